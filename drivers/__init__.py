@@ -1,0 +1,2 @@
+"""Hardware access: Modbus servo drives, serial laser interferometer, and their simulated and
+replayed counterparts. Only `station/` (and tests) choose a concrete implementation."""

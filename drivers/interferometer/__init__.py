@@ -1,0 +1,1 @@
+"""Serial laser interferometer: line protocol and client."""

@@ -1,0 +1,1 @@
+"""Modbus servo drive: register-map profiles, client, and protocol helpers."""

@@ -1,0 +1,1 @@
+"""Replay devices that answer from a recorded HDF5 session."""

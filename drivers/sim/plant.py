@@ -1,0 +1,236 @@
+"""The plant: a physical model (digital twin) of one ball-screw leg.
+
+Both the simulated drive (Modbus) and the simulated interferometer (serial) read the same
+`LegPlant`, so what the drive does and what the laser sees stay consistent.
+
+Coordinates and signs (see drivers.interfaces): `x_mm` is the motor/encoder position of the nut
+relative to mid-stroke; the leg's true length is `nominal_length_mm + x_mm + error_um/1000`.
+`error_um` is *true minus commanded* (positive = leg too long). Direction +1 = moving towards
+larger x.
+
+Error sources (each can be switched off by leaving it out of `enabled`), magnitudes from
+shared/docs/domain.md section 4:
+- ``lead``: cumulative lead error, a slope `lead_slope_um_per_m` over the stroke.
+- ``longwave``: long-wave screw error terms `(wavelength_mm, amplitude_um, phase_rad)`.
+- ``wobble``: once-per-revolution error at the screw lead `lead_mm`.
+- ``backlash``: reversal; `reversal_um` = mean error approaching in -1 minus in +1, so the
+  error is -reversal/2 approaching upwards and +reversal/2 approaching downwards.
+- ``thermal``: the screw expands between its fixed bearing (at `bearing_mm`) and the nut:
+  `expansion_ppm_per_k * (x - bearing_mm)/1000 * (T - temp_ref_c)` um, with the material
+  temperature T following a first-order model heated by travel (`heating_k_per_m`, `tau_s`).
+- ``load``: elastic compliance under axial load (compression positive shortens the leg):
+  `-(bearing_compliance_um_per_kn + screw_compliance_um_per_kn_per_m*(x - bearing_mm)/1000) * load_kn`.
+- ``drift``: setup/laser drift growing with time, `drift_um_per_h`, independent of position.
+- ``scale``: a scale error of the measurement chain (cosine/Abbe, wavelength), `scale_ppm` of x.
+- ``noise``: white measurement noise, `noise_um` standard deviation per reading.
+- ``run_offset``: run-to-run scatter; a new offset (std `run_offset_um`) at every reversal.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+ALL_SOURCES = frozenset(
+    {"lead", "longwave", "wobble", "backlash", "thermal", "load", "drift", "scale", "noise", "run_offset"}
+)
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Physical parameters of one leg. Units are in the names."""
+
+    nominal_length_mm: float = 1095.85  # leg length at mid-stroke (the paper's positioner)
+    stroke_half_mm: float = 90.0  # usable stroke is +/- this around mid-stroke
+    lead_mm: float = 5.0  # screw lead (travel per revolution)
+    lead_slope_um_per_m: float = 9.0  # the paper's "linear deviation of 9 um/m"
+    longwave: tuple[tuple[float, float, float], ...] = ((120.0, 0.6, 0.4), (45.0, 0.25, 1.9))
+    wobble_amplitude_um: float = 0.2
+    wobble_phase_rad: float = 0.7
+    reversal_um: float = 1.0
+    expansion_ppm_per_k: float = 11.5  # steel
+    bearing_mm: float = -150.0  # fixed bearing, below the stroke
+    temp_ref_c: float = 20.0  # error-free temperature (lengths are normalised to 20 C)
+    ambient_temp_c: float = 20.0
+    initial_temp_c: float = 20.0
+    heating_k_per_m: float = 0.25  # material temperature rise per metre of nut travel
+    tau_s: float = 1800.0  # thermal time constant of the screw
+    bearing_compliance_um_per_kn: float = 1.5
+    screw_compliance_um_per_kn_per_m: float = 15.5  # L/(E*A), d = 20 mm, E = 2.06e5 N/mm^2
+    load_per_pass_n: tuple[float, ...] = (0.0,)  # axial load, cycled at every new pass
+    drift_um_per_h: float = 0.15
+    scale_ppm: float = 0.0
+    noise_um: float = 0.03
+    run_offset_um: float = 0.04
+    enabled: frozenset[str] = field(default_factory=lambda: ALL_SOURCES)
+
+    def __post_init__(self) -> None:
+        unknown = set(self.enabled) - ALL_SOURCES
+        if unknown:
+            raise ValueError(f"unknown error sources {sorted(unknown)}; known: {sorted(ALL_SOURCES)}")
+        if self.tau_s <= 0 or self.lead_mm <= 0 or self.stroke_half_mm <= 0:
+            raise ValueError("tau_s, lead_mm and stroke_half_mm must be positive")
+
+    def only(self, *sources: str) -> "PlantConfig":
+        """This configuration with only the named error sources switched on."""
+        return replace(self, enabled=frozenset(sources))
+
+    def without(self, *sources: str) -> "PlantConfig":
+        """This configuration with the named error sources switched off."""
+        return replace(self, enabled=frozenset(self.enabled) - set(sources))
+
+    @property
+    def compliance_um_per_kn(self) -> float:
+        """Minus d(error)/d(load) at mid-stroke, um per kN (the diagnosis' parameter)."""
+        return self.bearing_compliance_um_per_kn + self.screw_compliance_um_per_kn_per_m * (0.0 - self.bearing_mm) / 1000.0
+
+
+def screw_error_um(cfg: PlantConfig, x_mm):
+    """Position-only part of the error (lead slope, long-wave terms, wobble), um. Vectorised."""
+    x = np.asarray(x_mm, dtype=float)
+    e = np.zeros_like(x)
+    on = cfg.enabled
+    if "lead" in on:
+        e = e + cfg.lead_slope_um_per_m * x / 1000.0
+    if "longwave" in on:
+        for wavelength_mm, amplitude_um, phase_rad in cfg.longwave:
+            e = e + amplitude_um * np.sin(2 * np.pi * x / wavelength_mm + phase_rad)
+    if "wobble" in on:
+        e = e + cfg.wobble_amplitude_um * np.sin(2 * np.pi * x / cfg.lead_mm + cfg.wobble_phase_rad)
+    return e
+
+
+def systematic_error_um(cfg: PlantConfig, x_mm, direction, temp_c, load_n, t_s):
+    """Deterministic error (true minus commanded), um, excluding noise and run offsets.
+
+    All arguments broadcast: `x_mm` position, `direction` +1/-1 of the last motion,
+    `temp_c` material temperature, `load_n` axial load (compression positive), `t_s` time since
+    the start of the session (for drift).
+    """
+    x = np.asarray(x_mm, dtype=float)
+    on = cfg.enabled
+    e = screw_error_um(cfg, x)
+    if "backlash" in on:
+        e = e - 0.5 * cfg.reversal_um * np.sign(np.asarray(direction, dtype=float))
+    if "thermal" in on:
+        dt_k = np.asarray(temp_c, dtype=float) - cfg.temp_ref_c
+        e = e + cfg.expansion_ppm_per_k * (x - cfg.bearing_mm) / 1000.0 * dt_k
+    if "load" in on:
+        load_kn = np.asarray(load_n, dtype=float) / 1000.0
+        c = cfg.bearing_compliance_um_per_kn + cfg.screw_compliance_um_per_kn_per_m * (x - cfg.bearing_mm) / 1000.0
+        e = e - c * load_kn
+    if "drift" in on:
+        e = e + cfg.drift_um_per_h * np.asarray(t_s, dtype=float) / 3600.0
+    if "scale" in on:
+        e = e + cfg.scale_ppm * x / 1000.0
+    return e
+
+
+class LegPlant:
+    """The stateful leg: nut position, direction of last motion, temperature, pass, load.
+
+    Not thread-safe by itself; the simulated rig serialises access with its own lock.
+    """
+
+    def __init__(self, cfg: PlantConfig, seed: int = 0, t0_s: float = 0.0):
+        self.cfg = cfg
+        self._rng = np.random.default_rng(seed)
+        self.x_mm = 0.0
+        self.direction = 1
+        self.temp_c = cfg.initial_temp_c
+        self._t_last_s = t0_s
+        self.t0_s = t0_s
+        self.pass_index = 0
+        self._pass_offset_um = self._draw_offset()
+        self.load_n = cfg.load_per_pass_n[0] if cfg.load_per_pass_n else 0.0
+        self._zero_um = 0.0
+
+    # -- time evolution -------------------------------------------------------------------
+    def _advance_thermal(self, t_s: float, travel_mm: float = 0.0) -> None:
+        dt = max(0.0, t_s - self._t_last_s)
+        heat_k = self.cfg.heating_k_per_m * abs(travel_mm) / 1000.0
+        amb = self.cfg.ambient_temp_c
+        if dt == 0.0:
+            self.temp_c += heat_k
+        else:
+            decay = math.exp(-dt / self.cfg.tau_s)
+            # constant heating rate over the interval: exact first-order response
+            rate_k_s = heat_k / dt
+            self.temp_c = amb + (self.temp_c - amb) * decay + rate_k_s * self.cfg.tau_s * (1.0 - decay)
+        self._t_last_s = max(self._t_last_s, t_s)
+
+    def _draw_offset(self) -> float:
+        if "run_offset" in self.cfg.enabled and self.cfg.run_offset_um > 0:
+            return float(self._rng.normal(0.0, self.cfg.run_offset_um))
+        return 0.0
+
+    def move(self, to_mm: float, t_end_s: float) -> None:
+        """The nut has moved to `to_mm`, arriving at time `t_end_s`."""
+        travel = to_mm - self.x_mm
+        if travel != 0.0:
+            new_dir = 1 if travel > 0 else -1
+            if new_dir != self.direction:
+                self._new_pass(new_dir)
+        self._advance_thermal(t_end_s, travel)
+        self.x_mm = float(to_mm)
+
+    def _new_pass(self, new_dir: int) -> None:
+        self.direction = new_dir
+        self.pass_index += 1
+        self._pass_offset_um = self._draw_offset()
+        loads = self.cfg.load_per_pass_n
+        if loads:
+            self.load_n = float(loads[self.pass_index % len(loads)])
+
+    # -- observations -----------------------------------------------------------------------
+    def error_um(self, t_s: float) -> float:
+        """Systematic error now (true minus commanded at the nut), um."""
+        self._advance_thermal(t_s)
+        return float(
+            systematic_error_um(self.cfg, self.x_mm, self.direction, self.temp_c, self.load_n, t_s - self.t0_s)
+        )
+
+    def true_position_mm(self, t_s: float) -> float:
+        return self.x_mm + self.error_um(t_s) / 1000.0
+
+    def measured_position_mm(self, t_s: float, averaging_s: float = 0.0) -> float:
+        """What an ideal-but-noisy interferometer reads now, relative to its zero, mm.
+
+        Averaging over `averaging_s` reduces the white noise by sqrt(averaging / 0.1 s).
+        """
+        noise = 0.0
+        if "noise" in self.cfg.enabled and self.cfg.noise_um > 0:
+            n_eff = max(1.0, averaging_s / 0.1)
+            noise = float(self._rng.normal(0.0, self.cfg.noise_um / math.sqrt(n_eff)))
+        return self.true_position_mm(t_s) + (self._pass_offset_um + noise - self._zero_um) / 1000.0
+
+    def zero_here(self, t_s: float) -> None:
+        """Set the interferometer zero so that the current true position reads as x_mm."""
+        self._zero_um = self.error_um(t_s) + self._pass_offset_um
+
+    def material_temp_c(self, t_s: float) -> float:
+        self._advance_thermal(t_s)
+        return self.temp_c
+
+
+def default_leg_configs(seed: int = 0, legs: int = 6, base: PlantConfig | None = None) -> list[PlantConfig]:
+    """Six legs that look alike (same manufacturing) with small differences in scale and offset,
+    as the paper observed. Deterministic for a seed."""
+    base = base or PlantConfig()
+    rng = np.random.default_rng(seed + 7919)
+    out = []
+    for _ in range(legs):
+        k = float(rng.uniform(0.8, 1.2))
+        out.append(
+            replace(
+                base,
+                lead_slope_um_per_m=base.lead_slope_um_per_m * k,
+                longwave=tuple((w, a * float(rng.uniform(0.8, 1.2)), p + float(rng.normal(0, 0.2))) for w, a, p in base.longwave),
+                wobble_amplitude_um=base.wobble_amplitude_um * float(rng.uniform(0.7, 1.3)),
+                reversal_um=base.reversal_um * float(rng.uniform(0.6, 1.4)),
+                bearing_mm=base.bearing_mm + float(rng.uniform(-20, 20)),
+            )
+        )
+    return out

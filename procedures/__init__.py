@@ -1,0 +1,1 @@
+"""Calibration science and sequences. Imports only the interfaces of `drivers/`."""

@@ -1,0 +1,106 @@
+"""Events a procedure yields. Frozen dataclasses; front ends and sinks only present them.
+
+Units are in the field names; `t_s` is on the rig clock (virtual on the simulated rig).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Event:
+    pass
+
+
+@dataclass(frozen=True)
+class SweepStarted(Event):
+    session_id: str
+    legs: tuple[int, ...]
+    total_points: int
+    plan: dict[str, Any]  # the plan as JSON-able data
+    devices: dict[str, str]  # leg/instrument -> identity string
+    resumed_points: int = 0  # points already on disk when resuming
+
+
+@dataclass(frozen=True)
+class LegStarted(Event):
+    leg: int
+
+
+@dataclass(frozen=True)
+class PointMeasured(Event):
+    """One point measured. `record` maps the POINT_DTYPE field names to values."""
+
+    record: dict[str, float]
+    done: int  # points done including this one
+    total: int
+
+
+@dataclass(frozen=True)
+class PointRecorded(Event):
+    """Emitted after a recording sink has the point on disk (flushed)."""
+
+    index: int
+
+
+@dataclass(frozen=True)
+class Progress(Event):
+    done: int
+    total: int
+    elapsed_s: float
+    eta_s: float | None
+
+
+@dataclass(frozen=True)
+class Fault(Event):
+    """A fault during a sweep. `gave_up` is True once retries are exhausted."""
+
+    index: int
+    leg: int
+    run: int
+    target_mm: float
+    kind: str  # beam_break / drive_fault / timeout / framing
+    message: str
+    attempt: int
+    gave_up: bool
+    t_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class Paused(Event):
+    pass
+
+
+@dataclass(frozen=True)
+class Resumed(Event):
+    pass
+
+
+@dataclass(frozen=True)
+class Message(Event):
+    text: str
+    level: str = "info"  # info / warning / error
+
+
+@dataclass(frozen=True)
+class SweepFinished(Event):
+    outcome: str  # completed / aborted / failed
+    points: int
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class TablePushed(Event):
+    leg: int
+    bank: int
+    table_sha256: str
+    drive: str
+
+
+@dataclass(frozen=True)
+class Finding(Event):
+    leg: int
+    effect: str
+    parameters: dict[str, float] = field(default_factory=dict)

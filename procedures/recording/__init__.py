@@ -1,0 +1,1 @@
+"""HDF5 session recordings: schema, crash-safe writer, checked reader."""

@@ -1,0 +1,66 @@
+"""The HDF5 session schema: one place for field names, types and units.
+
+Layout of a session file (schema version SCHEMA_VERSION, attribute `schema_version` on the root):
+
+    /                      attrs: schema_version, software_version, session_id, operator,
+                                  started_utc, ended_utc, outcome, rig ("sim"/"live"/"replay"/"import")
+    /points                compound dataset, one row per measured point (POINT_DTYPE), chunked,
+                           resizable; attrs `units_<field>` give each field's unit
+    /faults                compound dataset (FAULT_DTYPE), one row per fault event
+    /meta                  group; attrs hold JSON strings: plan, station_config, devices
+
+Sign convention: `error_um` = measured minus target (interferometer minus commanded target),
+micrometres; positive = the leg is longer than commanded. `direction` +1 = approached while the
+position increased.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+SCHEMA_VERSION = "1.0"  # major.minor; readers refuse another major
+
+# (name, numpy type, unit) -- the unit goes into the `units_<name>` attribute
+POINT_FIELDS: list[tuple[str, str, str]] = [
+    ("index", "<i8", "1"),  # position of the point in the plan (for resume): unique per session
+    ("leg", "<i2", "1"),
+    ("run", "<i4", "1"),  # one-direction pass number within the leg, 1-based
+    ("direction", "<i1", "1"),  # +1 / -1
+    ("target_mm", "<f8", "mm"),
+    ("commanded_mm", "<f8", "mm"),  # what was sent to the drive
+    ("drive_position_mm", "<f8", "mm"),  # drive-reported position actual
+    ("measured_mm", "<f8", "mm"),  # interferometer reading
+    ("error_um", "<f8", "um"),  # measured - target
+    ("time_s", "<f8", "s"),  # since the session start
+    ("air_temp_c", "<f8", "degC"),
+    ("air_pressure_hpa", "<f8", "hPa"),
+    ("humidity_pct", "<f8", "%RH"),
+    ("material_temp_c", "<f8", "degC"),
+    ("load_n", "<f8", "N"),  # axial load, compression positive
+    ("signal_pct", "<f4", "%"),
+    ("flags", "<u4", "bitfield"),  # see FLAG_*
+]
+POINT_DTYPE = np.dtype([(n, t) for n, t, _ in POINT_FIELDS])
+POINT_UNITS = {n: u for n, _, u in POINT_FIELDS}
+
+# flags bits
+FLAG_RETRIED_BEAM = 1  # the reading needed a retry after a beam break
+FLAG_RETRIED_DRIVE = 2  # the move needed a retry after a drive fault/timeout
+FLAG_IMPORTED = 4  # came from CSV: commanded/drive/measured positions are derived
+FLAG_REPLAYED = 8  # came from a replay device
+
+FAULT_FIELDS: list[tuple[str, str, str]] = [
+    ("index", "<i8", "1"),  # plan index of the point the fault hit
+    ("leg", "<i2", "1"),
+    ("run", "<i4", "1"),
+    ("target_mm", "<f8", "mm"),
+    ("time_s", "<f8", "s"),
+    ("kind", "S16", ""),  # beam_break / drive_fault / timeout / framing / aborted
+    ("attempt", "<i2", "1"),
+    ("gave_up", "<i1", "1"),  # 1 when retries were exhausted and the point was skipped/failed
+    ("message", "S200", ""),
+]
+FAULT_DTYPE = np.dtype([(n, t) for n, t, _ in FAULT_FIELDS])
+
+OPTIONAL_NAN_FIELDS = ("time_s", "air_temp_c", "air_pressure_hpa", "humidity_pct", "material_temp_c", "load_n")
+"""Fields that may be unknown (NaN) in imported data: NaN means 'not measured', never zero."""
