@@ -1,0 +1,68 @@
+"""The simulated rig: six leg plants behind a real Modbus server and a real serial pty.
+
+One `VirtualClock` and one lock are shared by the drive server and the interferometer, so
+both see the same physical leg at the same (virtual) time.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from drivers.clock import VirtualClock
+from drivers.modbus.profile import DriveProfile
+from drivers.sim.drive_server import SimDriveServer
+from drivers.sim.interferometer_server import SimInterferometer
+from drivers.sim.plant import LegPlant, PlantConfig, default_leg_configs
+
+
+@dataclass
+class SimRig:
+    """Start with `start()`; then reach the drives at `drive_url` (Modbus TCP on 127.0.0.1)
+    or `rtu_port` (Modbus RTU over a pty) and the interferometer at `laser_port` (a pty)."""
+
+    time_scale: float = 0.0
+    seed: int = 0
+    legs: int = 6
+    configs: list[PlantConfig] | None = None
+    nv_path: Path | None = None
+    profile: DriveProfile | None = None
+    tcp_port: int = 0
+    rtu: bool = False
+    clock: VirtualClock = field(init=False)
+    plants: dict[int, LegPlant] = field(init=False)
+    drive_url: str = field(init=False, default="")
+    rtu_port: str = field(init=False, default="")
+    laser_port: str = field(init=False, default="")
+
+    def __post_init__(self) -> None:
+        self.clock = VirtualClock(self.time_scale)
+        cfgs = self.configs or default_leg_configs(self.seed, self.legs)
+        self.plants = {i + 1: LegPlant(cfg, seed=self.seed * 100 + i + 1) for i, cfg in enumerate(cfgs)}
+        self.lock = threading.RLock()
+        self.profile = self.profile or DriveProfile.load()
+        self.drive_server = SimDriveServer(self.plants, self.clock, self.profile, nv_path=self.nv_path, lock=self.lock)
+        self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed)
+        self._started = False
+
+    def start(self) -> "SimRig":
+        port = self.drive_server.start_tcp("127.0.0.1", self.tcp_port)
+        self.drive_url = f"tcp://127.0.0.1:{port}"
+        if self.rtu:
+            self.rtu_port = self.drive_server.start_rtu()
+        self.laser_port = self.laser_server.start()
+        self._started = True
+        return self
+
+    def stop(self) -> None:
+        if self._started:
+            self.laser_server.stop()
+            self.drive_server.stop()
+            self._started = False
+
+    def __enter__(self) -> "SimRig":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

@@ -1,0 +1,213 @@
+"""The calibration sweep procedure: move, settle, measure, yield a point; repeat.
+
+It talks only to the `ServoAxis` / `Interferometer` / `Clock` interfaces and yields events; the
+runner feeds them to sinks (recorder, progress bar, TUI). Safety: the plan is checked against
+every leg's soft limits before anything moves; on any exit (done, fault, abort, kill of the
+generator) the axes are stopped and disabled in `finally`.
+
+Point record fields and units: see procedures/recording/schema.py. `error_um` = interferometer
+reading minus target, micrometres (positive = leg longer than commanded).
+"""
+
+from __future__ import annotations
+
+import logging
+import uuid
+from dataclasses import dataclass
+from typing import Iterator, Mapping
+
+from drivers.interfaces import (
+    BeamBreak,
+    Clock,
+    CommTimeout,
+    DriveFault,
+    DriverError,
+    Environment,
+    FramingError,
+    Interferometer,
+    ServoAxis,
+)
+from procedures import events as ev
+from procedures.control import Aborted, RunControl
+from procedures.plans import PlanPoint, SweepPlan
+from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RetryPolicy:
+    """Bounded retries per point. `beam_wait_s`: wait before re-reading after a beam break."""
+
+    beam_retries: int = 3
+    drive_retries: int = 2
+    comm_retries: int = 2
+    beam_wait_s: float = 0.5
+    env_interval_s: float = 10.0  # environment is read at most this often (it changes slowly)
+
+
+class SweepFailed(Exception):
+    """Retries exhausted at a point; the session stops there and can be resumed."""
+
+    def __init__(self, fault: ev.Fault):
+        super().__init__(f"{fault.kind} at leg {fault.leg}, run {fault.run}, target {fault.target_mm:.4f} mm: {fault.message}")
+        self.fault = fault
+
+
+def _kind(exc: BaseException) -> str:
+    if isinstance(exc, BeamBreak):
+        return "beam_break"
+    if isinstance(exc, DriveFault):
+        return "drive_fault"
+    if isinstance(exc, CommTimeout):
+        return "timeout"
+    if isinstance(exc, FramingError):
+        return "framing"
+    return "error"
+
+
+def sweep(
+    plan: SweepPlan,
+    axes: Mapping[int, ServoAxis],
+    laser: Interferometer,
+    clock: Clock,
+    *,
+    control: RunControl | None = None,
+    done_indices: frozenset[int] | set[int] = frozenset(),
+    retry: RetryPolicy = RetryPolicy(),
+    session_id: str | None = None,
+    t0_s: float | None = None,
+) -> Iterator[ev.Event]:
+    """Run `plan`, skipping plan indices in `done_indices` (resume). Yields events.
+
+    Ends with `SweepFinished(outcome=...)`: "completed", "aborted" or "failed" (retries
+    exhausted; the `Fault` event before it names the point).
+    """
+    control = control or RunControl()
+    missing = [leg for leg in plan.legs if leg not in axes]
+    if missing:
+        raise DriverError(f"no drive connected for leg(s) {missing}")
+    # Safety first: check every leg's soft limits before the first motion.
+    for leg in plan.legs:
+        lim = axes[leg].limits()
+        plan.validate_limits(lim.min_mm, lim.max_mm, leg)
+    for leg in plan.legs:
+        control.on_abort(axes[leg].stop)
+
+    points = [p for p in plan.points() if p.index not in done_indices]
+    total = plan.total_points
+    done = total - len(points)
+    devices = {f"leg{leg}": axes[leg].identity() for leg in plan.legs}
+    devices["interferometer"] = laser.identity()
+    t_start = clock.now() if t0_s is None else t0_s
+    yield ev.SweepStarted(session_id or uuid.uuid4().hex[:12], tuple(plan.legs), total, plan.to_dict(), devices, done)
+
+    outcome, reason = "completed", ""
+    current_leg: int | None = None
+    prev: PlanPoint | None = None
+    env: Environment | None = None
+    env_t = -1e18
+    try:
+        laser.set_averaging(plan.averaging_s)
+        for p in points:
+            control.check()
+            if p.leg != current_leg:
+                if current_leg is not None:
+                    axes[current_leg].disable()
+                current_leg = p.leg
+                yield ev.LegStarted(p.leg)
+                _prepare_leg(axes[p.leg], laser, p.leg, clock, plan)
+                prev = None
+            flags = 0
+            # approach from the pass's side unless we just measured the previous point of this pass
+            contiguous = prev is not None and prev.leg == p.leg and prev.run == p.run and prev.index == p.index - 1
+            record = None
+            attempt = 0
+            while record is None:
+                control.check()
+                attempt += 1
+                try:
+                    axis = axes[p.leg]
+                    if not contiguous:
+                        axis.move_to(p.approach_mm(plan.overrun_mm))
+                    status = axis.move_to(p.target_mm)
+                    clock.sleep(plan.dwell_s)
+                    reading = laser.read(p.leg)
+                    if env is None or clock.now() - env_t >= retry.env_interval_s:
+                        env = laser.environment()
+                        env_t = clock.now()
+                    record = {
+                        "index": p.index, "leg": p.leg, "run": p.run, "direction": p.direction,
+                        "target_mm": p.target_mm, "commanded_mm": p.target_mm,
+                        "drive_position_mm": status.position_mm, "measured_mm": reading.position_mm,
+                        "error_um": (reading.position_mm - p.target_mm) * 1000.0,
+                        "time_s": clock.now() - t_start,
+                        "air_temp_c": env.air_temp_c, "air_pressure_hpa": env.air_pressure_hpa,
+                        "humidity_pct": env.humidity_pct, "material_temp_c": env.material_temp_of(p.leg),
+                        "load_n": status.load_n, "signal_pct": reading.signal_pct, "flags": flags,
+                    }
+                except Aborted:
+                    raise
+                except DriverError as exc:
+                    if control.aborted:
+                        raise Aborted(control.reason) from exc
+                    kind = _kind(exc)
+                    limit = {"beam_break": retry.beam_retries, "drive_fault": retry.drive_retries}.get(kind, retry.comm_retries)
+                    gave_up = attempt > limit
+                    fault = ev.Fault(p.index, p.leg, p.run, p.target_mm, kind, str(exc), attempt, gave_up, clock.now() - t_start)
+                    yield fault
+                    if gave_up:
+                        raise SweepFailed(fault) from exc
+                    contiguous = False  # re-approach so the point keeps its direction
+                    if kind == "beam_break":
+                        flags |= FLAG_RETRIED_BEAM
+                        clock.sleep(retry.beam_wait_s)
+                        contiguous = True  # the axis did not move: only re-read
+                    else:
+                        flags |= FLAG_RETRIED_DRIVE
+                        _recover_axis(axes[p.leg])
+            done += 1
+            prev = p
+            yield ev.PointMeasured(record, done, total)
+    except Aborted as exc:
+        outcome, reason = "aborted", str(exc)
+    except SweepFailed as exc:
+        outcome, reason = "failed", str(exc)
+    finally:
+        _stop_all(axes, plan.legs)
+    yield ev.SweepFinished(outcome, done, reason)
+
+
+def _prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan) -> None:
+    """Enable the drive, go to the mid-stroke reference and zero the interferometer there."""
+    st = axis.status()
+    if st.fault:
+        axis.reset_fault()
+    axis.enable()
+    axis.move_to(0.0)
+    clock.sleep(plan.dwell_s)
+    laser.zero(leg)
+
+
+def _recover_axis(axis: ServoAxis) -> None:
+    try:
+        st = axis.status()
+        if st.fault:
+            axis.reset_fault()
+        if not axis.status().enabled:
+            axis.enable()
+    except DriverError:
+        log.warning("axis recovery failed; the next attempt will report it", exc_info=True)
+
+
+def _stop_all(axes: Mapping[int, ServoAxis], legs) -> None:
+    """Quick stop then disable every axis of the plan; never raises (a dead link is logged)."""
+    for leg in legs:
+        axis = axes.get(leg)
+        if axis is None:
+            continue
+        for action in (axis.stop, axis.disable):
+            try:
+                action()
+            except Exception:
+                log.warning("leg %s: %s failed while making the rig safe", leg, action.__name__, exc_info=True)

@@ -1,0 +1,51 @@
+"""`station sim`: start the simulated rig standalone and print where to reach it."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from pathlib import Path
+
+from drivers.sim.rig import SimRig
+
+NAME = "sim"
+HELP = "start the simulated rig (Modbus drives + serial interferometer) and print where to reach it"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--port", type=int, default=5020, help="Modbus TCP port on 127.0.0.1 (default 5020; 0 = any free)")
+    p.add_argument("--rtu", action="store_true", help="also serve Modbus RTU on a pseudo-terminal")
+    p.add_argument("--time-scale", type=float, default=1.0, help="real seconds per simulated second (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="plant seed")
+    p.add_argument("--nv", metavar="FILE", help="file for the drives' table memory (EEPROM)")
+
+
+def run(args) -> int:
+    rig = SimRig(time_scale=args.time_scale, seed=args.seed, tcp_port=args.port, rtu=args.rtu,
+                 nv_path=Path(args.nv) if args.nv else None)
+    try:
+        rig.start()
+    except OSError as exc:
+        print(f"station sim: error: cannot listen on 127.0.0.1:{args.port} ({exc.strerror}); try --port 0")
+        return 2
+    prof = rig.profile
+    print("simulated rig running (Ctrl-C to stop)")
+    print(f"  drives (Modbus TCP): {rig.drive_url}   unit ids 1-6 = legs 1-6")
+    if rig.rtu_port:
+        print(f"  drives (Modbus RTU): {rig.rtu_port}")
+    print(f"  interferometer (serial): {rig.laser_port}")
+    print(f"  time scale: {args.time_scale:g} real s per simulated s; seed {args.seed}")
+    addr = prof.address("position_actual") if hasattr(prof, "address") else None
+    if addr is not None:
+        print(f"  e.g.  mbpoll -m tcp -p {rig.drive_url.rsplit(':', 1)[1]} -a 3 -t 4:int -B -0 -r {addr} -c 1 -1 127.0.0.1")
+    print(flush=True)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        stop.wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        rig.stop()
+    return 0

@@ -1,0 +1,85 @@
+"""`station sweep`: a calibration sweep with a progress bar, recorded to HDF5."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from procedures.errors import InputError
+from procedures.plans import iso230_plan, paper_plan, parse_legs, targets_from_file, SweepPlan
+from station.config import load_config
+from station.jobs import plan_of_recording, run_sweep
+from station.progress import ConsoleProgress
+from station.wiring import open_rig
+
+NAME = "sweep"
+HELP = "run a calibration sweep (ISO 230-2 or the paper's) and record it to HDF5"
+DESCRIPTION = (
+    "Run a bidirectional calibration sweep on one or more legs and record every point to an HDF5 "
+    "session file. Ctrl-C stops the motion and leaves a valid file; `--resume FILE.h5` finishes it."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--sim", action="store_true", help="use the simulated rig (default without --config)")
+    where.add_argument("--config", help="station TOML naming the real drives and interferometer")
+    p.add_argument("--out", help="session file to write (FILE.h5)")
+    p.add_argument("--resume", metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
+    p.add_argument("--plan", choices=["iso230", "paper"], default="iso230", help="sweep plan (default iso230)")
+    p.add_argument("--legs", default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
+    p.add_argument("--cycles", type=int, help="bidirectional cycles (default: 5 iso230, 6 paper)")
+    spacing = p.add_mutually_exclusive_group()
+    spacing.add_argument("--step", type=float, metavar="MM", help="uniform target spacing in mm")
+    spacing.add_argument("--targets", metavar="FILE", help="targets in mm, one per line or a target_mm column")
+    p.add_argument("--n-targets", type=int, help="number of irregularly spaced ISO 230-2 targets (default 11)")
+    p.add_argument("--min-mm", type=float, default=-90.0, help="lowest target, mm (default -90)")
+    p.add_argument("--max-mm", type=float, default=90.0, help="highest target, mm (default +90)")
+    p.add_argument("--dwell", type=float, default=1.0, metavar="S", help="settle time per target, s (default 1)")
+    p.add_argument("--averaging", type=float, default=0.1, metavar="S", help="interferometer averaging, s")
+    p.add_argument("--overrun", type=float, default=2.0, metavar="MM", help="overrun before reversing, mm")
+    p.add_argument("--time-scale", type=float, metavar="S",
+                   help="simulated rig only: real seconds per simulated second (0 = no waiting; default 0)")
+    p.add_argument("--seed", type=int, help="simulated rig only: plant seed")
+
+
+def build_plan(args) -> SweepPlan:
+    legs = parse_legs(args.legs)
+    if args.plan == "paper":
+        if args.targets or args.step:
+            raise InputError("--plan paper has fixed targets (361 at 0.5 mm); drop --step/--targets or use --plan iso230")
+        return paper_plan(legs, cycles=args.cycles or 6, overrun_mm=args.overrun, dwell_s=args.dwell, averaging_s=args.averaging)
+    if args.targets:
+        targets = targets_from_file(args.targets)
+        return SweepPlan("custom", targets, args.cycles or 5, legs, args.overrun, args.dwell, args.averaging)
+    return iso230_plan(legs, args.min_mm, args.max_mm, n_targets=args.n_targets, step_mm=args.step,
+                       cycles=args.cycles or 5, overrun_mm=args.overrun, dwell_s=args.dwell, averaging_s=args.averaging)
+
+
+def run(args) -> int:
+    cfg = load_config(args.config)
+    if args.seed is not None:
+        cfg.sim.seed = args.seed
+    if args.resume:
+        out = Path(args.resume)
+        plan = plan_of_recording(out)
+        if args.out and Path(args.out) != out:
+            raise InputError("--resume appends to the session it names; drop --out")
+    else:
+        if not args.out:
+            raise InputError("--out FILE.h5 is required (where to record the session)")
+        out = Path(args.out)
+        if out.exists():
+            raise InputError(f"{out} exists; choose another --out, or --resume {out} to finish it")
+        plan = build_plan(args)
+    for note in plan.notes:
+        print(f"note: {note}")
+    with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
+        print(f"rig: {rig.description}")
+        result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], resume=bool(args.resume))
+    print(f"session: {out} ({result.outcome}, {result.points} of {plan.total_points} points)")
+    if result.outcome == "completed":
+        print(f"next: station iso230 {out}   |   station fit {out} --out model.json")
+        return 0
+    print(f"resume with: station sweep --resume {out}" + (" --sim" if cfg.is_sim else f" --config {args.config}"))
+    return 1

@@ -1,0 +1,80 @@
+"""Composition root: turn a StationConfig into connected drives and an interferometer.
+
+Only this module (and tests) decide whether a leg is real, simulated or replayed. Even on the
+simulated rig the station talks to the devices through the real protocol clients (Modbus TCP
+on 127.0.0.1, serial over a pty), so nothing above the drivers can tell the difference.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drivers.clock import SystemClock
+from drivers.interfaces import Clock, Interferometer, ServoAxis
+from drivers.interferometer.client import SerialInterferometer
+from drivers.modbus.client import connect_axes
+from drivers.modbus.profile import DriveProfile
+from station.config import StationConfig
+
+
+@dataclass
+class Rig:
+    axes: dict[int, ServoAxis]
+    laser: Interferometer
+    clock: Clock
+    kind: str  # "sim" / "live" / "replay"
+    description: str
+    profile: DriveProfile | None = None
+    sim: Any = None  # the SimRig when simulated (tests use it to inject faults)
+    _closers: list = field(default_factory=list)
+
+    def close(self) -> None:
+        for axis in self.axes.values():
+            try:
+                axis.close()
+            except Exception:
+                pass
+        try:
+            self.laser.close()
+        except Exception:
+            pass
+        for closer in reversed(self._closers):
+            closer()
+        self._closers.clear()
+
+    def __enter__(self) -> "Rig":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | None = None) -> Rig:
+    """Connect to the rig named by `cfg`; on "sim" start the simulated rig in-process first."""
+    profile = DriveProfile.load(cfg.drive.profile or None)
+    if cfg.is_sim:
+        from drivers.sim.rig import SimRig
+
+        scale = cfg.sim.time_scale if time_scale is None else time_scale
+        nv = Path(cfg.sim.nv_path) if cfg.sim.nv_path else None
+        sim = SimRig(time_scale=scale, seed=cfg.sim.seed, nv_path=nv, profile=profile).start()
+        try:
+            axes = connect_axes(sim.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s)
+            laser = SerialInterferometer(sim.laser_port, timeout_s=cfg.interferometer.timeout_s)
+        except Exception:
+            sim.stop()
+            raise
+        desc = f"simulated rig (time scale {scale:g}): drives {sim.drive_url}, interferometer {sim.laser_port}"
+        return Rig(axes, laser, sim.clock, "sim", desc, profile, sim, [sim.stop])
+    axes = connect_axes(cfg.drive.url, legs, profile, timeout_s=cfg.drive.timeout_s)
+    try:
+        laser = SerialInterferometer(cfg.interferometer.port, baudrate=cfg.interferometer.baudrate,
+                                     timeout_s=cfg.interferometer.timeout_s)
+    except Exception:
+        for a in axes.values():
+            a.close()
+        raise
+    desc = f"drives {cfg.drive.url}, interferometer {cfg.interferometer.port}"
+    return Rig(axes, laser, SystemClock(), "live", desc, profile)
