@@ -1,0 +1,255 @@
+"""Client for the serial laser interferometer (implements drivers.interfaces.Interferometer).
+
+One command, one reply line (protocol: docs/interferometer-protocol.md). Every reply is checked
+(terminator, checksum, field count and types, that it answers the question asked); a malformed
+or missing reply is retried after flushing the input, at most `retries` times, then raised as
+`FramingError` or `CommTimeout`. An `ERR` reply is raised at once as `InstrumentError` and a
+beam status other than OK as `BeamBreak`: retrying those is the caller's decision.
+"""
+
+from __future__ import annotations
+
+import time
+from urllib.parse import parse_qs, urlparse
+
+import serial
+
+from drivers.errors import BeamBreak, CommTimeout, DriverError, FramingError
+from drivers.interfaces import Environment, Reading
+from drivers.interferometer import protocol as p
+
+_POLL_S = 0.02  # longest blocking read: bounds how late a deadline is noticed
+
+
+class SerialInterferometer:
+    """A multi-axis laser interferometer on a serial port; axis n measures leg n.
+
+    `port` is a device path (``/dev/ttyUSB0``, a pty path from the simulator, ``COM3``);
+    `baudrate` in baud (8N1); `timeout_s` is the wait for one complete reply line, seconds (a
+    position query waits `timeout_s` plus the averaging time); `retries` is how many times a
+    missing or malformed reply is asked again; `axes` the instrument's axis count.
+
+    Timing guarantee: a silent port raises `CommTimeout` after about
+    ``(timeout_s + averaging_s) * (retries + 1)`` seconds (averaging_s = 0 except for a
+    position query), never later; a port that only returns garbage raises `FramingError`
+    within the same bound.
+
+    The port is opened with an exclusive (advisory) lock where the platform supports it, so two
+    programs cannot talk to one instrument at once. Not thread-safe: one owner at a time.
+    `transactions` counts command/reply exchanges sent (retries included), for benchmarks.
+    """
+
+    def __init__(
+        self,
+        port: str,
+        baudrate: int = p.DEFAULT_BAUDRATE,
+        timeout_s: float = 0.5,
+        retries: int = 2,
+        axes: int = 6,
+    ):
+        if timeout_s <= 0:
+            raise ValueError(f"interferometer timeout_s must be > 0 seconds, got {timeout_s}")
+        if retries < 0:
+            raise ValueError(f"interferometer retries must be >= 0, got {retries}")
+        if axes < 1:
+            raise ValueError(f"interferometer axes must be >= 1, got {axes}")
+        self.port = port
+        self.baudrate = int(baudrate)
+        self.timeout_s = float(timeout_s)
+        self.retries = int(retries)
+        self.axes = int(axes)
+        self.transactions = 0
+        self.retried = 0  # exchanges that had to be asked again (noise statistics)
+        self._averaging_s: float | None = None  # unknown until set or asked
+        try:
+            self._serial = serial.Serial(
+                port,
+                baudrate=self.baudrate,
+                bytesize=serial.EIGHTBITS,
+                parity=serial.PARITY_NONE,
+                stopbits=serial.STOPBITS_ONE,
+                timeout=min(self.timeout_s, _POLL_S),
+                write_timeout=self.timeout_s,
+                exclusive=True,
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            busy = "lock" in str(exc).lower() or "busy" in str(exc).lower()
+            raise DriverError(
+                f"cannot open the interferometer serial port {port!r}: {exc}",
+                hint=(
+                    "Another program holds the port; close it first."
+                    if busy
+                    else "Check the port name (ls /dev/ttyUSB* /dev/serial/by-id) and permissions (group dialout)."
+                ),
+            ) from exc
+
+    @classmethod
+    def from_url(cls, url: str) -> "SerialInterferometer":
+        """Open from ``serial:///dev/pts/5?baud=115200&timeout_s=0.5&retries=2&axes=6``.
+
+        Query parameters are optional; unknown ones are refused with a message naming them.
+        """
+        parsed = urlparse(url)
+        if parsed.scheme != "serial" or not parsed.path:
+            raise ValueError(f"interferometer URL {url!r} must look like serial:///dev/ttyUSB0?baud=115200")
+        known = {"baud": int, "timeout_s": float, "retries": int, "axes": int}
+        kwargs: dict[str, object] = {}
+        for key, values in parse_qs(parsed.query, strict_parsing=False).items():
+            if key not in known:
+                raise ValueError(f"interferometer URL {url!r}: unknown parameter {key!r}; known: {', '.join(known)}")
+            try:
+                kwargs["baudrate" if key == "baud" else key] = known[key](values[-1])
+            except ValueError:
+                raise ValueError(f"interferometer URL {url!r}: {key}={values[-1]!r} is not a number") from None
+        return cls(parsed.path, **kwargs)  # type: ignore[arg-type]
+
+    # -- Interferometer interface ------------------------------------------------------------
+
+    def identity(self) -> str:
+        """Instrument identity 'vendor,model,serial,firmware' (the *IDN? reply)."""
+        return self._transact(p.cmd_identity(), p.parse_identity)
+
+    def read(self, axis: int) -> Reading:
+        """One position reading of `axis` (1..axes).
+
+        `position_mm` is relative to the axis zero, air-compensated, positive = leg longer.
+        `t_s` is the instrument's time of the reading (end of the averaging window), seconds.
+        Raises `BeamBreak` when the instrument reports the beam interrupted (BEAM) or its
+        signal too weak (LOW); no retry is made for that.
+        """
+        self._check_axis(axis)
+        if self._averaging_s is None:
+            self._averaging_s = self._transact(p.cmd_averaging_query(), p.parse_averaging)
+        reply = self._transact(
+            p.cmd_position(axis), lambda fields: p.parse_position(fields, axis), extra_wait_s=self._averaging_s
+        )
+        if reply.status != "OK":
+            why = "beam interrupted" if reply.status == "BEAM" else "signal too weak"
+            raise BeamBreak(
+                f"interferometer axis {axis} on {self.port}: {why} "
+                f"(status {reply.status}, signal {reply.signal_pct:.1f} %, at t = {reply.t_s:.3f} s)."
+            )
+        return Reading(
+            axis=axis, position_mm=reply.position_mm, beam_ok=True, signal_pct=reply.signal_pct, t_s=reply.t_s
+        )
+
+    def environment(self) -> Environment:
+        """Air temperature (C), pressure (hPa), humidity (%RH) and material temperature per
+        leg (C, index 0 = leg 1, NaN = no sensor on that axis)."""
+        env = self._transact(p.cmd_environment(), lambda fields: p.parse_environment(fields, self.axes))
+        return Environment(
+            air_temp_c=env.air_temp_c,
+            air_pressure_hpa=env.air_pressure_hpa,
+            humidity_pct=env.humidity_pct,
+            material_temp_c=env.material_temp_c,
+        )
+
+    def zero(self, axis: int) -> None:
+        """Set the zero of `axis` at its current position (later readings are relative to it)."""
+        self._check_axis(axis)
+        self._transact(p.cmd_zero(axis), p.parse_ok)
+
+    def set_averaging(self, averaging_s: float) -> None:
+        """Averaging time of each position reading, seconds (0..10). Longer = less noise; a
+        position query then takes that much longer to answer."""
+        if not 0.0 <= averaging_s <= p.MAX_AVERAGING_S:
+            raise ValueError(f"averaging time must be within 0..{p.MAX_AVERAGING_S:g} s, got {averaging_s} s")
+        self._transact(p.cmd_set_averaging(averaging_s), p.parse_ok)
+        self._averaging_s = float(p.format_averaging(averaging_s))
+
+    def averaging(self) -> float:
+        """The instrument's current averaging time, seconds (asks it)."""
+        self._averaging_s = self._transact(p.cmd_averaging_query(), p.parse_averaging)
+        return self._averaging_s
+
+    def close(self) -> None:
+        """Release the port. Safe to call twice."""
+        if self._serial.is_open:
+            self._serial.close()
+
+    def __enter__(self) -> "SerialInterferometer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- one exchange ------------------------------------------------------------------------
+
+    def _check_axis(self, axis: int) -> None:
+        if not isinstance(axis, int) or not 1 <= axis <= self.axes:
+            raise ValueError(f"interferometer axis must be an integer in 1..{self.axes}, got {axis!r}")
+
+    def _transact(self, command: bytes, parse, extra_wait_s: float = 0.0):
+        """Send `command`, read one reply line, check and `parse` its fields; retry on
+        missing or malformed replies. Returns what `parse` returns."""
+        if not self._serial.is_open:
+            raise DriverError(f"interferometer on {self.port} is closed", hint="Open a new connection.")
+        shown = command.decode("ascii").strip()
+        wait_s = self.timeout_s + extra_wait_s
+        last_problem: tuple[str, bytes] | None = None  # (reason, line) of the last malformed reply
+        timeouts = 0
+        for attempt in range(self.retries + 1):
+            if attempt:
+                self.retried += 1
+            # drop anything unsolicited (the rest of a garbled line, a reply that came too late)
+            # so it cannot pass for the answer to this command
+            self._serial.reset_input_buffer()
+            self.transactions += 1
+            try:
+                self._serial.write(command)
+            except serial.SerialTimeoutException:
+                timeouts += 1
+                continue
+            except (serial.SerialException, OSError) as exc:
+                raise DriverError(
+                    f"interferometer on {self.port}: writing {shown!r} failed: {exc}",
+                    hint="The port went away (cable unplugged, simulator stopped?). Reconnect.",
+                ) from exc
+            line = self._read_line(wait_s)
+            if not line:
+                timeouts += 1
+                continue
+            try:
+                fields = p.split_reply(line)
+                p.raise_if_error(fields, shown, self.port)
+                return parse(fields)
+            except p.ProtocolError as exc:
+                last_problem = (str(exc), line)
+        attempts = self.retries + 1
+        if last_problem is None:
+            raise CommTimeout(
+                f"interferometer on {self.port} did not answer {shown!r} within {wait_s:g} s "
+                f"({attempts} attempts, {wait_s * attempts:g} s in total)."
+            )
+        reason, line = last_problem
+        raise FramingError(
+            f"interferometer on {self.port}: malformed reply to {shown!r} after {attempts} attempts "
+            f"({timeouts} without reply): {reason}; last line {p.show_line(line)}."
+        )
+
+    def _read_line(self, wait_s: float) -> bytes:
+        """Read one reply line within `wait_s` seconds; b'' on silence, the partial line if the
+        terminator did not come in time (the caller's split_reply rejects it).
+
+        Not readline(): its timeout is per byte and a partial line looks complete. Not
+        read_until() either: it reads byte by byte (0.35 ms per reply on a pty). Instead, wait
+        for the first byte, then take what is waiting; the port's own timeout is a short poll
+        slice so the deadline is kept within _POLL_S.
+        """
+        deadline = time.monotonic() + wait_s
+        line = bytearray()
+        try:
+            while True:
+                waiting = self._serial.in_waiting
+                line += self._serial.read(waiting if waiting else 1)
+                end = line.find(p.TERMINATOR)
+                if end >= 0:
+                    # bytes after the terminator are not an answer to anything: dropped
+                    return bytes(line[: end + len(p.TERMINATOR)])
+                if len(line) >= p.MAX_LINE_BYTES or time.monotonic() >= deadline:
+                    return bytes(line)
+        except (serial.SerialException, OSError) as exc:
+            raise DriverError(
+                f"interferometer on {self.port}: reading the reply failed: {exc}",
+                hint="The port went away (cable unplugged, simulator stopped?). Reconnect.",
+            ) from exc

@@ -1,0 +1,283 @@
+"""The interferometer's serial line protocol: framing, checksum, commands and reply parsing.
+
+Shared by the client (drivers.interferometer.client) and the simulated instrument
+(drivers.sim.interferometer_server) so both sides agree byte for byte. The full description, with
+an example exchange, timing and error codes, is docs/interferometer-protocol.md.
+
+Summary: ASCII, 8N1, 115200 baud by default. A command is one line ending in "\\n" (a "\\r\\n"
+is accepted). Every reply is one line ``<field>,<field>,...*HH\\r\\n`` where HH is the NMEA-style
+checksum: the XOR of all bytes before '*', as two uppercase hex digits.
+
+Parsing functions raise `ProtocolError` (a ValueError) naming what is wrong; the client turns it
+into `drivers.errors.FramingError` once its retries are used up.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from drivers.errors import DriverError
+
+TERMINATOR = b"\r\n"
+COMMAND_TERMINATOR = b"\n"
+MAX_LINE_BYTES = 256  # longer lines are noise: the longest legal reply is under 160 bytes
+DEFAULT_BAUDRATE = 115200
+MAX_AVERAGING_S = 10.0
+STATUSES = ("OK", "BEAM", "LOW")  # beam ok / beam interrupted / signal below threshold
+LOW_SIGNAL_PCT = 25.0  # below this the instrument reports LOW
+
+# Command words (the client sends them in upper case; the instrument accepts any case).
+CMD_IDN = "*IDN?"
+CMD_POS = "POS?"
+CMD_ENV = "ENV?"
+CMD_ZERO = "ZERO"
+CMD_AVG = "AVG"
+CMD_AVG_QUERY = "AVG?"
+
+# Error codes of `ERR,<code>,<text>` replies.
+ERR_UNKNOWN_COMMAND = 1
+ERR_BAD_ARGUMENT = 2  # missing, extra or unparsable argument
+ERR_BAD_AXIS = 3  # axis number outside 1..axes
+ERR_OUT_OF_RANGE = 4  # argument parsed but outside its range (e.g. AVG above 10 s)
+ERR_LINE_TOO_LONG = 5  # no terminator within MAX_LINE_BYTES
+ERROR_NAMES = {
+    ERR_UNKNOWN_COMMAND: "unknown command",
+    ERR_BAD_ARGUMENT: "bad argument",
+    ERR_BAD_AXIS: "bad axis",
+    ERR_OUT_OF_RANGE: "argument out of range",
+    ERR_LINE_TOO_LONG: "line too long",
+}
+
+
+class ProtocolError(ValueError):
+    """A line that does not follow the protocol (framing, checksum, field count or type)."""
+
+
+class InstrumentError(DriverError):
+    """The instrument understood the frame but refused the command (an `ERR` reply).
+
+    `code` is the protocol error code (see ERROR_NAMES); `instrument_text` its own message.
+    """
+
+    hint = "This is a usage or configuration error (axis count, argument range), not line noise."
+
+    def __init__(self, message: str, code: int = 0, instrument_text: str = "", hint: str = ""):
+        super().__init__(message, hint)
+        self.code = code
+        self.instrument_text = instrument_text
+
+
+# -- framing -------------------------------------------------------------------------------
+
+
+def checksum(body: bytes) -> str:
+    """NMEA-style checksum of `body` (all bytes before '*'): XOR of the bytes, 2 upper hex."""
+    value = 0
+    for byte in body:
+        value ^= byte
+    return f"{value:02X}"
+
+
+def frame_reply(*fields: object) -> bytes:
+    """One reply line: fields joined by ',', then '*HH\\r\\n'."""
+    body = ",".join(str(f) for f in fields).encode("ascii")
+    return body + b"*" + checksum(body).encode("ascii") + TERMINATOR
+
+
+def show_line(line: bytes, limit: int = 60) -> str:
+    """repr of a received line for error messages, cut to `limit` bytes."""
+    if len(line) <= limit:
+        return repr(line)
+    return repr(line[:limit]) + f"... ({len(line)} bytes)"
+
+
+def split_reply(line: bytes) -> list[str]:
+    """Check terminator, characters and checksum of one reply line; return its fields.
+
+    Raises ProtocolError with the reason (the line itself is shown by the caller).
+    """
+    if not line:
+        raise ProtocolError("empty reply")
+    if not line.endswith(TERMINATOR):
+        raise ProtocolError(f"reply not terminated by \\r\\n ({len(line)} bytes received before the timeout)")
+    content = line[: -len(TERMINATOR)]
+    if any(b < 0x20 or b > 0x7E for b in content):
+        raise ProtocolError("reply contains non-printable or non-ASCII bytes (line noise?)")
+    star = content.rfind(b"*")
+    if star < 0:
+        raise ProtocolError("reply has no '*HH' checksum")
+    body, given = content[:star], content[star + 1 :]
+    if len(given) != 2 or any(c not in b"0123456789ABCDEF" for c in given):
+        raise ProtocolError(f"checksum field {given.decode('ascii')!r} is not two uppercase hex digits")
+    expected = checksum(body)
+    if given.decode("ascii") != expected:
+        raise ProtocolError(f"bad checksum: reply says {given.decode('ascii')}, computed {expected}")
+    return body.decode("ascii").split(",")
+
+
+# -- commands (client side builds them, instrument side parses them) ------------------------
+
+
+def cmd_identity() -> bytes:
+    return f"{CMD_IDN}\n".encode("ascii")
+
+
+def cmd_position(axis: int) -> bytes:
+    return f"{CMD_POS} {int(axis)}\n".encode("ascii")
+
+
+def cmd_environment() -> bytes:
+    return f"{CMD_ENV}\n".encode("ascii")
+
+
+def cmd_zero(axis: int) -> bytes:
+    return f"{CMD_ZERO} {int(axis)}\n".encode("ascii")
+
+
+def cmd_set_averaging(averaging_s: float) -> bytes:
+    return f"{CMD_AVG} {format_averaging(averaging_s)}\n".encode("ascii")
+
+
+def cmd_averaging_query() -> bytes:
+    return f"{CMD_AVG_QUERY}\n".encode("ascii")
+
+
+def format_averaging(averaging_s: float) -> str:
+    return f"{float(averaging_s):.3f}"
+
+
+def parse_command(line: bytes) -> tuple[str, list[str]]:
+    """Split one command line (without terminator) into upper-case word and arguments."""
+    words = line.decode("ascii", errors="replace").strip().split()
+    if not words:
+        return "", []
+    return words[0].upper(), words[1:]
+
+
+# -- replies (instrument side formats them, client side parses them) ------------------------
+
+
+@dataclass(frozen=True)
+class PositionReply:
+    """Fields of a `POS` reply: position (mm, relative to the axis zero, air-compensated),
+    status (OK/BEAM/LOW), signal strength (0-100 %), instrument time (s)."""
+
+    axis: int
+    position_mm: float
+    status: str
+    signal_pct: float
+    t_s: float
+
+
+@dataclass(frozen=True)
+class EnvironmentReply:
+    air_temp_c: float
+    air_pressure_hpa: float
+    humidity_pct: float
+    material_temp_c: tuple[float, ...]  # index 0 = axis (leg) 1; NaN = no sensor
+
+
+def format_position(axis: int, position_mm: float, status: str, signal_pct: float, t_s: float) -> bytes:
+    return frame_reply("POS", int(axis), f"{position_mm:+.9f}", status, f"{signal_pct:.1f}", f"{t_s:.6f}")
+
+
+def format_environment(air_temp_c: float, air_pressure_hpa: float, humidity_pct: float, material_temp_c) -> bytes:
+    temps = ["NAN" if math.isnan(t) else f"{t:.3f}" for t in material_temp_c]
+    return frame_reply("ENV", f"{air_temp_c:.3f}", f"{air_pressure_hpa:.2f}", f"{humidity_pct:.1f}", *temps)
+
+
+def format_error(code: int, text: str) -> bytes:
+    # the text must not break the framing
+    clean = "".join(c for c in text if 0x20 <= ord(c) <= 0x7E and c not in ",*")
+    return frame_reply("ERR", int(code), clean)
+
+
+def _number(fields: list[str], index: int, what: str, allow_nan: bool = False) -> float:
+    text = fields[index]
+    try:
+        value = float(text)
+    except ValueError:
+        raise ProtocolError(f"field {index} ({what}) is {text!r}, not a number") from None
+    if math.isinf(value) or (math.isnan(value) and not allow_nan):
+        raise ProtocolError(f"field {index} ({what}) is {text!r}, not a finite number")
+    return value
+
+
+def _expect(fields: list[str], tag: str, count: int | None = None) -> None:
+    if fields[0] != tag:
+        raise ProtocolError(f"expected a {tag} reply, got {fields[0]!r}")
+    if count is not None and len(fields) != count:
+        raise ProtocolError(f"{tag} reply has {len(fields)} fields, expected {count}")
+
+
+def raise_if_error(fields: list[str], command: str, port: str = "") -> None:
+    """Raise InstrumentError for an `ERR,<code>,<text>` reply to `command` (sent on `port`)."""
+    if fields and fields[0] == "ERR":
+        try:
+            code = int(fields[1]) if len(fields) > 1 else 0
+        except ValueError:
+            code = 0
+        text = ",".join(fields[2:]) if len(fields) > 2 else ""
+        name = ERROR_NAMES.get(code, "error")
+        raise InstrumentError(
+            f"interferometer{' on ' + port if port else ''} refused {command!r}: {name} (ERR {code}: {text}).",
+            code=code,
+            instrument_text=text,
+        )
+
+
+def parse_identity(fields: list[str]) -> str:
+    """`IDN,<vendor>,<model>,<serial>,<firmware>` -> 'vendor,model,serial,firmware'."""
+    _expect(fields, "IDN", 5)
+    return ",".join(fields[1:])
+
+
+def parse_position(fields: list[str], axis: int) -> PositionReply:
+    _expect(fields, "POS", 6)
+    try:
+        got_axis = int(fields[1])
+    except ValueError:
+        raise ProtocolError(f"field 1 (axis) is {fields[1]!r}, not an integer") from None
+    if got_axis != axis:
+        # a late reply to an earlier query: the caller flushes and asks again
+        raise ProtocolError(f"reply is for axis {got_axis}, asked for axis {axis}")
+    status = fields[3]
+    if status not in STATUSES:
+        raise ProtocolError(f"field 3 (status) is {status!r}, expected one of {', '.join(STATUSES)}")
+    signal = _number(fields, 4, "signal_pct")
+    if not 0.0 <= signal <= 100.0:
+        raise ProtocolError(f"field 4 (signal_pct) is {signal}, outside 0..100")
+    return PositionReply(
+        axis=got_axis,
+        position_mm=_number(fields, 2, "position_mm"),
+        status=status,
+        signal_pct=signal,
+        t_s=_number(fields, 5, "t_s"),
+    )
+
+
+def parse_environment(fields: list[str], axes: int) -> EnvironmentReply:
+    _expect(fields, "ENV")
+    if len(fields) != 4 + axes:
+        raise ProtocolError(
+            f"ENV reply has {len(fields) - 4} material temperatures, expected {axes} (one per axis)"
+        )
+    return EnvironmentReply(
+        air_temp_c=_number(fields, 1, "air_temp_c"),
+        air_pressure_hpa=_number(fields, 2, "air_pressure_hpa"),
+        humidity_pct=_number(fields, 3, "humidity_pct"),
+        material_temp_c=tuple(_number(fields, 4 + i, f"material_temp_c of axis {i + 1}", allow_nan=True) for i in range(axes)),
+    )
+
+
+def parse_ok(fields: list[str]) -> None:
+    _expect(fields, "OK", 1)
+
+
+def parse_averaging(fields: list[str]) -> float:
+    _expect(fields, "AVG", 2)
+    value = _number(fields, 1, "averaging_s")
+    if not 0.0 <= value <= MAX_AVERAGING_S:
+        raise ProtocolError(f"field 1 (averaging_s) is {value}, outside 0..{MAX_AVERAGING_S:g}")
+    return value
