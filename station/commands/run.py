@@ -1,0 +1,47 @@
+"""`station run`: the main job on the simulated rig, headless.
+
+An ISO 230-2 sweep of one leg on the simulated rig (through the real Modbus and serial
+protocols), recorded to runs/, followed by its ISO 230-2 evaluation. `make run` starts the
+terminal UI instead once it is installed; this command stays as the scriptable demo.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from procedures.plans import iso230_plan, parse_legs
+from station.config import load_config
+from station.jobs import run_sweep
+from station.progress import ConsoleProgress
+from station.wiring import open_rig
+
+NAME = "run"
+HELP = "headless calibration sweep on the simulated rig, then its ISO 230-2 evaluation"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--legs", default="1", help="legs to sweep (default 1)")
+    p.add_argument("--cycles", type=int, default=5, help="bidirectional cycles (default 5)")
+    p.add_argument("--out", help="session file (default runs/run-YYYYmmdd-HHMMSS.h5)")
+    p.add_argument("--time-scale", type=float, default=0.0, help="real s per simulated s (default 0: no waiting)")
+
+
+def run(args) -> int:
+    cfg = load_config(None)
+    plan = iso230_plan(parse_legs(args.legs), cycles=args.cycles)
+    out = Path(args.out or f"{cfg.recordings_dir}/run-{time.strftime('%Y%m%d-%H%M%S')}.h5")
+    with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
+        print(f"rig: {rig.description}")
+        result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()])
+    print(f"session recorded: {out.resolve()} ({result.outcome}, {result.points} points)")
+    if result.outcome != "completed":
+        return 1
+    try:
+        from procedures.iso230 import evaluate, format_table
+        from procedures.recording.reader import read_session
+    except ImportError:  # evaluation module not installed in this build
+        return 0
+    print(format_table(evaluate(read_session(out).points)))
+    return 0
