@@ -65,6 +65,10 @@ class PlantConfig:
     noise_um: float = 0.03
     run_offset_um: float = 0.04
     enabled: frozenset[str] = field(default_factory=lambda: ALL_SOURCES)
+    # ambient cycling (air conditioning, day/night): ambient = ambient_temp_c + swing*sin(2 pi t/period);
+    # makes the material temperature non-monotonic in time, so thermal and drift are separable
+    ambient_swing_k: float = 0.0
+    ambient_period_s: float = 3600.0
 
     def __post_init__(self) -> None:
         unknown = set(self.enabled) - ALL_SOURCES
@@ -72,6 +76,8 @@ class PlantConfig:
             raise ValueError(f"unknown error sources {sorted(unknown)}; known: {sorted(ALL_SOURCES)}")
         if self.tau_s <= 0 or self.lead_mm <= 0 or self.stroke_half_mm <= 0:
             raise ValueError("tau_s, lead_mm and stroke_half_mm must be positive")
+        if self.ambient_period_s <= 0:
+            raise ValueError("ambient_period_s must be positive")
 
     def only(self, *sources: str) -> "PlantConfig":
         """This configuration with only the named error sources switched on."""
@@ -152,6 +158,10 @@ class LegPlant:
         dt = max(0.0, t_s - self._t_last_s)
         heat_k = self.cfg.heating_k_per_m * abs(travel_mm) / 1000.0
         amb = self.cfg.ambient_temp_c
+        if self.cfg.ambient_swing_k:
+            # ambient at the middle of the interval: intervals are short against the period
+            t_mid = 0.5 * (t_s + self._t_last_s) - self.t0_s
+            amb += self.cfg.ambient_swing_k * math.sin(2 * math.pi * t_mid / self.cfg.ambient_period_s)
         if dt == 0.0:
             self.temp_c += heat_k
         else:
