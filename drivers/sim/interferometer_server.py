@@ -66,6 +66,9 @@ class SimInterferometer:
         self._beam_break: set[int] = set()
         self._signal_pct = {axis: float(signal_pct) for axis in range(1, self.axes + 1)}
         self._last_position_mm = {axis: 0.0 for axis in range(1, self.axes + 1)}
+        # plant position (mm) where each axis was zeroed: readings are displacements from it;
+        # the sweep zeroes at mid-stroke (0), so readings are then in leg coordinates
+        self._datum_mm = {axis: 0.0 for axis in range(1, self.axes + 1)}
         self._faults = threading.Lock()
         self._garbage_left = 0
         self._garbage_kind: str | None = None
@@ -226,7 +229,10 @@ class SimInterferometer:
             with self.lock:
                 plant = self.plants.get(axis)
                 if plant is not None:
+                    # the plant forgets the error offset here; the datum makes later readings
+                    # displacements from this point, as a real interferometer's zero does
                     plant.zero_here(self.clock.now())
+                    self._datum_mm[axis] = plant.x_mm
             return p.frame_reply("OK")
         if word == p.CMD_AVG_QUERY:
             return p.frame_reply("AVG", p.format_averaging(self._averaging_s)) if not args else _bad_args(word)
@@ -270,7 +276,7 @@ class SimInterferometer:
                 status, signal = "BEAM", 0.0
                 position_mm = self._last_position_mm[axis]  # the last valid count
             else:
-                position_mm = plant.measured_position_mm(t_s, averaging_s)
+                position_mm = plant.measured_position_mm(t_s, averaging_s) - self._datum_mm[axis]
                 self._last_position_mm[axis] = position_mm
                 signal = float(np.clip(nominal_pct + self._rng.normal(0.0, 0.3), 0.0, 100.0))
                 status = "LOW" if signal < p.LOW_SIGNAL_PCT else "OK"
