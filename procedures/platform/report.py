@@ -1,0 +1,123 @@
+"""Text of the platform report: the paper's Table 2 (pose) and Table 1 (legs) as Markdown."""
+
+from __future__ import annotations
+
+from procedures.platform.sensitivity import POSE_ERROR_FIELDS
+
+_ROWS = (
+    ("max_original", "Maximum original error"),
+    ("min_original", "Minimum original error"),
+    ("max_compensated", "Maximum compensated error"),
+    ("min_compensated", "Minimum compensated error"),
+    ("range_reduction_pct", "Range reduction (%)"),
+    ("mean_abs_original", "Mean of original abs(error)"),
+    ("mean_abs_compensated", "Mean of compensated abs(error)"),
+)
+_LABELS = {"x_um": "x", "y_um": "y", "z_um": "z", "rx_rad": "rx", "ry_rad": "ry", "rz_rad": "rz"}
+
+
+def _fmt(value, key: str, sci: bool) -> str:
+    if value is None:
+        return "n/a"
+    if key == "range_reduction_pct":
+        return f"{value:.2f} %"
+    return f"{value:.4g}" if sci else f"{value:.4f}"
+
+
+def _table(columns: list[tuple[str, str, dict, bool]]) -> list[str]:
+    head = "| Measure | " + " | ".join(f"{label} ({unit})" for label, unit, _, _ in columns) + " |"
+    lines = [head, "|---|" + "---:|" * len(columns)]
+    for key, label in _ROWS:
+        lines.append(f"| {label} | " + " | ".join(_fmt(stats[key], key, sci) for _, _, stats, sci in columns) + " |")
+    return lines
+
+
+def pose_table_markdown(summary: dict) -> str:
+    """Table 2 of the paper for this run: x, y, z in um and angles in arc-seconds, then the
+    angles in radians as the paper gives them."""
+    pose = summary["pose"]
+    cols = [(_LABELS[n], "um", pose[n], False) for n in POSE_ERROR_FIELDS[:3]]
+    cols += [(_LABELS[n], "arcsec", pose[n.replace("_rad", "_arcsec")], False) for n in POSE_ERROR_FIELDS[3:]]
+    rad = [(_LABELS[n], "rad", pose[n], True) for n in POSE_ERROR_FIELDS[3:]]
+    return "\n".join(_table(cols) + ["", "Angles in radians:", ""] + _table(rad))
+
+
+def leg_table_markdown(summary: dict) -> str:
+    """Table 1 of the paper for this run: leg errors at the sampled positions, um."""
+    legs = summary["legs"]
+    cols = [(f"leg {k}" if k != "all" else "all legs", "um", legs[k], False) for k in legs]
+    return "\n".join(_table(cols))
+
+
+def report_markdown(summary: dict, geometry_text: str = "", home_sensitivity: dict | None = None) -> str:
+    """The whole report (Markdown): source and settings, pose and leg tables, the acceptance
+    check (pose range reduction against the legs'), dominant legs, FK outcome."""
+    ws = summary["workspace"]
+    lines = [
+        "# Platform pose errors from leg errors, before and after compensation",
+        "",
+        f"- Error source: {summary['source']}",
+        *([f"- Geometry: {geometry_text}"] if geometry_text else []),
+        f"- Poses: {summary['poses_used']} used of {summary['poses']} (drawn {summary['poses_drawn']} to find "
+        f"{summary['poses']} within stroke and recorded range), seed {summary['seed']}",
+        f"- Workspace about home: x, y +/-{ws['xy_mm']:g} mm, z +/-{ws['z_mm']:g} mm, "
+        f"rx, ry +/-{ws['tilt_rad']:.4g} rad, rz +/-{ws['yaw_rad']:.4g} rad",
+        "- Pose error = FK pose from erroneous leg lengths minus the nominal pose; angles are "
+        "roll-pitch-yaw about fixed X, Y, Z (R = Rz Ry Rx).",
+        "",
+        "## Pose errors (the paper's Table 2)",
+        "",
+        pose_table_markdown(summary),
+        "",
+        "## Leg errors at the sampled positions (the paper's Table 1)",
+        "",
+        leg_table_markdown(summary),
+        "",
+        "## Range reduction: pose against legs",
+        "",
+        "| Component | Pose range reduction | Leg range reduction (all legs) | At least as much |",
+        "|---|---:|---:|---|",
+    ]
+    for name, acc in summary["acceptance"].items():
+        pr, lr = acc["range_reduction_pct"], acc["leg_range_reduction_pct"]
+        lines.append(
+            f"| {_LABELS[name]} | {_fmt(pr, 'range_reduction_pct', False)} | {_fmt(lr, 'range_reduction_pct', False)} | "
+            f"{'yes' if acc['at_least_leg_reduction'] else 'no'} |"
+        )
+    lines += [
+        "",
+        "## Which leg dominates each pose component",
+        "",
+        "Mean |linearised contribution| of each leg (sensitivity d pose / d leg at each pose times the "
+        "leg's error), share of the six legs.",
+        "",
+        "| Component | Original: leg (share) | Compensated: leg (share) | Linearisation mismatch (rel. to range) |",
+        "|---|---|---|---:|",
+    ]
+    dom = summary["dominant_leg"]
+    for a, b in zip(dom["original"], dom["compensated"]):
+        mis = summary["linearisation_mismatch_rel"][a["component"]]
+        lines.append(f"| {_LABELS[a['component']]} | leg {a['leg']} ({a['share_pct']:.0f} %) | leg {b['leg']} ({b['share_pct']:.0f} %) | {mis:.1e} |")
+    if home_sensitivity is not None:
+        lines += [
+            "",
+            "Sensitivity at the home pose (pose error per um of leg error; rows components, columns legs 1-6):",
+            "",
+            "| Component | " + " | ".join(f"leg {i}" for i in range(1, 7)) + " | dominant |",
+            "|---|" + "---:|" * 6 + "---|",
+        ]
+        for (name, row), d in zip(home_sensitivity["matrix"].items(), home_sensitivity["dominant"]):
+            lines.append(f"| {name} | " + " | ".join(f"{v:+.4f}" for v in row) + f" | leg {d['leg']} ({d['share_pct']:.0f} %) |")
+    fk = summary["fk"]
+    lines += [
+        "",
+        "## Forward kinematics",
+        "",
+        f"- original lengths: {', '.join(f'{k} {v}' for k, v in fk['original'].items())}",
+        f"- compensated lengths: {', '.join(f'{k} {v}' for k, v in fk['compensated'].items())}",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+__all__ = ["leg_table_markdown", "pose_table_markdown", "report_markdown"]
