@@ -64,3 +64,36 @@ FAULT_DTYPE = np.dtype([(n, t) for n, t, _ in FAULT_FIELDS])
 
 OPTIONAL_NAN_FIELDS = ("time_s", "air_temp_c", "air_pressure_hpa", "humidity_pct", "material_temp_c", "load_n")
 """Fields that may be unknown (NaN) in imported data: NaN means 'not measured', never zero."""
+
+# --- additions (recording writer/reader) -------------------------------------------------------
+
+FAULT_UNITS = {n: u for n, _, u in FAULT_FIELDS}
+
+POINT_REQUIRED_KEYS = ("index", "leg", "run", "direction", "target_mm")
+"""Keys a point record must carry; every other POINT_DTYPE field defaults to unknown (NaN, or 0
+for `flags`)."""
+
+ROOT_ATTRS = (
+    "schema_version", "software_version", "session_id", "operator", "rig",
+    "started_utc", "ended_utc", "outcome", "resumed_utc",
+)
+"""Root attributes of a session file, all strings. `ended_utc` and `outcome` are "" while the
+session is open or when it was cut short; `resumed_utc` is a JSON list of the UTC times at which
+the session was resumed ("[]" when never)."""
+
+META_ATTRS = ("plan", "station_config", "devices")
+"""Attributes of the /meta group: JSON text."""
+
+OUTCOMES = ("completed", "aborted", "failed")
+"""Values of the root `outcome` attribute once a session is finished."""
+
+POINTS_CHUNK_ROWS = 256  # ~28 kB per chunk: small rewrite per flush, few chunks per session
+FAULTS_CHUNK_ROWS = 64
+UNWRITTEN_INDEX = -1
+"""Fill value of `index`: a row whose index is -1 was allocated but never written (a kill
+between growing the dataset and writing the row). Readers drop such rows."""
+
+
+def schema_major(version: str) -> int:
+    """The major number of a "major.minor" schema version string (ValueError if malformed)."""
+    return int(str(version).split(".")[0])
