@@ -1,0 +1,566 @@
+"""Modbus client for the leg servo drives: a shared bus and one `ServoAxis` per leg.
+
+`ModbusBus` wraps a pymodbus sync client (TCP or RTU) with one lock (six axes share one bus),
+a transaction counter, chunked writes (<= 123 registers), and errors a technician can act on:
+`CommTimeout` names the URL, unit id and timeout. `ModbusServoAxis` implements
+`drivers.interfaces.ServoAxis` on the register map of a `DriveProfile`
+(docs/register-map.md). A move is one write (controlword with new-set-point + target) plus
+status reads until the drive reports the target reached: two transactions when the drive
+arrives at once (simulated rig at time scale 0).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from typing import Callable, Sequence
+from urllib.parse import parse_qs, urlsplit
+
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ModbusException
+
+from drivers.clock import SystemClock
+from drivers.errors import CommTimeout, DriveFault, DriverError, SoftLimitError, TableError
+from drivers.interfaces import Clock, DriveLimits, DriveStatus, TableBank
+from drivers.modbus.codec import chunks, crc16_modbus, int_range
+from drivers.modbus.profile import MAX_READ_WORDS, MAX_WRITE_WORDS, DriveProfile
+
+log = logging.getLogger(__name__)
+
+EXCEPTION_NAMES = {
+    1: "illegal function",
+    2: "illegal data address",
+    3: "illegal data value",
+    4: "server device failure",
+    5: "acknowledge",
+    6: "server device busy",
+    8: "memory parity error",
+    10: "gateway path unavailable",
+    11: "gateway target failed to respond",
+}
+
+
+class BusConfigError(DriverError, ValueError):
+    """A drive URL or bus setting is malformed."""
+
+    hint = "Use tcp://HOST:PORT (e.g. tcp://127.0.0.1:5020) or rtu:///dev/ttyUSB0?baud=115200."
+
+
+class RequestRefused(DriverError):
+    """The drive answered a request with a Modbus exception (it refused it)."""
+
+    hint = ""
+
+    def __init__(self, message: str, exception_code: int, address: int):
+        super().__init__(message)
+        self.exception_code = exception_code
+        self.address = address
+
+
+class ModbusBus:
+    """One Modbus line (a TCP connection or a serial port) shared by several drives.
+
+    Thread-safe: one request at a time. `timeout_s` bounds one request including its
+    retries (each attempt waits timeout_s / (retries + 1)). `transactions` counts requests
+    sent (each write chunk and each read is one). `on_request(kind, unit, address, count)` is
+    called before each request ("read"/"write"), e.g. for tracing.
+    """
+
+    def __init__(self, client, where: str, timeout_s: float, retries: int):
+        self._client = client
+        self.where = where
+        self.timeout_s = timeout_s
+        self.retries = retries
+        self.transactions = 0
+        self.on_request: Callable[[str, int, int, int], None] | None = None
+        self._lock = threading.RLock()
+        self._users = 0
+
+    # -- construction -------------------------------------------------------------------------------
+    @staticmethod
+    def _check(timeout_s: float, retries: int) -> float:
+        if not (isinstance(timeout_s, (int, float)) and timeout_s > 0 and math.isfinite(timeout_s)):
+            raise BusConfigError(f"timeout must be a positive number of seconds, got {timeout_s!r}")
+        if not (isinstance(retries, int) and 0 <= retries <= 10):
+            raise BusConfigError(f"retries must be an integer 0..10, got {retries!r}")
+        return timeout_s / (retries + 1)
+
+    @classmethod
+    def tcp(cls, host: str, port: int, timeout_s: float = 1.0, retries: int = 1) -> "ModbusBus":
+        """Modbus TCP to `host`:`port`; connects on the first request."""
+        attempt_s = cls._check(timeout_s, retries)
+        client = ModbusTcpClient(host, port=int(port), timeout=attempt_s, retries=retries,
+                                 reconnect_delay=0.0, reconnect_delay_max=attempt_s)
+        return cls(client, f"tcp://{host}:{port}", timeout_s, retries)
+
+    @classmethod
+    def rtu(cls, port: str, baudrate: int = 115200, timeout_s: float = 1.0, retries: int = 1) -> "ModbusBus":
+        """Modbus RTU on serial `port` (8N1 at `baudrate`); opens on the first request."""
+        attempt_s = cls._check(timeout_s, retries)
+        client = ModbusSerialClient(port, baudrate=int(baudrate), bytesize=8, parity="N", stopbits=1,
+                                    timeout=attempt_s, retries=retries, reconnect_delay=0.0,
+                                    reconnect_delay_max=attempt_s)
+        return cls(client, f"rtu://{port}?baud={baudrate}", timeout_s, retries)
+
+    @classmethod
+    def from_url(cls, url: str, timeout_s: float = 1.0, retries: int = 1) -> "ModbusBus":
+        """A bus for `tcp://HOST:PORT` (port default 502) or `rtu:///dev/PATH?baud=115200`."""
+        try:
+            parts = urlsplit(url)
+        except ValueError as exc:
+            raise BusConfigError(f"drive URL {url!r} is malformed ({exc}).") from None
+        if parts.scheme == "tcp":
+            try:
+                port = parts.port or 502
+            except ValueError:
+                raise BusConfigError(f"drive URL {url!r}: the port must be a number 1..65535.") from None
+            if not parts.hostname:
+                raise BusConfigError(f"drive URL {url!r} has no host.")
+            return cls.tcp(parts.hostname, port, timeout_s, retries)
+        if parts.scheme == "rtu":
+            path = (parts.netloc + parts.path) if parts.netloc else parts.path
+            if not path:
+                raise BusConfigError(f"drive URL {url!r} has no serial port path.")
+            query = parse_qs(parts.query)
+            try:
+                baud = int(query.get("baud", ["115200"])[0])
+            except ValueError:
+                raise BusConfigError(f"drive URL {url!r}: baud must be a number.") from None
+            return cls.rtu(path, baud, timeout_s, retries)
+        raise BusConfigError(f"drive URL {url!r}: unknown scheme {parts.scheme!r}.")
+
+    # -- sharing ----------------------------------------------------------------------------------------
+    def acquire(self) -> None:
+        with self._lock:
+            self._users += 1
+
+    def release(self) -> None:
+        """One user is done; the connection closes when the last one is (it reopens on demand)."""
+        with self._lock:
+            self._users = max(0, self._users - 1)
+            if self._users == 0:
+                self.close()
+
+    def close(self) -> None:
+        with self._lock:
+            try:
+                self._client.close()
+            except Exception:  # closing a dead link must not raise
+                log.debug("closing %s failed", self.where, exc_info=True)
+
+    # -- requests ------------------------------------------------------------------------------------
+    def _execute(self, kind: str, unit: int, address: int, count: int, call):
+        with self._lock:
+            if self.on_request:
+                self.on_request(kind, unit, address, count)
+            self.transactions += 1
+            try:
+                rsp = call()
+            except ModbusException as exc:
+                self.close()  # a late reply must not be taken for the next request's
+                text = str(exc)
+                if "connect" in text.lower() and "no response" not in text.lower():
+                    what = "cannot connect (refused or unreachable)"
+                else:
+                    what = f"no answer within {self.timeout_s:g} s ({self.retries + 1} attempt(s))"
+                raise CommTimeout(f"drive at {self.where}, unit id {unit}: {what} while trying to {kind} "
+                                  f"register {address} (+{count}).") from None
+            except OSError as exc:
+                self.close()
+                raise CommTimeout(f"drive at {self.where}, unit id {unit}: {exc.strerror or exc} while trying to "
+                                  f"{kind} register {address} (+{count}).") from None
+            if rsp.isError():
+                code = int(getattr(rsp, "exception_code", 0))
+                name = EXCEPTION_NAMES.get(code, "unknown exception")
+                raise RequestRefused(f"drive at {self.where}, unit id {unit} refused to {kind} register {address} "
+                                     f"(+{count}): Modbus exception {code} ({name}).", code, address)
+            return rsp
+
+    def read(self, unit: int, address: int, count: int) -> list[int]:
+        """Read `count` holding registers (several requests when count > 125)."""
+        out: list[int] = []
+        for a, n in ((address + i, min(MAX_READ_WORDS, count - i)) for i in range(0, count, MAX_READ_WORDS)):
+            rsp = self._execute("read", unit, a, n,
+                                lambda a=a, n=n: self._client.read_holding_registers(a, count=n, device_id=unit))
+            regs = list(rsp.registers)
+            if len(regs) != n:
+                raise CommTimeout(f"drive at {self.where}, unit id {unit}: asked for {n} registers at {a}, got {len(regs)}.")
+            out += regs
+        return out
+
+    def write(self, unit: int, address: int, values: Sequence[int]) -> None:
+        """Write holding registers, in chunks of at most 123 (one request each)."""
+        for a, vals in chunks(address, list(values), MAX_WRITE_WORDS):
+            self._execute("write", unit, a, len(vals),
+                          lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit))
+
+
+class ModbusServoAxis:
+    """One leg's drive on a `ModbusBus` (unit id = leg unless `unit_id` is given).
+
+    Implements `drivers.interfaces.ServoAxis`. Positions are mm in leg coordinates (as the drive
+    reports them: compensated), errors um (measured minus commanded). `clock` paces the status
+    polling (`poll_interval_s` between reads while moving) and measures move timeouts;
+    `move_timeout_s` None = twice the trapezoid time of the move plus 1 s.
+    """
+
+    def __init__(
+        self,
+        bus: ModbusBus,
+        leg: int,
+        profile: DriveProfile | None = None,
+        clock: Clock | None = None,
+        poll_interval_s: float = 0.001,
+        move_timeout_s: float | None = None,
+        unit_id: int | None = None,
+    ):
+        self.bus = bus
+        self.leg = int(leg)
+        self.unit = int(unit_id if unit_id is not None else leg)
+        if not 1 <= self.unit <= 247:
+            raise BusConfigError(f"leg {leg}: unit id {self.unit} is outside 1..247.")
+        self.profile = profile or DriveProfile.load()
+        self.clock = clock or SystemClock()
+        self.poll_interval_s = poll_interval_s
+        self.move_timeout_s = move_timeout_s
+        self._limits: DriveLimits | None = None
+        self._profile_motion: tuple[float, float] | None = None  # profile velocity, accel
+        self._last_position_mm: float | None = None
+        self._closed = False
+        p = self.profile
+        self._status_block = p.blocks["status"]
+        self._move_block = p.blocks["move_command"]
+        self._target_reg = p.registers["target_position"]
+        self._cw_addr = p.address("controlword")
+        self._move_cw = p.commands["enable_operation"] | (1 << p.controlword_bits["new_set_point"])
+        bus.acquire()
+
+    def __repr__(self) -> str:
+        return f"ModbusServoAxis(leg={self.leg}, unit={self.unit}, {self.bus.where})"
+
+    # -- reading ------------------------------------------------------------------------------------
+    def _read_block(self, name: str) -> dict:
+        b = self.profile.blocks[name]
+        return self.profile.decode_block(name, self.bus.read(self.unit, b.start, b.words))
+
+    def identity(self) -> str:
+        """'vendor product s/n SERIAL fw FIRMWARE' as the drive reports it."""
+        v = self._read_block("identity")
+        return f"{v['vendor']} {v['product']} s/n {v['serial']} fw {v['firmware']}"
+
+    def check_map_version(self) -> None:
+        """Refuse a drive whose register map version differs from the profile's."""
+        v = self._read_block("identity")
+        if v["map_version"] != self.profile.map_version:
+            raise DriveFault(f"leg {self.leg}: the drive at {self.bus.where} unit {self.unit} reports register map "
+                             f"version {v['map_version']}, the profile {self.profile.path} is for version "
+                             f"{self.profile.map_version}.", hint="Use the drive profile that matches the drive's firmware.")
+
+    def limits(self, refresh: bool = False) -> DriveLimits:
+        """Soft travel limits and motion limits as the drive reports them (read once, cached)."""
+        if self._limits is None or refresh:
+            v = self._read_block("limits")
+            self._limits = DriveLimits(v["soft_limit_min"], v["soft_limit_max"], v["max_velocity"], v["max_acceleration"])
+            self._profile_motion = (min(v["profile_velocity"], v["max_velocity"]), min(v["profile_acceleration"], v["max_acceleration"]))
+        return self._limits
+
+    def _status_from(self, v: dict) -> DriveStatus:
+        p = self.profile
+        sw = v["statusword"]
+        state = p.state_of(sw)
+        reached = p.sw_bit(sw, "target_reached")
+        self._last_position_mm = v["position_actual"]
+        return DriveStatus(
+            state=state,
+            fault=state == "fault",
+            fault_code=v["fault_code"],
+            moving=not reached,
+            target_reached=reached,
+            position_mm=v["position_actual"],
+            following_error_um=v["following_error"],
+            load_n=v["axial_load"],
+            active_bank=v["active_bank"],
+            table_enabled=bool(v["table_enable"]),
+        )
+
+    def status(self) -> DriveStatus:
+        """One read of the status block."""
+        return self._status_from(self._read_block("status"))
+
+    # -- state machine ------------------------------------------------------------------------------
+    def _command(self, name: str) -> None:
+        self.bus.write(self.unit, self._cw_addr, [self.profile.commands[name]])
+
+    def enable(self) -> None:
+        """Walk the CiA 402 state machine to operation enabled. DriveFault if the drive is in
+        fault (reset it first) or does not get there."""
+        st = self.status()
+        if st.fault:
+            raise DriveFault(f"leg {self.leg}: the drive is in fault {self.profile.fault_text(st.fault_code)}; "
+                             f"reset the fault before enabling.", st.fault_code)
+        if st.enabled:
+            return
+        seq = {
+            "quick_stop_active": ["enable_operation"],
+            "switched_on": ["enable_operation"],
+            "ready_to_switch_on": ["switch_on", "enable_operation"],
+        }.get(st.state, ["shutdown", "switch_on", "enable_operation"])
+        for cmd in seq:
+            self._command(cmd)
+        st = self.status()
+        if not st.enabled:
+            raise DriveFault(f"leg {self.leg}: the drive did not enable (state {st.state}, fault code 0x{st.fault_code:04X}).",
+                             st.fault_code)
+
+    def disable(self) -> None:
+        """Power stage off (CiA 402 disable voltage -> switch on disabled)."""
+        self._command("disable_voltage")
+
+    def reset_fault(self) -> None:
+        """Clear a drive fault (rising edge of the fault-reset bit); DriveFault if it persists."""
+        self._command("disable_voltage")
+        self._command("fault_reset")
+        st = self.status()
+        if st.fault:
+            raise DriveFault(f"leg {self.leg}: the fault {self.profile.fault_text(st.fault_code)} persists after reset.",
+                             st.fault_code)
+
+    def stop(self) -> None:
+        """Quick stop. Never raises: after a fault or with a dead link it only logs."""
+        try:
+            self._command("quick_stop")
+        except Exception as exc:  # the caller is making the rig safe; it cannot act on this
+            log.warning("leg %s: quick stop not delivered: %s", self.leg, exc)
+
+    # -- motion ------------------------------------------------------------------------------------
+    def _trapezoid_s(self, distance_mm: float) -> float:
+        v, a = self._profile_motion or (self._limits.max_velocity_mm_s, self._limits.max_accel_mm_s2)  # type: ignore[union-attr]
+        d = abs(distance_mm)
+        return 2 * math.sqrt(d / a) if d <= v * v / a else v / a + d / v
+
+    def move_to(self, target_mm: float, timeout_s: float | None = None) -> DriveStatus:
+        """Move to `target_mm` (leg coordinates) and return the status once the drive reports
+        the target reached.
+
+        SoftLimitError before anything is written when the target lies outside the limits the
+        drive reports; DriveFault when the drive faults or is not enabled; CommTimeout when it
+        does not answer, or does not arrive within `timeout_s` (default: `move_timeout_s`, or
+        twice the trapezoid time plus 1 s) on this axis' clock.
+        """
+        lim = self.limits()
+        if not (isinstance(target_mm, (int, float)) and math.isfinite(target_mm)):
+            raise SoftLimitError(f"leg {self.leg}: target {target_mm!r} is not a finite position in mm; nothing moved.")
+        if not lim.min_mm <= target_mm <= lim.max_mm:
+            raise SoftLimitError(f"leg {self.leg}: target {target_mm:.4f} mm is outside the soft limits "
+                                 f"{lim.min_mm:.3f} .. {lim.max_mm:.3f} mm reported by the drive; nothing moved.")
+        words = [self._move_cw] + self._target_reg.encode(target_mm)
+        if timeout_s is None:
+            timeout_s = self.move_timeout_s
+        if timeout_s is None:
+            span = lim.max_mm - lim.min_mm
+            dist = abs(target_mm - self._last_position_mm) if self._last_position_mm is not None else span
+            timeout_s = 2.0 * self._trapezoid_s(dist) + 1.0
+        t0 = self.clock.now()
+        try:
+            self.bus.write(self.unit, self._move_block.start, words)
+        except RequestRefused as exc:
+            raise DriveFault(f"leg {self.leg}: the drive refused the move to {target_mm:.4f} mm: {exc}", 0) from None
+        while True:
+            st = self.status()
+            if st.fault:
+                raise DriveFault(f"leg {self.leg}: drive fault {self.profile.fault_text(st.fault_code)} "
+                                 f"on the move to {target_mm:.4f} mm.", st.fault_code)
+            if not st.enabled:
+                raise DriveFault(f"leg {self.leg}: the drive is {st.state}, not operation_enabled, so it did not move "
+                                 f"to {target_mm:.4f} mm; enable it first.", 0,
+                                 hint="Enable the axis (it may have been quick-stopped or disabled).")
+            if st.target_reached:
+                return st
+            if self.clock.now() - t0 > timeout_s:
+                self.stop()
+                raise CommTimeout(f"leg {self.leg}: the drive did not reach {target_mm:.4f} mm within {timeout_s:.3g} s "
+                                  f"(at {st.position_mm:.4f} mm); it was quick-stopped.",
+                                  hint="Check the mechanics and the drive's motion profile.")
+            self.clock.sleep(self.poll_interval_s)
+
+    # -- compensation tables ------------------------------------------------------------------------
+    def _check_bank(self, bank: int) -> None:
+        if bank not in range(self.profile.table.banks):
+            raise TableError(f"leg {self.leg}: table bank {bank!r} does not exist (banks are 0..{self.profile.table.banks - 1}).",
+                             hint="")
+
+    def active_bank(self) -> int:
+        """The bank the drive applies (0 or 1)."""
+        r = self.profile.registers["active_bank"]
+        return r.decode(self.bus.read(self.unit, r.address, r.words))
+
+    def read_table(self, bank: int) -> TableBank:
+        """The table held in `bank`. TableError if the bank's entries do not match its checksum
+        (e.g. an interrupted push left it half written)."""
+        self._check_bank(bank)
+        t = self.profile.table
+        base = t.bank_base[bank]
+        h = t.decode_header(self.bus.read(self.unit, base, t.header_words))
+        n = h["point_count"]
+        if n > t.max_points:
+            raise TableError(f"leg {self.leg}: bank {bank} claims {n} points, more than the drive's {t.max_points}.", hint="")
+        fwd = self.bus.read(self.unit, t.fwd_address(bank), n) if n else []
+        rev = self.bus.read(self.unit, t.rev_address(bank), n) if n else []
+        crc = crc16_modbus(fwd + rev)
+        if crc != h["checksum"] or h["units"] != t.units_code:
+            raise TableError(f"leg {self.leg}: bank {bank} holds an inconsistent table (header checksum 0x{h['checksum']:04X}, "
+                             f"entries 0x{crc:04X}, units code {h['units']}); an interrupted push?", hint="")
+        to_um = lambda ws: tuple((w - 0x10000 if w & 0x8000 else w) * t.entry_scale_um for w in ws)  # noqa: E731
+        return TableBank(h["start_position"], h["spacing"], to_um(fwd), to_um(rev), h["checksum"])
+
+    def write_table(self, bank: int, table: TableBank) -> None:
+        """Write `table` into the inactive `bank`: entries in chunks of <= 123 registers, the
+        header (with the checksum) last, then read everything back and compare.
+
+        Refuses (TableError, before writing) a bank that is active, a table the drive cannot
+        hold (points, spacing, corrections beyond the profile's limits), or a given checksum
+        that does not match the entries. Does not activate: call `activate_table(bank)`.
+        """
+        self._check_bank(bank)
+        fwd, rev, header = table_registers(self.profile, table, where=f"leg {self.leg}")
+        active = self.active_bank()
+        if bank == active:
+            raise TableError(f"leg {self.leg}: bank {bank} is the active table; write bank {1 - bank} and activate it.")
+        t = self.profile.table
+        base = t.bank_base[bank]
+        # the header (with the checksum) goes last, so a bank is consistent only once complete
+        runs = _writable_runs(self.profile, header)
+        plan = [(t.fwd_address(bank), fwd), (t.rev_address(bank), rev)] + [(base + off, words) for off, words in runs]
+        try:
+            for address, words in plan:
+                if words:
+                    self.bus.write(self.unit, address, words)
+        except RequestRefused as exc:
+            raise TableError(f"leg {self.leg}: the drive refused the table write to bank {bank}: {exc}") from None
+        except CommTimeout as exc:
+            raise CommTimeout(f"leg {self.leg}: table push to bank {bank} interrupted: {exc}",
+                              hint="The previously active table is still active; push again when the drive answers.") from None
+        # read back and compare
+        got_h = self.bus.read(self.unit, base, t.header_words)
+        got_f = self.bus.read(self.unit, t.fwd_address(bank), len(fwd)) if fwd else []
+        got_r = self.bus.read(self.unit, t.rev_address(bank), len(rev)) if rev else []
+        for what, want, got, a0 in (("forward entries", fwd, got_f, t.fwd_address(bank)),
+                                    ("reverse entries", rev, got_r, t.rev_address(bank))):
+            if want != got:
+                i = next(i for i, (x, y) in enumerate(zip(want, got)) if x != y)
+                raise TableError(f"leg {self.leg}: read-back of bank {bank} {what} differs at register {a0 + i}: "
+                                 f"wrote {want[i]}, read {got[i]}; the bank was not activated.")
+        for off, words in runs:
+            if got_h[off : off + len(words)] != words:
+                raise TableError(f"leg {self.leg}: read-back of bank {bank} header differs (wrote {words}, read "
+                                 f"{got_h[off:off + len(words)]}); the bank was not activated.")
+        valid = t.header["valid"].decode(got_h[t.header["valid"].address : t.header["valid"].end])
+        if valid != 1:
+            raise TableError(f"leg {self.leg}: the drive does not accept bank {bank} as valid after the write "
+                             f"(its checksum check failed); the bank was not activated.")
+
+    def activate_table(self, bank: int) -> None:
+        """Make `bank` the active table (one register write). The drive checks the bank's
+        checksum and refuses an invalid bank (TableError; the previous bank stays active)."""
+        self._check_bank(bank)
+        r = self.profile.registers["active_bank"]
+        try:
+            self.bus.write(self.unit, r.address, r.encode(bank))
+        except RequestRefused as exc:
+            why = {3: "its entries do not match its checksum (write it completely first)",
+                   6: "the axis is moving (stop it first)"}.get(exc.exception_code, str(exc))
+            raise TableError(f"leg {self.leg}: the drive refused to activate bank {bank}: {why}.") from None
+
+    def set_table_enabled(self, on: bool) -> None:
+        """Switch applying the active table on or off (one register write)."""
+        r = self.profile.registers["table_enable"]
+        self.bus.write(self.unit, r.address, r.encode(1 if on else 0))
+
+    def close(self) -> None:
+        """Release the bus (the connection closes when its last axis is closed). Idempotent."""
+        if not self._closed:
+            self._closed = True
+            self.bus.release()
+
+
+def table_registers(profile: DriveProfile, table: TableBank, where: str = "table") -> tuple[list[int], list[int], list[int]]:
+    """(forward entry registers, reverse entry registers, header registers) for `table`.
+
+    Entries are rounded to the profile's entry resolution. TableError naming `where` if the
+    table does not fit the drive: point count, equal lengths, spacing, finite values, and
+    |correction| <= max_correction_um; or if `table.checksum` is given (non-zero) and differs
+    from the CRC of the entries.
+    """
+    t = profile.table
+    n = len(table.error_fwd_um)
+    if len(table.error_rev_um) != n:
+        raise TableError(f"{where}: {n} forward but {len(table.error_rev_um)} reverse entries; both directions need the same points.", hint="")
+    if n > t.max_points:
+        raise TableError(f"{where}: {n} points per direction, the drive holds at most {t.max_points}; use a coarser step.", hint="")
+    if not (math.isfinite(table.start_mm) and math.isfinite(table.spacing_mm)):
+        raise TableError(f"{where}: start and spacing must be finite numbers.", hint="")
+    if n > 1 and not table.spacing_mm > 0:
+        raise TableError(f"{where}: spacing {table.spacing_mm} mm must be > 0 (positions strictly increasing).", hint="")
+    for name, vals in (("error_fwd_um", table.error_fwd_um), ("error_rev_um", table.error_rev_um)):
+        for i, e in enumerate(vals):
+            if not math.isfinite(e) or abs(e) > t.max_correction_um:
+                raise TableError(f"{where}: {name}[{i}] = {e} um at {table.start_mm + i * table.spacing_mm:.4f} mm is beyond "
+                                 f"the drive's correction limit of +/-{t.max_correction_um:g} um.", hint="")
+    lo, hi = int_range(t.entry_type)
+    fwd = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_fwd_um]
+    rev = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_rev_um]
+    crc = crc16_modbus(fwd + rev)
+    if table.checksum and table.checksum != crc:
+        raise TableError(f"{where}: the table's checksum 0x{table.checksum:04X} does not match its entries (0x{crc:04X}).", hint="")
+    try:
+        header = t.encode_header({"point_count": n, "start_position": table.start_mm, "spacing": table.spacing_mm,
+                                  "units": t.units_code, "checksum": crc})
+    except ValueError as exc:
+        raise TableError(f"{where}: {exc}", hint="") from None
+    return fwd, rev, header
+
+
+def _writable_runs(profile: DriveProfile, header: list[int]) -> list[tuple[int, list[int]]]:
+    """Contiguous runs (offset, words) of the writable header registers."""
+    mask = [False] * len(header)
+    for r in profile.table.header.values():
+        if r.writable:
+            for i in range(r.address, r.end):
+                mask[i] = True
+    runs, start = [], None
+    for i, w in enumerate(mask + [False]):
+        if w and start is None:
+            start = i
+        elif not w and start is not None:
+            runs.append((start, header[start:i]))
+            start = None
+    return runs
+
+
+def connect_axes(
+    url: str,
+    legs: Sequence[int],
+    profile: DriveProfile | None = None,
+    timeout_s: float = 1.0,
+    retries: int = 1,
+    clock: Clock | None = None,
+    **axis_options,
+) -> dict[int, ModbusServoAxis]:
+    """Connect to the drives of `legs` on one bus (unit id = leg) and check each answers with
+    the profile's register map version. CommTimeout naming the URL if one does not."""
+    profile = profile or DriveProfile.load()
+    bus = ModbusBus.from_url(url, timeout_s=timeout_s, retries=retries)
+    axes: dict[int, ModbusServoAxis] = {}
+    try:
+        for leg in legs:
+            axis = ModbusServoAxis(bus, leg, profile, clock=clock, **axis_options)
+            axes[leg] = axis
+            axis.check_map_version()
+            axis.limits()
+    except BaseException:
+        for axis in axes.values():
+            axis.close()
+        bus.close()
+        raise
+    return axes

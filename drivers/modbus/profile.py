@@ -1,0 +1,524 @@
+"""Drive profiles: the register map of a servo drive, loaded from TOML and checked.
+
+`DriveProfile.load()` reads `profiles/default.toml` (or a file you name) into frozen
+dataclasses. Everything protocol-specific (addresses, types, word order, scaling, controlword
+and statusword bits, fault codes, the compensation-table layout) comes from the file, so the
+client and the simulated drive share one definition. Validation errors name the file and the
+key, e.g. ``default.toml: [registers.position_actual] type: must be one of ...``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping, Sequence
+
+from drivers.modbus.codec import (
+    TYPE_WORDS,
+    WORD_ORDERS,
+    CodecError,
+    decode_ascii,
+    decode_int,
+    encode_ascii,
+    encode_int,
+)
+
+DEFAULT_PROFILE = Path(__file__).resolve().parent / "profiles" / "default.toml"
+
+MAX_READ_WORDS = 125  # Modbus read_holding_registers limit
+MAX_WRITE_WORDS = 123  # Modbus write_registers limit
+
+# registers the client and the simulated drive rely on
+REQUIRED_REGISTERS = (
+    "vendor", "product", "serial", "firmware", "map_version",
+    "soft_limit_min", "soft_limit_max", "max_velocity", "max_acceleration",
+    "profile_velocity", "profile_acceleration",
+    "controlword", "target_position",
+    "statusword", "position_actual", "following_error", "fault_code", "axial_load",
+    "active_bank", "table_enable",
+)  # fmt: skip
+REQUIRED_BLOCKS = ("identity", "limits", "move_command", "status")
+REQUIRED_CW_BITS = ("switch_on", "enable_voltage", "quick_stop", "enable_operation", "new_set_point", "fault_reset")
+REQUIRED_COMMANDS = ("disable_voltage", "quick_stop", "shutdown", "switch_on", "enable_operation", "fault_reset")
+REQUIRED_SW_BITS = (
+    "ready_to_switch_on", "switched_on", "operation_enabled", "fault", "voltage_enabled",
+    "quick_stop", "switch_on_disabled", "target_reached", "internal_limit_active",
+    "set_point_acknowledge",
+)  # fmt: skip
+REQUIRED_HEADER = ("point_count", "start_position", "spacing", "units", "checksum", "valid")
+REQUIRED_FAULTS = ("soft_limit",)
+
+STATES = (
+    "not_ready", "switch_on_disabled", "ready_to_switch_on", "switched_on",
+    "operation_enabled", "quick_stop_active", "fault",
+)  # fmt: skip
+
+
+class ProfileError(ValueError):
+    """A drive profile file is missing, unreadable or inconsistent."""
+
+
+@dataclass(frozen=True)
+class Register:
+    """One register (or group of registers holding one value).
+
+    `scale` is engineering units per count (value = raw * scale, in `unit`); None for raw
+    integers. `access` is "r" or "rw".
+    """
+
+    name: str
+    address: int
+    type: str  # u16 i16 u32 i32 ascii
+    words: int
+    scale: float | None = None
+    unit: str = ""
+    access: str = "r"
+    word_order: str = "big"
+
+    @property
+    def writable(self) -> bool:
+        return self.access == "rw"
+
+    @property
+    def end(self) -> int:
+        """First address after this register."""
+        return self.address + self.words
+
+    def counts(self, value: float) -> int:
+        """Raw integer for engineering `value` (rounded to the nearest count); CodecError if it
+        does not fit the register."""
+        raw = round(value / self.scale) if self.scale else int(value)
+        try:
+            encode_int(raw, self.type, self.word_order)
+        except CodecError as exc:
+            raise CodecError(f"{self.name}: {value:g} {self.unit} is out of range ({exc})") from None
+        return raw
+
+    def encode(self, value: Any) -> list[int]:
+        """Registers for an engineering value (str for ascii)."""
+        if self.type == "ascii":
+            return encode_ascii(str(value), self.words)
+        return encode_int(self.counts(value), self.type, self.word_order)
+
+    def decode(self, words: Sequence[int]) -> Any:
+        """Engineering value (float when scaled, int otherwise, str for ascii) of `words`."""
+        if self.type == "ascii":
+            return decode_ascii(words)
+        raw = decode_int(list(words), self.type, self.word_order)
+        return raw * self.scale if self.scale else raw
+
+
+@dataclass(frozen=True)
+class Block:
+    """Contiguous registers read or written by one request."""
+
+    name: str
+    start: int
+    words: int
+    names: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class FaultCode:
+    code: int
+    name: str
+    text: str
+
+
+@dataclass(frozen=True)
+class ProfileLimits:
+    """The limits a drive of this profile reports (the simulated drive serves these)."""
+
+    soft_min_mm: float
+    soft_max_mm: float
+    max_velocity_mm_s: float
+    max_accel_mm_s2: float
+    profile_velocity_mm_s: float
+    profile_accel_mm_s2: float
+
+
+@dataclass(frozen=True)
+class TableLayout:
+    """Where the two compensation-table banks live and how entries are coded.
+
+    Bank b: header at `bank_base[b]` (registers of `header`, addresses are offsets), forward
+    entries at base + `fwd_offset`, reverse entries at base + `rev_offset`, `max_points` each.
+    An entry is `entry_type` in `entry_scale_um` um per count.
+    """
+
+    max_points: int
+    max_correction_um: float
+    entry_type: str
+    entry_scale_um: float
+    units_code: int
+    bank_base: tuple[int, ...]
+    fwd_offset: int
+    rev_offset: int
+    header: Mapping[str, Register]  # address = offset from the bank base
+
+    @property
+    def banks(self) -> int:
+        return len(self.bank_base)
+
+    @property
+    def header_words(self) -> int:
+        return max(r.end for r in self.header.values())
+
+    def header_register(self, bank: int, name: str) -> Register:
+        """Header register `name` of `bank` at its absolute address."""
+        r = self.header[name]
+        return Register(r.name, self.bank_base[bank] + r.address, r.type, r.words, r.scale, r.unit, r.access, r.word_order)
+
+    def fwd_address(self, bank: int) -> int:
+        return self.bank_base[bank] + self.fwd_offset
+
+    def rev_address(self, bank: int) -> int:
+        return self.bank_base[bank] + self.rev_offset
+
+    def bank_end(self, bank: int) -> int:
+        """First address after the bank."""
+        return self.bank_base[bank] + max(self.header_words, self.fwd_offset + self.max_points, self.rev_offset + self.max_points)
+
+    def entry_counts(self, error_um: float) -> int:
+        """Raw entry for an error in um (rounded to the entry resolution)."""
+        return round(error_um / self.entry_scale_um)
+
+    def decode_header(self, words: Sequence[int]) -> dict[str, Any]:
+        """Header values from the `header_words` registers at the bank base."""
+        return {n: r.decode(words[r.address : r.end]) for n, r in self.header.items()}
+
+    def encode_header(self, values: Mapping[str, Any]) -> list[int]:
+        """`header_words` registers for header `values` (missing names are 0)."""
+        out = [0] * self.header_words
+        for n, r in self.header.items():
+            out[r.address : r.end] = r.encode(values.get(n, 0))
+        return out
+
+
+@dataclass(frozen=True)
+class DriveProfile:
+    """A drive's register map and semantics. Load with `DriveProfile.load(path=None)`."""
+
+    path: str
+    name: str
+    map_version: int
+    word_order: str
+    limits: ProfileLimits
+    identity: Mapping[str, str]
+    registers: Mapping[str, Register]
+    blocks: Mapping[str, Block]
+    controlword_bits: Mapping[str, int]
+    commands: Mapping[str, int]
+    statusword_bits: Mapping[str, int]
+    faults: Mapping[int, FaultCode]
+    table: TableLayout
+
+    # -- loading ------------------------------------------------------------------------------
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> "DriveProfile":
+        """Read and check a profile TOML; None = the built-in `profiles/default.toml`.
+
+        Raises ProfileError naming the file and key on any problem.
+        """
+        p = Path(path) if path else DEFAULT_PROFILE
+        if not p.is_file():
+            raise ProfileError(f"drive profile {p} not found; give the path of a profile TOML "
+                               f"(the built-in one is {DEFAULT_PROFILE})")
+        try:
+            data = tomllib.loads(p.read_text(encoding="utf-8"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ProfileError(f"{p}: not valid TOML ({exc}); fix the file") from None
+        return _Parser(p, data).profile()
+
+    # -- lookups ------------------------------------------------------------------------------
+    def register(self, name: str) -> Register:
+        try:
+            return self.registers[name]
+        except KeyError:
+            raise ProfileError(f"{self.path}: no register named {name!r}") from None
+
+    def address(self, name: str) -> int:
+        """0-based holding-register address of register `name` (mbpoll: use -0)."""
+        return self.register(name).address
+
+    def fault(self, code: int) -> FaultCode | None:
+        return self.faults.get(code)
+
+    def fault_by_name(self, name: str) -> FaultCode:
+        for f in self.faults.values():
+            if f.name == name:
+                return f
+        raise ProfileError(f"{self.path}: no fault named {name!r} in [[fault]]")
+
+    def fault_text(self, code: int) -> str:
+        """Human text of a fault code, e.g. '0x8612 soft_limit: target beyond ...'."""
+        f = self.faults.get(code)
+        return f"0x{code:04X} {f.name}: {f.text}" if f else f"0x{code:04X} (not in profile {self.name})"
+
+    def decode_block(self, block: str, words: Sequence[int]) -> dict[str, Any]:
+        """Values of the registers of `block` from the words read at its start."""
+        b = self.blocks[block]
+        out = {}
+        for n in b.names:
+            r = self.registers[n]
+            out[n] = r.decode(words[r.address - b.start : r.end - b.start])
+        return out
+
+    def sw_bit(self, statusword: int, name: str) -> bool:
+        return bool(statusword >> self.statusword_bits[name] & 1)
+
+    def cw_bit(self, controlword: int, name: str) -> bool:
+        return bool(controlword >> self.controlword_bits[name] & 1)
+
+    def state_of(self, statusword: int) -> str:
+        """CiA 402 state name of a statusword (see drivers.interfaces.DriveStatus.state)."""
+        bit = lambda n: self.sw_bit(statusword, n)  # noqa: E731
+        if bit("fault"):
+            return "fault"
+        if bit("switch_on_disabled"):
+            return "switch_on_disabled"
+        if bit("operation_enabled"):
+            return "operation_enabled" if bit("quick_stop") else "quick_stop_active"
+        if bit("switched_on"):
+            return "switched_on"
+        if bit("ready_to_switch_on"):
+            return "ready_to_switch_on"
+        return "not_ready"
+
+    def statusword_of(self, state: str, **flags: bool) -> int:
+        """The statusword a drive in `state` reports, with extra bits (`target_reached=True`, ...).
+
+        Bit patterns as CiA 402 (voltage_enabled follows the power stage).
+        """
+        on = {
+            "not_ready": (),
+            "switch_on_disabled": ("switch_on_disabled", "quick_stop"),
+            "ready_to_switch_on": ("ready_to_switch_on", "quick_stop", "voltage_enabled"),
+            "switched_on": ("ready_to_switch_on", "switched_on", "quick_stop", "voltage_enabled"),
+            "operation_enabled": ("ready_to_switch_on", "switched_on", "operation_enabled", "quick_stop", "voltage_enabled"),
+            "quick_stop_active": ("ready_to_switch_on", "switched_on", "operation_enabled", "voltage_enabled"),
+            "fault": ("fault",),
+        }[state]
+        word = 0
+        for n in on:
+            word |= 1 << self.statusword_bits[n]
+        for n, v in flags.items():
+            if v and n in self.statusword_bits:
+                word |= 1 << self.statusword_bits[n]
+        return word
+
+
+class _Parser:
+    """Turns the TOML dict into a DriveProfile, naming file and key in every error."""
+
+    def __init__(self, path: Path, data: dict):
+        self.path = path
+        self.data = data
+
+    def err(self, key: str, what: str) -> ProfileError:
+        return ProfileError(f"{self.path}: [{key}] {what}; fix the drive profile")
+
+    def section(self, key: str) -> dict:
+        sec = self.data.get(key)
+        if not isinstance(sec, dict):
+            raise self.err(key, "section missing")
+        return sec
+
+    def num(self, sec: dict, key: str, name: str, positive: bool = False) -> float:
+        v = sec.get(name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.err(key, f"{name}: must be a number, got {v!r}")
+        if positive and not v > 0:
+            raise self.err(key, f"{name}: must be > 0, got {v!r}")
+        return float(v)
+
+    def integer(self, sec: dict, key: str, name: str, lo: int = 0, hi: int = 0xFFFF) -> int:
+        v = sec.get(name)
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise self.err(key, f"{name}: must be an integer in {lo}..{hi}, got {v!r}")
+        return v
+
+    def reg(self, key: str, name: str, spec: Any, word_order: str, addr_key: str = "address") -> Register:
+        if not isinstance(spec, dict):
+            raise self.err(key, f"must be a table like {{ {addr_key} = 100, type = \"u16\" }}")
+        typ = spec.get("type")
+        if typ not in (*TYPE_WORDS, "ascii"):
+            raise self.err(key, f"type: must be one of u16, i16, u32, i32, ascii, got {typ!r}")
+        address = self.integer(spec, key, addr_key)
+        if typ == "ascii":
+            words = self.integer(spec, key, "words", 1, 60)
+        else:
+            words = TYPE_WORDS[typ]
+        scale = spec.get("scale")
+        if scale is not None:
+            scale = self.num(spec, key, "scale", positive=True)
+            if typ == "ascii":
+                raise self.err(key, "scale: not allowed for ascii")
+        access = spec.get("access", "rw" if addr_key == "offset" else "r")
+        if access not in ("r", "rw"):
+            raise self.err(key, f"access: must be \"r\" or \"rw\", got {access!r}")
+        unit = spec.get("unit", "")
+        if not isinstance(unit, str):
+            raise self.err(key, f"unit: must be a string, got {unit!r}")
+        if address + words > 0x10000:
+            raise self.err(key, f"{addr_key}: {address} + {words} words runs past 65535")
+        return Register(name, address, typ, words, scale, unit, access, word_order)
+
+    def bits(self, key: str, required: Sequence[str], hi: int) -> dict[str, int]:
+        sec = self.section(key)
+        out = {}
+        for n, v in sec.items():
+            out[n] = self.integer(sec, key, n, 0, hi)
+        missing = [n for n in required if n not in out]
+        if missing:
+            raise self.err(key, f"missing {', '.join(missing)}")
+        return out
+
+    def profile(self) -> DriveProfile:
+        prof = self.section("profile")
+        word_order = prof.get("word_order", "big")
+        if word_order not in WORD_ORDERS:
+            raise self.err("profile", f"word_order: must be \"big\" or \"little\", got {word_order!r}")
+        name = prof.get("name")
+        if not isinstance(name, str) or not name:
+            raise self.err("profile", "name: must be a non-empty string")
+        map_version = self.integer(prof, "profile", "map_version")
+
+        lim = self.section("limits")
+        limits = ProfileLimits(
+            soft_min_mm=self.num(lim, "limits", "soft_min_mm"),
+            soft_max_mm=self.num(lim, "limits", "soft_max_mm"),
+            max_velocity_mm_s=self.num(lim, "limits", "max_velocity_mm_s", positive=True),
+            max_accel_mm_s2=self.num(lim, "limits", "max_accel_mm_s2", positive=True),
+            profile_velocity_mm_s=self.num(lim, "limits", "profile_velocity_mm_s", positive=True),
+            profile_accel_mm_s2=self.num(lim, "limits", "profile_accel_mm_s2", positive=True),
+        )
+        if not limits.soft_min_mm < limits.soft_max_mm:
+            raise self.err("limits", f"soft_min_mm ({limits.soft_min_mm}) must be below soft_max_mm ({limits.soft_max_mm})")
+
+        ident_sec = self.section("identity")
+        identity = {}
+        for n in ("vendor", "product", "firmware", "serial_prefix"):
+            v = ident_sec.get(n)
+            if not isinstance(v, str) or not v.isascii():
+                raise self.err("identity", f"{n}: must be an ASCII string, got {v!r}")
+            identity[n] = v
+
+        regs_sec = self.section("registers")
+        registers = {n: self.reg(f"registers.{n}", n, spec, word_order) for n, spec in regs_sec.items()}
+        missing = [n for n in REQUIRED_REGISTERS if n not in registers]
+        if missing:
+            raise self.err("registers", f"missing {', '.join(missing)}")
+        for n in ("statusword", "controlword", "fault_code", "active_bank", "table_enable", "map_version"):
+            if registers[n].type != "u16":
+                raise self.err(f"registers.{n}", f"type: must be u16, got {registers[n].type}")
+        for n in ("controlword", "target_position", "active_bank", "table_enable"):
+            if not registers[n].writable:
+                raise self.err(f"registers.{n}", "access: must be \"rw\" (the station writes it)")
+        for n in ("vendor", "product", "serial", "firmware"):
+            if registers[n].type != "ascii":
+                raise self.err(f"registers.{n}", "type: must be ascii")
+        ordered = sorted(registers.values(), key=lambda r: r.address)
+        for a, b in zip(ordered, ordered[1:]):
+            if b.address < a.end:
+                raise self.err(f"registers.{b.name}", f"address: {b.address} overlaps {a.name} ({a.address}..{a.end - 1})")
+
+        blocks_sec = self.section("blocks")
+        blocks = {}
+        for bname, names in blocks_sec.items():
+            key = f"blocks.{bname}"
+            if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+                raise self.err(key, "must be a list of register names")
+            unknown = [n for n in names if n not in registers]
+            if unknown:
+                raise self.err(key, f"unknown register(s) {', '.join(unknown)}")
+            rs = sorted((registers[n] for n in names), key=lambda r: r.address)
+            for a, b in zip(rs, rs[1:]):
+                if b.address != a.end:
+                    raise self.err(key, f"registers must be contiguous: gap between {a.name} and {b.name}")
+            words = rs[-1].end - rs[0].address
+            limit = MAX_WRITE_WORDS if bname == "move_command" else MAX_READ_WORDS
+            if words > limit:
+                raise self.err(key, f"spans {words} registers, more than one request carries ({limit})")
+            blocks[bname] = Block(bname, rs[0].address, words, tuple(r.name for r in rs))
+        missing = [n for n in REQUIRED_BLOCKS if n not in blocks]
+        if missing:
+            raise self.err("blocks", f"missing {', '.join(missing)}")
+        if blocks["move_command"].names[0] != "controlword":
+            raise self.err("blocks.move_command", "controlword must come first (the drive latches the target on the controlword write)")
+        if "statusword" not in blocks["status"].names:
+            raise self.err("blocks.status", "must include statusword")
+
+        cw_bits = self.bits("controlword", REQUIRED_CW_BITS, 15)
+        commands = self.bits("commands", REQUIRED_COMMANDS, 0xFFFF)
+        sw_bits = self.bits("statusword", REQUIRED_SW_BITS, 15)
+
+        faults_list = self.data.get("fault", [])
+        if not isinstance(faults_list, list):
+            raise self.err("fault", "must be an array of tables ([[fault]])")
+        faults = {}
+        for i, f in enumerate(faults_list):
+            key = f"fault #{i + 1}"
+            if not isinstance(f, dict):
+                raise self.err(key, "must be a table with code, name, text")
+            code = self.integer(f, key, "code", 1, 0xFFFF)
+            fname, text = f.get("name"), f.get("text")
+            if not isinstance(fname, str) or not isinstance(text, str):
+                raise self.err(key, "name and text must be strings")
+            if code in faults:
+                raise self.err(key, f"code 0x{code:04X} defined twice")
+            faults[code] = FaultCode(code, fname, text)
+        missing = [n for n in REQUIRED_FAULTS if n not in {f.name for f in faults.values()}]
+        if missing:
+            raise self.err("fault", f"missing fault(s) named {', '.join(missing)}")
+
+        table = self.table(word_order, registers)
+        return DriveProfile(
+            path=str(self.path), name=name, map_version=map_version, word_order=word_order,
+            limits=limits, identity=MappingProxyType(identity), registers=MappingProxyType(registers),
+            blocks=MappingProxyType(blocks), controlword_bits=MappingProxyType(cw_bits),
+            commands=MappingProxyType(commands), statusword_bits=MappingProxyType(sw_bits),
+            faults=MappingProxyType(faults), table=table,
+        )  # fmt: skip
+
+    def table(self, word_order: str, registers: dict[str, Register]) -> TableLayout:
+        sec = self.section("table")
+        max_points = self.integer(sec, "table", "max_points", 2, 4096)
+        max_corr = self.num(sec, "table", "max_correction_um", positive=True)
+        entry_type = sec.get("entry_type")
+        if entry_type != "i16":
+            raise self.err("table", f"entry_type: only \"i16\" is supported, got {entry_type!r}")
+        scale = self.num(sec, "table", "entry_scale_um", positive=True)
+        if round(max_corr / scale) > 0x7FFF:
+            raise self.err("table", f"max_correction_um {max_corr} does not fit an i16 entry of {scale} um")
+        units_code = self.integer(sec, "table", "units_code")
+        bases = sec.get("bank_base")
+        if not isinstance(bases, list) or len(bases) != 2 or not all(isinstance(b, int) and not isinstance(b, bool) for b in bases):
+            raise self.err("table", f"bank_base: must be a list of two addresses, got {bases!r}")
+        fwd = self.integer(sec, "table", "fwd_offset")
+        rev = self.integer(sec, "table", "rev_offset")
+        hsec = sec.get("header")
+        if not isinstance(hsec, dict):
+            raise self.err("table.header", "section missing")
+        header = {n: self.reg(f"table.header.{n}", n, spec, word_order, addr_key="offset") for n, spec in hsec.items()}
+        missing = [n for n in REQUIRED_HEADER if n not in header]
+        if missing:
+            raise self.err("table.header", f"missing {', '.join(missing)}")
+        layout = TableLayout(max_points, max_corr, entry_type, scale, units_code, tuple(bases), fwd, rev, MappingProxyType(header))
+        hw = layout.header_words
+        spans = sorted([(0, hw, "header"), (fwd, fwd + max_points, "fwd entries"), (rev, rev + max_points, "rev entries")])
+        for (a0, a1, an), (b0, _b1, bn) in zip(spans, spans[1:]):
+            if b0 < a1:
+                raise self.err("table", f"{bn} (offset {b0}) overlap {an} (ends at offset {a1 - 1})")
+        used = [(r.address, r.end, f"registers.{r.name}") for r in registers.values()]
+        for b in range(2):
+            used.append((layout.bank_base[b], layout.bank_end(b), f"table bank {b}"))
+        used.sort()
+        for (a0, a1, an), (b0, _b1, bn) in zip(used, used[1:]):
+            if b0 < a1:
+                raise self.err("table", f"{bn} at {b0} overlaps {an} ({a0}..{a1 - 1})")
+        if used[-1][1] > 0x10000:
+            raise self.err("table", "bank_base: the banks run past address 65535")
+        return layout

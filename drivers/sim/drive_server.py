@@ -1,0 +1,762 @@
+"""The simulated servo drives: a real pymodbus server (TCP on 127.0.0.1, RTU over a pty) in
+front of the leg plants.
+
+One server serves every leg on one bus: unit id n = leg n, each with its own register space
+laid out by the drive profile (drivers/modbus/profiles/default.toml, docs/register-map.md).
+Each unit runs the CiA 402 state machine, trapezoidal moves on the shared clock against its
+`LegPlant`, soft-limit refusal with a fault, and the active compensation table. Tables and the
+active bank live in "non-volatile memory": a JSON file rewritten atomically on every change and
+read at start, like a drive's EEPROM, so a drive killed in the middle of a table push comes
+back with its previous table active and intact.
+
+At time scale 0 a move completes within the request that commands it: the server advances the
+virtual clock by the move's duration. At scale > 0 the position follows the clock and is
+evaluated on every request (and by a background tick, so the plant the interferometer reads
+stays current).
+
+Run standalone (used by tests that kill it):
+    python -m drivers.sim.drive_server [--port 0] [--rtu] [--nv FILE] [--time-scale 0] [--seed 0]
+It prints `tcp://127.0.0.1:PORT` (and `rtu PATH`) on stdout once it listens.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import ipaddress
+import json
+import logging
+import math
+import os
+import signal
+import sys
+import tempfile
+import threading
+import tty
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Mapping
+
+from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import NoSuchIdException
+from pymodbus.framer import FramerType
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from drivers.interfaces import Clock
+from drivers.modbus.codec import crc16_modbus
+from drivers.modbus.profile import DriveProfile
+from drivers.sim.plant import LegPlant
+
+log = logging.getLogger(__name__)
+
+NV_FORMAT = "station-sim-drive-nv"
+NV_VERSION = 1
+FOLLOWING_LAG_S = 0.002  # following error during motion = velocity * lag (a stiff servo loop)
+TICK_S = 0.02  # real seconds between background motion updates at time scale > 0
+
+
+class NvError(ValueError):
+    """The drive's non-volatile memory file is unreadable or not ours."""
+
+
+@dataclass
+class _Motion:
+    """A trapezoidal move of the nut from p0 to p1 (mm) starting at t0 (s)."""
+
+    p0: float
+    p1: float
+    t0: float
+    v: float  # cruise velocity, mm/s
+    a: float  # acceleration, mm/s^2
+
+    def __post_init__(self) -> None:
+        d = abs(self.p1 - self.p0)
+        self.sign = 1.0 if self.p1 >= self.p0 else -1.0
+        if d <= self.v * self.v / self.a:  # triangular: never reaches cruise velocity
+            self.t_acc = math.sqrt(d / self.a)
+            self.v_peak = self.a * self.t_acc
+            self.t_cruise = 0.0
+        else:
+            self.t_acc = self.v / self.a
+            self.v_peak = self.v
+            self.t_cruise = (d - self.v * self.v / self.a) / self.v
+        self.duration = 2 * self.t_acc + self.t_cruise
+
+    @property
+    def t_end(self) -> float:
+        return self.t0 + self.duration
+
+    def position(self, t: float) -> float:
+        """Nut position (mm) at time t."""
+        s = min(max(t - self.t0, 0.0), self.duration)
+        ta, tc, a, vp = self.t_acc, self.t_cruise, self.a, self.v_peak
+        if s <= ta:
+            d = 0.5 * a * s * s
+        elif s <= ta + tc:
+            d = 0.5 * a * ta * ta + vp * (s - ta)
+        else:
+            r = self.duration - s
+            d = abs(self.p1 - self.p0) - 0.5 * a * r * r
+        return self.p0 + self.sign * d
+
+    def velocity(self, t: float) -> float:
+        """Signed velocity (mm/s) at time t."""
+        s = t - self.t0
+        if s <= 0 or s >= self.duration:
+            return 0.0
+        if s < self.t_acc:
+            v = self.a * s
+        elif s < self.t_acc + self.t_cruise:
+            v = self.v_peak
+        else:
+            v = self.a * (self.duration - s)
+        return self.sign * v
+
+
+class _DriveModel:
+    """One simulated drive (one unit id): its registers and its behaviour.
+
+    Not thread-safe by itself: the server calls it under the shared rig lock.
+    """
+
+    def __init__(self, leg: int, plant: LegPlant, clock: Clock, profile: DriveProfile):
+        self.leg = leg
+        self.plant = plant
+        self.clock = clock
+        self.p = profile
+        self.t = profile.table
+        size = max(max(r.end for r in profile.registers.values()), self.t.bank_end(len(self.t.bank_base) - 1))
+        self.regs = [0] * size
+        self.readable = bytearray(size)
+        self.writable = bytearray(size)
+        for r in profile.registers.values():
+            self.readable[r.address : r.end] = b"\1" * r.words
+            if r.writable:
+                self.writable[r.address : r.end] = b"\1" * r.words
+        for b in range(self.t.banks):
+            base = self.t.bank_base[b]
+            for r in self.t.header.values():
+                self.readable[base + r.address : base + r.end] = b"\1" * r.words
+                if r.writable:
+                    self.writable[base + r.address : base + r.end] = b"\1" * r.words
+            for off in (self.t.fwd_offset, self.t.rev_offset):
+                a0 = base + off
+                self.readable[a0 : a0 + self.t.max_points] = b"\1" * self.t.max_points
+                self.writable[a0 : a0 + self.t.max_points] = b"\1" * self.t.max_points
+        # drive state
+        self.state = "switch_on_disabled"
+        self.fault_code = 0
+        self.internal_limit = False
+        self.set_point_ack = False
+        self.cw_prev = 0
+        self.motion: _Motion | None = None
+        self.nut_mm = plant.x_mm
+        self.cmd_mm = plant.x_mm  # last commanded target, leg coordinates
+        self.direction = plant.direction
+        self.corr_um = 0.0  # table correction applied to the current/last move
+        self.unresponsive = False
+        self.reads = 0
+        self.writes = 0
+        self._bank_cache: dict[int, tuple | None] = {}
+        self._init_registers()
+
+    # -- registers ------------------------------------------------------------------------------
+    def _set(self, name: str, value) -> None:
+        r = self.p.registers[name]
+        self.regs[r.address : r.end] = r.encode(value)
+
+    def _get(self, name: str):
+        r = self.p.registers[name]
+        return r.decode(self.regs[r.address : r.end])
+
+    def _init_registers(self) -> None:
+        ident = self.p.identity
+        lim = self.p.limits
+        self._set("vendor", ident["vendor"])
+        self._set("product", ident["product"])
+        self._set("serial", f"{ident['serial_prefix']}-{self.leg:04d}")
+        self._set("firmware", ident["firmware"])
+        self._set("map_version", self.p.map_version)
+        self._set("soft_limit_min", lim.soft_min_mm)
+        self._set("soft_limit_max", lim.soft_max_mm)
+        self._set("max_velocity", lim.max_velocity_mm_s)
+        self._set("max_acceleration", lim.max_accel_mm_s2)
+        self._set("profile_velocity", lim.profile_velocity_mm_s)
+        self._set("profile_acceleration", lim.profile_accel_mm_s2)
+        self._set("table_enable", 1)
+        self._set("active_bank", 0)
+        for b in range(self.t.banks):
+            self._write_header(b, {"point_count": 0, "start_position": 0.0, "spacing": 0.0,
+                                   "units": self.t.units_code, "checksum": crc16_modbus([])})
+            self._revalidate(b)
+        self._update_status()
+
+    def _write_header(self, bank: int, values: Mapping) -> None:
+        base = self.t.bank_base[bank]
+        words = self.t.encode_header(values)
+        for n, r in self.t.header.items():
+            if n in values:
+                self.regs[base + r.address : base + r.end] = words[r.address : r.end]
+
+    def bank_registers(self, bank: int) -> list[int]:
+        """All registers of a bank (header and both entry areas), for non-volatile storage."""
+        return self.regs[self.t.bank_base[bank] : self.t.bank_end(bank)]
+
+    def load_bank_registers(self, bank: int, words: list[int]) -> None:
+        self.regs[self.t.bank_base[bank] : self.t.bank_end(bank)] = words
+        self._revalidate(bank)
+
+    # -- compensation table -----------------------------------------------------------------------
+    def _revalidate(self, bank: int) -> bool:
+        """Check the bank (count, units, spacing, checksum), set its `valid` register, cache its
+        entries in um. Returns validity."""
+        base = self.t.bank_base[bank]
+        h = self.t.decode_header(self.regs[base : base + self.t.header_words])
+        n = h["point_count"]
+        ok = 0 <= n <= self.t.max_points and h["units"] == self.t.units_code and (n <= 1 or h["spacing"] > 0)
+        if ok:
+            fwd = self.regs[self.t.fwd_address(bank) : self.t.fwd_address(bank) + n]
+            rev = self.regs[self.t.rev_address(bank) : self.t.rev_address(bank) + n]
+            ok = crc16_modbus(fwd + rev) == h["checksum"]
+        if ok:
+            sc = self.t.entry_scale_um
+            to_um = lambda ws: [(w - 0x10000 if w & 0x8000 else w) * sc for w in ws]  # noqa: E731
+            self._bank_cache[bank] = (h["start_position"], h["spacing"], to_um(fwd), to_um(rev))
+        else:
+            self._bank_cache[bank] = None
+        vr = self.t.header_register(bank, "valid")
+        self.regs[vr.address : vr.end] = vr.encode(1 if ok else 0)
+        return ok
+
+    def correction_um(self, target_mm: float, direction: int) -> float:
+        """Active table's predicted error at `target_mm` approaching in `direction`, um (linear
+        interpolation, end values held outside the table); 0 when disabled or empty."""
+        if not self._get("table_enable"):
+            return 0.0
+        cache = self._bank_cache.get(self._get("active_bank"))
+        if not cache or not cache[2]:
+            return 0.0
+        start, spacing, fwd, rev = cache
+        vals = fwd if direction > 0 else rev
+        n = len(vals)
+        if n == 1:
+            return vals[0]
+        u = min(max((target_mm - start) / spacing, 0.0), n - 1.0)
+        i = min(int(u), n - 2)
+        f = u - i
+        return vals[i] * (1 - f) + vals[i + 1] * f
+
+    # -- motion -------------------------------------------------------------------------------------
+    def refresh(self) -> None:
+        """Bring the motion up to the clock's now and the status registers up to date."""
+        if self.motion is not None:
+            now = self.clock.now()
+            m = self.motion
+            if now >= m.t_end:
+                self._arrive()
+            else:
+                self.nut_mm = m.position(now)
+                self.plant.move(self.nut_mm, now)
+        self._update_status()
+
+    def _arrive(self) -> None:
+        m = self.motion
+        assert m is not None
+        self.nut_mm = m.p1
+        self.plant.move(m.p1, m.t_end)
+        self.motion = None
+
+    def _halt(self) -> None:
+        """Stop where the nut is now (quick stop, disable, fault)."""
+        if self.motion is not None:
+            now = self.clock.now()
+            if now >= self.motion.t_end:
+                self._arrive()
+            else:
+                self.nut_mm = self.motion.position(now)
+                self.plant.move(self.nut_mm, now)
+                self.motion = None
+        # the demand becomes where the leg is, so a later move starts from here
+        self.cmd_mm = self.nut_mm + self.corr_um / 1000.0
+
+    def _start_move(self, target_mm: float) -> None:
+        lim = self.p.limits
+        if not lim.soft_min_mm <= target_mm <= lim.soft_max_mm:
+            self.internal_limit = True
+            self._fault(self.p.fault_by_name("soft_limit").code)
+            log.info("leg %d: refused target %.6f mm beyond soft limits", self.leg, target_mm)
+            return
+        self.internal_limit = False
+        if target_mm != self.cmd_mm:
+            self.direction = 1 if target_mm > self.cmd_mm else -1
+        self.corr_um = self.correction_um(target_mm, self.direction)
+        nut_target = target_mm - self.corr_um / 1000.0  # the drive subtracts the predicted error
+        v = min(self._get("profile_velocity"), lim.max_velocity_mm_s)
+        a = min(self._get("profile_acceleration"), lim.max_accel_mm_s2)
+        self.cmd_mm = target_mm
+        self.motion = _Motion(self.nut_mm, nut_target, self.clock.now(), v, a)
+        if getattr(self.clock, "time_scale", 1.0) == 0:
+            # no waiting: the move happens within this request, on virtual time
+            self.clock.sleep(self.motion.duration)
+            self.motion.t0 = self.clock.now() - self.motion.duration
+            self._arrive()
+
+    def _fault(self, code: int) -> None:
+        self._halt()
+        self.state = "fault"
+        self.fault_code = code
+
+    def inject_fault(self, code: int) -> None:
+        self._fault(code)
+        self._update_status()
+
+    # -- CiA 402 state machine ----------------------------------------------------------------------
+    def _controlword(self, cw: int) -> None:
+        bit = lambda n: self.p.cw_bit(cw, n)  # noqa: E731
+        rising_reset = bit("fault_reset") and not self.p.cw_bit(self.cw_prev, "fault_reset")
+        self.cw_prev = cw
+        if self.state == "fault":
+            if rising_reset:
+                self.state = "switch_on_disabled"
+                self.fault_code = 0
+                self.internal_limit = False
+            return
+        ev, qs, so, eo = bit("enable_voltage"), bit("quick_stop"), bit("switch_on"), bit("enable_operation")
+        s = self.state
+        if not ev:  # disable voltage
+            if s != "switch_on_disabled":
+                self._halt()
+            s = "switch_on_disabled"
+        elif not qs:  # quick stop
+            if s == "operation_enabled":
+                self._halt()
+                s = "quick_stop_active"
+            elif s in ("ready_to_switch_on", "switched_on"):
+                s = "switch_on_disabled"
+        elif not so:  # shutdown
+            if s in ("switch_on_disabled", "switched_on", "operation_enabled"):
+                self._halt()
+                s = "ready_to_switch_on"
+        elif not eo:  # switch on (or disable operation)
+            if s in ("ready_to_switch_on", "operation_enabled"):
+                self._halt()
+                s = "switched_on"
+        else:  # enable operation
+            if s in ("switched_on", "quick_stop_active"):
+                s = "operation_enabled"
+        self.state = s
+        self.set_point_ack = bit("new_set_point") and s == "operation_enabled"
+        if self.set_point_ack:
+            self._start_move(self._get("target_position"))
+
+    def _update_status(self) -> None:
+        moving = self.motion is not None
+        sw = self.p.statusword_of(
+            self.state,
+            target_reached=not moving,
+            internal_limit_active=self.internal_limit,
+            set_point_acknowledge=self.set_point_ack,
+            remote=True,
+        )
+        if self.motion is not None:
+            now = self.clock.now()
+            v = self.motion.velocity(now)
+        else:
+            v = 0.0
+        self._set("statusword", sw)
+        self._set("position_actual", self.nut_mm + self.corr_um / 1000.0)
+        self._set("following_error", v * FOLLOWING_LAG_S * 1000.0)
+        self._set("fault_code", self.fault_code)
+        self._set("axial_load", self.plant.load_n)
+
+    # -- requests -----------------------------------------------------------------------------------
+    def read(self, address: int, count: int) -> list[int] | ExcCodes:
+        self.reads += 1
+        if address < 0 or address + count > len(self.regs) or not all(self.readable[address : address + count]):
+            return ExcCodes.ILLEGAL_ADDRESS
+        self.refresh()
+        return self.regs[address : address + count]
+
+    def _bank_of(self, address: int, count: int) -> set[int]:
+        hit = set()
+        for b in range(self.t.banks):
+            if address < self.t.bank_end(b) and address + count > self.t.bank_base[b]:
+                hit.add(b)
+        return hit
+
+    def write(self, address: int, values: list[int]) -> ExcCodes | None:
+        """Apply a register write; returns a Modbus exception code to refuse it (nothing applied)."""
+        self.writes += 1
+        count = len(values)
+        if address < 0 or address + count > len(self.regs) or not all(self.writable[address : address + count]):
+            return ExcCodes.ILLEGAL_ADDRESS
+        self.refresh()
+        touched = lambda name: self.p.registers[name].address < address + count and self.p.registers[name].end > address  # noqa: E731
+        banks = self._bank_of(address, count)
+        active = self._get("active_bank")
+        if active in banks:
+            return ExcCodes.ILLEGAL_ADDRESS  # the active table is read-only while active
+        proposed = list(self.regs)
+        proposed[address : address + count] = values
+
+        def value(name: str):
+            r = self.p.registers[name]
+            return r.decode(proposed[r.address : r.end])
+
+        if touched("active_bank"):
+            b = value("active_bank")
+            if b != active:
+                if not 0 <= b < self.t.banks or self._bank_cache.get(b) is None:
+                    return ExcCodes.ILLEGAL_VALUE  # unknown bank, or its checksum does not match
+                if self.motion is not None:
+                    return ExcCodes.DEVICE_BUSY  # never switch tables under a moving axis
+        if touched("table_enable") and value("table_enable") not in (0, 1):
+            return ExcCodes.ILLEGAL_VALUE
+        for n in ("profile_velocity", "profile_acceleration"):
+            if touched(n) and not value(n) > 0:
+                return ExcCodes.ILLEGAL_VALUE
+        self.regs[address : address + count] = values
+        for b in banks:
+            self._revalidate(b)
+        if touched("controlword"):
+            self._controlword(self._get("controlword"))
+        self._update_status()
+        return None
+
+    def touches_nv(self, address: int, count: int) -> bool:
+        names = ("active_bank", "table_enable")
+        if any(self.p.registers[n].address < address + count and self.p.registers[n].end > address for n in names):
+            return True
+        return bool(self._bank_of(address, count))
+
+    def nv_state(self) -> dict:
+        return {
+            "active_bank": self._get("active_bank"),
+            "table_enable": self._get("table_enable"),
+            "banks": [self.bank_registers(b) for b in range(self.t.banks)],
+        }
+
+    def load_nv_state(self, state: dict, where: str) -> None:
+        banks = state.get("banks")
+        if not isinstance(banks, list) or len(banks) != self.t.banks:
+            raise NvError(f"{where}: 'banks' must be a list of {self.t.banks} register lists")
+        for b, words in enumerate(banks):
+            size = self.t.bank_end(b) - self.t.bank_base[b]
+            if not isinstance(words, list) or len(words) != size or not all(isinstance(w, int) and 0 <= w <= 0xFFFF for w in words):
+                raise NvError(f"{where}: bank {b} must hold {size} register values 0..65535")
+            self.load_bank_registers(b, words)
+        active, enable = state.get("active_bank"), state.get("table_enable")
+        if active not in range(self.t.banks) or enable not in (0, 1):
+            raise NvError(f"{where}: active_bank must be 0..{self.t.banks - 1} and table_enable 0 or 1")
+        self._set("active_bank", active)
+        self._set("table_enable", enable)
+        self._update_status()
+
+
+class SimDriveServer:
+    """Simulated drives for `plants` (leg -> plant; unit id = leg) behind a pymodbus server.
+
+    `clock` is the rig clock (a VirtualClock: its time scale decides whether moves take time),
+    `profile` the register map, `nv_path` the file of the drives' table memory (None = tables
+    are lost at stop), `lock` the lock shared with everything else that reads the plants.
+    The server runs its asyncio loop in a background thread; start it with `start_tcp()` and/or
+    `start_rtu()`, end it with `stop()`.
+    """
+
+    def __init__(
+        self,
+        plants: dict[int, LegPlant],
+        clock: Clock,
+        profile: DriveProfile,
+        nv_path: Path | None = None,
+        lock: threading.RLock | None = None,
+    ):
+        for leg in plants:
+            if not 1 <= leg <= 247:
+                raise ValueError(f"leg {leg} cannot be a Modbus unit id (1..247)")
+        self.clock = clock
+        self.profile = profile
+        self.lock = lock or threading.RLock()
+        self.nv_path = Path(nv_path) if nv_path else None
+        self._models = {leg: _DriveModel(leg, plant, clock, profile) for leg, plant in sorted(plants.items())}
+        if self.nv_path and self.nv_path.exists():
+            self._load_nv()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._servers: list = []
+        self._fds: list[int] = []
+        self._tick: asyncio.Task | None = None
+        self.tcp_port: int | None = None
+        self.rtu_port: str | None = None
+
+    # -- non-volatile memory ----------------------------------------------------------------------
+    def _load_nv(self) -> None:
+        assert self.nv_path is not None
+        where = str(self.nv_path)
+        try:
+            data = json.loads(self.nv_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise NvError(f"{where}: cannot read the drive table memory ({exc}); delete it to start with empty tables") from None
+        if not isinstance(data, dict) or data.get("format") != NV_FORMAT or data.get("version") != NV_VERSION:
+            raise NvError(f"{where}: not a {NV_FORMAT} file of version {NV_VERSION}")
+        legs = data.get("legs", {})
+        for leg, model in self._models.items():
+            state = legs.get(str(leg))
+            if state is not None:
+                model.load_nv_state(state, f"{where}: leg {leg}")
+
+    def _save_nv(self) -> None:
+        """Write the table memory atomically: temp file, fsync, rename (a kill leaves the old
+        or the new file, never half of one)."""
+        if self.nv_path is None:
+            return
+        data = {"format": NV_FORMAT, "version": NV_VERSION,
+                "legs": {str(leg): m.nv_state() for leg, m in self._models.items()}}
+        text = json.dumps(data, separators=(",", ":"))
+        d = self.nv_path.parent
+        fd, tmp = tempfile.mkstemp(prefix=self.nv_path.name + ".", suffix=".tmp", dir=d)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, self.nv_path)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise
+        try:
+            dfd = os.open(d, os.O_RDONLY)
+            try:
+                os.fsync(dfd)
+            finally:
+                os.close(dfd)
+        except OSError:
+            pass
+
+    # -- request handling (runs in the server thread) ------------------------------------------------
+    async def _action(self, leg, function_code, start_address, address, count, registers, set_values):
+        with self.lock:
+            model = self._models[leg]
+            if model.unresponsive:
+                raise NoSuchIdException(f"leg {leg} set unresponsive")  # no reply at all
+            if set_values is None:
+                res = model.read(address, count)
+                if isinstance(res, ExcCodes):
+                    return res
+                registers[address - start_address : address - start_address + count] = res
+                return None
+            values = [int(v) for v in set_values]
+            res = model.write(address, values)
+            if res is None and model.touches_nv(address, count):
+                self._save_nv()
+            return res
+
+    async def _silent(self, *args):
+        raise NoSuchIdException("no drive at this unit id")  # an absent drive does not answer
+
+    def _devices(self) -> list[SimDevice]:
+        size = len(next(iter(self._models.values())).regs)
+        devices = [
+            SimDevice(id=leg, simdata=[SimData(address=0, count=size, datatype=DataType.REGISTERS)],
+                      action=partial(self._action, leg))
+            for leg in self._models
+        ]  # fmt: skip
+        devices.append(SimDevice(id=0, simdata=[SimData(address=0, datatype=DataType.REGISTERS)], action=self._silent))
+        return devices
+
+    # -- life cycle ---------------------------------------------------------------------------------
+    def _ensure_loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            self._loop = asyncio.new_event_loop()
+            self._thread = threading.Thread(target=self._loop.run_forever, name="sim-drive-server", daemon=True)
+            self._thread.start()
+            if getattr(self.clock, "time_scale", 0.0) > 0:
+                self._call(self._start_tick())
+        return self._loop
+
+    def _call(self, coro, timeout_s: float = 10.0):
+        assert self._loop is not None
+        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(timeout_s)
+
+    async def _start_tick(self) -> None:
+        async def tick():
+            while True:
+                await asyncio.sleep(TICK_S)
+                self.sync()
+
+        self._tick = asyncio.get_running_loop().create_task(tick())
+
+    def sync(self) -> None:
+        """Bring every drive's motion (and its plant) up to the clock's now."""
+        with self.lock:
+            for m in self._models.values():
+                m.refresh()
+
+    def start_tcp(self, host: str = "127.0.0.1", port: int = 0) -> int:
+        """Serve Modbus TCP on `host` (loopback only) and `port` (0 = any free); returns the port."""
+        if not ipaddress.ip_address(host).is_loopback:
+            raise ValueError(f"the simulated drive serves loopback only, not {host}; use 127.0.0.1")
+        self._ensure_loop()
+
+        async def start():
+            server = ModbusTcpServer(self._devices(), address=(host, port), ignore_missing_devices=True)
+            try:
+                await server.serve_forever(background=True)
+            except RuntimeError:
+                raise OSError(98, f"cannot listen on {host}:{port} (address in use?)") from None
+            self._servers.append(server)
+            return server.transport.sockets[0].getsockname()[1]
+
+        self.tcp_port = self._call(start())
+        return self.tcp_port
+
+    def start_rtu(self, baudrate: int = 115200) -> str:
+        """Serve Modbus RTU on a pseudo-terminal; returns the path a client opens
+        (e.g. /dev/pts/7; URL rtu:///dev/pts/7?baud=115200)."""
+        self._ensure_loop()
+
+        async def start():
+            # The server owns one pty, the client opens another; we copy bytes between the two
+            # masters (a pty master has no path a client could open).
+            m_srv, s_srv = os.openpty()
+            m_cli, s_cli = os.openpty()
+            for fd in (s_srv, s_cli):
+                tty.setraw(fd)  # no echo or line editing before the client configures it
+            self._fds += [m_srv, s_srv, m_cli, s_cli]
+            loop = asyncio.get_running_loop()
+            for src, dst in ((m_srv, m_cli), (m_cli, m_srv)):
+                os.set_blocking(src, False)
+                loop.add_reader(src, partial(self._copy, src, dst))
+            server = ModbusSerialServer(self._devices(), framer=FramerType.RTU, port=os.ttyname(s_srv),
+                                        baudrate=baudrate, ignore_missing_devices=True)
+            await server.serve_forever(background=True)
+            self._servers.append(server)
+            return os.ttyname(s_cli)
+
+        self.rtu_port = self._call(start())
+        return self.rtu_port
+
+    @staticmethod
+    def _copy(src: int, dst: int) -> None:
+        try:
+            data = os.read(src, 4096)
+        except (BlockingIOError, OSError):
+            return
+        view = memoryview(data)
+        while view:
+            try:
+                n = os.write(dst, view)
+            except BlockingIOError:
+                continue
+            except OSError:
+                return
+            view = view[n:]
+
+    def stop(self) -> None:
+        """Stop serving and end the server thread. Idempotent."""
+        if self._loop is None:
+            return
+
+        async def shutdown():
+            if self._tick:
+                self._tick.cancel()
+            for server in self._servers:
+                await server.shutdown()
+            loop = asyncio.get_running_loop()
+            for fd in self._fds:
+                try:
+                    loop.remove_reader(fd)
+                except (ValueError, OSError):
+                    pass
+
+        try:
+            self._call(shutdown())
+        finally:
+            self._loop.call_soon_threadsafe(self._loop.stop)
+            if self._thread:
+                self._thread.join(5.0)
+            self._loop.close()
+            for fd in self._fds:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+            self._fds.clear()
+            self._servers.clear()
+            self._loop = None
+            self._thread = None
+
+    def __enter__(self) -> "SimDriveServer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # -- fault injection and inspection (tests, sweep runner) --------------------------------------
+    def inject_fault(self, leg: int, code: int | str) -> None:
+        """Put drive `leg` into fault with `code` (an int, or a fault name from the profile)."""
+        if isinstance(code, str):
+            code = self.profile.fault_by_name(code).code
+        with self.lock:
+            self._models[leg].inject_fault(int(code))
+
+    def set_unresponsive(self, leg: int, on: bool = True) -> None:
+        """Make drive `leg` ignore every request (no reply), as a drive with a dead link would."""
+        with self.lock:
+            self._models[leg].unresponsive = bool(on)
+
+    def request_counts(self, leg: int) -> tuple[int, int]:
+        """(reads, writes) drive `leg` has answered or refused since start."""
+        with self.lock:
+            m = self._models[leg]
+            return m.reads, m.writes
+
+    def state(self, leg: int) -> str:
+        """CiA 402 state name of drive `leg` (inspection for tests)."""
+        with self.lock:
+            return self._models[leg].state
+
+
+def main(argv: list[str] | None = None) -> int:
+    from drivers.clock import VirtualClock
+    from drivers.sim.plant import default_leg_configs
+
+    ap = argparse.ArgumentParser(prog="python -m drivers.sim.drive_server", description="Simulated leg servo drives (Modbus).")
+    ap.add_argument("--port", type=int, default=0, help="Modbus TCP port on 127.0.0.1 (0 = any free)")
+    ap.add_argument("--rtu", action="store_true", help="also serve Modbus RTU on a pty")
+    ap.add_argument("--nv", type=Path, help="file for the drives' table memory")
+    ap.add_argument("--time-scale", type=float, default=0.0, help="real seconds per simulated second")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--legs", type=int, default=6)
+    ap.add_argument("--profile", type=Path, help="drive profile TOML (default: built-in)")
+    args = ap.parse_args(argv)
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    clock = VirtualClock(args.time_scale)
+    plants = {i + 1: LegPlant(cfg, seed=args.seed * 100 + i + 1) for i, cfg in enumerate(default_leg_configs(args.seed, args.legs))}
+    try:
+        server = SimDriveServer(plants, clock, DriveProfile.load(args.profile), nv_path=args.nv)
+        port = server.start_tcp("127.0.0.1", args.port)
+    except (ValueError, OSError) as exc:
+        print(f"drive_server: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"tcp://127.0.0.1:{port}", flush=True)
+    if args.rtu:
+        print(f"rtu {server.start_rtu()}", flush=True)
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    try:
+        done.wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
