@@ -24,6 +24,13 @@ def _fmt(value, key: str, sci: bool) -> str:
     return f"{value:.4g}" if sci else f"{value:.4f}"
 
 
+def _dominant(d: dict) -> str:
+    legs = d.get("legs") or [d["leg"]]
+    if len(legs) == 1:
+        return f"leg {legs[0]} ({d['share_pct']:.0f} %)"
+    return f"legs {', '.join(str(x) for x in legs)} ({d['share_pct']:.0f} % each)"
+
+
 def _table(columns: list[tuple[str, str, dict, bool]]) -> list[str]:
     head = "| Measure | " + " | ".join(f"{label} ({unit})" for label, unit, _, _ in columns) + " |"
     lines = [head, "|---|" + "---:|" * len(columns)]
@@ -97,7 +104,7 @@ def report_markdown(summary: dict, geometry_text: str = "", home_sensitivity: di
     dom = summary["dominant_leg"]
     for a, b in zip(dom["original"], dom["compensated"]):
         mis = summary["linearisation_mismatch_rel"][a["component"]]
-        lines.append(f"| {_LABELS[a['component']]} | leg {a['leg']} ({a['share_pct']:.0f} %) | leg {b['leg']} ({b['share_pct']:.0f} %) | {mis:.1e} |")
+        lines.append(f"| {_LABELS[a['component']]} | {_dominant(a)} | {_dominant(b)} | {mis:.1e} |")
     if home_sensitivity is not None:
         lines += [
             "",
@@ -107,7 +114,7 @@ def report_markdown(summary: dict, geometry_text: str = "", home_sensitivity: di
             "|---|" + "---:|" * 6 + "---|",
         ]
         for (name, row), d in zip(home_sensitivity["matrix"].items(), home_sensitivity["dominant"]):
-            lines.append(f"| {name} | " + " | ".join(f"{v:+.4f}" for v in row) + f" | leg {d['leg']} ({d['share_pct']:.0f} %) |")
+            lines.append(f"| {name} | " + " | ".join(f"{v:+.4f}" for v in row) + f" | {_dominant(d)} |")
     fk = summary["fk"]
     lines += [
         "",

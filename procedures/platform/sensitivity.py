@@ -58,7 +58,8 @@ def dominant_legs(contributions: np.ndarray) -> list[dict]:
 
     `contributions` (N, 6, 6) from `pose_error_contributions` (or a sensitivity matrix (6, 6)).
     Returns one dict per component in POSE_ERROR_FIELDS order: `component`, `leg` (1-6),
-    `share_pct` (that leg's share of the summed mean |contribution|), `shares_pct` (all six).
+    `share_pct` (that leg's share of the summed mean |contribution|), `legs` (every leg within
+    1 % of the largest share: symmetric geometries tie), `shares_pct` (all six).
     """
     c = np.abs(np.asarray(contributions, dtype=float))
     if c.ndim == 2:
@@ -69,7 +70,11 @@ def dominant_legs(contributions: np.ndarray) -> list[dict]:
         total = float(np.sum(mean[k]))
         shares = 100.0 * mean[k] / total if total > 0 else np.zeros(6)
         leg = int(np.argmax(mean[k])) + 1
-        out.append({"component": name, "leg": leg, "share_pct": float(shares[leg - 1]), "shares_pct": [float(s) for s in shares]})
+        ties = [i + 1 for i in range(6) if shares[i] >= 0.99 * shares[leg - 1] and shares[i] > 0]
+        out.append({
+            "component": name, "leg": leg, "legs": ties, "share_pct": float(shares[leg - 1]),
+            "shares_pct": [float(s) for s in shares],
+        })
     return out
 
 

@@ -1,0 +1,183 @@
+"""`station platform`: what the recorded leg errors, and their compensation, do to the platform pose.
+
+The seed paper's Section 4 experiment (procedures.platform.experiment) on a session file or a
+fitted model, written as a Markdown + JSON report (the paper's Tables 1 and 2) and histograms
+(its Figs. 9 and 10).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from procedures.errors import InputError
+
+NAME = "platform"
+HELP = "pose errors of the platform from leg errors, before and after compensation (paper's Table 2)"
+DESCRIPTION = (
+    "Simulate random platform poses: inverse kinematics gives the leg positions, the recorded leg "
+    "errors (per direction, interpolated) are added, forward kinematics gives the erroneous pose; "
+    "then again with the compensation applied. With FILE.h5 one recorded pass is the measurement "
+    "and the mean of the other passes the compensation table; with MODEL.json the model is the "
+    "compensation and its recording (or --recording) gives the measurement. Writes "
+    "platform_report.md, platform_summary.json and histograms to --out."
+)
+
+REPORT_MD = "platform_report.md"
+SUMMARY_JSON = "platform_summary.json"
+POSITION_PNG = "pose_position_hist.png"
+ORIENTATION_PNG = "pose_orientation_hist.png"
+LEG_PNG = "leg_error_hist.png"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("source", metavar="FILE.h5|MODEL.json", help="a session file, or a model file from `station fit`")
+    p.add_argument("--out", required=True, metavar="DIR", help="directory for the report and figures (created)")
+    p.add_argument("--poses", type=int, default=2000, metavar="N", help="random poses (default 2000)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
+    p.add_argument("--recording", metavar="FILE.h5", help="with MODEL.json: the session giving the measured errors "
+                   "(default: the recording named in the model)")
+    p.add_argument("--geometry", metavar="FILE.toml", help="platform geometry (default: the paper-like positioner, docs/platform.md)")
+    p.add_argument("--xy-mm", type=float, default=60.0, help="workspace half-range in x and y about home, mm (default 60)")
+    p.add_argument("--z-mm", type=float, default=60.0, help="workspace half-range in z about home, mm (default 60)")
+    p.add_argument("--tilt-deg", type=float, default=3.0, help="workspace half-range of rx and ry, degrees (default 3)")
+    p.add_argument("--yaw-deg", type=float, default=0.0, help="workspace half-range of rz, degrees (default 0)")
+
+
+def _load_errors(args) -> tuple[object, dict]:
+    """The experiment's error source and a description of the inputs for the report."""
+    from procedures.platform.experiment import RecordedLegErrors
+    from procedures.recording.reader import read_session
+
+    src = Path(args.source)
+    if not src.exists():
+        raise FileNotFoundError(f"{src}: no such file")
+    if src.suffix.lower() == ".json":
+        from procedures.fit import load_model
+
+        model = load_model(src)
+        source_path = model.source.get("path", "")
+        source_sha = model.source.get("sha256", "")
+        if args.recording:
+            rec_path = Path(args.recording)
+        elif source_path:
+            rec_path = Path(source_path)
+            if not rec_path.is_absolute() and not rec_path.exists():
+                rec_path = src.parent / source_path  # recorded relative to the model's folder
+        else:
+            raise InputError(f"{src}: the model names no recording; pass --recording FILE.h5 for the measured errors.")
+        if not rec_path.exists():
+            raise InputError(f"{src}: its recording {rec_path} is not there; pass --recording FILE.h5 for the measured errors.")
+        session = read_session(rec_path)
+        held_out = bool(source_sha) and session.sha256 != source_sha
+        if not args.recording and held_out:
+            raise InputError(
+                f"{rec_path} changed since {src} was fitted to it (sha256 {session.sha256[:12]}... vs "
+                f"{source_sha[:12]}...); pass --recording {rec_path} to use it anyway."
+            )
+        missing = [leg for leg in range(1, 7) if leg not in model.legs]
+        if missing:
+            raise InputError(f"{src}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
+        errors = RecordedLegErrors(session.points, predicted_um=model.predict_um, source=f"{rec_path} with model {src} ({model.method})")
+        inputs = {
+            "model": {"path": str(src), "method": model.method, "source": model.source},
+            "recording": {"path": str(rec_path), "sha256": session.sha256},
+            "recording_is_the_models_own": not held_out,
+        }
+        return errors, inputs
+    session = read_session(src)
+    errors = RecordedLegErrors(session.points, source=str(src))
+    return errors, {"recording": {"path": str(src), "sha256": session.sha256}}
+
+
+def _hist_figure(orig: np.ndarray, comp: np.ndarray, labels: list[str], unit: str, title: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(labels), 2, figsize=(9, 2.4 * len(labels)), squeeze=False)
+    for k, label in enumerate(labels):
+        lo = float(min(np.min(orig[:, k]), np.min(comp[:, k])))
+        hi = float(max(np.max(orig[:, k]), np.max(comp[:, k])))
+        if not hi > lo:
+            hi = lo + 1e-12
+        bins = np.linspace(lo, hi, 41)  # same bins left and right, so the narrowing is visible
+        for col, (data, name) in enumerate(((orig[:, k], "original"), (comp[:, k], "compensated"))):
+            ax = axes[k, col]
+            ax.hist(data, bins=bins, color="tab:red" if col == 0 else "tab:blue")
+            ax.set_title(f"{label}: {name} error", fontsize=9)
+            ax.set_xlabel(f"error ({unit})", fontsize=8)
+            ax.set_ylabel("poses", fontsize=8)
+            ax.tick_params(labelsize=7)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _write_figures(result, out: Path) -> list[Path]:
+    from procedures.platform.sensitivity import ARCSEC_PER_RAD
+
+    ok = result.valid
+    e0, e1 = result.pose_error[ok], result.pose_error_compensated[ok]
+    paths = [out / POSITION_PNG, out / ORIENTATION_PNG, out / LEG_PNG]
+    _hist_figure(e0[:, :3], e1[:, :3], ["x", "y", "z"], "um", "End-effector position errors (cf. the paper's Fig. 9)", paths[0])
+    _hist_figure(e0[:, 3:] * ARCSEC_PER_RAD, e1[:, 3:] * ARCSEC_PER_RAD, ["rx", "ry", "rz"], "arcsec (1 arcsec = 4.848e-6 rad)",
+                 "End-effector orientation errors (cf. the paper's Fig. 10)", paths[1])
+    legs = result.leg_error_um[ok].reshape(-1, 1)
+    legs_c = result.leg_compensated_um[ok].reshape(-1, 1)
+    _hist_figure(legs, legs_c, ["all legs"], "um", "Leg errors at the sampled positions (cf. the paper's Figs. 7-8)", paths[2])
+    return paths
+
+
+def run(args) -> int:
+    from procedures.platform.experiment import Workspace, run_experiment, summarize
+    from procedures.platform.geometry import default_geometry, describe, load_geometry
+    from procedures.platform.report import pose_table_markdown, report_markdown
+    from procedures.platform.sensitivity import sensitivity_report
+
+    if args.poses < 1:
+        raise InputError(f"--poses must be at least 1, got {args.poses}.")
+    for name in ("xy_mm", "z_mm", "tilt_deg", "yaw_deg"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value >= 0):
+            raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
+    geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
+    errors, inputs = _load_errors(args)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} is a file; give a directory.")
+    workspace = Workspace(args.xy_mm, args.z_mm, math.radians(args.tilt_deg), math.radians(args.yaw_deg))
+    result = run_experiment(geometry, errors, poses=args.poses, seed=args.seed, workspace=workspace)
+    summary = summarize(result)
+    home = sensitivity_report(geometry, geometry.home_pose_mm_rad)
+    summary["inputs"] = inputs
+    summary["geometry"] = {
+        "name": geometry.name,
+        "source": geometry.source,
+        "description": describe(geometry),
+        "home_pose_mm_rad": [float(v) for v in geometry.home_pose_mm_rad],
+    }
+    summary["sensitivity_home"] = home
+    summary["conventions"] = {
+        "pose": "x_mm, y_mm, z_mm of the platform origin in the base frame; rx, ry, rz roll-pitch-yaw about fixed X, Y, Z, R = Rz Ry Rx",
+        "pose_error": "FK pose from erroneous lengths minus the nominal pose; x, y, z in um, angles in rad (and arcsec)",
+        "leg_error": "measured minus commanded, um; compensated = measured - predicted",
+        "direction": "poses visited in the order drawn from home; a leg's direction is the sign of its last motion",
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / REPORT_MD).write_text(report_markdown(summary, describe(geometry), home), encoding="utf-8")
+    (out / SUMMARY_JSON).write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    figures = _write_figures(result, out)
+    print(pose_table_markdown(summary))
+    legs = summary["legs"]["all"]["range_reduction_pct"]
+    print(f"\nleg error range reduction (all legs): {legs:.2f} %" if legs is not None else "\nleg error range: zero")
+    print(f"poses used: {summary['poses_used']} of {summary['poses']}")
+    for path in [out / REPORT_MD, out / SUMMARY_JSON, *figures]:
+        print(f"wrote {path}")
+    return 0
