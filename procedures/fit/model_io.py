@@ -1,0 +1,219 @@
+"""Model files: JSON naming the recording they came from.
+
+    {"format": "station-leg-error-model", "version": 1, "method": "default"|"paper",
+     "source": {"path": ..., "sha256": ...}, "created_utc": ..., "options": {...},
+     "legs": {"1": {"stroke_mm": [min, max], "target_spacing_mm": ..., "stats": {...},
+                    "model": {... method specific ...}}, ...}}
+
+The content is deterministic: the same points and options give the same file apart from
+`source` and `created_utc` (keys sorted, floats written with Python's round-trip repr).
+A file that is not JSON, is another format, or lacks or mistypes a field is refused with a
+`SchemaError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from procedures.errors import SchemaError
+from procedures.fit.bidirectional import bidirectional_from_json
+from procedures.fit.model import FORMAT, METHODS, VERSION, FitStats, LegErrorModel, LegFit
+from procedures.fit.paper import paper_from_json
+
+
+def _clean(value: Any) -> Any:
+    """JSON-safe: NaN/inf never reach a file (they are not JSON); numpy scalars become Python."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def model_to_json(model: LegErrorModel, source_path: str | os.PathLike | None = None,
+                  source_sha256: str | None = None, created_utc: str | None = None) -> str:
+    """The model file's text (see the module docstring)."""
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        "method": model.method,
+        "source": {
+            "path": str(source_path) if source_path is not None else model.source.get("path", ""),
+            "sha256": source_sha256 if source_sha256 is not None else model.source.get("sha256", ""),
+        },
+        "created_utc": created_utc if created_utc is not None else datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "options": model.options,
+        "legs": {str(leg): f.to_json() for leg, f in model.legs.items()},
+    }
+    return json.dumps(_clean(doc), indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+def save_model(model: LegErrorModel, path: str | os.PathLike, source_path: str | os.PathLike | None = None,
+               source_sha256: str | None = None) -> Path:
+    """Write `model` as JSON to `path` (atomically: a partial file never replaces a good one)."""
+    path = Path(path)
+    text = model_to_json(model, source_path, source_sha256)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent if str(path.parent) else ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+# -- reading ---------------------------------------------------------------------------------
+
+class _Checker:
+    def __init__(self, path: Path):
+        self.path = path
+
+    def fail(self, where: str, problem: str) -> SchemaError:
+        return SchemaError(f"{self.path}: {where}: {problem}; this is not a model file written by `station fit` "
+                           "(or it was edited or truncated): fit the recording again")
+
+    def get(self, d: Any, key: str, where: str) -> Any:
+        if not isinstance(d, dict):
+            raise self.fail(where, "expected an object")
+        if key not in d:
+            raise self.fail(f"{where}.{key}" if where else key, "missing")
+        return d[key]
+
+    def number(self, d: Any, key: str, where: str, *, optional: bool = False, integer: bool = False) -> Any:
+        v = self.get(d, key, where)
+        name = f"{where}.{key}" if where else key
+        if v is None and optional:
+            return None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not isinstance(v, int)):
+            raise self.fail(name, f"expected {'an integer' if integer else 'a number'}, got {v!r:.40}")
+        if not math.isfinite(v):
+            raise self.fail(name, "not a finite number")
+        return v
+
+    def numbers(self, d: Any, key: str, where: str, *, length: int | None = None, integer: bool = False) -> list:
+        v = self.get(d, key, where)
+        name = f"{where}.{key}"
+        if not isinstance(v, list):
+            raise self.fail(name, "expected a list of numbers")
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or (integer and not isinstance(x, int)) or not math.isfinite(x):
+                raise self.fail(f"{name}[{i}]", f"expected a finite {'integer' if integer else 'number'}, got {x!r:.40}")
+        if length is not None and len(v) != length:
+            raise self.fail(name, f"expected {length} values, got {len(v)}")
+        return v
+
+
+_STAT_INT = ("n_points", "n_passes", "n_cycles", "dropped", "folds")
+_STAT_OPT = ("noise_floor_um", "within_pass_um", "heldout_rms_um", "range_after_um")
+
+
+def _stats(c: _Checker, d: Any, where: str) -> FitStats:
+    kw: dict[str, Any] = {k: c.number(d, k, where, integer=True) for k in _STAT_INT}
+    for k in _STAT_OPT:
+        kw[k] = c.number(d, k, where, optional=True)
+    kw["range_before_um"] = c.number(d, "range_before_um", where)
+    note = d.get("note", "")
+    kw["note"] = note if isinstance(note, str) else ""
+    return FitStats(**kw)
+
+
+def _leg(c: _Checker, method: str, leg: int, d: Any) -> LegFit:
+    where = f"legs.{leg}"
+    stroke = c.numbers(d, "stroke_mm", where, length=2)
+    if not stroke[0] < stroke[1]:
+        raise c.fail(f"{where}.stroke_mm", f"minimum {stroke[0]} is not below maximum {stroke[1]}")
+    spacing = c.number(d, "target_spacing_mm", where)
+    stats = _stats(c, c.get(d, "stats", where), f"{where}.stats")
+    m = c.get(d, "model", where)
+    mw = f"{where}.model"
+    if method == "paper":
+        n = c.number(m, "n_samples", mw, integer=True)
+        if n < 3:
+            raise c.fail(f"{mw}.n_samples", "must be at least 3")
+        c.number(m, "x_start_mm", mw)
+        if c.number(m, "spacing_mm", mw) <= 0:
+            raise c.fail(f"{mw}.spacing_mm", "must be positive")
+        c.number(m, "mean_um", mw)
+        c.number(m, "n_params", mw, integer=True)
+        k = c.numbers(m, "k", mw, integer=True)
+        c.numbers(m, "amplitude_um", mw, length=len(k))
+        c.numbers(m, "phase_rad", mw, length=len(k))
+        if any(not 0 < x < n for x in k):
+            raise c.fail(f"{mw}.k", f"frequencies must lie between 1 and {n - 1}")
+        return paper_from_json(leg, stroke, spacing, stats, m)
+    b = c.get(m, "basis", mw)
+    bw = f"{mw}.basis"
+    c.number(b, "center_mm", bw)
+    if c.number(b, "half_span_mm", bw) <= 0:
+        raise c.fail(f"{bw}.half_span_mm", "must be positive")
+    td = c.number(b, "trend_degree", bw, integer=True)
+    rd = c.number(b, "reversal_degree", bw, integer=True)
+    wl = c.numbers(b, "wavelengths_mm", bw)
+    lead = c.number(b, "lead_mm", bw, optional=True)
+    lh = c.number(b, "lead_harmonics", bw, integer=True)
+    if not (0 <= td <= 10 and -1 <= rd <= 10 and lh >= 0):
+        raise c.fail(bw, f"degrees out of range (trend {td}, reversal {rd}, lead harmonics {lh})")
+    if any(w <= 0 for w in wl) or (lead is not None and lead <= 0) or (lh > 0 and lead is None):
+        raise c.fail(bw, "wavelengths and lead must be positive, and lead harmonics need a lead")
+    n_params = (td + 1) + (rd + 1) + 2 * len(wl) + 2 * lh
+    c.numbers(m, "coefficients_um", mw, length=n_params)
+    if not isinstance(m.get("selection", {}), dict):
+        raise c.fail(f"{mw}.selection", "expected an object")
+    return bidirectional_from_json(leg, stroke, spacing, stats, m)
+
+
+def load_model(path: str | os.PathLike) -> LegErrorModel:
+    """Read and check a model file; `SchemaError` (naming the file and field) if it is corrupt
+    or foreign. `FileNotFoundError` if it does not exist."""
+    path = Path(path)
+    raw = path.read_bytes()
+    c = _Checker(path)
+    try:
+        doc = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise SchemaError(f"{path}: not a text file (a model file is JSON written by `station fit`)") from None
+    except json.JSONDecodeError as exc:
+        raise SchemaError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); "
+                          "the file is truncated or corrupt: fit the recording again") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise SchemaError(f"{path}: not a leg-error model (format is {found!r}, expected {FORMAT!r})")
+    version = doc.get("version")
+    if version != VERSION:
+        raise SchemaError(f"{path}: model format version {version!r} is not supported (this station reads "
+                          f"version {VERSION}); fit the recording again with this version")
+    method = c.get(doc, "method", "")
+    if method not in METHODS:
+        raise c.fail("method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    source = c.get(doc, "source", "")
+    if not isinstance(source, dict) or not isinstance(source.get("path", ""), str) or not isinstance(source.get("sha256", ""), str):
+        raise c.fail("source", "expected {\"path\": ..., \"sha256\": ...}")
+    legs_doc = c.get(doc, "legs", "")
+    if not isinstance(legs_doc, dict) or not legs_doc:
+        raise c.fail("legs", "expected a non-empty object of legs")
+    legs: dict[int, LegFit] = {}
+    for key, d in legs_doc.items():
+        if not key.isdigit() or int(key) < 1:
+            raise c.fail(f"legs.{key}", "leg keys must be leg numbers 1, 2, ...")
+        try:
+            legs[int(key)] = _leg(c, method, int(key), d)
+        except SchemaError:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise c.fail(f"legs.{key}", f"malformed ({exc})") from None
+    options = doc.get("options", {})
+    return LegErrorModel(method, legs, source={"path": source.get("path", ""), "sha256": source.get("sha256", "")},
+                         options=options if isinstance(options, dict) else {},
+                         created_utc=str(doc.get("created_utc", "")))
