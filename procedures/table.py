@@ -1,0 +1,412 @@
+"""Compensation tables: a model resampled on a fixed step, written for a drive or LinuxCNC.
+
+A table holds, per leg, the predicted error (measured minus commanded, um) at
+`start_mm + i * step_mm` when the target is approached in the positive (`error_fwd_um`) and the
+negative (`error_rev_um`) direction. The controller *subtracts* these from the command.
+
+Formats
+- CSV (`write_table_csv` / `read_table_csv`): header `leg,position_mm,error_fwd_um,error_rev_um`,
+  rows sorted by leg then position, a fixed step per leg.
+- LinuxCNC (`write_linuxcnc_comp`): one `[JOINT_n] COMP_FILE` per leg (leg N -> joint N-1),
+  three numbers per line in machine units (mm), no header or comment (LinuxCNC's parser stops
+  silently at the first line that is not three numbers), at most 256 lines, strictly
+  increasing nominal positions.
+  COMP_FILE_TYPE 0: `nominal  actual_moving_+  actual_moving_-`, where actual = nominal + error;
+  COMP_FILE_TYPE 1: `nominal  forward_trim  reverse_trim`, where trim = -error.
+  (LinuxCNC converts type 0 to trims as nominal - actual and commands the motor at
+  position + trim, so both cancel the error; see docs/tables.md.)
+
+Every writer validates first and writes through a temporary file renamed into place, so on
+any error nothing is written. Readers name the file, row and field of the first problem.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Iterable, Iterator, Mapping
+
+import numpy as np
+
+from drivers.interfaces import TableBank
+from procedures.errors import InputError
+
+CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
+LINUXCNC_MAX_LINES = 256
+SPACING_TOL_MM = 1e-5  # positions are written to 1e-6 mm: steps may differ by rounding only
+_STEP_QUANTUM_MM = 1e-3  # automatic steps are rounded up to whole micrometres
+
+
+class TableValidationError(InputError):
+    """A compensation table is invalid (the message names file, row and field) or cannot be
+    made within the drive's limits."""
+
+
+@dataclass(frozen=True)
+class TableLimits:
+    """What a drive accepts. Defaults mirror drivers/modbus/profiles/default.toml [table]
+    (max_points per direction, max_correction_um = largest |entry|); the command layer passes
+    the active profile's values. `min_step_mm`: the finest step the drive resolves."""
+
+    max_points: int = 512
+    max_correction_um: float = 300.0
+    min_step_mm: float = 0.001
+
+
+LINUXCNC_LIMITS = TableLimits(max_points=LINUXCNC_MAX_LINES, max_correction_um=1000.0, min_step_mm=1e-6)
+"""LinuxCNC: at most 256 lines per COMP_FILE; no documented correction limit (1 mm here)."""
+
+
+@dataclass(frozen=True)
+class LegTable:
+    """One leg's table: `error_*_um[i]` at `start_mm + i * step_mm`."""
+
+    leg: int
+    start_mm: float
+    step_mm: float
+    error_fwd_um: tuple[float, ...]
+    error_rev_um: tuple[float, ...]
+
+    @property
+    def point_count(self) -> int:
+        return len(self.error_fwd_um)
+
+    @property
+    def positions_mm(self) -> np.ndarray:
+        return self.start_mm + self.step_mm * np.arange(self.point_count)
+
+    @property
+    def end_mm(self) -> float:
+        return self.start_mm + self.step_mm * (self.point_count - 1)
+
+    def to_bank(self) -> TableBank:
+        """As a drivers.interfaces.TableBank (checksum left 0: the pusher computes it)."""
+        return TableBank(self.start_mm, self.step_mm, tuple(self.error_fwd_um), tuple(self.error_rev_um))
+
+    def correction_um(self, position_mm, direction) -> np.ndarray:
+        """The table's error at `position_mm` (linear interpolation, end values held outside),
+        for approach `direction` +1/-1 (broadcast)."""
+        x = np.asarray(position_mm, dtype=float)
+        d = np.broadcast_to(np.asarray(direction), np.broadcast(x, np.asarray(direction)).shape)
+        x = np.broadcast_to(x, d.shape)
+        pos = self.positions_mm
+        fwd = np.interp(x, pos, self.error_fwd_um)
+        rev = np.interp(x, pos, self.error_rev_um)
+        return np.where(d > 0, fwd, rev)
+
+
+@dataclass(frozen=True)
+class CompTable:
+    """Tables of several legs (`legs`: leg number -> LegTable, ascending)."""
+
+    legs: Mapping[int, LegTable]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "legs", MappingProxyType({k: self.legs[k] for k in sorted(self.legs)}))
+
+    def rows(self) -> Iterator[tuple[int, float, float, float]]:
+        """(leg, position_mm, error_fwd_um, error_rev_um), sorted by leg then position."""
+        for leg, t in self.legs.items():
+            for x, f, r in zip(t.positions_mm, t.error_fwd_um, t.error_rev_um):
+                yield leg, float(x), float(f), float(r)
+
+
+# -- making a table from a model ---------------------------------------------------------------
+
+def _auto_step_mm(span_mm: float, native_mm: float, limits: TableLimits) -> float:
+    step = max(native_mm, span_mm / max(1, limits.max_points - 1), limits.min_step_mm)
+    return math.ceil(step / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM
+
+
+def make_table(model, step_mm: float | None = None, limits: TableLimits | None = None,
+               legs: Iterable[int] | None = None) -> CompTable:
+    """Resample `model` (a procedures.fit LegErrorModel) on a fixed step over each leg's
+    recorded stroke.
+
+    Positions run from the stroke minimum in steps of `step_mm` until the stroke maximum is
+    covered (the last point may lie up to one step beyond it; the model holds its end value
+    there). Without `step_mm` the step is the recording's target spacing, coarsened (and
+    rounded up to whole um) until the table fits `limits.max_points`. Raises `TableValidationError`
+    when the step gives too many points or a correction exceeds `limits.max_correction_um`.
+    """
+    limits = limits or TableLimits()
+    if step_mm is not None and not (math.isfinite(step_mm) and step_mm > 0):
+        raise TableValidationError(f"table step must be a positive number of mm, got {step_mm}")
+    if step_mm is not None and step_mm < limits.min_step_mm:
+        raise TableValidationError(f"table step {step_mm:g} mm is below the drive's minimum step {limits.min_step_mm:g} mm")
+    chosen = list(model.legs) if legs is None else sorted(set(int(x) for x in legs))
+    out: dict[int, LegTable] = {}
+    for leg in chosen:
+        fit = model.leg(leg)
+        lo, hi = fit.stroke_mm
+        span = hi - lo
+        step = step_mm if step_mm is not None else _auto_step_mm(span, fit.target_spacing_mm, limits)
+        n = int(math.ceil(span / step - 1e-9)) + 1
+        if n > limits.max_points:
+            need = math.ceil(span / (limits.max_points - 1) / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM
+            raise TableValidationError(
+                f"leg {leg}: a {step:g} mm step over the {span:g} mm stroke needs {n} points, more than "
+                f"the limit of {limits.max_points}; use a step of at least {need:g} mm"
+            )
+        start = round(lo, 6)
+        pos = start + step * np.arange(n)
+        fwd = np.asarray(model.predict_um(leg, pos, 1), dtype=float)
+        rev = np.asarray(model.predict_um(leg, pos, -1), dtype=float)
+        for name, values in (("error_fwd_um", fwd), ("error_rev_um", rev)):
+            bad = np.flatnonzero(~np.isfinite(values) | (np.abs(values) > limits.max_correction_um))
+            if bad.size:
+                i = int(bad[0])
+                raise TableValidationError(
+                    f"leg {leg}: {name} at {pos[i]:.4f} mm is {values[i]:.3f} um, beyond the drive's limit of "
+                    f"+/-{limits.max_correction_um:g} um; check the recording (is the interferometer zeroed?)"
+                )
+        out[leg] = LegTable(leg, float(start), float(step), tuple(float(v) for v in fwd), tuple(float(v) for v in rev))
+    return CompTable(out)
+
+
+# -- validation --------------------------------------------------------------------------------
+
+def _expected_set(expected_legs: int | Iterable[int] | None) -> set[int] | None:
+    if expected_legs is None:
+        return None
+    if isinstance(expected_legs, int):
+        return set(range(1, expected_legs + 1))
+    return {int(x) for x in expected_legs}
+
+
+def _check_legs(where: str, have: Iterable[int], expected_legs) -> None:
+    want = _expected_set(expected_legs)
+    have = sorted(set(have))
+    if want is not None and set(have) != want:
+        raise TableValidationError(
+            f"{where}: the table has leg(s) {have}, expected {sorted(want)}: it was made for another "
+            "leg count; make the table from a model of these legs"
+        )
+
+
+def validate_table(table: CompTable, limits: TableLimits | None = None, expected_legs=None,
+                   where: str = "table") -> None:
+    """Check a CompTable against `limits` (and the expected legs: an int n means legs 1..n).
+    Raises `TableValidationError` naming leg, point and field."""
+    limits = limits or TableLimits()
+    if not table.legs:
+        raise TableValidationError(f"{where}: the table is empty")
+    _check_legs(where, table.legs, expected_legs)
+    for leg, t in table.legs.items():
+        if t.point_count < 2:
+            raise TableValidationError(f"{where}, leg {leg}: {t.point_count} point(s); a table needs at least two")
+        if len(t.error_rev_um) != t.point_count:
+            raise TableValidationError(f"{where}, leg {leg}: {t.point_count} forward but {len(t.error_rev_um)} reverse entries")
+        if t.point_count > limits.max_points:
+            raise TableValidationError(f"{where}, leg {leg}: {t.point_count} points, more than the drive's limit of {limits.max_points}")
+        if not (math.isfinite(t.step_mm) and t.step_mm >= limits.min_step_mm) or not math.isfinite(t.start_mm):
+            raise TableValidationError(f"{where}, leg {leg}: step {t.step_mm:g} mm is below the drive's minimum {limits.min_step_mm:g} mm")
+        for name, values in (("error_fwd_um", t.error_fwd_um), ("error_rev_um", t.error_rev_um)):
+            v = np.asarray(values, dtype=float)
+            bad = np.flatnonzero(~np.isfinite(v) | (np.abs(v) > limits.max_correction_um))
+            if bad.size:
+                i = int(bad[0])
+                raise TableValidationError(
+                    f"{where}, leg {leg}, point {i + 1} ({t.positions_mm[i]:.4f} mm), field {name}: {v[i]} um is "
+                    f"beyond the drive's limit of +/-{limits.max_correction_um:g} um"
+                )
+
+
+# -- writing -----------------------------------------------------------------------------------
+
+def _write_atomic(files: Mapping[Path, str]) -> list[Path]:
+    """Write every file or none: all go to temporary files first, then are renamed."""
+    temps: list[tuple[str, Path]] = []
+    try:
+        for path, text in files.items():
+            if not path.parent.is_dir():
+                raise TableValidationError(f"{path}: directory {path.parent} does not exist")
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            temps.append((tmp, path))
+            with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
+                fh.write(text)
+        for tmp, path in temps:
+            os.replace(tmp, path)
+    finally:
+        for tmp, _ in temps:
+            Path(tmp).unlink(missing_ok=True)
+    return list(files)
+
+
+def table_csv_text(table: CompTable) -> str:
+    lines = [",".join(CSV_HEADER)]
+    for leg, x, f, r in table.rows():
+        lines.append(f"{leg},{x:.6f},{f:.4f},{r:.4f}")
+    return "\n".join(lines) + "\n"
+
+
+def write_table_csv(table: CompTable, path: str | os.PathLike, limits: TableLimits | None = None,
+                    expected_legs=None) -> Path:
+    """Validate `table` (against `limits`, default TableLimits()) and write it as CSV.
+    Positions to 1e-6 mm, errors to 1e-4 um. Nothing is written when validation fails."""
+    path = Path(path)
+    validate_table(table, limits, expected_legs, where=str(path))
+    _write_atomic({path: table_csv_text(table)})
+    return path
+
+
+def linuxcnc_paths(out: str | os.PathLike, legs: Iterable[int]) -> dict[int, Path]:
+    """COMP_FILE path per leg: `OUT/joint<N-1>.comp` for a directory OUT, or
+    `<stem>_joint<N-1>.comp` beside OUT when OUT ends in `.comp`."""
+    out = Path(out)
+    if out.suffix == ".comp":
+        return {leg: out.with_name(f"{out.stem}_joint{leg - 1}.comp") for leg in legs}
+    return {leg: out / f"joint{leg - 1}.comp" for leg in legs}
+
+
+def linuxcnc_text(t: LegTable, comp_type: int = 0) -> str:
+    """One COMP_FILE: `nominal a b` per line in mm (see the module docstring for a, b)."""
+    if comp_type not in (0, 1):
+        raise TableValidationError(f"LinuxCNC COMP_FILE_TYPE must be 0 or 1, got {comp_type}")
+    lines = []
+    for x, f, r in zip(t.positions_mm, t.error_fwd_um, t.error_rev_um):
+        if comp_type == 0:
+            a, b = x + f / 1000.0, x + r / 1000.0  # where the joint actually is, moving + / -
+        else:
+            a, b = -f / 1000.0, -r / 1000.0  # trims LinuxCNC adds to the command
+        lines.append(f"{x:.6f} {a:.6f} {b:.6f}")
+    return "\n".join(lines) + "\n"
+
+
+def write_linuxcnc_comp(table: CompTable, out: str | os.PathLike, comp_type: int = 0,
+                        limits: TableLimits | None = None) -> list[Path]:
+    """Write one LinuxCNC COMP_FILE per leg (paths: `linuxcnc_paths`). A directory OUT is
+    created if missing. Nothing is written when any leg fails validation (more than 256
+    lines, beyond `limits`)."""
+    limits = limits or LINUXCNC_LIMITS
+    if limits.max_points > LINUXCNC_MAX_LINES:
+        limits = TableLimits(LINUXCNC_MAX_LINES, limits.max_correction_um, limits.min_step_mm)
+    validate_table(table, limits, where=str(out))
+    if comp_type not in (0, 1):
+        raise TableValidationError(f"LinuxCNC COMP_FILE_TYPE must be 0 or 1, got {comp_type}")
+    paths = linuxcnc_paths(out, table.legs)
+    texts = {paths[leg]: linuxcnc_text(t, comp_type) for leg, t in table.legs.items()}
+    out = Path(out)
+    if out.suffix != ".comp":
+        out.mkdir(parents=True, exist_ok=True)
+    return _write_atomic(texts)
+
+
+# -- reading -----------------------------------------------------------------------------------
+
+def read_table_csv(path: str | os.PathLike, limits: TableLimits | None = None,
+                   expected_legs: int | Iterable[int] | None = None) -> CompTable:
+    """Read and validate a CSV table (see the module docstring).
+
+    Refused, with file, row (line number, header = row 1) and field named: a wrong header, a
+    row without four fields or with a non-number, rows not sorted by leg, positions not
+    strictly increasing or unevenly spaced within a leg (drives need a fixed step), a step
+    below `limits.min_step_mm`, corrections beyond `limits.max_correction_um`, more than
+    `limits.max_points` points for a leg, fewer than two, and legs other than
+    `expected_legs` (an int n means legs 1..n). Raises `TableValidationError`.
+    """
+    limits = limits or TableLimits()
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise TableValidationError(f"{path}: not a text file (a table is CSV with the header {','.join(CSV_HEADER)})") from None
+    lines = text.splitlines()
+    if not lines or [c.strip() for c in lines[0].split(",")] != list(CSV_HEADER):
+        found = lines[0][:80] if lines else "(empty file)"
+        raise TableValidationError(f"{path}, row 1: header is {found!r}, expected {','.join(CSV_HEADER)!r}")
+    data: dict[int, dict[str, list]] = {}
+    last_leg = None
+    for row, raw in enumerate(lines[1:], start=2):
+        if not raw.strip():
+            continue
+        cells = [c.strip() for c in raw.split(",")]
+        if len(cells) != len(CSV_HEADER):
+            raise TableValidationError(f"{path}, row {row}: {len(cells)} field(s), expected {len(CSV_HEADER)} ({','.join(CSV_HEADER)})")
+        try:
+            leg = int(cells[0])
+        except ValueError:
+            raise TableValidationError(f"{path}, row {row}, field leg: {cells[0]!r} is not a leg number") from None
+        if leg < 1:
+            raise TableValidationError(f"{path}, row {row}, field leg: {leg} is not a leg number (legs count from 1)")
+        values = []
+        for name, cell in zip(CSV_HEADER[1:], cells[1:]):
+            try:
+                v = float(cell)
+            except ValueError:
+                raise TableValidationError(f"{path}, row {row}, field {name}: {cell!r} is not a number") from None
+            if not math.isfinite(v):
+                raise TableValidationError(f"{path}, row {row}, field {name}: {cell!r} is not a finite number")
+            values.append(v)
+        x, f, r = values
+        if leg != last_leg:
+            if leg in data:
+                raise TableValidationError(f"{path}, row {row}, field leg: leg {leg} appears again after leg {last_leg}; "
+                                 "rows must be sorted by leg, then position")
+            if last_leg is not None and leg < last_leg:
+                raise TableValidationError(f"{path}, row {row}, field leg: leg {leg} after leg {last_leg}; rows must be sorted by leg")
+            data[leg] = {"x": [], "f": [], "r": [], "row": []}
+            last_leg = leg
+        d = data[leg]
+        if d["x"]:
+            prev = d["x"][-1]
+            step = x - prev
+            if step <= 0:
+                raise TableValidationError(f"{path}, row {row}, field position_mm: {x:g} mm is not above the previous "
+                                 f"position {prev:g} mm; positions must increase strictly within a leg")
+            if len(d["x"]) >= 2:
+                step0 = d["x"][1] - d["x"][0]
+                if abs(step - step0) > SPACING_TOL_MM:
+                    raise TableValidationError(
+                        f"{path}, row {row}, field position_mm: step {step:.6f} mm differs from the leg's step "
+                        f"{step0:.6f} mm; drives need a fixed step: resample with `station table --step`"
+                    )
+            elif step < limits.min_step_mm:
+                raise TableValidationError(f"{path}, row {row}, field position_mm: step {step:g} mm is below the drive's "
+                                 f"minimum {limits.min_step_mm:g} mm")
+        for name, v in (("error_fwd_um", f), ("error_rev_um", r)):
+            if abs(v) > limits.max_correction_um:
+                raise TableValidationError(f"{path}, row {row}, field {name}: {v:g} um is beyond the drive's limit of "
+                                 f"+/-{limits.max_correction_um:g} um")
+        if len(d["x"]) >= limits.max_points:
+            raise TableValidationError(f"{path}, row {row}: leg {leg} has more than the drive's limit of {limits.max_points} points")
+        d["x"].append(x)
+        d["f"].append(f)
+        d["r"].append(r)
+        d["row"].append(row)
+    if not data:
+        raise TableValidationError(f"{path}: no table rows after the header")
+    _check_legs(str(path), data, expected_legs)
+    legs: dict[int, LegTable] = {}
+    for leg, d in data.items():
+        if len(d["x"]) < 2:
+            raise TableValidationError(f"{path}, row {d['row'][0]}: leg {leg} has a single point; a table needs at least two")
+        x = np.asarray(d["x"])
+        step = float((x[-1] - x[0]) / (x.size - 1))  # the mean step: robust to 1e-6 mm rounding
+        legs[leg] = LegTable(leg, float(x[0]), round(step, 9), tuple(d["f"]), tuple(d["r"]))
+    return CompTable(legs)
+
+
+def read_linuxcnc_comp(path: str | os.PathLike, comp_type: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A COMP_FILE as LinuxCNC loads it: (nominal_mm, forward_trim_mm, reverse_trim_mm).
+    Type 0 lines are converted as LinuxCNC does (trim = nominal - actual). Reading stops at the
+    first line that is not three numbers, as LinuxCNC's does."""
+    nom, fwd, rev = [], [], []
+    for line in Path(path).read_text().splitlines():
+        parts = line.split()
+        if len(parts) < 3:
+            break
+        try:
+            n, a, b = (float(p) for p in parts[:3])
+        except ValueError:
+            break
+        if comp_type == 0:
+            a, b = n - a, n - b
+        nom.append(n)
+        fwd.append(a)
+        rev.append(b)
+    return np.array(nom), np.array(fwd), np.array(rev)
