@@ -566,7 +566,8 @@ class SimDriveServer:
                       action=partial(self._action, leg))
             for leg in self._models
         ]  # fmt: skip
-        devices.append(SimDevice(id=0, simdata=[SimData(address=0, datatype=DataType.REGISTERS)], action=self._silent))
+        # unit ids without a drive: same address space, so every request reaches _silent
+        devices.append(SimDevice(id=0, simdata=[SimData(address=0, count=size, datatype=DataType.REGISTERS)], action=self._silent))
         return devices
 
     # -- life cycle ---------------------------------------------------------------------------------
