@@ -132,7 +132,10 @@ class BidirectionalLegFit(LegFit):
         return (self.basis.design(x, d) @ self.coef_um).reshape(x.shape)
 
     def describe(self) -> str:
-        return self.basis.describe()
+        text = self.basis.describe()
+        if self.basis.lead_harmonics and self.selection.get("lead") == "detected in the data":
+            text = text.replace(" mm (", " mm, found in the data (")
+        return text
 
     def model_json(self) -> dict[str, Any]:
         return {
@@ -154,6 +157,72 @@ def bidirectional_from_json(leg: int, stroke_mm, target_spacing_mm: float, stats
     )
     return BidirectionalLegFit(leg, stroke_mm, target_spacing_mm, stats, basis=basis,
                                coef_um=np.array(m["coefficients_um"], dtype=float), selection=m.get("selection", {}))
+
+
+# -- finding the screw lead in the data -----------------------------------------------------------
+
+DETECT_MARGIN = 12.0  # peak power over the noise expectation, on top of ln(independent freqs)
+
+
+def pair_amplitudes(x: np.ndarray, r: np.ndarray, freqs: np.ndarray) -> np.ndarray:
+    """Least-squares amplitude of a sin + cos pair at each frequency (cycles/mm) fitted to r."""
+    a = 2.0 * np.pi * freqs[:, None] * x[None, :]
+    s, c = np.sin(a), np.cos(a)
+    ss, cc, sc = (s * s).sum(1), (c * c).sum(1), (s * c).sum(1)
+    rs, rc = s @ r, c @ r
+    det = ss * cc - sc * sc
+    det = np.where(det > 1e-12 * ss * cc, det, np.inf)
+    bs = (cc * rs - sc * rc) / det
+    bc = (ss * rc - sc * rs) / det
+    return np.hypot(bs, bc)
+
+
+def detect_period_mm(data: LegData, shortest_stroke_wavelength_mm: float, base: "Basis") -> float | None:
+    """The wavelength (mm) of a significant periodic error shorter than the stroke harmonics,
+    e.g. the once-per-revolution error at the screw lead, or None.
+
+    The residual of `base` (trend, reversal and all stroke harmonics) is averaged per cell
+    (target, direction), and a sin + cos pair is fitted at each frequency between the shortest
+    stroke harmonic and 1/(2.5 x spacing). The strongest peak counts when its power exceeds
+    the white-noise expectation by ln(number of independent frequencies) + DETECT_MARGIN
+    (false alarm below 1e-5 on noise).
+    """
+    spacing = data.target_spacing_mm()
+    span = 2.0 * base.half_span_mm
+    if spacing <= 0:
+        return None
+    f_lo = 1.0 / shortest_stroke_wavelength_mm + 0.5 / span
+    f_hi = 1.0 / (MIN_POINTS_PER_WAVE * spacing)
+    if f_hi <= f_lo:
+        return None
+    X = base.design(data.position_mm, data.direction)
+    coef, *_ = np.linalg.lstsq(X, data.error_um, rcond=None)
+    resid = data.error_um - X @ coef
+    keys = np.stack([data.position_mm, data.direction.astype(float)], 1)
+    cells, ids = np.unique(keys, axis=0, return_inverse=True)
+    ids = ids.ravel()
+    rm = np.bincount(ids, weights=resid) / np.bincount(ids)
+    xm = cells[:, 0]
+    n = xm.size
+    if n < 8:
+        return None
+    rm = rm - rm.mean()
+    freqs = np.arange(f_lo, f_hi, 0.25 / span)
+    if freqs.size < 2:
+        return None
+    amp = pair_amplitudes(xm, rm, freqs)
+    k = int(np.argmax(amp))
+    # refine around the peak on a fine grid
+    fine = np.linspace(freqs[max(k - 1, 0)], freqs[min(k + 1, freqs.size - 1)], 81)
+    amp_fine = pair_amplitudes(xm, rm, fine)
+    j = int(np.argmax(amp_fine))
+    peak_f, peak_a = float(fine[j]), float(amp_fine[j])
+    sigma2 = float(np.mean(rm**2))
+    n_indep = max(1.0, (f_hi - f_lo) * span)
+    # amplitude^2 of a pair fitted to white noise of variance sigma2 ~ (4 sigma2 / n) * chi2_2 / 2
+    if peak_a**2 <= 4.0 * sigma2 / n * (np.log(n_indep) + DETECT_MARGIN):
+        return None
+    return 1.0 / peak_f
 
 
 # -- size selection ----------------------------------------------------------------------------
@@ -276,7 +345,7 @@ def fit_bidirectional_leg(
     data: LegData,
     folds: np.ndarray | None,
     *,
-    lead_mm: float | None = None,
+    lead_mm: float | str | None = "auto",
     trend_degree: int | None = None,
     reversal_degree: int | None = None,
     fourier_terms: int | None = None,
@@ -303,13 +372,21 @@ def fit_bidirectional_leg(
     k_max = max(0, min(max_fourier_terms, (n_targets - 1) // 4))
     wavelengths = stroke_wavelengths_mm(span, k_max)
     h_max = 0
+    r_max = MAX_REVERSAL_DEGREE if both_directions else -1
+    lead_source = "given"
+    if isinstance(lead_mm, str):
+        if lead_mm != "auto":
+            raise InputError(f"{where}: screw lead must be a number of mm, 'auto' or None, got {lead_mm!r}")
+        long_waves = Basis((lo + hi) / 2.0, span / 2.0, MAX_TREND_DEGREE, r_max, wavelengths, None, 0)
+        shortest = wavelengths[-1] if wavelengths else span
+        lead_mm = detect_period_mm(data, shortest, long_waves) if n_cells > long_waves.n_params + 8 else None
+        lead_source = "detected in the data" if lead_mm else "none found"
     if lead_mm:
         h_max = max(h for h in range(0, MAX_LEAD_HARMONICS + 1) if h == 0 or lead_mm / h > MIN_POINTS_PER_WAVE * spacing)
         # a stroke harmonic within half a bin of a lead harmonic would be the same column
         lead_f = [h / lead_mm for h in range(1, h_max + 1)]
         wavelengths = tuple(w for w in wavelengths if all(abs(1.0 / w - f) > 0.5 / span for f in lead_f))
         k_max = len(wavelengths)
-    r_max = MAX_REVERSAL_DEGREE if both_directions else -1
     full = Basis((lo + hi) / 2.0, span / 2.0, MAX_TREND_DEGREE, r_max, wavelengths, lead_mm if h_max else None, h_max)
 
     for name, value, top in (("trend degree", trend_degree, MAX_TREND_DEGREE),
@@ -334,7 +411,8 @@ def fit_bidirectional_leg(
     X = full.design(data.position_mm, data.direction)
     y = data.error_um
     heldout = None
-    info: dict[str, Any] = {"candidates": len(cands), "rule": "one standard error, paired over folds"}
+    info: dict[str, Any] = {"candidates": len(cands), "rule": "one standard error, paired over folds",
+                            "lead": lead_source}
     if len(cands) > 1 and folds is None:
         raise InputError(
             f"{where}: choosing the model size needs at least two cycles (an upward and a downward "
@@ -359,9 +437,10 @@ def fit_bidirectional_leg(
             else:
                 c_in = chosen
             idx = cands[c_in].columns
-            train = folds != f
-            beta, *_ = np.linalg.lstsq(X[train][:, idx], y[train], rcond=None)
-            test = ~train
+            ix = np.ix_(idx, idx)
+            # normal equations from the fold Grams (the candidate's conditioning was checked)
+            beta = np.linalg.solve(grams.G.sum(axis=0)[ix] - grams.G[f][ix], grams.b.sum(axis=0)[idx] - grams.b[f][idx])
+            test = folds == f
             heldout[test] = y[test] - X[test][:, idx] @ beta
         info["heldout"] = "nested cross-validation" if nested_ok else (
             "cross-validation (size fixed)" if len(cands) == 1 else

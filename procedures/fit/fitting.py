@@ -54,7 +54,7 @@ def fit_leg(data: LegData, method: str = "default", **opts: Any) -> LegFit:
         leg_fit.stats = _stats(data, folds, heldout)
         return leg_fit
     if method == "default":
-        kw = {k: opts[k] for k in _DEFAULT_OPTS if k in opts and opts[k] is not None}
+        kw = {k: opts[k] for k in _DEFAULT_OPTS if k in opts and (opts[k] is not None or k == "lead_mm")}
         leg_fit, heldout, info = fit_bidirectional_leg(data, folds, where=where, **kw)
         leg_fit.stats = _stats(data, folds, heldout)
         return leg_fit
@@ -68,7 +68,7 @@ def fit(
     legs: Iterable[int] | None = None,
     source: dict[str, str] | None = None,
     n_params: int = DEFAULT_N_PARAMS,
-    lead_mm: float | None = None,
+    lead_mm: float | str | None = "auto",
     trend_degree: int | None = None,
     reversal_degree: int | None = None,
     fourier_terms: int | None = None,
@@ -79,8 +79,9 @@ def fit(
     """Fit a leg-error model to a session's points (POINT_DTYPE array).
 
     method "default": the bidirectional model (procedures.fit.bidirectional); sizes left None
-    are chosen by cross-validation over held-out cycles; `lead_mm` (screw lead, mm) enables the
-    lead harmonics. method "paper": the seed paper's Algorithm 1 with `n_params` cosine terms
+    are chosen by cross-validation over held-out cycles; `lead_mm` is the screw lead (mm) for the
+    lead harmonics, "auto" (default) to look for a significant short period in the data,
+    None for no lead harmonics. method "paper": the seed paper's Algorithm 1 with `n_params` cosine terms
     (needs uniformly spaced targets). `legs` restricts the fit to some legs. `source` =
     {"path", "sha256"} of the recording, stored in the model.
 
@@ -89,7 +90,10 @@ def fit(
     """
     if method not in METHODS:
         raise InputError(f"unknown fit method {method!r}; use one of {', '.join(METHODS)}")
-    if lead_mm is not None and not (np.isfinite(lead_mm) and lead_mm > 0):
+    if isinstance(lead_mm, str):
+        if lead_mm != "auto":
+            raise InputError(f"screw lead must be a number of mm, 'auto' or none, got {lead_mm!r}")
+    elif lead_mm is not None and not (np.isfinite(lead_mm) and lead_mm > 0):
         raise InputError(f"screw lead must be a positive number of mm, got {lead_mm}")
     src = (source or {}).get("path", "") or "the session"
     by_leg = split_legs(points, source=src)

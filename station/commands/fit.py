@@ -1,0 +1,88 @@
+"""`station fit`: fit a leg-error model to a recorded session and save it as JSON."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from procedures.errors import InputError
+from procedures.fit import fit, save_model
+from procedures.fit.paper import DEFAULT_N_PARAMS
+from procedures.plans import parse_legs
+from procedures.recording.reader import read_session
+
+NAME = "fit"
+HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"
+DESCRIPTION = (
+    "Fit a leg-error model to a recorded session (FILE.h5) and save it as JSON naming the "
+    "recording and its SHA-256. Per leg it prints the terms chosen, the held-out RMS (cross-"
+    "validation over whole cycles), the noise floor from repeat passes, their ratio and the "
+    "error range reduction on held-out cycles. See docs/models.md."
+)
+
+
+def _lead(text: str) -> float | str | None:
+    t = text.strip().lower()
+    if t == "auto":
+        return "auto"
+    if t in ("none", "off", "0"):
+        return None
+    try:
+        value = float(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give the screw lead in mm, 'auto' or 'none'") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: the screw lead must be > 0 mm")
+    return value
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("session", metavar="FILE.h5", help="recorded session")
+    p.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
+    p.add_argument("--method", choices=["default", "paper"], default="default",
+                   help="default: bidirectional, size by cross-validation; paper: Algorithm 1 of the seed paper")
+    p.add_argument("--params", type=int, default=DEFAULT_N_PARAMS, metavar="N",
+                   help=f"paper method: number of cosine terms kept (default {DEFAULT_N_PARAMS}, as the paper)")
+    p.add_argument("--lead-mm", type=_lead, default="auto", metavar="MM|auto|none",
+                   help="default method: screw lead for the once-per-revolution terms (default auto: look for it in the data)")
+    p.add_argument("--legs", help="fit only these legs, e.g. 1-3 or 2,5 (default: all in the session)")
+
+
+def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
+    return none if value is None else format(value, spec)
+
+
+def run(args) -> int:
+    if args.params < 1:
+        raise InputError(f"--params must be >= 1, got {args.params}")
+    out = Path(args.out)
+    if out.parent and not out.parent.is_dir():
+        raise InputError(f"{out}: directory {out.parent} does not exist")
+    session = read_session(args.session)
+    if session.points.size == 0:
+        raise InputError(f"{session.path}: the session has no points; record a sweep first")
+    legs = parse_legs(args.legs) if args.legs else None
+    model = fit(session.points, args.method, legs=legs, n_params=args.params, lead_mm=args.lead_mm,
+                source={"path": str(session.path), "sha256": session.sha256})
+    save_model(model, out, str(session.path), session.sha256)
+    if session.outcome != "completed":
+        print(f"note: the session's outcome is {session.outcome!r}: the model uses the {session.points.size} points recorded")
+    print(f"method: {args.method}" + (f" ({args.params} cosine terms)" if args.method == "paper" else ""))
+    print(f"{'leg':>3}  {'held-out RMS':>12}  {'noise floor':>11}  {'ratio':>5}  {'(ideal)':>7}  {'range before':>12}  {'after':>7}  {'reduction':>9}  terms")
+    for leg, f in model.legs.items():
+        s = f.stats
+        rr = s.range_reduction_pct
+        print(
+            f"{leg:>3}  {_fmt(s.heldout_rms_um):>9} um  {_fmt(s.noise_floor_um):>8} um  {_fmt(s.ratio, '.2f'):>5}  "
+            f"{_fmt(s.ratio_floor, '.2f'):>7}  {s.range_before_um:>9.3f} um  {_fmt(s.range_after_um):>7}  "
+            f"{_fmt(rr, '.1f') + ' %' if rr is not None else 'n/a':>9}  {f.describe()}"
+        )
+        if s.note:
+            print(f"     note: {s.note}")
+        if s.dropped:
+            print(f"     note: {s.dropped} point(s) without a finite error were left out")
+    print("held-out: each cycle scored by a model fitted without it; ratio = held-out RMS / noise floor;"
+          " (ideal) = what a perfect static model would score")
+    print(f"model: {out}")
+    print(f"next: station table {out} --out table.csv   |   station report {session.path} --out report --model {out}")
+    return 0

@@ -1,0 +1,80 @@
+"""`station table`: a compensation table from a model, for the drive (CSV) or LinuxCNC."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from procedures.errors import InputError
+from procedures.fit import load_model
+from procedures.plans import parse_legs
+from procedures.table import LINUXCNC_LIMITS, TableLimits, make_table, write_linuxcnc_comp, write_table_csv
+
+NAME = "table"
+HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"
+DESCRIPTION = (
+    "Resample a leg-error model on a fixed step over each leg's recorded stroke. The CSV has the "
+    "columns leg,position_mm,error_fwd_um,error_rev_um: the predicted error (measured minus "
+    "commanded) approaching in the + / - direction, which the drive subtracts. The table's point "
+    "count and correction range are checked against the drive profile's limits. "
+    "--format linuxcnc writes one COMP_FILE per joint (leg N -> joint N-1). See docs/tables.md."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", metavar="MODEL.json", help="model written by `station fit`")
+    p.add_argument("--out", required=True, metavar="TABLE.csv|DIR",
+                   help="CSV file; for --format linuxcnc a directory (joint0.comp, ...) or NAME.comp (NAME_joint0.comp, ...)")
+    p.add_argument("--step", type=float, metavar="MM", help="table step, mm (default: the recording's spacing, "
+                   "coarsened to fit the point limit)")
+    p.add_argument("--format", choices=["csv", "linuxcnc"], default="csv", help="output format (default csv)")
+    p.add_argument("--comp-type", type=int, choices=[0, 1], default=0,
+                   help="LinuxCNC COMP_FILE_TYPE: 0 = nominal, actual moving +, actual moving - (default); "
+                   "1 = nominal, forward trim, reverse trim")
+    p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
+    p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
+
+
+def drive_limits(profile_path: str | None) -> TableLimits:
+    """Table limits of a drive profile (the built-in one without a path)."""
+    from drivers.modbus.profile import DriveProfile, ProfileError
+
+    try:
+        layout = DriveProfile.load(profile_path).table
+    except ProfileError as exc:
+        raise InputError(str(exc)) from None
+    return TableLimits(max_points=layout.max_points, max_correction_um=layout.max_correction_um)
+
+
+def run(args) -> int:
+    model = load_model(args.model)
+    legs = parse_legs(args.legs) if args.legs else None
+    if legs is not None:
+        missing = [x for x in legs if x not in model.legs]
+        if missing:
+            raise InputError(f"{args.model}: the model has no leg(s) {missing} (it has {list(model.legs)})")
+    if args.format == "linuxcnc":
+        profile = drive_limits(args.profile) if args.profile else None
+        limits = LINUXCNC_LIMITS if profile is None else TableLimits(
+            min(profile.max_points, LINUXCNC_LIMITS.max_points), profile.max_correction_um, LINUXCNC_LIMITS.min_step_mm)
+    else:
+        limits = drive_limits(args.profile)
+    table = make_table(model, args.step, limits, legs=legs)
+    if args.format == "csv":
+        written = [write_table_csv(table, args.out, limits)]
+    else:
+        written = write_linuxcnc_comp(table, args.out, args.comp_type, limits)
+    print(f"model: {args.model} ({model.method}; from {model.source.get('path') or 'unknown recording'})")
+    for leg, t in table.legs.items():
+        worst = max(float(np.max(np.abs(t.error_fwd_um))), float(np.max(np.abs(t.error_rev_um))))
+        print(f"leg {leg}: {t.point_count} points, {t.start_mm:g} .. {t.end_mm:g} mm step {t.step_mm:g} mm, "
+              f"largest correction {worst:.3f} um (limit {limits.max_correction_um:g} um)")
+    for path in written:
+        print(f"wrote {path}")
+    if args.format == "linuxcnc":
+        print(f"LinuxCNC: [JOINT_n] COMP_FILE = <file>  COMP_FILE_TYPE = {args.comp_type}  (machine units mm)")
+    else:
+        print(f"next: station push {written[0]} --leg N --sim")
+    return 0
