@@ -29,10 +29,10 @@ class SerialInterferometer:
     position query waits `timeout_s` plus the averaging time); `retries` is how many times a
     missing or malformed reply is asked again; `axes` the instrument's axis count.
 
-    Timing guarantee: a silent port raises `CommTimeout` after about
+    Timing guarantee: a silent port raises `CommTimeout` after
     ``(timeout_s + averaging_s) * (retries + 1)`` seconds (averaging_s = 0 except for a
-    position query), never later; a port that only returns garbage raises `FramingError`
-    within the same bound.
+    position query), plus at most 20 ms per attempt (the read poll slice); a port that only
+    returns garbage raises `FramingError` within the same bound, usually at once.
 
     The port is opened with an exclusive (advisory) lock where the platform supports it, so two
     programs cannot talk to one instrument at once. Not thread-safe: one owner at a time.
@@ -90,7 +90,8 @@ class SerialInterferometer:
         Query parameters are optional; unknown ones are refused with a message naming them.
         """
         parsed = urlparse(url)
-        if parsed.scheme != "serial" or not parsed.path:
+        port = parsed.path or parsed.netloc  # serial:///dev/ttyUSB0 or serial://COM3
+        if parsed.scheme != "serial" or not port:
             raise ValueError(f"interferometer URL {url!r} must look like serial:///dev/ttyUSB0?baud=115200")
         known = {"baud": int, "timeout_s": float, "retries": int, "axes": int}
         kwargs: dict[str, object] = {}
@@ -101,7 +102,7 @@ class SerialInterferometer:
                 kwargs["baudrate" if key == "baud" else key] = known[key](values[-1])
             except ValueError:
                 raise ValueError(f"interferometer URL {url!r}: {key}={values[-1]!r} is not a number") from None
-        return cls(parsed.path, **kwargs)  # type: ignore[arg-type]
+        return cls(port, **kwargs)  # type: ignore[arg-type]
 
     # -- Interferometer interface ------------------------------------------------------------
 

@@ -123,6 +123,7 @@ class ScriptedPeer:
         self.port = os.ttyname(self.slave)
         self.problems: list[str] = []
         self.consumed = 0
+        self.replied = threading.Semaphore(0)  # released after each reply is written
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def _receive(self, count: int) -> bytes:
@@ -154,6 +155,8 @@ class ScriptedPeer:
                 if i:
                     time.sleep(self.chunk_gap_s)
                 os.write(self.master, chunk)
+            if chunks:
+                self.replied.release()
 
     def __enter__(self) -> "ScriptedPeer":
         self._thread.start()
@@ -256,6 +259,24 @@ def test_late_reply_for_another_axis_is_not_taken_for_the_answer():
         assert laser.read(3).position_mm == 3.0
 
 
+def test_reply_arriving_after_its_timeout_does_not_answer_the_next_command():
+    late_idn = p.frame_reply("IDN", "Acme", "LI-6", "1", "2.1")
+    script = [
+        (b"*IDN?\n", late_idn, 0.1),  # answered after the client gave up (timeout 0.05 s)
+        (b"AVG?\n", p.frame_reply("AVG", "0.000")),
+        (b"POS? 1\n", p.frame_reply("POS", 1, "+1.000000000", "OK", "90.0", "1.000000")),
+    ]
+    with ScriptedPeer(script) as peer:
+        laser = SerialInterferometer(peer.port, timeout_s=0.05, retries=0)
+        try:
+            with pytest.raises(CommTimeout):
+                laser.identity()
+            assert peer.replied.acquire(timeout=2.0)  # the stale IDN line now waits in the port
+            assert laser.read(1).position_mm == 1.0  # retries=0: only right if it was discarded
+        finally:
+            laser.close()
+
+
 def test_beam_and_refusals_are_not_retried():
     script = [
         (b"AVG?\n", p.frame_reply("AVG", "0.000")),
@@ -275,7 +296,7 @@ def test_silence_is_retried_then_reported_with_port_and_timeout():
         t0 = time.monotonic()
         with pytest.raises(CommTimeout, match=rf"{laser.port} did not answer '\*IDN\?' within 0.05 s \(2 attempts"):
             laser.identity()
-        assert 0.1 <= time.monotonic() - t0 < 0.1 + 0.08
+        assert 0.1 <= time.monotonic() - t0 < 0.1 + 0.12
 
 
 def test_long_averaging_extends_the_wait_for_a_position():

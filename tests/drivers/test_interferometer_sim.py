@@ -213,7 +213,7 @@ def test_silent_port_times_out_within_the_configured_bound_naming_the_port():
     message = str(info.value)
     assert r.port in message and "0.1 s" in message and "3 attempts" in message
     bound_s = timeout_s * (retries + 1)
-    assert bound_s <= elapsed_s < bound_s + 0.1
+    assert bound_s <= elapsed_s < bound_s + 0.15  # 20 ms poll slice per attempt + scheduling
 
 
 def test_axis_the_instrument_lacks_is_an_instrument_error_naming_it():
