@@ -9,6 +9,7 @@ beam status other than OK as `BeamBreak`: retrying those is the caller's decisio
 
 from __future__ import annotations
 
+import numbers
 import time
 from urllib.parse import parse_qs, urlparse
 
@@ -118,7 +119,7 @@ class SerialInterferometer:
         Raises `BeamBreak` when the instrument reports the beam interrupted (BEAM) or its
         signal too weak (LOW); no retry is made for that.
         """
-        self._check_axis(axis)
+        axis = self._check_axis(axis)
         if self._averaging_s is None:
             self._averaging_s = self._transact(p.cmd_averaging_query(), p.parse_averaging)
         reply = self._transact(
@@ -147,7 +148,7 @@ class SerialInterferometer:
 
     def zero(self, axis: int) -> None:
         """Set the zero of `axis` at its current position (later readings are relative to it)."""
-        self._check_axis(axis)
+        axis = self._check_axis(axis)
         self._transact(p.cmd_zero(axis), p.parse_ok)
 
     def set_averaging(self, averaging_s: float) -> None:
@@ -176,9 +177,10 @@ class SerialInterferometer:
 
     # -- one exchange ------------------------------------------------------------------------
 
-    def _check_axis(self, axis: int) -> None:
-        if not isinstance(axis, int) or not 1 <= axis <= self.axes:
+    def _check_axis(self, axis: int) -> int:
+        if isinstance(axis, bool) or not isinstance(axis, numbers.Integral) or not 1 <= axis <= self.axes:
             raise ValueError(f"interferometer axis must be an integer in 1..{self.axes}, got {axis!r}")
+        return int(axis)
 
     def _transact(self, command: bytes, parse, extra_wait_s: float = 0.0):
         """Send `command`, read one reply line, check and `parse` its fields; retry on

@@ -70,6 +70,7 @@ def test_reading_tracks_plant_motion_within_the_plants_errors(rig):
         assert (r.position_mm - target_mm) * 1000.0 == pytest.approx(error_um, abs=0.03), target_mm
         errors_um.append(error_um)
     assert max(errors_um) - min(errors_um) > 0.5  # so the check above does see the error
+    assert rig.laser.read(np.int64(axis)).axis == axis  # numpy integers from plans are fine
     assert rig.laser.read(5).position_mm == pytest.approx(0.0, abs=5e-3)  # other legs did not move
 
 
@@ -255,12 +256,15 @@ def test_client_refuses_out_of_range_values_before_sending(rig):
         rig.laser.set_averaging(12.0)
     with pytest.raises(ValueError, match=r"axis must be an integer in 1..6, got 7"):
         rig.laser.read(7)
+    with pytest.raises(ValueError, match=r"axis must be an integer in 1..6, got 2.0"):
+        rig.laser.zero(2.0)
     assert sum(rig.sim.commands.values()) == 0
 
 
 def test_port_is_exclusive(rig):
-    with pytest.raises(DriverError, match=rf"cannot open .*{rig.port}"):
+    with pytest.raises(DriverError, match=rf"cannot open .*{rig.port}.*Another program holds the port"):
         SerialInterferometer(rig.port)
+    assert rig.laser.read(1).beam_ok  # the owner is undisturbed
 
 
 def test_missing_port_is_a_clear_error():
