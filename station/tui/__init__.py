@@ -1,0 +1,1 @@
+"""The station's terminal UI (Textual). Start it with `station` or `station ui`."""

@@ -1,0 +1,394 @@
+"""The station's terminal UI: one Textual app, one mode (screen stack) per task.
+
+The app owns the rig connection and the sweep job, so a sweep survives screen changes and
+redraws: the screens only draw from `app.sweep` (a `SweepState`) and call the app's actions.
+All device I/O runs in thread workers; results come back as messages. Device access is
+serialised by `rig_lock` (the sweep holds it for its whole run; status polling skips a beat
+instead of waiting), except the quick stop of an abort, which must not wait for anything.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+from textual import work
+from textual.app import App
+from textual.binding import Binding
+
+from procedures.control import RunControl
+from procedures.plans import SweepPlan
+from station.config import StationConfig
+from station.tui.bridge import SweepEnded, SweepEvent, TuiBridge
+from station.tui.errors import describe
+from station.tui.messages import Notice, RigActionDone, RigConnected, RigConnectFailed
+from station.tui.screens.common import ConfirmScreen
+from station.tui.screens.compensation import CompensationScreen
+from station.tui.screens.diagnosis import DiagnosisScreen
+from station.tui.screens.replay import ReplayScreen
+from station.tui.screens.results import ResultsScreen
+from station.tui.screens.rig import RigScreen
+from station.tui.screens.sweep import SweepScreen
+from station.tui.state import SweepState
+
+log = logging.getLogger("station.tui")
+
+ALL_LEGS = (1, 2, 3, 4, 5, 6)
+# How long quitting waits for an aborted sweep to stop the drives and close its recording.
+QUIT_WAIT_S = 15.0
+
+
+class StationApp(App):
+    """The calibration station UI.
+
+    `cfg`: station config (None = simulated rig with built-in defaults). `time_scale`: simulated
+    rig only, real seconds per simulated second (None = the config's). `replay`: a session file
+    to open on the Replay screen. `autoconnect`: connect to the rig at start. `hide_volatile`:
+    hide clocks, ETAs, device addresses and file paths (for snapshot tests). `poll_interval_s`:
+    how often the Rig screen reads drive and interferometer status.
+    """
+
+    TITLE = "station"
+    SUB_TITLE = "leg calibration"
+    CSS_PATH = "station.tcss"
+    MODES = {
+        "rig": RigScreen,
+        "sweep": SweepScreen,
+        "results": ResultsScreen,
+        "compensation": CompensationScreen,
+        "replay": ReplayScreen,
+        "diagnosis": DiagnosisScreen,
+    }
+    DEFAULT_MODE = "rig"
+    BINDINGS = [
+        Binding("f1", "switch_mode('rig')", "Rig"),
+        Binding("f2", "switch_mode('sweep')", "Sweep"),
+        Binding("f3", "switch_mode('results')", "Results"),
+        Binding("f4", "switch_mode('compensation')", "Compensation"),
+        Binding("f5", "switch_mode('replay')", "Replay"),
+        Binding("f6", "switch_mode('diagnosis')", "Diagnosis"),
+        Binding("ctrl+q", "quit", "Quit", priority=True),
+        Binding("ctrl+c", "quit", "Quit", show=False, priority=True),
+    ]
+
+    def __init__(
+        self,
+        cfg: StationConfig | None = None,
+        *,
+        time_scale: float | None = None,
+        replay: str | Path | None = None,
+        legs: tuple[int, ...] = ALL_LEGS,
+        autoconnect: bool = True,
+        hide_volatile: bool = False,
+        poll_interval_s: float = 1.0,
+    ) -> None:
+        super().__init__()
+        self.cfg = cfg or StationConfig()
+        self.time_scale = time_scale
+        self.replay_path = Path(replay) if replay else None
+        self.legs = tuple(legs)
+        self.autoconnect = autoconnect
+        self.hide_volatile = hide_volatile
+        self.poll_interval_s = poll_interval_s
+        self.rig = None  # station.wiring.Rig once connected
+        self.rig_state = "not connected"  # "connecting" / "connected" / "not connected"
+        self.rig_error = ""
+        self.rig_lock = threading.Lock()
+        self.sweep = SweepState()
+        self.sweep_control: RunControl | None = None
+        self._sweep_idle = threading.Event()
+        self._sweep_idle.set()
+        self._quit_after_sweep = False
+        self.last_session: Path | None = None  # the newest recording made or opened here
+        self.session_listeners: list[Callable[[Path], None]] = []
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def on_mount(self) -> None:
+        if self.replay_path is not None:
+            self.last_session = self.replay_path
+            self.switch_mode("replay")
+        if self.autoconnect:
+            self.connect_rig()
+
+    def on_unmount(self) -> None:
+        # Last line of defence (e.g. the terminal closed): stop motion, close the recording.
+        if self.sweep_control is not None and not self._sweep_idle.is_set():
+            self.sweep_control.abort("the station UI closed")
+            self._sweep_idle.wait(QUIT_WAIT_S)
+        self._close_rig()
+
+    def _close_rig(self) -> None:
+        rig, self.rig = self.rig, None
+        if rig is not None:
+            try:
+                rig.close()
+            except Exception:
+                log.exception("closing the rig failed")
+
+    # -- notifications -----------------------------------------------------------------------
+    def on_notice(self, message: Notice) -> None:
+        self.notify(message.text, title=message.title, severity=message.severity,  # type: ignore[arg-type]
+                    timeout=12 if message.severity == "error" else 6)
+
+    def set_session(self, path: Path) -> None:
+        """Make `path` the session the Results/Compensation/Diagnosis screens work on."""
+        self.last_session = Path(path)
+        for listener in list(self.session_listeners):
+            listener(self.last_session)
+
+    # -- rig connection ------------------------------------------------------------------------
+    def action_connect(self) -> None:
+        if self.sweep.active:
+            self.notify("A sweep is running; abort it before reconnecting.", severity="warning")
+            return
+        self.connect_rig()
+
+    def connect_rig(self) -> None:
+        self.rig_state, self.rig_error = "connecting", ""
+        self._connect_worker()
+
+    @work(thread=True, exclusive=True, group="connect", exit_on_error=False)
+    def _connect_worker(self) -> None:
+        from station.wiring import open_rig  # imported here: a missing driver is a notice, not a crash
+
+        with self.rig_lock:
+            old, self.rig = self.rig, None
+            if old is not None:
+                try:
+                    old.close()
+                except Exception:
+                    log.exception("closing the previous rig failed")
+            try:
+                rig = open_rig(self.cfg, legs=self.legs, time_scale=self.time_scale)
+            except Exception as exc:
+                self.post_message(RigConnectFailed(describe(exc, "cannot connect to the rig")))
+                return
+        self.post_message(RigConnected(rig))
+
+    def on_rig_connected(self, message: RigConnected) -> None:
+        self.rig = message.rig
+        self.rig_state, self.rig_error = "connected", ""
+        self.notify(f"Connected: {self._rig_kind_text()}.", timeout=4)
+
+    def on_rig_connect_failed(self, message: RigConnectFailed) -> None:
+        self.rig_state, self.rig_error = "not connected", message.error
+        self.notify(message.error + " Press c on the Rig screen (F1) to retry.", title="Rig",
+                    severity="error", timeout=15)
+
+    def _rig_kind_text(self) -> str:
+        if self.rig is None:
+            return "no rig"
+        if self.hide_volatile:
+            return {"sim": "simulated rig", "live": "live rig", "replay": "replayed session"}.get(self.rig.kind, self.rig.kind)
+        return self.rig.description
+
+    # -- rig actions (enable, disable, home, reset, stop) ----------------------------------------
+    def rig_action(self, action: str, legs: tuple[int, ...]) -> None:
+        """Run a rig action on `legs` in a worker. Refused while a sweep holds the rig
+        (except "stop", which always goes through)."""
+        if self.rig is None:
+            self.notify("Not connected to the rig: press c on the Rig screen to connect.", severity="warning")
+            return
+        if action != "stop" and self.sweep.active:
+            self.notify("A sweep is running: pause or abort it first (Sweep screen, F2).", severity="warning")
+            return
+        self._rig_action_worker(action, legs)
+
+    @work(thread=True, group="rig-action", exit_on_error=False)
+    def _rig_action_worker(self, action: str, legs: tuple[int, ...]) -> None:
+        rig = self.rig
+        if rig is None:
+            return
+        locked = False
+        if action != "stop":  # a stop must never wait behind another transaction
+            locked = self.rig_lock.acquire(timeout=5.0)
+            if not locked:
+                self.post_message(RigActionDone(action, legs, "the rig is busy (another action is running); try again"))
+                return
+        try:
+            for leg in legs:
+                axis = rig.axes[leg]
+                if action == "enable":
+                    if axis.status().fault:
+                        raise _ActionRefused(f"leg {leg} is in fault: reset the fault (r) first")
+                    axis.enable()
+                elif action == "disable":
+                    axis.disable()
+                elif action == "home":  # the reference is mid-stroke, 0 mm
+                    if not axis.status().enabled:
+                        axis.enable()
+                    axis.move_to(0.0)
+                elif action == "reset":
+                    axis.reset_fault()
+                elif action == "stop":
+                    axis.stop()
+                else:
+                    raise _ActionRefused(f"unknown action {action!r}")
+        except _ActionRefused as exc:
+            self.post_message(RigActionDone(action, legs, str(exc)))
+            return
+        except Exception as exc:
+            self.post_message(RigActionDone(action, legs, describe(exc, f"{action} failed")))
+            return
+        finally:
+            if locked:
+                self.rig_lock.release()
+        self.post_message(RigActionDone(action, legs))
+
+    def on_rig_action_done(self, message: RigActionDone) -> None:
+        legs = ", ".join(str(leg) for leg in message.legs)
+        if message.error:
+            self.notify(message.error, title=f"{message.action} leg {legs}", severity="error", timeout=12)
+        else:
+            self.notify(f"{message.action}: leg {legs} done.", timeout=3)
+
+    # -- sweep -----------------------------------------------------------------------------------
+    def start_sweep(self, plan: SweepPlan, out: Path) -> bool:
+        """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner)."""
+        if self.sweep.active:
+            self.notify("A sweep is already running.", severity="warning")
+            return False
+        if self.rig is None:
+            self.notify("Not connected to the rig: go to the Rig screen (F1) and press c to connect.",
+                        severity="error", timeout=10)
+            return False
+        missing = [leg for leg in plan.legs if leg not in self.rig.axes]
+        if missing:
+            self.notify(f"No drive connected for leg(s) {missing}; connected: {sorted(self.rig.axes)}.",
+                        severity="error", timeout=10)
+            return False
+        if out.exists():
+            self.notify(f"{out} exists already; choose another file name.", severity="error")
+            return False
+        self.sweep = SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting",
+                                total=plan.total_points)
+        self.sweep_control = RunControl()
+        self._sweep_idle.clear()
+        self._sweep_worker(plan, out, self.sweep_control)
+        return True
+
+    @work(thread=True, group="sweep", exit_on_error=False)
+    def _sweep_worker(self, plan: SweepPlan, out: Path, control: RunControl) -> None:
+        from station.jobs import run_sweep
+
+        outcome, points, error = "error", 0, ""
+        try:
+            if not self.rig_lock.acquire(timeout=10.0):
+                error = "the rig stayed busy for 10 s (a rig action is still running); try again"
+                return
+            try:
+                rig = self.rig
+                if rig is None:
+                    error = "the rig was disconnected; connect it on the Rig screen (F1)"
+                    return
+                result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self)], control=control)
+                outcome, points = result.outcome, result.points
+            finally:
+                self.rig_lock.release()
+        except Exception as exc:  # the runner has already stopped the drives in its finally
+            error = describe(exc, "the sweep stopped")
+        finally:
+            self._sweep_idle.set()
+            self.post_message(SweepEnded(outcome, points, error))
+
+    def on_sweep_event(self, message: SweepEvent) -> None:
+        self.sweep.apply(message.event)
+        from procedures import events as ev
+
+        event = message.event
+        if isinstance(event, ev.Fault):
+            self.notify(f"leg {event.leg} run {event.run} at {event.target_mm:+.3f} mm: {event.message}",
+                        title=f"{event.kind} ({'gave up' if event.gave_up else f'attempt {event.attempt}, retrying'})",
+                        severity="error" if event.gave_up else "warning", timeout=10)
+
+    def on_sweep_ended(self, message: SweepEnded) -> None:
+        s = self.sweep
+        if s.active:  # no SweepFinished came: the run broke off with an exception
+            s.status = "error" if message.error else message.outcome
+            s.reason = message.error
+            s.version += 1
+        if message.error:
+            self.notify(message.error, title="Sweep", severity="error", timeout=15)
+        else:
+            note = {"completed": "completed. Results: F3.", "aborted": "aborted; drives stopped, recording kept.",
+                    "failed": f"failed: {s.reason}"}.get(s.status, s.status)
+            self.notify(f"Sweep {note} ({s.done} of {s.total} points)", title="Sweep",
+                        severity="information" if s.status == "completed" else "warning", timeout=8)
+        if s.out is not None and s.out.exists():
+            self.set_session(s.out)
+        if self._quit_after_sweep:
+            self.exit()
+
+    def action_pause_sweep(self) -> None:
+        """Pause between points (nothing moves while paused), or resume."""
+        if not self.sweep.active or self.sweep_control is None:
+            self.notify("No sweep is running.", severity="warning")
+            return
+        if self.sweep.status == "aborting":
+            return
+        if self.sweep_control.paused:
+            self.sweep_control.resume()
+            self.notify("Resuming the sweep.", timeout=3)
+        else:
+            self.sweep_control.pause()
+            self.notify("Pausing after the current point…", timeout=3)
+
+    def action_abort_sweep(self) -> None:
+        """Abort: quick-stop the axes now (from a worker, the UI stays live), end the sweep."""
+        if not self.sweep.active or self.sweep_control is None:
+            self.notify("No sweep is running.", severity="warning")
+            return
+        if self.sweep.status != "aborting":
+            self.sweep.status = "aborting"
+            self.sweep.version += 1
+            self._abort_worker(self.sweep_control)
+            self.notify("Aborting: stopping the drives…", severity="warning", timeout=4)
+
+    @work(thread=True, group="abort", exit_on_error=False)
+    def _abort_worker(self, control: RunControl) -> None:
+        control.abort("aborted by the operator")
+
+    # -- quitting --------------------------------------------------------------------------------
+    async def action_quit(self) -> None:
+        if self._quit_after_sweep:
+            return
+        if self.sweep.active:
+            legs = ", ".join(str(leg) for leg in self.sweep.legs)
+
+            def confirmed(yes: bool | None) -> None:
+                if yes:
+                    self._quit_after_sweep = True
+                    self.action_abort_sweep()
+                    self.notify("Stopping the drives and closing the recording, then quitting…", timeout=10)
+
+            self.push_screen(
+                ConfirmScreen(
+                    f"A sweep is running on leg {legs}.\n\nQuit anyway? The sweep is aborted, the drives are "
+                    "stopped and disabled, and the recording is kept (finish it later with "
+                    "`station sweep --resume FILE`).",
+                    yes="Abort and quit", no="Keep sweeping",
+                ),
+                confirmed,
+            )
+            return
+        self.exit()
+
+
+class _ActionRefused(Exception):
+    pass
+
+
+def default_session_path(cfg: StationConfig, legs: tuple[int, ...]) -> Path:
+    """runs/ui-YYYYmmdd-HHMMSS-legs1-2.h5 under the config's recordings folder."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    tag = "-".join(str(leg) for leg in legs)
+    base = Path(cfg.recordings_dir) / f"ui-{stamp}-leg{tag}.h5"
+    n = 1
+    out = base
+    while out.exists():
+        n += 1
+        out = base.with_name(f"{base.stem}-{n}.h5")
+    return out

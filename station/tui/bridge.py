@@ -1,0 +1,48 @@
+"""The Textual bridge: a runner sink that only posts messages to the app.
+
+The runner calls `handle` on the sweep's worker thread; `App.post_message` is thread-safe, so
+the sweep never touches a widget. The app folds the events into a `SweepState` on its own
+thread and the screens draw from that state.
+"""
+
+from __future__ import annotations
+
+from textual.app import App
+from textual.message import Message
+
+from procedures import events as ev
+
+
+class SweepEvent(Message):
+    """One procedure event, carried from the sweep thread to the app."""
+
+    def __init__(self, event: ev.Event) -> None:
+        super().__init__()
+        self.event = event
+
+
+class SweepEnded(Message):
+    """The sweep worker returned. `error` is a sentence for the operator when the run could not
+    start or broke off (a driver error, a plan outside the soft limits), else ""."""
+
+    def __init__(self, outcome: str, points: int, error: str = "") -> None:
+        super().__init__()
+        self.outcome = outcome
+        self.points = points
+        self.error = error
+
+
+class TuiBridge:
+    """Runner sink (not critical: if posting ever fails the runner drops it, the sweep and
+    its recording go on)."""
+
+    critical = False
+
+    def __init__(self, app: App) -> None:
+        self.app = app
+
+    def handle(self, event: ev.Event) -> None:
+        self.app.post_message(SweepEvent(event))
+
+    def close(self, outcome: str) -> None:
+        pass

@@ -1,0 +1,72 @@
+"""Pieces shared by the screens: the page frame and the confirmation dialog."""
+
+from __future__ import annotations
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Grid, Horizontal
+from textual.screen import ModalScreen, Screen
+from textual.widgets import Button, Footer, Header, Label, Static
+
+
+PAGES = [("rig", "F1", "Rig"), ("sweep", "F2", "Sweep"), ("results", "F3", "Results"),
+         ("compensation", "F4", "Compensation"), ("replay", "F5", "Replay"), ("diagnosis", "F6", "Diagnosis")]
+
+
+def nav_bar(current: str) -> str:
+    """The page tabs with their keys; the current page highlighted."""
+    parts = []
+    for mode, key, title in PAGES:
+        if mode == current:
+            parts.append(f"[reverse b] {key} {title} [/reverse b]")
+        else:
+            parts.append(f" [b]{key}[/b] {title} ")
+    return "│".join(parts)
+
+
+class StationScreen(Screen):
+    """A page: header (no clock), page tabs, a line saying what the page is for, body, footer."""
+
+    MODE = ""
+    PAGE_HELP = ""
+
+    def compose_header(self) -> ComposeResult:
+        yield Header(show_clock=False, icon="≡")
+        yield Static(nav_bar(self.MODE), classes="nav-bar")
+        yield Static(f"[dim]{self.PAGE_HELP}[/dim]", classes="page-help")
+
+    def compose_footer(self) -> ComposeResult:
+        yield Footer(show_command_palette=False, compact=True)
+
+
+class ConfirmScreen(ModalScreen[bool]):
+    """Yes/no question; dismisses with True only on an explicit yes."""
+
+    BINDINGS = [
+        Binding("y", "answer(True)", "Yes"),
+        Binding("n", "answer(False)", "No"),
+        Binding("escape", "answer(False)", "Cancel"),
+    ]
+
+    def __init__(self, question: str, yes: str = "Yes", no: str = "No") -> None:
+        super().__init__()
+        self.question = question
+        self.yes_label = yes
+        self.no_label = no
+
+    def compose(self) -> ComposeResult:
+        with Grid(id="confirm-dialog"):
+            yield Label(self.question, id="confirm-question")
+            with Horizontal(id="confirm-buttons"):
+                yield Button(f"{self.yes_label} (y)", variant="error", id="confirm-yes")
+                yield Button(f"{self.no_label} (n)", variant="primary", id="confirm-no")
+
+    def on_mount(self) -> None:
+        self.query_one("#confirm-no", Button).focus()  # the safe answer is the default
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        self.dismiss(event.button.id == "confirm-yes")
+
+    def action_answer(self, yes: bool) -> None:
+        self.dismiss(yes)

@@ -1,0 +1,238 @@
+"""Sweep screen: choose legs and plan, start; live error plot, progress, environment; pause,
+resume, abort. The sweep itself belongs to the app, so leaving this screen does not stop it.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
+from textual.widgets import Button, Input, Label, ProgressBar, Select, Static
+
+from station.progress import fmt_duration
+from station.tui.errors import describe
+from station.tui.screens.common import StationScreen
+from station.tui.widgets import XYPlot
+
+PLANS = [("ISO 230-2", "iso230"), ("Paper (361 × 0.5 mm)", "paper")]
+
+
+class SweepScreen(StationScreen):
+    MODE = "sweep"
+    PAGE_HELP = "choose legs and plan, start; error = measured − commanded (µm)"
+    BINDINGS = [
+        Binding("s", "start", "Start"),
+        Binding("p", "app.pause_sweep", "Pause/Resume"),
+        Binding("a", "app.abort_sweep", "Abort"),
+        Binding("l", "next_leg", "Plot next leg"),
+        Binding("escape", "leave_field", "Leave field", show=False),
+    ]
+
+    def compose(self) -> ComposeResult:
+        yield from self.compose_header()
+        with Horizontal(id="sweep-body"):
+            with VerticalScroll(id="sweep-form"):
+                with Grid(id="plan-grid"):
+                    yield Label("Legs")
+                    yield Input("1", id="legs", compact=True, tooltip="e.g. 1, 1-6 or 1,3")
+                    yield Label("Plan")
+                    yield Select(PLANS, value="iso230", allow_blank=False, id="plan", compact=True)
+                    yield Label("Cycles")
+                    yield Input("5", id="cycles", type="integer", compact=True, tooltip="bidirectional cycles")
+                    yield Label("Targets")
+                    yield Input("11", id="n-targets", type="integer", compact=True,
+                                tooltip="number of irregularly spaced targets (ISO 230-2)")
+                    yield Label("Step mm")
+                    yield Input("", id="step", placeholder="blank: irregular", type="number", compact=True,
+                                tooltip="uniform spacing instead of irregular targets")
+                    yield Label("Min mm")
+                    yield Input("-90", id="min-mm", type="number", compact=True)
+                    yield Label("Max mm")
+                    yield Input("90", id="max-mm", type="number", compact=True)
+                    yield Label("Dwell s")
+                    yield Input("1", id="dwell", type="number", compact=True, tooltip="settle time per target")
+                yield Static("", id="plan-summary")
+                yield Button("Start (s)", id="start", variant="success")
+                with Horizontal(classes="pair"):
+                    yield Button("Pause (p)", id="pause", variant="warning")
+                    yield Button("Abort (a)", id="abort", variant="error")
+            with Vertical(id="sweep-live"):
+                yield XYPlot("error against position", "target mm", "error µm", id="sweep-plot")
+                yield ProgressBar(id="progress", show_eta=False)
+                yield Static("no sweep yet", id="sweep-status")
+                yield Static("", id="sweep-env")
+                yield Static("", id="sweep-faults")
+        yield from self.compose_footer()
+
+    def on_mount(self) -> None:
+        self._drawn_version = -1
+        self.plot_leg: int | None = None
+        self._update_summary()
+        self.set_interval(0.2, self._redraw_if_changed)
+        self._redraw()
+
+    def on_screen_resume(self) -> None:
+        self._redraw()
+
+    # -- form --------------------------------------------------------------------------------------
+    def _form_args(self) -> SimpleNamespace:
+        def val(wid: str) -> str:
+            return self.query_one(f"#{wid}", Input).value.strip()
+
+        def num(wid: str, kind=float, default=None):
+            text = val(wid)
+            if not text:
+                return default
+            try:
+                return kind(text)
+            except ValueError:
+                raise ValueError(f"{wid.replace('-', ' ')}: {text!r} is not a {'whole ' if kind is int else ''}number") from None
+
+        return SimpleNamespace(
+            legs=val("legs") or "1", plan=self.query_one("#plan", Select).value,
+            cycles=num("cycles", int), targets=None, step=num("step"), n_targets=num("n-targets", int),
+            min_mm=num("min-mm", float, -90.0), max_mm=num("max-mm", float, 90.0), overrun=2.0,
+            dwell=num("dwell", float, 1.0), averaging=0.1,
+        )
+
+    def build_plan(self):
+        """The plan from the form, built exactly as `station sweep` builds it."""
+        from station.commands.sweep import build_plan
+
+        args = self._form_args()
+        if args.plan == "paper":
+            args.step = None  # the paper plan has fixed targets; the ISO fields do not apply
+        return build_plan(args)
+
+    def _update_summary(self) -> None:
+        summary = self.query_one("#plan-summary", Static)
+        paper = self.query_one("#plan", Select).value == "paper"
+        for wid in ("n-targets", "step", "min-mm", "max-mm"):
+            self.query_one(f"#{wid}", Input).disabled = paper or self.app.sweep.active
+        try:
+            plan = self.build_plan()
+        except Exception as exc:
+            summary.update(f"[red]{describe(exc)}[/red]")
+            return
+        text = (f"{len(plan.targets_mm)} targets × {plan.cycles} cycles × 2 directions × "
+                f"{len(plan.legs)} leg(s) = [b]{plan.total_points}[/b] points")
+        for note in plan.notes:
+            text += f"\n[yellow]note:[/yellow] {note}"
+        summary.update(text)
+
+    def on_input_changed(self, event: Input.Changed) -> None:
+        self._update_summary()
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        # each plan has its own standard number of cycles (ISO 230-2: 5, the paper: 6 sets)
+        cycles = self.query_one("#cycles", Input)
+        default = {"iso230": "5", "paper": "6"}
+        if cycles.value.strip() in ("", *default.values()):
+            cycles.value = default.get(str(event.value), cycles.value)
+        self._update_summary()
+
+    def action_leave_field(self) -> None:
+        self.query_one("#start", Button).focus()
+
+    # -- actions -----------------------------------------------------------------------------------
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        if event.button.id == "start":
+            self.action_start()
+        elif event.button.id == "pause":
+            self.app.action_pause_sweep()
+        elif event.button.id == "abort":
+            self.app.action_abort_sweep()
+
+    def action_start(self) -> None:
+        from station.tui.app import default_session_path
+
+        if self.app.sweep.active:
+            self.notify("A sweep is already running.", severity="warning")
+            return
+        try:
+            plan = self.build_plan()
+        except Exception as exc:
+            self.notify(describe(exc), title="Plan", severity="error", timeout=10)
+            return
+        out = default_session_path(self.app.cfg, plan.legs)
+        if self.app.start_sweep(plan, out):
+            self.plot_leg = None
+            self.query_one("#abort", Button).focus()
+            self._redraw()
+
+    def action_next_leg(self) -> None:
+        legs = sorted(self.app.sweep.traces)
+        if not legs:
+            return
+        current = self.plot_leg or self.app.sweep.current_leg or legs[0]
+        self.plot_leg = legs[(legs.index(current) + 1) % len(legs)] if current in legs else legs[0]
+        self._redraw()
+
+    # -- drawing -----------------------------------------------------------------------------------
+    def _redraw_if_changed(self) -> None:
+        if self.app.sweep.version != self._drawn_version:
+            self._redraw()
+
+    def _redraw(self) -> None:
+        s = self.app.sweep
+        self._drawn_version = s.version
+        active = s.active
+        for wid in ("legs", "plan", "cycles", "dwell"):
+            self.query_one(f"#{wid}").disabled = active
+        self._update_summary()
+        self.query_one("#start", Button).disabled = active
+        self.query_one("#pause", Button).disabled = not active
+        self.query_one("#abort", Button).disabled = not active
+        self.query_one("#pause", Button).label = "Resume (p)" if s.status == "paused" else "Pause (p)"
+
+        leg = self.plot_leg if self.plot_leg in s.traces else s.current_leg
+        plot = self.query_one("#sweep-plot", XYPlot)
+        trace = s.traces.get(leg) if leg is not None else None
+        if trace is None:
+            plot.show([], title="error against position (no points yet)")
+        else:
+            plot.show([
+                ("approach +1 (up)", trace.up_target_mm, trace.up_error_um, "scatter"),
+                ("approach −1 (down)", trace.down_target_mm, trace.down_error_um, "scatter"),
+            ], title=f"leg {leg}: error against position ({trace.count} points)")
+
+        bar = self.query_one("#progress", ProgressBar)
+        bar.update(total=max(s.total, 1) if s.status != "idle" else None, progress=s.done)
+
+        status = self.query_one("#sweep-status", Static)
+        if s.status == "idle":
+            status.update("no sweep yet: fill in the plan and press Start (s)")
+        else:
+            colour = {"completed": "green", "aborted": "yellow", "failed": "red", "error": "red",
+                      "paused": "yellow", "aborting": "yellow"}.get(s.status, "cyan")
+            line = f"[{colour} b]{s.status}[/{colour} b]  {s.done}/{s.total} points"
+            r = s.last_record
+            if r:
+                line += (f"   leg {int(r['leg'])} run {int(r['run'])} {r['target_mm']:+.3f} mm "
+                         f"error {r['error_um']:+.3f} µm")
+            if not self.app.hide_volatile:
+                if active:
+                    line += f"   elapsed {fmt_duration(s.elapsed_s)}  ETA {fmt_duration(s.eta_s)}"
+                if s.out is not None:
+                    line += f"\nrecording: {s.out}"
+            if s.reason and s.status not in ("running", "paused"):
+                line += f"\n{s.reason}"
+            status.update(line)
+
+        env = self.query_one("#sweep-env", Static)
+        r = s.last_record
+        if r:
+            env.update(f"air {r['air_temp_c']:.2f} °C  {r['air_pressure_hpa']:.1f} hPa  {r['humidity_pct']:.1f} %RH"
+                       f"   material {r['material_temp_c']:.2f} °C   load {r['load_n']:.0f} N   signal {r['signal_pct']:.0f} %")
+        else:
+            env.update("")
+        faults = self.query_one("#sweep-faults", Static)
+        if s.faults:
+            last = s.faults[-3:]
+            faults.update("\n".join(f"[yellow]fault[/yellow] leg {f.leg} run {f.run} {f.target_mm:+.3f} mm: "
+                                    f"{f.kind} (attempt {f.attempt}{', gave up' if f.gave_up else ''})" for f in last))
+        else:
+            faults.update("")

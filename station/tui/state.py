@@ -1,0 +1,97 @@
+"""What the UI knows about the current (or last) sweep, folded from procedure events.
+
+Owned and mutated by the app's thread only (the bridge posts events as messages). Screens
+read it to draw, so a sweep survives screen changes and redraws.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from procedures import events as ev
+from station.progress import Eta
+
+
+@dataclass
+class LegTrace:
+    """Measured points of one leg, split by approach direction (+1 up, -1 down)."""
+
+    up_target_mm: list[float] = field(default_factory=list)
+    up_error_um: list[float] = field(default_factory=list)
+    down_target_mm: list[float] = field(default_factory=list)
+    down_error_um: list[float] = field(default_factory=list)
+
+    def add(self, target_mm: float, error_um: float, direction: int) -> None:
+        if direction > 0:
+            self.up_target_mm.append(target_mm)
+            self.up_error_um.append(error_um)
+        else:
+            self.down_target_mm.append(target_mm)
+            self.down_error_um.append(error_um)
+
+    @property
+    def count(self) -> int:
+        return len(self.up_target_mm) + len(self.down_target_mm)
+
+
+@dataclass
+class SweepState:
+    """status: "idle" / "starting" / "running" / "paused" / "aborting" / then the outcome
+    ("completed" / "aborted" / "failed" / "error")."""
+
+    out: Path | None = None
+    legs: tuple[int, ...] = ()
+    plan_kind: str = ""
+    status: str = "idle"
+    session_id: str = ""
+    done: int = 0
+    total: int = 0
+    resumed_points: int = 0
+    current_leg: int | None = None
+    traces: dict[int, LegTrace] = field(default_factory=dict)
+    last_record: dict[str, float] = field(default_factory=dict)
+    faults: list[ev.Fault] = field(default_factory=list)
+    reason: str = ""
+    elapsed_s: float = 0.0
+    eta_s: float | None = None
+    version: int = 0  # bumped on every change: screens redraw when it moved
+    _eta: Eta = field(default_factory=Eta)
+
+    @property
+    def active(self) -> bool:
+        """True while the sweep worker runs (the drives may move)."""
+        return self.status in ("starting", "running", "paused", "aborting")
+
+    def apply(self, event: ev.Event) -> None:
+        if isinstance(event, ev.SweepStarted):
+            self.session_id = event.session_id
+            self.legs = tuple(event.legs)
+            self.total = event.total_points
+            self.done = self.resumed_points = event.resumed_points
+            self.status = "running"
+        elif isinstance(event, ev.LegStarted):
+            self.current_leg = event.leg
+            self.traces.setdefault(event.leg, LegTrace())
+        elif isinstance(event, ev.PointMeasured):
+            r = event.record
+            leg = int(r["leg"])
+            self.current_leg = leg
+            self.traces.setdefault(leg, LegTrace()).add(float(r["target_mm"]), float(r["error_um"]), int(r["direction"]))
+            self.last_record = dict(r)
+            self.done, self.total = event.done, event.total
+            self.elapsed_s, self.eta_s = self._eta.update(event.done, event.total)
+        elif isinstance(event, ev.Fault):
+            self.faults.append(event)
+        elif isinstance(event, ev.Paused):
+            if self.status != "aborting":
+                self.status = "paused"
+        elif isinstance(event, ev.Resumed):
+            if self.status != "aborting":
+                self.status = "running"
+        elif isinstance(event, ev.SweepFinished):
+            self.status = event.outcome
+            self.done = event.points
+            self.reason = event.reason
+            self.eta_s = None
+        self.version += 1
