@@ -1,0 +1,316 @@
+"""Session report: PNG plots and a summary table (Markdown and JSON) of errors before and after
+compensation by a leg-error model.
+
+Files written into the output directory:
+- errors.png      error per leg and direction (points) with the model (lines)
+- residuals.png   residual (error minus model) per leg and direction
+- histograms.png  error before / after compensation per leg, like the paper's Figs. 7-8
+- spectrum.png    amplitude spectrum of the residual per leg, screw lead and harmonics marked
+- summary.md, summary.json  per-leg figures (um)
+
+"After compensation" is the residual of the model on this session's points: in-sample when
+the model was fitted to this session, a true test when it came from another recording. The
+model's own held-out figures (cross-validation over cycles) are quoted from the model.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from procedures.errors import InputError
+from procedures.fit import LegErrorModel, fit
+from procedures.fit.bidirectional import MIN_POINTS_PER_WAVE, pair_amplitudes
+from procedures.fit.data import LegData, split_legs
+from procedures.fit.noise import estimate_noise_floor
+
+UP_COLOR = "tab:blue"
+DOWN_COLOR = "tab:red"
+
+
+@dataclass
+class ReportResult:
+    out_dir: Path
+    files: list[Path] = field(default_factory=list)
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def _lead_of(model: LegErrorModel, leg: int) -> float | None:
+    fit_ = model.legs[leg]
+    basis = getattr(fit_, "basis", None)
+    if basis is not None and basis.lead_mm and basis.lead_harmonics:
+        return float(basis.lead_mm)
+    return None
+
+
+def residual_spectrum(data: LegData, residual_um: np.ndarray, n_freq: int = 600) -> tuple[np.ndarray, np.ndarray]:
+    """(wavelength_mm, amplitude_um) of sin + cos pairs fitted to the per-cell mean residual,
+    from the stroke length down to 2.5 target spacings (shorter waves alias)."""
+    keys = np.stack([data.position_mm, data.direction.astype(float)], 1)
+    cells, ids = np.unique(keys, axis=0, return_inverse=True)
+    ids = ids.ravel()
+    rm = np.bincount(ids, weights=residual_um) / np.bincount(ids)
+    xm = cells[:, 0]
+    span = float(np.ptp(xm))
+    spacing = data.target_spacing_mm()
+    if span <= 0 or spacing <= 0 or xm.size < 4:
+        return np.empty(0), np.empty(0)
+    f_lo, f_hi = 1.0 / span, 1.0 / (MIN_POINTS_PER_WAVE * spacing)
+    if f_hi <= f_lo:
+        return np.empty(0), np.empty(0)
+    freqs = np.linspace(f_lo, f_hi, n_freq)
+    return 1.0 / freqs, pair_amplitudes(xm, rm - rm.mean(), freqs)
+
+
+def _iso_figures(points: np.ndarray, leg: int, residual_points: np.ndarray | None) -> dict[str, Any] | None:
+    """ISO 230-2 figures from procedures.iso230 when that module offers them (optional)."""
+    try:
+        from procedures import iso230  # type: ignore[attr-defined]
+    except ImportError:
+        return None
+    func = getattr(iso230, "evaluate", None) or getattr(iso230, "iso230_2", None)
+    if func is None:
+        return None
+    try:
+        before = func(points[points["leg"] == leg])
+        after = func(residual_points[residual_points["leg"] == leg]) if residual_points is not None else None
+    except Exception:  # an optional extra must never sink the report
+        return None
+
+    def as_dict(r):
+        if r is None:
+            return None
+        if hasattr(r, "to_dict"):
+            return r.to_dict()
+        if hasattr(r, "__dataclass_fields__"):
+            from dataclasses import asdict
+
+            return asdict(r)
+        return r if isinstance(r, dict) else None
+
+    return {"before": as_dict(before), "after": as_dict(after)}
+
+
+def _json_safe(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    return v
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorModel | None = None, *,
+                source_path: str = "", source_sha256: str = "", lead_mm: float | str | None = "auto",
+                title: str = "") -> ReportResult:
+    """Write the report files (module docstring) for a session's points into `out_dir`
+    (created if missing). Without `model`, the default model is fitted to the points.
+    Errors are measured minus commanded (um), positions mm."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a directory; choose another --out")
+    src = source_path or "the session"
+    by_leg = split_legs(points, source=src)
+    fitted_here = model is None
+    if model is None:
+        model = fit(points, "default", lead_mm=lead_mm, source={"path": source_path, "sha256": source_sha256})
+    legs = [leg for leg in by_leg if leg in model.legs]
+    if not legs:
+        raise InputError(f"{src}: the model has legs {list(model.legs)}, the session has legs {list(by_leg)}: "
+                         "no leg in common; use the model fitted to this leg's recording")
+    out.mkdir(parents=True, exist_ok=True)
+    same_source = fitted_here or (bool(source_sha256) and model.source.get("sha256") == source_sha256)
+
+    resid: dict[int, np.ndarray] = {}
+    for leg in legs:
+        d = by_leg[leg]
+        resid[leg] = d.error_um - model.predict_um(leg, d.position_mm, d.direction)
+
+    n = len(legs)
+    ncols = min(3, n)
+    nrows = int(np.ceil(n / ncols))
+    result = ReportResult(out)
+
+    def grid(name: str, rows: int = nrows, cols: int = ncols, size=(5.0, 3.4)):
+        fig, axes = plt.subplots(rows, cols, figsize=(size[0] * cols, size[1] * rows), squeeze=False)
+        return fig, axes
+
+    def save(fig, name: str) -> None:
+        fig.tight_layout()
+        path = out / name
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        result.files.append(path)
+
+    # errors with the model
+    fig, axes = grid("errors")
+    for ax, leg in zip(axes.flat, legs):
+        d = by_leg[leg]
+        lo, hi = model.legs[leg].stroke_mm
+        xs = np.linspace(lo, hi, 1000)
+        for sign, color, label in ((1, UP_COLOR, "approach +"), (-1, DOWN_COLOR, "approach -")):
+            m = d.direction == sign
+            ax.plot(d.position_mm[m], d.error_um[m], ".", ms=2, color=color, alpha=0.35, label=f"measured {label}")
+            ax.plot(xs, model.predict_um(leg, xs, sign), "-", lw=1.2, color=color, label=f"model {label}")
+        ax.set_title(f"leg {leg}: error and {model.method} model")
+        ax.set_xlabel("position (mm)")
+        ax.set_ylabel("error (um)")
+        ax.grid(alpha=0.3)
+    axes.flat[0].legend(fontsize=7)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    save(fig, "errors.png")
+
+    # residuals
+    fig, axes = grid("residuals")
+    for ax, leg in zip(axes.flat, legs):
+        d = by_leg[leg]
+        for sign, color in ((1, UP_COLOR), (-1, DOWN_COLOR)):
+            m = d.direction == sign
+            ax.plot(d.position_mm[m], resid[leg][m], ".", ms=2, color=color, alpha=0.4)
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.set_title(f"leg {leg}: residual (RMS {_rms(resid[leg]):.3f} um)")
+        ax.set_xlabel("position (mm)")
+        ax.set_ylabel("error - model (um)")
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    save(fig, "residuals.png")
+
+    # histograms before / after (paper Figs. 7-8)
+    fig, axes = plt.subplots(n, 2, figsize=(9.0, 2.6 * n), squeeze=False)
+    for row, leg in enumerate(legs):
+        d = by_leg[leg]
+        # one x range per leg, so the narrowing is seen at a glance
+        lo = min(float(d.error_um.min()), float(resid[leg].min()))
+        hi = max(float(d.error_um.max()), float(resid[leg].max()))
+        bins = np.linspace(lo, hi, 61) if hi > lo else 10
+        for col, (values, what) in enumerate(((d.error_um, "error"), (resid[leg], "compensated error"))):
+            ax = axes[row, col]
+            ax.hist(values, bins=bins, color="0.55" if col == 0 else "tab:green", edgecolor="white", linewidth=0.3)
+            ax.set_title(f"Histogram, {what} of leg {leg}", fontsize=9)
+            ax.set_xlabel("error (um)")
+            ax.set_ylabel("frequency")
+    save(fig, "histograms.png")
+
+    # residual spectrum
+    fig, axes = grid("spectrum")
+    for ax, leg in zip(axes.flat, legs):
+        d = by_leg[leg]
+        wl, amp = residual_spectrum(d, resid[leg])
+        if wl.size:
+            ax.semilogx(wl, amp, "-", lw=0.9, color="k")
+        lead = lead_mm if isinstance(lead_mm, (int, float)) and lead_mm else _lead_of(model, leg)
+        if lead:
+            shortest = float(wl.min()) if wl.size else 0.0
+            for h in (1, 2, 3):
+                if lead / h >= shortest:
+                    ax.axvline(lead / h, color="tab:orange", ls="--", lw=0.9,
+                               label=f"screw lead {lead:g} mm and harmonics" if h == 1 else None)
+            ax.legend(fontsize=7)
+        ax.set_title(f"leg {leg}: residual spectrum")
+        ax.set_xlabel("wavelength (mm)")
+        ax.set_ylabel("amplitude (um)")
+        ax.grid(alpha=0.3, which="both")
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    save(fig, "spectrum.png")
+
+    # summary
+    rows = []
+    for leg in legs:
+        d = by_leg[leg]
+        f = model.legs[leg]
+        noise = estimate_noise_floor(d)
+        up = d.error_um[d.direction == 1]
+        down = d.error_um[d.direction == -1]
+        before_range = float(np.ptp(d.error_um))
+        after_range = float(np.ptp(resid[leg]))
+        residual_points = points[points["leg"] == leg].copy()
+        # the same rows split_legs kept (finite target and error), in the same order
+        residual_points = residual_points[np.isfinite(residual_points["target_mm"]) & np.isfinite(residual_points["error_um"])]
+        residual_points["error_um"] = resid[leg]
+        row = {
+            "leg": leg,
+            "points": d.n_points,
+            "passes": d.n_passes,
+            "cycles": d.n_cycles,
+            "stroke_mm": list(f.stroke_mm),
+            "range_before_um": before_range,
+            "range_after_um": after_range,
+            "range_reduction_pct": 100.0 * (1.0 - after_range / before_range) if before_range > 0 else None,
+            "rms_before_um": _rms(d.error_um - d.error_um.mean()),
+            "rms_after_um": _rms(resid[leg]),
+            "mean_abs_before_um": float(np.mean(np.abs(d.error_um))),
+            "mean_abs_after_um": float(np.mean(np.abs(resid[leg]))),
+            "reversal_um": float(down.mean() - up.mean()) if up.size and down.size else None,
+            "noise_floor_um": noise.noise_floor_um,
+            "model_terms": f.describe(),
+            "model_heldout_rms_um": f.stats.heldout_rms_um,
+            "model_noise_floor_um": f.stats.noise_floor_um,
+            "model_ratio": f.stats.ratio,
+            "iso230_2": _iso_figures(points, leg, residual_points),
+        }
+        rows.append(row)
+    summary = {
+        "source": {"path": source_path, "sha256": source_sha256},
+        "model": {"method": model.method, "source": model.source, "fitted_to_this_session": same_source},
+        "residuals": "in-sample (model fitted to this session)" if same_source else "out-of-sample (model from another recording)",
+        "legs": rows,
+    }
+    result.summary = _json_safe(summary)
+    (out / "summary.json").write_text(json.dumps(result.summary, indent=2, sort_keys=True) + "\n")
+    result.files.append(out / "summary.json")
+    (out / "summary.md").write_text(_markdown(result.summary, title or f"Report: {source_path or 'session'}"))
+    result.files.append(out / "summary.md")
+    return result
+
+
+def _f(v: Any, spec: str = ".3f") -> str:
+    return "n/a" if v is None else format(v, spec)
+
+
+def _markdown(s: dict[str, Any], title: str) -> str:
+    lines = [f"# {title}", ""]
+    src = s["source"]
+    lines.append(f"Recording: `{src['path'] or 'n/a'}` (sha256 `{(src['sha256'] or 'n/a')[:16]}`)  ")
+    m = s["model"]
+    lines.append(f"Model: {m['method']} (from `{m['source'].get('path') or 'n/a'}`); residuals are {s['residuals']}.")
+    lines.append("")
+    lines.append("| leg | points | cycles | range before (um) | range after (um) | reduction | RMS before (um) | "
+                 "RMS after (um) | reversal (um) | noise floor (um) | model held-out RMS (um) | ratio |")
+    lines.append("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in s["legs"]:
+        lines.append(
+            f"| {r['leg']} | {r['points']} | {r['cycles']} | {_f(r['range_before_um'])} | {_f(r['range_after_um'])} | "
+            f"{_f(r['range_reduction_pct'], '.1f')} % | {_f(r['rms_before_um'])} | {_f(r['rms_after_um'])} | "
+            f"{_f(r['reversal_um'])} | {_f(r['noise_floor_um'])} | {_f(r['model_heldout_rms_um'])} | {_f(r['model_ratio'], '.2f')} |"
+        )
+    lines.append("")
+    lines.append("Range: max - min of all points; RMS before about the mean; reversal: mean error approaching "
+                 "downwards minus upwards; noise floor: pooled pass-to-pass scatter at the same target and direction; "
+                 "held-out RMS: each cycle scored by a model fitted without it (see docs/models.md).")
+    lines.append("")
+    lines.append("Terms:")
+    for r in s["legs"]:
+        lines.append(f"- leg {r['leg']}: {r['model_terms']}")
+    lines.append("")
+    lines.append("Plots: errors.png, residuals.png, histograms.png, spectrum.png")
+    return "\n".join(lines) + "\n"
