@@ -94,7 +94,7 @@ def _load_errors(args) -> tuple[object, dict]:
     return errors, {"recording": {"path": str(src), "sha256": session.sha256}}
 
 
-def _hist_figure(orig: np.ndarray, comp: np.ndarray, labels: list[str], unit: str, title: str, path: Path) -> None:
+def _hist_figure(orig: np.ndarray, comp: np.ndarray, labels: list[str], unit: str, title: str, path: Path, ylabel: str = "poses") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -109,13 +109,15 @@ def _hist_figure(orig: np.ndarray, comp: np.ndarray, labels: list[str], unit: st
         bins = np.linspace(lo, hi, 41)  # same bins left and right, so the narrowing is visible
         for col, (data, name) in enumerate(((orig[:, k], "original"), (comp[:, k], "compensated"))):
             ax = axes[k, col]
-            ax.hist(data, bins=bins, color="tab:red" if col == 0 else "tab:blue")
+            counts, _ = np.histogram(data, bins=bins)
+            # one filled step artist instead of 40 bar patches: drawing stays fast
+            ax.stairs(counts, bins, fill=True, color="tab:red" if col == 0 else "tab:blue")
             ax.set_title(f"{label}: {name} error", fontsize=9)
             ax.set_xlabel(f"error ({unit})", fontsize=8)
-            ax.set_ylabel("poses", fontsize=8)
+            ax.set_ylabel(ylabel, fontsize=8)
             ax.tick_params(labelsize=7)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.22 / len(labels), top=1 - 0.25 / len(labels), hspace=0.75, wspace=0.22)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
@@ -131,7 +133,8 @@ def _write_figures(result, out: Path) -> list[Path]:
                  "End-effector orientation errors (cf. the paper's Fig. 10)", paths[1])
     legs = result.leg_error_um[ok].reshape(-1, 1)
     legs_c = result.leg_compensated_um[ok].reshape(-1, 1)
-    _hist_figure(legs, legs_c, ["all legs"], "um", "Leg errors at the sampled positions (cf. the paper's Figs. 7-8)", paths[2])
+    _hist_figure(legs, legs_c, ["all legs"], "um", "Leg errors at the sampled positions (cf. the paper's Figs. 7-8)", paths[2],
+                 ylabel="leg positions")
     return paths
 
 

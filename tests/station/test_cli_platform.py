@@ -1,0 +1,97 @@
+"""`station platform` through station.cli.main: report files, figures, model input, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from drivers.sim.plant import default_leg_configs
+from drivers.sim.synth import synth_session
+from procedures.recording.reader import file_sha256
+from procedures.recording.writer import SessionWriter
+from station.cli import main
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def write_session(path, legs=range(1, 7), cycles=3, step_mm=3.0, seed=0):
+    cfgs = {leg: c for leg, c in zip(range(1, 7), default_leg_configs(seed=seed)) if leg in legs}
+    points = synth_session(cfgs, np.arange(-90.0, 90.01, step_mm), cycles=cycles, seed=seed)
+    w = SessionWriter.create(path, session_id="platform-test", operator="test", rig="sim", plan={},
+                             station_config={}, devices={}, software_version="test")
+    w.append_points(points)
+    w.finish("completed")
+    w.close()
+    return points
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    path = tmp_path_factory.mktemp("rec") / "six-legs.h5"
+    points = write_session(path)
+    return path, points
+
+
+def test_platform_writes_table_json_and_histograms(session, tmp_path, capsys):
+    path, _ = session
+    out = tmp_path / "report"
+    rc = main(["platform", str(path), "--poses", "400", "--seed", "7", "--out", str(out)])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert "| Range reduction (%) |" in printed and "x (um)" in printed and "rx (arcsec)" in printed
+    for name in ("pose_position_hist.png", "pose_orientation_hist.png", "leg_error_hist.png"):
+        data = (out / name).read_bytes()
+        assert data.startswith(PNG_MAGIC) and len(data) > 5000
+    summary = json.loads((out / "platform_summary.json").read_text())
+    assert summary["poses"] == 400 and summary["seed"] == 7
+    assert summary["inputs"]["recording"]["sha256"] == file_sha256(path)
+    for name, st in summary["pose"].items():
+        assert st["range_reduction_pct"] == pytest.approx(100 * (1 - st["range_compensated"] / st["range_original"]))
+        assert st["max_original"] >= st["min_original"]
+    assert summary["sensitivity_home"]["dominant"][2]["legs"] == [1, 2, 3, 4, 5, 6]
+    report = (out / "platform_report.md").read_text()
+    assert "the paper's Table 2" in report and "Which leg dominates" in report and str(path) in report
+
+
+def test_platform_with_a_model_uses_its_recording(session, tmp_path, capsys):
+    from procedures.fit import fit, save_model
+
+    path, points = session
+    model = fit(points, method="paper")
+    model_path = save_model(model, tmp_path / "model.json", source_path=str(path), source_sha256=file_sha256(path))
+    out = tmp_path / "m"
+    assert main(["platform", str(model_path), "--poses", "300", "--out", str(out)]) == 0
+    summary = json.loads((out / "platform_summary.json").read_text())
+    assert summary["inputs"]["model"]["method"] == "paper"
+    assert summary["inputs"]["recording_is_the_models_own"] is True
+    assert "model" in summary["source"]
+    # another recording as measurement is allowed explicitly (a held-out session)
+    other = tmp_path / "other.h5"
+    write_session(other, seed=1)
+    out3 = tmp_path / "m3"
+    assert main(["platform", str(model_path), "--recording", str(other), "--poses", "200", "--out", str(out3)]) == 0
+    assert json.loads((out3 / "platform_summary.json").read_text())["inputs"]["recording_is_the_models_own"] is False
+
+
+def test_platform_refuses_bad_input_with_one_line(tmp_path, capsys):
+    part = tmp_path / "two-legs.h5"
+    write_session(part, legs=(1, 2), cycles=2, step_mm=10.0)
+    rc = main(["platform", str(part), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "leg 3" in err and "record every leg" in err and "Traceback" not in err
+    assert err.count("\n") == 1
+
+    rc = main(["platform", str(tmp_path / "missing.h5"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "missing.h5" in err
+
+    rc = main(["platform", str(part), "--poses", "0", "--out", str(tmp_path / "o")])
+    assert rc == 2 and "--poses" in capsys.readouterr().err
+
+    bad_geo = tmp_path / "g.toml"
+    bad_geo.write_text('format = "station.platform.geometry/1"\n[legs]\n')
+    rc = main(["platform", str(part), "--geometry", str(bad_geo), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "g.toml" in err and "legs.mid_stroke_mm" in err
