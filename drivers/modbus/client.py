@@ -18,7 +18,7 @@ from typing import Callable, Sequence
 from urllib.parse import parse_qs, urlsplit
 
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
-from pymodbus.exceptions import ModbusException
+from pymodbus.exceptions import ConnectionException, ModbusException
 
 from drivers.clock import SystemClock
 from drivers.errors import CommTimeout, DriveFault, DriverError, SoftLimitError, TableError
@@ -159,9 +159,11 @@ class ModbusBus:
                 rsp = call()
             except ModbusException as exc:
                 self.close()  # a late reply must not be taken for the next request's
-                text = str(exc)
-                if "connect" in text.lower() and "no response" not in text.lower():
-                    what = "cannot connect (refused or unreachable)"
+                if isinstance(exc, ConnectionException):
+                    if "closed" in str(exc):
+                        what = "the drive closed the connection"
+                    else:
+                        what = "cannot connect (refused or unreachable)"
                 else:
                     what = f"no answer within {self.timeout_s:g} s ({self.retries + 1} attempt(s))"
                 raise CommTimeout(f"drive at {self.where}, unit id {unit}: {what} while trying to {kind} "

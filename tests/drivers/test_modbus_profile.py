@@ -116,3 +116,28 @@ def test_little_word_order_profile_round_trips(tmp_path):
     r = prof.register("position_actual")
     assert r.encode(-1.5) == encode_int(-1_500_000, "i32", "little")
     assert r.decode(r.encode(-1.5)) == pytest.approx(-1.5)
+
+
+def test_register_map_doc_matches_the_profile(profile):
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "register-map.md").read_text()
+    rows = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in doc.splitlines() if ln.startswith("| ")]
+    seen = set()
+    for cells in rows:
+        if len(cells) >= 3 and cells[0].isdigit() and cells[1] in profile.registers:
+            r = profile.registers[cells[1]]
+            typ = r.type if r.type != "ascii" else f"ascii x{r.words}"
+            assert (int(cells[0]), cells[2]) == (r.address, typ), f"docs row {cells[:3]} vs profile {r}"
+            seen.add(r.name)
+        if len(cells) >= 3 and cells[0].startswith("+") and cells[1] in profile.table.header:
+            h = profile.table.header[cells[1]]
+            assert (int(cells[0][1:]), cells[2]) == (h.address, h.type), f"docs header row {cells[:3]}"
+            seen.add("header." + h.name)
+        if cells and cells[0].startswith("0x") and len(cells) >= 2:
+            code = int(cells[0], 16)
+            if code in profile.faults:
+                assert profile.faults[code].name == cells[1]
+                seen.add(f"fault.{code}")
+    assert set(profile.registers) <= seen, f"undocumented registers: {set(profile.registers) - seen}"
+    assert {f"header.{n}" for n in profile.table.header} <= seen
+    assert {f"fault.{c}" for c in profile.faults} <= seen
+    assert f"-r {profile.address('position_actual')} -t 4:int -B" in doc
