@@ -7,50 +7,68 @@ stderr with exit code 2; no traceback reaches a technician. Set STATION_DEBUG=1 
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
 import logging
 import os
 import pkgutil
 import sys
+from pathlib import Path
 
 from drivers.errors import DriverError
 from procedures.errors import InputError
 from station import __version__
 
 
-def _command_modules():
+def _command_specs() -> dict[str, dict[str, str]]:
+    """NAME/HELP/DESCRIPTION of every command module, read from their source without importing
+    them, so `station X` imports only command X (the TUI, scipy and matplotlib stay unloaded
+    for a quick `station sweep`)."""
     import station.commands as pkg
 
-    mods = []
+    specs: dict[str, dict[str, str]] = {}
     for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda i: i.name):
         if info.name.startswith("_"):
             continue
-        mod = importlib.import_module(f"station.commands.{info.name}")
-        if hasattr(mod, "NAME") and hasattr(mod, "run"):
-            mods.append(mod)
-    return mods
+        path = Path(pkg.__path__[0]) / f"{info.name}.py"
+        values: dict[str, str] = {"module": info.name}
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+                key = node.targets[0].id
+                if key in ("NAME", "HELP", "DESCRIPTION") and isinstance(node.value, ast.Constant):
+                    values[key] = str(node.value.value)
+        if "NAME" in values:
+            specs[values["NAME"]] = values
+    return specs
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The full parser lists every command; arguments are added for `command` only (or for
+    all when None)."""
     parser = argparse.ArgumentParser(
         prog="station",
         description="Calibration station for the ball-screw legs of Gough-Stewart platforms.",
     )
     parser.add_argument("--version", action="version", version=f"station {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for mod in _command_modules():
-        p = sub.add_parser(mod.NAME, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
-        mod.add_arguments(p)
-        p.set_defaults(_run=mod.run)
+    for name, spec in _command_specs().items():
+        help_text = spec.get("HELP", "")
+        p = sub.add_parser(name, help=help_text, description=spec.get("DESCRIPTION", help_text))
+        if command is None or command == name:
+            mod = importlib.import_module(f"station.commands.{spec['module']}")
+            mod.add_arguments(p)
+            p.set_defaults(_run=mod.run)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # frame dumps are not for users
     argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser()
+    specs = _command_specs()
     if not argv:
-        argv = ["ui"] if "ui" in parser._subparsers._group_actions[0].choices else ["--help"]  # type: ignore[union-attr]
+        argv = ["ui"] if "ui" in specs else ["--help"]
+    command = argv[0] if argv[0] in specs else None
+    parser = build_parser(command) if command else build_parser("")
     args = parser.parse_args(argv)
     if not getattr(args, "_run", None):
         parser.print_help()
