@@ -1,0 +1,98 @@
+"""Forward kinematics speed: the vectorised Newton solver against scipy.optimize.least_squares
+pose by pose, in the same run, at equal tolerance.
+
+Both start from the home pose, use the same analytic Jacobian and must bring every leg length
+within TOL_MM of the request; the script checks that each did (and how close each pose came back)
+before printing poses per second and the ratio.
+
+    .venv/bin/python bench/bench_fk.py [--poses N] [--scipy-poses M]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from procedures.platform.geometry import default_geometry
+from procedures.platform.kinematics import FkStatus, forward_kinematics, inverse_kinematics, length_jacobian
+
+TOL_MM = 1e-10
+
+
+def workspace_poses(geo, n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return geo.home_pose_mm_rad + np.column_stack([rng.uniform(-60, 60, (n, 3)), rng.uniform(-0.05, 0.05, (n, 3))])
+
+
+def scipy_fk(geo, lengths: np.ndarray, xtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """One least_squares (MINPACK LM) solve per pose; returns poses and max |residual| per pose."""
+    out = np.empty((lengths.shape[0], 6))
+    resid = np.empty(lengths.shape[0])
+    start = geo.home_pose_mm_rad
+    for i, target in enumerate(lengths):
+        sol = least_squares(
+            lambda p, t=target: inverse_kinematics(geo, p) - t,
+            start,
+            jac=lambda p: length_jacobian(geo, p),
+            method="lm",
+            xtol=xtol, ftol=1e-15, gtol=1e-15,
+        )
+        out[i] = sol.x
+        resid[i] = np.max(np.abs(sol.fun))
+    return out, resid
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--poses", type=int, default=20000, help="poses for the vectorised solver")
+    ap.add_argument("--scipy-poses", type=int, default=500, help="poses for scipy (one call each)")
+    ap.add_argument("--repeat", type=int, default=3, help="best of this many runs")
+    args = ap.parse_args()
+
+    geo = default_geometry()
+    poses = workspace_poses(geo, args.poses, seed=1)
+    lengths = inverse_kinematics(geo, poses)
+
+    best = np.inf
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        res = forward_kinematics(geo, lengths, tol_mm=TOL_MM, check_stroke=False)
+        best = min(best, time.perf_counter() - t0)
+    ok = res.status == FkStatus.CONVERGED
+    vec_rate = args.poses / best
+    vec_err = np.abs(res.poses_mm_rad[ok] - poses[ok])
+
+    # Equal tolerance: scipy has no leg-residual stop, so use its loosest step tolerance (xtol)
+    # at which every pose of a trial set ends within TOL_MM, as the vectorised solver must.
+    trial = lengths[:50]
+    for xtol in (1e-6, 1e-8, 1e-10, 1e-12, 1e-13, 1e-14):
+        if np.all(scipy_fk(geo, trial, xtol)[1] <= TOL_MM):
+            break
+    sp_poses = poses[: args.scipy_poses]
+    sp_best = np.inf
+    for _ in range(max(1, args.repeat - 1)):
+        t0 = time.perf_counter()
+        sp, sp_resid = scipy_fk(geo, lengths[: args.scipy_poses], xtol)
+        sp_best = min(sp_best, time.perf_counter() - t0)
+    sp_rate = args.scipy_poses / sp_best
+    sp_err = np.abs(sp - sp_poses)
+
+    print(f"forward kinematics, default geometry, tolerance {TOL_MM:g} mm on every leg length")
+    print(
+        f"  vectorised Newton : {args.poses} poses in {best * 1e3:8.1f} ms = {vec_rate:10.0f} poses/s; "
+        f"converged {ok.sum()}/{args.poses}, mean iterations {res.iterations.mean():.2f}, "
+        f"max residual {np.nanmax(res.residual_mm):.1e} mm, max pose error {vec_err[:, :3].max():.1e} mm / {vec_err[:, 3:].max():.1e} rad"
+    )
+    print(
+        f"  scipy least_squares (lm, xtol {xtol:g}, pose by pose): {args.scipy_poses} poses in {sp_best * 1e3:8.1f} ms = {sp_rate:10.0f} poses/s; "
+        f"within tolerance {(sp_resid <= TOL_MM).sum()}/{args.scipy_poses}, max residual {sp_resid.max():.1e} mm, "
+        f"max pose error {sp_err[:, :3].max():.1e} mm / {sp_err[:, 3:].max():.1e} rad"
+    )
+    print(f"  ratio vectorised / scipy: {vec_rate / sp_rate:.0f}x")
+
+
+if __name__ == "__main__":
+    main()
