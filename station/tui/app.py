@@ -103,6 +103,7 @@ class StationApp(App):
         self._sweep_idle.set()
         self._quit_after_sweep = False
         self.last_session: Path | None = None  # the newest recording made or opened here
+        self.analysis = None  # results.Analysis: the session, model and ISO figures on show
         self.session_listeners: list[Callable[[Path], None]] = []
 
     # -- lifecycle -------------------------------------------------------------------------

@@ -45,3 +45,85 @@ class XYPlot(PlotextPlot):
         self.drawn_points = n
         self.drawn_series = names
         self.refresh()
+
+
+# -- choosing a session file -------------------------------------------------------------------
+
+from pathlib import Path  # noqa: E402
+
+from textual.app import ComposeResult  # noqa: E402
+from textual.containers import Horizontal  # noqa: E402
+from textual.message import Message  # noqa: E402
+from textual.widgets import Button, Input, Select  # noqa: E402
+
+
+def known_sessions(folders) -> list[Path]:
+    """Session files (*.h5) in `folders`, newest first (at most 50)."""
+    found: dict[Path, float] = {}
+    for folder in folders:
+        folder = Path(folder)
+        if folder.is_dir():
+            for p in folder.glob("*.h5"):
+                try:
+                    found[p] = p.stat().st_mtime
+                except OSError:
+                    continue
+    return sorted(found, key=lambda p: -found[p])[:50]
+
+
+class SessionPicker(Horizontal):
+    """A list of known recordings plus a path field; posts `Chosen(path)` on Open."""
+
+    class Chosen(Message):
+        def __init__(self, picker: "SessionPicker", path: Path) -> None:
+            super().__init__()
+            self.picker = picker
+            self.path = path
+
+    DEFAULT_CSS = """
+    SessionPicker { height: auto; }
+    SessionPicker Select { width: 2fr; }
+    SessionPicker Input { width: 2fr; }
+    SessionPicker Button { width: auto; min-width: 10; }
+    """
+
+    def __init__(self, folders_fn, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.folders_fn = folders_fn
+
+    def compose(self) -> ComposeResult:
+        yield Select([], prompt="recent sessions", id="session-list", compact=True)
+        yield Input(placeholder="or a path: FILE.h5", id="session-path", compact=True)
+        yield Button("Open", id="session-open", compact=True, variant="primary")
+
+    def on_mount(self) -> None:
+        self.rescan()
+
+    def rescan(self) -> None:
+        files = known_sessions(self.folders_fn())
+        select = self.query_one("#session-list", Select)
+        select.set_options([(str(p), str(p)) for p in files])
+
+    def set_path(self, path: Path) -> None:
+        self.query_one("#session-path", Input).value = str(path)
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        event.stop()
+        if event.value is not Select.BLANK:
+            self.set_path(Path(str(event.value)))
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        self._choose()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if event.button.id == "session-open":
+            event.stop()
+            self._choose()
+
+    def _choose(self) -> None:
+        text = self.query_one("#session-path", Input).value.strip()
+        if not text:
+            self.app.notify("Choose a recent session or type the path of a session file (.h5).", severity="warning")
+            return
+        self.post_message(self.Chosen(self, Path(text).expanduser()))

@@ -1,18 +1,194 @@
-"""Diagnosis screen (placeholder until its procedures land)."""
+"""Diagnosis screen: the gap between the digital twin and a recording — where it lies, which
+unmodelled effect explains it, how far it shrinks — with a per-leg plot of the gap along the
+stroke. The diagnosis is procedures.diagnosis.diagnose (the same as `station diagnose`), run in a
+thread worker.
+"""
 
 from __future__ import annotations
 
-from textual.app import ComposeResult
-from textual.widgets import Static
+from pathlib import Path
 
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.message import Message
+from textual.widgets import Button, DataTable, Label, Select, Static
+
+from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
+from station.tui.widgets import SessionPicker, XYPlot
+
+TWINS = [("fitted on the recording", "fitted"), ("simulated plant (sim:default)", "sim"),
+         ("model on the Results screen", "results")]
+
+
+class DiagnosisReady(Message):
+    def __init__(self, path: Path, report: dict) -> None:
+        super().__init__()
+        self.path = path
+        self.report = report
+
+
+class DiagnosisFailed(Message):
+    def __init__(self, error: str) -> None:
+        super().__init__()
+        self.error = error
 
 
 class DiagnosisScreen(StationScreen):
     MODE = "diagnosis"
-    PAGE_HELP = ""
+    PAGE_HELP = "gap = recording − twin: where it lies, which effect explains it, how far it shrinks"
+    BINDINGS = [
+        Binding("d", "diagnose", "Diagnose"),
+        Binding("l", "next_leg", "Next leg"),
+    ]
 
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
-        yield Static("not available yet")
+        with Vertical(id="diag-body"):
+            yield SessionPicker(lambda: [self.app.cfg.recordings_dir, "recordings"], id="diag-picker")
+            with Horizontal(classes="controls"):
+                yield Label("Twin ")
+                yield Select(TWINS, value="fitted", allow_blank=False, id="twin", compact=True)
+                yield Button("Diagnose (d)", id="diag-run", compact=True, variant="success")
+            yield Static("no diagnosis yet: choose a session and press d", id="diag-status", classes="status")
+            yield DataTable(id="diag-table", cursor_type="row", zebra_stripes=True)
+            with Horizontal(id="diag-plots"):
+                yield XYPlot("gap along the stroke", "position mm", "gap µm", id="diag-plot")
+                with VerticalScroll(id="diag-text-box"):
+                    yield Static("", id="diag-text")
         yield from self.compose_footer()
+
+    def on_mount(self) -> None:
+        self.report: dict | None = None
+        self.plot_leg: str | None = None
+        t = self.query_one("#diag-table", DataTable)
+        t.add_columns("Leg", "Effect", "Parameters", "Held-out gap µm", "Shrink", "p")
+        self.app.session_listeners.append(self._on_new_session)
+        if self.app.last_session is not None:
+            self._on_new_session(self.app.last_session)
+        self._show()
+
+    def _on_new_session(self, path: Path) -> None:
+        picker = self.query_one(SessionPicker)
+        picker.rescan()
+        picker.set_path(path)
+
+    def on_screen_resume(self) -> None:
+        if self.app.last_session is not None and not self.query_one("#session-path").value:
+            self._on_new_session(self.app.last_session)
+
+    # -- running -----------------------------------------------------------------------------------
+    def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
+        self.action_diagnose()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if event.button.id == "diag-run":
+            event.stop()
+            self.action_diagnose()
+
+    def action_diagnose(self) -> None:
+        text = self.query_one("#session-path").value.strip()
+        path = Path(text).expanduser() if text else self.app.last_session
+        if path is None:
+            self.notify("Choose a session first (a finished sweep appears here).", severity="warning")
+            return
+        twin_kind = str(self.query_one("#twin", Select).value)
+        model = None
+        if twin_kind == "results":
+            if self.app.analysis is None:
+                self.notify("No model on the Results screen: fit one there (F3), or choose another twin.",
+                            severity="warning")
+                return
+            model = (self.app.analysis.model, str(self.app.analysis.model_path or self.app.analysis.path))
+        self.query_one("#diag-status", Static).update("diagnosing…")
+        self._run(Path(path), twin_kind, model)
+
+    @work(thread=True, exclusive=True, group="diagnosis", exit_on_error=False)
+    def _run(self, path: Path, twin_kind: str, model) -> None:
+        try:
+            from procedures.diagnosis import DiagnosisSettings, diagnose, twin_from_model
+            from procedures.recording.reader import read_session
+
+            session = read_session(path)
+            twin = None
+            if twin_kind == "sim":
+                from station.commands.diagnose import load_twin
+
+                twin = load_twin("sim:default")
+            elif twin_kind == "results" and model is not None:
+                twin = twin_from_model(model[0], model[1])
+            report = diagnose(session.points, twin, DiagnosisSettings(),
+                              recording={"path": str(path), "sha256": session.sha256}, source=str(path))
+        except Exception as exc:
+            self.post_message(DiagnosisFailed(describe(exc, f"cannot diagnose {path.name}")))
+            return
+        self.post_message(DiagnosisReady(path, report))
+
+    def on_diagnosis_ready(self, message: DiagnosisReady) -> None:
+        self.report = message.report
+        self.report_path = message.path
+        self.plot_leg = None
+        self._show()
+
+    def on_diagnosis_failed(self, message: DiagnosisFailed) -> None:
+        self.query_one("#diag-status", Static).update(f"[red]{message.error}[/red]")
+        self.notify(message.error, title="Diagnosis", severity="error", timeout=12)
+
+    def action_next_leg(self) -> None:
+        if not self.report:
+            return
+        legs = list(self.report["legs"])
+        current = self.plot_leg if self.plot_leg in legs else legs[0]
+        self.plot_leg = legs[(legs.index(current) + 1) % len(legs)]
+        self._show_plot()
+
+    # -- drawing -------------------------------------------------------------------------------------
+    def _show(self) -> None:
+        table = self.query_one("#diag-table", DataTable)
+        table.clear()
+        status = self.query_one("#diag-status", Static)
+        text = self.query_one("#diag-text", Static)
+        r = self.report
+        if r is None:
+            text.update("")
+            self._show_plot()
+            return
+        from procedures.diagnosis.text_report import text_report
+
+        name = self.report_path.name
+        n = len(r["findings"])
+        status.update(f"[b]{name}[/b]: twin {r['twin']['description']}\n"
+                      f"{n} finding{'s' if n != 1 else ''}" + ("" if n else ": no effect is both significant and above the threshold"))
+        for f in r["findings"]:
+            params = ", ".join(f"{k} {v:.3g}" + (f" ± {f['uncertainty'][k]:.2g}" if f["uncertainty"].get(k) is not None else "")
+                               for k, v in f["parameters"].items())
+            table.add_row(str(f["leg"]), f["effect"], params,
+                          f"{f['heldout_rms_before_um']:.3g} → {f['heldout_rms_after_um']:.3g}",
+                          f"{f['shrink_pct']:.0f} %", f"{f['p_value']:.2g}")
+        report_text = text_report(r)
+        if self.app.hide_volatile:  # the recording's path and hash vary from run to run
+            report_text = "\n".join(line for line in report_text.splitlines() if not line.startswith("recording:"))
+        text.update(report_text)
+        self._show_plot()
+
+    def _show_plot(self) -> None:
+        plot = self.query_one("#diag-plot", XYPlot)
+        r = self.report
+        if not r or not r["legs"]:
+            plot.show([], title="gap along the stroke (no diagnosis)")
+            return
+        legs = list(r["legs"])
+        key = self.plot_leg if self.plot_leg in legs else legs[0]
+        self.plot_leg = key
+        leg = r["legs"][key]
+        # The report gives the gap per stroke region (RMS and mean): drawn as steps over each region.
+        xs, rms, mean = [], [], []
+        for reg in leg.get("by_region", []):
+            for x in (reg["from_mm"], reg["to_mm"]):
+                xs.append(x)
+                rms.append(reg["rms_um"])
+                mean.append(reg.get("mean_um", 0.0))
+        series = [("RMS per region", xs, rms, "line"), ("mean per region", xs, mean, "line")]
+        plot.show(series, title=f"leg {key}: gap by stroke region — {leg.get('dominant', '')[:60]}")

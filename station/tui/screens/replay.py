@@ -1,18 +1,143 @@
-"""Replay screen (placeholder until its procedures land)."""
+"""Replay screen: pick a recorded session (recordings/, the runs folder, or a path), see what it
+holds, open it on the Results and Diagnosis screens, or replay it at a chosen speed through the
+same sweep screen once replay devices are installed (see station.tui.capabilities).
+"""
 
 from __future__ import annotations
 
-from textual.app import ComposeResult
-from textual.widgets import Static
+from pathlib import Path
 
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.message import Message
+from textual.widgets import Button, Input, Label, Static
+
+from station.tui import capabilities
+from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
+from station.tui.widgets import SessionPicker
+
+
+class SessionRead(Message):
+    def __init__(self, path: Path, session=None, error: str = "") -> None:
+        super().__init__()
+        self.path = path
+        self.session = session
+        self.error = error
 
 
 class ReplayScreen(StationScreen):
     MODE = "replay"
-    PAGE_HELP = ""
+    PAGE_HELP = "recorded sessions: inspect, analyse (Results, Diagnosis), or replay through the sweep"
+    BINDINGS = [
+        Binding("o", "open_results", "Open in Results"),
+        Binding("d", "open_diagnosis", "Diagnose"),
+        Binding("r", "replay", "Replay"),
+    ]
 
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
-        yield Static("not available yet")
+        with Vertical(id="replay-body"):
+            yield SessionPicker(lambda: ["recordings", self.app.cfg.recordings_dir], id="replay-picker")
+            with Horizontal(classes="controls"):
+                yield Label("Speed ")
+                yield Input("10", id="replay-speed", type="number", compact=True,
+                            tooltip="times faster than recorded; 0 = as fast as possible")
+                yield Button("Replay (r)", id="replay-run", compact=True, variant="success")
+                yield Button("Open in Results (o)", id="replay-results", compact=True)
+                yield Button("Diagnose (d)", id="replay-diagnose", compact=True)
+            yield Static("choose a session above (sample sessions live in recordings/)", id="replay-info", classes="status")
         yield from self.compose_footer()
+
+    def on_mount(self) -> None:
+        self.session = None
+        self.session_path: Path | None = None
+        if self.app.replay_path is not None:
+            self.query_one(SessionPicker).set_path(self.app.replay_path)
+            self._read(self.app.replay_path)
+        elif self.app.last_session is not None:
+            self.query_one(SessionPicker).set_path(self.app.last_session)
+        self.app.session_listeners.append(self._on_new_session)
+
+    def _on_new_session(self, path: Path) -> None:
+        picker = self.query_one(SessionPicker)
+        picker.rescan()
+        if path != self.session_path:
+            picker.set_path(path)
+
+    def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
+        self._read(message.path)
+
+    @work(thread=True, exclusive=True, group="replay-read", exit_on_error=False)
+    def _read(self, path: Path) -> None:
+        try:
+            from procedures.recording.reader import read_session
+
+            self.post_message(SessionRead(path, read_session(path)))
+        except Exception as exc:
+            self.post_message(SessionRead(path, error=describe(exc, f"cannot read {path.name}")))
+
+    def on_session_read(self, message: SessionRead) -> None:
+        info = self.query_one("#replay-info", Static)
+        if message.error:
+            self.session = None
+            info.update(f"[red]{message.error}[/red]")
+            self.notify(message.error, severity="error", timeout=12)
+            return
+        s = self.session = message.session
+        self.session_path = message.path
+        plan = s.plan or {}
+        targets = plan.get("targets_mm") or []
+        faults = len(s.faults)
+        name = message.path.name if self.app.hide_volatile else str(message.path)
+        lines = [
+            f"[b]{name}[/b]",
+            f"outcome [b]{s.outcome}[/b]; {len(s.points)} points on legs {s.legs}; {faults} fault record(s)",
+            f"plan {plan.get('kind', '?')}: {len(targets)} targets"
+            + (f" {targets[0]:+.1f}..{targets[-1]:+.1f} mm" if targets else "")
+            + f", {plan.get('cycles', '?')} cycles",
+            f"rig {s.attrs.get('rig', '?')}, operator {s.attrs.get('operator', '?')}, schema {s.schema_version}",
+        ]
+        if not self.app.hide_volatile:
+            lines.append(f"recorded {s.attrs.get('started_utc', '?')} .. {s.attrs.get('ended_utc', '?')}")
+        if capabilities.find("replay") is None:
+            lines.append("[yellow]" + capabilities.missing_text("replay", "Replay through the drivers") +
+                         "[/yellow] You can still analyse the session (o, d).")
+        info.update("\n".join(lines))
+        self.app.set_session(message.path)
+
+    # -- actions -------------------------------------------------------------------------------------
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        action = {"replay-run": "replay", "replay-results": "open_results",
+                  "replay-diagnose": "open_diagnosis"}.get(event.button.id or "")
+        if action is not None:
+            event.stop()
+            self.run_action(action)
+
+    def _need_session(self) -> bool:
+        if self.session is None:
+            self.notify("Choose a session first (Open).", severity="warning")
+            return False
+        return True
+
+    async def action_open_results(self) -> None:
+        if self._need_session():
+            await self.app.switch_mode("results")
+            self.app.screen.action_fit()
+
+    async def action_open_diagnosis(self) -> None:
+        if self._need_session():
+            await self.app.switch_mode("diagnosis")
+            self.app.screen.action_diagnose()
+
+    def action_replay(self) -> None:
+        if not self._need_session():
+            return
+        if capabilities.find("replay") is None:
+            self.notify(capabilities.missing_text("replay", "Replay through the drivers"),
+                        title="Replay", severity="warning", timeout=12)
+            return
+        self.notify("Replay devices are installed but not wired into the UI in this build; "
+                    "use `station replay FILE.h5`.", severity="warning", timeout=10)

@@ -1,18 +1,274 @@
-"""Results screen (placeholder until its procedures land)."""
+"""Results screen: ISO 230-2 figures per leg, the fitted model over the measured points, the
+residual, and the held-out residual against the noise floor; method default or paper.
+
+Reading, fitting and evaluating run in a thread worker; the result is kept on the app
+(`app.analysis`) for the Compensation screen.
+"""
 
 from __future__ import annotations
 
-from textual.app import ComposeResult
-from textual.widgets import Static
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
+import numpy as np
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.message import Message
+from textual.widgets import Button, DataTable, Label, Select, Static
+
+from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
+from station.tui.widgets import SessionPicker, XYPlot
+
+METHODS = [("default (bidirectional, cross-validated)", "default"), ("paper (Fourier, Algorithm 1)", "paper")]
+
+
+@dataclass
+class Analysis:
+    """A recording with its fitted model and ISO 230-2 evaluation (None when unavailable)."""
+
+    path: Path
+    session: Any  # procedures.recording.reader.Session
+    method: str
+    model: Any  # procedures.fit.LegErrorModel
+    iso: Any = None
+    iso_note: str = ""
+    model_path: Path | None = None
+
+
+class AnalysisReady(Message):
+    def __init__(self, analysis: Analysis) -> None:
+        super().__init__()
+        self.analysis = analysis
+
+
+class AnalysisFailed(Message):
+    def __init__(self, error: str) -> None:
+        super().__init__()
+        self.error = error
+
+
+def iso_figures(iso: Any, leg: int) -> dict[str, float | None]:
+    """A, E, M, B, R (um) of one leg from the ISO 230-2 evaluation, whatever its shape
+    (the evaluation module reports per leg; missing figures are None, never NaN)."""
+    if iso is None:
+        return {}
+    per_leg = iso.get(leg) if isinstance(iso, dict) else getattr(iso, "legs", {}).get(leg)
+    if per_leg is None and isinstance(iso, dict):
+        per_leg = iso.get(str(leg))
+    if per_leg is None:
+        return {}
+    out = {}
+    for key, names in {"A": ("A_um", "accuracy_um", "A"), "E": ("E_um", "systematic_um", "E"),
+                       "M": ("M_um", "range_mean_um", "M"), "B": ("B_um", "reversal_um", "B"),
+                       "R": ("R_um", "repeatability_um", "R")}.items():
+        value = None
+        for name in names:
+            value = per_leg.get(name) if isinstance(per_leg, dict) else getattr(per_leg, name, None)
+            if value is not None:
+                break
+        out[key] = None if value is None or not np.isfinite(value) else float(value)
+    return out
+
+
+def _fmt(value: float | None, spec: str = ".3f") -> str:
+    return "n/a" if value is None else format(value, spec)
 
 
 class ResultsScreen(StationScreen):
     MODE = "results"
-    PAGE_HELP = ""
+    PAGE_HELP = "ISO 230-2 per leg, model over the measured points, residual; held-out RMS against the noise floor"
+    BINDINGS = [
+        Binding("f", "fit", "Fit"),
+        Binding("m", "toggle_method", "Method"),
+        Binding("l", "next_leg", "Next leg"),
+        Binding("w", "save_model", "Save model"),
+    ]
 
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
-        yield Static("not available yet")
+        with Vertical(id="results-body"):
+            yield SessionPicker(self._folders, id="results-picker")
+            with Horizontal(id="results-controls"):
+                yield Label("Method ")
+                yield Select(METHODS, value="default", allow_blank=False, id="method", compact=True)
+                yield Button("Fit (f)", id="fit", compact=True, variant="success")
+                yield Button("Save model (w)", id="save-model", compact=True)
+            yield Static("no session open: finish a sweep, or open a session file above", id="results-status")
+            yield DataTable(id="results-table", cursor_type="row", zebra_stripes=True)
+            with Horizontal(id="results-plots"):
+                yield XYPlot("measured and model", "position mm", "error µm", id="model-plot")
+                yield XYPlot("residual = error − model", "position mm", "µm", id="residual-plot")
         yield from self.compose_footer()
+
+    def _folders(self):
+        return [self.app.cfg.recordings_dir, "recordings"]
+
+    def on_mount(self) -> None:
+        table = self.query_one("#results-table", DataTable)
+        table.add_columns("Leg", "Points", "Cycles", "Noise floor µm", "Held-out RMS µm", "Ratio",
+                          "Range µm (before → after)", "A µm", "E µm", "M µm", "B µm", "R µm")
+        self.plot_leg: int | None = None
+        self.app.session_listeners.append(self._on_new_session)
+        if self.app.last_session is not None:
+            self._on_new_session(self.app.last_session)
+        self._show()
+
+    def _on_new_session(self, path: Path) -> None:
+        picker = self.query_one(SessionPicker)
+        picker.rescan()
+        picker.set_path(path)
+
+    # -- actions -----------------------------------------------------------------------------------
+    def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
+        self.app.last_session = message.path
+        self.action_fit()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if event.button.id == "fit":
+            event.stop()
+            self.action_fit()
+        elif event.button.id == "save-model":
+            event.stop()
+            self.action_save_model()
+
+    def action_toggle_method(self) -> None:
+        select = self.query_one("#method", Select)
+        select.value = "paper" if select.value == "default" else "default"
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        if event.select.id == "method" and self.app.analysis is not None and self.app.analysis.method != event.value:
+            self.action_fit()
+
+    def action_fit(self) -> None:
+        text = self.query_one("#session-path").value.strip()
+        path = Path(text).expanduser() if text else self.app.last_session
+        if path is None:
+            self.notify("Open a session first (a finished sweep opens itself here).", severity="warning")
+            return
+        method = str(self.query_one("#method", Select).value)
+        self.query_one("#results-status", Static).update(f"reading and fitting ({method})…")
+        self._analyse(Path(path), method)
+
+    @work(thread=True, exclusive=True, group="analysis", exit_on_error=False)
+    def _analyse(self, path: Path, method: str) -> None:
+        try:
+            from procedures.fit import fit
+            from procedures.recording.reader import read_session
+
+            session = read_session(path)
+            model = fit(session.points, method, source={"path": str(path), "sha256": session.sha256})
+        except Exception as exc:
+            self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}")))
+            return
+        iso, note = None, ""
+        try:
+            from procedures import iso230
+        except ImportError:
+            note = "ISO 230-2 evaluation not available yet (procedures.iso230 missing)"
+        else:
+            try:
+                iso = iso230.evaluate(session.points)
+            except Exception as exc:
+                note = describe(exc, "ISO 230-2")
+        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note)))
+
+    def on_analysis_ready(self, message: AnalysisReady) -> None:
+        self.app.analysis = message.analysis
+        self.app.last_session = message.analysis.path
+        self.plot_leg = None
+        self._show()
+
+    def on_analysis_failed(self, message: AnalysisFailed) -> None:
+        self.query_one("#results-status", Static).update(f"[red]{message.error}[/red]")
+        self.notify(message.error, title="Results", severity="error", timeout=12)
+
+    def action_next_leg(self) -> None:
+        a = self.app.analysis
+        if a is None:
+            return
+        legs = list(a.model.legs)
+        current = self.plot_leg if self.plot_leg in legs else legs[0]
+        self.plot_leg = legs[(legs.index(current) + 1) % len(legs)]
+        self._show_plots()
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        if event.row_key is not None and event.row_key.value is not None and self.app.analysis is not None:
+            leg = int(event.row_key.value)
+            if leg != self.plot_leg:
+                self.plot_leg = leg
+                self._show_plots()
+
+    def action_save_model(self) -> None:
+        a = self.app.analysis
+        if a is None:
+            self.notify("Fit a model first (f).", severity="warning")
+            return
+        from procedures.fit import save_model
+
+        out = a.path.with_name(f"{a.path.stem}.{a.method}.model.json")
+        try:
+            save_model(a.model, out, source_path=a.path, source_sha256=a.session.sha256)
+        except Exception as exc:
+            self.notify(describe(exc, "cannot save the model"), severity="error", timeout=12)
+            return
+        a.model_path = out
+        self.notify(f"Model saved: {out if not self.app.hide_volatile else out.name}", timeout=6)
+
+    # -- drawing -----------------------------------------------------------------------------------
+    def _show(self) -> None:
+        a = self.app.analysis
+        status = self.query_one("#results-status", Static)
+        table = self.query_one("#results-table", DataTable)
+        table.clear()
+        if a is None:
+            self._show_plots()
+            return
+        s = a.session
+        name = a.path.name if self.app.hide_volatile else str(a.path)
+        text = (f"[b]{name}[/b]  {s.outcome}, {len(s.points)} points, legs {s.legs}   method [b]{a.method}[/b]")
+        if a.iso_note:
+            text += f"\n[yellow]{a.iso_note}[/yellow]"
+        status.update(text)
+        for leg, lf in a.model.legs.items():
+            st = lf.stats
+            iso = iso_figures(a.iso, leg)
+            ratio = st.ratio
+            table.add_row(
+                str(leg), str(st.n_points), str(st.n_cycles), _fmt(st.noise_floor_um), _fmt(st.heldout_rms_um),
+                _fmt(ratio, ".2f") if ratio is not None else "n/a",
+                f"{st.range_before_um:.3f} → {_fmt(st.range_after_um)}",
+                *(_fmt(iso.get(k)) for k in "AEMBR"),
+                key=str(leg),
+            )
+        self._show_plots()
+
+    def _show_plots(self) -> None:
+        a = self.app.analysis
+        mplot = self.query_one("#model-plot", XYPlot)
+        rplot = self.query_one("#residual-plot", XYPlot)
+        if a is None:
+            mplot.show([], title="measured and model (no session)")
+            rplot.show([], title="residual (no session)")
+            return
+        legs = list(a.model.legs)
+        leg = self.plot_leg if self.plot_leg in legs else legs[0]
+        self.plot_leg = leg
+        pts = a.session.points[a.session.points["leg"] == leg]
+        lf = a.model.leg(leg)
+        grid = np.linspace(lf.stroke_mm[0], lf.stroke_mm[1], 200)
+        series, resid = [], []
+        for d, name in ((1, "+1"), (-1, "−1")):
+            p = pts[pts["direction"] == d]
+            if len(p) == 0:
+                continue
+            series.append((f"measured {name}", p["target_mm"], p["error_um"], "scatter"))
+            series.append((f"model {name}", grid, a.model.predict_um(leg, grid, d), "line"))
+            resid.append((f"residual {name}", p["target_mm"],
+                          p["error_um"] - a.model.predict_um(leg, p["target_mm"], d), "scatter"))
+        st = lf.stats
+        mplot.show(series, title=f"leg {leg}: measured and {a.method} model")
+        rplot.show(resid, title=f"leg {leg}: held-out RMS {_fmt(st.heldout_rms_um)} µm, noise floor {_fmt(st.noise_floor_um)} µm")
