@@ -91,17 +91,28 @@ class RecordedLegErrors:
     """Leg errors from a recording's points (POINT_DTYPE), per leg and direction of approach.
 
     The measurement at a pose is one randomly chosen pass of the leg in that direction,
-    interpolated linearly between its targets. The prediction is `predicted_um(leg, x, dir)`
+    interpolated linearly between its targets (`measurement="pass"`), or the mean of all passes
+    in that direction (`"mean"`: the systematic error only, the paper's setting; needs a model). The prediction is `predicted_um(leg, x, dir)`
     when given (a fitted model), else the mean over the other passes in that direction at that
     position (leave-one-out table). Passes that do not span the leg's recorded range are left out
     (`dropped_runs`); at least two full passes per leg and direction are needed.
     """
 
-    def __init__(self, points: np.ndarray, predicted_um: LegErrorFn | None = None, source: str = "the recording"):
+    def __init__(self, points: np.ndarray, predicted_um: LegErrorFn | None = None, source: str = "the recording",
+                 measurement: str = "pass"):
+        if measurement not in ("pass", "mean"):
+            raise InputError(f"measurement must be 'pass' or 'mean', got {measurement!r}.")
+        if measurement == "mean" and predicted_um is None:
+            raise InputError(
+                "measuring with the mean of all passes needs a model as compensation (MODEL.json): "
+                "the mean of the other passes would be the measurement itself."
+            )
         self.source = source
         self.predicted_um = predicted_um
+        self.measurement = measurement
         self.description = (
-            f"{source}: one pass per pose as measurement, "
+            f"{source}: "
+            + ("one pass per pose and leg as measurement, " if measurement == "pass" else "mean of all passes per direction as measurement, ")
             + ("the model's prediction as compensation" if predicted_um else "mean of the other passes (leave-one-out) as compensation")
         )
         self.dropped_runs: dict[int, list[int]] = {}
@@ -175,7 +186,10 @@ class RecordedLegErrors:
             tab = self._tables[(leg, sign)]
             n_pass = tab.passes_um.shape[0]
             pick = rng.integers(0, n_pass, size=sel.size)
-            meas[sel] = _interp_rows(tab.grid_mm, tab.passes_um[pick], x[sel])
+            if self.measurement == "mean":
+                meas[sel] = np.interp(x[sel], tab.grid_mm, tab.passes_um.mean(axis=0))
+            else:
+                meas[sel] = _interp_rows(tab.grid_mm, tab.passes_um[pick], x[sel])
             if self.predicted_um is not None:
                 pred[sel] = np.asarray(self.predicted_um(leg, x[sel], np.full(sel.size, sign)), dtype=float)
             else:

@@ -41,6 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
     p.add_argument("--recording", metavar="FILE.h5", help="with MODEL.json: the session giving the measured errors "
                    "(default: the recording named in the model)")
+    p.add_argument("--measured", choices=["pass", "mean"], default="pass",
+                   help="measured leg error: one recorded pass per pose (default), or with MODEL.json the mean of "
+                   "all passes per direction (the systematic error only, as in the paper)")
     p.add_argument("--geometry", metavar="FILE.toml", help="platform geometry (default: the paper-like positioner, docs/platform.md)")
     p.add_argument("--xy-mm", type=float, default=60.0, help="workspace half-range in x and y about home, mm (default 60)")
     p.add_argument("--z-mm", type=float, default=60.0, help="workspace half-range in z about home, mm (default 60)")
@@ -82,13 +85,16 @@ def _load_errors(args) -> tuple[object, dict]:
         missing = [leg for leg in range(1, 7) if leg not in model.legs]
         if missing:
             raise InputError(f"{src}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
-        errors = RecordedLegErrors(session.points, predicted_um=model.predict_um, source=f"{rec_path} with model {src} ({model.method})")
+        errors = RecordedLegErrors(session.points, predicted_um=model.predict_um, source=f"{rec_path} with model {src} ({model.method})",
+                                   measurement=args.measured)
         inputs = {
             "model": {"path": str(src), "method": model.method, "source": model.source},
             "recording": {"path": str(rec_path), "sha256": session.sha256},
             "recording_is_the_models_own": not held_out,
         }
         return errors, inputs
+    if args.measured == "mean":
+        raise InputError("--measured mean needs MODEL.json as compensation; with FILE.h5 the table is the mean of the other passes.")
     session = read_session(src)
     errors = RecordedLegErrors(session.points, source=str(src))
     return errors, {"recording": {"path": str(src), "sha256": session.sha256}}

@@ -94,6 +94,13 @@ def test_recorded_errors_interpolate_a_pass_and_hold_it_out_of_the_table():
         assert (m, p) in ((-1.0, -2.0), (-2.0, -1.0))  # the other down pass is the table
     with pytest.raises(InputError, match="leg 7"):
         src.position_range_mm(7)
+    # the mean of all passes as measurement (the paper's setting) needs a model to compensate
+    with pytest.raises(InputError, match="needs a model"):
+        RecordedLegErrors(make_points(passes), measurement="mean")
+    model = RecordedLegErrors(make_points(passes), predicted_um=lambda leg, x, d: 0.1 * x, measurement="mean")
+    meas, pred = model.sample_um(2, pos, np.array([1, 1, -1, -1]), rng)
+    assert np.allclose(meas, [0.1 * 5 + 2.3, 0.1 * -2.5 + 2.3, -1.5, -1.5])
+    assert np.allclose(pred, 0.1 * pos)
 
 
 def test_recorded_errors_need_two_full_passes_per_direction():

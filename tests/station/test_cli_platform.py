@@ -62,11 +62,11 @@ def test_platform_with_a_model_uses_its_recording(session, tmp_path, capsys):
     model = fit(points, method="paper")
     model_path = save_model(model, tmp_path / "model.json", source_path=str(path), source_sha256=file_sha256(path))
     out = tmp_path / "m"
-    assert main(["platform", str(model_path), "--poses", "300", "--out", str(out)]) == 0
+    assert main(["platform", str(model_path), "--measured", "mean", "--poses", "300", "--out", str(out)]) == 0
     summary = json.loads((out / "platform_summary.json").read_text())
     assert summary["inputs"]["model"]["method"] == "paper"
     assert summary["inputs"]["recording_is_the_models_own"] is True
-    assert "model" in summary["source"]
+    assert "model" in summary["source"] and "mean of all passes" in summary["source"]
     # another recording as measurement is allowed explicitly (a held-out session)
     other = tmp_path / "other.h5"
     write_session(other, seed=1)
@@ -86,6 +86,9 @@ def test_platform_refuses_bad_input_with_one_line(tmp_path, capsys):
     rc = main(["platform", str(tmp_path / "missing.h5"), "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err
     assert rc == 2 and "missing.h5" in err
+
+    rc = main(["platform", str(part), "--measured", "mean", "--out", str(tmp_path / "o")])
+    assert rc == 2 and "MODEL.json" in capsys.readouterr().err
 
     rc = main(["platform", str(part), "--poses", "0", "--out", str(tmp_path / "o")])
     assert rc == 2 and "--poses" in capsys.readouterr().err
