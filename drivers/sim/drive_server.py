@@ -398,12 +398,12 @@ class _DriveModel:
         active = self._get("active_bank")
         if active in banks:
             return ExcCodes.ILLEGAL_ADDRESS  # the active table is read-only while active
-        proposed = list(self.regs)
-        proposed[address : address + count] = values
 
         def value(name: str):
+            """The register's value as it would be after this write."""
             r = self.p.registers[name]
-            return r.decode(proposed[r.address : r.end])
+            words = [values[a - address] if address <= a < address + count else self.regs[a] for a in range(r.address, r.end)]
+            return r.decode(words)
 
         if touched("active_bank"):
             b = value("active_bank")

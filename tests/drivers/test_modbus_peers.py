@@ -85,7 +85,10 @@ def tk_drive(profile):
         # modbus-tk polls with a 1 s select; a connection wakes it so stop() returns at once
         server._go.clear()
         if server.ready.is_set():
-            socket.create_connection(server._sock.getsockname()[:2], timeout=1).close()
+            try:
+                socket.create_connection(server._sock.getsockname()[:2], timeout=1).close()
+            except OSError:
+                pass  # it had already woken up and closed its socket
         server.stop()
 
 
