@@ -282,12 +282,15 @@ class _FoldGrams:
             self.yy[f] = yf @ yf
             self.n[f] = int(m.sum())
 
-    def all_sse(self, cands: list[_Candidate]) -> np.ndarray:
+    def all_sse(self, cands: list[_Candidate], nested: bool = True) -> np.ndarray:
         """SSE[c, o, i]: candidate c scored on fold i, fitted on every fold except i and o
-        (o == i: except i alone). The o != i entries serve the nested cross-validation."""
+        (o == i: except i alone). The o != i entries serve the nested cross-validation; they
+        stay inf unless `nested` (which needs at least three folds)."""
         F = self.n_folds
         o_idx, i_idx = np.meshgrid(np.arange(F), np.arange(F), indexing="ij")
         o_idx, i_idx = o_idx.ravel(), i_idx.ravel()
+        if not (nested and F >= 3):
+            o_idx = i_idx = np.arange(F)
         drop_o = (o_idx != i_idx).astype(float)[None, :, None]
         G_all = self.G.sum(axis=0)
         b_all = self.b.sum(axis=0)
@@ -310,14 +313,23 @@ class _FoldGrams:
             bt = b_all[idx][:, None] - bs[:, i_idx] - drop_o * bs[:, o_idx]
             try:
                 beta = np.linalg.solve(Gt, bt[..., None])[..., 0]
+                ok = np.ones(Gt.shape[:2], dtype=bool)
             except np.linalg.LinAlgError:
-                continue
+                # some training set is singular (too few distinct targets left): solve one by one
+                beta = np.zeros(bt.shape)
+                ok = np.zeros(Gt.shape[:2], dtype=bool)
+                for c_i, k_i in np.ndindex(*Gt.shape[:2]):
+                    try:
+                        beta[c_i, k_i] = np.linalg.solve(Gt[c_i, k_i], bt[c_i, k_i])
+                        ok[c_i, k_i] = True
+                    except np.linalg.LinAlgError:
+                        pass
             bf, Gf = bs[:, i_idx], Gs[:, i_idx]
             yy = self.yy[i_idx][None]
             sse = yy - 2.0 * np.einsum("ckp,ckp->ck", beta, bf) + np.einsum("ckp,ckpq,ckq->ck", beta, Gf, beta)
             # a negative sum of squares means the subtraction lost all precision: distrust it
-            sse = np.where(sse >= -1e-9 * yy, np.maximum(sse, 0.0), np.inf)
-            out[members] = sse.reshape(-1, F, F)
+            sse = np.where(ok & (sse >= -1e-9 * yy), np.maximum(sse, 0.0), np.inf)
+            out[members[:, None], o_idx[None, :], i_idx[None, :]] = sse
         return out
 
 
@@ -423,13 +435,16 @@ def fit_bidirectional_leg(
         n_folds = int(folds.max()) + 1
         grams = _FoldGrams(X, y, folds, n_folds)
         all_f = list(range(n_folds))
-        sse = grams.all_sse(cands)
+        nested_ok = nested and n_folds >= 3 and len(cands) > 1
+        sse = grams.all_sse(cands, nested_ok)
         top = sse[:, np.arange(n_folds), np.arange(n_folds)]
-        chosen, cv_mse = _one_se_choice(top, grams.n, cands)
+        try:
+            chosen, cv_mse = _one_se_choice(top, grams.n, cands)
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
         info.update(folds=n_folds, cv_rms_um=float(np.sqrt(cv_mse)))
         # nested: re-choose the size without each held-out fold, then score that fold
         heldout = np.empty(data.n_points)
-        nested_ok = nested and n_folds >= 3 and len(cands) > 1
         for f in all_f:
             if nested_ok:
                 inner = [g for g in all_f if g != f]

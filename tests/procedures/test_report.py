@@ -1,0 +1,61 @@
+"""`make_report`: the plots and the summary table, before and after compensation."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from drivers.sim.plant import PlantConfig
+from drivers.sim.synth import synth_session
+from procedures.errors import InputError
+from procedures.fit import fit
+from procedures.report import make_report
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def points():
+    cfg = PlantConfig().only("backlash", "lead", "longwave", "wobble", "noise", "run_offset")
+    return synth_session({1: cfg, 2: cfg}, np.linspace(-90, 90, 91), cycles=3, seed=3)
+
+
+def test_report_files_and_summary(points, tmp_path):
+    result = make_report(points, tmp_path / "rep", source_path="s.h5", source_sha256="c" * 64, lead_mm=5.0)
+    names = sorted(p.name for p in result.files)
+    assert names == ["errors.png", "histograms.png", "residuals.png", "spectrum.png", "summary.json", "summary.md"]
+    for p in result.files:
+        if p.suffix == ".png":
+            assert p.read_bytes()[:8] == PNG and p.stat().st_size > 10_000
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert summary["model"]["fitted_to_this_session"] is True
+    assert [r["leg"] for r in summary["legs"]] == [1, 2]
+    for r in summary["legs"]:
+        assert r["points"] == 91 * 6 and r["cycles"] == 3
+        assert r["range_after_um"] < 0.3 * r["range_before_um"]
+        assert r["rms_after_um"] < r["rms_before_um"]
+        assert r["reversal_um"] == pytest.approx(1.0, abs=0.1)
+        assert r["noise_floor_um"] > 0 and r["model_heldout_rms_um"] > 0
+    md = (tmp_path / "rep" / "summary.md").read_text()
+    assert "| leg | points |" in md and "s.h5" in md
+    assert md.count("\n| 1 |") == 1 and md.count("\n| 2 |") == 1
+
+
+def test_report_with_a_model_from_another_recording(points, tmp_path):
+    cfg = PlantConfig().only("backlash", "lead", "longwave", "wobble", "noise", "run_offset")
+    other = synth_session({2: cfg}, np.linspace(-90, 90, 91), cycles=3, seed=99)
+    model = fit(other, source={"path": "other.h5", "sha256": "d" * 64})
+    result = make_report(points, tmp_path / "rep", model, source_path="s.h5", source_sha256="c" * 64)
+    assert result.summary["model"]["fitted_to_this_session"] is False
+    assert [r["leg"] for r in result.summary["legs"]] == [2]  # only the legs the model has
+    row = result.summary["legs"][0]
+    assert row["range_after_um"] < 0.5 * row["range_before_um"]  # same plant: the model still helps
+
+
+def test_report_refuses_a_model_without_common_legs(points, tmp_path):
+    cfg = PlantConfig().only("noise", "lead")
+    model = fit(synth_session({5: cfg}, np.linspace(-90, 90, 31), cycles=2, seed=1), lead_mm=None)
+    with pytest.raises(InputError, match="no leg in common"):
+        make_report(points, tmp_path / "rep", model)
