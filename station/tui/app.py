@@ -149,6 +149,7 @@ class StationApp(App):
 
     def connect_rig(self) -> None:
         self.rig_state, self.rig_error = "connecting", ""
+        self._refresh_rig_screen()
         self._connect_worker()
 
     @work(thread=True, exclusive=True, group="connect", exit_on_error=False)
@@ -173,11 +174,19 @@ class StationApp(App):
         self.rig = message.rig
         self.rig_state, self.rig_error = "connected", ""
         self.notify(f"Connected: {self._rig_kind_text()}.", timeout=4)
+        self._refresh_rig_screen()
 
     def on_rig_connect_failed(self, message: RigConnectFailed) -> None:
         self.rig_state, self.rig_error = "not connected", message.error
         self.notify(message.error + " Press c on the Rig screen (F1) to retry.", title="Rig",
                     severity="error", timeout=15)
+        self._refresh_rig_screen()
+
+    def _refresh_rig_screen(self) -> None:
+        for screen in self._screen_stacks.get("rig", []):
+            show = getattr(screen, "_show_connection", None)
+            if show is not None and screen.is_mounted:
+                show()
 
     def _rig_kind_text(self) -> str:
         if self.rig is None:

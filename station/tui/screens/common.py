@@ -29,6 +29,17 @@ class StationScreen(Screen):
 
     MODE = ""
     PAGE_HELP = ""
+    # Focus a table or button, not a text field, so the letter keys in the footer act at once.
+    AUTO_FOCUS = "DataTable, Button"
+    BINDINGS = [Binding("escape", "leave_field", "Leave field", show=False)]
+
+    def action_leave_field(self) -> None:
+        """Leave a text field (Esc) so the letter keys act again."""
+        for selector in ("DataTable", "Button"):
+            for widget in self.query(selector):
+                if widget.focusable:
+                    widget.focus()
+                    return
 
     def compose_header(self) -> ComposeResult:
         yield Header(show_clock=False, icon="≡")

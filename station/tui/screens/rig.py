@@ -39,6 +39,7 @@ class RigSnapshot:
     readings: dict[int, Reading | str] = field(default_factory=dict)
     environment: Environment | str | None = None
     laser_identity: str = ""
+    fault_text: dict[int, str] = field(default_factory=dict)
     poll_ms: float = 0.0
 
 
@@ -100,7 +101,9 @@ class RigScreen(StationScreen):
         try:
             for leg, axis in sorted(rig.axes.items()):
                 try:
-                    snap.drives[leg] = axis.status()
+                    st = snap.drives[leg] = axis.status()
+                    if st.fault and rig.profile is not None:
+                        snap.fault_text[leg] = rig.profile.fault_text(st.fault_code)
                 except Exception as exc:
                     snap.drives[leg] = describe(exc)
             try:
@@ -157,7 +160,7 @@ class RigScreen(StationScreen):
                     f"{st.following_error_um:+7.2f}",
                     f"{st.load_n:7.1f}",
                     f"bank {st.active_bank} {'on' if st.table_enabled else 'off'}",
-                    f"[red]code {st.fault_code}[/red]" if st.fault else "–",
+                    f"[red]{snap.fault_text.get(leg) or f'code 0x{st.fault_code:04X}'}[/red]" if st.fault else "–",
                 ]
             for col, value in enumerate(cells, start=1):
                 table.update_cell_at((table.get_row_index(str(leg)), col), value)

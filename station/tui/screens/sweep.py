@@ -21,13 +21,13 @@ PLANS = [("ISO 230-2", "iso230"), ("Paper (361 × 0.5 mm)", "paper")]
 
 class SweepScreen(StationScreen):
     MODE = "sweep"
+    AUTO_FOCUS = "#start"
     PAGE_HELP = "choose legs and plan, start; error = measured − commanded (µm)"
     BINDINGS = [
         Binding("s", "start", "Start"),
         Binding("p", "app.pause_sweep", "Pause/Resume"),
         Binding("a", "app.abort_sweep", "Abort"),
         Binding("l", "next_leg", "Plot next leg"),
-        Binding("escape", "leave_field", "Leave field", show=False),
     ]
 
     def compose(self) -> ComposeResult:
@@ -132,9 +132,6 @@ class SweepScreen(StationScreen):
         if cycles.value.strip() in ("", *default.values()):
             cycles.value = default.get(str(event.value), cycles.value)
         self._update_summary()
-
-    def action_leave_field(self) -> None:
-        self.query_one("#start", Button).focus()
 
     # -- actions -----------------------------------------------------------------------------------
     def on_button_pressed(self, event: Button.Pressed) -> None:

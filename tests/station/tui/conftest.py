@@ -48,3 +48,30 @@ def connected():
 @pytest.fixture
 def size():
     return SIZE
+
+
+@pytest.fixture(scope="module")
+def recorded_session(tmp_path_factory):
+    """A small completed session from the simulated rig (legs 1 and 2, 9 uniform targets
+    -80..80 mm, 3 cycles), recorded by the same runner as the CLI and the UI."""
+    from procedures.plans import iso230_plan
+    from station.jobs import run_sweep
+    from station.wiring import open_rig
+
+    out = tmp_path_factory.mktemp("session") / "two-legs.h5"
+    plan = iso230_plan((1, 2), -80.0, 80.0, step_mm=20.0, cycles=3)
+    cfg = StationConfig(operator="test")
+    with open_rig(cfg, legs=(1, 2), time_scale=0.0) as rig:
+        result = run_sweep(rig, plan, out, cfg)
+    assert result.outcome == "completed"
+    return out
+
+
+def notifications(app) -> list[str]:
+    return [n.message for n in app._notifications]
+
+
+@pytest.fixture
+def notes():
+    """`notes(app)`: the texts of the notifications the app is showing."""
+    return notifications

@@ -1,0 +1,167 @@
+"""Results, Compensation, Diagnosis and Replay screens on a session recorded on the simulated rig.
+
+The screens must show what the procedures compute (fit, make_table, diagnose), so the tests
+compare the UI against direct calls on the same file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+from textual.widgets import DataTable, Input, Select, Static
+
+from procedures.diagnosis import diagnose
+from procedures.fit import fit
+from procedures.recording.reader import read_session
+from procedures.table import make_table
+from station.tui import capabilities
+from station.tui.app import StationApp
+from station.tui.widgets import XYPlot
+
+pytestmark = pytest.mark.timeout(120)
+
+
+async def open_session(pilot, wait_until, mode_key: str, path) -> None:
+    app = pilot.app
+    await pilot.press(mode_key)
+    await wait_until(pilot, lambda: app.screen.query("#session-path"), what="the session picker")
+    app.screen.query_one("#session-path", Input).value = str(path)
+    await pilot.click("#session-open")
+
+
+def test_results_show_the_fit_iso_and_plots(recorded_session, cfg, size, wait_until, notes):
+    asyncio.run(_results(recorded_session, cfg, size, wait_until, notes))
+
+
+async def _results(path, cfg, size, wait_until, notes):
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        await open_session(pilot, wait_until, "f3", path)
+        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        points = read_session(path).points
+        expected = fit(points, "default")
+        table = app.screen.query_one("#results-table", DataTable)
+        assert table.row_count == 2
+        for row, (leg, lf) in enumerate(expected.legs.items()):
+            cells = table.get_row_at(row)
+            assert cells[0] == str(leg) and cells[1] == str(lf.stats.n_points) and cells[2] == "3"
+            assert cells[3] == f"{lf.stats.noise_floor_um:.3f}"
+            assert cells[4] == f"{lf.stats.heldout_rms_um:.3f}"
+        if capabilities.find("iso230") is None:
+            assert "ISO 230-2 evaluation not available yet" in str(app.screen.query_one("#results-status", Static).render())
+        # the model plot shows measured points of both directions and the two model curves
+        mplot = app.screen.query_one("#model-plot", XYPlot)
+        assert mplot.drawn_series == ["measured +1", "model +1", "measured −1", "model −1"]
+        n_leg1 = int(np.sum(points["leg"] == 1))
+        assert mplot.drawn_points == n_leg1 + 2 * 200
+        assert app.screen.query_one("#residual-plot", XYPlot).drawn_points == n_leg1
+        # the paper method on the same (uniformly spaced) session
+        await pilot.press("m")
+        await wait_until(pilot, lambda: app.analysis.method == "paper", 60, "the paper fit")
+        paper = fit(points, "paper")
+        assert table.get_row_at(0)[4] == f"{paper.legs[1].stats.heldout_rms_um:.3f}"
+        # save the model next to the recording
+        await pilot.press("w")
+        await wait_until(pilot, lambda: app.analysis.model_path is not None and app.analysis.model_path.exists(),
+                         what="the model file")
+        assert app.analysis.model_path.name == "two-legs.paper.model.json"
+        app.analysis.model_path.unlink()
+
+
+def test_a_bad_session_file_is_a_notification_not_a_crash(tmp_path, cfg, size, wait_until, notes):
+    asyncio.run(_bad_file(tmp_path, cfg, size, wait_until, notes))
+
+
+async def _bad_file(tmp_path, cfg, size, wait_until, notes):
+    bad = tmp_path / "not-a-session.h5"
+    bad.write_text("hello")
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        await open_session(pilot, wait_until, "f3", bad)
+        await wait_until(pilot, lambda: any("not-a-session.h5" in n for n in notes(app)), 30, "the error notice")
+        assert app.is_running and app.analysis is None
+        status = str(app.screen.query_one("#results-status", Static).render())
+        assert "not-a-session.h5" in status and "Traceback" not in status
+
+
+def test_compensation_previews_the_table_against_the_drive(recorded_session, cfg, size, wait_until, notes, connected):
+    asyncio.run(_compensation(recorded_session, cfg, size, wait_until, notes, connected))
+
+
+async def _compensation(path, cfg, size, wait_until, notes, connected):
+    app = StationApp(cfg, time_scale=0.0)
+    async with app.run_test(size=size) as pilot:
+        await connected(pilot)
+        await open_session(pilot, wait_until, "f3", path)
+        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        await pilot.press("f4")
+        table = app.screen.query_one("#comp-table", DataTable)
+        await wait_until(pilot, lambda: table.row_count == 2 and "pts" in str(table.get_row_at(1)[6]), 30,
+                         "the table and the drives' active tables")
+        expected = make_table(app.analysis.model)
+        for row, (leg, t) in enumerate(expected.legs.items()):
+            cells = table.get_row_at(row)
+            assert cells[0] == str(leg) and cells[3] == str(t.point_count)
+            assert cells[2] == f"{t.step_mm:g}"
+            # the simulated drives start with an empty table: the difference is the table itself
+            biggest = max(np.max(np.abs(t.error_fwd_um)), np.max(np.abs(t.error_rev_um)))
+            assert cells[7] == f"{biggest:.3f}"
+        assert app.screen.query_one("#comp-plot", XYPlot).drawn_points == 4 * expected.legs[1].point_count
+        # export
+        await pilot.press("w")
+        csv = path.with_name("two-legs.default.table.csv")
+        await wait_until(pilot, csv.exists, what="the table CSV")
+        assert csv.read_text().splitlines()[0] == "leg,position_mm,error_fwd_um,error_rev_um"
+        csv.unlink()
+        # push: the push procedure has not landed in this build; the UI says so and writes nothing
+        if capabilities.find("push") is None:
+            before = app.rig.axes[1].read_table(app.rig.axes[1].active_bank())
+            await pilot.press("u")
+            await wait_until(pilot, lambda: any("not available yet" in n for n in notes(app)), what="the notice")
+            assert app.rig.axes[1].read_table(app.rig.axes[1].active_bank()) == before
+        else:
+            pytest.fail("push is installed: replace this branch with the push-after-confirmation flow")
+
+
+def test_diagnosis_opens_the_gap_report(recorded_session, cfg, size, wait_until):
+    asyncio.run(_diagnosis(recorded_session, cfg, size, wait_until))
+
+
+async def _diagnosis(path, cfg, size, wait_until):
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        await open_session(pilot, wait_until, "f6", path)
+        await wait_until(pilot, lambda: app.screen.report is not None, 90, "the diagnosis")
+        expected = diagnose(read_session(path).points)
+        table = app.screen.query_one("#diag-table", DataTable)
+        assert table.row_count == len(expected["findings"])
+        text = str(app.screen.query_one("#diag-text", Static).render())
+        assert "LEG 1:" in text and "LEG 2:" in text
+        plot = app.screen.query_one("#diag-plot", XYPlot)
+        regions = expected["legs"]["1"]["by_region"]
+        assert plot.drawn_points == 2 * 2 * len(regions)  # two series, two ends per region
+        await pilot.press("l")
+        await wait_until(pilot, lambda: app.screen.plot_leg == "2", what="the next leg")
+
+
+def test_replay_screen_reads_a_session_and_opens_it_in_results(recorded_session, cfg, size, wait_until, notes):
+    asyncio.run(_replay(recorded_session, cfg, size, wait_until, notes))
+
+
+async def _replay(path, cfg, size, wait_until, notes):
+    app = StationApp(cfg, autoconnect=False, replay=path)
+    async with app.run_test(size=size) as pilot:
+        await wait_until(pilot, lambda: app.screen.MODE == "replay" and app.screen.session is not None, 30,
+                         "the session summary")
+        info = str(app.screen.query_one("#replay-info", Static).render())
+        s = read_session(path)
+        assert f"{len(s.points)} points on legs [1, 2]" in info and "outcome completed" in info
+        if capabilities.find("replay") is None:
+            await pilot.press("r")
+            await wait_until(pilot, lambda: any("Replay through the drivers is not available yet" in n for n in notes(app)),
+                             what="the notice")
+        await pilot.press("o")
+        await wait_until(pilot, lambda: app.screen.MODE == "results" and app.analysis is not None, 60, "the fit")
+        assert app.analysis.path == path
