@@ -384,11 +384,17 @@ class SessionWriter:
             raise InputError(f"{self.path}: the session file is closed")
         n0 = ds.shape[0]
         n = len(rows)
-        ds.id.set_extent((n0 + n,))
-        fspace = ds.id.get_space()
-        fspace.select_hyperslab((n0,), (n,))
-        ds.id.write(h5py.h5s.create_simple((n,)), fspace, rows, mtype=mtype)
-        self._f.flush()
+        try:
+            ds.id.set_extent((n0 + n,))
+            fspace = ds.id.get_space()
+            fspace.select_hyperslab((n0,), (n,))
+            ds.id.write(h5py.h5s.create_simple((n,)), fspace, rows, mtype=mtype)
+            self._f.flush()
+        except BaseException:
+            # e.g. Ctrl-C (raised between two bytecodes, so possibly right after the extent
+            # grew): leave no unwritten row behind; the point was not acknowledged
+            ds.id.set_extent((n0,))
+            raise
         if self._fsync:
             os.fsync(self._f.id.get_vfd_handle())
 
