@@ -1,0 +1,94 @@
+"""The replay clock: the recording's time, played back at a chosen speed.
+
+Time comes from the recording. Whenever a replay device answers with a recorded point (or
+raises a recorded fault) the clock is *set* to the time recorded for it, so a procedure that
+stamps `clock.now() - t_start` (with t_start = 0) gets the recorded `time_s` bit for bit. In
+between, the clock advances by the procedure's own sleeps and the devices' move/averaging
+times, like the simulated rig's virtual clock at time scale 0.
+
+Speed: `speed=None` runs as fast as possible; `speed=1` replays in real time; `speed=10` ten
+times faster. The waiting happens only in `sleep()` calls of the procedure's thread (the
+sweep sleeps for the dwell at every point, also when the dwell is 0), never inside a device
+request, where a wait would look like a silent device to the client. The waiting keeps
+`wall - wall0 = (now - t0) / speed` from an anchor taken at the first sleep; the anchor is
+taken again when the recorded time goes backwards (a resumed session starts its clock again).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+
+class ReplayClock:
+    """Implements drivers.interfaces.Clock for the procedure; `device_clock()` is the view the
+    replay servers use (advances without waiting). Thread-safe."""
+
+    def __init__(self, speed: float | None = None, start_s: float = 0.0):
+        if speed is not None and not (isinstance(speed, (int, float)) and math.isfinite(speed) and speed > 0):
+            raise ValueError(f"replay speed must be a positive number (1 = real time) or None (as fast as possible), got {speed!r}")
+        self.speed = None if speed is None else float(speed)
+        self._lock = threading.Lock()
+        self._t = float(start_s)
+        self._anchor: tuple[float, float] | None = None  # (clock time, wall time) of the pacing anchor
+        self._cancelled = threading.Event()
+        self.waited_s = 0.0  # real seconds spent pacing (statistics)
+
+    def now(self) -> float:
+        with self._lock:
+            return self._t
+
+    def advance(self, dt_s: float) -> None:
+        """Move the clock forward by `dt_s` seconds without waiting."""
+        if dt_s > 0:
+            with self._lock:
+                self._t += dt_s
+
+    def set_recorded(self, t_s: float) -> None:
+        """Set the clock to a recorded time (seconds since the session start). NaN is ignored."""
+        if not math.isfinite(t_s):
+            return
+        with self._lock:
+            if t_s < self._t:
+                self._anchor = None  # time went back (a resumed session): pace from here
+            self._t = float(t_s)
+
+    def sleep(self, dt_s: float) -> None:
+        """Advance by `dt_s`, then wait until the wall clock has caught up at the chosen speed."""
+        self.advance(dt_s)
+        if self.speed is None or self._cancelled.is_set():
+            return
+        with self._lock:
+            now_wall = time.monotonic()
+            if self._anchor is None:
+                self._anchor = (self._t, now_wall)
+                return
+            t0, wall0 = self._anchor
+            wait_s = wall0 + (self._t - t0) / self.speed - now_wall
+        if wait_s > 0:
+            self._cancelled.wait(wait_s)
+            self.waited_s += wait_s
+
+    def cancel_waits(self) -> None:
+        """End every present and future wait at once (the run is being aborted)."""
+        self._cancelled.set()
+
+    def device_clock(self) -> "DeviceClock":
+        return DeviceClock(self)
+
+
+class DeviceClock:
+    """The replay clock as the servers see it: `sleep` advances without waiting, and
+    `time_scale` 0 makes the drive complete each move within the request that commands it."""
+
+    time_scale = 0.0
+
+    def __init__(self, clock: ReplayClock):
+        self._clock = clock
+
+    def now(self) -> float:
+        return self._clock.now()
+
+    def sleep(self, dt_s: float) -> None:
+        self._clock.advance(dt_s)

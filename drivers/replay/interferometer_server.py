@@ -1,0 +1,72 @@
+"""The replay interferometer: the simulated instrument's pty server answering from the recording.
+
+Position and environment replies carry the recorded values *exactly*: numbers are written with
+`repr` (the shortest text that parses back to the same double) instead of the protocol's fixed
+decimals (9 for positions, 1-3 for the environment), which would round values that did not come
+through this protocol (an import, another instrument) and so change `error_um`. The client
+parses both forms (`float()`), so nothing changes on its side. Other commands (identity,
+averaging, zero) behave as on the simulated instrument.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+from drivers.interferometer import protocol as p
+from drivers.replay.clock import DeviceClock
+from drivers.replay.plant import ReplayPlant, ReplayState
+from drivers.sim.interferometer_server import SimInterferometer
+
+ERR_NOT_RECORDED = 10
+"""ERR code of a query the recording cannot answer (a mismatch, or the end of the recording)."""
+ERR_REPLAYED = 11
+"""ERR code of a recorded instrument error, replayed."""
+_MAX_ERR_TEXT = 180  # an ERR line must stay well under the protocol's 256-byte line limit
+
+
+def exact(value: float) -> str:
+    """A float as the shortest text that parses back to the same double ('NAN' if NaN)."""
+    return "NAN" if math.isnan(value) else repr(float(value))
+
+
+class ReplayInterferometer(SimInterferometer):
+    """Serves the replay plants on a pty (`start()` returns the path for the client)."""
+
+    def __init__(self, state: ReplayState, plants: dict[int, ReplayPlant], clock: DeviceClock,
+                 lock: threading.RLock, identity: tuple[str, str, str, str], axes: int = 6):
+        super().__init__(plants, clock, lock=lock, axes=axes, identity=identity)
+        self.state = state
+
+    def _position(self, axis: int) -> bytes | None:
+        self.clock.sleep(self._averaging_s)  # the averaging window passes on the replay clock
+        with self.lock:
+            plant = self.plants.get(axis)
+            if plant is None:
+                return p.format_error(ERR_NOT_RECORDED, f"replay: axis {axis} has no leg in the recording")
+            answer = plant.reading()
+            t_s = self.clock.now()
+            last = self._last_position_mm[axis]
+            if answer.kind == "value":
+                self._last_position_mm[axis] = answer.point.measured_mm
+        kind = answer.kind
+        if kind == "value":
+            pt = answer.point
+            return p.frame_reply("POS", axis, exact(pt.measured_mm), "OK", exact(pt.signal_pct), f"{t_s:.6f}")
+        if kind == "beam":
+            return p.frame_reply("POS", axis, exact(last), "BEAM", "0.0", f"{t_s:.6f}")
+        if kind == "silent":
+            return None
+        if kind == "garbage":
+            good = p.frame_reply("POS", axis, exact(last), "OK", "90.0", f"{t_s:.6f}")
+            return self._corrupt(good, "checksum")
+        if kind == "end" and self.state.on_end is not None:
+            # outside the rig lock: the callback may stop the drives over Modbus
+            self.state.on_end(answer.text)
+        code = ERR_REPLAYED if kind == "error" else ERR_NOT_RECORDED
+        return p.format_error(code, answer.text[:_MAX_ERR_TEXT])
+
+    def _environment(self) -> bytes:
+        with self.lock:
+            air_c, pressure_hpa, humidity_pct, temps = self.state.environment(self.plants, self.axes)
+        return p.frame_reply("ENV", exact(air_c), exact(pressure_hpa), exact(humidity_pct), *(exact(t) for t in temps))
