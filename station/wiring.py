@@ -78,3 +78,45 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         raise
     desc = f"drives {cfg.drive.url}, interferometer {cfg.interferometer.port}"
     return Rig(axes, laser, SystemClock(), "live", desc, profile)
+
+
+REPLAY_LASER_TIMEOUT_S = 0.2
+"""Reply timeout of the interferometer client on a replay (the replay answers in well under a
+millisecond; a recorded time-out is replayed as silence, so a short timeout keeps it quick)."""
+
+
+def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationConfig | None = None,
+                    legs=None) -> Rig:
+    """Replay devices answering from the session file `path`, reached through the normal Modbus
+    and serial clients. `speed`: None = as fast as possible, 1 = real time, N = N times faster.
+    `legs`: the drives to connect (default: the legs of the recorded plan). The Rig's `sim` is
+    the drivers.replay.ReplayRig (its `mismatch`, `ended`, `on_end`). See docs/replay.md."""
+    from drivers.replay import ReplayRig, ReplayScript
+    from procedures.plans import SweepPlan
+    from procedures.recording.reader import read_session
+
+    cfg = cfg or StationConfig()
+    session = read_session(path)
+    try:
+        plan_points = SweepPlan.from_dict(session.plan).points()
+        directions = {pp.index: pp.direction for pp in plan_points}
+        plan_legs = tuple(SweepPlan.from_dict(session.plan).legs)
+    except (ValueError, TypeError):  # no usable plan (e.g. an import): fall back on run parity
+        directions, plan_legs = {}, ()
+    script = ReplayScript.from_arrays(
+        session.points, session.faults, source=str(path), outcome=session.outcome, sha256=session.sha256,
+        session_id=str(session.attrs.get("session_id", "")), directions=directions,
+    )
+    legs = tuple(legs or plan_legs or session.legs or (1,))
+    profile = DriveProfile.load(cfg.drive.profile or None)
+    replay = ReplayRig(script, speed=speed, profile=profile).start()
+    try:
+        axes = connect_axes(replay.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s)
+        laser = SerialInterferometer(replay.laser_port, timeout_s=REPLAY_LASER_TIMEOUT_S)
+    except Exception:
+        replay.stop()
+        raise
+    pace = "as fast as possible" if speed is None else ("real time" if speed == 1 else f"{speed:g}x real time")
+    desc = (f"replay of {path} ({script.value_points} points, outcome {session.outcome}) {pace}: "
+            f"drives {replay.drive_url}, interferometer {replay.laser_port}")
+    return Rig(axes, laser, replay.clock, "replay", desc, profile, replay, [replay.stop])
