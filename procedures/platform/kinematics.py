@@ -24,6 +24,7 @@ from procedures.platform.geometry import Geometry
 
 POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "rx_rad", "ry_rad", "rz_rad")
 DEFAULT_TOL_MM = 1e-10  # leg-length residual at which FK stops; far below any leg error (um)
+_BLOCK = 4096  # poses per vectorised block (cache-sized)
 DEFAULT_SINGULAR_RCOND = 1e-5  # smallest/largest singular value of the scaled Jacobian;
 # below it 1 um of leg error moves the pose by more than 0.1 mm: the pose is not worth reporting
 
@@ -237,7 +238,21 @@ def forward_kinematics(
         raise ValueError(f"lengths_mm must have 6 columns (legs 1-6), got shape {np.shape(lengths_mm)}")
     n = lengths.shape[0]
     start = geometry.home_pose_mm_rad if initial_poses_mm_rad is None else initial_poses_mm_rad
-    poses = np.array(np.broadcast_to(np.asarray(start, dtype=float), (n, 6)))
+    starts = np.broadcast_to(np.asarray(start, dtype=float), (n, 6))
+    if n <= _BLOCK:
+        return _fk_block(geometry, lengths, starts, tol_mm, max_iterations, singular_rcond, check_stroke)
+    # Blocks of a few thousand poses keep the temporaries in cache: 20 000 poses at once run
+    # at half the rate of the same poses in blocks.
+    parts = [
+        _fk_block(geometry, lengths[i:i + _BLOCK], starts[i:i + _BLOCK], tol_mm, max_iterations, singular_rcond, check_stroke)
+        for i in range(0, n, _BLOCK)
+    ]
+    return FkResult(*(np.concatenate([getattr(r, f) for r in parts]) for f in ("poses_mm_rad", "status", "iterations", "residual_mm", "rcond")))
+
+
+def _fk_block(geometry, lengths, starts, tol_mm, max_iterations, singular_rcond, check_stroke) -> FkResult:
+    n = lengths.shape[0]
+    poses = np.array(starts)
     status = np.full(n, FkStatus.NOT_CONVERGED, dtype=np.int8)
     iterations = np.zeros(n, dtype=np.int32)
 
