@@ -234,21 +234,26 @@ def random_poses(
     while have < n:
         batch = max(256, 2 * (n - have))
         poses = geometry.home_pose_mm_rad + rng.uniform(-1.0, 1.0, size=(batch, 6)) * half
-        drawn += batch
         lengths = inverse_kinematics(geometry, poses)
         ok = np.all(in_stroke(geometry, lengths), axis=1)
         if position_range_mm is not None:
             pos = leg_positions_mm(geometry, lengths)
             ok &= np.all((pos >= position_range_mm[:, 0]) & (pos <= position_range_mm[:, 1]), axis=1)
-        good = poses[ok]
-        accepted.append(good)
-        have += good.shape[0]
+        hits = np.flatnonzero(ok)
+        if have + hits.size >= n:
+            # count draws only up to the n-th reachable pose, so drawn/n is the rejection rate
+            hits = hits[: n - have]
+            drawn += int(hits[-1]) + 1
+        else:
+            drawn += batch
+        accepted.append(poses[hits])
+        have += hits.size
         if drawn >= 100 * max(n, 256) and have < 0.01 * drawn:
             raise InputError(
                 f"only {have} of {drawn} random poses keep every leg within its stroke and the recorded positions; "
                 "shrink the workspace (--xy-mm, --z-mm, --tilt-deg) or record over a longer stroke."
             )
-    return np.concatenate(accepted)[:n], drawn
+    return np.concatenate(accepted), drawn
 
 
 def approach_directions(positions_mm: np.ndarray, start_mm: np.ndarray | None = None) -> np.ndarray:
