@@ -15,6 +15,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping, Sequence
 
+from drivers.errors import DriverError
 from drivers.modbus.codec import (
     TYPE_WORDS,
     WORD_ORDERS,
@@ -56,8 +57,9 @@ STATES = (
 )  # fmt: skip
 
 
-class ProfileError(ValueError):
-    """A drive profile file is missing, unreadable or inconsistent."""
+class ProfileError(DriverError, ValueError):
+    """A drive profile file is missing, unreadable or inconsistent (a DriverError, so the
+    command line shows it as one line)."""
 
 
 @dataclass(frozen=True)

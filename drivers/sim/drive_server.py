@@ -44,6 +44,7 @@ from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from drivers.errors import DriverError
 from drivers.interfaces import Clock
 from drivers.modbus.codec import crc16_modbus
 from drivers.modbus.profile import DriveProfile
@@ -57,7 +58,7 @@ FOLLOWING_LAG_S = 0.002  # following error during motion = velocity * lag (a sti
 TICK_S = 0.02  # real seconds between background motion updates at time scale > 0
 
 
-class NvError(ValueError):
+class NvError(DriverError, ValueError):
     """The drive's non-volatile memory file is unreadable or not ours."""
 
 
