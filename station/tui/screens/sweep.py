@@ -197,7 +197,8 @@ class SweepScreen(StationScreen):
             ], title=f"leg {leg}: error against position ({trace.count} points)")
 
         bar = self.query_one("#progress", ProgressBar)
-        bar.update(total=max(s.total, 1) if s.status != "idle" else None, progress=s.done)
+        # never indeterminate: its animation would be a moving part on an idle screen
+        bar.update(total=max(s.total, 1), progress=s.done)
 
         status = self.query_one("#sweep-status", Static)
         if s.status == "idle":
