@@ -1,0 +1,29 @@
+"""`station export`: an HDF5 session file -> the interchange CSV."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from procedures.csv_io import export_csv
+
+NAME = "export"
+HELP = "write a session file's points as an interchange CSV"
+DESCRIPTION = (
+    "Write the points of an HDF5 session file as an interchange CSV (one row per point, in plan order). "
+    "Optional columns with no measured value are left out; points without a measured error are skipped."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("h5", metavar="FILE.h5", help="session file to read")
+    p.add_argument("--out", required=True, metavar="FILE.csv", help="CSV file to write")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+
+
+def run(args) -> int:
+    summary = export_csv(Path(args.h5), Path(args.out), overwrite=args.force)
+    print(f"exported {summary.rows} points to {summary.path} (columns: {', '.join(summary.columns)})")
+    if summary.skipped_no_error:
+        print(f"left out {summary.skipped_no_error} points without a measured error")
+    return 0

@@ -1,0 +1,37 @@
+"""`station import`: an interchange CSV from other laser software -> an HDF5 session file."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from procedures.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
+from station import __version__
+
+NAME = "import"
+HELP = "convert an interchange CSV (leg, run, direction, target_mm, error_um, ...) to a session file"
+DESCRIPTION = (
+    "Convert measurements in the interchange CSV format to an HDF5 session file. Required columns: "
+    f"{', '.join(REQUIRED_COLUMNS)}; optional: {', '.join(OPTIONAL_COLUMNS)} (a missing optional column "
+    "means 'not measured'). The whole file is checked first; on any problem nothing is written."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("csv", metavar="FILE.csv", help="interchange CSV to read")
+    p.add_argument("--out", required=True, metavar="FILE.h5", help="session file to write")
+    p.add_argument("--operator", default="", help="operator name stored in the session")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+
+
+def run(args) -> int:
+    session = import_csv(Path(args.csv), Path(args.out), operator=args.operator, software_version=__version__,
+                         overwrite=args.force)
+    pts = session.points
+    legs = ", ".join(str(leg) for leg in session.legs)
+    runs = len({(int(r["leg"]), int(r["run"])) for r in pts[["leg", "run"]]})
+    optional = session.plan.get("optional_columns") or []
+    print(f"imported {len(pts)} points (legs {legs}; {runs} runs) from {args.csv}")
+    print(f"optional columns: {', '.join(optional) if optional else 'none (environment unknown)'}")
+    print(f"session written: {args.out} (sha256 {session.sha256[:16]}...)")
+    return 0
