@@ -61,7 +61,7 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         nv = Path(cfg.sim.nv_path) if cfg.sim.nv_path else None
         sim = SimRig(time_scale=scale, seed=cfg.sim.seed, nv_path=nv, profile=profile).start()
         try:
-            axes = connect_axes(sim.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s)
+            axes = connect_axes(sim.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
             laser = SerialInterferometer(sim.laser_port, timeout_s=cfg.interferometer.timeout_s)
         except Exception:
             sim.stop()
