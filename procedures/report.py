@@ -50,7 +50,7 @@ def _lead_of(model: LegErrorModel, leg: int) -> float | None:
 
 def residual_spectrum(data: LegData, residual_um: np.ndarray, n_freq: int = 600) -> tuple[np.ndarray, np.ndarray]:
     """(wavelength_mm, amplitude_um) of sin + cos pairs fitted to the per-cell mean residual,
-    from the stroke length down to 2.5 target spacings (shorter waves alias)."""
+    from the stroke length down to 2.2 target spacings (shorter waves alias)."""
     keys = np.stack([data.position_mm, data.direction.astype(float)], 1)
     cells, ids = np.unique(keys, axis=0, return_inverse=True)
     ids = ids.ravel()
@@ -67,33 +67,22 @@ def residual_spectrum(data: LegData, residual_um: np.ndarray, n_freq: int = 600)
     return 1.0 / freqs, pair_amplitudes(xm, rm - rm.mean(), freqs)
 
 
-def _iso_figures(points: np.ndarray, leg: int, residual_points: np.ndarray | None) -> dict[str, Any] | None:
-    """ISO 230-2 figures from procedures.iso230 when that module offers them (optional)."""
-    try:
-        from procedures import iso230  # type: ignore[attr-defined]
-    except ImportError:
-        return None
-    func = getattr(iso230, "evaluate", None) or getattr(iso230, "iso230_2", None)
-    if func is None:
-        return None
-    try:
-        before = func(points[points["leg"] == leg])
-        after = func(residual_points[residual_points["leg"] == leg]) if residual_points is not None else None
-    except Exception:  # an optional extra must never sink the report
-        return None
+def _iso_figures(points: np.ndarray, leg: int, residual_points: np.ndarray) -> dict[str, Any]:
+    """ISO 230-2 values (um) of the leg before and after compensation (procedures.iso230)."""
+    from procedures import iso230
 
-    def as_dict(r):
-        if r is None:
-            return None
-        if hasattr(r, "to_dict"):
-            return r.to_dict()
-        if hasattr(r, "__dataclass_fields__"):
-            from dataclasses import asdict
+    before = iso230.evaluate_leg(points, leg)
+    after = iso230.evaluate_leg(residual_points, leg)
+    return {
+        "before": dict(before.values),
+        "after": dict(after.values),
+        "not_computed": dict(before.reasons),
+        "notes": list(before.notes),
+    }
 
-            return asdict(r)
-        return r if isinstance(r, dict) else None
 
-    return {"before": as_dict(before), "after": as_dict(after)}
+ISO_ROWS = (("E", "systematic deviation E"), ("M", "mean bidirectional range M"), ("A", "accuracy A"),
+            ("B", "reversal B"), ("R", "repeatability R"))
 
 
 def _json_safe(v: Any) -> Any:
@@ -307,6 +296,18 @@ def _markdown(s: dict[str, Any], title: str) -> str:
     lines.append("Range: max - min of all points; RMS before about the mean; reversal: mean error approaching "
                  "downwards minus upwards; noise floor: pooled pass-to-pass scatter at the same target and direction; "
                  "held-out RMS: each cycle scored by a model fitted without it (see docs/models.md).")
+    lines.append("")
+    lines.append("ISO 230-2 (um), before -> after compensation:")
+    lines.append("")
+    lines.append("| leg | " + " | ".join(label for _, label in ISO_ROWS) + " |")
+    lines.append("|---:|" + "---:|" * len(ISO_ROWS))
+    for r in s["legs"]:
+        iso = r["iso230_2"]
+        cells = [f"{_f(iso['before'].get(k))} -> {_f(iso['after'].get(k))}" for k, _ in ISO_ROWS]
+        lines.append(f"| {r['leg']} | " + " | ".join(cells) + " |")
+    for r in s["legs"]:
+        for note in r["iso230_2"]["notes"]:
+            lines.append(f"- leg {r['leg']}: {note}")
     lines.append("")
     lines.append("Terms:")
     for r in s["legs"]:

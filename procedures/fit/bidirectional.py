@@ -13,7 +13,8 @@ error(x, d) = trend(u) + reversal(u, d) + stroke harmonics(x) + lead harmonics(x
   the stroke centre. Fitted by least squares over the real positions, not assumed periodic, so a
   trend (in the polynomial) does not ring at the ends and irregular (ISO 230-2) spacing is fine;
 - lead harmonics: a sin + cos pair at lead / h, h = 1..H, phase origin at x = 0, when the screw
-  lead is known (and the targets are dense enough to see it: lead / h > 2.5 x spacing).
+  lead is known or found in the data (and the targets are dense enough to see it: lead / h >
+  2.2 x spacing).
 
 Size (deg, reversal degree, K, H) is chosen by leave-one-cycle-out cross-validation with the
 one-standard-error rule on paired fold differences: the smallest model whose CV error is within
@@ -36,9 +37,10 @@ from procedures.fit.model import FitStats, LegFit
 
 MAX_TREND_DEGREE = 3
 MAX_REVERSAL_DEGREE = 1
-MAX_FOURIER_TERMS = 16
+MAX_FOURIER_TERMS = 24
 MAX_LEAD_HARMONICS = 3
-MIN_POINTS_PER_WAVE = 2.5  # lead harmonics need lead/h > 2.5 x spacing (else aliased)
+MIN_POINTS_PER_WAVE = 2.2  # periodic terms need wavelength > 2.2 x spacing (Nyquist: 2)
+MIN_STROKE_WAVE_SPACINGS = 4.0  # stroke harmonics down to 4 target spacings
 
 
 @dataclass(frozen=True)
@@ -183,7 +185,7 @@ def detect_period_mm(data: LegData, shortest_stroke_wavelength_mm: float, base: 
 
     The residual of `base` (trend, reversal and all stroke harmonics) is averaged per cell
     (target, direction), and a sin + cos pair is fitted at each frequency between the shortest
-    stroke harmonic and 1/(2.5 x spacing). The strongest peak counts when its power exceeds
+    stroke harmonic and 1/(2.2 x spacing). The strongest peak counts when its power exceeds
     the white-noise expectation by ln(number of independent frequencies) + DETECT_MARGIN
     (false alarm below 1e-5 on noise).
     """
@@ -212,11 +214,14 @@ def detect_period_mm(data: LegData, shortest_stroke_wavelength_mm: float, base: 
         return None
     amp = pair_amplitudes(xm, rm, freqs)
     k = int(np.argmax(amp))
-    # refine around the peak on a fine grid
-    fine = np.linspace(freqs[max(k - 1, 0)], freqs[min(k + 1, freqs.size - 1)], 81)
-    amp_fine = pair_amplitudes(xm, rm, fine)
-    j = int(np.argmax(amp_fine))
-    peak_f, peak_a = float(fine[j]), float(amp_fine[j])
+    # refine around the peak: three rounds of a finer grid (resolution ~1e-7 of the frequency)
+    lo_f, hi_f = freqs[max(k - 1, 0)], freqs[min(k + 1, freqs.size - 1)]
+    for _ in range(3):
+        fine = np.linspace(lo_f, hi_f, 41)
+        amp_fine = pair_amplitudes(xm, rm, fine)
+        j = int(np.argmax(amp_fine))
+        peak_f, peak_a = float(fine[j]), float(amp_fine[j])
+        lo_f, hi_f = fine[max(j - 1, 0)], fine[min(j + 1, fine.size - 1)]
     sigma2 = float(np.mean(rm**2))
     n_indep = max(1.0, (f_hi - f_lo) * span)
     # amplitude^2 of a pair fitted to white noise of variance sigma2 ~ (4 sigma2 / n) * chi2_2 / 2
@@ -381,7 +386,8 @@ def fit_bidirectional_leg(
 
     # the largest model on offer
     n_targets = data.targets_mm().size
-    k_max = max(0, min(max_fourier_terms, (n_targets - 1) // 4))
+    k_max = max(0, min(max_fourier_terms, (n_targets - 1) // 4,
+                       int(span / (MIN_STROKE_WAVE_SPACINGS * spacing)) if spacing > 0 else 0))
     wavelengths = stroke_wavelengths_mm(span, k_max)
     h_max = 0
     r_max = MAX_REVERSAL_DEGREE if both_directions else -1

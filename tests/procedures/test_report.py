@@ -38,9 +38,12 @@ def test_report_files_and_summary(points, tmp_path):
         assert r["rms_after_um"] < r["rms_before_um"]
         assert r["reversal_um"] == pytest.approx(1.0, abs=0.1)
         assert r["noise_floor_um"] > 0 and r["model_heldout_rms_um"] > 0
+        iso = r["iso230_2"]  # procedures.iso230 before and after: the systematic part is gone
+        assert iso["after"]["E"] < 0.2 * iso["before"]["E"] and iso["after"]["B"] < 0.3 * iso["before"]["B"]
+        assert iso["before"]["B"] == pytest.approx(abs(r["reversal_um"]), abs=0.3)
     md = (tmp_path / "rep" / "summary.md").read_text()
-    assert "| leg | points |" in md and "s.h5" in md
-    assert md.count("\n| 1 |") == 1 and md.count("\n| 2 |") == 1
+    assert "| leg | points |" in md and "s.h5" in md and "ISO 230-2" in md
+    assert md.count("\n| 1 |") == 2 and md.count("\n| 2 |") == 2  # summary and ISO tables
 
 
 def test_report_with_a_model_from_another_recording(points, tmp_path):
