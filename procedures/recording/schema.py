@@ -87,8 +87,8 @@ META_ATTRS = ("plan", "station_config", "devices")
 OUTCOMES = ("completed", "aborted", "failed")
 """Values of the root `outcome` attribute once a session is finished."""
 
-POINTS_CHUNK_ROWS = 256  # ~28 kB per chunk: small rewrite per flush, few chunks per session
-FAULTS_CHUNK_ROWS = 64
+POINTS_CHUNK_ROWS = 32  # 3.5 kB: each flush rewrites the whole last chunk, so keep it about a page
+FAULTS_CHUNK_ROWS = 16
 UNWRITTEN_INDEX = -1
 """Fill value of `index`: a row whose index is -1 was allocated but never written (a kill
 between growing the dataset and writing the row). Readers drop such rows."""
