@@ -28,7 +28,7 @@ import numpy as np
 ISO_APPROACHES = 5  # per target and direction
 ISO_MIN_TARGETS = 5
 TARGET_TOLERANCE_MM = 0.001  # targets closer than this are the same position (1 um)
-OUTLIER_FACTOR = 6.0  # a run is flagged when it strays this many robust sigmas from the others
+OUTLIER_R_SHARE = 0.5  # a run is noted when R of its direction without it is below this share
 
 UNI = ("E", "A", "R")
 BI_NAMES = ("E", "M", "A", "B", "B_mean", "R")
@@ -147,30 +147,28 @@ def _match_reason(up: list[TargetStats], down: list[TargetStats]) -> str | None:
 
 
 def _outlier_notes(pts: np.ndarray) -> list[str]:
-    """Runs that stray far from the other approaches at the same targets (informative only)."""
-    resid = np.full(len(pts), np.nan)
-    for d in (1, -1):
-        sel = np.flatnonzero(pts["direction"] == d)
-        for g in _cluster_targets(pts["target_mm"][sel]):
-            idx = sel[g]
-            if len(idx) >= 3:
-                resid[idx] = pts["error_um"][idx] - np.median(pts["error_um"][idx])
-    finite = np.isfinite(resid)
-    if finite.sum() < 6:
-        return []
-    sigma = 1.4826 * float(np.median(np.abs(resid[finite])))  # robust scatter (MAD)
-    if sigma <= 0:
-        return []
+    """Runs that alone make up most of a direction's repeatability (informative only).
+
+    For each run, R of its direction is recomputed without it; when that more than halves R,
+    the run is far off the others (a disturbed cycle, a re-zeroed laser) and worth a look.
+    """
     notes = []
-    for run in np.unique(pts["run"][finite]):
-        r = finite & (pts["run"] == run)
-        worst = int(np.flatnonzero(r)[np.argmax(np.abs(resid[r]))])
-        if abs(resid[worst]) > OUTLIER_FACTOR * sigma:
-            notes.append(
-                f"run {int(run)} (direction {int(pts['direction'][worst]):+d}) is far off the other approaches: "
-                f"{resid[worst]:+.3g} um from their median at {_fmt_mm(float(pts['target_mm'][worst]))} mm "
-                f"(typical scatter {sigma:.3g} um); values include it, check that cycle"
-            )
+    for d, word in ((1, "up"), (-1, "down")):
+        sel = pts[pts["direction"] == d]
+        groups = _cluster_targets(sel["target_mm"])
+        if not groups or min(len(g) for g in groups) < 3:
+            continue  # without a run some target would keep fewer than 2 approaches
+        r_with = max(4 * float(np.std(sel["error_um"][g], ddof=1)) for g in groups)
+        for run in np.unique(sel["run"]):
+            keep = [g[sel["run"][g] != run] for g in groups]
+            if min(len(k) for k in keep) < 2:
+                continue
+            r_without = max(4 * float(np.std(sel["error_um"][k], ddof=1)) for k in keep)
+            if r_with > 0 and r_without < OUTLIER_R_SHARE * r_with:
+                notes.append(
+                    f"run {int(run)} (direction {d:+d}) is far off the other approaches: without it R_{word} would "
+                    f"be {r_without:.4g} um instead of {r_with:.4g} um; values include it, check that cycle"
+                )
     return notes
 
 

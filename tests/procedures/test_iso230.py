@@ -180,3 +180,18 @@ def test_json_layout(shared_data, tmp_path):
     assert all(isinstance(leg[n], float) for n in VALUE_NAMES)
     assert j["source"]["sha256"] == "ab" and j["units"] == "um"
     assert len(leg["targets"]) == 10 and {t["n"] for t in leg["targets"]} == {5}
+
+
+def test_a_run_that_alone_makes_the_repeatability_is_noted():
+    rng = np.random.default_rng(7)
+    targets = (-40.0, -13.0, 2.0, 21.0, 44.0)
+    spec = [(2 * j + (d == -1) + 1, d, t, 0.05 * t + rng.normal(0, 0.3)) for j in range(5) for d in (1, -1)
+            for t in targets]
+    clean = evaluate(_points(spec))[1]
+    assert not any("far off" in n for n in clean.notes), clean.notes
+    k = 3 * 10 + 5 + 2  # cycle 4 (j = 3), downward (run 8), third target: one reading far off
+    spec[k] = (*spec[k][:3], spec[k][3] + 25.0)
+    r = evaluate(_points(spec))[1]
+    far = [n for n in r.notes if "far off" in n]
+    assert len(far) == 1 and far[0].startswith("run 8 (direction -1)"), r.notes
+    assert r.values["R_down"] > 2 * clean.values["R_down"]  # the values still include the run
