@@ -161,6 +161,13 @@ def bidirectional_from_json(leg: int, stroke_mm, target_spacing_mm: float, stats
                                coef_um=np.array(m["coefficients_um"], dtype=float), selection=m.get("selection", {}))
 
 
+def _least_squares(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least-squares coefficients by QR (cheaper than the SVD of lstsq; the designs here are
+    well conditioned: the size search refuses condition numbers above 1e10 squared)."""
+    q, r = np.linalg.qr(X)
+    return np.linalg.solve(r, q.T @ y)
+
+
 # -- finding the screw lead in the data -----------------------------------------------------------
 
 DETECT_MARGIN = 12.0  # peak power over the noise expectation, on top of ln(independent freqs)
@@ -198,7 +205,7 @@ def detect_period_mm(data: LegData, shortest_stroke_wavelength_mm: float, base: 
     if f_hi <= f_lo:
         return None
     X = base.design(data.position_mm, data.direction)
-    coef, *_ = np.linalg.lstsq(X, data.error_um, rcond=None)
+    coef = _least_squares(X, data.error_um)
     resid = data.error_um - X @ coef
     keys = np.stack([data.position_mm, data.direction.astype(float)], 1)
     cells, ids = np.unique(keys, axis=0, return_inverse=True)
@@ -292,11 +299,22 @@ class _FoldGrams:
         (o == i: except i alone). The o != i entries serve the nested cross-validation; they
         stay inf unless `nested` (which needs at least three folds)."""
         F = self.n_folds
-        o_idx, i_idx = np.meshgrid(np.arange(F), np.arange(F), indexing="ij")
-        o_idx, i_idx = o_idx.ravel(), i_idx.ravel()
-        if not (nested and F >= 3):
-            o_idx = i_idx = np.arange(F)
-        drop_o = (o_idx != i_idx).astype(float)[None, :, None]
+        # training sets: all folds but {a} (a == b) or but {a, b}; {a, b} serves two scores
+        pairs = [(a, a) for a in range(F)]
+        if nested and F >= 3:
+            pairs += [(a, b) for a in range(F) for b in range(a + 1, F)]
+        ta = np.array([a for a, _ in pairs])
+        tb = np.array([b for _, b in pairs])
+        drop_b = (ta != tb).astype(float)
+        s_train, s_test, s_out = [], [], []  # score: which training set, which test fold, o index
+        for t, (a, b) in enumerate(pairs):
+            if a == b:
+                s_train.append(t), s_test.append(a), s_out.append(a)
+            else:
+                s_train += [t, t]
+                s_test += [b, a]
+                s_out += [a, b]
+        s_train, s_test, s_out = np.array(s_train), np.array(s_test), np.array(s_out)
         G_all = self.G.sum(axis=0)
         b_all = self.b.sum(axis=0)
         out = np.full((len(cands), F, F), np.inf)
@@ -307,15 +325,16 @@ class _FoldGrams:
             idx = np.stack([cands[m].columns for m in members])  # (n_c, p)
             rows, cols = idx[:, :, None], idx[:, None, :]
             G_tot = G_all[rows, cols]  # (n_c, p, p)
-            good = np.linalg.cond(G_tot) < self.MAX_COND
+            eig = np.linalg.eigvalsh(G_tot)  # symmetric: cheaper than the SVD behind np.linalg.cond
+            good = eig[:, 0] > eig[:, -1] / self.MAX_COND
             if not good.any():
                 continue
             members, idx, G_tot = members[good], idx[good], G_tot[good]
             rows, cols = idx[:, :, None], idx[:, None, :]
             Gs = np.moveaxis(self.G[:, rows, cols], 0, 1)  # (n_c, F, p, p)
             bs = np.moveaxis(self.b[:, idx], 0, 1)  # (n_c, F, p)
-            Gt = G_tot[:, None] - Gs[:, i_idx] - drop_o[..., None] * Gs[:, o_idx]
-            bt = b_all[idx][:, None] - bs[:, i_idx] - drop_o * bs[:, o_idx]
+            Gt = G_tot[:, None] - Gs[:, ta] - drop_b[None, :, None, None] * Gs[:, tb]
+            bt = b_all[idx][:, None] - bs[:, ta] - drop_b[None, :, None] * bs[:, tb]
             try:
                 beta = np.linalg.solve(Gt, bt[..., None])[..., 0]
                 ok = np.ones(Gt.shape[:2], dtype=bool)
@@ -329,12 +348,14 @@ class _FoldGrams:
                         ok[c_i, k_i] = True
                     except np.linalg.LinAlgError:
                         pass
-            bf, Gf = bs[:, i_idx], Gs[:, i_idx]
-            yy = self.yy[i_idx][None]
-            sse = yy - 2.0 * np.einsum("ckp,ckp->ck", beta, bf) + np.einsum("ckp,ckpq,ckq->ck", beta, Gf, beta)
-            # a negative sum of squares means the subtraction lost all precision: distrust it
-            sse = np.where(ok & (sse >= -1e-9 * yy), np.maximum(sse, 0.0), np.inf)
-            out[members[:, None], o_idx[None, :], i_idx[None, :]] = sse
+            for f in range(F):
+                sel = np.flatnonzero(s_test == f)
+                bsel = beta[:, s_train[sel]]  # (n_c, k, p)
+                sse = (self.yy[f] - 2.0 * np.einsum("ckp,cp->ck", bsel, bs[:, f])
+                       + np.einsum("ckp,cpq,ckq->ck", bsel, Gs[:, f], bsel))
+                # a negative sum of squares means the subtraction lost all precision: distrust it
+                sse = np.where(ok[:, s_train[sel]] & (sse >= -1e-9 * self.yy[f]), np.maximum(sse, 0.0), np.inf)
+                out[members[:, None], s_out[sel][None, :], f] = sse
         return out
 
 
@@ -473,7 +494,7 @@ def fit_bidirectional_leg(
     basis = Basis(full.center_mm, full.half_span_mm, c.trend_degree, c.reversal_degree,
                   full.wavelengths_mm[: c.fourier_terms], full.lead_mm if c.lead_harmonics else None,
                   c.lead_harmonics)
-    coef, *_ = np.linalg.lstsq(X[:, c.columns], y, rcond=None)
+    coef = _least_squares(X[:, c.columns], y)
     placeholder = FitStats(data.n_points, data.n_passes, data.n_cycles, data.dropped, 0, None, None, None,
                            float(np.ptp(y)), None)
     fit = BidirectionalLegFit(data.leg, (lo, hi), spacing, placeholder, basis=basis, coef_um=coef, selection=info)
