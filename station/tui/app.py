@@ -102,6 +102,7 @@ class StationApp(App):
         self._sweep_idle = threading.Event()
         self._sweep_idle.set()
         self._quit_after_sweep = False
+        self.replay_rig = None  # the replay devices of the running (or last) replay
         self.last_session: Path | None = None  # the newest recording made or opened here
         self.analysis = None  # results.Analysis: the session, model and ISO figures on show
         self.session_listeners: list[Callable[[Path], None]] = []
@@ -304,6 +305,48 @@ class StationApp(App):
             self._sweep_idle.set()
             self.post_message(SweepEnded(outcome, points, error))
 
+    def start_replay(self, source: Path, speed: float | None) -> bool:
+        """Replay `source` through the replay devices and the sweep procedure (station.commands.
+        replay.replay_sweep, the CLI's job), recording a new session; shown on the Sweep screen.
+        `speed`: None = as fast as possible, 1 = real time, N = N times faster."""
+        if self.sweep.active:
+            self.notify("A sweep is already running.", severity="warning")
+            return False
+        out = replay_output_path(self.cfg, source)
+        self.sweep = SweepState(out=out, label=f"replay of {source.name}", status="starting")
+        self.sweep_control = RunControl()
+        self._sweep_idle.clear()
+        self._replay_worker(source, speed, out, self.sweep_control)
+        return True
+
+    @work(thread=True, group="sweep", exit_on_error=False)
+    def _replay_worker(self, source: Path, speed: float | None, out: Path, control: RunControl) -> None:
+        outcome, points, error, note = "error", 0, "", ""
+        try:
+            from procedures.recording.reader import read_session
+            from station.commands.replay import compare_sessions, replay_sweep
+            from station.wiring import open_replay_rig
+
+            session = read_session(source)
+            if not session.plan:
+                raise ValueError(f"{source.name}: the session stores no sweep plan, so there is nothing to replay")
+            with open_replay_rig(source, speed, self.cfg) as rig:
+                self.replay_rig = rig  # tests look at its devices
+                result = replay_sweep(rig, session, out, self.cfg, sinks=[TuiBridge(self)], control=control)
+                mismatch = rig.sim.mismatch
+            outcome, points = result.outcome, result.points
+            if mismatch is not None:
+                error = describe(mismatch, "the replay met a request the recording does not hold")
+            elif not control.aborted:
+                cmp = compare_sessions(session, read_session(out))
+                note = ("identical to the recording" if cmp.identical
+                        else "differs from the recording: " + "; ".join(cmp.differences[:2]))
+        except Exception as exc:
+            error = describe(exc, "the replay stopped")
+        finally:
+            self._sweep_idle.set()
+            self.post_message(SweepEnded(outcome, points, error, note))
+
     def on_sweep_event(self, message: SweepEvent) -> None:
         self.sweep.apply(message.event)
         from procedures import events as ev
@@ -319,13 +362,15 @@ class StationApp(App):
         if s.active:  # no SweepFinished came: the run broke off with an exception
             s.status = "error" if message.error else message.outcome
             s.reason = message.error
-            s.version += 1
+        s.note = message.note
+        s.version += 1
         if message.error:
             self.notify(message.error, title="Sweep", severity="error", timeout=15)
         else:
             note = {"completed": "completed. Results: F3.", "aborted": "aborted; drives stopped, recording kept.",
                     "failed": f"failed: {s.reason}"}.get(s.status, s.status)
-            self.notify(f"Sweep {note} ({s.done} of {s.total} points)", title="Sweep",
+            extra = f"; {s.note}" if s.note else ""
+            self.notify(f"{s.label.capitalize()} {note} ({s.done} of {s.total} points){extra}", title="Sweep",
                         severity="information" if s.status == "completed" else "warning", timeout=8)
         if s.out is not None and s.out.exists():
             self.set_session(s.out)
@@ -389,6 +434,16 @@ class StationApp(App):
 
 class _ActionRefused(Exception):
     pass
+
+
+def replay_output_path(cfg: StationConfig, source: Path) -> Path:
+    """runs/NAME.replay.h5 (then -2, -3, ...): a replay never overwrites a session."""
+    base = Path(cfg.recordings_dir) / f"{source.stem}.replay.h5"
+    out, n = base, 1
+    while out.exists() or out.resolve() == source.resolve():
+        n += 1
+        out = base.with_name(f"{source.stem}.replay-{n}.h5")
+    return out
 
 
 def default_session_path(cfg: StationConfig, legs: tuple[int, ...]) -> Path:

@@ -25,11 +25,12 @@ class SweepEnded(Message):
     """The sweep worker returned. `error` is a sentence for the operator when the run could not
     start or broke off (a driver error, a plan outside the soft limits), else ""."""
 
-    def __init__(self, outcome: str, points: int, error: str = "") -> None:
+    def __init__(self, outcome: str, points: int, error: str = "", note: str = "") -> None:
         super().__init__()
         self.outcome = outcome
         self.points = points
         self.error = error
+        self.note = note  # e.g. a replay's comparison with its recording
 
 
 class TuiBridge:

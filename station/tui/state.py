@@ -41,6 +41,8 @@ class SweepState:
     ("completed" / "aborted" / "failed" / "error")."""
 
     out: Path | None = None
+    label: str = "sweep"  # "sweep", or "replay of NAME"
+    note: str = ""  # said when it ended (a replay's comparison with its recording)
     legs: tuple[int, ...] = ()
     plan_kind: str = ""
     status: str = "idle"

@@ -43,8 +43,8 @@ class ReplayScreen(StationScreen):
             yield SessionPicker(lambda: ["recordings", self.app.cfg.recordings_dir], id="replay-picker")
             with Horizontal(classes="controls"):
                 yield Label("Speed ")
-                yield Input("10", id="replay-speed", type="number", compact=True,
-                            tooltip="times faster than recorded; 0 = as fast as possible")
+                yield Input("max", id="replay-speed", compact=True,
+                            tooltip="1 = real time, N = N times faster, max = as fast as possible")
                 yield Button("Replay (r)", id="replay-run", compact=True, variant="success")
                 yield Button("Open in Results (o)", id="replay-results", compact=True)
                 yield Button("Diagnose (d)", id="replay-diagnose", compact=True)
@@ -124,20 +124,29 @@ class ReplayScreen(StationScreen):
 
     async def action_open_results(self) -> None:
         if self._need_session():
+            self.app.set_session(self.session_path)  # the session shown here, not the last one made
             await self.app.switch_mode("results")
             self.app.screen.action_fit()
 
     async def action_open_diagnosis(self) -> None:
         if self._need_session():
+            self.app.set_session(self.session_path)
             await self.app.switch_mode("diagnosis")
             self.app.screen.action_diagnose()
 
-    def action_replay(self) -> None:
+    async def action_replay(self) -> None:
         if not self._need_session():
             return
         if capabilities.find("replay") is None:
             self.notify(capabilities.missing_text("replay", "Replay through the drivers"),
                         title="Replay", severity="warning", timeout=12)
             return
-        self.notify("Replay devices are installed but not wired into the UI in this build; "
-                    "use `station replay FILE.h5`.", severity="warning", timeout=10)
+        from station.commands.replay import parse_speed
+
+        try:
+            speed = parse_speed(self.query_one("#replay-speed", Input).value)
+        except Exception as exc:  # argparse.ArgumentTypeError: the message says what to type
+            self.notify(f"Speed {exc}", title="Replay", severity="error", timeout=10)
+            return
+        if self.app.start_replay(self.session_path, speed):
+            await self.app.switch_mode("sweep")

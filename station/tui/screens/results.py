@@ -52,26 +52,12 @@ class AnalysisFailed(Message):
 
 
 def iso_figures(iso: Any, leg: int) -> dict[str, float | None]:
-    """A, E, M, B, R (um) of one leg from the ISO 230-2 evaluation, whatever its shape
-    (the evaluation module reports per leg; missing figures are None, never NaN)."""
-    if iso is None:
+    """A, E, M, B, R (um, both directions) of one leg from procedures.iso230.evaluate's result;
+    a value the standard's definitions cannot give from this data is None (shown as n/a)."""
+    if not iso or leg not in iso:
         return {}
-    per_leg = iso.get(leg) if isinstance(iso, dict) else getattr(iso, "legs", {}).get(leg)
-    if per_leg is None and isinstance(iso, dict):
-        per_leg = iso.get(str(leg))
-    if per_leg is None:
-        return {}
-    out = {}
-    for key, names in {"A": ("A_um", "accuracy_um", "A"), "E": ("E_um", "systematic_um", "E"),
-                       "M": ("M_um", "range_mean_um", "M"), "B": ("B_um", "reversal_um", "B"),
-                       "R": ("R_um", "repeatability_um", "R")}.items():
-        value = None
-        for name in names:
-            value = per_leg.get(name) if isinstance(per_leg, dict) else getattr(per_leg, name, None)
-            if value is not None:
-                break
-        out[key] = None if value is None or not np.isfinite(value) else float(value)
-    return out
+    values = iso[leg].values
+    return {k: values.get(k) for k in "AEMBR"}
 
 
 def _fmt(value: float | None, spec: str = ".3f") -> str:
@@ -232,6 +218,12 @@ class ResultsScreen(StationScreen):
         text = (f"[b]{name}[/b]  {s.outcome}, {len(s.points)} points, legs {s.legs}   method [b]{a.method}[/b]")
         if a.iso_note:
             text += f"\n[yellow]{a.iso_note}[/yellow]"
+        extra = []
+        for leg, r in (a.iso or {}).items():
+            extra += [f"[yellow]leg {leg}:[/yellow] {note}" for note in r.notes]
+            extra += [f"[yellow]leg {leg}: not computed:[/yellow] {why}" for why in sorted(set(r.reasons.values()))]
+        if extra:  # ISO 230-2 caveats (too few approaches, a stray run, ...): the first few
+            text += "\n" + "\n".join(extra[:3]) + (f"\n… and {len(extra) - 3} more" if len(extra) > 3 else "")
         status.update(text)
         for leg, lf in a.model.legs.items():
             st = lf.stats

@@ -206,7 +206,7 @@ class SweepScreen(StationScreen):
         else:
             colour = {"completed": "green", "aborted": "yellow", "failed": "red", "error": "red",
                       "paused": "yellow", "aborting": "yellow"}.get(s.status, "cyan")
-            line = f"[{colour} b]{s.status}[/{colour} b]  {s.done}/{s.total} points"
+            line = f"{s.label}: [{colour} b]{s.status}[/{colour} b]  {s.done}/{s.total} points"
             r = s.last_record
             if r:
                 line += (f"   leg {int(r['leg'])} run {int(r['run'])} {r['target_mm']:+.3f} mm "
@@ -218,6 +218,8 @@ class SweepScreen(StationScreen):
                     line += f"\nrecording: {s.out}"
             if s.reason and s.status not in ("running", "paused"):
                 line += f"\n{s.reason}"
+            if s.note:
+                line += f"\n{s.note}"
             status.update(line)
 
         env = self.query_one("#sweep-env", Static)

@@ -49,8 +49,16 @@ async def _results(path, cfg, size, wait_until, notes):
             assert cells[0] == str(leg) and cells[1] == str(lf.stats.n_points) and cells[2] == "3"
             assert cells[3] == f"{lf.stats.noise_floor_um:.3f}"
             assert cells[4] == f"{lf.stats.heldout_rms_um:.3f}"
-        if capabilities.find("iso230") is None:
+        evaluate = capabilities.find("iso230")
+        if evaluate is None:
             assert "ISO 230-2 evaluation not available yet" in str(app.screen.query_one("#results-status", Static).render())
+        else:  # A, E, M, B, R of both directions, as procedures.iso230 computes them
+            iso = evaluate(points)
+            for row, leg in enumerate(expected.legs):
+                shown = table.get_row_at(row)[7:12]
+                want = [iso[leg].values[k] for k in "AEMBR"]
+                assert shown == [("n/a" if v is None else f"{v:.3f}") for v in want]
+                assert all(v is not None for v in want)  # 3 cycles, same targets both ways: all computable
         # the model plot shows measured points of both directions and the two model curves
         mplot = app.screen.query_one("#model-plot", XYPlot)
         assert mplot.drawn_series == ["measured +1", "model +1", "measured −1", "model −1"]
@@ -146,7 +154,7 @@ async def _diagnosis(path, cfg, size, wait_until):
         await wait_until(pilot, lambda: app.screen.plot_leg == "2", what="the next leg")
 
 
-def test_replay_screen_reads_a_session_and_opens_it_in_results(recorded_session, cfg, size, wait_until, notes):
+def test_replay_a_session_through_the_sweep_screen(recorded_session, cfg, size, wait_until, notes):
     asyncio.run(_replay(recorded_session, cfg, size, wait_until, notes))
 
 
@@ -158,10 +166,23 @@ async def _replay(path, cfg, size, wait_until, notes):
         info = str(app.screen.query_one("#replay-info", Static).render())
         s = read_session(path)
         assert f"{len(s.points)} points on legs [1, 2]" in info and "outcome completed" in info
-        if capabilities.find("replay") is None:
-            await pilot.press("r")
-            await wait_until(pilot, lambda: any("Replay through the drivers is not available yet" in n for n in notes(app)),
-                             what="the notice")
+        assert capabilities.find("replay") is not None, "replay devices are part of this build"
+        # replay as fast as possible: the same sweep screen shows it, and it matches the recording
+        await pilot.press("r")
+        await wait_until(pilot, lambda: app.screen.MODE == "sweep" and app.sweep.label == "replay of two-legs.h5",
+                         what="the replay on the Sweep screen")
+        await wait_until(pilot, lambda: app.sweep.status == "completed" and app.sweep.note, 60, "the replay to finish")
+        assert app.sweep.note == "identical to the recording"
+        assert app.sweep.done == len(s.points)
+        plot = app.screen.query_one("#sweep-plot", XYPlot)
+        await wait_until(pilot, lambda: plot.drawn_points == int(np.sum(s.points["leg"] == 2)), what="the plot")
+        replayed = read_session(app.sweep.out)
+        assert replayed.attrs["rig"] == "replay" and len(replayed.points) == len(s.points)
+        np.testing.assert_array_equal(replayed.points["error_um"], s.points["error_um"])
+        assert app.last_session == app.sweep.out
+        # the replayed session opens in Results like any other
+        await pilot.press("f5")
+        app.screen.query_one("#session-path", Input).value = str(path)
         await pilot.press("o")
         await wait_until(pilot, lambda: app.screen.MODE == "results" and app.analysis is not None, 60, "the fit")
         assert app.analysis.path == path

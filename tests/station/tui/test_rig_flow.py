@@ -99,8 +99,9 @@ async def _beam_break(cfg, size, connected, wait_until, notes):
         await wait_until(pilot, lambda: app.sweep.status == "failed", 60, "the sweep to give up")
         assert any("beam_break (gave up)" == n.title for n in app._notifications)
         assert app.sweep.faults and app.sweep.faults[-1].gave_up and app.sweep.faults[-1].kind == "beam_break"
-        status = str(app.screen.query_one("#sweep-status", Static).render())
-        assert "failed" in status and "beam" in status.lower()
+        status = app.screen.query_one("#sweep-status", Static)
+        await wait_until(pilot, lambda: "failed" in str(status.render()), what="the status line")
+        assert "beam" in str(status.render()).lower()
         st = app.rig.axes[5].status()
         assert not st.moving and not st.enabled
         s = read_session(app.sweep.out)
