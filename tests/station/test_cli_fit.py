@@ -108,3 +108,18 @@ def test_report(session, model_file, tmp_path, capsys):
         p.name for p in out.iterdir()}
     text = capsys.readouterr().out
     assert "leg 1: range" in text and "leg 2: range" in text
+
+
+def test_table_with_a_missing_profile_is_one_clear_line(model_file, tmp_path, capsys):
+    csv = tmp_path / "t.csv"
+    assert main(["table", str(model_file), "--out", str(csv), "--profile", str(tmp_path / "nope.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "nope.toml" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not csv.exists()
+
+
+def test_fit_of_a_csv_file_says_what_to_do(tmp_path, capsys):
+    f = tmp_path / "x.csv"
+    f.write_text("leg,run,direction,target_mm,error_um\n1,1,1,0.0,0.1\n")
+    assert main(["fit", str(f), "--out", str(tmp_path / "m.json")]) == 2
+    assert "station import" in capsys.readouterr().err
