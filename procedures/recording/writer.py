@@ -422,7 +422,13 @@ class SessionWriter:
         if outcome not in OUTCOMES:
             raise ValueError(f"outcome must be one of {', '.join(OUTCOMES)}, got {outcome!r}")
         self.close()
-        with h5py.File(self.path, "a", libver=LIBVER) as f:
+        try:
+            f = h5py.File(self.path, "a", libver=LIBVER)
+        except BlockingIOError:
+            # a live reader (SWMR, e.g. the UI's plot) holds a shared lock: the two attributes
+            # are written anyway; the reader only follows /points, which does not change
+            f = h5py.File(self.path, "a", libver=LIBVER, locking=False)
+        with f:
             f.attrs["ended_utc"] = utc_now()
             f.attrs["outcome"] = outcome
         _fsync_path(self.path)

@@ -204,8 +204,11 @@ def test_second_process_reads_points_while_the_file_grows(tmp_path):
                 assert new["index"].tolist() == [i] and new["error_um"][0] == i / 10
             mid = read_session(path)  # a full read of a file still being written works too
             assert len(mid.points) == 25 and mid.outcome == "incomplete"
-        proc.stdin.close()
-        assert proc.stdout.readline().strip() == "finished"
+            proc.stdin.write("25\n")
+            proc.stdin.close()  # the writer finishes while the live reader still has the file open
+            assert int(proc.stdout.readline()) == 25
+            assert proc.stdout.readline().strip() == "finished"
+            assert live.poll()["index"].tolist() == [25]
     finally:
         proc.kill() if proc.poll() is None else None
         proc.wait(timeout=30)
