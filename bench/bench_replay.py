@@ -1,0 +1,65 @@
+"""Bench: replay of the six-leg sample calibration at full speed, recorded again.
+
+The replay goes through everything a live sweep does: Modbus TCP on 127.0.0.1 to the replay
+drives, the serial client over a pty to the replay interferometer, the sweep procedure, the
+runner and the HDF5 recorder (flush per point). Prints points per second, the wall time, the
+protocol transactions per point, and whether the new session equals the recording.
+
+    .venv/bin/python bench/bench_replay.py [--session recordings/calibration-6legs.h5] [--speed max]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from procedures.recording.reader import read_session  # noqa: E402
+from station.commands.replay import compare_sessions, parse_speed, replay_sweep  # noqa: E402
+from station.config import StationConfig  # noqa: E402
+from station.wiring import open_replay_rig  # noqa: E402
+
+DEFAULT = Path(__file__).resolve().parents[1] / "recordings" / "calibration-6legs.h5"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--session", type=Path, default=DEFAULT, help="session to replay (default: the six-leg sample)")
+    ap.add_argument("--speed", type=parse_speed, default=None, help="1, N or max (default max)")
+    args = ap.parse_args()
+    cfg = StationConfig(operator="bench")
+    t_read = time.perf_counter()
+    session = read_session(args.session)
+    t_read = time.perf_counter() - t_read
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "replay.h5"
+        t_open = time.perf_counter()
+        with open_replay_rig(args.session, args.speed, cfg) as rig:
+            t_open = time.perf_counter() - t_open
+            bus = next(iter(rig.axes.values())).bus
+            tx0, lx0 = bus.transactions, rig.laser.transactions
+            t0 = time.perf_counter()
+            result = replay_sweep(rig, session, out, cfg)
+            wall = time.perf_counter() - t0
+            tx, lx = bus.transactions - tx0, rig.laser.transactions - lx0
+            mismatch = rig.sim.mismatch
+        cmp = compare_sessions(session, read_session(out))
+        size_mb = out.stat().st_size / 1e6
+    n = result.points
+    recorded_h = float(session.points["time_s"].max()) / 3600.0
+    print(f"replay of {args.session.name}: {n} points, {len(session.plan.get('legs', []))} legs, "
+          f"{recorded_h:.2f} h recorded, speed {'max' if args.speed is None else args.speed}")
+    print(f"  {n / wall:8.1f} points/s   ({wall:.1f} s wall, {wall / n * 1000:.3f} ms per point; "
+          f"{recorded_h * 3600 / wall:.0f}x real time)")
+    print(f"  open: read {t_read:.2f} s, rig + clients {t_open:.2f} s; new session {size_mb:.2f} MB")
+    print(f"  per point: {tx / n:.2f} Modbus transactions, {lx / n:.2f} interferometer exchanges")
+    print(f"  outcome {result.outcome}; mismatch {mismatch}; identical to the recording: {cmp.identical}"
+          + ("" if cmp.identical else f" ({'; '.join(cmp.differences)})"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,178 @@
+"""`station recordings`: make the sample sessions of recordings/ on the simulated rig.
+
+Deterministic: the simulated rig runs on its virtual clock with fixed seeds, so the points of a
+regenerated file are the same as those of the committed one (only session ids and UTC times
+differ). `make recordings` runs `station recordings --out recordings`; recordings/README.md
+lists the files.
+
+- calibration-6legs.h5: the seed paper's plan (361 targets at 0.5 mm over +/-90 mm, six
+  bidirectional cycles, six legs: 25 992 points) on legs with every plant effect switched on,
+  axial load changing between cycles and the room temperature swinging; one transient beam
+  break (leg 3) and one drive fault (leg 5) on the way, both retried.
+- verification-6legs.h5: after fitting the default model to the calibration, making a
+  compensation table per leg and loading it into the simulated drives (write_table +
+  activate_table over Modbus), an ISO 230-2 test of all six legs on the same rig.
+- fault-beam-break.h5: an ISO 230-2 test of legs 1-2, cut short by a beam break on leg 2 that
+  does not clear (injected after point index FAULT_AFTER_INDEX): outcome "failed".
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+from procedures import events as ev
+from procedures.errors import InputError
+from procedures.plans import iso230_plan, paper_plan
+from procedures.runner import CallbackSink
+from station.config import StationConfig
+
+NAME = "recordings"
+HELP = "regenerate the sample sessions of recordings/ on the simulated rig (deterministic)"
+
+SAMPLES = ("calibration", "verification", "fault")
+FILES = {"calibration": "calibration-6legs.h5", "verification": "verification-6legs.h5", "fault": "fault-beam-break.h5"}
+SEED = 1
+LOADS_N = (150.0, 150.0, 450.0, 450.0)  # axial load per pass: changes between bidirectional cycles
+AMBIENT_SWING_K = 0.3
+AMBIENT_PERIOD_S = 2.0 * 3600.0
+CAL_BEAM_BREAK = (3, 1000)  # (leg, point of that leg after which its beam is interrupted once)
+CAL_DRIVE_FAULT = (5, 2000)  # (leg, point of that leg after which its drive faults once)
+FAULT_LEG = 2
+FAULT_AFTER_INDEX = 157  # leg 2 run 5 (third upward pass), its 4th target is never measured
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", default="recordings", metavar="DIR", help="directory to write (default recordings)")
+    p.add_argument("--only", metavar="NAMES", help=f"comma-separated subset of {', '.join(SAMPLES)} "
+                   "(verification needs calibration in the same run)")
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+def plant_configs(seed: int = SEED):
+    """The six legs of the samples: the simulator's default legs with the load and the room
+    temperature changing during the session, so that thermal, load and drift effects are all
+    present and separable."""
+    from drivers.sim.plant import PlantConfig, default_leg_configs
+
+    base = replace(PlantConfig(), load_per_pass_n=LOADS_N, ambient_swing_k=AMBIENT_SWING_K,
+                   ambient_period_s=AMBIENT_PERIOD_S)
+    return default_leg_configs(seed, 6, base)
+
+
+def open_sample_rig(seed: int = SEED):
+    """The simulated rig of the samples, wired like `open_rig` does (real Modbus TCP and pty)."""
+    from drivers.interferometer.client import SerialInterferometer
+    from drivers.modbus.client import connect_axes
+    from drivers.sim.rig import SimRig
+    from station.wiring import Rig
+
+    sim = SimRig(time_scale=0.0, seed=seed, configs=plant_configs(seed)).start()
+    try:
+        axes = connect_axes(sim.drive_url, (1, 2, 3, 4, 5, 6), sim.profile)
+        laser = SerialInterferometer(sim.laser_port)
+    except Exception:
+        sim.stop()
+        raise
+    return Rig(axes, laser, sim.clock, "sim", f"simulated rig (seed {seed}) for the sample recordings", sim.profile,
+               sim, [sim.stop])
+
+
+def _injector(actions: dict[int, Callable[[], None]], clear_beam: Callable[[ev.Fault], None] | None = None):
+    """A sink calling actions[index] once point `index` is recorded (so the fault hits the next
+    point), and `clear_beam` on a beam-break fault."""
+
+    def on_event(e: ev.Event) -> None:
+        if isinstance(e, ev.PointMeasured):
+            action = actions.pop(int(e.record["index"]), None)
+            if action:
+                action()
+        elif isinstance(e, ev.Fault) and clear_beam is not None and e.kind == "beam_break":
+            clear_beam(e)
+
+    return CallbackSink(on_event)
+
+
+def make_calibration(rig, out: Path, cfg: StationConfig):
+    from station.jobs import run_sweep
+
+    plan = paper_plan((1, 2, 3, 4, 5, 6))
+    beam_leg, beam_k = CAL_BEAM_BREAK
+    drive_leg, drive_k = CAL_DRIVE_FAULT
+    beam_after = plan.legs.index(beam_leg) * plan.points_per_leg + beam_k  # plan index
+    drive_after = plan.legs.index(drive_leg) * plan.points_per_leg + drive_k
+    sim = rig.sim
+    sink = _injector(
+        {beam_after: lambda: sim.laser_server.set_beam_break(beam_leg, True),
+         drive_after: lambda: sim.drive_server.inject_fault(drive_leg, "overcurrent")},
+        clear_beam=lambda f: sim.laser_server.set_beam_break(beam_leg, False),  # transient: one bad reading
+    )
+    return run_sweep(rig, plan, out, cfg, sinks=[sink])
+
+
+def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> list[str]:
+    """Fit, tabulate and load the tables into the drives, then an ISO 230-2 test. Returns lines
+    describing what was loaded."""
+    from procedures.fit import fit
+    from procedures.recording.reader import read_session
+    from procedures.table import TableLimits, make_table
+    from station.jobs import run_sweep
+
+    session = read_session(calibration)
+    model = fit(session.points, "default", source={"path": str(calibration), "sha256": session.sha256})
+    layout = rig.profile.table
+    table = make_table(model, limits=TableLimits(max_points=layout.max_points, max_correction_um=layout.max_correction_um))
+    lines = []
+    for leg, leg_table in table.legs.items():
+        axis = rig.axes[leg]
+        bank = 1 - axis.active_bank()
+        axis.write_table(bank, leg_table.to_bank())
+        axis.activate_table(bank)
+        lines.append(f"leg {leg}: table of {leg_table.point_count} points, step {leg_table.step_mm:g} mm, in bank {bank} (active)")
+    plan = iso230_plan((1, 2, 3, 4, 5, 6))
+    result = run_sweep(rig, plan, out, cfg)
+    return lines + [f"verification: {result.outcome}, {result.points} points"]
+
+
+def make_fault(rig, out: Path, cfg: StationConfig):
+    from station.jobs import run_sweep
+
+    plan = iso230_plan((1, FAULT_LEG))
+    sim = rig.sim
+    sink = _injector({FAULT_AFTER_INDEX: lambda: sim.laser_server.set_beam_break(FAULT_LEG, True)})
+    return run_sweep(rig, plan, out, cfg, sinks=[sink])
+
+
+def run(args) -> int:
+    wanted = SAMPLES if not args.only else tuple(x.strip() for x in args.only.split(",") if x.strip())
+    unknown = [w for w in wanted if w not in SAMPLES]
+    if unknown:
+        raise InputError(f"--only: unknown sample(s) {unknown}; choose from {', '.join(SAMPLES)}")
+    if "verification" in wanted and "calibration" not in wanted:
+        raise InputError("--only verification needs calibration too (the tables are fitted to it on the same rig)")
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    targets = {name: out_dir / FILES[name] for name in wanted}
+    for path in targets.values():
+        if path.exists():
+            if not args.force:
+                raise InputError(f"{path} exists; add --force to regenerate it")
+            path.unlink()
+    cfg = StationConfig(operator="station recordings")
+    if "calibration" in wanted:
+        with open_sample_rig() as rig:
+            res = make_calibration(rig, targets["calibration"], cfg)
+            print(f"{targets['calibration']}: {res.outcome}, {res.points} points")
+            if "verification" in wanted:
+                for line in make_verification(rig, targets["calibration"], targets["verification"], cfg):
+                    print(f"  {line}")
+                print(f"{targets['verification']}: written")
+    if "fault" in wanted:
+        with open_sample_rig() as rig:
+            res = make_fault(rig, targets["fault"], cfg)
+            print(f"{targets['fault']}: {res.outcome}, {res.points} points ({res.reason})")
+    for path in targets.values():
+        print(f"  {path.name}: {path.stat().st_size / 1e6:.2f} MB")
+    return 0
