@@ -14,6 +14,7 @@ ever risking what is already recorded.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 from collections.abc import Mapping
@@ -230,6 +231,39 @@ def _replace(tmp: Path, path: Path) -> None:
     _fsync_path(path.parent)  # make the rename itself durable
 
 
+class SessionLock:
+    """An exclusive advisory lock on a hidden file beside the session (`.NAME.lock`).
+
+    HDF5 drops its own file lock once a file is in SWMR mode, so without this a second
+    process could resume (rebuild and rename) a session another process is still appending
+    to, and the points of the first would go to a file that no longer has a name. The kernel
+    releases the lock when its holder dies, so a killed session can be resumed at once.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.lock_path = path.with_name(f".{path.name}.lock")
+        fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            raise InputError(
+                f"{path}: another station process (pid {holder}) is writing this session; "
+                "wait for it to finish or stop it first"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        self._fd: int | None = fd
+
+    def release(self) -> None:
+        if self._fd is None:
+            return
+        self.lock_path.unlink(missing_ok=True)
+        os.close(self._fd)
+        self._fd = None
+
+
 class SessionWriter:
     """Appends points and faults to one session file; see the module docstring.
 
@@ -240,9 +274,11 @@ class SessionWriter:
     Single-threaded: call it from one thread.
     """
 
-    def __init__(self, path: Path, points_index: np.ndarray, faults_written: int, fsync: bool) -> None:
+    def __init__(self, path: Path, points_index: np.ndarray, faults_written: int, fsync: bool,
+                 lock: SessionLock) -> None:
         # use create() or resume()
         self.path = path
+        self._lock = lock
         self._fsync = fsync
         self._indices: set[int] = {int(i) for i in points_index}
         self._points_written = len(points_index)
@@ -257,6 +293,7 @@ class SessionWriter:
             self._f.swmr_mode = True
         except BaseException:
             self._f.close()
+            lock.release()
             raise
         # Pass the file's own types to H5Dwrite: h5py would otherwise rebuild the compound type
         # on every call (about 0.4 ms per row).
@@ -310,13 +347,19 @@ class SessionWriter:
             "station_config": to_json_text("station_config", station_config),
             "devices": to_json_text("devices", devices),
         }
+        lock = SessionLock(path)
         tmp = _temp_path(path, "new")
         try:
+            if path.exists() and not overwrite:  # again, now that no other writer can race us
+                raise InputError(f"{path}: file exists; choose another --out, or resume the session it holds")
             build_session_file(tmp, root, meta)
             _replace(tmp, path)
+        except BaseException:
+            lock.release()
+            raise
         finally:
             tmp.unlink(missing_ok=True)
-        return cls(path, np.empty(0, np.int64), 0, fsync)
+        return cls(path, np.empty(0, np.int64), 0, fsync, lock)
 
     @classmethod
     def resume(cls, path: str | os.PathLike, *, fsync: bool = False, resumed_utc: str | None = None) -> "SessionWriter":
@@ -331,27 +374,33 @@ class SessionWriter:
         from procedures.recording.reader import open_h5, read_session  # reader never imports writer
 
         path = Path(path)
-        session = read_session(path)
-        if session.schema_version != SCHEMA_VERSION:
-            raise SchemaError(
-                f"{path}: schema version {session.schema_version} differs from this station's "
-                f"{SCHEMA_VERSION}; resume it with the station version that recorded it"
-            )
-        for stale in path.parent.glob(f".{path.name}.resume-*.tmp"):
-            stale.unlink(missing_ok=True)  # left by a crash during an earlier resume
-        with open_h5(path) as src:
-            root = dict(src.attrs.items())
-            meta = dict(src["meta"].attrs.items())
-            resumes = session.resumed_utc + [resumed_utc or utc_now()]
-            root.update(ended_utc="", outcome="", resumed_utc=json.dumps(resumes))
-            tmp = _temp_path(path, "resume")
-            try:
-                build_session_file(tmp, root, meta, session.points, session.faults, copy_from=src)
-            except BaseException:
-                tmp.unlink(missing_ok=True)
-                raise
-        _replace(tmp, path)
-        return cls(path, session.points["index"], len(session.faults), fsync)
+        read_session(path)  # clear errors (missing file, schema) before taking the lock
+        lock = SessionLock(path)
+        try:
+            session = read_session(path)  # again: no other writer can append from here on
+            if session.schema_version != SCHEMA_VERSION:
+                raise SchemaError(
+                    f"{path}: schema version {session.schema_version} differs from this station's "
+                    f"{SCHEMA_VERSION}; resume it with the station version that recorded it"
+                )
+            for stale in path.parent.glob(f".{path.name}.resume-*.tmp"):
+                stale.unlink(missing_ok=True)  # left by a crash during an earlier resume
+            with open_h5(path) as src:
+                root = dict(src.attrs.items())
+                meta = dict(src["meta"].attrs.items())
+                resumes = session.resumed_utc + [resumed_utc or utc_now()]
+                root.update(ended_utc="", outcome="", resumed_utc=json.dumps(resumes))
+                tmp = _temp_path(path, "resume")
+                try:
+                    build_session_file(tmp, root, meta, session.points, session.faults, copy_from=src)
+                except BaseException:
+                    tmp.unlink(missing_ok=True)
+                    raise
+            _replace(tmp, path)
+        except BaseException:
+            lock.release()
+            raise
+        return cls(path, session.points["index"], len(session.faults), fsync, lock)
 
     # -- writing ---------------------------------------------------------------------------
 
@@ -421,21 +470,28 @@ class SessionWriter:
         """
         if outcome not in OUTCOMES:
             raise ValueError(f"outcome must be one of {', '.join(OUTCOMES)}, got {outcome!r}")
-        self.close()
+        self._close_file()
         try:
-            f = h5py.File(self.path, "a", libver=LIBVER)
-        except BlockingIOError:
-            # a live reader (SWMR, e.g. the UI's plot) holds a shared lock: the two attributes
-            # are written anyway; the reader only follows /points, which does not change
-            f = h5py.File(self.path, "a", libver=LIBVER, locking=False)
-        with f:
-            f.attrs["ended_utc"] = utc_now()
-            f.attrs["outcome"] = outcome
-        _fsync_path(self.path)
+            try:
+                f = h5py.File(self.path, "a", libver=LIBVER)
+            except BlockingIOError:
+                # a live reader (SWMR, e.g. the UI's plot) holds a shared lock: the two attributes
+                # are written anyway; the reader only follows /points, which does not change
+                f = h5py.File(self.path, "a", libver=LIBVER, locking=False)
+            with f:
+                f.attrs["ended_utc"] = utc_now()
+                f.attrs["outcome"] = outcome
+            _fsync_path(self.path)
+        finally:
+            self._lock.release()
         self._finished_outcome = outcome
 
     def close(self) -> None:
         """Flush and close the file (idempotent). The outcome stays unset unless `finish` ran."""
+        self._close_file()
+        self._lock.release()
+
+    def _close_file(self) -> None:
         if self._f is not None and self._f.id.valid:
             self._f.flush()
             self._f.close()

@@ -15,7 +15,9 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
+from procedures.errors import InputError
 from procedures.recording.reader import LiveReader, file_sha256, read_session
 from procedures.recording.writer import SessionWriter
 
@@ -213,3 +215,29 @@ def test_second_process_reads_points_while_the_file_grows(tmp_path):
         proc.kill() if proc.poll() is None else None
         proc.wait(timeout=30)
     assert read_session(path).outcome == "completed"
+
+
+def test_resume_is_refused_while_another_process_is_still_writing(tmp_path):
+    path = tmp_path / "live.h5"
+    proc = subprocess.Popen([sys.executable, "-c", LIVE_WRITER, str(path)], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        proc.stdin.write("0\n")
+        proc.stdin.flush()
+        assert int(proc.stdout.readline()) == 0
+        before = file_sha256(path)
+        with pytest.raises(InputError, match=rf"another station process \(pid {proc.pid}\) is writing"):
+            SessionWriter.resume(path)
+        with pytest.raises(InputError, match="another station process"):  # even with overwrite
+            SessionWriter.create(path, session_id="x", operator="", rig="sim", plan={}, station_config={},
+                                 devices={}, software_version="t", overwrite=True)
+        assert file_sha256(path) == before
+        proc.stdin.write("1\n")  # the first writer carries on undisturbed
+        proc.stdin.close()
+        assert int(proc.stdout.readline()) == 1 and proc.stdout.readline().strip() == "finished"
+    finally:
+        proc.kill() if proc.poll() is None else None
+        proc.wait(timeout=30)
+    assert read_session(path).indices == {0, 1}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["live.h5"]  # lock file gone
