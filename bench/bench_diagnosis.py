@@ -1,0 +1,51 @@
+"""Bench: diagnosis of a six-leg, 361-target, six-cycle session (the paper's sweep).
+
+Target: <= 2 s per diagnosis (default twin fitted on the recording). Also timed: the same
+session against the simulated plant as twin (where scale and cyclic are tried too).
+Prints figures; not a timed test.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from drivers.sim.plant import default_leg_configs  # noqa: E402
+from drivers.sim.synth import synth_session  # noqa: E402
+from procedures.diagnosis import diagnose  # noqa: E402
+from station.commands.diagnose import plant_twin  # noqa: E402
+
+TARGET_S = 2.0
+
+
+def main() -> int:
+    cfgs = {i + 1: c for i, c in enumerate(default_leg_configs(seed=1))}
+    targets = np.linspace(-90.0, 90.0, 361)
+    t0 = time.perf_counter()
+    points = synth_session(cfgs, targets, cycles=6, seed=1)
+    print(f"session: {len(cfgs)} legs x {targets.size} targets x 6 cycles = {points.size} points "
+          f"(synthesised in {time.perf_counter() - t0:.2f} s)")
+    worst = 0.0
+    for label, twin in (("twin fitted on the recording", None),
+                        ("twin = simulated plant (position terms)", plant_twin(cfgs, "plant"))):
+        times = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            report = diagnose(points, twin)
+            times.append(time.perf_counter() - t0)
+        named = ", ".join(f"{f['effect']}@{f['leg']}" for f in report["findings"]) or "none"
+        print(f"{label}: best {min(times):.2f} s, median {np.median(times):.2f} s (target <= {TARGET_S} s); "
+              f"named: {named}")
+        if twin is None:
+            worst = float(np.median(times))
+    print("OK" if worst <= TARGET_S else "SLOWER THAN TARGET")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

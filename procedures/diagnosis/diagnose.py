@@ -1,0 +1,300 @@
+"""Diagnosis of the gap between a twin and a recording: where, which effect, how far.
+
+`diagnose(points, twin=None)` returns a JSON-able report (see docs/diagnosis.md):
+
+    {"format": "station-diagnosis", "version": 1, "recording": {...}, "twin": {...},
+     "settings": {...},
+     "findings": [{"leg": 2, "effect": "backlash", "parameters": {"reversal_um": 1.23},
+                   "uncertainty": {"reversal_um": 0.02}, "heldout_rms_before_um": 0.61,
+                   "heldout_rms_after_um": 0.07, ...}, ...],
+     "legs": {"2": {...where..., "noise_floor_um": 0.05, "combined": {...}, "candidates": [...],
+                    "cannot_conclude": [...]}},
+     "notes": [...]}
+
+Units are in the keys; error = measured minus commanded (um); no NaN anywhere (a value that
+cannot be computed is null with a reason beside it).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from procedures.diagnosis.blas import single_threaded_blas
+from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
+from procedures.diagnosis.legdata import LegData, split_legs
+from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate, select_effects
+from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
+from procedures.diagnosis.where import breakdown, repeatability_um
+from procedures.errors import InputError
+
+FORMAT = "station-diagnosis"
+VERSION = 1
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """threshold_um: an effect is named only when its held-out RMS contribution exceeds this;
+    alpha: significance level of the pass-level test; lead_mm: screw lead marked in the spectrum
+    (None = none); max_folds: cross-validation folds (whole passes); regions: stroke regions in
+    the breakdown; effects: the candidate effects tried."""
+
+    threshold_um: float = 0.1
+    alpha: float = 1e-3
+    lead_mm: float | None = 5.0
+    max_folds: int = 12
+    regions: int = 4
+    effects: tuple[str, ...] = tuple(EFFECTS)
+
+    def __post_init__(self):
+        unknown = [e for e in self.effects if e not in EFFECTS]
+        if unknown:
+            raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(EFFECTS)}")
+        if not self.threshold_um >= 0:
+            raise InputError(f"threshold_um must be >= 0, got {self.threshold_um}")
+        if not 0 < self.alpha < 1:
+            raise InputError(f"alpha must be between 0 and 1, got {self.alpha}")
+        if self.lead_mm is not None and not self.lead_mm > 0:
+            raise InputError(f"lead_mm must be positive, got {self.lead_mm}")
+        if self.regions < 1 or self.max_folds < 2:
+            raise InputError("regions must be >= 1 and max_folds >= 2")
+
+
+@dataclass
+class LegContext:
+    """What the diagnosis of one leg works on (used by the self-check for its oracle)."""
+
+    leg: LegData
+    problem: LegProblem
+    fixed_um: np.ndarray
+    external: bool
+    twin_info: dict = field(default_factory=dict)
+
+
+def prepare_leg(leg: LegData, twin: Twin | None, settings: DiagnosisSettings,
+                twin_error_um: np.ndarray | None = None) -> LegContext:
+    """Set up the regression of one leg against the twin (fitted here when `twin` is None, on
+    `twin_error_um` when given: the errors with already identified effects taken out)."""
+    folds = leg.folds(settings.max_folds)
+    if twin is None:
+        pfit = fit_position_twin(leg, folds, error_um=twin_error_um)
+        base = pfit.basis.design(leg.x_mm)
+        fixed = np.zeros(leg.n_points)
+        if isinstance(pfit.basis, TargetBasis):
+            info = {"kind": "fitted", "form": "target means", "targets": len(pfit.basis.knots_mm),
+                    "heldout_rms_um": pfit.cv_rms_um, "note": pfit.note}
+        else:
+            info = {"kind": "fitted", "form": "trend + sinusoids", "trend": pfit.basis.trend,
+                    "sinusoids": len(pfit.basis.freqs_per_mm),
+                    "wavelengths_mm": [1.0 / f for f in pfit.basis.freqs_per_mm], "heldout_rms_um": pfit.cv_rms_um}
+        if pfit.cv_rms_um is None:
+            info["heldout_rms_note"] = pfit.note
+    else:
+        fixed = twin.predict_um(leg.leg, leg.x_mm, leg.direction)
+        base = np.ones((leg.n_points, 1))  # an external twin has its own zero
+        info = {"kind": twin.kind, "offset_um": float(np.mean(leg.error_um - fixed))}
+    return LegContext(leg, LegProblem(leg, base, fixed, folds), fixed, twin is not None, info)
+
+
+def _cannot_conclude(leg: LegData, settings: DiagnosisSettings, external: bool) -> list[str]:
+    out = []
+    if leg.n_cycles < 2:
+        out.append(f"only {leg.n_cycles} cycle: no pass can be held out, so no effect can be tested; "
+                   "the breakdown describes the gap only")
+    elif leg.n_cycles < 3:
+        out.append("only 2 cycles: held-out scores rest on 2 folds; treat any finding as indicative")
+    if leg.n_targets < 8:
+        sp = leg.spacing_mm
+        text = (f"only {leg.n_targets} distinct targets ({sp:.3g} mm apart): "
+                + ("the twin can only follow the mean error at each target, so " if not external else "")
+                + f"the shape between targets, periodic errors shorter than {2 * sp:.3g} mm")
+        if settings.lead_mm and settings.lead_mm < 2 * sp:
+            text += f" (the {settings.lead_mm:g} mm screw lead among them)"
+        text += " and a cyclic error cannot be resolved"
+        if not external:
+            text += "; a scale error cannot be told from the twin's own slope"
+        out.append(text)
+    if leg.n_cycles >= 2 and leg.n_passes < 12:
+        out.append(f"only {leg.n_passes} passes: pass-level effects (backlash, drift, load, a thermal offset) are "
+                   f"tested against the scatter of {leg.n_passes} pass offsets, so only effects well above that "
+                   "scatter can be named")
+    if not leg.has_time:
+        out.append("no time recorded: drift is tested against pass order (um per pass), which assumes the passes "
+                   "followed each other at a steady pace")
+    if not leg.has_temp:
+        out.append("no material temperature recorded: thermal expansion cannot be tested")
+    if not leg.has_load:
+        out.append("no axial load recorded: compliance cannot be tested")
+    return out
+
+
+def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tuple[dict, list[dict]]:
+    ctx = prepare_leg(leg, twin, s)
+    problem = ctx.problem
+    can_cv = problem.folds is not None
+    if twin is not None:
+        gap = leg.error_um - ctx.fixed_um
+    elif can_cv:
+        gap = problem.heldout_residuals(())  # the twin predicts each cycle without having seen it
+    else:
+        x = problem.base
+        gap = problem.y - x @ np.linalg.lstsq(x, problem.y, rcond=None)[0]
+    rep = {"points": leg.n_points, "dropped_points": leg.dropped, "passes": leg.n_passes, "cycles": leg.n_cycles,
+           "targets": leg.n_targets, "target_spacing_mm": leg.spacing_mm,
+           "stroke_mm": list(leg.span_mm), "twin": ctx.twin_info}
+    cannot = _cannot_conclude(leg, s, twin is not None)
+
+    def where(noise_floor_um):
+        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, noise_floor_um))
+        for p in rep.get("outlier_passes", []):
+            cannot.append(f"run {p['run']} is {p['offset_um']:+.3g} um off the other passes: it dominates the pass "
+                          "scatter against which effects are tested")
+    findings: list[dict] = []
+    cands: list[dict] = []
+    applicable: list[Effect] = []
+    for name in s.effects:
+        e = EFFECTS[name]
+        why = e.applicable(leg, twin is not None)
+        if why is None and not can_cv:
+            why = "needs at least two cycles to score on held-out passes"
+        if why is None:
+            applicable.append(e)
+        else:
+            cands.append({"effect": name, "status": "not applicable", "reason": why})
+    bonf = {"cyclic": EFFECTS["cyclic"].independent_frequencies(leg)} if isinstance(EFFECTS["cyclic"], Cyclic) else {}
+    if not can_cv:
+        fit = problem.full_fit((), bonf)
+        rep["noise_floor_um"] = repeatability_um(leg, fit.resid_um)
+        rep["noise_floor_note"] = "scatter of repeat passes at the same target and direction (one cycle only: rough)"
+        where(None)
+        rep["combined"] = None
+        rep["combined_note"] = "no held-out passes"
+        rep["candidates"] = cands
+        rep["cannot_conclude"] = cannot
+        return rep, findings
+    chosen, log = select_effects(problem, applicable, s.threshold_um, s.alpha, bonf)
+    if twin is None and chosen:
+        # the twin's size was chosen with the effects still in the data, where they act as noise
+        # and can hide fine position structure (e.g. the wobble): choose it again without them
+        # and repeat the selection once with that twin
+        part = problem.effect_part_um(problem.full_fit(chosen, bonf))
+        ctx2 = prepare_leg(leg, None, s, leg.error_um - part)
+        if ctx2.twin_info.get("wavelengths_mm") != ctx.twin_info.get("wavelengths_mm"):
+            ctx, problem = ctx2, ctx2.problem
+            ctx.twin_info["fitted_without"] = [e.name for e in chosen]
+            rep["twin"] = ctx.twin_info
+            chosen, log2 = select_effects(problem, applicable, s.threshold_um, s.alpha, bonf)
+            log += ["twin refitted without the effects: "
+                    f"{ctx.twin_info.get('sinusoids')} sinusoids"] + log2
+            gap = problem.heldout_residuals(())
+    baseline = problem.cv_rms(())
+    final = problem.full_fit(chosen, bonf)
+    rep["noise_floor_um"] = repeatability_um(leg, final.resid_um)
+    rep["noise_floor_note"] = ("scatter of repeat passes at the same target and direction, after the named "
+                               "effects (pass offsets included)")
+    rep["within_pass_scatter_um"] = final.gls.sigma_e_um
+    rep["pass_offset_scatter_um"] = final.gls.sigma_u_um
+    where(rep["noise_floor_um"])
+    for e in chosen:
+        sl = final.slices[e.name]
+        params, se = e.parameters(final.gls.coef[sl], final.gls.cov[sl, sl], final.specs.get(e.name), leg, final.resid_um)
+        after = problem.cv_rms((e,))
+        f, p, df2 = final.tests[e.name]
+        findings.append({
+            "leg": leg.leg, "effect": e.name, "parameters": params, "uncertainty": se,
+            "heldout_rms_before_um": baseline, "heldout_rms_after_um": after,
+            "shrink_pct": 100.0 * (1 - after / baseline) if baseline > 0 else 0.0,
+            "heldout_contribution_um": contribution_um(baseline, after),
+            "p_value": p, "f_stat": f, "df_denominator": df2,
+        })
+    after_all = problem.cv_rms(chosen)
+    rep["combined"] = {"effects": [e.name for e in chosen], "heldout_rms_before_um": baseline,
+                       "heldout_rms_after_um": after_all,
+                       "shrink_pct": 100.0 * (1 - after_all / baseline) if baseline > 0 else 0.0}
+    for e in applicable:
+        if e in chosen:
+            cands.append({"effect": e.name, "status": "named", "p_value": final.tests[e.name][1],
+                          "heldout_contribution_um": contribution_um(baseline, problem.cv_rms((e,)))})
+            continue
+        ev = evaluate(problem, chosen, e, bonf)
+        entry = {"effect": e.name, "p_value": ev.p_value, "heldout_contribution_um": ev.contribution_um}
+        if ev.p_value >= s.alpha:
+            entry["status"] = "not significant"
+            entry["reason"] = f"p = {ev.p_value:.2g} against the scatter between passes (needs < {s.alpha:g})"
+        elif ev.contribution_um <= s.threshold_um:
+            entry["status"] = "below threshold"
+            entry["reason"] = f"adds {ev.contribution_um:.3g} um on held-out passes (threshold {s.threshold_um:g} um)"
+        else:
+            entry["status"] = "dropped"
+            entry["reason"] = "qualified alone but not together with the named effects"
+        if chosen:
+            alone = evaluate(problem, (), e, bonf)
+            if alone.qualifies(s.threshold_um, s.alpha):
+                entry["status"] = "explained by others"
+                entry["reason"] = (f"alone it would explain {alone.contribution_um:.3g} um, but once "
+                                   f"{', '.join(c.name for c in chosen)} {'is' if len(chosen) == 1 else 'are'} in it adds "
+                                   f"only {ev.contribution_um:.3g} um: confounded, not named")
+        cands.append(entry)
+    order = {n: i for i, n in enumerate(s.effects)}
+    rep["candidates"] = sorted(cands, key=lambda c: order[c["effect"]])
+    rep["selection_log"] = log
+    rep["cannot_conclude"] = cannot
+    return rep, findings
+
+
+def diagnose(points: np.ndarray, twin: Twin | None = None, settings: DiagnosisSettings | None = None,
+             recording: dict | None = None, source: str = "the session") -> dict:
+    """Diagnose every leg of a POINT_DTYPE array against `twin` (None: a position-only twin
+    fitted on this recording). `recording` (e.g. path and sha256) is copied into the report.
+    Raises InputError/SchemaError for unusable input."""
+    with single_threaded_blas():
+        return _diagnose(points, twin, settings or DiagnosisSettings(), recording, source)
+
+
+def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
+    legs = split_legs(points, source)
+    report: dict = {
+        "format": FORMAT, "version": VERSION, "recording": recording or {},
+        "twin": ({"kind": "fitted", "description": "position-only twin (trend + selected sinusoids; target means when "
+                  "there are few targets) fitted on this recording's training passes"} if twin is None else {"kind": twin.kind, "description": twin.description}),
+        "settings": asdict(s), "findings": [], "legs": {}, "notes": [],
+    }
+    for n, leg in legs.items():
+        rep, findings = _diagnose_leg(leg, twin, s)
+        report["legs"][str(n)] = rep
+        report["findings"].extend(findings)
+    if not report["findings"]:
+        report["notes"].append("no effect qualified on any leg")
+    extra: list[str] = []
+    out = finite_or_null(report, extra)
+    out["notes"].extend(extra)
+    return out
+
+
+def finite_or_null(obj, notes: list[str], path: str = ""):
+    """A JSON-able copy: numpy types to Python, non-finite numbers to None (noted in `notes`)."""
+    if isinstance(obj, dict):
+        return {str(k): finite_or_null(v, notes, f"{path}.{k}" if path else str(k)) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_or_null(v, notes, f"{path}[{i}]") for i, v in enumerate(obj)]
+    if isinstance(obj, np.ndarray):
+        return finite_or_null(obj.tolist(), notes, path)
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        if not math.isfinite(v):
+            notes.append(f"{path}: could not be computed (not a finite number)")
+            return None
+        return v
+    return obj
+
+
+def to_json(report: dict) -> str:
+    """The report as JSON text (strict: no NaN/Infinity)."""
+    return json.dumps(report, indent=1, allow_nan=False)

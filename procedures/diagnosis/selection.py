@@ -1,0 +1,313 @@
+"""Fitting effects on training passes, scoring them on held-out passes, and choosing them.
+
+A leg's regression: gap = y - fixed twin = base columns (the fitted twin's position terms, or a
+constant for an external twin's arbitrary zero) + effect columns + pass offsets + noise. Held-out
+residuals come from fitting on all folds but one and predicting that one; a fold holds whole
+passes (a pass shares its offset, so splitting one would leak it). Effects are chosen by greedy
+forward selection on held-out RMS with parsimonious tie-breaking, then pruned backwards: an
+effect stays only while it is significant (significance.py) and its held-out contribution
+exceeds the threshold.
+
+Speed: the rows are sorted by fold once and the base columns' Gram blocks per fold are cached,
+so trying an effect costs products with its own few columns and small solves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from procedures.diagnosis.effects import Effect, cyclic_grid
+from procedures.diagnosis.legdata import LegData
+from procedures.diagnosis.significance import (Gram, GlsFit, between_pass_share, random_intercept_gls, replicate_variance,
+                                               solve_gram, wald_test)
+from procedures.diagnosis.twin import _Scan
+
+PARSIMONY = 0.03  # a simpler effect wins when it explains at least 97 % of what the best explains (held-out
+# scoring already penalises a useless extra parameter, so the margin can be small)
+
+
+def contribution_um(rms_before_um: float, rms_after_um: float) -> float:
+    """RMS of what an addition explains on held-out passes: sqrt(before^2 - after^2), um."""
+    return float(np.sqrt(max(rms_before_um**2 - rms_after_um**2, 0.0)))
+
+
+@dataclass
+class FullFit:
+    """A model fitted on all passes (GLS with pass offsets)."""
+
+    effects: tuple[Effect, ...]
+    specs: dict[str, object]
+    gls: GlsFit
+    slices: dict[str, slice]
+    resid_um: np.ndarray
+    tests: dict[str, tuple[float, float, int]] = field(default_factory=dict)  # name -> (F, p, df2)
+
+
+class LegProblem:
+    """The regression problem of one leg; caches held-out residuals per set of effects."""
+
+    def __init__(self, leg: LegData, base: np.ndarray, fixed_um: np.ndarray, folds: np.ndarray | None):
+        self.leg = leg
+        self.base = base
+        self.y = leg.error_um - fixed_um
+        self.folds = folds
+        n = leg.n_points
+        groups = folds if folds is not None else np.zeros(n, dtype=np.int64)
+        self.n_groups = int(groups.max()) + 1
+        self._order = np.argsort(groups, kind="stable")
+        self._bounds = np.searchsorted(groups[self._order], np.arange(self.n_groups + 1))
+        self._bs = base[self._order]
+        self._ys = self.y[self._order]
+        self._gbb, self._hb, self._yy = [], [], []
+        for a, b in self._spans():
+            bb, yy = self._bs[a:b], self._ys[a:b]
+            self._gbb.append(bb.T @ bb)
+            self._hb.append(bb.T @ yy)
+            self._yy.append(float(yy @ yy))
+        self._pcount = np.bincount(leg.pass_id).astype(float)
+        self._pmean_b = self._pass_means(base)
+        self._pmean_y = self._pass_means(self.y)
+        self._cv: dict[tuple[str, ...], np.ndarray] = {}
+        self._cache: dict = {}
+        self._full: dict = {}
+
+    # -- building blocks ------------------------------------------------------------------------
+    def _spans(self):
+        return [(int(self._bounds[g]), int(self._bounds[g + 1])) for g in range(self.n_groups)]
+
+    def _pass_means(self, v: np.ndarray) -> np.ndarray:
+        cnt = np.maximum(self._pcount, 1.0)
+        if v.ndim == 1:
+            return np.bincount(self.leg.pass_id, v, minlength=cnt.size) / cnt
+        return np.stack([np.bincount(self.leg.pass_id, v[:, j], minlength=cnt.size) for j in range(v.shape[1])], 1) / cnt[:, None]
+
+    def _blocks(self, e: np.ndarray):
+        """Per-fold Gram matrices and X'y of [base, e] (e in recording order)."""
+        es = e[self._order]
+        nb, q = self.base.shape[1], e.shape[1]
+        gs = np.empty((self.n_groups, nb + q, nb + q))
+        hs = np.empty((self.n_groups, nb + q))
+        for g, (a, b) in enumerate(self._spans()):
+            bb, ee, yy = self._bs[a:b], es[a:b], self._ys[a:b]
+            gbe = bb.T @ ee
+            gs[g, :nb, :nb] = self._gbb[g]
+            gs[g, :nb, nb:] = gbe
+            gs[g, nb:, :nb] = gbe.T
+            gs[g, nb:, nb:] = ee.T @ ee
+            hs[g, :nb] = self._hb[g]
+            hs[g, nb:] = ee.T @ yy
+        return gs, hs
+
+    def _matrix(self, effects, specs) -> tuple[np.ndarray, dict[str, slice]]:
+        cols, slices, k = [], {}, 0
+        for e in effects:
+            c = e.columns(self.leg, specs.get(e.name))
+            cols.append(c)
+            slices[e.name] = slice(k, k + c.shape[1])
+            k += c.shape[1]
+        if not cols:
+            return np.zeros((self.leg.n_points, 0)), slices
+        return np.column_stack(cols), slices
+
+    def _predict(self, e: np.ndarray, coef: np.ndarray) -> np.ndarray:
+        nb = self.base.shape[1]
+        return self.base @ coef[:nb] + (e @ coef[nb:] if e.shape[1] else 0.0)
+
+    def _fit_resid(self, effects, specs, train_groups: list[int]) -> np.ndarray:
+        """Residual on all rows of the model fitted on the rows of `train_groups`."""
+        e, _ = self._matrix(effects, specs)
+        gs, hs = self._blocks(e)
+        coef = solve_gram(gs[train_groups].sum(0), hs[train_groups].sum(0))
+        return self.y - self._predict(e, coef)
+
+    # -- the cyclic wavelength ----------------------------------------------------------------
+    def _search_cyclic(self, eff: Effect, others: tuple[Effect, ...], specs, train_groups: list[int]) -> float | None:
+        """Wavelength (mm) of the strongest sinusoid left by `others` on the training rows:
+        a sinusoid scan of the per-position mean residual, then a golden-section refinement of
+        the joint least-squares fit."""
+        resid = self._fit_resid(others, specs, train_groups)
+        mask = np.isin(self.folds if self.folds is not None else np.zeros(self.leg.n_points, int), train_groups)
+        x = self.leg.x_mm
+        if "cyc_scan" not in self._cache:
+            ux = np.unique(x)
+            grid = cyclic_grid(self.leg)
+            self._cache["cyc_scan"] = (ux, grid, _Scan(ux, grid, 0.0) if grid.size else None)
+        ux, grid, scan = self._cache["cyc_scan"]
+        if scan is None:
+            return None
+        inv = np.searchsorted(ux, x[mask])
+        w = np.bincount(inv, minlength=ux.size).astype(float)
+        m = np.divide(np.bincount(inv, resid[mask], minlength=ux.size), w, out=np.zeros(ux.size), where=w > 0)
+        # detrend (weighted line) so a slope does not leak into the long wavelengths
+        a = np.column_stack([np.ones(ux.size), ux]) * np.sqrt(w)[:, None]
+        m = m - np.column_stack([np.ones(ux.size), ux]) @ np.linalg.lstsq(a, m * np.sqrt(w), rcond=None)[0]
+        k = int(np.argmax(scan.amplitudes(m, w)))
+        # joint refinement (Gauss-Newton on the frequency, the linear terms refitted with it):
+        # the scan alone is biased when other effects leave a slope or offsets in the residual
+        e_o, _ = self._matrix(others, specs)
+        xo = np.column_stack([self.base[mask], e_o[mask]])
+        ym = self.y[mask]
+        xm = x[mask]
+        g_oo, h_o = xo.T @ xo, xo.T @ ym
+        no = xo.shape[1]
+        step = grid[1] - grid[0] if grid.size > 1 else grid[0]
+        f0 = f = float(grid[k])
+        a = b = None
+        for _ in range(8):
+            ang = 2 * np.pi * f * xm
+            sn, cs = np.sin(ang), np.cos(ang)
+            cols = [sn, cs] if a is None else [sn, cs, 2 * np.pi * xm * (a * cs - b * sn)]
+            z = np.column_stack(cols)
+            g_oz = xo.T @ z
+            g = np.empty((no + z.shape[1],) * 2)
+            g[:no, :no], g[:no, no:], g[no:, :no], g[no:, no:] = g_oo, g_oz, g_oz.T, z.T @ z
+            coef = solve_gram(g, np.concatenate([h_o, z.T @ ym]))
+            if a is not None:
+                df = float(np.clip(coef[no + 2], -0.5 * step, 0.5 * step))
+                f = float(np.clip(f + df, f0 - step, f0 + step))
+                if abs(df) < 1e-9 * f:
+                    break
+            a, b = float(coef[no]), float(coef[no + 1])
+        return 1.0 / f
+
+    def _specs(self, effects, train_groups: list[int]) -> dict[str, object]:
+        specs: dict[str, object] = {}
+        for e in effects:
+            if e.name == "cyclic":
+                others = tuple(o for o in effects if o.name != "cyclic")
+                specs["cyclic"] = self._search_cyclic(e, others, specs, train_groups)
+        return specs
+
+    # -- held-out scoring ---------------------------------------------------------------------
+    def heldout_residuals(self, effects: tuple[Effect, ...]) -> np.ndarray:
+        """Residual of every point, predicted by the model fitted without its fold (um)."""
+        if self.folds is None:
+            raise ValueError("no folds: the leg has too few passes to hold any out")
+        key = tuple(sorted(e.name for e in effects))
+        if key in self._cv:
+            return self._cv[key]
+        out = np.empty(self.leg.n_points)
+        all_groups = list(range(self.n_groups))
+        searched = any(e.name == "cyclic" for e in effects)
+        if not searched:
+            e, _ = self._matrix(effects, {})
+            gs, hs = self._blocks(e)
+            gt, ht = gs.sum(0), hs.sum(0)
+        for g in all_groups:
+            te = self.folds == g
+            if searched:
+                train = [j for j in all_groups if j != g]
+                specs = self._specs(effects, train)
+                e, _ = self._matrix(effects, specs)
+                gs, hs = self._blocks(e)
+                gt, ht = gs.sum(0), hs.sum(0)
+            coef = solve_gram(gt - gs[g], ht - hs[g])
+            nb = self.base.shape[1]
+            out[te] = self.y[te] - self.base[te] @ coef[:nb] - (e[te] @ coef[nb:] if e.shape[1] else 0.0)
+        self._cv[key] = out
+        return out
+
+    def cv_rms(self, effects: tuple[Effect, ...]) -> float:
+        r = self.heldout_residuals(effects)
+        return float(np.sqrt(np.mean(r**2)))
+
+    # -- fits on all passes ---------------------------------------------------------------------
+    def effect_part_um(self, fit: FullFit) -> np.ndarray:
+        """The fitted effects' contribution at every point (um), without the base terms."""
+        e_all, _ = self._matrix(fit.effects, fit.specs)
+        nb = self.base.shape[1]
+        return e_all @ fit.gls.coef[nb:] if e_all.shape[1] else np.zeros(self.leg.n_points)
+
+    def full_fit(self, effects: tuple[Effect, ...], bonferroni: dict[str, int] | None = None) -> FullFit:
+        """GLS fit on all passes, with a Wald test of each effect's columns."""
+        key = (tuple(e.name for e in effects), tuple(sorted((bonferroni or {}).items())))
+        if key not in self._full:
+            self._full[key] = self._full_fit(effects, bonferroni)
+        return self._full[key]
+
+    def _full_fit(self, effects, bonferroni) -> FullFit:
+        specs = self._specs(effects, list(range(self.n_groups)))
+        e_all, slices = self._matrix(effects, specs)
+        gs, hs = self._blocks(e_all)
+        stats = Gram(gs.sum(0), hs.sum(0), float(sum(self._yy)),
+                     np.column_stack([self._pmean_b, self._pass_means(e_all)]) if e_all.shape[1] else self._pmean_b,
+                     self._pmean_y, self._pcount)
+        nb = self.base.shape[1]
+        coef = solve_gram(stats.g, stats.h)
+        cell = self.leg.target_id * 2 + (self.leg.direction > 0)
+        s2 = replicate_variance(self.y - self._predict(e_all, coef), self.leg.pass_id, cell)
+        gls = random_intercept_gls(stats, s2)
+        fit = FullFit(tuple(effects), specs, gls, {k: slice(s.start + nb, s.stop + nb) for k, s in slices.items()},
+                      self.y - self._predict(e_all, gls.coef))
+        n_eff = sum(e.n_params for e in effects)
+        for e in effects:
+            s = fit.slices[e.name]
+            idx = list(range(s.start, s.stop))
+            f, p, df2 = wald_test(gls, idx, between_pass_share(stats, idx), n_eff)
+            if bonferroni and e.name in bonferroni:
+                p = min(1.0, p * bonferroni[e.name])  # a scanned wavelength: look-elsewhere effect
+            fit.tests[e.name] = (f, p, df2)
+        return fit
+
+
+@dataclass
+class Evaluation:
+    """One candidate scored on top of a set of already chosen effects."""
+
+    name: str
+    rms_before_um: float
+    rms_after_um: float
+    contribution_um: float
+    p_value: float
+    f_stat: float
+    df2: int
+
+    def qualifies(self, threshold_um: float, alpha: float) -> bool:
+        return self.p_value < alpha and self.contribution_um > threshold_um
+
+
+def evaluate(problem: LegProblem, chosen: tuple[Effect, ...], cand: Effect, bonferroni) -> Evaluation:
+    before = problem.cv_rms(chosen)
+    after = problem.cv_rms(chosen + (cand,))
+    fit = problem.full_fit(chosen + (cand,), bonferroni)
+    f, p, df2 = fit.tests[cand.name]
+    return Evaluation(cand.name, before, after, contribution_um(before, after), p, f, df2)
+
+
+def select_effects(problem: LegProblem, candidates: list[Effect], threshold_um: float, alpha: float,
+                   bonferroni: dict[str, int] | None = None) -> tuple[tuple[Effect, ...], list[str]]:
+    """Greedy forward selection, then backward pruning. Returns (chosen effects, log lines)."""
+    chosen: tuple[Effect, ...] = ()
+    log: list[str] = []
+    while True:
+        rest = [c for c in candidates if c not in chosen]
+        if not rest:
+            break
+        evals = [(c, evaluate(problem, chosen, c, bonferroni)) for c in rest]
+        ok = [(c, ev) for c, ev in evals if ev.qualifies(threshold_um, alpha)]
+        if not ok:
+            break
+        best = max(ev.contribution_um for _, ev in ok)
+        near = [(c, ev) for c, ev in ok if ev.contribution_um >= (1 - PARSIMONY) * best]
+        c, ev = min(near, key=lambda t: (t[0].n_params, -t[1].contribution_um))
+        log.append(f"add {c.name}: held-out {ev.rms_before_um:.4f} -> {ev.rms_after_um:.4f} um, p={ev.p_value:.2g}")
+        chosen = chosen + (c,)
+    # backward: drop the weakest effect while any no longer earns its place
+    while len(chosen) > 1:
+        fit = problem.full_fit(chosen, bonferroni)
+        after = problem.cv_rms(chosen)
+        weakest, worst = None, None
+        for c in chosen:
+            without = tuple(e for e in chosen if e is not c)
+            contrib = contribution_um(problem.cv_rms(without), after)
+            p = fit.tests[c.name][1]
+            if p >= alpha or contrib <= threshold_um:
+                if worst is None or contrib < worst:
+                    weakest, worst = c, contrib
+        if weakest is None:
+            break
+        log.append(f"drop {weakest.name}: adds only {worst:.4f} um once the others are in")
+        chosen = tuple(e for e in chosen if e is not weakest)
+    return chosen, log

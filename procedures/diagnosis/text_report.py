@@ -1,0 +1,109 @@
+"""The diagnosis report as readable text (what `station diagnose` prints)."""
+
+from __future__ import annotations
+
+
+def _f(v, fmt=".3g", unit="") -> str:
+    return "n/a" if v is None else f"{v:{fmt}}{unit}"
+
+
+def _param_line(f: dict) -> str:
+    parts = []
+    for k, v in f["parameters"].items():
+        se = f["uncertainty"].get(k)
+        parts.append(f"{k} = {v:.4g}" + (f" +/- {se:.2g}" if se is not None else ""))
+    return ", ".join(parts)
+
+
+def text_report(report: dict) -> str:
+    """Findings first, then per leg: where the gap lies, candidates, what cannot be concluded."""
+    lines = []
+    rec = report.get("recording") or {}
+    if rec.get("path"):
+        lines.append(f"recording: {rec['path']}" + (f" (sha256 {rec['sha256'][:12]})" if rec.get("sha256") else ""))
+    lines.append(f"twin: {report['twin']['description']}")
+    st = report["settings"]
+    lines.append(f"an effect is named when significant (p < {st['alpha']:g}, against the scatter between passes) and "
+                 f"it explains more than {st['threshold_um']:g} um on held-out passes")
+    lines.append("")
+    if report["findings"]:
+        lines.append("FINDINGS")
+        for f in report["findings"]:
+            lines.append(f"  leg {f['leg']}: {f['effect']}: {_param_line(f)}")
+            lines.append(f"      held-out gap {f['heldout_rms_before_um']:.3g} -> {f['heldout_rms_after_um']:.3g} um RMS "
+                         f"({f['shrink_pct']:.0f} % smaller), p = {f['p_value']:.2g}")
+    else:
+        lines.append("FINDINGS: none (no candidate effect is both significant and above the threshold)")
+    for key, leg in report["legs"].items():
+        lines.append("")
+        lines.append(f"LEG {key}: {leg['points']} points, {leg['passes']} passes ({leg['cycles']} cycles), "
+                     f"{leg['targets']} targets {leg['stroke_mm'][0]:.4g}..{leg['stroke_mm'][1]:.4g} mm")
+        tw = leg["twin"]
+        if tw.get("kind") == "fitted" and tw.get("form") == "target means":
+            lines.append(f"  twin: the mean error at each of the {tw['targets']} targets; held-out RMS "
+                         f"{_f(tw.get('heldout_rms_um'))} um")
+        elif tw.get("kind") == "fitted":
+            lines.append(f"  twin: trend + {tw['sinusoids']} sinusoid(s); held-out RMS {_f(tw.get('heldout_rms_um'))} um"
+                         + (f" (chosen with {', '.join(tw['fitted_without'])} taken out)" if tw.get("fitted_without") else ""))
+        else:
+            lines.append(f"  twin: {tw.get('kind')}; zero offset of the recording against it {tw.get('offset_um', 0):+.3g} um")
+        g = leg["gap"]
+        lines.append(f"  gap: RMS {g['rms_um']:.3g} um, peak to peak {g['p2p_um']:.3g} um, mean {g['mean_um']:+.3g} um; "
+                     f"noise floor {_f(leg.get('noise_floor_um'))} um")
+        lines.append(f"  where: {leg['dominant']}")
+        vs = leg["variance_share_pct"]
+        lines.append("  variance of the gap: " + ", ".join(f"{k} {v:.0f} %" for k, v in vs.items()))
+        bd = leg["by_direction"]
+        if len(bd) == 2:
+            lines.append(f"  by direction: +1 mean {bd['+1']['mean_um']:+.3g} um, -1 mean {bd['-1']['mean_um']:+.3g} um")
+        lines.append("  by region: " + "; ".join(
+            f"{r['from_mm']:.0f}..{r['to_mm']:.0f} mm RMS {r['rms_um']:.3g}" for r in leg["by_region"]))
+        tr = leg.get("pass_trend")
+        if tr:
+            if "um_per_h" in tr:
+                lines.append(f"  by pass: trend {tr['um_per_h']:+.3g} um/h (r = {tr['r']:.2f})")
+            else:
+                lines.append(f"  by pass: trend {tr['um_per_pass']:+.3g} um per pass (r = {tr['r']:.2f}; no time recorded)")
+        cond = leg["by_condition"]
+        if cond.get("material_temp"):
+            c = cond["material_temp"]
+            lines.append(f"  temperature: range {c['range_k']:.3g} K" +
+                         (f", pass gap {c['um_per_k']:+.3g} um/K (r = {c['r']:.2f})" if c.get("um_per_k") is not None else ""))
+        if cond.get("load"):
+            c = cond["load"]
+            lines.append(f"  load: range {c['range_n']:.0f} N" +
+                         (f", pass gap {c['um_per_kn']:+.3g} um/kN (r = {c['r']:.2f})" if c.get("um_per_kn") is not None else ""))
+        sp = leg["spectrum"]
+        if sp.get("peaks"):
+            lines.append("  spectrum peaks: " + ", ".join(f"{p['wavelength_mm']:.3g} mm {p['amplitude_um']:.3g} um"
+                                                          for p in sp["peaks"]))
+        if sp.get("lead_amplitude_um") is not None:
+            lines.append(f"  at the {sp['lead_mm']:g} mm lead: {sp['lead_amplitude_um']:.3g} um"
+                         + (" (a peak)" if sp.get("lead_is_peak") else ""))
+        elif sp.get("lead_note"):
+            lines.append(f"  lead: {sp['lead_note']}")
+        for p in leg.get("outlier_passes", []):
+            lines.append(f"  outlier pass: run {p['run']} is {p['offset_um']:+.3g} um off the other passes of its direction")
+        op = leg.get("outlier_points") or {}
+        if op.get("count"):
+            w = op["worst"][0]
+            lines.append(f"  outlier points: {op['count']} (worst: run {w['run']} at {w['target_mm']:.4g} mm, "
+                         f"{w['deviation_um']:+.3g} um off its repeats)")
+        comb = leg.get("combined")
+        if comb and comb["effects"]:
+            lines.append(f"  all named effects ({', '.join(comb['effects'])}): held-out gap "
+                         f"{comb['heldout_rms_before_um']:.3g} -> {comb['heldout_rms_after_um']:.3g} um "
+                         f"({comb['shrink_pct']:.0f} % smaller)")
+        lines.append("  candidates:")
+        for c in leg["candidates"]:
+            extra = c.get("reason") or (f"explains {c['heldout_contribution_um']:.3g} um held out"
+                                        if c.get("heldout_contribution_um") is not None else "")
+            lines.append(f"    {c['effect']:<9} {c['status']}: {extra}")
+        if leg.get("cannot_conclude"):
+            lines.append("  cannot be concluded from this recording:")
+            for t in leg["cannot_conclude"]:
+                lines.append(f"    - {t}")
+    if report.get("notes"):
+        lines.append("")
+        lines += [f"note: {n}" for n in report["notes"]]
+    return "\n".join(lines)

@@ -1,0 +1,272 @@
+"""Where the gap lies: a breakdown of one leg's gap (measured minus twin, um).
+
+By direction, stroke region, pass and time, position frequency (with the screw lead marked) and
+by condition (material temperature, load) when recorded; the variance of the gap split into a
+constant offset, a direction part, a pass-to-pass part, a position part and the rest; and the
+dominant locus named in words.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from procedures.diagnosis.effects import cyclic_grid
+from procedures.diagnosis.legdata import LegData
+from procedures.diagnosis.twin import sinusoid_scan
+
+
+def _rms(v: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(v**2))) if v.size else 0.0
+
+
+def _stats(v: np.ndarray) -> dict:
+    return {"points": int(v.size), "mean_um": float(v.mean()), "rms_um": _rms(v), "p2p_um": float(np.ptp(v))}
+
+
+def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float] | None:
+    """Slope of y on x and the correlation; None when x does not vary."""
+    if x.size < 3 or np.ptp(x) <= 0 or not np.all(np.isfinite(x)):
+        return None
+    xc, yc = x - x.mean(), y - y.mean()
+    slope = float(xc @ yc / (xc @ xc))
+    den = float(np.sqrt((xc @ xc) * (yc @ yc)))
+    return slope, (float(xc @ yc / den) if den > 0 else 0.0)
+
+
+def _region_name(i: int, n: int) -> str:
+    if n == 4:
+        return ("the bottom of the stroke", "the lower middle of the stroke", "the upper middle of the stroke",
+                "the top of the stroke")[i]
+    if n == 3:
+        return ("the bottom of the stroke", "the middle of the stroke", "the top of the stroke")[i]
+    return f"region {i + 1} of {n}"
+
+
+def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means: np.ndarray) -> dict:
+    """Peaks of the least-squares sinusoid scan of the per-position mean gap (pass offsets
+    removed), and the amplitude at the screw lead."""
+    lo, hi = leg.span_mm
+    out: dict = {"peaks": [], "lead_mm": lead_mm}
+    r = gap_um - pass_means[leg.pass_id]
+    ux, inv = np.unique(leg.x_mm, return_inverse=True)
+    w = np.bincount(inv).astype(float)
+    m = np.bincount(inv, r) / w
+    grid = cyclic_grid(leg)
+    if grid.size == 0:
+        out["note"] = f"only {leg.n_targets} distinct targets: no spectrum"
+        out["lead_amplitude_um"] = None
+        return out
+    amp, _, _ = sinusoid_scan(ux, m - np.average(m, weights=w), w, grid)
+    peaks = [i for i in range(grid.size) if (i == 0 or amp[i] >= amp[i - 1]) and (i == grid.size - 1 or amp[i] > amp[i + 1])]
+    floor = float(np.median(amp))
+    peaks = sorted((i for i in peaks if amp[i] > 3 * floor), key=lambda i: -amp[i])[:3]
+    out["peaks"] = [{"wavelength_mm": float(1 / grid[i]), "amplitude_um": float(amp[i])} for i in peaks]
+    out["median_amplitude_um"] = floor
+    if lead_mm:
+        if lead_mm < 2 * leg.spacing_mm:
+            out["lead_amplitude_um"] = None
+            out["lead_note"] = (f"the {lead_mm:g} mm lead is shorter than twice the {leg.spacing_mm:.3g} mm target "
+                                "spacing: it cannot be resolved (it aliases)")
+        elif lead_mm > hi - lo:
+            out["lead_amplitude_um"] = None
+            out["lead_note"] = f"the {lead_mm:g} mm lead is longer than the measured stroke"
+        else:
+            a = float(sinusoid_scan(ux, m - np.average(m, weights=w), w, np.array([1 / lead_mm]))[0][0])
+            out["lead_amplitude_um"] = a
+            out["lead_is_peak"] = any(abs(1 / p["wavelength_mm"] - 1 / lead_mm) <= 1.5 / (4 * (hi - lo)) for p in out["peaks"])
+    return out
+
+
+def repeatability_um(leg: LegData, resid_um: np.ndarray) -> float | None:
+    """Pooled standard deviation of `resid_um` over repeat passes at the same target and
+    direction (n - cells degrees of freedom), um; None without repeats."""
+    cell = leg.target_id * 2 + (leg.direction > 0)
+    ids, inv = np.unique(cell, return_inverse=True)
+    cnt = np.bincount(inv).astype(float)
+    mean = np.bincount(inv, resid_um) / cnt
+    dof = leg.n_points - ids.size
+    if dof <= 0:
+        return None
+    return float(np.sqrt(np.sum((resid_um - mean[inv]) ** 2) / dof))
+
+
+def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: float | None = 5.0,
+              regions: int = 4, threshold_um: float = 0.1, noise_floor_um: float | None = None) -> dict:
+    """The where-report of one leg (JSON-able dict; units in the keys). `noise_floor_um`, when
+    known, lets the words say that a gap is no larger than the scatter of repeat passes."""
+    g = gap_um
+    n = g.size
+    counts = np.bincount(leg.pass_id).astype(float)
+    pass_means = np.bincount(leg.pass_id, g) / counts
+    pass_dir = np.array([leg.direction[leg.pass_id == p][0] for p in range(leg.n_passes)])
+    out: dict = {"gap": _stats(g)}
+    # by direction
+    by_dir = {}
+    dir_mean = {}
+    for d, key in ((1.0, "+1"), (-1.0, "-1")):
+        sel = leg.direction == d
+        if sel.any():
+            by_dir[key] = _stats(g[sel])
+            dir_mean[d] = float(g[sel].mean())
+    out["by_direction"] = by_dir
+    if len(dir_mean) == 2:
+        out["direction_offset_um"] = dir_mean[-1.0] - dir_mean[1.0]  # negative minus positive, as reversal_um
+    # by stroke region (equal lengths of the measured stroke)
+    lo, hi = leg.span_mm
+    edges = np.linspace(lo, hi, regions + 1)
+    reg = np.clip(np.searchsorted(edges, leg.x_mm, side="right") - 1, 0, regions - 1)
+    out["by_region"] = [
+        {"from_mm": float(edges[i]), "to_mm": float(edges[i + 1]), **_stats(g[reg == i])}
+        for i in range(regions) if np.any(reg == i)
+    ]
+    # by pass and time
+    times = [float(np.mean(leg.time_h[leg.pass_id == p]) * 3600.0) if leg.has_time else None for p in range(leg.n_passes)]
+    out["by_pass"] = [
+        {"run": int(leg.run[leg.pass_id == p][0]), "direction": int(pass_dir[p]), "time_mid_s": times[p],
+         "mean_um": float(pass_means[p]), "rms_um": _rms(g[leg.pass_id == p])}
+        for p in range(leg.n_passes)
+    ]
+    # pass offsets beyond the direction part: trend and outliers
+    dm = np.array([dir_mean.get(d, 0.0) for d in pass_dir])
+    pass_dev = pass_means - dm
+    trend: dict = {}
+    if leg.has_time:
+        t_h = np.array([np.mean(leg.time_h[leg.pass_id == p]) for p in range(leg.n_passes)])
+        line = _line(t_h, pass_dev)
+        if line:
+            trend = {"um_per_h": line[0], "r": line[1]}
+    if not trend:
+        line = _line(np.arange(leg.n_passes, dtype=float), pass_dev)
+        if line:
+            trend = {"um_per_pass": line[0], "r": line[1], "note": "no time recorded: trend against pass order"}
+    out["pass_trend"] = trend or None
+    # outlier passes: robustly, against the median pass of the same direction
+    out["outlier_passes"] = []
+    if leg.n_passes >= 4:
+        dev = pass_means - np.array([np.median(pass_means[pass_dir == d]) for d in pass_dir])
+        scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
+        out["outlier_passes"] = [
+            {"run": int(leg.run[leg.pass_id == p][0]), "offset_um": float(dev[p])}
+            for p in range(leg.n_passes) if abs(dev[p]) > 5 * scale and abs(dev[p]) > threshold_um
+        ]
+    # outlier points: against the median of their target and direction, after pass offsets
+    r0 = g - pass_means[leg.pass_id]
+    cell = leg.target_id * 2 + (leg.direction > 0)
+    cell_ids, cell_inv = np.unique(cell, return_inverse=True)
+    med = np.array([np.median(r0[cell_inv == c]) for c in range(cell_ids.size)])
+    dev = r0 - med[cell_inv]
+    scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
+    bad = np.flatnonzero((np.abs(dev) > 6 * scale) & (np.abs(dev) > threshold_um))
+    worst = bad[np.argsort(-np.abs(dev[bad]))][:5]
+    out["outlier_points"] = {
+        "count": int(bad.size),
+        "worst": [{"run": int(leg.run[i]), "target_mm": float(leg.x_mm[i]), "deviation_um": float(dev[i])} for i in worst],
+    }
+    # by condition
+    cond: dict = {}
+    if leg.has_temp:
+        tp = np.bincount(leg.pass_id, leg.temp_c) / counts
+        line = _line(tp, pass_dev)
+        cond["material_temp"] = {"range_k": float(np.ptp(leg.temp_c)),
+                                 "um_per_k": line[0] if line else None, "r": line[1] if line else None}
+        if not line:
+            cond["material_temp"]["note"] = "the pass-mean temperature did not change"
+    else:
+        cond["material_temp"] = None
+        cond["material_temp_note"] = "not recorded"
+    if leg.has_load:
+        lp = np.bincount(leg.pass_id, leg.load_kn) / counts
+        line = _line(lp, pass_dev)
+        cond["load"] = {"range_n": float(1000 * np.ptp(leg.load_kn)),
+                        "um_per_kn": line[0] if line else None, "r": line[1] if line else None}
+        if not line:
+            cond["load"]["note"] = "the load did not change between passes"
+    else:
+        cond["load"] = None
+        cond["load_note"] = "not recorded"
+    out["by_condition"] = cond
+    out["spectrum"] = spectrum(leg, g, lead_mm, pass_means)
+    # variance shares (mean squares about zero, sequential: offset, direction, pass, position, rest)
+    total = float(np.mean(g**2))
+    mean = float(g.mean())
+    d_part = np.array([dir_mean.get(d, mean) for d in leg.direction]) - mean
+    p_part = pass_means[leg.pass_id] - mean - d_part
+    r1 = g - pass_means[leg.pass_id]
+    tcount = np.bincount(leg.target_id).astype(float)
+    pos_part = (np.bincount(leg.target_id, r1) / np.maximum(tcount, 1))[leg.target_id]
+    r2 = r1 - pos_part
+    # direction-dependent shape: what the (target, direction) means add beyond the target means
+    ccount = np.bincount(cell_inv).astype(float)
+    dpos_part = (np.bincount(cell_inv, r2) / ccount)[cell_inv]
+    rest = r2 - dpos_part
+    parts = {"offset": mean**2, "direction": float(np.mean(d_part**2)), "pass": float(np.mean(p_part**2)),
+             "position": float(np.mean(pos_part**2)), "direction_by_position": float(np.mean(dpos_part**2)),
+             "rest": float(np.mean(rest**2))}
+    s = sum(parts.values())
+    out["variance_share_pct"] = {k: (100.0 * v / s if s > 0 else 0.0) for k, v in parts.items()}
+    out["dominant"] = _dominant(out, parts, reg, regions, external_twin, leg, n, total)
+    if noise_floor_um is not None and out["gap"]["rms_um"] <= 1.25 * noise_floor_um:
+        text = (f"the gap ({out['gap']['rms_um']:.3g} um RMS) is at the noise floor of repeat passes "
+                f"({noise_floor_um:.3g} um): nothing systematic stands out")
+        if max(parts, key=parts.get) != "rest":
+            text += "; what there is, is " + out["dominant"][len("the gap is "):]
+        out["dominant"] = text
+    return out
+
+
+def _dominant(out, parts, reg, regions, external_twin, leg, n, total) -> str:
+    s = sum(parts.values())
+    if s <= 0:
+        return "the gap is zero"
+    order = sorted(parts, key=lambda k: -parts[k])
+    words = []
+    for k in order[:2]:
+        share = parts[k] / s
+        if words and share < 0.25:
+            break
+        words.append(_describe(k, out, reg, regions, external_twin, leg))
+    return "the gap is mostly " + words[0] + ("; also " + words[1] if len(words) > 1 else "")
+
+
+def _describe(kind, out, reg, regions, external_twin, leg) -> str:
+    if kind == "offset":
+        return (f"a constant offset ({out['gap']['mean_um']:+.3g} um"
+                + ("; an external twin has its own zero)" if external_twin else ")"))
+    if kind == "direction":
+        return f"a direction-dependent offset (negative minus positive passes {out.get('direction_offset_um', 0):+.3g} um)"
+    if kind == "pass":
+        text = "a change from pass to pass"
+        tr = out.get("pass_trend") or {}
+        cond = out["by_condition"]
+        if out.get("outlier_passes"):
+            runs = ", ".join(str(p["run"]) for p in out["outlier_passes"])
+            text += f" (run(s) {runs} far off the others)"
+        elif tr and abs(tr.get("r", 0)) >= 0.7:
+            if "um_per_h" in tr:
+                text += f" that {'grows' if tr['um_per_h'] > 0 else 'falls'} with time ({tr['um_per_h']:+.3g} um/h)"
+            else:
+                text += f" that {'grows' if tr['um_per_pass'] > 0 else 'falls'} pass after pass ({tr['um_per_pass']:+.3g} um/pass)"
+        if cond.get("material_temp") and cond["material_temp"].get("r") is not None and abs(cond["material_temp"]["r"]) >= 0.7:
+            text += f", following the material temperature ({cond['material_temp']['um_per_k']:+.3g} um/K)"
+        if cond.get("load") and cond["load"].get("r") is not None and abs(cond["load"]["r"]) >= 0.7:
+            text += f", following the load ({cond['load']['um_per_kn']:+.3g} um/kN)"
+        return text
+    if kind == "direction_by_position":
+        return "a direction-dependent error that changes along the stroke (the reversal differs from target to target)"
+    if kind == "position":
+        text = "a function of position"
+        rms = [r["rms_um"] for r in out["by_region"]]
+        if len(rms) >= 3:
+            i = int(np.argmax(rms))
+            others = np.delete(np.array(rms), i)
+            if rms[i] >= 1.5 * float(np.median(others)):
+                text += f", concentrated near {_region_name(i, len(rms))}"
+        peaks = out["spectrum"].get("peaks") or []
+        if peaks:
+            p = peaks[0]
+            lead = out["spectrum"].get("lead_mm")
+            tag = " (the screw lead)" if lead and abs(p["wavelength_mm"] - lead) <= 0.05 * lead else ""
+            if p["amplitude_um"] ** 2 / 2 >= 0.3 * np.mean([r["rms_um"] ** 2 for r in out["by_region"]]):
+                text += f", periodic with a {p['wavelength_mm']:.3g} mm wavelength{tag}"
+        return text
+    return "scatter from point to point that no breakdown explains"

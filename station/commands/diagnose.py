@@ -1,0 +1,323 @@
+"""`station diagnose`: where the gap between the twin and a recording lies, which unmodelled
+effect causes it, and how far it shrinks once that effect is added; and `--self-check`, the same
+diagnosis run on simulated sessions with known effects withheld from the twin.
+
+This module is the composition root of the diagnosis: it reads files, builds twins (including
+the simulated plant's own systematic error for `--twin sim:...`, so procedures never import the
+simulator) and makes the self-check's sessions with the plant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tomllib
+from dataclasses import fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from procedures.diagnosis import DiagnosisSettings, diagnose, to_json
+from procedures.diagnosis.selfcheck import Trial, format_self_check, run_self_check
+from procedures.diagnosis.text_report import text_report
+from procedures.diagnosis.twin import ExternalTwin, twin_from_model, twin_from_recording
+from procedures.errors import InputError
+
+NAME = "diagnose"
+HELP = "diagnose the gap between the twin and a recording (where, which effect, how far)"
+DESCRIPTION = (
+    "Measure the gap between a recording and the digital twin, break it down (direction, stroke "
+    "region, pass/time, spectrum, temperature, load), name the unmodelled effects that explain it "
+    "(backlash, thermal, load, drift, scale, cyclic) with parameters and uncertainties, and say how far "
+    "the held-out gap shrinks with them. Without --twin the twin is a position-only error model fitted "
+    "on the same recording. --self-check runs the diagnosis on simulated sessions with known effects "
+    "withheld from the twin and prints how often it names them rightly."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", nargs="?", metavar="FILE.h5", help="session recording (station sweep / station import)")
+    p.add_argument("--twin", metavar="TWIN",
+                   help="MODEL.json (station fit), REFERENCE.h5 (a twin fitted on another recording), or "
+                        "sim:CONFIG.toml / sim:default (the simulated plant's systematic error)")
+    p.add_argument("--json", metavar="OUT", help="write the report (or the self-check results) as JSON")
+    p.add_argument("--threshold-um", type=float, default=0.1,
+                   help="name an effect only if it explains more than this on held-out passes, um (default 0.1)")
+    p.add_argument("--alpha", type=float, default=1e-3, help="significance level against pass scatter (default 0.001)")
+    p.add_argument("--lead-mm", type=float, default=5.0, help="screw lead marked in the spectrum, mm (default 5)")
+    p.add_argument("--effects", help="candidate effects to try, comma separated (default all)")
+    p.add_argument("--self-check", action="store_true", help="check the diagnosis on simulated withheld effects")
+    p.add_argument("--seeds", type=int, default=20, help="self-check: number of sessions (default 20)")
+    p.add_argument("--first-seed", type=int, default=0, help="self-check: first seed (default 0)")
+
+
+def _settings(args) -> DiagnosisSettings:
+    effects = None
+    if args.effects:
+        effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
+    kw = {"threshold_um": args.threshold_um, "alpha": args.alpha, "lead_mm": args.lead_mm}
+    if effects:
+        kw["effects"] = effects
+    return DiagnosisSettings(**kw)
+
+
+def run(args) -> int:
+    settings = _settings(args)
+    if args.self_check:
+        if args.file:
+            raise InputError("--self-check makes its own sessions; drop FILE.h5")
+        if args.seeds < 1:
+            raise InputError("--seeds must be at least 1")
+        return _self_check(args, settings)
+    if not args.file:
+        raise InputError("name a session file (FILE.h5), or use --self-check")
+    path = Path(args.file)
+    if path.suffix.lower() == ".csv":
+        raise InputError(f"{path}: a CSV must be imported first: `station import {path} --out FILE.h5`, "
+                         "then `station diagnose FILE.h5`")
+    from procedures.recording.reader import read_session
+
+    session = read_session(path)
+    twin = load_twin(args.twin) if args.twin else None
+    report = diagnose(session.points, twin, settings, recording={"path": str(path), "sha256": session.sha256},
+                      source=str(path))
+    print(text_report(report))
+    if args.json:
+        Path(args.json).write_text(to_json(report))
+        print(f"\nreport written to {args.json}")
+    return 0
+
+
+# -- twins ----------------------------------------------------------------------------------------
+def load_twin(spec: str):
+    """The twin named by --twin: MODEL.json, REFERENCE.h5, sim:CONFIG.toml or sim:default."""
+    if spec.startswith("sim:"):
+        return sim_twin(spec[4:])
+    path = Path(spec)
+    if not path.exists():
+        raise InputError(f"--twin {spec}: no such file (give MODEL.json, REFERENCE.h5 or sim:CONFIG.toml)")
+    if path.suffix.lower() == ".json":
+        from procedures.fit.model_io import load_model
+
+        return twin_from_model(load_model(path), str(path))
+    if path.suffix.lower() in (".h5", ".hdf5"):
+        from procedures.recording.reader import read_session
+
+        return twin_from_recording(read_session(path).points, str(path))
+    raise InputError(f"--twin {spec}: unknown kind of twin (expected .json, .h5 or sim:CONFIG.toml)")
+
+
+def _plant_configs(spec: str) -> dict:
+    """Leg number -> PlantConfig from `default` or a TOML file:
+
+        seed = 0                # start from the simulated rig's legs (default_leg_configs(seed))
+        [all]                   # PlantConfig fields for every leg
+        lead_slope_um_per_m = 9.0
+        [leg.2]                 # fields for one leg
+        reversal_um = 1.2
+    """
+    from drivers.sim.plant import PlantConfig, default_leg_configs
+
+    if spec in ("", "default"):
+        return {i + 1: c for i, c in enumerate(default_leg_configs(0))}
+    path = Path(spec)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"--twin sim:{spec}: plant config file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML ({exc})") from None
+    known = {f.name: f for f in fields(PlantConfig)}
+    unknown = set(data) - {"seed", "legs", "all", "leg"}
+    if unknown:
+        raise InputError(f"{path}: unknown key(s) {sorted(unknown)} (known: seed, legs, [all], [leg.N])")
+    seed = int(data.get("seed", 0))
+    n_legs = int(data.get("legs", 6))
+    cfgs = {i + 1: c for i, c in enumerate(default_leg_configs(seed, n_legs))}
+
+    def apply(cfg, table, where):
+        kw = {}
+        for k, v in table.items():
+            if k not in known:
+                raise InputError(f"{path}: [{where}] {k}: not a plant parameter (known: {', '.join(sorted(known))})")
+            if k == "enabled":
+                v = frozenset(v)
+            elif k == "longwave":
+                v = tuple(tuple(float(a) for a in t) for t in v)
+            elif k == "load_per_pass_n":
+                v = tuple(float(a) for a in v)
+            kw[k] = v
+        try:
+            return replace(cfg, **kw)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{path}: [{where}]: {exc}") from None
+
+    for leg in cfgs:
+        cfgs[leg] = apply(cfgs[leg], data.get("all", {}), "all")
+    for key, table in data.get("leg", {}).items():
+        try:
+            leg = int(key)
+        except ValueError:
+            raise InputError(f"{path}: [leg.{key}]: expected a leg number") from None
+        cfgs[leg] = apply(cfgs.get(leg, PlantConfig()), table, f"leg.{key}")
+    return cfgs
+
+
+def plant_twin(cfgs: dict, description: str) -> ExternalTwin:
+    """The plant's systematic error as a twin: position terms only (direction 0, temperature at
+    the reference, no load, time 0), so backlash/thermal/load/drift are left in the gap."""
+    from drivers.sim.plant import systematic_error_um
+
+    def predict(leg, x_mm, direction):
+        cfg = cfgs[leg]
+        return systematic_error_um(cfg, x_mm, 0.0, cfg.temp_ref_c, 0.0, 0.0)
+
+    return ExternalTwin(predict=predict, kind="sim", description=description, legs=frozenset(cfgs))
+
+
+def sim_twin(spec: str) -> ExternalTwin:
+    return plant_twin(_plant_configs(spec), f"simulated plant ({spec or 'default'})")
+
+
+# -- self-check -----------------------------------------------------------------------------------
+FITTED_TWIN_EFFECTS = ("backlash", "thermal", "load", "drift")
+SIM_TWIN_EFFECTS = FITTED_TWIN_EFFECTS + ("scale", "cyclic")
+SELF_CHECK_CONTRIBUTION_UM = (0.3, 3.0)  # RMS of a withheld effect against the twin, log-uniform
+BASE_SOURCES = ("lead", "longwave", "wobble", "noise", "run_offset")
+SEPARABLE_MAX_CORRELATION = 0.9  # |correlation| of pass temperature with pass time, else drawn again
+
+
+def _removed(v: np.ndarray, x: np.ndarray, fitted: bool) -> np.ndarray:
+    """What of a contribution the baseline cannot absorb: minus the per-position mean (a twin
+    fitted on the session) or minus the overall mean (an external twin's free zero)."""
+    if not fitted:
+        return v - v.mean()
+    ux, inv = np.unique(x, return_inverse=True)
+    return v - (np.bincount(inv, v) / np.bincount(inv))[inv]
+
+
+def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5) -> Trial:
+    """One self-check session: 1-2 legs of a realistic plant (lead, long-wave, wobble, noise,
+    pass offsets, a material temperature that changes, sometimes varying load) with none, one or
+    two effects present in the plant but withheld from the twin, at a random magnitude (RMS
+    contribution log-uniform in SELF_CHECK_CONTRIBUTION_UM). Odd seeds use the simulated plant
+    as twin, even seeds the twin fitted on the session."""
+    from drivers.sim.plant import PlantConfig, default_leg_configs, systematic_error_um
+    from drivers.sim.synth import synth_session
+
+    rng = np.random.default_rng(10_000 + seed)
+    fitted = seed % 2 == 0
+    eligible = FITTED_TWIN_EFFECTS if fitted else SIM_TWIN_EFFECTS
+    n_legs = int(rng.integers(1, 3))
+    legs = sorted(int(v) for v in rng.choice(np.arange(1, 7), n_legs, replace=False))
+    u = rng.random()
+    n_eff = 0 if u < 0.2 else (1 if u < 0.6 else 2)
+    chosen = [str(e) for e in rng.choice(eligible, n_eff, replace=False)]
+    where = {e: int(rng.choice(legs)) for e in chosen}
+    # irregular targets (ISO 230-2): a regular grid with jitter
+    step = 180.0 / (n_targets - 1)
+    targets = np.linspace(-90, 90, n_targets) + rng.uniform(-0.3, 0.3, n_targets) * step
+    targets[0], targets[-1] = -90.0, 90.0
+    dwell_s = 4.0
+    pass_s = n_targets * (dwell_s + step / 10.0)
+    session_s = 2 * cycles * pass_s
+    lib = default_leg_configs(int(rng.integers(0, 1000)), 6)
+    base = {}
+    for leg in legs:
+        vary_load = "load" in [e for e in chosen if where[e] == leg] or rng.random() < 0.5
+        loads = tuple(float(v) for v in rng.uniform(0, 500, 2 * cycles + 2)) if vary_load else (0.0,)
+        for _attempt in range(50):
+            cfg = replace(
+                lib[leg - 1], enabled=frozenset(BASE_SOURCES), drift_um_per_h=0.0,
+                # the material temperature changes in every session (a confounder for drift and scale)
+                initial_temp_c=20.0 + float(rng.uniform(-1.0, 1.0)), tau_s=float(rng.uniform(900, 2400)),
+                ambient_swing_k=float(rng.uniform(0.3, 1.0)) * float(rng.choice([-1, 1])),
+                ambient_period_s=float(rng.uniform(0.5, 1.2)) * session_s,
+                load_per_pass_n=loads,
+                bearing_mm=float(rng.choice([-1, 1])) * float(rng.uniform(120, 250)),
+            )
+            # keep thermal and drift separable: the pass temperatures must not follow time linearly
+            trial_pts = synth_session({leg: cfg}, targets, cycles, seed=seed, dwell_s=dwell_s)
+            run = trial_pts["run"]
+            t_pass = np.array([trial_pts["time_s"][run == r].mean() for r in np.unique(run)])
+            temp_pass = np.array([trial_pts["material_temp_c"][run == r].mean() for r in np.unique(run)])
+            if abs(np.corrcoef(t_pass, temp_pass)[0, 1]) <= SEPARABLE_MAX_CORRELATION:
+                break
+        base[leg] = cfg
+    dry = synth_session(base, targets, cycles, seed=seed, dwell_s=dwell_s)
+    truth: dict[int, dict] = {leg: {} for leg in legs}
+    real = dict(base)
+    for eff in chosen:
+        leg = where[eff]
+        sel = dry["leg"] == leg
+        x, t_h = dry["target_mm"][sel], dry["time_s"][sel] / 3600.0
+        temp, load_n = dry["material_temp_c"][sel], dry["load_n"][sel]
+        m = float(np.exp(rng.uniform(*np.log(SELF_CHECK_CONTRIBUTION_UM))))
+        cfg = real[leg]
+        if eff == "backlash":
+            cfg = replace(cfg, reversal_um=2 * m)
+            truth[leg][eff] = {"reversal_um": 2 * m}
+        elif eff == "drift":
+            d = m / float(np.std(_removed(t_h, x, fitted))) * float(rng.choice([-1, 1]))
+            cfg = replace(cfg, drift_um_per_h=d)
+            truth[leg][eff] = {"drift_um_per_h": d}
+        elif eff == "scale":
+            ppm = m / float(np.std(x / 1000.0)) * float(rng.choice([-1, 1]))
+            cfg = replace(cfg, scale_ppm=ppm)
+            truth[leg][eff] = {"scale_ppm": ppm}
+        elif eff == "cyclic":
+            lam = float(rng.uniform(8.0, 38.0))
+            while any(abs(lam - w) < 0.15 * w for w in (cfg.lead_mm, 2 * cfg.lead_mm)):
+                lam = float(rng.uniform(8.0, 38.0))
+            amp = m * np.sqrt(2.0)
+            cfg = replace(cfg, longwave=cfg.longwave + ((lam, amp, float(rng.uniform(0, 2 * np.pi))),))
+            truth[leg][eff] = {"wavelength_mm": lam, "amplitude_um": float(amp)}
+        elif eff == "thermal":
+            e_ppm = float(rng.uniform(8.0, 20.0))
+            unit = systematic_error_um(replace(cfg, expansion_ppm_per_k=e_ppm).only("thermal"), x, 1, temp, 0, 0)
+            k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
+            # scale the temperature excursion (not the steel) to reach the drawn magnitude
+            cfg = replace(cfg, expansion_ppm_per_k=e_ppm, initial_temp_c=20 + k * (cfg.initial_temp_c - 20),
+                          ambient_swing_k=k * cfg.ambient_swing_k, heating_k_per_m=k * cfg.heating_k_per_m)
+            truth[leg][eff] = {"expansion_ppm_per_k": e_ppm}
+        elif eff == "load":
+            cfg = replace(cfg, bearing_compliance_um_per_kn=float(rng.uniform(1.0, 3.0)),
+                          screw_compliance_um_per_kn_per_m=float(rng.uniform(10.0, 20.0)))
+            unit = systematic_error_um(cfg.only("load"), x, 1, 20.0, load_n, 0)
+            k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
+            cfg = replace(cfg, load_per_pass_n=tuple(k * v for v in cfg.load_per_pass_n))
+            truth[leg][eff] = {"compliance_um_per_kn": cfg.compliance_um_per_kn}
+        cfg = replace(cfg, enabled=cfg.enabled | ({"longwave"} if eff == "cyclic" else {eff}))
+        real[leg] = cfg
+    points = synth_session(real, targets, cycles, seed=seed, dwell_s=dwell_s)
+    # the true contribution of the withheld effects at every point
+    true_um = np.zeros(points.size)
+    for leg in legs:
+        sel = points["leg"] == leg
+        p = points[sel]
+        for eff in truth[leg]:
+            cfg = real[leg]
+            if eff == "cyclic":
+                extra = replace(cfg, longwave=cfg.longwave[len(base[leg].longwave):]).only("longwave")
+            else:
+                extra = cfg.only(eff)
+            true_um[sel] += systematic_error_um(extra, p["target_mm"], p["direction"], p["material_temp_c"],
+                                                p["load_n"], p["time_s"])
+    twin = None if fitted else plant_twin(base, "simulated plant without the withheld effects")
+    label = ", ".join(f"{e}@leg{where[e]}" for e in chosen) or "no effect"
+    return Trial(seed, points, twin, truth, true_um, label, {"legs": legs, "targets": n_targets, "cycles": cycles})
+
+
+def _self_check(args, settings: DiagnosisSettings) -> int:
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+
+    def progress(r):
+        mark = "ok " if r["ok"] else "BAD"
+        print(f"  {mark} seed {r['seed']:>4} ({r['twin']} twin): {r['label']}", file=sys.stderr, flush=True)
+
+    result = run_self_check((selfcheck_trial(s) for s in seeds), settings, progress)
+    print(format_self_check(result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1, allow_nan=False, default=float))
+    return 0 if result["summary"]["trials_ok"] == result["summary"]["trials"] else 1
