@@ -11,7 +11,8 @@ times faster. The waiting happens only in `sleep()` calls of the procedure's thr
 sweep sleeps for the dwell at every point, also when the dwell is 0), never inside a device
 request, where a wait would look like a silent device to the client. The waiting keeps
 `wall - wall0 = (now - t0) / speed` from an anchor taken at the first sleep; the anchor is
-taken again when the recorded time goes backwards (a resumed session starts its clock again).
+taken again when the recorded time goes backwards (a resumed session starts its clock again)
+and when the replay has fallen behind (after a pause of the run), so it never rushes.
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ from __future__ import annotations
 import math
 import threading
 import time
+
+LATE_REANCHOR_S = 0.5
+"""Pacing lagging the wall clock by more than this (seconds) is forgotten, not caught up."""
 
 
 class ReplayClock:
@@ -66,6 +70,10 @@ class ReplayClock:
                 return
             t0, wall0 = self._anchor
             wait_s = wall0 + (self._t - t0) / self.speed - now_wall
+            if wait_s < -LATE_REANCHOR_S:
+                # behind by more than a moment (a pause, a busy machine): carry on at the chosen
+                # speed from here instead of rushing to catch up
+                self._anchor = (self._t, now_wall)
         if wait_s > 0:
             self._cancelled.wait(wait_s)
             self.waited_s += wait_s

@@ -277,6 +277,17 @@ def test_clock_speed_max_never_waits_and_speed_n_paces_recorded_time():
         ReplayClock(0)
 
 
+def test_clock_after_a_pause_keeps_its_speed_instead_of_catching_up():
+    clock = ReplayClock(speed=10.0)
+    clock.sleep(0.0)
+    threading.Event().wait(0.6)  # the run is paused: 0.6 s of wall time pass without the clock
+    clock.sleep(0.0)  # late: re-anchors here
+    t0 = time.monotonic()
+    clock.set_recorded(1.0)  # 1 recorded second = 0.1 s at 10x, counted from the resume
+    clock.sleep(0.0)
+    assert time.monotonic() - t0 >= 0.09
+
+
 def test_clock_wait_ends_when_cancelled():
     clock = ReplayClock(speed=1.0)
     clock.sleep(0.0)

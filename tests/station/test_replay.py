@@ -20,6 +20,7 @@ from procedures import events as ev
 from procedures.control import RunControl
 from procedures.diagnosis import diagnose, to_json
 from procedures.fit import fit, model_to_json
+from procedures.iso230 import dumps as iso230_json, evaluate as iso230
 from procedures.plans import SweepPlan, iso230_plan
 from procedures.recording.reader import read_session
 from procedures.recording.schema import FLAG_REPLAYED, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
@@ -81,7 +82,7 @@ def schema_of(path: Path) -> dict:
         }
 
 
-def test_replay_via_cli_gives_the_same_points_model_table_and_diagnosis(recorded, tmp_path, capsys):
+def test_replay_via_cli_gives_the_same_points_model_table_iso230_and_diagnosis(recorded, tmp_path, capsys):
     out = tmp_path / "replayed.h5"
     assert main(["replay", str(recorded), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
@@ -109,6 +110,7 @@ def test_replay_via_cli_gives_the_same_points_model_table_and_diagnosis(recorded
     assert m_paper == model_to_json(fit(rep.points, "paper"), **src)
     assert table_csv_text(make_table(m_live)) == table_csv_text(make_table(m_rep))
     assert to_json(diagnose(live.points)) == to_json(diagnose(rep.points))
+    assert iso230_json(iso230(live.points), {"path": "s.h5"}) == iso230_json(iso230(rep.points), {"path": "s.h5"})
 
 
 def test_replayed_file_passes_the_schema_tools(recorded, tmp_path):
@@ -178,6 +180,19 @@ def test_cli_reports_a_mismatch_in_one_line(recorded, tmp_path, capsys):
     last = err.strip().splitlines()[-1]
     assert last.startswith("station replay: error: replay: leg 3 was not recorded in") and "Traceback" not in err
     assert "(the recording has legs 1, 2)" in last
+
+
+def test_cli_refuses_a_recording_with_an_unknown_reported_value(recorded, tmp_path, capsys):
+    edited = tmp_path / "no-load.h5"
+    shutil.copy(recorded, edited)
+    with h5py.File(edited, "a") as f:
+        row = f["points"][17]
+        row["load_n"] = np.nan
+        f["points"][17] = row
+    assert main(["replay", str(edited), "--out", str(tmp_path / "n.h5")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"station replay: error: {edited}: point index 17 (leg 1 run 2 target") and "\n" not in err
+    assert "has no recorded load_n (NaN)" in err and not (tmp_path / "n.h5").exists()
 
 
 def test_cli_refuses_to_overwrite_and_checks_the_speed(recorded, tmp_path, capsys):
