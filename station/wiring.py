@@ -51,15 +51,25 @@ class Rig:
         self.close()
 
 
-def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | None = None) -> Rig:
-    """Connect to the rig named by `cfg`; on "sim" start the simulated rig in-process first."""
+def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | None = None,
+             noise_seed: int | None = None) -> Rig:
+    """Connect to the rig named by `cfg`; on "sim" start the simulated rig in-process first.
+
+    `noise_seed` (simulated rig only): seed of the measurement noise and pass offsets, so a
+    later session (a verification) sees new noise on the same plant (`cfg.sim.seed`); None =
+    the plant seed, which repeats a session's noise exactly."""
     profile = DriveProfile.load(cfg.drive.profile or None)
     if cfg.is_sim:
+        from drivers.sim.plant import default_leg_configs
         from drivers.sim.rig import SimRig
 
         scale = cfg.sim.time_scale if time_scale is None else time_scale
         nv = Path(cfg.sim.nv_path) if cfg.sim.nv_path else None
-        sim = SimRig(time_scale=scale, seed=cfg.sim.seed, nv_path=nv, profile=profile).start()
+        if noise_seed is None:
+            sim = SimRig(time_scale=scale, seed=cfg.sim.seed, nv_path=nv, profile=profile).start()
+        else:
+            sim = SimRig(time_scale=scale, seed=int(noise_seed), configs=default_leg_configs(cfg.sim.seed),
+                         nv_path=nv, profile=profile).start()
         try:
             axes = connect_axes(sim.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
             laser = SerialInterferometer(sim.laser_port, timeout_s=cfg.interferometer.timeout_s)
