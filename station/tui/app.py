@@ -63,13 +63,15 @@ class StationApp(App):
         "diagnosis": DiagnosisScreen,
     }
     DEFAULT_MODE = "rig"
+    # The page keys (F1-F6) are shown in the tab bar at the top of every page; the footer keeps
+    # the current page's actions.
     BINDINGS = [
-        Binding("f1", "switch_mode('rig')", "Rig"),
-        Binding("f2", "switch_mode('sweep')", "Sweep"),
-        Binding("f3", "switch_mode('results')", "Results"),
-        Binding("f4", "switch_mode('compensation')", "Compensation"),
-        Binding("f5", "switch_mode('replay')", "Replay"),
-        Binding("f6", "switch_mode('diagnosis')", "Diagnosis"),
+        Binding("f1", "switch_mode('rig')", "Rig", show=False),
+        Binding("f2", "switch_mode('sweep')", "Sweep", show=False),
+        Binding("f3", "switch_mode('results')", "Results", show=False),
+        Binding("f4", "switch_mode('compensation')", "Compensation", show=False),
+        Binding("f5", "switch_mode('replay')", "Replay", show=False),
+        Binding("f6", "switch_mode('diagnosis')", "Diagnosis", show=False),
         Binding("ctrl+q", "quit", "Quit", priority=True),
         Binding("ctrl+c", "quit", "Quit", show=False, priority=True),
     ]
@@ -103,6 +105,7 @@ class StationApp(App):
         self._sweep_idle.set()
         self._quit_after_sweep = False
         self.replay_rig = None  # the replay devices of the running (or last) replay
+        self._on_sweep_done: Callable[[SweepState], None] | None = None
         self.last_session: Path | None = None  # the newest recording made or opened here
         self.analysis = None  # results.Analysis: the session, model and ISO figures on show
         self.session_listeners: list[Callable[[Path], None]] = []
@@ -257,8 +260,11 @@ class StationApp(App):
             self.notify(f"{message.action}: leg {legs} done.", timeout=3)
 
     # -- sweep -----------------------------------------------------------------------------------
-    def start_sweep(self, plan: SweepPlan, out: Path) -> bool:
-        """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner)."""
+    def start_sweep(self, plan: SweepPlan, out: Path, label: str = "sweep",
+                    on_done: Callable[[SweepState], None] | None = None) -> bool:
+        """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner).
+        `label` names the job on screen ("sweep", "verification of leg 2"); `on_done(state)` is
+        called on the app's thread when it has ended (whatever the outcome)."""
         if self.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
             return False
@@ -275,7 +281,8 @@ class StationApp(App):
             self.notify(f"{out} exists already; choose another file name.", severity="error")
             return False
         self.sweep = SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting",
-                                total=plan.total_points)
+                                total=plan.total_points, label=label)
+        self._on_sweep_done = on_done
         self.sweep_control = RunControl()
         self._sweep_idle.clear()
         self._sweep_worker(plan, out, self.sweep_control)
@@ -314,6 +321,7 @@ class StationApp(App):
             return False
         out = replay_output_path(self.cfg, source)
         self.sweep = SweepState(out=out, label=f"replay of {source.name}", status="starting")
+        self._on_sweep_done = None
         self.sweep_control = RunControl()
         self._sweep_idle.clear()
         self._replay_worker(source, speed, out, self.sweep_control)
@@ -374,6 +382,12 @@ class StationApp(App):
                         severity="information" if s.status == "completed" else "warning", timeout=8)
         if s.out is not None and s.out.exists():
             self.set_session(s.out)
+        done, self._on_sweep_done = self._on_sweep_done, None
+        if done is not None:
+            try:
+                done(s)
+            except Exception as exc:  # a follow-up must not take the app down
+                self.notify(describe(exc, f"after the {s.label}"), severity="error", timeout=12)
         if self._quit_after_sweep:
             self.exit()
 
@@ -421,9 +435,9 @@ class StationApp(App):
 
             self.push_screen(
                 ConfirmScreen(
-                    f"A sweep is running on leg {legs}.\n\nQuit anyway? The sweep is aborted, the drives are "
-                    "stopped and disabled, and the recording is kept (finish it later with "
-                    "`station sweep --resume FILE`).",
+                    f"A {self.sweep.label} is running on leg {legs}.\n\nQuit anyway? It is aborted, the drives "
+                    "are stopped and disabled, and the recording is kept"
+                    + (f" (finish it later with `station sweep --resume {self.sweep.out}`)." if self.sweep.label == "sweep" else "."),
                     yes="Abort and quit", no="Keep sweeping",
                 ),
                 confirmed,

@@ -38,8 +38,9 @@ class XYPlot(PlotextPlot):
                 continue
             if style == "line":
                 plt.plot(list(x), list(y), label=label)
-            else:
-                plt.scatter(list(x), list(y), label=label, marker="dot")
+            else:  # "scatter" or "scatter:M" with a marker character M (tells series apart without colour)
+                marker = style.split(":", 1)[1] if ":" in style else "dot"
+                plt.scatter(list(x), list(y), label=label, marker=marker)
             n += len(x)
             names.append(label)
         self.drawn_points = n
@@ -61,6 +62,8 @@ def known_sessions(folders) -> list[Path]:
     """Session files (*.h5) in `folders`, newest first (at most 50)."""
     found: dict[Path, float] = {}
     for folder in folders:
+        if folder is None:
+            continue
         folder = Path(folder)
         if folder.is_dir():
             for p in folder.glob("*.h5"):
@@ -127,3 +130,15 @@ class SessionPicker(Horizontal):
             self.app.notify("Choose a recent session or type the path of a session file (.h5).", severity="warning")
             return
         self.post_message(self.Chosen(self, Path(text).expanduser()))
+
+
+def sample_folders() -> list[Path]:
+    """Where sample sessions live: recordings/ in the working folder and in the station's
+    source checkout (an editable install), whichever exist."""
+    import station
+
+    out = []
+    for folder in (Path("recordings"), Path(station.__file__).resolve().parents[1] / "recordings"):
+        if folder.is_dir() and all(folder.resolve() != o.resolve() for o in out):
+            out.append(folder)
+    return out

@@ -24,6 +24,7 @@ from textual.widgets import Button, DataTable, Input, Label, Static
 
 from station.tui import capabilities
 from station.tui.errors import describe
+from station.tui.messages import Notice
 from station.tui.screens.common import ConfirmScreen, StationScreen
 from station.tui.widgets import XYPlot
 
@@ -43,6 +44,27 @@ class DriveTablesRead(Message):
     def __init__(self, tables: dict[int, DriveTable]) -> None:
         super().__init__()
         self.tables = tables
+
+
+class DrivePlanReady(Message):
+    """A push or rollback was prepared (drive read, table checked); it awaits confirmation."""
+
+    def __init__(self, plan, audit) -> None:
+        super().__init__()
+        self.plan = plan
+        self.audit = audit
+
+
+class DriveChanged(Message):
+    """A push or rollback ended (either way): re-read the drives and the audit log."""
+
+
+class VerifyReady(Message):
+    def __init__(self, report: str, passed: bool | None, summary: str) -> None:
+        super().__init__()
+        self.report = report
+        self.passed = passed
+        self.summary = summary
 
 
 class CompensationScreen(StationScreen):
@@ -69,8 +91,11 @@ class CompensationScreen(StationScreen):
                 yield Button("Read drives (g)", id="comp-read", compact=True)
                 yield Button("Save CSV (w)", id="comp-save", compact=True)
                 yield Button("Push… (u)", id="comp-push", compact=True, variant="error")
+                yield Button("Verify (v)", id="comp-verify", compact=True)
+                yield Button("Rollback… (b)", id="comp-rollback", compact=True)
             yield DataTable(id="comp-table", cursor_type="row", zebra_stripes=True)
             yield Static("", id="comp-status", classes="status")
+            yield Static("", id="comp-audit", classes="status")
             with Horizontal(id="comp-plots"):
                 yield XYPlot("table", "position mm", "error µm", id="comp-plot")
                 yield XYPlot("new − active", "position mm", "µm", id="comp-diff-plot")
@@ -81,6 +106,7 @@ class CompensationScreen(StationScreen):
         self.table_model_id: int | None = None
         self.drive_tables: dict[int, DriveTable] = {}
         self.plot_leg: int | None = None
+        self.verify_text = ""
         t = self.query_one("#comp-table", DataTable)
         t.add_columns("Leg", "Start mm", "Step mm", "Points", "Fwd µm (min..max)", "Rev µm (min..max)",
                       "Drive bank", "Max |new − active| µm")
@@ -199,76 +225,236 @@ class CompensationScreen(StationScreen):
         legs = list(self.table.legs)
         return self.plot_leg if self.plot_leg in legs else legs[0]
 
+    def _audit(self):
+        """The audit log `station push/rollback/verify` use: <recordings_dir>/audit.jsonl."""
+        from procedures.audit import AuditLog
+        from station.commands.push import AUDIT_NAME
+
+        folder = Path(self.app.cfg.recordings_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        return AuditLog(folder / AUDIT_NAME, operator=self.app.cfg.operator)
+
+    def _drive_url(self) -> str:
+        cfg = self.app.cfg
+        if cfg.drive.url == "sim":
+            return f"sim ({cfg.sim.nv_path})" if cfg.sim.nv_path else "sim"
+        return cfg.drive.url
+
+    def _ready_for_drive(self, what: str) -> bool:
+        if capabilities.find("push") is None:
+            self.notify(capabilities.missing_text("push", what), severity="warning", timeout=12)
+            return False
+        if self.app.rig is None:
+            self.notify("Not connected to the rig: connect on the Rig screen (F1).", severity="error")
+            return False
+        if self.app.sweep.active:
+            self.notify(f"A sweep is running: {what.lower()} only when it has ended.", severity="warning")
+            return False
+        return True
+
     def action_push(self) -> None:
         leg = self._selected_leg()
         if leg is None:
             self.notify("Make a table first (t).", severity="warning")
             return
-        push = capabilities.find("push")
-        if push is None:
-            self.notify(capabilities.missing_text("push", "Pushing a table to a drive") +
-                        " Save the table as CSV (w) and push it with `station push` once available.",
-                        title="Push", severity="warning", timeout=12)
-            return
-        if self.app.rig is None:
-            self.notify("Not connected to the rig: connect on the Rig screen (F1).", severity="error")
-            return
-        dt = self.drive_tables.get(leg)
-        drive = dt.identity if dt and dt.identity else f"leg {leg} drive"
-        where = "" if self.app.hide_volatile else f" at {self.app.cfg.drive.url if not self.app.cfg.is_sim else self.app.rig.description}"
-        t = self.table.legs[leg]
-        self.app.push_screen(
-            ConfirmScreen(
-                f"Push the compensation table for [b]leg {leg}[/b] to drive [b]{drive}[/b]{where}?\n\n"
-                f"{t.point_count} points from {t.start_mm:+.3f} mm every {t.step_mm:g} mm. The drive's current "
-                "table is backed up to the audit log and stays active if anything fails.",
-                yes="Push", no="Cancel"),
-            lambda yes: self._push_confirmed(yes, leg, push),
-        )
+        if self._ready_for_drive("Pushing a table"):
+            self._prepare_worker("push", leg)
 
-    def _push_confirmed(self, yes: bool | None, leg: int, push) -> None:
-        if not yes:
-            self.notify("Push cancelled; nothing was written.", timeout=4)
-            return
-        self.notify(f"Pushing the table to leg {leg}…", timeout=4)
-        self._push_worker(leg, push)
+    def action_rollback(self) -> None:
+        leg = self._selected_leg() or (self.app.legs[0] if self.app.legs else None)
+        if leg is not None and self._ready_for_drive("Rollback"):
+            self._prepare_worker("rollback", leg)
 
     @work(thread=True, exclusive=True, group="push", exit_on_error=False)
-    def _push_worker(self, leg: int, push) -> None:
-        from station.tui.messages import Notice
+    def _prepare_worker(self, action: str, leg: int) -> None:
+        """Read the drive and check what would be written (nothing is written here)."""
+        from procedures.audit import AuditEntry
+        from procedures.push import PushRefused, prepare_push, prepare_rollback
 
         app = self.app
+        audit = self._audit()
+        url = self._drive_url()
+        source = None
+        a = app.analysis
+        if action == "push" and a is not None:
+            source = {"path": str(a.model_path or a.path), "leg": leg, "recording": str(a.path),
+                      "recording_sha256": a.session.sha256, "method": a.method}
         if not app.rig_lock.acquire(timeout=5.0):
-            self.post_message(Notice("The rig is busy; push not started.", "error"))
+            app.post_message(Notice("The rig is busy; try again.", "error", action.capitalize()))
             return
         try:
-            push(app.rig.axes[leg], self.table.legs[leg])
+            axis = app.rig.axes[leg]
+            if action == "push":
+                profile = app.rig.profile
+                plan = prepare_push(axis, self.table.legs[leg], table_limits=self._limits(),
+                                    quantum_um=profile.table.entry_scale_um if profile else 0.01,
+                                    drive_url=url, source=source)
+            else:
+                plan = prepare_rollback(axis, audit, drive_url=url)
         except Exception as exc:
-            app.post_message(Notice(describe(exc, f"push to leg {leg} failed") +
-                                    " The previous table is still active.", "error", "Push"))
+            if isinstance(exc, PushRefused):
+                try:
+                    audit.append(AuditEntry(action, leg, "refused", str(exc), "", url, app.cfg.operator, source=source))
+                except Exception:
+                    pass  # the refusal is still shown; the log is best effort here as in the CLI
+            app.post_message(Notice(describe(exc, f"{action} refused"), "error", action.capitalize()))
             return
         finally:
             app.rig_lock.release()
-        app.post_message(Notice(f"Table pushed to leg {leg} and activated.", "information", "Push"))
-        self.call_from_thread(self.action_read_drives)
+        self.post_message(DrivePlanReady(plan, audit))
+
+    def on_drive_plan_ready(self, message: DrivePlanReady) -> None:
+        plan = message.plan
+        lines = plan.describe()
+        if self.app.hide_volatile:
+            lines = [line.split(" at ")[0] if line.startswith(f"leg {plan.leg}: drive") else line for line in lines]
+        verb = "Push this table to" if plan.action == "push" else "Roll back the table of"
+        question = f"[b]{verb} leg {plan.leg}[/b], drive [b]{plan.drive}[/b]?\n\n" + "\n".join(lines) + (
+            "\n\nThe drive's current table is backed up in the audit log first; on any failure it stays active.")
+        self.app.push_screen(ConfirmScreen(question, yes="Push" if plan.action == "push" else "Roll back", no="Cancel"),
+                             lambda yes: self._confirmed(yes, message.plan, message.audit))
+
+    def _confirmed(self, yes: bool | None, plan, audit) -> None:
+        from procedures.audit import AuditEntry
+
+        if not yes:
+            try:
+                audit.append(AuditEntry(plan.action, plan.leg, "cancelled", "cancelled at the confirmation; nothing written",
+                                        plan.drive, plan.drive_url, self.app.cfg.operator, source=plan.source))
+            except Exception:
+                pass
+            self.notify(f"{plan.action.capitalize()} cancelled; nothing was written.", timeout=5)
+            self._show_audit()
+            return
+        self.notify(f"{'Pushing to' if plan.action == 'push' else 'Rolling back'} leg {plan.leg}…", timeout=4)
+        self._apply_worker(plan, audit)
+
+    @work(thread=True, exclusive=True, group="push", exit_on_error=False)
+    def _apply_worker(self, plan, audit) -> None:
+        from procedures.push import push_table, rollback
+
+        app = self.app
+        if not app.rig_lock.acquire(timeout=5.0):
+            app.post_message(Notice("The rig is busy; nothing was written.", "error", plan.action.capitalize()))
+            return
+        try:
+            axis = app.rig.axes[plan.leg]
+            if plan.action == "push":
+                result = push_table(axis, plan=plan, audit=audit, operator=app.cfg.operator)
+            else:
+                result = rollback(axis, audit, plan=plan, operator=app.cfg.operator)
+        except Exception as exc:  # PushRefused / PushFailed say which table is active
+            app.post_message(Notice(describe(exc, f"{plan.action} of leg {plan.leg} failed"), "error", plan.action.capitalize()))
+            self.post_message(DriveChanged())
+            return
+        finally:
+            app.rig_lock.release()
+        done = "pushed and active" if plan.action == "push" else "rolled back"
+        warn = "" if result.table_enabled else " Warning: the drive does not apply its table (table_enable = 0)."
+        app.post_message(Notice(f"Leg {result.leg}: table {done} in bank {result.bank} (was bank {result.previous_bank}); "
+                                f"backup in the audit log.{warn}", "information", plan.action.capitalize()))
+        self.post_message(DriveChanged())
+
+    def on_drive_changed(self, message: DriveChanged) -> None:
+        self._show_audit()
+        self.action_read_drives()
 
     def action_verify(self) -> None:
-        if capabilities.find("verify") is None:
-            self.notify(capabilities.missing_text("verify", "The verification sweep") +
-                        " A plain sweep of the leg (F2) with the table active shows the compensated error.",
-                        title="Verify", severity="warning", timeout=12)
-            return
-        self.notify("Verification runs from `station verify` in this build.", severity="warning")
+        """A verification sweep of the selected leg with its table active: the calibration's plan
+        again, then procedures.verify compares it with the calibration (before vs after)."""
+        from dataclasses import replace
 
-    def action_rollback(self) -> None:
-        if capabilities.find("rollback") is None:
-            self.notify(capabilities.missing_text("rollback", "Rollback"), title="Rollback", severity="warning", timeout=12)
+        from procedures.plans import SweepPlan
+
+        a = self.app.analysis
+        leg = self._selected_leg()
+        if a is None or leg is None:
+            self.notify("Fit a model (F3) and make its table (t) first: the verification repeats that calibration.",
+                        severity="warning")
             return
-        self.notify("Rollback runs from `station rollback` in this build.", severity="warning")
+        if not self._ready_for_drive("The verification sweep"):
+            return
+        dt = self.drive_tables.get(leg)
+        if dt is None or dt.table is None:
+            self.notify("Read the drives first (g).", severity="warning")
+            return
+        if dt.table.point_count == 0:
+            self.notify(f"Leg {leg}: the drive's active table is empty; push a table first (u).", severity="error")
+            return
+        try:
+            plan = replace(SweepPlan.from_dict(a.session.plan), legs=(leg,), kind="verification", notes=())
+        except Exception as exc:
+            self.notify(describe(exc, "the calibration's plan cannot be repeated"), severity="error", timeout=12)
+            return
+        from station.tui.app import default_session_path
+
+        made = default_session_path(self.app.cfg, (leg,))  # runs/ui-STAMP-legN.h5
+        out = made.with_name("verify-" + made.name.removeprefix("ui-"))
+        before = a.session
+        if self.app.start_sweep(plan, out, label=f"verification of leg {leg}",
+                                on_done=lambda state: self._verify_done(state, before, leg, dt)):
+            self.notify(f"Verification sweep of leg {leg} started (Sweep screen, F2).", timeout=5)
+            self.app.switch_mode("sweep")
+
+    def _verify_done(self, state, before, leg: int, dt: DriveTable) -> None:
+        if state.out is None or not state.out.exists():
+            return
+        self._verify_worker(state.out, state.status, before, leg, dt)
+
+    @work(thread=True, exclusive=True, group="verify", exit_on_error=False)
+    def _verify_worker(self, out: Path, outcome: str, before, leg: int, dt: DriveTable) -> None:
+        from procedures.audit import AuditEntry
+        from procedures.push import table_sha256
+        from procedures.recording.reader import read_session
+        from procedures.verify import ACCEPT_RATIO, format_report, verify
+
+        app = self.app
+        try:
+            after = read_session(out)
+            results = verify(after.points, before.points, [leg], after_source=str(out), before_source=str(before.path))
+        except Exception as exc:
+            app.post_message(Notice(describe(exc, "cannot evaluate the verification"), "error", "Verify"))
+            return
+        r = results[leg]
+        ratio = r.ratio
+        msg = (f"verification {outcome}: residual RMS {r.after.rms_um:.4f} um, noise floor "
+               + (f"{r.after.noise_floor_um:.4f} um, ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
+                  if ratio is not None else "n/a"))
+        try:
+            self._audit().append(AuditEntry(
+                "verify", leg, outcome, msg, dt.identity, self._drive_url(), app.cfg.operator,
+                table_sha256=table_sha256(dt.table), bank=dt.active_bank,
+                details={"session": str(out), "session_sha256": after.sha256, **r.to_json(),
+                         "before_session": {"path": str(before.path), "sha256": before.sha256}}))
+        except Exception as exc:
+            app.post_message(Notice(describe(exc, "the audit log"), "warning", "Verify"))
+        self.post_message(VerifyReady(format_report(results), r.passed, msg))
+
+    def on_verify_ready(self, message: VerifyReady) -> None:
+        self.verify_text = message.report
+        self.notify(message.summary, title="Verify", severity="information" if message.passed else "warning", timeout=12)
+        self._show()
+
+    def _show_audit(self) -> None:
+        widget = self.query_one("#comp-audit", Static)
+        try:
+            entries = self._audit().entries()[-5:]
+        except Exception as exc:
+            widget.update(f"audit log: [red]{describe(exc)}[/red]")
+            return
+        if not entries:
+            widget.update("audit log: no entries yet")
+            return
+        lines = ["audit log (newest last):"]
+        for e in entries:
+            when = "" if self.app.hide_volatile else f"{e.time_utc[:19]} "
+            lines.append(f"  {when}{e.action} leg {e.leg} [b]{e.outcome}[/b]: {e.message[:90]}")
+        widget.update("\n".join(lines))
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         action = {"comp-make": self.action_make_table, "comp-read": self.action_read_drives,
-                  "comp-save": self.action_save_csv, "comp-push": self.action_push}.get(event.button.id or "")
+                  "comp-save": self.action_save_csv, "comp-push": self.action_push,
+                  "comp-verify": self.action_verify, "comp-rollback": self.action_rollback}.get(event.button.id or "")
         if action is not None:
             event.stop()
             action()
@@ -322,8 +508,10 @@ class CompensationScreen(StationScreen):
         if missing:
             lines.append(f"[yellow]not available yet in this build: {', '.join(missing)}[/yellow] "
                          "(the table can be saved as CSV: w)")
-        lines.append("audit log: " + ("not available yet" if capabilities.find("push") is None else "see `station push` log"))
+        if self.verify_text:
+            lines.append(self.verify_text.rstrip())
         status.update("\n".join(lines))
+        self._show_audit()
         self._show_plots()
 
     def _show_plots(self) -> None:

@@ -17,7 +17,7 @@ from textual.widgets import Button, DataTable, Label, Select, Static
 
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import SessionPicker, XYPlot
+from station.tui.widgets import SessionPicker, sample_folders, XYPlot
 
 TWINS = [("fitted on the recording", "fitted"), ("simulated plant (sim:default)", "sim"),
          ("model on the Results screen", "results")]
@@ -47,7 +47,7 @@ class DiagnosisScreen(StationScreen):
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
         with Vertical(id="diag-body"):
-            yield SessionPicker(lambda: [self.app.cfg.recordings_dir, "recordings"], id="diag-picker")
+            yield SessionPicker(lambda: [self.app.cfg.recordings_dir, *sample_folders()], id="diag-picker")
             with Horizontal(classes="controls"):
                 yield Label("Twin ")
                 yield Select(TWINS, value="fitted", allow_blank=False, id="twin", compact=True)

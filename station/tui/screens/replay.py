@@ -17,7 +17,7 @@ from textual.widgets import Button, Input, Label, Static
 from station.tui import capabilities
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import SessionPicker
+from station.tui.widgets import SessionPicker, sample_folders
 
 
 class SessionRead(Message):
@@ -40,7 +40,7 @@ class ReplayScreen(StationScreen):
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
         with Vertical(id="replay-body"):
-            yield SessionPicker(lambda: ["recordings", self.app.cfg.recordings_dir], id="replay-picker")
+            yield SessionPicker(lambda: [*sample_folders(), self.app.cfg.recordings_dir], id="replay-picker")
             with Horizontal(classes="controls"):
                 yield Label("Speed ")
                 yield Input("max", id="replay-speed", compact=True,

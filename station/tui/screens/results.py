@@ -91,12 +91,15 @@ class ResultsScreen(StationScreen):
         yield from self.compose_footer()
 
     def _folders(self):
-        return [self.app.cfg.recordings_dir, "recordings"]
+        from station.tui.widgets import sample_folders
+
+        return [self.app.cfg.recordings_dir, *sample_folders()]
 
     def on_mount(self) -> None:
         table = self.query_one("#results-table", DataTable)
-        table.add_columns("Leg", "Points", "Cycles", "Noise floor µm", "Held-out RMS µm", "Ratio",
-                          "Range µm (before → after)", "A µm", "E µm", "M µm", "B µm", "R µm")
+        # µm throughout; "held-out" = RMS of the residual on cycles the fit did not see
+        table.add_columns("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Ratio",
+                          "Range before→after", "A", "E", "M", "B", "R")
         self.plot_leg: int | None = None
         self.app.session_listeners.append(self._on_new_session)
         if self.app.last_session is not None:
@@ -215,7 +218,8 @@ class ResultsScreen(StationScreen):
             return
         s = a.session
         name = a.path.name if self.app.hide_volatile else str(a.path)
-        text = (f"[b]{name}[/b]  {s.outcome}, {len(s.points)} points, legs {s.legs}   method [b]{a.method}[/b]")
+        text = (f"[b]{name}[/b]  {s.outcome}, {len(s.points)} points, legs {s.legs}   method [b]{a.method}[/b]"
+                "   [dim](figures in µm)[/dim]")
         if a.iso_note:
             text += f"\n[yellow]{a.iso_note}[/yellow]"
         extra = []
@@ -232,7 +236,7 @@ class ResultsScreen(StationScreen):
             table.add_row(
                 str(leg), str(st.n_points), str(st.n_cycles), _fmt(st.noise_floor_um), _fmt(st.heldout_rms_um),
                 _fmt(ratio, ".2f") if ratio is not None else "n/a",
-                f"{st.range_before_um:.3f} → {_fmt(st.range_after_um)}",
+                f"{st.range_before_um:.2f} → {_fmt(st.range_after_um, '.2f')}",
                 *(_fmt(iso.get(k)) for k in "AEMBR"),
                 key=str(leg),
             )
@@ -257,10 +261,10 @@ class ResultsScreen(StationScreen):
             p = pts[pts["direction"] == d]
             if len(p) == 0:
                 continue
-            series.append((f"measured {name}", p["target_mm"], p["error_um"], "scatter"))
+            series.append((f"measured {name}", p["target_mm"], p["error_um"], "scatter" if d > 0 else "scatter:x"))
             series.append((f"model {name}", grid, a.model.predict_um(leg, grid, d), "line"))
             resid.append((f"residual {name}", p["target_mm"],
-                          p["error_um"] - a.model.predict_um(leg, p["target_mm"], d), "scatter"))
+                          p["error_um"] - a.model.predict_um(leg, p["target_mm"], d), "scatter" if d > 0 else "scatter:x"))
         st = lf.stats
         mplot.show(series, title=f"leg {leg}: measured and {a.method} model")
         rplot.show(resid, title=f"leg {leg}: held-out RMS {_fmt(st.heldout_rms_um)} µm, noise floor {_fmt(st.noise_floor_um)} µm")

@@ -163,7 +163,7 @@ class RigScreen(StationScreen):
                     f"[red]{snap.fault_text.get(leg) or f'code 0x{st.fault_code:04X}'}[/red]" if st.fault else "–",
                 ]
             for col, value in enumerate(cells, start=1):
-                table.update_cell_at((table.get_row_index(str(leg)), col), value)
+                table.update_cell_at((table.get_row_index(str(leg)), col), value, update_width=True)
         laser = self.query_one("#laser", Static)
         parts = []
         for leg, r in sorted(snap.readings.items()):

@@ -193,7 +193,7 @@ class SweepScreen(StationScreen):
         else:
             plot.show([
                 ("approach +1 (up)", trace.up_target_mm, trace.up_error_um, "scatter"),
-                ("approach −1 (down)", trace.down_target_mm, trace.down_error_um, "scatter"),
+                ("approach −1 (down)", trace.down_target_mm, trace.down_error_um, "scatter:x"),
             ], title=f"leg {leg}: error against position ({trace.count} points)")
 
         bar = self.query_one("#progress", ProgressBar)

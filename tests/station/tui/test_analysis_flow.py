@@ -7,6 +7,7 @@ compare the UI against direct calls on the same file.
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,14 +124,85 @@ async def _compensation(path, cfg, size, wait_until, notes, connected):
         await wait_until(pilot, csv.exists, what="the table CSV")
         assert csv.read_text().splitlines()[0] == "leg,position_mm,error_fwd_um,error_rev_um"
         csv.unlink()
-        # push: the push procedure has not landed in this build; the UI says so and writes nothing
-        if capabilities.find("push") is None:
-            before = app.rig.axes[1].read_table(app.rig.axes[1].active_bank())
-            await pilot.press("u")
-            await wait_until(pilot, lambda: any("not available yet" in n for n in notes(app)), what="the notice")
-            assert app.rig.axes[1].read_table(app.rig.axes[1].active_bank()) == before
-        else:
-            pytest.fail("push is installed: replace this branch with the push-after-confirmation flow")
+
+
+def test_push_after_confirming_then_verify_and_roll_back(recorded_session, cfg, size, wait_until, notes, connected):
+    asyncio.run(_push(recorded_session, cfg, size, wait_until, notes, connected))
+
+
+async def _push(path, cfg, size, wait_until, notes, connected):
+    from procedures.audit import read_entries
+    from procedures.push import quantize, table_sha256
+    from procedures.verify import format_report, verify
+    from station.tui.screens.common import ConfirmScreen
+
+    app = StationApp(cfg, time_scale=0.0)
+    async with app.run_test(size=size) as pilot:
+        await connected(pilot)
+        await open_session(pilot, wait_until, "f3", path)
+        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        await pilot.press("f4")
+        comp = app.screen
+        table = comp.query_one("#comp-table", DataTable)
+        await wait_until(pilot, lambda: table.row_count == 2 and "pts" in str(table.get_row_at(0)[6]), 30, "the drives")
+        axis = app.rig.axes[1]
+        bank0 = axis.active_bank()
+        empty_sha = table_sha256(axis.read_table(bank0))
+        audit_path = Path(cfg.recordings_dir) / "audit.jsonl"
+        # 1) cancel at the confirmation: nothing is written, the cancellation is logged
+        await pilot.press("u")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the push confirmation")
+        question = str(app.screen.query_one("#confirm-question").render())
+        assert "leg 1" in question and axis.identity() in question  # names the leg and the drive
+        await pilot.press("n")
+        await wait_until(pilot, lambda: any("cancelled; nothing was written" in n for n in notes(app)), what="cancel")
+        assert axis.active_bank() == bank0 and table_sha256(axis.read_table(bank0)) == empty_sha
+        # 2) confirm: the table lands in the other bank, is active, and the push is audited with its backup
+        await pilot.press("u")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the push confirmation")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: any("pushed and active" in n for n in notes(app)), 30, "the push")
+        pushed = comp.table.legs[1]
+        assert axis.active_bank() == 1 - bank0
+        want_sha = table_sha256(quantize(pushed.to_bank(), app.rig.profile.table.entry_scale_um))
+        assert table_sha256(axis.read_table(axis.active_bank())) == want_sha
+        entries, problems = read_entries(audit_path)
+        assert not problems
+        assert [(e.action, e.outcome) for e in entries] == [("push", "cancelled"), ("push", "started"), ("push", "ok")]
+        assert entries[-1].table_sha256 == want_sha and entries[-1].leg == 1
+        # the screen now shows the drive holding the new table: no difference left
+        def diff_um() -> float:
+            try:
+                return float(str(table.get_row_at(0)[7]))
+            except ValueError:  # not read yet
+                return float("inf")
+
+        await wait_until(pilot, lambda: diff_um() <= 0.005 + 1e-9,
+                         what="the drive diff to vanish (up to half the drive's 0.01 um quantum)")
+        # 3) verify: the calibration's plan again on leg 1 with the table active, compared before/after
+        await pilot.press("v")
+        await wait_until(pilot, lambda: app.sweep.label == "verification of leg 1", what="the verification sweep")
+        await wait_until(pilot, lambda: comp.verify_text != "", 60, "the verification report")
+        assert app.sweep.status == "completed"
+        from procedures.recording.reader import read_session as rs
+
+        expected = verify(rs(app.sweep.out).points, rs(path).points, [1], after_source=str(app.sweep.out),
+                          before_source=str(path))
+        assert comp.verify_text == format_report(expected)
+        assert expected[1].after.rms_um < expected[1].before.rms_um  # the table did reduce the error
+        entries, _ = read_entries(audit_path)
+        assert (entries[-1].action, entries[-1].outcome, entries[-1].table_sha256) == ("verify", "completed", want_sha)
+        # 4) roll back: the empty table from before the push is active again
+        await pilot.press("f4")
+        await wait_until(pilot, lambda: app.screen is comp, what="the Compensation screen")
+        await pilot.press("b")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the rollback confirmation")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: any("rolled back" in n for n in notes(app)), 30, "the rollback")
+        assert table_sha256(axis.read_table(axis.active_bank())) == empty_sha
+        entries, _ = read_entries(audit_path)
+        assert (entries[-1].action, entries[-1].outcome) == ("rollback", "ok")
+        assert "rollback leg 1" in str(comp.query_one("#comp-audit", Static).render())
 
 
 def test_diagnosis_opens_the_gap_report(recorded_session, cfg, size, wait_until):
