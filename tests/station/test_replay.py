@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import subprocess
 import time
@@ -154,6 +155,21 @@ def test_aborted_recording_replays_to_the_same_point_and_ends_aborted(tmp_path):
     assert compare_sessions(read_session(original), read_session(tmp_path / "r.h5")).identical
 
 
+def test_resumed_recording_replays_in_one_go_with_its_clock_restarting(tmp_path):
+    original = tmp_path / "resumed.h5"
+    plan = iso230_plan((1,), n_targets=6, cycles=2)
+    control = RunControl()
+    record(original, plan, inject=lambda rig, e: isinstance(e, ev.PointMeasured) and e.done == 9 and control.abort("break"),
+           control=control)
+    with open_sample_rig() as rig:  # a new rig, its clock starting at 0 again
+        assert run_sweep(rig, plan, original, CFG, resume=True).outcome == "completed"
+    live = read_session(original)
+    assert len(live.resumed_utc) == 1 and np.any(np.diff(live.points["time_s"]) < 0)
+    result, mismatch, ended = replay(original, tmp_path / "r.h5")
+    assert result.outcome == "completed" and mismatch is None and not ended
+    assert compare_sessions(live, read_session(tmp_path / "r.h5")).identical
+
+
 def test_a_plan_asking_for_an_unrecorded_target_stops_naming_the_first_mismatch(recorded, tmp_path):
     plan = SweepPlan.from_dict(read_session(recorded).plan)
     targets = list(plan.targets_mm)
@@ -221,7 +237,7 @@ def test_speed_ten_replays_ten_times_faster_than_recorded(tmp_path):
 def test_retry_limits_follow_the_recording():
     live = read_session(RECORDINGS / FILES["fault"])
     policy = retry_policy_of(live)
-    assert policy.beam_retries == int(live.faults["attempt"].max()) - 1 and policy.env_interval_s == 0.0
+    assert policy.beam_retries == int(live.faults["attempt"].max()) - 1 and policy.env_interval_s == -math.inf
 
 
 # -- the sample recordings -------------------------------------------------------------------------
