@@ -28,7 +28,7 @@ from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
 from procedures.diagnosis.legdata import LegData, split_legs
 from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate, select_effects
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
-from procedures.diagnosis.where import breakdown, repeatability_um
+from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.errors import InputError
 
 FORMAT = "station-diagnosis"
@@ -167,7 +167,7 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     bonf = {"cyclic": EFFECTS["cyclic"].independent_frequencies(leg)} if isinstance(EFFECTS["cyclic"], Cyclic) else {}
     if not can_cv:
         fit = problem.full_fit((), bonf)
-        rep["noise_floor_um"] = repeatability_um(leg, fit.resid_um)
+        rep["noise_floor_um"] = repeatability_um(leg, fit.resid_um, outlier_mask(leg, gap, s.threshold_um))
         rep["noise_floor_note"] = "scatter of repeat passes at the same target and direction (one cycle only: rough)"
         where(None)
         rep["combined"] = None
@@ -192,22 +192,27 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
             gap = problem.heldout_residuals(())
     baseline = problem.cv_rms(())
     final = problem.full_fit(chosen, bonf)
-    rep["noise_floor_um"] = repeatability_um(leg, final.resid_um)
+    outliers = outlier_mask(leg, gap, s.threshold_um)
+    rep["noise_floor_um"] = repeatability_um(leg, final.resid_um, outliers)
     rep["noise_floor_note"] = ("scatter of repeat passes at the same target and direction, after the named "
-                               "effects (pass offsets included)")
+                               "effects (pass offsets included" + (f"; {int(outliers.sum())} outlier point(s) left out)"
+                                                                   if outliers.any() else ")"))
     rep["within_pass_scatter_um"] = final.gls.sigma_e_um
     rep["pass_offset_scatter_um"] = final.gls.sigma_u_um
     where(rep["noise_floor_um"])
-    for e in chosen:
+    for i, e in enumerate(chosen):
         sl = final.slices[e.name]
         params, se = e.parameters(final.gls.coef[sl], final.gls.cov[sl, sl], final.specs.get(e.name), leg, final.resid_um)
-        after = problem.cv_rms((e,))
+        # before/after in the order the effects were chosen: each on top of the ones before it
+        before, after = problem.cv_rms(chosen[:i]), problem.cv_rms(chosen[: i + 1])
         f, p, df2 = final.tests[e.name]
         findings.append({
             "leg": leg.leg, "effect": e.name, "parameters": params, "uncertainty": se,
-            "heldout_rms_before_um": baseline, "heldout_rms_after_um": after,
-            "shrink_pct": 100.0 * (1 - after / baseline) if baseline > 0 else 0.0,
-            "heldout_contribution_um": contribution_um(baseline, after),
+            "heldout_rms_before_um": before, "heldout_rms_after_um": after,
+            "shrink_pct": 100.0 * (1 - after / before) if before > 0 else 0.0,
+            "heldout_contribution_um": contribution_um(before, after),
+            "added_to": [c.name for c in chosen[:i]],
+            "heldout_rms_alone_after_um": problem.cv_rms((e,)),
             "p_value": p, "f_stat": f, "df_denominator": df2,
         })
     after_all = problem.cv_rms(chosen)
@@ -216,8 +221,9 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
                        "shrink_pct": 100.0 * (1 - after_all / baseline) if baseline > 0 else 0.0}
     for e in applicable:
         if e in chosen:
-            cands.append({"effect": e.name, "status": "named", "p_value": final.tests[e.name][1],
-                          "heldout_contribution_um": contribution_um(baseline, problem.cv_rms((e,)))})
+            fnd = next(f for f in findings if f["effect"] == e.name)
+            cands.append({"effect": e.name, "status": "named", "p_value": fnd["p_value"],
+                          "heldout_contribution_um": fnd["heldout_contribution_um"]})
             continue
         ev = evaluate(problem, chosen, e, bonf)
         entry = {"effect": e.name, "p_value": ev.p_value, "heldout_contribution_um": ev.contribution_um}

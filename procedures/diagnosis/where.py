@@ -77,17 +77,37 @@ def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means
     return out
 
 
-def repeatability_um(leg: LegData, resid_um: np.ndarray) -> float | None:
+def point_deviations(leg: LegData, gap_um: np.ndarray) -> np.ndarray:
+    """Each point's gap minus its pass offset and minus the median of its (target, direction)
+    cell: how far a point is from its repeats, um."""
+    counts = np.bincount(leg.pass_id).astype(float)
+    r0 = gap_um - (np.bincount(leg.pass_id, gap_um) / counts)[leg.pass_id]
+    _, inv = np.unique(leg.target_id * 2 + (leg.direction > 0), return_inverse=True)
+    med = np.array([np.median(r0[inv == c]) for c in range(int(inv.max()) + 1)])
+    return r0 - med[inv]
+
+
+def outlier_mask(leg: LegData, gap_um: np.ndarray, threshold_um: float) -> np.ndarray:
+    """Points more than 6 robust standard deviations (and the threshold) from their repeats."""
+    dev = point_deviations(leg, gap_um)
+    scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
+    return (np.abs(dev) > 6 * scale) & (np.abs(dev) > threshold_um)
+
+
+def repeatability_um(leg: LegData, resid_um: np.ndarray, exclude: np.ndarray | None = None) -> float | None:
     """Pooled standard deviation of `resid_um` over repeat passes at the same target and
-    direction (n - cells degrees of freedom), um; None without repeats."""
-    cell = leg.target_id * 2 + (leg.direction > 0)
+    direction (n - cells degrees of freedom), um, leaving out the points in `exclude`
+    (outliers); None without repeats."""
+    keep = np.ones(leg.n_points, dtype=bool) if exclude is None else ~exclude
+    cell = (leg.target_id * 2 + (leg.direction > 0))[keep]
+    r = resid_um[keep]
     ids, inv = np.unique(cell, return_inverse=True)
     cnt = np.bincount(inv).astype(float)
-    mean = np.bincount(inv, resid_um) / cnt
-    dof = leg.n_points - ids.size
+    mean = np.bincount(inv, r) / cnt
+    dof = r.size - ids.size
     if dof <= 0:
         return None
-    return float(np.sqrt(np.sum((resid_um - mean[inv]) ** 2) / dof))
+    return float(np.sqrt(np.sum((r - mean[inv]) ** 2) / dof))
 
 
 def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: float | None = 5.0,
@@ -149,19 +169,16 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
             {"run": int(leg.run[leg.pass_id == p][0]), "offset_um": float(dev[p])}
             for p in range(leg.n_passes) if abs(dev[p]) > 5 * scale and abs(dev[p]) > threshold_um
         ]
-    # outlier points: against the median of their target and direction, after pass offsets
-    r0 = g - pass_means[leg.pass_id]
-    cell = leg.target_id * 2 + (leg.direction > 0)
-    cell_ids, cell_inv = np.unique(cell, return_inverse=True)
-    med = np.array([np.median(r0[cell_inv == c]) for c in range(cell_ids.size)])
-    dev = r0 - med[cell_inv]
-    scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
-    bad = np.flatnonzero((np.abs(dev) > 6 * scale) & (np.abs(dev) > threshold_um))
+    dev = point_deviations(leg, g)
+    bad = np.flatnonzero(outlier_mask(leg, g, threshold_um))
     worst = bad[np.argsort(-np.abs(dev[bad]))][:5]
     out["outlier_points"] = {
         "count": int(bad.size),
+        "share_pct": 100.0 * float(np.sum(dev[bad] ** 2) / max(np.sum(g**2), 1e-300)),
         "worst": [{"run": int(leg.run[i]), "target_mm": float(leg.x_mm[i]), "deviation_um": float(dev[i])} for i in worst],
     }
+    cell = leg.target_id * 2 + (leg.direction > 0)
+    _, cell_inv = np.unique(cell, return_inverse=True)
     # by condition
     cond: dict = {}
     if leg.has_temp:
@@ -220,6 +237,12 @@ def _dominant(out, parts, reg, regions, external_twin, leg, n, total) -> str:
         return "the gap is zero"
     order = sorted(parts, key=lambda k: -parts[k])
     words = []
+    op = out.get("outlier_points") or {}
+    if op.get("count") and op.get("share_pct", 0) >= 25:
+        w = op["worst"][0]
+        lead = (f"the gap is dominated by {op['count']} outlier point(s) ({op['share_pct']:.0f} % of its square; "
+                f"worst: run {w['run']} at {w['target_mm']:.4g} mm, {w['deviation_um']:+.3g} um off its repeats)")
+        return lead + "; besides, it is mostly " + _describe(order[0], out, reg, regions, external_twin, leg)
     for k in order[:2]:
         share = parts[k] / s
         if words and share < 0.25:
