@@ -2,8 +2,9 @@
 
 Deterministic: the simulated rig runs on its virtual clock with fixed seeds, so the points of a
 regenerated file are the same as those of the committed one (only session ids and UTC times
-differ). `make recordings` runs `station recordings --out recordings`; recordings/README.md
-lists the files.
+differ). `make recordings` runs `station recordings --out recordings`, which replaces the files (they
+are made under temporary names first, so a failed run leaves the old ones); recordings/README.md
+lists them.
 
 - calibration-6legs.h5: the seed paper's plan (361 targets at 0.5 mm over +/-90 mm, six
   bidirectional cycles, six legs: 25 992 points) on legs with every plant effect switched on,
@@ -19,6 +20,7 @@ lists the files.
 from __future__ import annotations
 
 import argparse
+import os
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable
@@ -48,7 +50,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="recordings", metavar="DIR", help="directory to write (default recordings)")
     p.add_argument("--only", metavar="NAMES", help=f"comma-separated subset of {', '.join(SAMPLES)} "
                    "(verification needs calibration in the same run)")
-    p.add_argument("--force", action="store_true", help="overwrite existing files")
 
 
 def plant_configs(seed: int = SEED):
@@ -154,25 +155,32 @@ def run(args) -> int:
         raise InputError("--only verification needs calibration too (the tables are fitted to it on the same rig)")
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    targets = {name: out_dir / FILES[name] for name in wanted}
-    for path in targets.values():
-        if path.exists():
-            if not args.force:
-                raise InputError(f"{path} exists; add --force to regenerate it")
-            path.unlink()
+    final = {name: out_dir / FILES[name] for name in wanted}
+    # made under temporary names and renamed at the end: a failed run leaves the old samples
+    targets = {name: path.with_name(f".{path.name}.{os.getpid()}.tmp.h5") for name, path in final.items()}
+    try:
+        _make(wanted, targets)
+        for name, tmp in targets.items():
+            os.replace(tmp, final[name])
+    finally:
+        for tmp in targets.values():
+            tmp.unlink(missing_ok=True)
+    for path in final.values():
+        print(f"  {path}: {path.stat().st_size / 1e6:.2f} MB")
+    return 0
+
+
+def _make(wanted, targets: dict[str, Path]) -> None:
     cfg = StationConfig(operator="station recordings")
     if "calibration" in wanted:
         with open_sample_rig() as rig:
             res = make_calibration(rig, targets["calibration"], cfg)
-            print(f"{targets['calibration']}: {res.outcome}, {res.points} points")
+            print(f"{FILES['calibration']}: {res.outcome}, {res.points} points")
             if "verification" in wanted:
                 for line in make_verification(rig, targets["calibration"], targets["verification"], cfg):
                     print(f"  {line}")
-                print(f"{targets['verification']}: written")
+                print(f"{FILES['verification']}: written")
     if "fault" in wanted:
         with open_sample_rig() as rig:
             res = make_fault(rig, targets["fault"], cfg)
-            print(f"{targets['fault']}: {res.outcome}, {res.points} points ({res.reason})")
-    for path in targets.values():
-        print(f"  {path.name}: {path.stat().st_size / 1e6:.2f} MB")
-    return 0
+            print(f"{FILES['fault']}: {res.outcome}, {res.points} points ({res.reason})")
