@@ -118,7 +118,10 @@ def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationCo
         session_id=str(session.attrs.get("session_id", "")), directions=directions,
     )
     legs = tuple(legs or plan_legs or session.legs or (1,))
-    profile = DriveProfile.load(cfg.drive.profile or None)
+    # the recorded drive's register map, where it is at hand: its scaling (load, position) is
+    # what the recorded values went through, so they come back through it bit for bit
+    recorded = str((session.station_config.get("drive") or {}).get("profile") or "")
+    profile = DriveProfile.load(recorded if recorded and Path(recorded).is_file() else (cfg.drive.profile or None))
     replay = ReplayRig(script, speed=speed, profile=profile).start()
     try:
         axes = connect_axes(replay.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s)
