@@ -22,13 +22,13 @@ from procedures.recording.schema import (
     FAULT_DTYPE,
     META_ATTRS,
     POINT_DTYPE,
+    ROOT_ATTRS,
     SCHEMA_VERSION,
     UNWRITTEN_INDEX,
     schema_major,
 )
 
-_REQUIRED_ROOT = ("schema_version", "software_version", "session_id", "operator", "rig",
-                  "started_utc", "ended_utc", "outcome")
+_REQUIRED_ROOT = tuple(a for a in ROOT_ATTRS if a != "resumed_utc")  # resumed_utc: optional, "[]"
 
 
 @dataclass(frozen=True)

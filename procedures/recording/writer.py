@@ -2,7 +2,7 @@
 
 Durability: `append_point` grows /points by one row, writes it and flushes the file before it
 returns, so every point the caller acknowledges survives a kill of the process (SIGKILL,
-crash, Ctrl-C). Power loss needs `fsync=True` as well (about 0.25 ms more per point).
+crash, Ctrl-C). Power loss needs `fsync=True` as well (0.25 ms to a few ms more per point, by disk).
 
 Live reading: the file is in SWMR mode while it is written, so another process can open it
 with `h5py.File(path, "r", swmr=True)` (or `reader.LiveReader`) and watch it grow.

@@ -6,7 +6,6 @@ so every printed index must be in the file whatever the moment of the kill.
 
 from __future__ import annotations
 
-import os
 import random
 import signal
 import subprocess
