@@ -84,7 +84,7 @@ class Basis:
                      ("reversal" if self.reversal_degree == 0 else f"reversal deg {self.reversal_degree}"))
         parts.append(f"{len(self.wavelengths_mm)} stroke harmonic(s)")
         if self.lead_mm:
-            parts.append(f"{self.lead_harmonics} lead harmonic(s) of {self.lead_mm:g} mm")
+            parts.append(f"{self.lead_harmonics} lead harmonic(s) of {self.lead_mm:.5g} mm")
         return ", ".join(parts) + f" ({self.n_params} parameters)"
 
     def to_json(self) -> dict[str, Any]:
@@ -165,6 +165,10 @@ def _least_squares(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Least-squares coefficients by QR (cheaper than the SVD of lstsq; the designs here are
     well conditioned: the size search refuses condition numbers above 1e10 squared)."""
     q, r = np.linalg.qr(X)
+    d = np.abs(np.diag(r))
+    if d.size and d.min() <= 1e-10 * d.max():
+        raise InputError("the model has more terms than these targets can determine; "
+                         "choose a smaller size or record more targets")
     return np.linalg.solve(r, q.T @ y)
 
 
@@ -366,7 +370,7 @@ def _one_se_choice(sse: np.ndarray, n_test: np.ndarray, cands: list[_Candidate])
         raise InputError("no model size could be fitted (too few distinct targets?)")
     mse = np.where(finite, sse.sum(axis=1) / n_test.sum(), np.inf)
     best = int(np.argmin(mse))
-    per_fold = (sse - sse[best]) / n_test  # paired differences: fold offsets cancel
+    per_fold = np.where(finite[:, None], sse - sse[best], 0.0) / n_test  # paired: fold offsets cancel
     n_f = sse.shape[1]
     se = per_fold.std(axis=1, ddof=1) / np.sqrt(n_f) if n_f > 1 else np.zeros(len(cands))
     ok = finite & (mse - mse[best] <= se)
@@ -473,16 +477,21 @@ def fit_bidirectional_leg(
         # nested: re-choose the size without each held-out fold, then score that fold
         heldout = np.empty(data.n_points)
         for f in all_f:
+            c_in = chosen
             if nested_ok:
                 inner = [g for g in all_f if g != f]
-                c_in, _ = _one_se_choice(sse[:, f, inner], grams.n[inner], cands)
-            else:
-                c_in = chosen
+                try:
+                    c_in, _ = _one_se_choice(sse[:, f, inner], grams.n[inner], cands)
+                except InputError:
+                    pass  # nothing fits without this fold too: score the size chosen on all folds
             idx = cands[c_in].columns
             ix = np.ix_(idx, idx)
             # normal equations from the fold Grams (the candidate's conditioning was checked)
-            beta = np.linalg.solve(grams.G.sum(axis=0)[ix] - grams.G[f][ix], grams.b.sum(axis=0)[idx] - grams.b[f][idx])
             test = folds == f
+            try:
+                beta = np.linalg.solve(grams.G.sum(axis=0)[ix] - grams.G[f][ix], grams.b.sum(axis=0)[idx] - grams.b[f][idx])
+            except np.linalg.LinAlgError:  # singular without this fold: the minimum-norm solution
+                beta = np.linalg.lstsq(X[~test][:, idx], y[~test], rcond=None)[0]
             heldout[test] = y[test] - X[test][:, idx] @ beta
         info["heldout"] = "nested cross-validation" if nested_ok else (
             "cross-validation (size fixed)" if len(cands) == 1 else
