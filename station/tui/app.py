@@ -53,7 +53,7 @@ class StationApp(App):
 
     TITLE = "station"
     SUB_TITLE = "leg calibration"
-    CSS_PATH = "station.tcss"
+    CSS_PATH = Path(__file__).with_name("station.tcss")  # absolute: subclasses (tests) find it too
     MODES = {
         "rig": RigScreen,
         "sweep": SweepScreen,

@@ -177,9 +177,11 @@ class SweepScreen(StationScreen):
         s = self.app.sweep
         self._drawn_version = s.version
         active = s.active
-        for wid in ("legs", "plan", "cycles", "dwell"):
-            self.query_one(f"#{wid}").disabled = active
-        self._update_summary()
+        if active != getattr(self, "_form_locked", None):  # the form is locked while a sweep runs
+            self._form_locked = active
+            for wid in ("legs", "plan", "cycles", "dwell"):
+                self.query_one(f"#{wid}").disabled = active
+            self._update_summary()
         self.query_one("#start", Button).disabled = active
         self.query_one("#pause", Button).disabled = not active
         self.query_one("#abort", Button).disabled = not active
