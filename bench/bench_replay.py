@@ -11,6 +11,7 @@ protocol transactions per point, and whether the new session equals the recordin
 from __future__ import annotations
 
 import argparse
+import statistics
 import sys
 import tempfile
 import time
@@ -18,12 +19,42 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import numpy as np  # noqa: E402
+
 from procedures.recording.reader import read_session  # noqa: E402
 from station.commands.replay import compare_sessions, parse_speed, replay_sweep  # noqa: E402
 from station.config import StationConfig  # noqa: E402
 from station.wiring import open_replay_rig  # noqa: E402
 
 DEFAULT = Path(__file__).resolve().parents[1] / "recordings" / "calibration-6legs.h5"
+
+
+def device_round_trips(path: Path, cfg: StationConfig) -> tuple[float, float, float, int]:
+    """Median ms of a move, a position reading and an environment reading on the replay devices,
+    over leg 1's first two passes (the protocol part of a point, without runner and recorder)."""
+    session = read_session(path)
+    pts = session.points[(session.points["leg"] == 1) & (session.points["run"] <= 2)]
+    pts = pts[np.argsort(pts["index"])]
+    with open_replay_rig(path, None, cfg, legs=(1,)) as rig:
+        axis, laser = rig.axes[1], rig.laser
+        axis.enable()
+        laser.set_averaging(0.1)
+        tm, tr, te = [], [], []
+        run = None
+        for p in pts:
+            if p["run"] != run:  # a new pass: approach from its side, as the sweep does
+                run = p["run"]
+                axis.move_to(float(p["target_mm"]) - int(p["direction"]) * 2.0)
+            t0 = time.perf_counter()
+            axis.move_to(float(p["target_mm"]))
+            t1 = time.perf_counter()
+            laser.read(1)
+            t2 = time.perf_counter()
+            laser.environment()
+            t3 = time.perf_counter()
+            tm.append(t1 - t0), tr.append(t2 - t1), te.append(t3 - t2)
+    ms = lambda xs: statistics.median(xs) * 1000.0  # noqa: E731
+    return ms(tm), ms(tr), ms(te), len(pts)
 
 
 def main() -> None:
@@ -59,6 +90,9 @@ def main() -> None:
     print(f"  per point: {tx / n:.2f} Modbus transactions, {lx / n:.2f} interferometer exchanges")
     print(f"  outcome {result.outcome}; mismatch {mismatch}; identical to the recording: {cmp.identical}"
           + ("" if cmp.identical else f" ({'; '.join(cmp.differences)})"))
+    move_ms, read_ms, env_ms, k = device_round_trips(args.session, cfg)
+    print(f"  replay devices alone ({k} points of leg 1, medians): move {move_ms:.3f} ms (Modbus TCP), "
+          f"position {read_ms:.3f} ms, environment {env_ms:.3f} ms (pty)")
 
 
 if __name__ == "__main__":
