@@ -6,11 +6,16 @@ stderr with exit code 2; no traceback reaches a technician. Set STATION_DEBUG=1 
 
 from __future__ import annotations
 
+import os
+
+# The fits solve many small least-squares problems: BLAS threads only contend for the two cores
+# of a bench PC. Must be set before numpy loads; a user's own setting wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import ast
 import importlib
 import logging
-import os
 import pkgutil
 import sys
 from pathlib import Path
