@@ -375,7 +375,8 @@ class StationApp(App):
         if message.error:
             self.notify(message.error, title="Sweep", severity="error", timeout=15)
         else:
-            note = {"completed": "completed. Results: F3.", "aborted": "aborted; drives stopped, recording kept.",
+            note = {"completed": "completed." + (" Results: F3." if s.label == "sweep" else ""),
+                    "aborted": "aborted; drives stopped, recording kept.",
                     "failed": f"failed: {s.reason}"}.get(s.status, s.status)
             extra = f"; {s.note}" if s.note else ""
             self.notify(f"{s.label.capitalize()} {note} ({s.done} of {s.total} points){extra}", title="Sweep",

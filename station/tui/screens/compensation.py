@@ -87,9 +87,9 @@ class CompensationScreen(StationScreen):
             with Horizontal(classes="controls"):
                 yield Label("Step mm ")
                 yield Input("", id="comp-step", placeholder="auto", type="number", compact=True)
-                yield Button("Make table (t)", id="comp-make", compact=True, variant="success")
+                yield Button("Make (t)", id="comp-make", compact=True, variant="success")
                 yield Button("Read drives (g)", id="comp-read", compact=True)
-                yield Button("Save CSV (w)", id="comp-save", compact=True)
+                yield Button("CSV (w)", id="comp-save", compact=True)
                 yield Button("Push… (u)", id="comp-push", compact=True, variant="error")
                 yield Button("Verify (v)", id="comp-verify", compact=True)
                 yield Button("Rollback… (b)", id="comp-rollback", compact=True)
@@ -202,6 +202,11 @@ class CompensationScreen(StationScreen):
         finally:
             app.rig_lock.release()
         self.post_message(DriveTablesRead(out))
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        if event.input.id == "comp-step":
+            event.stop()
+            self.action_make_table()
 
     def on_drive_tables_read(self, message: DriveTablesRead) -> None:
         self.drive_tables.update(message.tables)
@@ -438,7 +443,7 @@ class CompensationScreen(StationScreen):
     def _show_audit(self) -> None:
         widget = self.query_one("#comp-audit", Static)
         try:
-            entries = self._audit().entries()[-5:]
+            entries = self._audit().entries()[-3:]
         except Exception as exc:
             widget.update(f"audit log: [red]{describe(exc)}[/red]")
             return
@@ -448,7 +453,9 @@ class CompensationScreen(StationScreen):
         lines = ["audit log (newest last):"]
         for e in entries:
             when = "" if self.app.hide_volatile else f"{e.time_utc[:19]} "
-            lines.append(f"  {when}{e.action} leg {e.leg} [b]{e.outcome}[/b]: {e.message[:90]}")
+            head = f"  {when}{e.action} leg {e.leg} {e.outcome}: "
+            message = e.message if len(head) + len(e.message) <= 112 else e.message[:109 - len(head)] + "…"
+            lines.append(f"{head}{message}".replace("[", "\\["))
         widget.update("\n".join(lines))
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
