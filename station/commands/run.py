@@ -1,8 +1,8 @@
 """`station run`: the main job on the simulated rig, headless.
 
 An ISO 230-2 sweep of one leg on the simulated rig (through the real Modbus and serial
-protocols), recorded to runs/, followed by its ISO 230-2 evaluation. `make run` starts the
-terminal UI instead once it is installed; this command stays as the scriptable demo.
+protocols), recorded to runs/, followed by its ISO 230-2 evaluation. This is the scriptable,
+non-interactive main job; `station` with no arguments starts the terminal UI.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from pathlib import Path
 from procedures.plans import iso230_plan, parse_legs
 from station.config import load_config
 from station.jobs import run_sweep
+from procedures.control import RunControl
+from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.wiring import open_rig
 
@@ -34,14 +36,13 @@ def run(args) -> int:
     out = Path(args.out or f"{cfg.recordings_dir}/run-{time.strftime('%Y%m%d-%H%M%S')}.h5")
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
-        result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()])
+        with abort_on_sigint(RunControl()) as control:
+            result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control)
     print(f"session recorded: {out.resolve()} ({result.outcome}, {result.points} points)")
     if result.outcome != "completed":
         return 1
-    try:
-        from procedures.iso230 import evaluate, format_table
-        from procedures.recording.reader import read_session
-    except ImportError:  # evaluation module not installed in this build
-        return 0
+    from procedures.iso230 import evaluate, format_table
+    from procedures.recording.reader import read_session
+
     print(format_table(evaluate(read_session(out).points)))
     return 0

@@ -9,6 +9,8 @@ from procedures.errors import InputError
 from procedures.plans import iso230_plan, paper_plan, parse_legs, targets_from_file, SweepPlan
 from station.config import load_config
 from station.jobs import plan_of_recording, run_sweep
+from procedures.control import RunControl
+from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.wiring import open_rig
 
@@ -76,7 +78,9 @@ def run(args) -> int:
         print(f"note: {note}")
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
-        result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], resume=bool(args.resume))
+        with abort_on_sigint(RunControl()) as control:
+            result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
+                               resume=bool(args.resume))
     print(f"session: {out} ({result.outcome}, {result.points} of {plan.total_points} points)")
     if result.outcome == "completed":
         print(f"next: station iso230 {out}   |   station fit {out} --out model.json")

@@ -185,3 +185,33 @@ def test_sigkill_mid_sweep_then_resume_gives_every_point_once(tmp_path):
     idx = [int(i) for i in read_session(out).points["index"]]
     total = 17 * 2 * 3 * 2
     assert sorted(idx) == list(range(total)), "no missing and no duplicate point after resume"
+
+
+def test_ctrl_c_on_the_command_line_stops_and_leaves_a_resumable_file(tmp_path):
+    out = tmp_path / "c.h5"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station.cli", "sweep", "--sim", "--legs", "1", "--cycles", "3", "--n-targets", "15",
+         "--time-scale", "0.002", "--out", str(out)],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)})
+    # wait until the file holds a few points, then press Ctrl-C
+    import time
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if out.exists():
+            try:
+                if len(read_session(out).points) >= 5:
+                    break
+            except Exception:
+                pass
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 1, stderr
+    assert "Traceback" not in stderr and "resume with: station sweep --resume" in stdout
+    s = read_session(out)
+    assert s.outcome == "aborted" and 5 <= len(s.points) < 90
+    r = subprocess.run([sys.executable, "-m", "station.cli", "sweep", "--sim", "--resume", str(out)],
+                       cwd=REPO, capture_output=True, text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert r.returncode == 0, r.stderr
+    assert sorted(read_session(out).points["index"]) == list(range(90))
