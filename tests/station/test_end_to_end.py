@@ -11,9 +11,12 @@ every leg. Definitions (docs/compensation.md):
 - the plant's own noise floor: the scatter no static table can remove, measured as the pooled
   pass-to-pass standard deviation over (target, direction) cells of the verification sweep
   itself (n - 1 per cell): measurement noise, pass-to-pass offsets, and the thermal and drift
-  changes from pass to pass within the session. Guarded: it must agree with the calibration
-  session's floor (same plant, same protocol: a table adds no scatter), and it must be at least
-  the plant's white noise and pass offsets combined.
+  changes from pass to pass within the session. Measured on the same passes as the residual, so
+  the ratio does not depend on how this session's ten or so pass offsets happened to fall
+  (across plant and noise seeds it stays within 0.90-0.97 while the floor itself moves by up to
+  25 % from session to session). Guarded, so a table cannot hide its own scatter in the floor:
+  the within-pass scatter must match the calibration's within 20 %, the floor the calibration's
+  within 35 %, and the floor must be at least the plant's white noise and pass offsets combined.
 
 The verification runs with new measurement noise (another noise seed, same plant): with the
 calibration's noise it would only replay the fit's own residuals.
@@ -89,17 +92,19 @@ def test_sweep_fit_push_verify_reaches_the_noise_floor_on_every_leg(capsys):
         floor = floor_um(ver, leg)
         floor_cal = floor_um(cal, leg)
         ratio = rms / floor
+        f = figures[str(leg)]
         print(f"leg {leg}: verified residual RMS {rms:.4f} um, noise floor {floor:.4f} um (calibration "
               f"{floor_cal:.4f} um), ratio {ratio:.3f}; before {rms_about_mean_um(cal, leg):.4f} um")
         # the acceptance
         assert ratio <= ACCEPT, f"leg {leg}: residual RMS {rms:.4f} um is {ratio:.3f} x the noise floor {floor:.4f} um"
         # the floor is the plant's, not something the table added, and not below its noise
-        assert abs(floor / floor_cal - 1.0) <= 0.2, f"leg {leg}: floor {floor:.4f} vs calibration {floor_cal:.4f} um"
+        within, within_cal = f["after"]["within_pass_um"], f["before"]["within_pass_um"]
+        assert abs(within / within_cal - 1.0) <= 0.2, f"leg {leg}: within-pass {within:.4f} vs {within_cal:.4f} um"
+        assert abs(floor / floor_cal - 1.0) <= 0.35, f"leg {leg}: floor {floor:.4f} vs calibration {floor_cal:.4f} um"
         assert floor >= white_and_offsets
         # the criterion can fail: the uncompensated calibration is far above its floor
         assert rms_about_mean_um(cal, leg) / floor_cal > 2.0
         # the systematic deviation (ISO 230-2 E) is what the table removed
-        f = figures[str(leg)]
         assert f["after"]["iso230"]["E"] < 0.25 * f["before"]["iso230"]["E"]
         # the command reports the same figures
         assert f["after"]["rms_um"] == pytest.approx(rms, rel=1e-9)
