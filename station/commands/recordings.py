@@ -11,8 +11,9 @@ lists them.
   axial load changing between cycles and the room temperature swinging; one transient beam
   break (leg 3) and one drive fault (leg 5) on the way, both retried.
 - verification-6legs.h5: after fitting the default model to the calibration, making a
-  compensation table per leg and loading it into the simulated drives (write_table +
-  activate_table over Modbus), an ISO 230-2 test of all six legs on the same rig.
+  compensation table per leg and pushing it into the simulated drives (procedures.push.push_table:
+  inactive bank, read back, switch, over the Modbus client), an ISO 230-2 test of all six legs on
+  the same rig.
 - fault-beam-break.h5: an ISO 230-2 test of legs 1-2, cut short by a beam break on leg 2 that
   does not clear (injected after point index FAULT_AFTER_INDEX): outcome "failed".
 """
@@ -117,6 +118,7 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
     """Fit, tabulate and load the tables into the drives, then an ISO 230-2 test. Returns lines
     describing what was loaded."""
     from procedures.fit import fit
+    from procedures.push import push_table
     from procedures.recording.reader import read_session
     from procedures.table import TableLimits, make_table
     from station.jobs import run_sweep
@@ -127,11 +129,11 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
     table = make_table(model, limits=TableLimits(max_points=layout.max_points, max_correction_um=layout.max_correction_um))
     lines = []
     for leg, leg_table in table.legs.items():
-        axis = rig.axes[leg]
-        bank = 1 - axis.active_bank()
-        axis.write_table(bank, leg_table.to_bank())
-        axis.activate_table(bank)
-        lines.append(f"leg {leg}: table of {leg_table.point_count} points, step {leg_table.step_mm:g} mm, in bank {bank} (active)")
+        # the station's safe push (inactive bank, read back, switch) over the Modbus client
+        res = push_table(rig.axes[leg], leg_table, drive_url=rig.sim.drive_url, operator=cfg.operator,
+                         source={"path": calibration.name, "sha256": session.sha256})
+        lines.append(f"leg {leg}: table of {res.points} points, step {leg_table.step_mm:g} mm, pushed to bank "
+                     f"{res.bank} (active), sha256 {res.table_sha256[:12]}")
     plan = iso230_plan((1, 2, 3, 4, 5, 6))
     result = run_sweep(rig, plan, out, cfg)
     return lines + [f"verification: {result.outcome}, {result.points} points"]
