@@ -38,7 +38,8 @@ from procedures.errors import InputError
 CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
 LINUXCNC_MAX_LINES = 256
 SPACING_TOL_MM = 1e-5  # positions are written to 1e-6 mm: steps may differ by rounding only
-_STEP_QUANTUM_MM = 1e-3  # automatic steps are rounded up to whole micrometres
+_STEP_QUANTUM_MM = 1e-3  # suggested steps in messages are rounded up to whole micrometres
+_AUTO_STEP_QUANTUM_MM = 1e-6  # automatic steps: whole nanometres, the drive's spacing unit
 
 
 class TableValidationError(InputError):
@@ -118,8 +119,13 @@ class CompTable:
 # -- making a table from a model ---------------------------------------------------------------
 
 def _auto_step_mm(span_mm: float, native_mm: float, limits: TableLimits) -> float:
+    """The recording's spacing (or coarser, to fit max_points), shrunk so that a whole number
+    of steps spans the stroke: the table then ends on the stroke end instead of up to a step
+    beyond it, where it could cross the soft limits. Rounded up to 1 nm (the drive's unit), so
+    the end lies at most max_points nm beyond."""
     step = max(native_mm, span_mm / max(1, limits.max_points - 1), limits.min_step_mm)
-    return math.ceil(step / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM
+    n_steps = max(1, math.ceil(span_mm / step - 1e-9))
+    return math.ceil(span_mm / n_steps / _AUTO_STEP_QUANTUM_MM - 1e-9) * _AUTO_STEP_QUANTUM_MM
 
 
 def make_table(model, step_mm: float | None = None, limits: TableLimits | None = None,
@@ -129,8 +135,9 @@ def make_table(model, step_mm: float | None = None, limits: TableLimits | None =
 
     Positions run from the stroke minimum in steps of `step_mm` until the stroke maximum is
     covered (the last point may lie up to one step beyond it; the model holds its end value
-    there). Without `step_mm` the step is the recording's target spacing, coarsened (and
-    rounded up to whole um) until the table fits `limits.max_points`. Raises `TableValidationError`
+    there). Without `step_mm` the step is the recording's target spacing, coarsened until the
+    table fits `limits.max_points` and adjusted so whole steps span the stroke (see
+    `_auto_step_mm`). Raises `TableValidationError`
     when the step gives too many points or a correction exceeds `limits.max_correction_um`.
     """
     limits = limits or TableLimits()

@@ -50,8 +50,11 @@ def test_table_covers_the_stroke_at_the_recording_spacing(model):
 def test_step_is_coarsened_to_fit_the_point_limit(model):
     table = make_table(model, limits=TableLimits(max_points=50))
     t = table.legs[1]
-    assert t.point_count <= 50 and t.end_mm >= 90.0 - 1e-9 and t.end_mm < 90.0 + t.step_mm
-    assert round(t.step_mm * 1000) == pytest.approx(t.step_mm * 1000, abs=1e-6)  # whole micrometres
+    assert t.point_count <= 50 and t.end_mm >= 90.0 - 1e-9
+    # whole steps span the stroke: the table ends on the stroke end (within the nm rounding),
+    # never up to a step beyond it where it could cross the soft limits
+    assert t.end_mm <= 90.0 + t.point_count * 1e-6
+    assert round(t.step_mm * 1e6) == pytest.approx(t.step_mm * 1e6, abs=1e-6)  # whole nanometres
 
 
 def test_too_fine_a_step_is_refused(model):
