@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test bench sim recordings clean
+.PHONY: run sweep test bench sim recordings clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -12,7 +12,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
+# The main job on the simulated rig: the terminal UI (a headless sweep: `make sweep`).
 run: $(STAMP)
+	$(VENV)/bin/station ui
+
+sweep: $(STAMP)
 	$(VENV)/bin/station run
 
 test: $(STAMP)
