@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import subprocess
 import time
@@ -16,7 +17,6 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import require_tool
 from procedures import events as ev
 from procedures.control import RunControl
 from procedures.diagnosis import diagnose, to_json
@@ -56,6 +56,18 @@ def beam_and_drive_faults(rig, e) -> None:
             rig.sim.drive_server.inject_fault(2, "encoder")
     elif isinstance(e, ev.Fault) and e.kind == "beam_break":
         rig.sim.laser_server.set_beam_break(1, False)
+
+
+def require_tool(name: str) -> str:
+    """Path of a Debian tool; skip when absent, except on CI (CI=true) where it must exist.
+    (As tests/conftest.py's; not imported from there: `conftest` is ambiguous when the TUI
+    tests' conftest is loaded first.)"""
+    path = shutil.which(name)
+    if path:
+        return path
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"{name} is required on CI (.ci/run installs it)")
+    pytest.skip(f"{name} not installed (apt-get install it to run this test)")
 
 
 def replay(original: Path, out: Path, speed=None):
