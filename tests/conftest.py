@@ -6,7 +6,6 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as station.cli does: small solves, 2 cores
 
-import shutil
 from pathlib import Path
 
 import pytest
@@ -23,11 +22,3 @@ def shared_data() -> Path:
     return path
 
 
-def require_tool(name: str) -> str:
-    """Path of a Debian tool; skip when absent, except on CI (CI=true) where it must exist."""
-    path = shutil.which(name)
-    if path:
-        return path
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"{name} is required on CI (.ci/run installs it)")
-    pytest.skip(f"{name} not installed (apt-get install it to run this test)")

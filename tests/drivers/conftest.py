@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import logging
-import os
-import shutil
 import socket
 import threading
 from dataclasses import dataclass, field
@@ -88,15 +86,3 @@ def closed_port() -> int:
     return port
 
 
-def require_tool(name: str) -> str:
-    """Path of a Debian tool; skip when absent, except on CI (CI=true) where it must exist.
-
-    Same as tests/conftest.py's: with two conftest.py files, `from conftest import ...` may
-    resolve to either module, so both provide it.
-    """
-    path = shutil.which(name)
-    if path:
-        return path
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"{name} is required on CI (.ci/run installs it)")
-    pytest.skip(f"{name} not installed (apt-get install it to run this test)")

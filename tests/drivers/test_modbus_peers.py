@@ -20,18 +20,11 @@ from drivers.modbus.client import ModbusBus, ModbusServoAxis
 modbus_tk = pytest.importorskip("modbus_tk")
 from modbus_tk import defines as cst  # noqa: E402
 from modbus_tk import modbus_tcp  # noqa: E402
+from tests.tooling import require_tool  # noqa: E402
 
 UNIT = 3
 pytestmark = pytest.mark.filterwarnings("ignore:isSet:DeprecationWarning")  # inside modbus-tk
 
-
-def require_tool(name: str) -> str:
-    path = shutil.which(name)
-    if path:
-        return path
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"{name} is required on CI (.ci/run installs it)")
-    pytest.skip(f"{name} not installed (apt-get install {name} to run this test)")
 
 
 def _crc_modbus(data: bytes) -> int:

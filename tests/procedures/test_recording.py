@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import require_tool
+from tests.tooling import require_tool
 from procedures.errors import InputError, SchemaError
 from procedures.recording.reader import LiveReader, file_sha256, read_session
 from procedures.recording.schema import FAULT_DTYPE, POINT_DTYPE, POINT_UNITS, SCHEMA_VERSION

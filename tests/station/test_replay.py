@@ -33,6 +33,7 @@ from station.commands.replay import compare_sessions, parse_speed, replay_sweep,
 from station.config import StationConfig
 from station.jobs import run_sweep
 from station.wiring import open_replay_rig
+from tests.tooling import require_tool  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 RECORDINGS = REPO / "recordings"
@@ -57,17 +58,6 @@ def beam_and_drive_faults(rig, e) -> None:
     elif isinstance(e, ev.Fault) and e.kind == "beam_break":
         rig.sim.laser_server.set_beam_break(1, False)
 
-
-def require_tool(name: str) -> str:
-    """Path of a Debian tool; skip when absent, except on CI (CI=true) where it must exist.
-    (As tests/conftest.py's; not imported from there: `conftest` is ambiguous when the TUI
-    tests' conftest is loaded first.)"""
-    path = shutil.which(name)
-    if path:
-        return path
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"{name} is required on CI (.ci/run installs it)")
-    pytest.skip(f"{name} not installed (apt-get install it to run this test)")
 
 
 def replay(original: Path, out: Path, speed=None):
