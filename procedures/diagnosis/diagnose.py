@@ -200,21 +200,32 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     rep["within_pass_scatter_um"] = final.gls.sigma_e_um
     rep["pass_offset_scatter_um"] = final.gls.sigma_u_um
     where(rep["noise_floor_um"])
-    for i, e in enumerate(chosen):
-        sl = final.slices[e.name]
-        params, se = e.parameters(final.gls.coef[sl], final.gls.cov[sl, sl], final.specs.get(e.name), leg, final.resid_um)
-        # before/after in the order the effects were chosen: each on top of the ones before it
-        before, after = problem.cv_rms(chosen[:i]), problem.cv_rms(chosen[: i + 1])
-        f, p, df2 = final.tests[e.name]
-        findings.append({
-            "leg": leg.leg, "effect": e.name, "parameters": params, "uncertainty": se,
-            "heldout_rms_before_um": before, "heldout_rms_after_um": after,
-            "shrink_pct": 100.0 * (1 - after / before) if before > 0 else 0.0,
-            "heldout_contribution_um": contribution_um(before, after),
-            "added_to": [c.name for c in chosen[:i]],
-            "heldout_rms_alone_after_um": problem.cv_rms((e,)),
-            "p_value": p, "f_stat": f, "df_denominator": df2,
-        })
+    # before/after in the order the effects were chosen, each on top of the ones before it; two
+    # effects that only help together (chosen as a pair) share their before/after
+    steps, i = [], 0
+    while i < len(chosen):
+        j = i + 1
+        if j < len(chosen) and problem.cv_rms(chosen[:j]) >= problem.cv_rms(chosen[:i]):
+            j += 1
+        steps.append((i, j))
+        i = j
+    for i, j in steps:
+        before, after = problem.cv_rms(chosen[:i]), problem.cv_rms(chosen[:j])
+        for e in chosen[i:j]:
+            sl = final.slices[e.name]
+            params, se = e.parameters(final.gls.coef[sl], final.gls.cov[sl, sl], final.specs.get(e.name), leg,
+                                      final.resid_um)
+            f, p, df2 = final.tests[e.name]
+            findings.append({
+                "leg": leg.leg, "effect": e.name, "parameters": params, "uncertainty": se,
+                "heldout_rms_before_um": before, "heldout_rms_after_um": after,
+                "shrink_pct": 100.0 * (1 - after / before) if before > 0 else 0.0,
+                "heldout_contribution_um": contribution_um(before, after),
+                "added_to": [c.name for c in chosen[:i]],
+                "added_with": [c.name for c in chosen[i:j] if c is not e],
+                "heldout_rms_alone_after_um": problem.cv_rms((e,)),
+                "p_value": p, "f_stat": f, "df_denominator": df2,
+            })
     after_all = problem.cv_rms(chosen)
     rep["combined"] = {"effects": [e.name for e in chosen], "heldout_rms_before_um": baseline,
                        "heldout_rms_after_um": after_all,

@@ -69,6 +69,8 @@ class LegProblem:
         self._pcount = np.bincount(leg.pass_id).astype(float)
         self._pmean_b = self._pass_means(base)
         self._pmean_y = self._pass_means(self.y)
+        self._cell = leg.target_id * 2 + (leg.direction > 0)
+        self._pass_group = np.array([groups[leg.pass_id == j][0] for j in range(leg.n_passes)])
         self._cv: dict[tuple[str, ...], np.ndarray] = {}
         self._cache: dict = {}
         self._full: dict = {}
@@ -100,6 +102,29 @@ class LegProblem:
             hs[g, nb:] = ee.T @ yy
         return gs, hs
 
+    def _gls_blocks(self, e: np.ndarray, gs: np.ndarray, hs: np.ndarray):
+        """The per-fold blocks quasi-demeaned for a random offset per pass (GLS): the fold fits
+        then use the information within passes (e.g. drift and temperature change during a
+        pass) instead of letting pass offsets dilute it. Variance components from the model
+        fitted on all passes."""
+        xm = np.column_stack([self._pmean_b, self._pass_means(e)]) if e.shape[1] else self._pmean_b
+        coef = solve_gram(gs.sum(0), hs.sum(0))
+        resid = self.y - self._predict(e, coef)
+        cnt = np.maximum(self._pcount, 1.0)
+        rbar = self._pass_means(resid)
+        s2e = replicate_variance(resid, self.leg.pass_id, self._cell)
+        if s2e is None:
+            s2e = float(np.sum((resid - rbar[self.leg.pass_id]) ** 2)) / max(self.leg.n_points - cnt.size, 1)
+        s2u = max(0.0, float(np.sum(rbar**2)) / max(cnt.size - 1, 1) - s2e * float(np.mean(1.0 / cnt)))
+        theta = 1.0 - np.sqrt(s2e / np.maximum(s2e + cnt * s2u, 1e-300))
+        k = cnt * (2 * theta - theta**2)
+        gs, hs = gs.copy(), hs.copy()
+        for g in range(self.n_groups):
+            j = self._pass_group == g
+            gs[g] -= (xm[j] * k[j, None]).T @ xm[j]
+            hs[g] -= (xm[j] * k[j, None]).T @ self._pmean_y[j]
+        return gs, hs
+
     def _matrix(self, effects, specs) -> tuple[np.ndarray, dict[str, slice]]:
         cols, slices, k = [], {}, 0
         for e in effects:
@@ -115,70 +140,68 @@ class LegProblem:
         nb = self.base.shape[1]
         return self.base @ coef[:nb] + (e @ coef[nb:] if e.shape[1] else 0.0)
 
-    def _fit_resid(self, effects, specs, train_groups: list[int]) -> np.ndarray:
-        """Residual on all rows of the model fitted on the rows of `train_groups`."""
-        e, _ = self._matrix(effects, specs)
-        gs, hs = self._blocks(e)
-        coef = solve_gram(gs[train_groups].sum(0), hs[train_groups].sum(0))
-        return self.y - self._predict(e, coef)
-
     # -- the cyclic wavelength ----------------------------------------------------------------
-    def _search_cyclic(self, eff: Effect, others: tuple[Effect, ...], specs, train_groups: list[int]) -> float | None:
-        """Wavelength (mm) of the strongest sinusoid left by `others` on the training rows:
-        a sinusoid scan of the per-position mean residual, then a golden-section refinement of
-        the joint least-squares fit."""
-        resid = self._fit_resid(others, specs, train_groups)
-        mask = np.isin(self.folds if self.folds is not None else np.zeros(self.leg.n_points, int), train_groups)
-        x = self.leg.x_mm
+    def _per_pass_line_removed(self, v: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """`v` on `rows` minus a least-squares line in position fitted per pass: removes pass
+        offsets and slopes, i.e. everything backlash, drift, load, thermal and scale can do."""
+        pid, x, v = self.leg.pass_id[rows], self.leg.x_mm[rows], v
+        n = np.bincount(pid, minlength=self.leg.n_passes).astype(float)
+        sx, sxx = np.bincount(pid, x, self.leg.n_passes), np.bincount(pid, x * x, self.leg.n_passes)
+        den = np.where(n > 0, n * sxx - sx**2, 1.0)
+        den = np.where(np.abs(den) > 1e-12, den, 1.0)
+        cols = v if v.ndim == 2 else v[:, None]
+        out = np.empty_like(cols)
+        for j in range(cols.shape[1]):
+            c = cols[:, j]
+            sv, sxv = np.bincount(pid, c, self.leg.n_passes), np.bincount(pid, x * c, self.leg.n_passes)
+            slope = (n * sxv - sx * sv) / den
+            icpt = np.divide(sv - slope * sx, n, out=np.zeros_like(n), where=n > 0)
+            out[:, j] = c - icpt[pid] - slope[pid] * x
+        return out if v.ndim == 2 else out[:, 0]
+
+    def _search_cyclic(self, train_groups: list[int]) -> float | None:
+        """Wavelength (mm) of the strongest sinusoid of position on the training rows, after a
+        line per pass is taken out (so no other effect can bias it): a sinusoid scan of the
+        per-position means, refined by Gauss-Newton on the frequency. Cached per fold."""
+        key = ("cyclic", tuple(train_groups))
+        if key in self._cache:
+            return self._cache[key]
+        groups = self.folds if self.folds is not None else np.zeros(self.leg.n_points, int)
+        rows = np.flatnonzero(np.isin(groups, train_groups))
+        x = self.leg.x_mm[rows]
+        yr = self._per_pass_line_removed(self.y[rows], rows)
         if "cyc_scan" not in self._cache:
-            ux = np.unique(x)
-            grid = cyclic_grid(self.leg)
+            ux = np.unique(self.leg.x_mm)
+            grid = cyclic_grid(self.leg, oversample=2)  # the Gauss-Newton step below refines
             self._cache["cyc_scan"] = (ux, grid, _Scan(ux, grid, 0.0) if grid.size else None)
         ux, grid, scan = self._cache["cyc_scan"]
         if scan is None:
+            self._cache[key] = None
             return None
-        inv = np.searchsorted(ux, x[mask])
+        inv = np.searchsorted(ux, x)
         w = np.bincount(inv, minlength=ux.size).astype(float)
-        m = np.divide(np.bincount(inv, resid[mask], minlength=ux.size), w, out=np.zeros(ux.size), where=w > 0)
-        # detrend (weighted line) so a slope does not leak into the long wavelengths
-        a = np.column_stack([np.ones(ux.size), ux]) * np.sqrt(w)[:, None]
-        m = m - np.column_stack([np.ones(ux.size), ux]) @ np.linalg.lstsq(a, m * np.sqrt(w), rcond=None)[0]
+        m = np.divide(np.bincount(inv, yr, minlength=ux.size), w, out=np.zeros(ux.size), where=w > 0)
         k = int(np.argmax(scan.amplitudes(m, w)))
-        # joint refinement (Gauss-Newton on the frequency, the linear terms refitted with it):
-        # the scan alone is biased when other effects leave a slope or offsets in the residual
-        e_o, _ = self._matrix(others, specs)
-        xo = np.column_stack([self.base[mask], e_o[mask]])
-        ym = self.y[mask]
-        xm = x[mask]
-        g_oo, h_o = xo.T @ xo, xo.T @ ym
-        no = xo.shape[1]
         step = grid[1] - grid[0] if grid.size > 1 else grid[0]
         f0 = f = float(grid[k])
         a = b = None
         for _ in range(8):
-            ang = 2 * np.pi * f * xm
+            ang = 2 * np.pi * f * x
             sn, cs = np.sin(ang), np.cos(ang)
-            cols = [sn, cs] if a is None else [sn, cs, 2 * np.pi * xm * (a * cs - b * sn)]
-            z = np.column_stack(cols)
-            g_oz = xo.T @ z
-            g = np.empty((no + z.shape[1],) * 2)
-            g[:no, :no], g[:no, no:], g[no:, :no], g[no:, no:] = g_oo, g_oz, g_oz.T, z.T @ z
-            coef = solve_gram(g, np.concatenate([h_o, z.T @ ym]))
+            cols = [sn, cs] if a is None else [sn, cs, 2 * np.pi * x * (a * cs - b * sn)]
+            z = self._per_pass_line_removed(np.column_stack(cols), rows)
+            coef = solve_gram(z.T @ z, z.T @ yr)
             if a is not None:
-                df = float(np.clip(coef[no + 2], -0.5 * step, 0.5 * step))
+                df = float(np.clip(coef[2], -0.5 * step, 0.5 * step))
                 f = float(np.clip(f + df, f0 - step, f0 + step))
-                if abs(df) < 1e-9 * f:
+                if abs(df) < 1e-7 * f:
                     break
-            a, b = float(coef[no]), float(coef[no + 1])
+            a, b = float(coef[0]), float(coef[1])
+        self._cache[key] = 1.0 / f
         return 1.0 / f
 
     def _specs(self, effects, train_groups: list[int]) -> dict[str, object]:
-        specs: dict[str, object] = {}
-        for e in effects:
-            if e.name == "cyclic":
-                others = tuple(o for o in effects if o.name != "cyclic")
-                specs["cyclic"] = self._search_cyclic(e, others, specs, train_groups)
-        return specs
+        return {"cyclic": self._search_cyclic(train_groups)} if any(e.name == "cyclic" for e in effects) else {}
 
     # -- held-out scoring ---------------------------------------------------------------------
     def heldout_residuals(self, effects: tuple[Effect, ...]) -> np.ndarray:
@@ -193,7 +216,7 @@ class LegProblem:
         searched = any(e.name == "cyclic" for e in effects)
         if not searched:
             e, _ = self._matrix(effects, {})
-            gs, hs = self._blocks(e)
+            gs, hs = self._gls_blocks(e, *self._blocks(e))
             gt, ht = gs.sum(0), hs.sum(0)
         for g in all_groups:
             te = self.folds == g
@@ -201,7 +224,7 @@ class LegProblem:
                 train = [j for j in all_groups if j != g]
                 specs = self._specs(effects, train)
                 e, _ = self._matrix(effects, specs)
-                gs, hs = self._blocks(e)
+                gs, hs = self._gls_blocks(e, *self._blocks(e))
                 gt, ht = gs.sum(0), hs.sum(0)
             coef = solve_gram(gt - gs[g], ht - hs[g])
             nb = self.base.shape[1]
@@ -236,8 +259,7 @@ class LegProblem:
                      self._pmean_y, self._pcount)
         nb = self.base.shape[1]
         coef = solve_gram(stats.g, stats.h)
-        cell = self.leg.target_id * 2 + (self.leg.direction > 0)
-        s2 = replicate_variance(self.y - self._predict(e_all, coef), self.leg.pass_id, cell)
+        s2 = replicate_variance(self.y - self._predict(e_all, coef), self.leg.pass_id, self._cell)
         gls = random_intercept_gls(stats, s2)
         fit = FullFit(tuple(effects), specs, gls, {k: slice(s.start + nb, s.stop + nb) for k, s in slices.items()},
                       self.y - self._predict(e_all, gls.coef))
@@ -276,9 +298,36 @@ def evaluate(problem: LegProblem, chosen: tuple[Effect, ...], cand: Effect, bonf
     return Evaluation(cand.name, before, after, contribution_um(before, after), p, f, df2)
 
 
+def _best_pair(problem: LegProblem, chosen, rest, threshold_um, alpha, bonferroni, significant: set[str]):
+    """Two effects that only help together (e.g. a thermal offset and a drift of opposite sign
+    that cancel in the mean): both significant in the joint model and each adding more than the
+    threshold on held-out passes once the other is in; at least one of them `significant` alone.
+    None when no pair qualifies."""
+    after_chosen = problem.cv_rms(chosen)
+    best, best_rms = None, None
+    for i, a in enumerate(rest):
+        for b in rest[i + 1:]:
+            if a.name not in significant and b.name not in significant:
+                continue
+            both = chosen + (a, b)
+            after = problem.cv_rms(both)
+            if contribution_um(after_chosen, after) <= threshold_um:
+                continue
+            fit = problem.full_fit(both, bonferroni)
+            if fit.tests[a.name][1] >= alpha or fit.tests[b.name][1] >= alpha:
+                continue
+            if min(contribution_um(problem.cv_rms(chosen + (b,)), after),
+                   contribution_um(problem.cv_rms(chosen + (a,)), after)) <= threshold_um:
+                continue
+            if best_rms is None or after < best_rms:
+                best, best_rms = (a, b), after
+    return best
+
+
 def select_effects(problem: LegProblem, candidates: list[Effect], threshold_um: float, alpha: float,
                    bonferroni: dict[str, int] | None = None) -> tuple[tuple[Effect, ...], list[str]]:
-    """Greedy forward selection, then backward pruning. Returns (chosen effects, log lines)."""
+    """Greedy forward selection (a pair when no single effect qualifies), then backward pruning.
+    Returns (chosen effects, log lines)."""
     chosen: tuple[Effect, ...] = ()
     log: list[str] = []
     while True:
@@ -288,7 +337,14 @@ def select_effects(problem: LegProblem, candidates: list[Effect], threshold_um: 
         evals = [(c, evaluate(problem, chosen, c, bonferroni)) for c in rest]
         ok = [(c, ev) for c, ev in evals if ev.qualifies(threshold_um, alpha)]
         if not ok:
-            break
+            # pairs only with a partner that is at least significant alone
+            sig = {c.name for c, ev in evals if ev.p_value < alpha}
+            pair = _best_pair(problem, chosen, rest, threshold_um, alpha, bonferroni, sig)
+            if pair is None:
+                break
+            log.append(f"add {pair[0].name} + {pair[1].name} together (neither helps alone: they partly cancel)")
+            chosen = chosen + pair
+            continue
         best = max(ev.contribution_um for _, ev in ok)
         near = [(c, ev) for c, ev in ok if ev.contribution_um >= (1 - PARSIMONY) * best]
         c, ev = min(near, key=lambda t: (t[0].n_params, -t[1].contribution_um))

@@ -29,7 +29,7 @@ CHECKED = {
     "cyclic": ("wavelength_mm", "amplitude_um"),
 }
 PARAM_TOLERANCE = 0.10  # relative
-GAP_TOLERANCE = 0.20  # held-out RMS after, relative to the oracle's
+GAP_TOLERANCE = 0.20  # held-out RMS after may exceed the oracle's by at most this (relative)
 
 
 @dataclass
@@ -92,7 +92,8 @@ def evaluate_trial(trial: Trial, settings: DiagnosisSettings) -> dict:
                                "rel_error": rel, "ok": rel is not None and rel <= PARAM_TOLERANCE})
         after = (leg_rep.get("combined") or {}).get("heldout_rms_after_um")
         ratio = after / oracle[leg] if after is not None and oracle.get(leg) else None
-        gap_ok = ratio is not None and abs(ratio - 1) <= GAP_TOLERANCE
+        # one-sided: doing better than the oracle on held-out passes is luck, not a fault
+        gap_ok = ratio is not None and ratio <= 1 + GAP_TOLERANCE
         leg_ok = not missed and not wrong and all(p["ok"] for p in params) and gap_ok
         ok &= leg_ok
         legs.append({"leg": leg, "true": sorted(true), "named": sorted(got), "missed": missed, "wrong": wrong,
@@ -163,7 +164,7 @@ def summarise(results: list[dict]) -> dict:
         "gap_ratio_median": float(np.median(rat)) if rat is not None else None,
         "gap_ratio_max": float(rat.max()) if rat is not None else None,
         "gap_ratio_min": float(rat.min()) if rat is not None else None,
-        "gap_within_tolerance": int(np.sum(np.abs(rat - 1) <= GAP_TOLERANCE)) if rat is not None else 0,
+        "gap_within_tolerance": int(np.sum(rat <= 1 + GAP_TOLERANCE)) if rat is not None else 0,
         "gap_checked": len(ratios),
     }
 
@@ -190,8 +191,8 @@ def format_self_check(result: dict) -> str:
                  f"{s['legs_without_effect_with_a_naming']}")
     if s["gap_checked"]:
         lines.append(f"held-out gap after / oracle's: median {s['gap_ratio_median']:.3f}, range "
-                     f"{s['gap_ratio_min']:.3f}-{s['gap_ratio_max']:.3f}; within "
-                     f"{100 * result['settings']['gap_tolerance']:.0f} %: {s['gap_within_tolerance']}/{s['gap_checked']} legs")
+                     f"{s['gap_ratio_min']:.3f}-{s['gap_ratio_max']:.3f}; at most "
+                     f"{100 * result['settings']['gap_tolerance']:.0f} % above: {s['gap_within_tolerance']}/{s['gap_checked']} legs")
     bad = [r for r in result["trials"] if not r["ok"]]
     for r in bad:
         for leg in r["legs"]:

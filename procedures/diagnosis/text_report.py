@@ -30,7 +30,12 @@ def text_report(report: dict) -> str:
         lines.append("FINDINGS")
         for f in report["findings"]:
             lines.append(f"  leg {f['leg']}: {f['effect']}: {_param_line(f)}")
-            lines.append(f"      held-out gap {f['heldout_rms_before_um']:.3g} -> {f['heldout_rms_after_um']:.3g} um RMS "
+            how = ""
+            if f.get("added_with"):
+                how = f" (together with {', '.join(f['added_with'])})"
+            elif f.get("added_to"):
+                how = f" (on top of {', '.join(f['added_to'])})"
+            lines.append(f"      held-out gap {f['heldout_rms_before_um']:.3g} -> {f['heldout_rms_after_um']:.3g} um RMS{how} "
                          f"({f['shrink_pct']:.0f} % smaller), p = {f['p_value']:.2g}")
     else:
         lines.append("FINDINGS: none (no candidate effect is both significant and above the threshold)")

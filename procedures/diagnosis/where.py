@@ -51,7 +51,7 @@ def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means
     ux, inv = np.unique(leg.x_mm, return_inverse=True)
     w = np.bincount(inv).astype(float)
     m = np.bincount(inv, r) / w
-    grid = cyclic_grid(leg)
+    grid = cyclic_grid(leg, oversample=2)
     if grid.size == 0:
         out["note"] = f"only {leg.n_targets} distinct targets: no spectrum"
         out["lead_amplitude_um"] = None
@@ -73,7 +73,7 @@ def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means
         else:
             a = float(sinusoid_scan(ux, m - np.average(m, weights=w), w, np.array([1 / lead_mm]))[0][0])
             out["lead_amplitude_um"] = a
-            out["lead_is_peak"] = any(abs(1 / p["wavelength_mm"] - 1 / lead_mm) <= 1.5 / (4 * (hi - lo)) for p in out["peaks"])
+            out["lead_is_peak"] = any(abs(1 / p["wavelength_mm"] - 1 / lead_mm) <= 1.5 / (2 * (hi - lo)) for p in out["peaks"])
     return out
 
 
@@ -83,8 +83,16 @@ def point_deviations(leg: LegData, gap_um: np.ndarray) -> np.ndarray:
     counts = np.bincount(leg.pass_id).astype(float)
     r0 = gap_um - (np.bincount(leg.pass_id, gap_um) / counts)[leg.pass_id]
     _, inv = np.unique(leg.target_id * 2 + (leg.direction > 0), return_inverse=True)
-    med = np.array([np.median(r0[inv == c]) for c in range(int(inv.max()) + 1)])
-    return r0 - med[inv]
+    return r0 - group_median(r0, inv)[inv]
+
+
+def group_median(v: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """Median of `v` within each group 0..G-1 (vectorised: one sort)."""
+    order = np.lexsort((v, group))
+    sv = v[order]
+    counts = np.bincount(group)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    return 0.5 * (sv[starts + (counts - 1) // 2] + sv[starts + counts // 2])
 
 
 def outlier_mask(leg: LegData, gap_um: np.ndarray, threshold_um: float) -> np.ndarray:

@@ -225,7 +225,8 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5) -> Trial:
     lib = default_leg_configs(int(rng.integers(0, 1000)), 6)
     base = {}
     for leg in legs:
-        vary_load = "load" in [e for e in chosen if where[e] == leg] or rng.random() < 0.5
+        has_load = "load" in [e for e in chosen if where[e] == leg]
+        vary_load = has_load or rng.random() < 0.5
         loads = tuple(float(v) for v in rng.uniform(0, 500, 2 * cycles + 2)) if vary_load else (0.0,)
         for _attempt in range(50):
             cfg = replace(
@@ -235,7 +236,9 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5) -> Trial:
                 ambient_swing_k=float(rng.uniform(0.3, 1.0)) * float(rng.choice([-1, 1])),
                 ambient_period_s=float(rng.uniform(0.5, 1.2)) * session_s,
                 load_per_pass_n=loads,
-                bearing_mm=float(rng.choice([-1, 1])) * float(rng.uniform(120, 250)),
+                # the plant's compliance grows from the bearing up to the nut: with a load effect the
+                # bearing is below the stroke; else it may be at either end (thermal works both ways)
+                bearing_mm=(-1.0 if has_load else float(rng.choice([-1, 1]))) * float(rng.uniform(120, 250)),
             )
             # keep thermal and drift separable: the pass temperatures must not follow time linearly
             trial_pts = synth_session({leg: cfg}, targets, cycles, seed=seed, dwell_s=dwell_s)
