@@ -32,7 +32,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from drivers.errors import CommTimeout, DriverError, TableError
+from drivers.errors import DriverError, TableError
 from drivers.interfaces import DriveLimits, ServoAxis, TableBank
 from procedures.audit import AuditEntry, AuditError, AuditLog, new_id
 from procedures.events import TablePushed

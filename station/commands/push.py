@@ -15,7 +15,7 @@ from typing import Any, Callable
 from drivers.errors import DriverError
 from procedures.audit import AuditEntry, AuditError, AuditLog
 from procedures.errors import InputError
-from procedures.push import PushFailed, PushRefused, prepare_push, push_table
+from procedures.push import PushRefused, prepare_push, push_table
 from procedures.recording.reader import file_sha256
 from procedures.table import TableLimits, read_table_csv
 from station.config import StationConfig, load_config
@@ -230,5 +230,3 @@ def run(args) -> int:
           f"   |   undo: station rollback --leg {leg} {undo_where}")
     return 0
 
-
-__all__ = ["run", "add_arguments", "PushFailed"]

@@ -9,7 +9,6 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from drivers.errors import DriverError
 from procedures.audit import AuditEntry, AuditError
 from procedures.errors import InputError
 from procedures.plans import SweepPlan, iso230_plan, parse_legs
@@ -169,5 +168,3 @@ def _log(audit, action: str, leg: int, drive: tuple[str, int, str, str], outcome
     except AuditError as exc:
         print(f"warning: {exc}", file=sys.stderr)
 
-
-__all__ = ["run", "add_arguments", "DriverError"]
