@@ -229,4 +229,3 @@ def run(args) -> int:
     print(f"next: station verify --leg {leg} {verify_where} --before CALIBRATION.h5 --out VERIFY.h5"
           f"   |   undo: station rollback --leg {leg} {undo_where}")
     return 0
-

@@ -167,4 +167,3 @@ def _log(audit, action: str, leg: int, drive: tuple[str, int, str, str], outcome
                                 details=details or {}))
     except AuditError as exc:
         print(f"warning: {exc}", file=sys.stderr)
-
