@@ -371,14 +371,18 @@ def _apply(axis: ServoAxis, plan: PushPlan, audit: AuditLog | None, operator: st
         raise PushRefused(f"leg {leg}: {exc}; the {verb} was not started.") from None
 
     def refuse(text: str) -> PushRefused:
-        _log(audit, AuditEntry(outcome="refused", message=text, backup=backup, **base))
-        return PushRefused(text)
+        exc = PushRefused(text)
+        try:
+            _log(audit, AuditEntry(outcome="refused", message=str(exc), backup=backup, **base))
+        except AuditError:
+            pass  # the refusal is what matters; nothing was written to the drive
+        return exc
 
     # the drive may have changed since the plan was made (another station, the drive panel)
     try:
         identity, active, current, _ = _read_state(axis, verb)
     except PushRefused as exc:
-        raise refuse(str(exc)) from None
+        raise refuse(str(exc.args[0])) from None
     if identity != plan.drive or active != prev or table_sha256(current) != plan.backup_sha256:
         raise refuse(f"leg {leg}: the drive changed since its table was read (active bank {active}, was {prev}); "
                      f"read it again and retry.")
