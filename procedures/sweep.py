@@ -179,11 +179,15 @@ def sweep(
 
 
 def _prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan) -> None:
-    """Enable the drive, go to the mid-stroke reference and zero the interferometer there."""
+    """Enable the drive, go to the mid-stroke reference and zero the interferometer there.
+
+    The reference is always approached upwards (from -overrun), so the zero carries the same
+    reversal state in every session, with or without a compensation table active."""
     st = axis.status()
     if st.fault:
         axis.reset_fault()
     axis.enable()
+    axis.move_to(-max(plan.overrun_mm, 0.5))
     axis.move_to(0.0)
     clock.sleep(plan.dwell_s)
     laser.zero(leg)
