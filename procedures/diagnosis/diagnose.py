@@ -30,6 +30,7 @@ from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.errors import InputError
+from procedures.events import Finding
 
 FORMAT = "station-diagnosis"
 VERSION = 1
@@ -48,6 +49,7 @@ class DiagnosisSettings:
     max_folds: int = 12
     regions: int = 4
     effects: tuple[str, ...] = tuple(EFFECTS)
+    holdout: str = "cycle"
 
     def __post_init__(self):
         unknown = [e for e in self.effects if e not in EFFECTS]
@@ -59,6 +61,8 @@ class DiagnosisSettings:
             raise InputError(f"alpha must be between 0 and 1, got {self.alpha}")
         if self.lead_mm is not None and not self.lead_mm > 0:
             raise InputError(f"lead_mm must be positive, got {self.lead_mm}")
+        if self.holdout not in ("cycle", "pass"):
+            raise InputError(f"holdout must be 'cycle' or 'pass', got {self.holdout!r}")
         if self.regions < 1 or self.max_folds < 2:
             raise InputError("regions must be >= 1 and max_folds >= 2")
 
@@ -78,7 +82,7 @@ def prepare_leg(leg: LegData, twin: Twin | None, settings: DiagnosisSettings,
                 twin_error_um: np.ndarray | None = None) -> LegContext:
     """Set up the regression of one leg against the twin (fitted here when `twin` is None, on
     `twin_error_um` when given: the errors with already identified effects taken out)."""
-    folds = leg.folds(settings.max_folds)
+    folds = leg.folds(settings.max_folds, settings.holdout)
     if twin is None:
         pfit = fit_position_twin(leg, folds, error_um=twin_error_um)
         base = pfit.basis.design(leg.x_mm)
@@ -289,6 +293,11 @@ def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
     out = finite_or_null(report, extra)
     out["notes"].extend(extra)
     return out
+
+
+def finding_events(report: dict) -> list[Finding]:
+    """The report's findings as `procedures.events.Finding` events (for sinks and front ends)."""
+    return [Finding(leg=f["leg"], effect=f["effect"], parameters=dict(f["parameters"])) for f in report["findings"]]
 
 
 def finite_or_null(obj, notes: list[str], path: str = ""):

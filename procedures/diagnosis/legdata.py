@@ -85,13 +85,16 @@ class LegData:
     def passes_of_direction(self, direction: int) -> int:
         return int(np.unique(self.pass_id[self.direction == direction]).size)
 
-    def folds(self, max_folds: int = MAX_FOLDS) -> np.ndarray | None:
-        """Fold number of every point for cross-validation: whole passes, dealt round-robin in
-        time order into at most `max_folds` folds (one pass per fold when there are few). None
-        when the leg has fewer than two cycles (too few passes to hold any out)."""
+    def folds(self, max_folds: int = MAX_FOLDS, unit: str = "cycle") -> np.ndarray | None:
+        """Fold number of every point for cross-validation: whole cycles (`unit` "cycle": the
+        k-th upward and k-th downward pass together, so every fold is balanced in direction)
+        or whole passes ("pass"), dealt round-robin in time order into at most `max_folds`
+        folds. None when the leg has fewer than two cycles (too few passes to hold any out)."""
         if self.n_cycles < 2:
             return None
-        return self.pass_id % min(max_folds, self.n_passes)
+        if unit == "pass":
+            return self.pass_id % min(max_folds, self.n_passes)
+        return self.cycle % min(max_folds, self.n_cycles)
 
 
 def _cluster_targets(x_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

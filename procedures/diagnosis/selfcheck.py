@@ -54,7 +54,7 @@ def oracle_rms_um(trial: Trial, settings: DiagnosisSettings) -> dict[int, float]
     out = {}
     for n, leg in split_legs(trial.points).items():
         true = trial.true_effect_um[leg.rows]
-        folds = leg.folds(settings.max_folds)
+        folds = leg.folds(settings.max_folds, settings.holdout)
         if folds is None:
             continue
         if trial.twin is None:

@@ -7,6 +7,15 @@ def _f(v, fmt=".3g", unit="") -> str:
     return "n/a" if v is None else f"{v:{fmt}}{unit}"
 
 
+def _um(v, sign: bool = False) -> str:
+    """A length in um with 3 significant digits; rounding noise (below 0.5 nm) shows as 0."""
+    if v is None:
+        return "n/a"
+    if abs(v) < 5e-4:
+        return "+0" if sign else "0"
+    return f"{v:+.3g}" if sign else f"{v:.3g}"
+
+
 def _param_line(f: dict) -> str:
     parts = []
     for k, v in f["parameters"].items():
@@ -51,18 +60,18 @@ def text_report(report: dict) -> str:
             lines.append(f"  twin: trend + {tw['sinusoids']} sinusoid(s); held-out RMS {_f(tw.get('heldout_rms_um'))} um"
                          + (f" (chosen with {', '.join(tw['fitted_without'])} taken out)" if tw.get("fitted_without") else ""))
         else:
-            lines.append(f"  twin: {tw.get('kind')}; zero offset of the recording against it {tw.get('offset_um', 0):+.3g} um")
+            lines.append(f"  twin: {tw.get('kind')}; zero offset of the recording against it {_um(tw.get('offset_um', 0), True)} um")
         g = leg["gap"]
-        lines.append(f"  gap: RMS {g['rms_um']:.3g} um, peak to peak {g['p2p_um']:.3g} um, mean {g['mean_um']:+.3g} um; "
+        lines.append(f"  gap: RMS {_um(g['rms_um'])} um, peak to peak {_um(g['p2p_um'])} um, mean {_um(g['mean_um'], True)} um; "
                      f"noise floor {_f(leg.get('noise_floor_um'))} um")
         lines.append(f"  where: {leg['dominant']}")
         vs = leg["variance_share_pct"]
         lines.append("  variance of the gap: " + ", ".join(f"{k} {v:.0f} %" for k, v in vs.items()))
         bd = leg["by_direction"]
         if len(bd) == 2:
-            lines.append(f"  by direction: +1 mean {bd['+1']['mean_um']:+.3g} um, -1 mean {bd['-1']['mean_um']:+.3g} um")
+            lines.append(f"  by direction: +1 mean {_um(bd['+1']['mean_um'], True)} um, -1 mean {_um(bd['-1']['mean_um'], True)} um")
         lines.append("  by region: " + "; ".join(
-            f"{r['from_mm']:.0f}..{r['to_mm']:.0f} mm RMS {r['rms_um']:.3g}" for r in leg["by_region"]))
+            f"{r['from_mm']:.0f}..{r['to_mm']:.0f} mm RMS {_um(r['rms_um'])}" for r in leg["by_region"]))
         tr = leg.get("pass_trend")
         if tr:
             if "um_per_h" in tr:
@@ -83,7 +92,7 @@ def text_report(report: dict) -> str:
             lines.append("  spectrum peaks: " + ", ".join(f"{p['wavelength_mm']:.3g} mm {p['amplitude_um']:.3g} um"
                                                           for p in sp["peaks"]))
         if sp.get("lead_amplitude_um") is not None:
-            lines.append(f"  at the {sp['lead_mm']:g} mm lead: {sp['lead_amplitude_um']:.3g} um"
+            lines.append(f"  at the {sp['lead_mm']:g} mm lead: {_um(sp['lead_amplitude_um'])} um"
                          + (" (a peak)" if sp.get("lead_is_peak") else ""))
         elif sp.get("lead_note"):
             lines.append(f"  lead: {sp['lead_note']}")

@@ -168,10 +168,14 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
         if line:
             trend = {"um_per_pass": line[0], "r": line[1], "note": "no time recorded: trend against pass order"}
     out["pass_trend"] = trend or None
-    # outlier passes: robustly, against the median pass of the same direction
+    # outlier passes: how far each pass lies from the median of its repeats (same target and
+    # direction), on the errors themselves so the twin cannot blur it; robust scale over passes
     out["outlier_passes"] = []
     if leg.n_passes >= 4:
-        dev = pass_means - np.array([np.median(pass_means[pass_dir == d]) for d in pass_dir])
+        _, cinv = np.unique(leg.target_id * 2 + (leg.direction > 0), return_inverse=True)
+        from_repeats = leg.error_um - group_median(leg.error_um, cinv)[cinv]
+        dev = np.bincount(leg.pass_id, from_repeats) / counts
+        dev = dev - np.median(dev)
         scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
         out["outlier_passes"] = [
             {"run": int(leg.run[leg.pass_id == p][0]), "offset_um": float(dev[p])}

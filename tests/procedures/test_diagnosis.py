@@ -11,7 +11,8 @@ import pytest
 
 from drivers.sim.plant import PlantConfig
 from drivers.sim.synth import synth_session
-from procedures.diagnosis import DiagnosisSettings, diagnose, to_json
+from procedures.diagnosis import DiagnosisSettings, diagnose, finding_events, to_json
+from procedures.events import Finding
 from procedures.errors import InputError, SchemaError
 from station.commands.diagnose import plant_twin
 
@@ -37,6 +38,8 @@ def test_backlash_is_named_on_its_leg_only_with_the_reversal():
     assert 0 < f["uncertainty"]["reversal_um"] < 0.1
     assert f["heldout_rms_after_um"] < 0.3 * f["heldout_rms_before_um"]
     assert report["legs"]["1"]["dominant"].startswith("the gap is mostly a direction-dependent offset")
+    (event,) = finding_events(report)
+    assert isinstance(event, Finding) and (event.leg, event.effect) == (1, "backlash")
     assert report["legs"]["2"]["combined"]["effects"] == []
     # the clean leg's gap is at the plant's noise (white 0.03 um + pass offsets 0.04 um)
     assert report["legs"]["2"]["noise_floor_um"] == pytest.approx(0.05, rel=0.35)

@@ -66,6 +66,14 @@ def test_twin_from_a_reference_recording(backlash_session, tmp_path, capsys):
     assert [f["effect"] for f in report["findings"]] == ["backlash"]
 
 
+def test_a_twin_without_the_leg_is_refused(tmp_path, capsys):
+    ref = write_session(tmp_path / "ref1.h5", synth_session({1: leg1()}, TARGETS, cycles=2, seed=3))
+    two = write_session(tmp_path / "leg2.h5", synth_session({2: leg1()}, TARGETS, cycles=2, seed=4))
+    assert main(["diagnose", str(two), "--twin", str(ref)]) == 2
+    err = capsys.readouterr().err
+    assert "has no leg 2" in err and "Traceback" not in err
+
+
 def test_twin_from_a_model_that_has_the_reversal_leaves_no_backlash(backlash_session, tmp_path, capsys):
     from procedures.recording.reader import read_session
 
