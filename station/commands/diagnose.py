@@ -47,6 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--alpha", type=float, default=1e-3, help="significance level against pass scatter (default 0.001)")
     p.add_argument("--lead-mm", type=float, default=5.0, help="screw lead marked in the spectrum, mm (default 5)")
     p.add_argument("--effects", help="candidate effects to try, comma separated (default all)")
+    p.add_argument("--holdout", choices=["cycle", "pass"], default="cycle",
+                   help="unit held out in cross-validation (default cycle: an upward and a downward pass)")
     p.add_argument("--self-check", action="store_true", help="check the diagnosis on simulated withheld effects")
     p.add_argument("--seeds", type=int, default=20, help="self-check: number of sessions (default 20)")
     p.add_argument("--first-seed", type=int, default=0, help="self-check: first seed (default 0)")
@@ -56,7 +58,7 @@ def _settings(args) -> DiagnosisSettings:
     effects = None
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    kw = {"threshold_um": args.threshold_um, "alpha": args.alpha, "lead_mm": args.lead_mm}
+    kw = {"threshold_um": args.threshold_um, "alpha": args.alpha, "lead_mm": args.lead_mm, "holdout": args.holdout}
     if effects:
         kw["effects"] = effects
     return DiagnosisSettings(**kw)
