@@ -49,6 +49,20 @@ class StationScreen(Screen):
     def compose_footer(self) -> ComposeResult:
         yield Footer(show_command_palette=False, compact=True)
 
+    # -- pages that analyse a session (a SessionPicker) follow the newest recording -------------
+    def follow_sessions(self) -> None:
+        """Offer each new recording in this page's SessionPicker, starting with the latest."""
+        self.app.session_listeners.append(self._on_new_session)
+        if self.app.last_session is not None:
+            self._on_new_session(self.app.last_session)
+
+    def _on_new_session(self, path) -> None:
+        from station.tui.widgets import SessionPicker
+
+        picker = self.query_one(SessionPicker)
+        picker.rescan()
+        picker.set_path(path)
+
 
 class ConfirmScreen(ModalScreen[bool]):
     """Yes/no question; dismisses with True only on an explicit yes."""

@@ -65,15 +65,8 @@ class DiagnosisScreen(StationScreen):
         self.plot_leg: str | None = None
         t = self.query_one("#diag-table", DataTable)
         t.add_columns("Leg", "Effect", "Parameters", "Held-out gap µm", "Shrink", "p")
-        self.app.session_listeners.append(self._on_new_session)
-        if self.app.last_session is not None:
-            self._on_new_session(self.app.last_session)
+        self.follow_sessions()
         self._show()
-
-    def _on_new_session(self, path: Path) -> None:
-        picker = self.query_one(SessionPicker)
-        picker.rescan()
-        picker.set_path(path)
 
     def on_screen_resume(self) -> None:
         if self.app.last_session is not None and not self.query_one("#session-path").value:

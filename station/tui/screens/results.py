@@ -101,15 +101,8 @@ class ResultsScreen(StationScreen):
         table.add_columns("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Ratio",
                           "Range before→after", "A", "E", "M", "B", "R")
         self.plot_leg: int | None = None
-        self.app.session_listeners.append(self._on_new_session)
-        if self.app.last_session is not None:
-            self._on_new_session(self.app.last_session)
+        self.follow_sessions()
         self._show()
-
-    def _on_new_session(self, path: Path) -> None:
-        picker = self.query_one(SessionPicker)
-        picker.rescan()
-        picker.set_path(path)
 
     # -- actions -----------------------------------------------------------------------------------
     def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
