@@ -38,6 +38,7 @@ ACCEPT_RATIO = 1.1
 """A verified leg passes when its residual RMS is at most this times its noise floor."""
 
 ISO_SHOWN = ("E", "M", "A", "R", "B")
+THERMAL_NOTE_K = 0.1  # a material temperature difference worth pointing out (about 0.2 um over 180 mm)
 
 
 @dataclass(frozen=True)
@@ -57,12 +58,13 @@ class ErrorSummary:
     noise_floor_um: float | None
     within_pass_um: float | None
     iso: LegIso230
+    material_temp_c: float | None = None  # mean over the leg's points; None when not recorded
 
     def to_json(self) -> dict[str, Any]:
         return {
             "n_points": self.n_points, "n_cycles": self.n_cycles, "mean_um": self.mean_um, "rms_um": self.rms_um,
             "rms_raw_um": self.rms_raw_um, "range_um": self.range_um, "noise_floor_um": self.noise_floor_um,
-            "within_pass_um": self.within_pass_um,
+            "within_pass_um": self.within_pass_um, "material_temp_c": self.material_temp_c,
             "iso230": {k: self.iso.values.get(k) for k in self.iso.values},
             "iso230_not_computed": dict(self.iso.reasons),
         }
@@ -116,6 +118,9 @@ def summarize(points: np.ndarray, leg: int, source: str = "the session") -> Erro
     e = data.error_um
     mean = float(np.mean(e))
     nf = estimate_noise_floor(data)
+    pts = np.asarray(points)
+    temps = pts["material_temp_c"][pts["leg"] == int(leg)]
+    temps = temps[np.isfinite(temps)]
     return ErrorSummary(
         n_points=data.n_points,
         n_cycles=data.n_cycles,
@@ -126,6 +131,7 @@ def summarize(points: np.ndarray, leg: int, source: str = "the session") -> Erro
         noise_floor_um=nf.noise_floor_um,
         within_pass_um=nf.within_pass_um,
         iso=evaluate_leg(np.asarray(points), int(leg)),
+        material_temp_c=float(np.mean(temps)) if temps.size else None,
     )
 
 
@@ -177,6 +183,14 @@ def format_report(results: dict[int, LegVerification]) -> str:
         red = r.range_reduction_pct
         if red is not None:
             lines.append(f"  range reduction: {red:.1f} %, RMS reduction: {r.rms_reduction_pct:.1f} %")
+        if b and b.material_temp_c is not None and a.material_temp_c is not None:
+            dt_k = a.material_temp_c - b.material_temp_c
+            if abs(dt_k) >= THERMAL_NOTE_K:
+                lines.append(
+                    f"  note: the leg was {abs(dt_k):.2f} K {'warmer' if dt_k > 0 else 'colder'} during verification "
+                    f"({a.material_temp_c:.2f} C) than during calibration ({b.material_temp_c:.2f} C); thermal "
+                    "expansion (steel ~11.5 um/m/K) is not in a static table: let the leg settle to the "
+                    "calibration temperature, or see `station diagnose`")
         for note in a.iso.notes:
             lines.append(f"  note (after): {note}")
         lines.append("")
