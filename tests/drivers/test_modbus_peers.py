@@ -17,10 +17,9 @@ from drivers.errors import TableError
 from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 
-modbus_tk = pytest.importorskip("modbus_tk")
-from modbus_tk import defines as cst  # noqa: E402
-from modbus_tk import modbus_tcp  # noqa: E402
-from tests.tooling import require_tool  # noqa: E402
+from modbus_tk import defines as cst  # the independent peer: a test dependency, never skipped
+from modbus_tk import modbus_tcp
+from tests.tooling import require_tool
 
 UNIT = 3
 pytestmark = pytest.mark.filterwarnings("ignore:isSet:DeprecationWarning")  # inside modbus-tk
