@@ -52,6 +52,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--self-check", action="store_true", help="check the diagnosis on simulated withheld effects")
     p.add_argument("--seeds", type=int, default=20, help="self-check: number of sessions (default 20)")
     p.add_argument("--first-seed", type=int, default=0, help="self-check: first seed (default 0)")
+    p.add_argument("--magnitude-um", type=float, nargs=2, metavar=("MIN", "MAX"),
+                   default=SELF_CHECK_CONTRIBUTION_UM,
+                   help="self-check: RMS contribution of a withheld effect, drawn log-uniform in "
+                        f"[MIN, MAX] um (default {SELF_CHECK_CONTRIBUTION_UM[0]:g} {SELF_CHECK_CONTRIBUTION_UM[1]:g})")
 
 
 def _settings(args) -> DiagnosisSettings:
@@ -199,7 +203,8 @@ def _removed(v: np.ndarray, x: np.ndarray, fitted: bool) -> np.ndarray:
     return v - (np.bincount(inv, v) / np.bincount(inv))[inv]
 
 
-def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5) -> Trial:
+def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
+                    contribution_um: tuple[float, float] | None = None) -> Trial:
     """One self-check session: 1-2 legs of a realistic plant (lead, long-wave, wobble, noise,
     pass offsets, a material temperature that changes, sometimes varying load) with none, one or
     two effects present in the plant but withheld from the twin, at a random magnitude (RMS
@@ -258,7 +263,7 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5) -> Trial:
         sel = dry["leg"] == leg
         x, t_h = dry["target_mm"][sel], dry["time_s"][sel] / 3600.0
         temp, load_n = dry["material_temp_c"][sel], dry["load_n"][sel]
-        m = float(np.exp(rng.uniform(*np.log(SELF_CHECK_CONTRIBUTION_UM))))
+        m = float(np.exp(rng.uniform(*np.log(contribution_um or SELF_CHECK_CONTRIBUTION_UM))))
         cfg = real[leg]
         if eff == "backlash":
             cfg = replace(cfg, reversal_um=2 * m)
@@ -321,7 +326,10 @@ def _self_check(args, settings: DiagnosisSettings) -> int:
         mark = "ok " if r["ok"] else "BAD"
         print(f"  {mark} seed {r['seed']:>4} ({r['twin']} twin): {r['label']}", file=sys.stderr, flush=True)
 
-    result = run_self_check((selfcheck_trial(s) for s in seeds), settings, progress)
+    lo, hi = args.magnitude_um
+    if not 0 < lo <= hi:
+        raise InputError(f"--magnitude-um {lo:g} {hi:g}: need 0 < MIN <= MAX (um)")
+    result = run_self_check((selfcheck_trial(s, contribution_um=(lo, hi)) for s in seeds), settings, progress)
     print(format_self_check(result))
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1, allow_nan=False, default=float))
