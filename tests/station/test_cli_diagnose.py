@@ -117,3 +117,10 @@ def test_self_check_prints_the_table_and_writes_json(tmp_path, capsys):
     result = json.loads(out.read_text())
     assert result["summary"]["trials"] == 2
     assert {t["seed"] for t in result["trials"]} == {6, 7}
+
+
+def test_self_check_magnitude_range_is_checked(capsys):
+    from station.cli import main
+
+    assert main(["diagnose", "--self-check", "--seeds", "1", "--magnitude-um", "1", "0.5"]) == 2
+    assert "need 0 < MIN <= MAX" in capsys.readouterr().err
