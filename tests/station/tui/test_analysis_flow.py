@@ -258,3 +258,27 @@ async def _replay(path, cfg, size, wait_until, notes):
         await pilot.press("o")
         await wait_until(pilot, lambda: app.screen.MODE == "results" and app.analysis is not None, 60, "the fit")
         assert app.analysis.path == path
+
+
+SAMPLE_FAULT = Path(__file__).resolve().parents[3] / "recordings" / "fault-beam-break.h5"
+
+
+def test_replay_the_fault_cut_sample_reproduces_its_fault(cfg, size, wait_until, notes):
+    asyncio.run(_replay_sample(SAMPLE_FAULT, cfg, size, wait_until, notes))
+
+
+async def _replay_sample(path, cfg, size, wait_until, notes):
+    original = read_session(path)
+    gave_up = original.faults[original.faults["gave_up"] == 1]
+    assert original.outcome == "failed" and len(gave_up) == 1
+    app = StationApp(cfg, autoconnect=False, replay=path)
+    async with app.run_test(size=size) as pilot:
+        await wait_until(pilot, lambda: app.screen.MODE == "replay" and app.screen.session is not None, 30,
+                         "the sample's summary")
+        await pilot.press("r")
+        await wait_until(pilot, lambda: app.sweep.status == "failed" and app.sweep.note, 90, "the replay to give up")
+        assert app.sweep.note == "identical to the recording"
+        last = app.sweep.faults[-1]
+        assert last.gave_up and last.kind == "beam_break"
+        assert (last.index, last.leg, last.run) == (int(gave_up["index"][0]), int(gave_up["leg"][0]), int(gave_up["run"][0]))
+        assert app.sweep.done == len(original.points)
