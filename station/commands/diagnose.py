@@ -211,7 +211,7 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
     contribution log-uniform in SELF_CHECK_CONTRIBUTION_UM). Odd seeds use the simulated plant
     as twin, even seeds the twin fitted on the session."""
     from drivers.sim.plant import PlantConfig, default_leg_configs, systematic_error_um
-    from drivers.sim.synth import synth_session
+    from station.synth import synth_session
 
     rng = np.random.default_rng(10_000 + seed)
     fitted = seed % 2 == 0

@@ -7,7 +7,7 @@ import pytest
 
 from drivers.interfaces import TableBank
 from drivers.sim.plant import PlantConfig
-from drivers.sim.synth import synth_session
+from station.synth import synth_session
 from procedures.errors import InputError
 from procedures.fit import fit
 from procedures.table import (

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import default_leg_configs
-from drivers.sim.synth import synth_session
+from station.synth import synth_session
 from procedures.fit import fit, save_model
 from procedures.recording.writer import SessionWriter
 from station.cli import main

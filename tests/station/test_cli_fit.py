@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from drivers.sim.synth import synth_session
+from station.synth import synth_session
 from procedures.plans import irregular_targets
 from procedures.recording.reader import file_sha256
 from procedures.recording.writer import SessionWriter

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import default_leg_configs
-from drivers.sim.synth import synth_session
+from station.synth import synth_session
 from procedures.recording.reader import file_sha256
 from procedures.recording.writer import SessionWriter
 from station.cli import main

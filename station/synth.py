@@ -1,5 +1,8 @@
 """Fast synthetic sessions straight from the plant, without the protocol layer.
 
+It lives in station/ (the composition root) because it joins the plant (drivers/sim) with the
+session format (procedures/recording): drivers never import procedures.
+
 For analysis tests, benchmarks and the diagnosis self-check, where thousands of sessions are
 needed and the Modbus/serial path is already covered by the integration tests. The motion
 sequence is the same bidirectional linear cycle the sweep procedure runs (with an overrun before
