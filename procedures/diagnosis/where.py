@@ -118,6 +118,19 @@ def repeatability_um(leg: LegData, resid_um: np.ndarray, exclude: np.ndarray | N
     return float(np.sqrt(np.sum((r - mean[inv]) ** 2) / dof))
 
 
+def by_target(leg: LegData, gap_um: np.ndarray) -> dict:
+    """Mean gap per target and direction, um, against the target position, mm (None where a
+    direction has no point at a target). JSON-able; the TUI plots it."""
+    n_t = leg.targets_mm.size
+    out: dict = {"position_mm": [float(x) for x in leg.targets_mm]}
+    for d, key in ((1.0, "gap_up_um"), (-1.0, "gap_down_um")):
+        sel = leg.direction == d
+        counts = np.bincount(leg.target_id[sel], minlength=n_t)
+        sums = np.bincount(leg.target_id[sel], gap_um[sel], minlength=n_t)
+        out[key] = [float(sums[i] / counts[i]) if counts[i] else None for i in range(n_t)]
+    return out
+
+
 def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: float | None = 5.0,
               regions: int = 4, threshold_um: float = 0.1, noise_floor_um: float | None = None) -> dict:
     """The where-report of one leg (JSON-able dict; units in the keys). `noise_floor_um`, when
@@ -147,6 +160,8 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
         {"from_mm": float(edges[i]), "to_mm": float(edges[i + 1]), **_stats(g[reg == i])}
         for i in range(regions) if np.any(reg == i)
     ]
+    # by target and direction: the gap against position, what the engineer plots
+    out["by_target"] = by_target(leg, g)
     # by pass and time
     times = [float(np.mean(leg.time_h[leg.pass_id == p]) * 3600.0) if leg.has_time else None for p in range(leg.n_passes)]
     out["by_pass"] = [

@@ -154,3 +154,14 @@ def test_bad_input_is_refused_with_the_row_named():
         DiagnosisSettings(threshold_um=-1)
     with pytest.raises(InputError, match="unknown effect"):
         DiagnosisSettings(effects=("backlash", "gremlins"))
+
+
+def test_gap_by_target_is_the_mean_gap_per_target_and_direction():
+    cfg = PlantConfig().only("lead", "backlash", "noise")
+    pts = synth_session({1: cfg}, np.linspace(-90, 90, 13), cycles=4, seed=3)
+    report = diagnose(pts)
+    bt = report["legs"]["1"]["by_target"]
+    assert bt["position_mm"] == pytest.approx(list(np.linspace(-90, 90, 13)))
+    up, down = np.array(bt["gap_up_um"]), np.array(bt["gap_down_um"])
+    # the twin has no direction term: the gap's direction split is the reversal
+    assert np.mean(down - up) == pytest.approx(cfg.reversal_um, abs=0.05)

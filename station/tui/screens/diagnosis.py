@@ -176,12 +176,20 @@ class DiagnosisScreen(StationScreen):
         key = self.plot_leg if self.plot_leg in legs else legs[0]
         self.plot_leg = key
         leg = r["legs"][key]
-        # The report gives the gap per stroke region (RMS and mean): drawn as steps over each region.
-        xs, rms, mean = [], [], []
+        # The gap (recording minus twin) per target, mean over the passes of each direction, and
+        # its RMS per stroke region as steps.
+        series = []
+        bt = leg.get("by_target") or {}
+        for label, values, kind in (("gap +1 (up)", bt.get("gap_up_um"), "scatter"),
+                                    ("gap −1 (down)", bt.get("gap_down_um"), "scatter:x")):
+            if values:
+                pts = [(x, v) for x, v in zip(bt["position_mm"], values) if v is not None]
+                if pts:
+                    series.append((label, [p[0] for p in pts], [p[1] for p in pts], kind))
+        xs, rms = [], []
         for reg in leg.get("by_region", []):
             for x in (reg["from_mm"], reg["to_mm"]):
                 xs.append(x)
                 rms.append(reg["rms_um"])
-                mean.append(reg.get("mean_um", 0.0))
-        series = [("RMS per region", xs, rms, "line"), ("mean per region", xs, mean, "line")]
-        plot.show(series, title=f"leg {key}: gap by stroke region — {leg.get('dominant', '')[:60]}")
+        series.append(("RMS per region", xs, rms, "line"))
+        plot.show(series, title=f"leg {key}: gap against position — {leg.get('dominant', '')[:60]}")

@@ -220,8 +220,13 @@ async def _diagnosis(path, cfg, size, wait_until):
         text = str(app.screen.query_one("#diag-text", Static).render())
         assert "LEG 1:" in text and "LEG 2:" in text
         plot = app.screen.query_one("#diag-plot", XYPlot)
-        regions = expected["legs"]["1"]["by_region"]
-        assert plot.drawn_points == 2 * 2 * len(regions)  # two series, two ends per region
+        leg1 = expected["legs"]["1"]
+        bt = leg1["by_target"]
+        # the gap against position: one point per target and direction, plus the region steps
+        n_gap = sum(v is not None for v in bt["gap_up_um"]) + sum(v is not None for v in bt["gap_down_um"])
+        assert n_gap == 2 * len(bt["position_mm"])
+        assert plot.drawn_series == ["gap +1 (up)", "gap −1 (down)", "RMS per region"]
+        assert plot.drawn_points == n_gap + 2 * len(leg1["by_region"])
         await pilot.press("l")
         await wait_until(pilot, lambda: app.screen.plot_leg == "2", what="the next leg")
 
