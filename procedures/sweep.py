@@ -99,8 +99,17 @@ def sweep(
     done = total - len(points)
     devices = {f"leg{leg}": axes[leg].identity() for leg in plan.legs}
     devices["interferometer"] = laser.identity()
+    tables = {leg: table_state(axes[leg]) for leg in plan.legs}
+    devices.update({f"leg{leg}_compensation": text for leg, (_, text) in tables.items()})
     t_start = clock.now() if t0_s is None else t0_s
     yield ev.SweepStarted(session_id or uuid.uuid4().hex[:12], tuple(plan.legs), total, plan.to_dict(), devices, done)
+    for leg, (active, text) in tables.items():
+        if active:
+            yield ev.Message(
+                f"leg {leg}: a compensation table is active ({text}): this sweep measures the compensated "
+                "leg. Right for a verification; for a new calibration roll the table back first "
+                "(station rollback), or a table made from this session replaces the active one instead "
+                "of adding to it.", "warning")
 
     outcome, reason = "completed", ""
     current_leg: int | None = None
@@ -176,6 +185,22 @@ def sweep(
     finally:
         _stop_all(axes, plan.legs)
     yield ev.SweepFinished(outcome, done, reason)
+
+
+def table_state(axis: ServoAxis) -> tuple[bool, str]:
+    """(active, description) of the compensation table the drive applies now. A table counts as
+    active when the drive has table compensation on and its active bank holds points."""
+    try:
+        st = axis.status()
+        if not st.table_enabled:
+            return False, "table compensation off"
+        bank = axis.read_table(st.active_bank)
+    except DriverError as exc:
+        return False, f"unknown ({exc})"
+    if bank.point_count == 0:
+        return False, f"bank {st.active_bank} active, empty"
+    return True, (f"bank {st.active_bank} active, {bank.point_count} points from {bank.start_mm:+.3f} mm "
+                  f"every {bank.spacing_mm:g} mm")
 
 
 def _prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan) -> None:

@@ -67,6 +67,11 @@ def run(args) -> int:
     save_model(model, out, str(session.path), session.sha256)
     if session.outcome != "completed":
         print(f"note: the session's outcome is {session.outcome!r}: the model uses the {session.points.size} points recorded")
+    for key, state in sorted(session.devices.items()):
+        if key.endswith("_compensation") and " points from " in state:
+            print(f"warning: {key.split('_')[0].replace('leg', 'leg ')} was recorded with a compensation table "
+                  f"active ({state}): this model describes the compensated leg, and a table made from it "
+                  "replaces the active one instead of adding to it")
     print(f"method: {args.method}" + (f" ({args.params} cosine terms)" if args.method == "paper" else ""))
     print(f"{'leg':>3}  {'held-out RMS':>12}  {'noise floor':>11}  {'ratio':>5}  {'(ideal)':>7}  {'range before':>12}  {'after':>7}  {'reduction':>9}  terms")
     for leg, f in model.legs.items():

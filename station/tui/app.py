@@ -364,6 +364,9 @@ class StationApp(App):
             self.notify(f"leg {event.leg} run {event.run} at {event.target_mm:+.3f} mm: {event.message}",
                         title=f"{event.kind} ({'gave up' if event.gave_up else f'attempt {event.attempt}, retrying'})",
                         severity="error" if event.gave_up else "warning", timeout=10)
+        elif isinstance(event, ev.Message) and event.level != "info" and self.sweep.label == "sweep":
+            # e.g. a calibration sweep on a leg whose compensation table is active
+            self.notify(event.text, title="Sweep", severity="warning", timeout=15)
 
     def on_sweep_ended(self, message: SweepEnded) -> None:
         s = self.sweep

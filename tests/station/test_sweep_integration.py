@@ -215,3 +215,36 @@ def test_ctrl_c_on_the_command_line_stops_and_leaves_a_resumable_file(tmp_path):
                        cwd=REPO, capture_output=True, text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
     assert r.returncode == 0, r.stderr
     assert sorted(read_session(out).points["index"]) == list(range(90))
+
+
+def test_a_sweep_with_a_table_active_warns_and_records_the_table_state(rig, tmp_path):
+    from drivers.interfaces import TableBank
+
+    axis = rig.axes[1]
+    bank = 1 - axis.active_bank()
+    axis.write_table(bank, TableBank(-90.0, 18.0, tuple([0.5] * 11), tuple([1.5] * 11)))
+    axis.activate_table(bank)
+    events = ListSink()
+    result = run_sweep(rig, PLAN, tmp_path / "t.h5", StationConfig(), sinks=[events])
+    assert result.outcome == "completed"
+    warnings = [m for m in events.of(ev.Message) if m.level == "warning"]
+    assert len(warnings) == 1 and warnings[0].text.startswith("leg 1: a compensation table is active")
+    devices = read_session(tmp_path / "t.h5").devices
+    assert devices["leg1_compensation"].startswith(f"bank {bank} active, 11 points from -90.000 mm every 18 mm")
+    assert "empty" in devices["leg3_compensation"]
+
+
+def test_fit_warns_when_the_recording_was_made_with_a_table_active(rig, tmp_path, capsys):
+    from drivers.interfaces import TableBank
+    from station.cli import main
+
+    axis = rig.axes[3]
+    bank = 1 - axis.active_bank()
+    axis.write_table(bank, TableBank(-90.0, 18.0, tuple([0.5] * 11), tuple([1.5] * 11)))
+    axis.activate_table(bank)
+    plan = SweepPlan("test", tuple(float(x) for x in np.linspace(-60, 60, 9)), cycles=3, legs=(1, 3))
+    assert run_sweep(rig, plan, tmp_path / "w.h5", StationConfig()).outcome == "completed"
+    assert main(["fit", str(tmp_path / "w.h5"), "--out", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert "warning: leg 3 was recorded with a compensation table active" in out
+    assert "warning: leg 1" not in out
