@@ -44,6 +44,9 @@ class ConsoleProgress:
     def __init__(self, stream: TextIO | None = None, width: int = 30) -> None:
         self.stream = stream or sys.stderr
         self.width = width
+        # A log file or pipe gets a plain line every 10 % instead of a redrawn bar.
+        self.redraw = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._next_decile = 1
         self.eta = Eta()
         self._last_draw = 0.0
         self._line_open = False
@@ -63,6 +66,12 @@ class ConsoleProgress:
             self._line(f"leg {event.leg}: enabled, zeroed at mid-stroke")
         elif isinstance(event, ev.PointMeasured):
             elapsed, eta = self.eta.update(event.done, event.total)
+            if not self.redraw:
+                if event.done * 10 >= self._next_decile * event.total:
+                    self._next_decile = event.done * 10 // max(event.total, 1) + 1
+                    self._line(f"{event.done}/{event.total} points ({event.done / max(event.total, 1):.0%}), "
+                               f"ETA {fmt_duration(eta)}")
+                return
             now = time.monotonic()
             if now - self._last_draw < 0.1 and event.done < event.total:
                 return
