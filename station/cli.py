@@ -83,7 +83,10 @@ def main(argv: list[str] | None = None) -> int:
     except (InputError, DriverError, FileNotFoundError, PermissionError, IsADirectoryError) as exc:
         if os.environ.get("STATION_DEBUG"):
             raise
-        print(f"station {args.command}: error: {exc}", file=sys.stderr)
+        message = str(exc)
+        if isinstance(exc, OSError) and exc.filename and exc.strerror:
+            message = f"{exc.filename}: {exc.strerror.lower()}"  # not "[Errno 2] ..."
+        print(f"station {args.command}: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"station {args.command}: interrupted", file=sys.stderr)

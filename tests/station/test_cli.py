@@ -77,3 +77,10 @@ def test_sweep_runs_end_to_end_from_the_command_line(capsys, tmp_path):
     assert rc == 0, text.err
     assert f"session: {out} (completed, 10 of 10 points)" in text.out
     assert "sweep completed: 10 points" in text.err
+
+
+def test_a_missing_input_file_is_named_plainly(capsys, tmp_path):
+    missing = tmp_path / "targets.txt"
+    assert main(["sweep", "--sim", "--targets", str(missing), "--out", str(tmp_path / "o.h5")]) == 2
+    err = capsys.readouterr().err
+    assert f"{missing}: no such file or directory" in err and "Errno" not in err
