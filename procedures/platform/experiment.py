@@ -386,7 +386,9 @@ def summarize(result: ExperimentResult) -> dict:
     `*_arcsec` entries. `legs`: the same per leg (um) and pooled over all legs (`all`).
     `dominant_leg`: per component, the leg with the largest mean |linearised contribution|,
     before and after compensation. `acceptance`: each component's range reduction against the
-    pooled leg error range reduction. `fk`: FK status counts.
+    pooled leg error range reduction. `common_mode`: the legs' mean (common part) and the
+    deviations from it (differential part), before and after, with the common part's share of
+    the variance. `fk`: FK status counts.
     """
     ok = result.valid
     if not ok.any():
@@ -418,6 +420,21 @@ def summarize(result: ExperimentResult) -> dict:
         }
         for name in POSE_ERROR_FIELDS
     }
+    # Common mode (the mean of the six legs at a pose) moves the platform mostly along z; the
+    # differences between legs drive x, y and the angles. Alike legs (same manufacturing) put most
+    # of the original error in the common part, while what compensation leaves is independent per
+    # leg: then x, y and the angles shrink less than the legs do. These figures say how much.
+    orig, comp = result.leg_error_um[ok], result.leg_compensated_um[ok]
+    common_o, common_c = orig.mean(axis=1), comp.mean(axis=1)
+    diff_o, diff_c = orig - common_o[:, None], comp - common_c[:, None]
+    total_var = float(np.var(orig - orig.mean()))
+    common_mode = {
+        "common": _stats(common_o, common_c),
+        "differential": _stats(diff_o.ravel(), diff_c.ravel()),
+        "common_share_of_variance_pct": (100.0 * float(np.var(common_o)) / total_var) if total_var > 0 else None,
+        "compensated_common_share_of_variance_pct": (
+            100.0 * float(np.var(common_c)) / float(np.var(comp - comp.mean())) if np.var(comp) > 0 else None),
+    }
     statuses = {
         "original": {s.name.lower(): int(np.sum(result.fk_status == s)) for s in FkStatus},
         "compensated": {s.name.lower(): int(np.sum(result.fk_status_compensated == s)) for s in FkStatus},
@@ -434,6 +451,7 @@ def summarize(result: ExperimentResult) -> dict:
         "dominant_leg": {"original": dom, "compensated": dom_c},
         "linearisation_mismatch_rel": mismatch,
         "acceptance": acceptance,
+        "common_mode": common_mode,
         "fk": statuses,
     }
 

@@ -24,6 +24,10 @@ def _fmt(value, key: str, sci: bool) -> str:
     return f"{value:.4g}" if sci else f"{value:.4f}"
 
 
+def _pct(value) -> str:
+    return "-" if value is None else f"{value:.1f} %"
+
+
 def _dominant(d: dict) -> str:
     legs = d.get("legs") or [d["leg"]]
     if len(legs) == 1:
@@ -91,6 +95,22 @@ def report_markdown(summary: dict, geometry_text: str = "", home_sensitivity: di
             f"| {_LABELS[name]} | {_fmt(pr, 'range_reduction_pct', False)} | {_fmt(lr, 'range_reduction_pct', False)} | "
             f"{'yes' if acc['at_least_leg_reduction'] else 'no'} |"
         )
+    cm = summary.get("common_mode")
+    if cm:
+        share, share_c = cm["common_share_of_variance_pct"], cm["compensated_common_share_of_variance_pct"]
+        lines += [
+            "",
+            "Common and differential leg errors: the mean of the six legs at a pose (common part) moves the "
+            "platform mostly along z; the deviations from it (differential part) drive x, y and the angles.",
+            "",
+            "| Part | Range before (um) | Range after (um) | Range reduction | Share of the leg error variance, before -> after |",
+            "|---|---:|---:|---:|---:|",
+            f"| common | {cm['common']['range_original']:.4f} | {cm['common']['range_compensated']:.4f} | "
+            f"{_fmt(cm['common']['range_reduction_pct'], 'range_reduction_pct', False)} | "
+            f"{_pct(share)} -> {_pct(share_c)} |",
+            f"| differential | {cm['differential']['range_original']:.4f} | {cm['differential']['range_compensated']:.4f} | "
+            f"{_fmt(cm['differential']['range_reduction_pct'], 'range_reduction_pct', False)} | |",
+        ]
     lines += [
         "",
         "## Which leg dominates each pose component",

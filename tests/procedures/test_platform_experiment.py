@@ -220,3 +220,26 @@ def test_simulated_legs_compensation_shrinks_every_pose_component(geo):
     assert again["pose"] == s["pose"]
     other = summarize(run_experiment(geo, src, poses=1500, seed=6))
     assert other["pose"] != s["pose"]
+
+
+def test_common_and_differential_parts_of_the_leg_errors(geo):
+    # every leg the same error at the same position: differences come only from leg positions
+    alike = FunctionLegErrors(lambda leg, x, d: np.full_like(x, 2.0) + 0.0 * x,
+                              lambda leg, x, d: np.full_like(x, 1.5) + 0.0 * x)
+    s = summarize(run_experiment(geo, alike, poses=200, seed=4))
+    cm = s["common_mode"]
+    assert cm["differential"]["range_original"] == pytest.approx(0.0, abs=1e-12)
+    assert cm["common"]["max_original"] == pytest.approx(2.0) and cm["common"]["max_compensated"] == pytest.approx(0.5)
+
+    # independent per-leg errors: the common part carries about 1/6 of the variance
+    rng = np.random.default_rng(0)
+    table = rng.normal(0, 1, (6, 2001))
+    grid = np.linspace(-90, 90, 2001)
+
+    def noisy(leg, x, d):
+        return np.interp(x, grid, table[leg - 1])
+
+    s = summarize(run_experiment(geo, FunctionLegErrors(noisy), poses=2000, seed=5))
+    assert s["common_mode"]["common_share_of_variance_pct"] == pytest.approx(100 / 6, abs=4)
+    text = report_markdown(s)
+    assert "| common |" in text and "| differential |" in text
