@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from procedures.errors import InputError, SchemaError
+from procedures.errors import InputError
+from procedures.points import check_points, usable_rows_by_leg
 
-REQUIRED_FIELDS = ("leg", "run", "direction", "target_mm", "error_um")
 MAX_FOLDS = 12
 
 
@@ -125,30 +125,15 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
     SchemaError naming the field or row for missing fields or a direction other than +1/-1,
     InputError when no usable point is left.
     """
-    names = points.dtype.names or ()
-    missing = [f for f in REQUIRED_FIELDS if f not in names]
-    if missing:
-        raise SchemaError(f"{source}: the points lack the field(s) {', '.join(missing)}")
-    if points.size == 0:
-        raise InputError(f"{source}: no measured points; record or import a sweep first")
-    direction_all = np.asarray(points["direction"]).astype(np.int64)
-    bad = np.flatnonzero((direction_all != 1) & (direction_all != -1))
-    if bad.size:
-        i = int(bad[0])
-        raise SchemaError(f"{source}: point row {i}: direction is {direction_all[i]}, expected +1 or -1")
+    check_points(points, source)
     target_all = np.asarray(points["target_mm"], dtype=float)
     error_all = np.asarray(points["error_um"], dtype=float)
+    direction_all = np.asarray(points["direction"]).astype(np.int64)
     time_all = _field(points, "time_s")
     temp_all = _field(points, "material_temp_c")
     load_all = _field(points, "load_n")
     out: dict[int, LegData] = {}
-    legs_all = np.asarray(points["leg"]).astype(np.int64)
-    for leg in np.unique(legs_all):
-        idx = np.flatnonzero(legs_all == leg)
-        ok = np.isfinite(target_all[idx]) & np.isfinite(error_all[idx])
-        rows = idx[ok]
-        if rows.size == 0:
-            continue
+    for leg, (rows, dropped) in usable_rows_by_leg(points).items():
         run = np.asarray(points["run"][rows]).astype(np.int64)
         direction = direction_all[rows].astype(float)
         # passes in run order; a pass is one run (one direction)
@@ -162,11 +147,11 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
         centres, target_id = _cluster_targets(x)
         t = time_all[rows]
         t_h = (t - np.nanmin(t)) / 3600.0 if np.any(np.isfinite(t)) else t
-        out[int(leg)] = LegData(
-            leg=int(leg), rows=rows, x_mm=x, error_um=error_all[rows], direction=direction, run=run,
+        out[leg] = LegData(
+            leg=leg, rows=rows, x_mm=x, error_um=error_all[rows], direction=direction, run=run,
             pass_id=pass_id.astype(np.int64), cycle=pass_cycle[pass_id], target_id=target_id,
             targets_mm=centres, time_h=t_h, temp_c=temp_all[rows], load_kn=load_all[rows] / 1000.0,
-            dropped=int((~ok).sum()),
+            dropped=dropped,
         )
     if not out:
         raise InputError(f"{source}: no point has a finite target_mm and error_um; nothing to diagnose")

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from procedures.errors import InputError, SchemaError
+from procedures.errors import InputError
+from procedures.points import check_points, usable_rows_by_leg
 
-_REQUIRED = ("leg", "run", "direction", "target_mm", "error_um")
 
 
 @dataclass(frozen=True)
@@ -84,40 +84,23 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
     Raises `SchemaError` for missing fields or a direction other than +1/-1 (naming the row),
     `InputError` when no usable point is left.
     """
+    check_points(points, source)
     names = points.dtype.names or ()
-    missing = [f for f in _REQUIRED if f not in names]
-    if missing:
-        raise SchemaError(f"{source}: points lack the field(s) {', '.join(missing)}")
-    if points.size == 0:
-        raise InputError(f"{source}: no measured points; record a sweep first")
-    direction_all = np.asarray(points["direction"]).astype(np.int64)
-    bad = np.flatnonzero((direction_all != 1) & (direction_all != -1))
-    if bad.size:
-        i = int(bad[0])
-        raise SchemaError(
-            f"{source}: point row {i}: field direction is {direction_all[i]}, expected +1 or -1"
-        )
     out: dict[int, LegData] = {}
-    for leg in np.unique(points["leg"]).astype(int):
-        p = points[points["leg"] == leg]
-        pos = np.asarray(p["target_mm"], dtype=float)
-        err = np.asarray(p["error_um"], dtype=float)
-        ok = np.isfinite(pos) & np.isfinite(err)
-        p = p[ok]
-        if p.size == 0:
-            continue
+    for leg, (rows, dropped) in usable_rows_by_leg(points).items():
+        p = points[rows]
         run = np.asarray(p["run"]).astype(np.int64)
         direction = np.asarray(p["direction"]).astype(np.int64)
         time_s = np.asarray(p["time_s"], dtype=float) if "time_s" in names else np.full(p.size, np.nan)
-        out[int(leg)] = LegData(
-            leg=int(leg),
+        out[leg] = LegData(
+            leg=leg,
             position_mm=np.asarray(p["target_mm"], dtype=float),
             error_um=np.asarray(p["error_um"], dtype=float),
             direction=direction,
             run=run,
             cycle=_cycles(run, direction),
             time_s=time_s,
-            dropped=int((~ok).sum()),
+            dropped=dropped,
         )
     if not out:
         raise InputError(f"{source}: no point has a finite error_um; nothing to fit")
