@@ -17,3 +17,31 @@ def require_tool(name: str) -> str:
     if os.environ.get("CI") == "true":
         pytest.fail(f"{name} is required on CI (.ci/run installs it)")
     pytest.skip(f"{name} not installed (apt-get install it to run this test)")
+
+
+def start_drive_process(nv_path, legs: int = 1):
+    """A simulated drive in its own process (so a test can SIGKILL it), keeping its table memory
+    in `nv_path`. Returns (process, "tcp://127.0.0.1:PORT") once it listens."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "drivers.sim.drive_server", "--nv", str(nv_path), "--port", "0", "--legs", str(legs)],
+        cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    line = proc.stdout.readline().strip()  # printed once it listens
+    if not line.startswith("tcp://"):
+        proc.kill()
+        raise AssertionError(f"drive server did not start: {line!r} {proc.stderr.read()}")
+    return proc, line
+
+
+def kill_process(proc) -> None:
+    """SIGKILL (no cleanup, like a power cut) and reap."""
+    import signal
+
+    if proc.poll() is None:
+        os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(10)

@@ -6,9 +6,6 @@ from __future__ import annotations
 import json
 import os
 import random
-import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -19,8 +16,8 @@ from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis, RequestRefused, table_registers
 from drivers.sim.drive_server import NvError, SimDriveServer
 from drivers.sim.plant import PlantConfig
+from tests.tooling import kill_process, start_drive_process
 
-REPO = Path(__file__).resolve().parents[2]
 
 # an error-free leg, so the nut position shows exactly what the table did
 IDEAL = PlantConfig().only()
@@ -195,28 +192,14 @@ def test_unreadable_nv_memory_is_explained(tmp_path, profile):
 
 # -- a drive killed in the middle of a push ----------------------------------------------------------
 
-def _start_drive_process(nv: Path) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "drivers.sim.drive_server", "--nv", str(nv), "--port", "0", "--legs", "2"],
-        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
-    line = proc.stdout.readline().strip()  # printed once it listens
-    if not line.startswith("tcp://"):
-        proc.kill()
-        raise AssertionError(f"drive server did not start: {line!r} {proc.stderr.read()}")
-    return proc, line
 
 
-def _kill(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.kill(proc.pid, signal.SIGKILL)
-    proc.wait(10)
 
 
 def _push_killed_at(nv: Path, profile, kill_at_write: int, new_table: TableBank) -> int:
     """Push `new_table` to the inactive bank of leg 1 and SIGKILL the drive process just
     before write number `kill_at_write`; returns the number of writes that got through."""
-    proc, url = _start_drive_process(nv)
+    proc, url = start_drive_process(nv, legs=2)
     bus = ModbusBus.from_url(url, timeout_s=0.5)
     writes = 0
 
@@ -225,7 +208,7 @@ def _push_killed_at(nv: Path, profile, kill_at_write: int, new_table: TableBank)
         if kind == "write":
             writes += 1
             if writes == kill_at_write:
-                _kill(proc)
+                kill_process(proc)
 
     try:
         ax = ModbusServoAxis(bus, 1, profile)
@@ -236,7 +219,7 @@ def _push_killed_at(nv: Path, profile, kill_at_write: int, new_table: TableBank)
         assert "interrupted" in str(info.value) and "still active" in str(info.value)
         ax.close()
     finally:
-        _kill(proc)
+        kill_process(proc)
         bus.close()
     return writes - 1
 
@@ -263,7 +246,7 @@ def test_drive_killed_during_a_push_keeps_the_previous_table(tmp_path, profile, 
         nv.write_bytes(saved)  # every round starts from the same drive memory
         landed = _push_killed_at(nv, profile, k, new)
         assert landed == k - 1, f"seed {seed}"
-        proc, url = _start_drive_process(nv)
+        proc, url = start_drive_process(nv, legs=2)
         try:
             bus = ModbusBus.from_url(url, timeout_s=1.0)
             ax = ModbusServoAxis(bus, 1, profile)
@@ -280,4 +263,4 @@ def test_drive_killed_during_a_push_keeps_the_previous_table(tmp_path, profile, 
             assert ax.active_bank() == 0
             ax.close()
         finally:
-            _kill(proc)
+            kill_process(proc)

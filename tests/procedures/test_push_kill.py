@@ -7,9 +7,6 @@ from __future__ import annotations
 import logging
 import os
 import random
-import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -19,8 +16,8 @@ from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from procedures.audit import AuditLog
 from procedures.push import PushFailed, push_table, quantize, table_sha256
+from tests.tooling import kill_process, start_drive_process
 
-REPO = Path(__file__).resolve().parents[2]
 PROFILE = DriveProfile.load()
 PREVIOUS = TableBank(-90.0, 1.0, tuple(round(0.01 * i, 2) for i in range(181)), tuple(round(-0.02 * i, 2) for i in range(181)))
 # 300 points per direction: 3 + 3 entry chunks and the header = 7 table writes, then the switch
@@ -33,20 +30,8 @@ def _quiet_pymodbus():
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
-def _start(nv: Path) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen([sys.executable, "-m", "drivers.sim.drive_server", "--nv", str(nv), "--port", "0", "--legs", "1"],
-                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    line = proc.stdout.readline().strip()  # printed once it listens
-    if not line.startswith("tcp://"):
-        proc.kill()
-        raise AssertionError(f"drive server did not start: {line!r} {proc.stderr.read()}")
-    return proc, line
 
 
-def _kill(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.kill(proc.pid, signal.SIGKILL)
-    proc.wait(10)
 
 
 def _axis(url: str) -> ModbusServoAxis:
@@ -56,17 +41,17 @@ def _axis(url: str) -> ModbusServoAxis:
 def test_drive_killed_at_a_random_write_of_a_push_keeps_the_previous_table(tmp_path):
     nv = tmp_path / "nv.json"
     audit = AuditLog(tmp_path / "audit.jsonl")
-    proc, url = _start(nv)
+    proc, url = start_drive_process(nv, legs=1)
     try:
         ax = _axis(url)
         push_table(ax, PREVIOUS, audit=audit)  # bank 1 active: the table to keep
         ax.close()
     finally:
-        _kill(proc)
+        kill_process(proc)
     previous_sha = table_sha256(quantize(PREVIOUS))
     seed = int(os.environ.get("KILL_SEED", random.randrange(1 << 30)))
     kill_at = random.Random(seed).randint(1, TABLE_WRITES + 1)  # a table chunk, the header or the switch
-    proc, url = _start(nv)
+    proc, url = start_drive_process(nv, legs=1)
     writes = 0
 
     def before_request(kind, unit, address, count):
@@ -74,7 +59,7 @@ def test_drive_killed_at_a_random_write_of_a_push_keeps_the_previous_table(tmp_p
         if kind == "write":
             writes += 1
             if writes == kill_at:
-                _kill(proc)
+                kill_process(proc)
 
     try:
         ax = _axis(url)
@@ -83,7 +68,7 @@ def test_drive_killed_at_a_random_write_of_a_push_keeps_the_previous_table(tmp_p
             push_table(ax, NEW, audit=audit)
         ax.close()
     finally:
-        _kill(proc)
+        kill_process(proc)
     text = str(info.value)
     if kill_at <= TABLE_WRITES:
         assert "previous table (bank 1" in text and "is still active" in text, f"seed {seed}: {text}"
@@ -93,7 +78,7 @@ def test_drive_killed_at_a_random_write_of_a_push_keeps_the_previous_table(tmp_p
     assert [e.outcome for e in entries[-2:]] == ["started", "failed"], f"seed {seed}"
     assert entries[-2].backup["sha256"] == previous_sha
 
-    proc, url = _start(nv)  # the drive powers up again from its NV memory
+    proc, url = start_drive_process(nv, legs=1)  # the drive powers up again from its NV memory
     try:
         ax = _axis(url)
         assert ax.active_bank() == 1, f"seed {seed}, killed at write {kill_at}"
@@ -105,4 +90,4 @@ def test_drive_killed_at_a_random_write_of_a_push_keeps_the_previous_table(tmp_p
         assert result.bank == 0 and table_sha256(ax.read_table(0)) == table_sha256(quantize(NEW))
         ax.close()
     finally:
-        _kill(proc)
+        kill_process(proc)
