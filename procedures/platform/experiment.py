@@ -14,10 +14,14 @@ Steps, for N random reachable poses (seeded):
    The measured error is taken at the nominal position (the compensation moves a leg by a few
    um, far less than the spacing of anything in the error curves).
 
-Error sources (LegErrorSampler): `RecordedLegErrors` takes a session's points: the "measurement"
-for a pose is one pass of that leg in that direction (chosen at random) interpolated linearly,
-and the compensation table is the mean of the *other* passes in that direction (leave one out,
-so the table never contains the pass it corrects), or a fitted model's `predict_um` when given.
+Error sources (LegErrorSampler): `RecordedLegErrors` takes a session's points. The "measurement"
+for a pose is either the mean of all passes of that leg in that direction (the systematic error,
+the paper's setting: its model against the data it was fitted to), or one pass chosen at random
+(repeatability included: what one leg in service may show), interpolated linearly. The
+compensation is a fitted model's `predict_um`, a compensation table as the drive interpolates it,
+or the mean of the *other* passes in that direction (leave one out, so the table never contains
+the pass it corrects). `reduction_digest` condenses a run so that two measurements can be
+reported side by side on the same poses.
 `FunctionLegErrors` takes plain callables `leg_error_um(leg, position_mm, direction)`.
 """
 
@@ -92,14 +96,16 @@ class RecordedLegErrors:
 
     The measurement at a pose is one randomly chosen pass of the leg in that direction,
     interpolated linearly between its targets (`measurement="pass"`), or the mean of all passes
-    in that direction (`"mean"`: the systematic error only, the paper's setting; needs a model). The prediction is `predicted_um(leg, x, dir)`
-    when given (a fitted model), else the mean over the other passes in that direction at that
+    in that direction (`"mean"`: the systematic error only, the paper's setting; needs a model or
+    a table). The prediction is `predicted_um(leg, x, dir)` when given (a fitted model, or a
+    compensation table as the drive interpolates it; `compensation` names it in the description),
+    else the mean over the other passes in that direction at that
     position (leave-one-out table). Passes that do not span the leg's recorded range are left out
     (`dropped_runs`); at least two full passes per leg and direction are needed.
     """
 
     def __init__(self, points: np.ndarray, predicted_um: LegErrorFn | None = None, source: str = "the recording",
-                 measurement: str = "pass"):
+                 measurement: str = "pass", compensation: str = "the model's prediction"):
         if measurement not in ("pass", "mean"):
             raise InputError(f"measurement must be 'pass' or 'mean', got {measurement!r}.")
         if measurement == "mean" and predicted_um is None:
@@ -113,7 +119,7 @@ class RecordedLegErrors:
         self.description = (
             f"{source}: "
             + ("one pass per pose and leg as measurement, " if measurement == "pass" else "mean of all passes per direction as measurement, ")
-            + ("the model's prediction as compensation" if predicted_um else "mean of the other passes (leave-one-out) as compensation")
+            + (f"{compensation} as compensation" if predicted_um else "mean of the other passes (leave-one-out) as compensation")
         )
         self.dropped_runs: dict[int, list[int]] = {}
         self._tables: dict[tuple[int, int], _PassTable] = {}
@@ -378,6 +384,31 @@ def _stats(orig: np.ndarray, comp: np.ndarray) -> dict:
     }
 
 
+MEASUREMENT_LABELS = {
+    "mean": "systematic error (mean of the recorded passes)",
+    "pass": "one recorded pass (leg repeatability included)",
+}
+"""What each `RecordedLegErrors.measurement` means, for reports."""
+
+
+def reduction_digest(summary: dict, measured: str | None = None) -> dict:
+    """The range reductions of a `summarize` result, for setting two runs side by side (same seed,
+    so same poses, another measurement): pose components and pooled legs with the acceptance
+    flags, each leg's reduction, and the common/differential split."""
+    cm = summary["common_mode"]
+    return {
+        "measured": measured,
+        "label": MEASUREMENT_LABELS.get(measured or "", measured),
+        "source": summary["source"],
+        "leg_range_reduction_pct": summary["legs"]["all"]["range_reduction_pct"],
+        "per_leg_range_reduction_pct": {k: v["range_reduction_pct"] for k, v in summary["legs"].items() if k != "all"},
+        "acceptance": summary["acceptance"],
+        "common_range_reduction_pct": cm["common"]["range_reduction_pct"],
+        "differential_range_reduction_pct": cm["differential"]["range_reduction_pct"],
+        "common_share_of_variance_pct": [cm["common_share_of_variance_pct"], cm["compensated_common_share_of_variance_pct"]],
+    }
+
+
 def summarize(result: ExperimentResult) -> dict:
     """The paper's Tables 1 and 2 for this run, as JSON-able data.
 
@@ -461,10 +492,12 @@ __all__ = [
     "FunctionLegErrors",
     "LegErrorFn",
     "LegErrorSampler",
+    "MEASUREMENT_LABELS",
     "RecordedLegErrors",
     "Workspace",
     "approach_directions",
     "random_poses",
+    "reduction_digest",
     "run_experiment",
     "summarize",
 ]

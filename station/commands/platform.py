@@ -21,10 +21,12 @@ HELP = "pose errors of the platform from leg errors, before and after compensati
 DESCRIPTION = (
     "Simulate random platform poses: inverse kinematics gives the leg positions, the recorded leg "
     "errors (per direction, interpolated) are added, forward kinematics gives the erroneous pose; "
-    "then again with the compensation applied. With FILE.h5 one recorded pass is the measurement "
-    "and the mean of the other passes the compensation table; with MODEL.json the model is the "
-    "compensation and its recording (or --recording) gives the measurement. Writes "
-    "platform_report.md, platform_summary.json and histograms to --out."
+    "then again with the compensation applied. The compensation is a model (MODEL.json from "
+    "`station fit`), a table (TABLE.csv from `station table`, applied as the drive interpolates "
+    "it; give --recording), or with FILE.h5 alone the mean of the other passes. With a model or a "
+    "table the measured leg error is the recording's systematic error (mean of its passes, the "
+    "paper's setting) and, on the same poses, one recorded pass (repeatability included); both are "
+    "reported. Writes platform_report.md, platform_summary.json and histograms to --out."
 )
 
 REPORT_MD = "platform_report.md"
@@ -35,15 +37,19 @@ LEG_PNG = "leg_error_hist.png"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("source", metavar="FILE.h5|MODEL.json", help="a session file, or a model file from `station fit`")
+    p.add_argument("source", metavar="FILE.h5|MODEL.json|TABLE.csv",
+                   help="a session file, a model file from `station fit`, or a table from `station table`")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the report and figures (created)")
     p.add_argument("--poses", type=int, default=2000, metavar="N", help="random poses (default 2000)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
-    p.add_argument("--recording", metavar="FILE.h5", help="with MODEL.json: the session giving the measured errors "
-                   "(default: the recording named in the model)")
-    p.add_argument("--measured", choices=["pass", "mean"], default="pass",
-                   help="measured leg error: one recorded pass per pose (default), or with MODEL.json the mean of "
-                   "all passes per direction (the systematic error only, as in the paper)")
+    p.add_argument("--recording", metavar="FILE.h5", help="the session giving the measured errors (needed with "
+                   "TABLE.csv; with MODEL.json the default is the recording named in the model)")
+    p.add_argument("--measured", choices=["pass", "mean"], default=None,
+                   help="the measurement of the main tables: 'mean' = the systematic error, mean of all passes per "
+                   "direction (the paper's setting; default with MODEL.json or TABLE.csv), 'pass' = one recorded pass per "
+                   "pose and leg (the only one with FILE.h5 alone); with a model or table the other is reported beside it")
+    p.add_argument("--profile", metavar="PROFILE.toml",
+                   help="with TABLE.csv: drive profile whose table limits the table is checked against (default: built-in)")
     p.add_argument("--geometry", metavar="FILE.toml", help="platform geometry (default: the paper-like positioner, docs/platform.md)")
     p.add_argument("--xy-mm", type=float, default=60.0, help="workspace half-range in x and y about home, mm (default 60)")
     p.add_argument("--z-mm", type=float, default=60.0, help="workspace half-range in z about home, mm (default 60)")
@@ -51,53 +57,103 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--yaw-deg", type=float, default=0.0, help="workspace half-range of rz, degrees (default 0)")
 
 
-def _load_errors(args) -> tuple[object, dict]:
-    """The experiment's error source and a description of the inputs for the report."""
+def _recording_for_model(src: Path, model, args) -> tuple[object, Path, bool]:
+    """The session the model's measured errors come from, and whether it is another one than the
+    model was fitted to (held out)."""
+    from procedures.recording.reader import read_session
+
+    source_path = model.source.get("path", "")
+    source_sha = model.source.get("sha256", "")
+    if args.recording:
+        rec_path = Path(args.recording)
+    elif source_path:
+        rec_path = Path(source_path)
+        if not rec_path.is_absolute() and not rec_path.exists():
+            rec_path = src.parent / source_path  # recorded relative to the model's folder
+    else:
+        raise InputError(f"{src}: the model names no recording; pass --recording FILE.h5 for the measured errors.")
+    if not rec_path.exists():
+        raise InputError(f"{src}: its recording {rec_path} is not there; pass --recording FILE.h5 for the measured errors.")
+    session = read_session(rec_path)
+    held_out = bool(source_sha) and session.sha256 != source_sha
+    if not args.recording and held_out:
+        raise InputError(
+            f"{rec_path} changed since {src} was fitted to it (sha256 {session.sha256[:12]}... vs "
+            f"{source_sha[:12]}...); pass --recording {rec_path} to use it anyway."
+        )
+    return session, rec_path, held_out
+
+
+def _compensation(args, src: Path) -> tuple[object, object, dict, str]:
+    """(predicted_um callable, session, inputs, description) for a MODEL.json or TABLE.csv."""
+    from procedures.recording.reader import file_sha256, read_session
+
+    if src.suffix.lower() == ".json":
+        from procedures.fit import load_model
+
+        model = load_model(src)
+        missing = [leg for leg in range(1, 7) if leg not in model.legs]
+        if missing:
+            raise InputError(f"{src}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
+        session, rec_path, held_out = _recording_for_model(src, model, args)
+        inputs = {
+            "model": {"path": str(src), "method": model.method, "source": model.source},
+            "recording": {"path": str(rec_path), "sha256": session.sha256},
+            "recording_is_the_models_own": not held_out,
+        }
+        return model.predict_um, session, inputs, f"{rec_path} with model {src} ({model.method})"
+    from procedures.table import read_table_csv
+    from station.commands.table import drive_limits
+
+    if not args.recording:
+        raise InputError(f"{src}: a table does not name its recording; pass --recording FILE.h5 for the measured errors.")
+    table = read_table_csv(src, drive_limits(args.profile), expected_legs=6)
+    rec_path = Path(args.recording)
+    if not rec_path.exists():
+        raise FileNotFoundError(f"{rec_path}: no such file")
+    session = read_session(rec_path)
+
+    def predicted_um(leg, position_mm, direction):
+        return table.legs[leg].correction_um(position_mm, direction)
+
+    inputs = {
+        "table": {"path": str(src), "sha256": file_sha256(src),
+                  "step_mm": {str(leg): t.step_mm for leg, t in table.legs.items()}},
+        "recording": {"path": str(rec_path), "sha256": session.sha256},
+    }
+    return predicted_um, session, inputs, f"{rec_path} with table {src}"
+
+
+def _load_errors(args) -> tuple[object, object | None, dict]:
+    """The experiment's error source for the main tables, the one for the other measurement
+    (None with FILE.h5 alone) and a description of the inputs for the report."""
     from procedures.platform.experiment import RecordedLegErrors
     from procedures.recording.reader import read_session
 
     src = Path(args.source)
     if not src.exists():
         raise FileNotFoundError(f"{src}: no such file")
-    if src.suffix.lower() == ".json":
-        from procedures.fit import load_model
+    suffix = src.suffix.lower()
+    if suffix in (".json", ".csv"):
+        predicted_um, session, inputs, where = _compensation(args, src)
+        measured = args.measured or "mean"
+        other = "pass" if measured == "mean" else "mean"
+        what = "the model's prediction" if suffix == ".json" else "the table, interpolated as the drive does,"
 
-        model = load_model(src)
-        source_path = model.source.get("path", "")
-        source_sha = model.source.get("sha256", "")
-        if args.recording:
-            rec_path = Path(args.recording)
-        elif source_path:
-            rec_path = Path(source_path)
-            if not rec_path.is_absolute() and not rec_path.exists():
-                rec_path = src.parent / source_path  # recorded relative to the model's folder
-        else:
-            raise InputError(f"{src}: the model names no recording; pass --recording FILE.h5 for the measured errors.")
-        if not rec_path.exists():
-            raise InputError(f"{src}: its recording {rec_path} is not there; pass --recording FILE.h5 for the measured errors.")
-        session = read_session(rec_path)
-        held_out = bool(source_sha) and session.sha256 != source_sha
-        if not args.recording and held_out:
-            raise InputError(
-                f"{rec_path} changed since {src} was fitted to it (sha256 {session.sha256[:12]}... vs "
-                f"{source_sha[:12]}...); pass --recording {rec_path} to use it anyway."
-            )
-        missing = [leg for leg in range(1, 7) if leg not in model.legs]
-        if missing:
-            raise InputError(f"{src}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
-        errors = RecordedLegErrors(session.points, predicted_um=model.predict_um, source=f"{rec_path} with model {src} ({model.method})",
-                                   measurement=args.measured)
-        inputs = {
-            "model": {"path": str(src), "method": model.method, "source": model.source},
-            "recording": {"path": str(rec_path), "sha256": session.sha256},
-            "recording_is_the_models_own": not held_out,
-        }
-        return errors, inputs
+        def errors(measurement: str):
+            return RecordedLegErrors(session.points, predicted_um=predicted_um, source=where, measurement=measurement,
+                                     compensation=what)
+
+        inputs["measured"] = measured
+        return errors(measured), errors(other), inputs
+    if args.recording:
+        raise InputError("--recording goes with MODEL.json or TABLE.csv; with FILE.h5 the session itself gives the errors.")
     if args.measured == "mean":
-        raise InputError("--measured mean needs MODEL.json as compensation; with FILE.h5 the table is the mean of the other passes.")
+        raise InputError("--measured mean needs MODEL.json or TABLE.csv as compensation; with FILE.h5 the table is the mean "
+                         "of the other passes.")
     session = read_session(src)
-    errors = RecordedLegErrors(session.points, source=str(src))
-    return errors, {"recording": {"path": str(src), "sha256": session.sha256}}
+    return RecordedLegErrors(session.points, source=str(src)), None, {"recording": {"path": str(src), "sha256": session.sha256},
+                                                                     "measured": "pass"}
 
 
 def _hist_figure(orig: np.ndarray, comp: np.ndarray, labels: list[str], unit: str, title: str, path: Path, ylabel: str = "poses") -> None:
@@ -144,10 +200,18 @@ def _write_figures(result, out: Path) -> list[Path]:
     return paths
 
 
+def _write_text(path: Path, text: str) -> None:
+    """Write through a temporary file renamed into place: a crash never leaves half a report."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+
+
 def run(args) -> int:
-    from procedures.platform.experiment import Workspace, run_experiment, summarize
+    from procedures.platform.experiment import Workspace, reduction_digest, run_experiment, summarize
     from procedures.platform.geometry import default_geometry, describe, load_geometry
-    from procedures.platform.report import pose_table_markdown, report_markdown
+    from procedures.platform.experiment import MEASUREMENT_LABELS
+    from procedures.platform.report import pose_table_markdown, reduction_lines, report_markdown
     from procedures.platform.sensitivity import sensitivity_report
 
     if args.poses < 1:
@@ -157,13 +221,18 @@ def run(args) -> int:
         if not (math.isfinite(value) and value >= 0):
             raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
     geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
-    errors, inputs = _load_errors(args)
+    errors, other_errors, inputs = _load_errors(args)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} is a file; give a directory.")
     workspace = Workspace(args.xy_mm, args.z_mm, math.radians(args.tilt_deg), math.radians(args.yaw_deg))
     result = run_experiment(geometry, errors, poses=args.poses, seed=args.seed, workspace=workspace)
     summary = summarize(result)
+    summary["measured"] = inputs["measured"]
+    if other_errors is not None:
+        # same seed, so the same poses and directions: only the measurement differs
+        other = summarize(run_experiment(geometry, other_errors, poses=args.poses, seed=args.seed, workspace=workspace))
+        summary["other_measurement"] = reduction_digest(other, other_errors.measurement)
     home = sensitivity_report(geometry, geometry.home_pose_mm_rad)
     summary["inputs"] = inputs
     summary["geometry"] = {
@@ -180,12 +249,13 @@ def run(args) -> int:
         "direction": "poses visited in the order drawn from home; a leg's direction is the sign of its last motion",
     }
     out.mkdir(parents=True, exist_ok=True)
-    (out / REPORT_MD).write_text(report_markdown(summary, describe(geometry), home), encoding="utf-8")
-    (out / SUMMARY_JSON).write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    _write_text(out / REPORT_MD, report_markdown(summary, describe(geometry), home))
+    _write_text(out / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
     figures = _write_figures(result, out)
+    print(f"measured leg error: {MEASUREMENT_LABELS[summary['measured']]}\n")
     print(pose_table_markdown(summary))
-    legs = summary["legs"]["all"]["range_reduction_pct"]
-    print(f"\nleg error range reduction (all legs): {legs:.2f} %" if legs is not None else "\nleg error range: zero")
+    print()
+    print(reduction_lines(summary))
     print(f"poses used: {summary['poses_used']} of {summary['poses']}")
     for path in [out / REPORT_MD, out / SUMMARY_JSON, *figures]:
         print(f"wrote {path}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -98,3 +99,77 @@ def test_platform_refuses_bad_input_with_one_line(tmp_path, capsys):
     rc = main(["platform", str(part), "--geometry", str(bad_geo), "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err
     assert rc == 2 and "g.toml" in err and "legs.mid_stroke_mm" in err
+
+
+SAMPLE = Path(__file__).resolve().parents[2] / "recordings" / "calibration-6legs.h5"
+
+
+def test_platform_with_a_table_reports_both_measurements(session, tmp_path, capsys):
+    path, _ = session
+    model_path = tmp_path / "model.json"
+    table_path = tmp_path / "table.csv"
+    assert main(["fit", str(path), "--out", str(model_path)]) == 0
+    assert main(["table", str(model_path), "--out", str(table_path)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "t"
+    assert main(["platform", str(table_path), "--recording", str(path), "--poses", "300", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "range reduction, systematic error" in printed and "range reduction, one recorded pass" in printed
+    summary = json.loads((out / "platform_summary.json").read_text())
+    assert summary["measured"] == "mean" and summary["inputs"]["measured"] == "mean"
+    assert summary["inputs"]["table"]["sha256"] == file_sha256(table_path)
+    assert "with table" in summary["source"] and "as the drive does" in summary["source"]
+    other = summary["other_measurement"]
+    assert other["measured"] == "pass" and set(other["acceptance"]) == set(summary["acceptance"])
+    # one pass adds the scatter no table removes: the legs shrink less than in the systematic measure
+    assert other["leg_range_reduction_pct"] < summary["legs"]["all"]["range_reduction_pct"]
+    # --measured pass swaps them: the same poses, so the same figures in the other place
+    out2 = tmp_path / "t2"
+    assert main(["platform", str(table_path), "--recording", str(path), "--measured", "pass", "--poses", "300",
+                 "--out", str(out2)]) == 0
+    swapped = json.loads((out2 / "platform_summary.json").read_text())
+    assert swapped["measured"] == "pass" and swapped["other_measurement"]["measured"] == "mean"
+    assert swapped["legs"]["all"]["range_reduction_pct"] == pytest.approx(other["leg_range_reduction_pct"])
+    assert swapped["other_measurement"]["acceptance"] == summary["acceptance"]
+    # a session alone has only the one-pass measure
+    out3 = tmp_path / "s"
+    assert main(["platform", str(path), "--poses", "200", "--out", str(out3)]) == 0
+    alone = json.loads((out3 / "platform_summary.json").read_text())
+    assert alone["measured"] == "pass" and "other_measurement" not in alone
+    assert not list(out.glob("*.tmp"))
+
+
+def test_platform_refuses_a_table_without_its_recording_or_for_other_legs(session, tmp_path, capsys):
+    path, _ = session
+    table = tmp_path / "table.csv"
+    assert main(["fit", str(path), "--out", str(tmp_path / "m.json")]) == 0
+    assert main(["table", str(tmp_path / "m.json"), "--out", str(table)]) == 0
+    capsys.readouterr()
+    rc = main(["platform", str(table), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--recording" in err and err.count("\n") == 1
+    lines = table.read_text().splitlines()
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(line for line in lines if not line.startswith(("4,", "5,", "6,"))) + "\n")
+    rc = main(["platform", str(short), "--recording", str(path), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "short.csv" in err and "leg count" in err and "Traceback" not in err
+    rc = main(["platform", str(path), "--recording", str(path), "--out", str(tmp_path / "o")])
+    assert rc == 2 and "--recording goes with" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_sample_sessions_pose_errors_shrink_at_least_as_much_as_its_legs(tmp_path, capsys):
+    """Issue 8's acceptance on the committed sample of the simulated rig: the default model
+    fitted to it, tabulated for the drive, applied to the paper's experiment (the recording's
+    systematic error as the measured leg error, as in the paper)."""
+    model, table, out = tmp_path / "m.json", tmp_path / "t.csv", tmp_path / "p"
+    assert main(["fit", str(SAMPLE), "--out", str(model)]) == 0
+    assert main(["table", str(model), "--out", str(table)]) == 0
+    assert main(["platform", str(table), "--recording", str(SAMPLE), "--out", str(out)]) == 0
+    summary = json.loads((out / "platform_summary.json").read_text())
+    legs = summary["legs"]["all"]["range_reduction_pct"]
+    assert legs > 80.0
+    shortfalls = {k: a["range_reduction_pct"] for k, a in summary["acceptance"].items() if not a["at_least_leg_reduction"]}
+    assert not shortfalls, f"legs {legs:.2f} %, pose components below: {shortfalls}"
+    assert "6 of 6 components at least as much as the legs" in capsys.readouterr().out
