@@ -21,7 +21,7 @@ the paper's setting: its model against the data it was fitted to), or one pass c
 compensation is a fitted model's `predict_um`, a compensation table as the drive interpolates it,
 or the mean of the *other* passes in that direction (leave one out, so the table never contains
 the pass it corrects). `reduction_digest` condenses a run so that two measurements can be
-reported side by side on the same poses.
+reported side by side on the same poses; `run_measurements` runs both and sets them side by side.
 `FunctionLegErrors` takes plain callables `leg_error_um(leg, position_mm, direction)`.
 """
 
@@ -409,6 +409,28 @@ def reduction_digest(summary: dict, measured: str | None = None) -> dict:
     }
 
 
+def run_measurements(
+    geometry: Geometry,
+    errors: LegErrorSampler,
+    other_errors: LegErrorSampler | None = None,
+    poses: int = 1000,
+    seed: int = 0,
+    workspace: Workspace = Workspace(),
+) -> tuple[ExperimentResult, dict]:
+    """Run the experiment with `errors` and, when `other_errors` is given, again with it on the
+    same poses and directions (same seed: only the measurement differs). Returns the first run
+    and its `summarize` with `measured` (the first source's measurement, None for a source
+    without one) and, with `other_errors`, `other_measurement` (its `reduction_digest`): what
+    `station platform` and the terminal UI's Platform page report."""
+    result = run_experiment(geometry, errors, poses=poses, seed=seed, workspace=workspace)
+    summary = summarize(result)
+    summary["measured"] = getattr(errors, "measurement", None)
+    if other_errors is not None:
+        other = summarize(run_experiment(geometry, other_errors, poses=poses, seed=seed, workspace=workspace))
+        summary["other_measurement"] = reduction_digest(other, getattr(other_errors, "measurement", None))
+    return result, summary
+
+
 def summarize(result: ExperimentResult) -> dict:
     """The paper's Tables 1 and 2 for this run, as JSON-able data.
 
@@ -499,5 +521,6 @@ __all__ = [
     "random_poses",
     "reduction_digest",
     "run_experiment",
+    "run_measurements",
     "summarize",
 ]

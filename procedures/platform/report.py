@@ -53,6 +53,19 @@ def pose_table_markdown(summary: dict) -> str:
     return "\n".join(_table(cols) + ["", "Angles in radians:", ""] + _table(rad))
 
 
+def pose_table_rows(summary: dict) -> list[tuple[str, list[str]]]:
+    """The rows of `pose_table_markdown`'s first table as text cells, formatted the same way:
+    (measure, [x, y, z in um, rx, ry, rz in arcsec]), for a display other than Markdown."""
+    pose = summary["pose"]
+    stats = [pose[n] for n in POSE_ERROR_FIELDS[:3]] + [pose[n.replace("_rad", "_arcsec")] for n in POSE_ERROR_FIELDS[3:]]
+    return [(label, [_fmt(st[key], key, False) for st in stats]) for key, label in _ROWS]
+
+
+def dominant_text(d: dict) -> str:
+    """One `dominant_legs` entry as the report writes it: "leg 3 (24 %)", or the tied legs."""
+    return _dominant(d)
+
+
 def leg_table_markdown(summary: dict) -> str:
     """Table 1 of the paper for this run: leg errors at the sampled positions, um."""
     legs = summary["legs"]
@@ -188,4 +201,4 @@ def report_markdown(summary: dict, geometry_text: str = "", home_sensitivity: di
     return "\n".join(lines)
 
 
-__all__ = ["leg_table_markdown", "pose_table_markdown", "reduction_lines", "report_markdown"]
+__all__ = ["dominant_text", "leg_table_markdown", "pose_table_markdown", "pose_table_rows", "reduction_lines", "report_markdown"]

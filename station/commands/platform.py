@@ -57,15 +57,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--yaw-deg", type=float, default=0.0, help="workspace half-range of rz, degrees (default 0)")
 
 
-def _recording_for_model(src: Path, model, args) -> tuple[object, Path, bool]:
+def _recording_for_model(src: Path, model, recording: str | Path | None) -> tuple[object, Path, bool]:
     """The session the model's measured errors come from, and whether it is another one than the
     model was fitted to (held out)."""
     from procedures.recording.reader import read_session
 
     source_path = model.source.get("path", "")
     source_sha = model.source.get("sha256", "")
-    if args.recording:
-        rec_path = Path(args.recording)
+    if recording:
+        rec_path = Path(recording)
     elif source_path:
         rec_path = Path(source_path)
         if not rec_path.is_absolute() and not rec_path.exists():
@@ -76,7 +76,7 @@ def _recording_for_model(src: Path, model, args) -> tuple[object, Path, bool]:
         raise InputError(f"{src}: its recording {rec_path} is not there; pass --recording FILE.h5 for the measured errors.")
     session = read_session(rec_path)
     held_out = bool(source_sha) and session.sha256 != source_sha
-    if not args.recording and held_out:
+    if not recording and held_out:
         raise InputError(
             f"{rec_path} changed since {src} was fitted to it (sha256 {session.sha256[:12]}... vs "
             f"{source_sha[:12]}...); pass --recording {rec_path} to use it anyway."
@@ -84,31 +84,55 @@ def _recording_for_model(src: Path, model, args) -> tuple[object, Path, bool]:
     return session, rec_path, held_out
 
 
-def _compensation(args, src: Path) -> tuple[object, object, dict, str]:
-    """(predicted_um callable, session, inputs, description) for a MODEL.json or TABLE.csv."""
+def check_model_legs(model, name) -> None:
+    """Refuse a model that does not cover all six legs (InputError naming `name`)."""
+    missing = [leg for leg in range(1, 7) if leg not in model.legs]
+    if missing:
+        raise InputError(f"{name}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
+
+
+def _both_measurements(session, predicted_um, where: str, what: str, inputs: dict,
+                       measured: str | None) -> tuple[object, object, dict]:
+    """Error sources for the main measurement (`measured`, default 'mean') and the other one,
+    both from the recording's points with `predicted_um` as compensation."""
+    from procedures.platform.experiment import RecordedLegErrors
+
+    measured = measured or "mean"
+    other = "pass" if measured == "mean" else "mean"
+
+    def errors(measurement: str):
+        return RecordedLegErrors(session.points, predicted_um=predicted_um, source=where, measurement=measurement,
+                                 compensation=what)
+
+    inputs["measured"] = measured
+    return errors(measured), errors(other), inputs
+
+
+def model_errors(model, session, recording_path, model_path, *, measured: str | None = None, held_out: bool = False,
+                 model_label: str | None = None) -> tuple[object, object, dict]:
+    """Error sources (main measurement, other measurement) and the report's inputs for a fitted
+    model (procedures.fit) applied to a read session: what `station platform MODEL.json` runs,
+    also for a model held in memory (the terminal UI's; `model_path` None when it is not saved,
+    `model_label` then names it in the description)."""
+    check_model_legs(model, model_path or model_label or "the model")
+    inputs = {
+        "model": {"path": None if model_path is None else str(model_path), "method": model.method, "source": model.source},
+        "recording": {"path": str(recording_path), "sha256": session.sha256},
+        "recording_is_the_models_own": not held_out,
+    }
+    where = f"{recording_path} with model {model_label or model_path} ({model.method})"
+    return _both_measurements(session, model.predict_um, where, "the model's prediction", inputs, measured)
+
+
+def _table_errors(src: Path, recording, profile, measured: str | None) -> tuple[object, object, dict]:
     from procedures.recording.reader import file_sha256, read_session
-
-    if src.suffix.lower() == ".json":
-        from procedures.fit import load_model
-
-        model = load_model(src)
-        missing = [leg for leg in range(1, 7) if leg not in model.legs]
-        if missing:
-            raise InputError(f"{src}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
-        session, rec_path, held_out = _recording_for_model(src, model, args)
-        inputs = {
-            "model": {"path": str(src), "method": model.method, "source": model.source},
-            "recording": {"path": str(rec_path), "sha256": session.sha256},
-            "recording_is_the_models_own": not held_out,
-        }
-        return model.predict_um, session, inputs, f"{rec_path} with model {src} ({model.method})"
     from procedures.table import read_table_csv
     from station.commands.table import drive_limits
 
-    if not args.recording:
+    if not recording:
         raise InputError(f"{src}: a table does not name its recording; pass --recording FILE.h5 for the measured errors.")
-    table = read_table_csv(src, drive_limits(args.profile), expected_legs=6)
-    rec_path = Path(args.recording)
+    table = read_table_csv(src, drive_limits(profile), expected_legs=6)
+    rec_path = Path(recording)
     if not rec_path.exists():
         raise FileNotFoundError(f"{rec_path}: no such file")
     session = read_session(rec_path)
@@ -121,34 +145,34 @@ def _compensation(args, src: Path) -> tuple[object, object, dict, str]:
                   "step_mm": {str(leg): t.step_mm for leg, t in table.legs.items()}},
         "recording": {"path": str(rec_path), "sha256": session.sha256},
     }
-    return predicted_um, session, inputs, f"{rec_path} with table {src}"
+    return _both_measurements(session, predicted_um, f"{rec_path} with table {src}",
+                              "the table, interpolated as the drive does,", inputs, measured)
 
 
-def _load_errors(args) -> tuple[object, object | None, dict]:
+def load_errors(source, *, recording=None, measured: str | None = None,
+                profile=None) -> tuple[object, object | None, dict]:
     """The experiment's error source for the main tables, the one for the other measurement
-    (None with FILE.h5 alone) and a description of the inputs for the report."""
+    (None with FILE.h5 alone) and a description of the inputs for the report, from a session
+    file, a model file or a table (with `recording`), as `station platform` takes them."""
     from procedures.platform.experiment import RecordedLegErrors
     from procedures.recording.reader import read_session
 
-    src = Path(args.source)
+    src = Path(source)
     if not src.exists():
         raise FileNotFoundError(f"{src}: no such file")
     suffix = src.suffix.lower()
-    if suffix in (".json", ".csv"):
-        predicted_um, session, inputs, where = _compensation(args, src)
-        measured = args.measured or "mean"
-        other = "pass" if measured == "mean" else "mean"
-        what = "the model's prediction" if suffix == ".json" else "the table, interpolated as the drive does,"
+    if suffix == ".json":
+        from procedures.fit import load_model
 
-        def errors(measurement: str):
-            return RecordedLegErrors(session.points, predicted_um=predicted_um, source=where, measurement=measurement,
-                                     compensation=what)
-
-        inputs["measured"] = measured
-        return errors(measured), errors(other), inputs
-    if args.recording:
+        model = load_model(src)
+        check_model_legs(model, src)
+        session, rec_path, held_out = _recording_for_model(src, model, recording)
+        return model_errors(model, session, rec_path, src, measured=measured, held_out=held_out)
+    if suffix == ".csv":
+        return _table_errors(src, recording, profile, measured)
+    if recording:
         raise InputError("--recording goes with MODEL.json or TABLE.csv; with FILE.h5 the session itself gives the errors.")
-    if args.measured == "mean":
+    if measured == "mean":
         raise InputError("--measured mean needs MODEL.json or TABLE.csv as compensation; with FILE.h5 the table is the mean "
                          "of the other passes.")
     session = read_session(src)
@@ -207,32 +231,14 @@ def _write_text(path: Path, text: str) -> None:
     tmp.replace(path)
 
 
-def run(args) -> int:
-    from procedures.platform.experiment import Workspace, reduction_digest, run_experiment, summarize
-    from procedures.platform.geometry import default_geometry, describe, load_geometry
-    from procedures.platform.experiment import MEASUREMENT_LABELS
-    from procedures.platform.report import pose_table_markdown, reduction_lines, report_markdown
+def write_report(out: Path, result, summary: dict, inputs: dict, geometry) -> list[Path]:
+    """Complete `summary` (from `run_measurements`) with the inputs, geometry, home sensitivity
+    and conventions, and write platform_report.md, platform_summary.json and the histograms into
+    `out` (created). Returns the paths written: report, summary, figures."""
+    from procedures.platform.geometry import describe
+    from procedures.platform.report import report_markdown
     from procedures.platform.sensitivity import sensitivity_report
 
-    if args.poses < 1:
-        raise InputError(f"--poses must be at least 1, got {args.poses}.")
-    for name in ("xy_mm", "z_mm", "tilt_deg", "yaw_deg"):
-        value = getattr(args, name)
-        if not (math.isfinite(value) and value >= 0):
-            raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
-    geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
-    errors, other_errors, inputs = _load_errors(args)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} is a file; give a directory.")
-    workspace = Workspace(args.xy_mm, args.z_mm, math.radians(args.tilt_deg), math.radians(args.yaw_deg))
-    result = run_experiment(geometry, errors, poses=args.poses, seed=args.seed, workspace=workspace)
-    summary = summarize(result)
-    summary["measured"] = inputs["measured"]
-    if other_errors is not None:
-        # same seed, so the same poses and directions: only the measurement differs
-        other = summarize(run_experiment(geometry, other_errors, poses=args.poses, seed=args.seed, workspace=workspace))
-        summary["other_measurement"] = reduction_digest(other, other_errors.measurement)
     home = sensitivity_report(geometry, geometry.home_pose_mm_rad)
     summary["inputs"] = inputs
     summary["geometry"] = {
@@ -248,15 +254,42 @@ def run(args) -> int:
         "leg_error": "measured minus commanded, um; compensated = measured - predicted",
         "direction": "poses visited in the order drawn from home; a leg's direction is the sign of its last motion",
     }
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     _write_text(out / REPORT_MD, report_markdown(summary, describe(geometry), home))
     _write_text(out / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
     figures = _write_figures(result, out)
+    return [out / REPORT_MD, out / SUMMARY_JSON, *figures]
+
+
+def run(args) -> int:
+    from procedures.platform.experiment import MEASUREMENT_LABELS, Workspace, run_measurements
+    from procedures.platform.geometry import default_geometry, load_geometry
+    from procedures.platform.report import pose_table_markdown, reduction_lines
+
+    if args.poses < 1:
+        raise InputError(f"--poses must be at least 1, got {args.poses}.")
+    for name in ("xy_mm", "z_mm", "tilt_deg", "yaw_deg"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value >= 0):
+            raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
+    geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
+    errors, other_errors, inputs = load_errors(args.source, recording=args.recording, measured=args.measured,
+                                               profile=args.profile)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} is a file; give a directory.")
+    workspace = Workspace(args.xy_mm, args.z_mm, math.radians(args.tilt_deg), math.radians(args.yaw_deg))
+    # same seed for the other measurement, so the same poses and directions: only the measurement differs
+    result, summary = run_measurements(geometry, errors, other_errors, poses=args.poses, seed=args.seed,
+                                       workspace=workspace)
+    summary["measured"] = inputs["measured"]
+    written = write_report(out, result, summary, inputs, geometry)
     print(f"measured leg error: {MEASUREMENT_LABELS[summary['measured']]}\n")
     print(pose_table_markdown(summary))
     print()
     print(reduction_lines(summary))
     print(f"poses used: {summary['poses_used']} of {summary['poses']}")
-    for path in [out / REPORT_MD, out / SUMMARY_JSON, *figures]:
+    for path in written:
         print(f"wrote {path}")
     return 0

@@ -28,6 +28,7 @@ from station.tui.messages import Notice, RigActionDone, RigConnected, RigConnect
 from station.tui.screens.common import ConfirmScreen
 from station.tui.screens.compensation import CompensationScreen
 from station.tui.screens.diagnosis import DiagnosisScreen
+from station.tui.screens.platform import PlatformScreen
 from station.tui.screens.replay import ReplayScreen
 from station.tui.screens.results import ResultsScreen
 from station.tui.screens.rig import RigScreen
@@ -61,9 +62,10 @@ class StationApp(App):
         "compensation": CompensationScreen,
         "replay": ReplayScreen,
         "diagnosis": DiagnosisScreen,
+        "platform": PlatformScreen,
     }
     DEFAULT_MODE = "rig"
-    # The page keys (F1-F6) are shown in the tab bar at the top of every page; the footer keeps
+    # The page keys (F1-F7) are shown in the tab bar at the top of every page; the footer keeps
     # the current page's actions.
     BINDINGS = [
         Binding("f1", "switch_mode('rig')", "Rig", show=False),
@@ -72,6 +74,7 @@ class StationApp(App):
         Binding("f4", "switch_mode('compensation')", "Compensation", show=False),
         Binding("f5", "switch_mode('replay')", "Replay", show=False),
         Binding("f6", "switch_mode('diagnosis')", "Diagnosis", show=False),
+        Binding("f7", "switch_mode('platform')", "Platform", show=False),
         Binding("ctrl+q", "quit", "Quit", priority=True),
         Binding("ctrl+c", "quit", "Quit", show=False, priority=True),
     ]
@@ -107,7 +110,7 @@ class StationApp(App):
         self.replay_rig = None  # the replay devices of the running (or last) replay
         self._on_sweep_done: Callable[[SweepState], None] | None = None
         self.last_session: Path | None = None  # the newest recording made or opened here
-        self.analysis = None  # results.Analysis: the session, model and ISO figures on show
+        self.analysis = None  # results.Analysis: the session, model and ISO figures on show (Compensation, Platform use it)
         self.session_listeners: list[Callable[[Path], None]] = []
 
     # -- lifecycle -------------------------------------------------------------------------

@@ -10,7 +10,8 @@ from textual.widgets import Button, Footer, Header, Label, Static
 
 
 PAGES = [("rig", "F1", "Rig"), ("sweep", "F2", "Sweep"), ("results", "F3", "Results"),
-         ("compensation", "F4", "Compensation"), ("replay", "F5", "Replay"), ("diagnosis", "F6", "Diagnosis")]
+         ("compensation", "F4", "Compensation"), ("replay", "F5", "Replay"), ("diagnosis", "F6", "Diagnosis"),
+         ("platform", "F7", "Platform")]
 
 
 def nav_bar(current: str) -> str:

@@ -1,0 +1,426 @@
+"""Platform screen: what the leg errors, and their compensation, do to the platform pose — the
+seed paper's Table 2, as `station platform` computes it.
+
+The input is the analysis on show (the session and the model fitted on Results), or a table
+(TABLE.csv from `station table` / Compensation) or a model file typed in, with its recording.
+Both measurements of the leg error (the recording's systematic error and one recorded pass) run on
+the same poses in a thread worker through procedures.platform.experiment.run_measurements, the
+function the CLI uses; `w` writes the CLI's report (station.commands.platform.write_report)
+beside the session, in platform/<session name>/.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.message import Message
+from textual.widgets import Button, DataTable, Input, Label, Static
+
+from station.tui.errors import describe
+from station.tui.screens.common import StationScreen
+from station.tui.widgets import XYPlot
+
+DEFAULT_POSES = 2000
+DEFAULT_SEED = 0
+COMPONENTS = ("x_um", "y_um", "z_um", "rx_rad", "ry_rad", "rz_rad")
+COMPONENT_LABELS = {"x_um": "x", "y_um": "y", "z_um": "z", "rx_rad": "rx", "ry_rad": "ry", "rz_rad": "rz"}
+SHORT_MEASUREMENT = {"mean": "systematic", "pass": "one pass"}
+UNSAVED_MODEL = "fitted in the station UI, not saved (Results, F3: w saves it)"
+
+
+def report_folder(recording: Path) -> Path:
+    """Where `w` writes: platform/<session name>/ beside the recording, so reports of several
+    sessions in one folder do not overwrite each other."""
+    return recording.parent / "platform" / recording.stem
+
+
+@dataclass
+class PlatformRequest:
+    """What to run, resolved on the app's thread from the page's fields and the analysis on show."""
+
+    poses: int
+    seed: int
+    analysis: Any = None  # results.Analysis: its model and session (recording None) or a held-out recording
+    compensation: Path | None = None  # TABLE.csv or MODEL.json typed in
+    recording: Path | None = None
+
+
+@dataclass
+class PlatformRun:
+    """One finished experiment: the main measurement's result and summary (with the other
+    measurement's digest), what went in, and where its report goes."""
+
+    result: Any  # procedures.platform.experiment.ExperimentResult
+    summary: dict
+    inputs: dict
+    geometry: Any
+    recording: Path
+    label: str  # what was compensated with what, for the status line (file names only)
+    analysis: Any = None
+    written: list[Path] = field(default_factory=list)
+
+
+class PlatformReady(Message):
+    def __init__(self, run: PlatformRun) -> None:
+        super().__init__()
+        self.run = run
+
+
+class PlatformFailed(Message):
+    def __init__(self, error: str, title: str = "Platform") -> None:
+        super().__init__()
+        self.error = error
+        self.title = title
+
+
+class PlatformWritten(Message):
+    def __init__(self, run: PlatformRun, paths: list[Path]) -> None:
+        super().__init__()
+        self.run = run
+        self.paths = paths
+
+
+def _require_six_legs(session, name: str) -> None:
+    from procedures.errors import InputError
+
+    legs = [int(leg) for leg in session.legs]
+    missing = [leg for leg in range(1, 7) if leg not in legs]
+    if missing:
+        raise InputError(
+            f"{name} has leg(s) {legs}, no {missing}; the platform needs the errors of all six legs. "
+            "Record a sweep of legs 1-6 (Sweep, F2) and fit it on Results (F3)."
+        )
+
+
+def run_platform(request: PlatformRequest) -> PlatformRun:
+    """Load the error sources and run both measurements on the same poses (any thread)."""
+    from procedures.platform.experiment import Workspace, run_measurements
+    from procedures.platform.geometry import default_geometry
+    from procedures.recording.reader import read_session
+    from station.commands.platform import load_errors, model_errors
+
+    a = request.analysis
+    if request.compensation is None:  # the model on Results
+        if request.recording is None:
+            session, rec_path, held_out = a.session, a.path, False
+        else:
+            session, rec_path = read_session(request.recording), request.recording
+            held_out = session.sha256 != a.session.sha256
+        _require_six_legs(session, rec_path.name)
+        errors, other, inputs = model_errors(
+            a.model, session, rec_path, a.model_path, held_out=held_out,
+            model_label=None if a.model_path else f"fitted on {a.path.name} in the station UI, not saved")
+        if a.model_path is None:
+            inputs["model"]["note"] = UNSAVED_MODEL
+        label = f"{a.method} model fitted on {a.path.name}" + (f", measured on {rec_path.name}" if held_out else "")
+    else:
+        errors, other, inputs = load_errors(request.compensation, recording=request.recording)
+        rec_path = Path(inputs["recording"]["path"])
+        kind = "table" if request.compensation.suffix.lower() == ".csv" else "model"
+        label = f"{kind} {request.compensation.name} on {rec_path.name}"
+        a = None
+    geometry = default_geometry()
+    result, summary = run_measurements(geometry, errors, other, poses=request.poses, seed=request.seed,
+                                       workspace=Workspace())
+    return PlatformRun(result, summary, inputs, geometry, rec_path, label, analysis=a)
+
+
+def write_platform_report(run: PlatformRun, out: Path) -> list[Path]:
+    """The CLI's report files for `run` in `out` (any thread)."""
+    from station.commands.platform import write_report
+
+    inputs = copy.deepcopy(run.inputs)
+    a = run.analysis
+    if a is not None and a.model_path is not None and inputs.get("model", {}).get("path") is None:
+        inputs["model"]["path"] = str(a.model_path)  # saved on Results since the run
+        inputs["model"].pop("note", None)
+    return write_report(out, run.result, dict(run.summary), inputs, run.geometry)
+
+
+def histogram_steps(orig: np.ndarray, comp: np.ndarray, bins: int = 40) -> tuple[list[float], list[float], list[float]]:
+    """Step outlines of the histograms of `orig` and `comp` on the same bins (as the report's
+    figures: the narrowing is visible): (x, counts original, counts compensated)."""
+    lo = float(min(np.min(orig), np.min(comp)))
+    hi = float(max(np.max(orig), np.max(comp)))
+    if not hi > lo:
+        hi = lo + 1e-12
+    edges = np.linspace(lo, hi, bins + 1)
+    c0, _ = np.histogram(orig, bins=edges)
+    c1, _ = np.histogram(comp, bins=edges)
+    xs = np.repeat(edges, 2)[1:-1]  # each bin's left and right edge
+    return [float(x) for x in xs], [float(c) for c in np.repeat(c0, 2)], [float(c) for c in np.repeat(c1, 2)]
+
+
+def _pct(value) -> str:
+    return "n/a" if value is None else f"{value:.2f} %"
+
+
+class PlatformScreen(StationScreen):
+    MODE = "platform"
+    PAGE_HELP = ("pose errors of the platform from the leg errors, before and after compensation "
+                 "(the paper's Table 2; station platform)")
+    AUTO_FOCUS = "#plat-legs"  # arrows choose the plotted component; letter keys act at once
+    BINDINGS = [
+        Binding("p", "run", "Run"),
+        Binding("w", "write_report", "Write report"),
+        Binding("c", "next_component", "Component"),
+    ]
+
+    def compose(self) -> ComposeResult:
+        yield from self.compose_header()
+        with Vertical(id="plat-body"):
+            with Horizontal(classes="controls", id="plat-inputs"):
+                yield Label("Compensation ")
+                yield Input(placeholder="TABLE.csv or MODEL.json (empty: model on F3)", id="plat-comp",
+                            compact=True)
+                yield Label(" Recording ")
+                yield Input(placeholder="FILE.h5 (empty: session on F3)", id="plat-recording", compact=True)
+            with Horizontal(classes="controls", id="plat-controls"):
+                yield Label("Poses ")
+                yield Input(str(DEFAULT_POSES), id="plat-poses", type="integer", compact=True)
+                yield Label(" Seed ")
+                yield Input(str(DEFAULT_SEED), id="plat-seed", type="integer", compact=True)
+                yield Button("Run (p)", id="plat-run", compact=True, variant="success")
+                yield Button("Write report (w)", id="plat-write", compact=True)
+            yield Static("", id="plat-status", classes="status")
+            yield DataTable(id="plat-table", cursor_type="none", zebra_stripes=True)
+            yield DataTable(id="plat-legs", cursor_type="row", zebra_stripes=True)
+            with Horizontal(id="plat-plots"):  # two panels on the same bins, each with its own count axis
+                yield XYPlot("original error", "error", "poses", id="plat-plot-orig")
+                yield XYPlot("compensated error", "error", "poses", id="plat-plot-comp")
+        yield from self.compose_footer()
+
+    def on_mount(self) -> None:
+        self.platform_run: PlatformRun | None = None
+        self.component = COMPONENTS[0]
+        self.running = False
+        self.query_one("#plat-table", DataTable).add_columns(
+            "Measure", "x (µm)", "y (µm)", "z (µm)", "rx (arcsec)", "ry (arcsec)", "rz (arcsec)")
+        self._show()
+
+    def on_screen_resume(self) -> None:
+        if self.platform_run is None:
+            self._show_status()
+
+    # -- running ------------------------------------------------------------------------------------
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if event.button.id == "plat-run":
+            event.stop()
+            self.action_run()
+        elif event.button.id == "plat-write":
+            event.stop()
+            self.action_write_report()
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        self.action_run()
+
+    def _number(self, widget_id: str, name: str, default: int, least: int) -> int | None:
+        text = self.query_one(widget_id, Input).value.strip()
+        if not text:
+            return default
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < least:
+            self.notify(f"{name} must be a whole number of at least {least}, got {text!r}.", title="Platform",
+                        severity="error", timeout=10)
+            return None
+        return value
+
+    def _request(self) -> PlatformRequest | None:
+        """The run the fields ask for, or None (after saying what is missing)."""
+        poses = self._number("#plat-poses", "Poses", DEFAULT_POSES, 1)
+        seed = self._number("#plat-seed", "Seed", DEFAULT_SEED, 0)
+        if poses is None or seed is None:
+            return None
+        comp_text = self.query_one("#plat-comp", Input).value.strip()
+        rec_text = self.query_one("#plat-recording", Input).value.strip()
+        recording = Path(rec_text).expanduser() if rec_text else None
+        a = self.app.analysis
+        if not comp_text:
+            if a is None:
+                self.notify("No model on show: open a session of six legs on Results (F3) and fit it, or type a "
+                            "compensation table (TABLE.csv) and its recording here.", title="Platform",
+                            severity="warning", timeout=10)
+                return None
+            return PlatformRequest(poses, seed, analysis=a, recording=recording)
+        comp = Path(comp_text).expanduser()
+        suffix = comp.suffix.lower()
+        if suffix not in (".csv", ".json"):
+            self.notify(f"{comp.name}: give a compensation table (TABLE.csv, from Compensation F4 or station table) "
+                        "or a model (MODEL.json, from Results F3 or station fit).", title="Platform",
+                        severity="error", timeout=10)
+            return None
+        if suffix == ".csv" and recording is None:
+            recording = a.path if a is not None else self.app.last_session
+            if recording is None:
+                self.notify(f"{comp.name} does not name its recording: type the session (FILE.h5) the table was "
+                            "made from under Recording.", title="Platform", severity="warning", timeout=10)
+                return None
+        return PlatformRequest(poses, seed, compensation=comp, recording=recording)
+
+    def action_run(self) -> None:
+        if self.running:
+            self.notify("The platform experiment is running already.", severity="warning", timeout=4)
+            return
+        request = self._request()
+        if request is None:
+            return
+        self.running = True
+        self.query_one("#plat-status", Static).update(
+            f"running {request.poses} poses (seed {request.seed}), both measurements…")
+        self._run_worker(request)
+
+    @work(thread=True, exclusive=True, group="platform", exit_on_error=False)
+    def _run_worker(self, request: PlatformRequest) -> None:
+        try:
+            run = run_platform(request)
+        except Exception as exc:
+            self.post_message(PlatformFailed(describe(exc, "cannot run the platform experiment")))
+            return
+        self.post_message(PlatformReady(run))
+
+    def on_platform_ready(self, message: PlatformReady) -> None:
+        self.running = False
+        self.platform_run = message.run
+        self._show()
+
+    def on_platform_failed(self, message: PlatformFailed) -> None:
+        self.running = False
+        self._show_status()
+        self.notify(message.error, title=message.title, severity="error", timeout=15)
+
+    # -- writing --------------------------------------------------------------------------------------
+    def action_write_report(self) -> None:
+        if self.platform_run is None:
+            self.notify("Run the experiment first (p).", title="Platform", severity="warning")
+            return
+        self._write_worker(self.platform_run, report_folder(self.platform_run.recording))
+
+    @work(thread=True, exclusive=True, group="platform-write", exit_on_error=False)
+    def _write_worker(self, run: PlatformRun, out: Path) -> None:
+        try:
+            paths = write_platform_report(run, out)
+        except Exception as exc:
+            self.post_message(PlatformFailed(describe(exc, f"cannot write the platform report to {out}"),
+                                             title="Platform report"))
+            return
+        self.post_message(PlatformWritten(run, paths))
+
+    def on_platform_written(self, message: PlatformWritten) -> None:
+        message.run.written = message.paths
+        folder = message.paths[0].parent
+        where = f"platform/{folder.name}/" if self.app.hide_volatile else str(folder)
+        self.notify(f"Platform report written to {where}: " + ", ".join(p.name for p in message.paths),
+                    title="Platform report", timeout=8)
+        if message.run is self.platform_run:
+            self._show_status()
+
+    # -- component of the plot ------------------------------------------------------------------------
+    def action_next_component(self) -> None:
+        self.component = COMPONENTS[(COMPONENTS.index(self.component) + 1) % len(COMPONENTS)]
+        table = self.query_one("#plat-legs", DataTable)
+        if table.row_count == len(COMPONENTS):
+            table.move_cursor(row=COMPONENTS.index(self.component))
+        self._show_plot()
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        key = event.row_key.value if event.row_key is not None else None
+        if key in COMPONENTS and key != self.component:
+            self.component = key
+            self._show_plot()
+
+    # -- drawing ----------------------------------------------------------------------------------------
+    def _show_status(self) -> None:
+        status = self.query_one("#plat-status", Static)
+        run = self.platform_run
+        if run is None:
+            a = self.app.analysis
+            if a is None:
+                status.update("no analysis on show: fit a six-leg session on Results (F3), or type a table and its "
+                              "recording; then p")
+            else:
+                status.update(f"ready: the {a.method} model fitted on [b]{a.path.name}[/b] "
+                              f"(legs {list(a.session.legs)}); press p to run")
+            return
+        from procedures.platform.experiment import MEASUREMENT_LABELS
+
+        s = run.summary
+        other = s.get("other_measurement")
+        lines = [f"[b]{run.label}[/b]: {s['poses_used']} of {s['poses']} poses used, seed {s['seed']}"
+                 + (f"   [dim]report in platform/{run.recording.stem}/[/dim]" if run.written else "")]
+        counts = []
+        for measured, acc in [(s.get("measured"), s["acceptance"])] + ([(other["measured"], other["acceptance"])] if other else []):
+            n_ok = sum(1 for v in acc.values() if v["at_least_leg_reduction"])
+            counts.append(f"{SHORT_MEASUREMENT.get(measured or '', 'pose')} {n_ok}/{len(acc)}")
+        lines.append(f"Table 2: {MEASUREMENT_LABELS.get(s.get('measured') or '', 'the source')}. "
+                     f"At least as much as the legs: {', '.join(counts)}")
+        status.update("\n".join(lines))
+
+    def _show(self) -> None:
+        from procedures.platform.report import dominant_text, pose_table_rows
+
+        table = self.query_one("#plat-table", DataTable)
+        legs = self.query_one("#plat-legs", DataTable)
+        table.clear()
+        legs.clear(columns=True)
+        self._show_status()
+        run = self.platform_run
+        if run is None:
+            legs.add_columns("Component", "Pose range reduction", "Legs (pooled)", "At least as much", "Dominant leg")
+            self._show_plot()
+            return
+        s = run.summary
+        for label, cells in pose_table_rows(s):
+            table.add_row(label, *cells)
+        columns = [(s.get("measured"), s["acceptance"], s["legs"]["all"]["range_reduction_pct"])]
+        other = s.get("other_measurement")
+        if other:
+            columns.append((other["measured"], other["acceptance"], other["leg_range_reduction_pct"]))
+        heads = ["Component"]
+        for measured, _, _ in columns:
+            name = SHORT_MEASUREMENT.get(measured or "", "pose")
+            heads += [f"{name}: pose", "legs", "≥ legs"]
+        heads += ["dominant leg before", "after"]
+        legs.add_columns(*heads)
+        dom = s["dominant_leg"]
+        for k, comp in enumerate(COMPONENTS):
+            cells = [COMPONENT_LABELS[comp]]
+            for _, acc, leg_red in columns:
+                a = acc[comp]
+                cells += [_pct(a["range_reduction_pct"]), _pct(leg_red), "yes" if a["at_least_leg_reduction"] else "no"]
+            cells += [dominant_text(dom["original"][k]), dominant_text(dom["compensated"][k])]
+            legs.add_row(*cells, key=comp)
+        legs.move_cursor(row=COMPONENTS.index(self.component))
+        self._show_plot()
+
+    def _show_plot(self) -> None:
+        plots = self.query_one("#plat-plot-orig", XYPlot), self.query_one("#plat-plot-comp", XYPlot)
+        run = self.platform_run
+        if run is None:
+            for plot, what in zip(plots, ("original", "compensated")):
+                plot.show([], title=f"{what} pose error (no run yet)")
+            return
+        from procedures.platform.sensitivity import ARCSEC_PER_RAD
+
+        k = COMPONENTS.index(self.component)
+        ok = run.result.valid
+        scale = 1.0 if k < 3 else ARCSEC_PER_RAD
+        unit = "µm" if k < 3 else "arcsec"
+        name = COMPONENT_LABELS[self.component]
+        xs, c0, c1 = histogram_steps(run.result.pose_error[ok, k] * scale, run.result.pose_error_compensated[ok, k] * scale)
+        measured = SHORT_MEASUREMENT.get(run.summary.get("measured") or "", "")
+        for plot, what, counts in zip(plots, ("original", "compensated"), (c0, c1)):
+            plot.xlabel_text = f"{name} error ({unit})"
+            plot.show([(what, xs, counts, "line")],
+                      title=f"{name}: {what} error, {measured} measurement" + ("" if what == "original" else " (c: next)"))
