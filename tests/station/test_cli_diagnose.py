@@ -12,19 +12,13 @@ import pytest
 from drivers.sim.plant import default_leg_configs
 from station.synth import synth_session
 from procedures.fit import fit, save_model
-from procedures.recording.writer import SessionWriter
 from station.cli import main
+from tests.tooling import write_points_session as write_session
 
 TARGETS = np.linspace(-90.0, 90.0, 46)
 POSITION_SOURCES = ("lead", "longwave", "wobble", "noise", "run_offset")
 
 
-def write_session(path, points):
-    with SessionWriter.create(path, session_id=path.stem, operator="test", rig="sim", plan={"kind": "test"},
-                              station_config={}, devices={}, software_version="test") as w:
-        w.append_points(points)
-        w.finish("completed")
-    return path
 
 
 def leg1(*extra):

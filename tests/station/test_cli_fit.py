@@ -11,17 +11,11 @@ from drivers.sim.plant import PlantConfig
 from station.synth import synth_session
 from procedures.plans import irregular_targets
 from procedures.recording.reader import file_sha256
-from procedures.recording.writer import SessionWriter
 from procedures.table import read_table_csv
 from station.cli import main
+from tests.tooling import write_points_session as write_session
 
 
-def write_session(path, points):
-    w = SessionWriter.create(path, session_id="t", operator="test", rig="sim", plan={}, station_config={},
-                             devices={}, software_version="test")
-    w.append_points(points)
-    w.finish("completed")
-    return path
 
 
 CFG = PlantConfig().only("backlash", "lead", "longwave", "wobble", "noise", "run_offset")

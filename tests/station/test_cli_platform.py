@@ -5,26 +5,18 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
-from station.synth import synth_session
 from procedures.recording.reader import file_sha256
-from procedures.recording.writer import SessionWriter
 from station.cli import main
+from tests.tooling import default_legs_points, write_points_session
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 def write_session(path, legs=range(1, 7), cycles=3, step_mm=3.0, seed=0):
-    cfgs = {leg: c for leg, c in zip(range(1, 7), default_leg_configs(seed=seed)) if leg in legs}
-    points = synth_session(cfgs, np.arange(-90.0, 90.01, step_mm), cycles=cycles, seed=seed)
-    w = SessionWriter.create(path, session_id="platform-test", operator="test", rig="sim", plan={},
-                             station_config={}, devices={}, software_version="test")
-    w.append_points(points)
-    w.finish("completed")
-    w.close()
+    points = default_legs_points(legs, cycles, step_mm, seed)
+    write_points_session(path, points)
     return points
 
 

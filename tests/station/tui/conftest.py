@@ -80,20 +80,9 @@ def notes():
 def write_six_leg_session(path, legs=(1, 2, 3, 4, 5, 6), cycles: int = 3, step_mm: float = 3.0, seed: int = 0):
     """A small synthetic session straight from the simulated plant (station.synth, no protocol
     layer): `legs` of the default leg configs, uniform targets -90..90 mm, `cycles` cycles."""
-    import numpy as np
+    from tests.tooling import default_legs_points, write_points_session
 
-    from drivers.sim.plant import default_leg_configs
-    from procedures.recording.writer import SessionWriter
-    from station.synth import synth_session
-
-    cfgs = {leg: c for leg, c in zip(range(1, 7), default_leg_configs(seed=seed)) if leg in legs}
-    points = synth_session(cfgs, np.arange(-90.0, 90.01, step_mm), cycles=cycles, seed=seed)
-    w = SessionWriter.create(path, session_id="platform-ui-test", operator="test", rig="sim", plan={},
-                             station_config={}, devices={}, software_version="test")
-    w.append_points(points)
-    w.finish("completed")
-    w.close()
-    return path
+    return write_points_session(path, default_legs_points(legs, cycles, step_mm, seed))
 
 
 @pytest.fixture
