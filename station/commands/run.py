@@ -11,7 +11,8 @@ import argparse
 import time
 from pathlib import Path
 
-from procedures.plans import iso230_plan, parse_legs
+from procedures.plan_spec import PlanSpec, plan_from_spec
+from procedures.plans import parse_legs
 from station.config import load_config
 from station.jobs import run_sweep
 from procedures.control import RunControl
@@ -32,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     cfg = load_config(None)
-    plan = iso230_plan(parse_legs(args.legs), cycles=args.cycles)
+    plan = plan_from_spec(PlanSpec(legs=parse_legs(args.legs), kind="iso230", cycles=args.cycles))
     out = Path(args.out or f"{cfg.recordings_dir}/run-{time.strftime('%Y%m%d-%H%M%S')}.h5")
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 
 from procedures.errors import InputError
-from procedures.plans import iso230_plan, paper_plan, parse_legs, targets_from_file, SweepPlan
+from procedures.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
+from procedures.plans import parse_legs, SweepPlan
 from station.config import load_config
 from station.jobs import plan_of_recording, run_sweep
 from procedures.control import RunControl
@@ -28,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     where.add_argument("--config", help="station TOML naming the real drives and interferometer")
     p.add_argument("--out", help="session file to write (FILE.h5)")
     p.add_argument("--resume", metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
-    p.add_argument("--plan", choices=["iso230", "paper"], default="iso230", help="sweep plan (default iso230)")
+    p.add_argument("--plan", choices=PLAN_KINDS, default="iso230", help="sweep plan (default iso230)")
     p.add_argument("--legs", default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
     p.add_argument("--cycles", type=int, help="bidirectional cycles (default: 5 iso230, 6 paper)")
     spacing = p.add_mutually_exclusive_group()
@@ -45,17 +46,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, help="simulated rig only: plant seed")
 
 
+def plan_spec(args) -> PlanSpec:
+    """The plan `station sweep` is asked for (not for --resume, which reuses the file's plan)."""
+    return PlanSpec(
+        legs=parse_legs(args.legs), kind=args.plan, cycles=args.cycles, n_targets=args.n_targets, step_mm=args.step,
+        targets_file=Path(args.targets) if args.targets else None, min_mm=args.min_mm, max_mm=args.max_mm,
+        overrun_mm=args.overrun, dwell_s=args.dwell, averaging_s=args.averaging,
+    )
+
+
 def build_plan(args) -> SweepPlan:
-    legs = parse_legs(args.legs)
-    if args.plan == "paper":
-        if args.targets or args.step:
-            raise InputError("--plan paper has fixed targets (361 at 0.5 mm); drop --step/--targets or use --plan iso230")
-        return paper_plan(legs, cycles=args.cycles or 6, overrun_mm=args.overrun, dwell_s=args.dwell, averaging_s=args.averaging)
-    if args.targets:
-        targets = targets_from_file(args.targets)
-        return SweepPlan("custom", targets, args.cycles or 5, legs, args.overrun, args.dwell, args.averaging)
-    return iso230_plan(legs, args.min_mm, args.max_mm, n_targets=args.n_targets, step_mm=args.step,
-                       cycles=args.cycles or 5, overrun_mm=args.overrun, dwell_s=args.dwell, averaging_s=args.averaging)
+    return plan_from_spec(plan_spec(args))
 
 
 def run(args) -> int:

@@ -4,13 +4,13 @@ resume, abort. The sweep itself belongs to the app, so leaving this screen does 
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
 from textual.widgets import Button, Input, Label, ProgressBar, Select, Static
 
+from procedures.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
+from procedures.plans import parse_legs
 from station.progress import fmt_duration
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
@@ -77,7 +77,8 @@ class SweepScreen(StationScreen):
         self._redraw()
 
     # -- form --------------------------------------------------------------------------------------
-    def _form_args(self) -> SimpleNamespace:
+    def plan_spec(self) -> PlanSpec:
+        """The plan the form asks for (ValueError/PlanError naming the field that is wrong)."""
         def val(wid: str) -> str:
             return self.query_one(f"#{wid}", Input).value.strip()
 
@@ -90,21 +91,18 @@ class SweepScreen(StationScreen):
             except ValueError:
                 raise ValueError(f"{wid.replace('-', ' ')}: {text!r} is not a {'whole ' if kind is int else ''}number") from None
 
-        return SimpleNamespace(
-            legs=val("legs") or "1", plan=self.query_one("#plan", Select).value,
-            cycles=num("cycles", int), targets=None, step=num("step"), n_targets=num("n-targets", int),
-            min_mm=num("min-mm", float, -90.0), max_mm=num("max-mm", float, 90.0), overrun=2.0,
-            dwell=num("dwell", float, 1.0), averaging=0.1,
+        kind = self.query_one("#plan", Select).value
+        cycles, step_mm, n_targets = num("cycles", int), num("step"), num("n-targets", int)
+        min_mm, max_mm, dwell_s = num("min-mm", float, -90.0), num("max-mm", float, 90.0), num("dwell", float, 1.0)
+        return PlanSpec(
+            legs=parse_legs(val("legs") or "1"), kind=kind, cycles=cycles, n_targets=n_targets,
+            step_mm=None if kind == "paper" else step_mm,  # the paper plan has fixed targets; the ISO fields do not apply
+            min_mm=min_mm, max_mm=max_mm, dwell_s=dwell_s,
         )
 
     def build_plan(self):
         """The plan from the form, built exactly as `station sweep` builds it."""
-        from station.commands.sweep import build_plan
-
-        args = self._form_args()
-        if args.plan == "paper":
-            args.step = None  # the paper plan has fixed targets; the ISO fields do not apply
-        return build_plan(args)
+        return plan_from_spec(self.plan_spec())
 
     def _update_summary(self) -> None:
         summary = self.query_one("#plan-summary", Static)
@@ -128,7 +126,7 @@ class SweepScreen(StationScreen):
     def on_select_changed(self, event: Select.Changed) -> None:
         # each plan has its own standard number of cycles (ISO 230-2: 5, the paper: 6 sets)
         cycles = self.query_one("#cycles", Input)
-        default = {"iso230": "5", "paper": "6"}
+        default = {kind: str(n) for kind, n in DEFAULT_CYCLES.items()}
         if cycles.value.strip() in ("", *default.values()):
             cycles.value = default.get(str(event.value), cycles.value)
         self._update_summary()
