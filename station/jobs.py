@@ -1,14 +1,19 @@
-"""Jobs both front ends start: a sweep (new or resumed) through the one runner."""
+"""Jobs both front ends start: a sweep (new or resumed) through the one runner, and the replay of
+a recorded session through the replay devices (`station replay`, the terminal UI's F5 page)."""
 
 from __future__ import annotations
 
+import math
 import uuid
 from pathlib import Path
 from typing import Iterable
 
+from procedures import events as ev
 from procedures.control import RunControl
+from procedures.errors import InputError
 from procedures.plans import SweepPlan
-from procedures.recording.reader import read_session
+from procedures.recording.reader import Session, read_session
+from procedures.recording.schema import FLAG_REPLAYED
 from procedures.recording.sink import RecorderSink
 from procedures.runner import RunResult, Sink, run
 from procedures.sweep import RetryPolicy, sweep
@@ -48,3 +53,88 @@ def run_sweep(
 def plan_of_recording(path: str | Path) -> SweepPlan:
     """The plan stored in a session file (for resume and replay)."""
     return SweepPlan.from_dict(read_session(path).plan)
+
+
+# -- replay of a recorded session ------------------------------------------------------------------
+
+_KIND_LIMIT = {"beam_break": "beam_retries", "drive_fault": "drive_retries"}  # other kinds: comm_retries
+
+
+def parse_speed(text: str) -> float | None:
+    """'max' -> None (as fast as possible); '1' -> real time; '10' -> ten times faster.
+    InputError saying what to type otherwise."""
+    t = str(text).strip().lower()
+    if t in ("max", "inf", "fastest"):
+        return None
+    try:
+        value = float(t)
+    except ValueError:
+        raise InputError(f"{text!r}: give a speed factor (1 = real time, 10 = ten times faster) or 'max'") from None
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"{text!r}: the speed factor must be > 0 (or 'max')")
+    return value
+
+
+def retry_policy_of(session: Session, base: RetryPolicy = RetryPolicy()) -> RetryPolicy:
+    """The retry limits the recorded run must have had: a fault that gave up at attempt n means
+    a limit of n - 1 for its kind; a fault that did not give up at attempt n means at least n.
+    The environment is read at every point, so each replayed point gets the environment recorded
+    with it, whatever the recorded run's reading interval was (`env_interval_s` is -inf rather than
+    0 because the recorded clock restarts in a resumed session, and the sweep compares `now -
+    last reading` with it)."""
+    limits = {"beam_retries": base.beam_retries, "drive_retries": base.drive_retries, "comm_retries": base.comm_retries}
+    exact: dict[str, int] = {}
+    for row in session.faults:
+        kind = row["kind"].decode("utf-8", "replace") if isinstance(row["kind"], bytes) else str(row["kind"])
+        name = _KIND_LIMIT.get(kind, "comm_retries")
+        attempt = int(row["attempt"])
+        if row["gave_up"]:
+            exact[name] = attempt - 1
+        else:
+            limits[name] = max(limits[name], attempt)
+    limits.update(exact)
+    return RetryPolicy(beam_retries=limits["beam_retries"], drive_retries=limits["drive_retries"],
+                       comm_retries=limits["comm_retries"], beam_wait_s=base.beam_wait_s, env_interval_s=-math.inf)
+
+
+class ReplayRecorderSink(RecorderSink):
+    """The recorder sink, with FLAG_REPLAYED set on every point it writes."""
+
+    def handle(self, event: ev.Event) -> None:
+        if isinstance(event, ev.PointMeasured):
+            record = dict(event.record)
+            record["flags"] = int(record.get("flags", 0)) | FLAG_REPLAYED
+            event = ev.PointMeasured(record, event.done, event.total)
+        super().handle(event)
+
+
+def replay_sweep(
+    rig: Rig,
+    session: Session,
+    out: str | Path,
+    cfg: StationConfig | None = None,
+    sinks: Iterable[Sink] = (),
+    control: RunControl | None = None,
+) -> RunResult:
+    """Run `session`'s plan on the replay `rig` (station.wiring.open_replay_rig) through the
+    sweep procedure and the runner, recording to `out` (rig kind "replay").
+
+    Where the recording was cut short (aborted, killed), the run is aborted where the recording
+    ends; a recorded give-up ends it "failed" at the same point. If a device met a request the
+    recording does not hold, `rig.sim.mismatch` names the first one (the run then fails).
+    """
+    if rig.kind != "replay":
+        raise InputError(f"replay_sweep needs a replay rig (station.wiring.open_replay_rig), not a {rig.kind} rig")
+    cfg = cfg or StationConfig()
+    control = control or RunControl()
+    plan = SweepPlan.from_dict(session.plan)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rig.sim.on_end = lambda reason: control.abort(reason)
+    control.on_abort(rig.clock.cancel_waits)
+    recorder = ReplayRecorderSink(out, operator=cfg.operator, rig="replay", station_config=cfg.to_dict(),
+                                  software_version=__version__)
+    # t0_s=0: recorded times are seconds since the session start, so `now - 0` is bit-exact
+    procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, retry=retry_policy_of(session),
+                      session_id=uuid.uuid4().hex[:12], t0_s=0.0)
+    return run(procedure, [recorder, *sinks], control)

@@ -316,8 +316,8 @@ class StationApp(App):
             self.post_message(SweepEnded(outcome, points, error))
 
     def start_replay(self, source: Path, speed: float | None) -> bool:
-        """Replay `source` through the replay devices and the sweep procedure (station.commands.
-        replay.replay_sweep, the CLI's job), recording a new session; shown on the Sweep screen.
+        """Replay `source` through the replay devices and the sweep procedure (station.jobs.
+        replay_sweep, the job `station replay` runs), recording a new session; shown on the Sweep screen.
         `speed`: None = as fast as possible, 1 = real time, N = N times faster."""
         if self.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
@@ -335,7 +335,8 @@ class StationApp(App):
         outcome, points, error, note = "error", 0, "", ""
         try:
             from procedures.recording.reader import read_session
-            from station.commands.replay import compare_sessions, replay_sweep
+            from procedures.replay_compare import compare_sessions
+            from station.jobs import replay_sweep
             from station.wiring import open_replay_rig
 
             session = read_session(source)

@@ -141,11 +141,11 @@ class ReplayScreen(StationScreen):
             self.notify(capabilities.missing_text("replay", "Replay through the drivers"),
                         title="Replay", severity="warning", timeout=12)
             return
-        from station.commands.replay import parse_speed
+        from station.jobs import parse_speed
 
         try:
             speed = parse_speed(self.query_one("#replay-speed", Input).value)
-        except Exception as exc:  # argparse.ArgumentTypeError: the message says what to type
+        except Exception as exc:  # InputError: the message says what to type
             self.notify(f"Speed {exc}", title="Replay", severity="error", timeout=10)
             return
         if self.app.start_replay(self.session_path, speed):

@@ -1,0 +1,31 @@
+"""The replay job lives with the other jobs both front ends start (station.jobs), the comparison
+with the recording in procedures.replay_compare; `station replay` uses the same objects."""
+
+import argparse
+
+import pytest
+
+from procedures.errors import InputError
+from procedures import replay_compare
+from station import jobs
+from station.commands import replay as replay_command
+
+
+def test_the_command_uses_the_shared_job_and_comparison():
+    assert replay_command.replay_sweep is jobs.replay_sweep
+    assert replay_command.retry_policy_of is jobs.retry_policy_of
+    assert replay_command.compare_sessions is replay_compare.compare_sessions
+    assert replay_command.Comparison is replay_compare.Comparison
+
+
+def test_one_speed_parser_for_both_front_ends_with_the_same_message():
+    assert jobs.parse_speed("max") is None and jobs.parse_speed(" MAX ") is None and jobs.parse_speed("fastest") is None
+    assert jobs.parse_speed("1") == 1.0 and jobs.parse_speed("2.5") == 2.5
+    for bad, message in [("fast", "'fast': give a speed factor (1 = real time, 10 = ten times faster) or 'max'"),
+                         ("0", "'0': the speed factor must be > 0 (or 'max')"),
+                         ("nan", "'nan': the speed factor must be > 0 (or 'max')")]:
+        with pytest.raises(InputError) as ui:  # what the Replay screen shows
+            jobs.parse_speed(bad)
+        with pytest.raises(argparse.ArgumentTypeError) as cli:  # what argparse prints for --speed
+            replay_command.parse_speed(bad)
+        assert str(ui.value) == str(cli.value) == message
