@@ -107,7 +107,7 @@ class DiagnosisScreen(StationScreen):
             session = read_session(path)
             twin = None
             if twin_kind == "sim":
-                from station.commands.diagnose import load_twin
+                from station.twins import load_twin
 
                 twin = load_twin("sim:default")
             elif twin_kind == "results" and model is not None:
