@@ -56,3 +56,11 @@ class TableError(DriverError):
     """A compensation table was refused, failed read-back, or failed its checksum."""
 
     hint = "The previously active table is still active."
+
+
+class TableRefused(TableError, ValueError):
+    """A table that does not fit what the device holds (`TableSpec.check`), refused before
+    anything was written. The one exception for a refused table, wherever it is checked: making
+    it, reading a CSV, pushing it, encoding it for a drive."""
+
+    hint = "Nothing was written."

@@ -14,6 +14,7 @@ Conventions (used everywhere in the project):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -25,22 +26,25 @@ from drivers.errors import (  # noqa: F401  (re-exported for procedures)
     FramingError,
     SoftLimitError,
     TableError,
+    TableRefused,
 )
+from drivers.states import DriveState, FaultKind  # noqa: F401  (re-exported for procedures)
 
 
 @dataclass(frozen=True)
 class DriveStatus:
     """A snapshot of one drive (one leg).
 
-    `state` is the CiA 402 state name ("switch_on_disabled", "ready_to_switch_on",
-    "switched_on", "operation_enabled", "quick_stop_active", "fault", "not_ready").
+    `state` is the CiA 402 state (a `DriveState`, equal to its name: "switch_on_disabled",
+    "ready_to_switch_on", "switched_on", "operation_enabled", "quick_stop_active", "fault",
+    "not_ready").
     `position_mm` is the drive-reported position actual in leg coordinates (with the active
     compensation table applied, as the drive reports it). `following_error_um` is the drive's
     demand minus actual, micrometres. `load_n` is the axial load from the drive's load cell
     input, newtons, compression positive.
     """
 
-    state: str
+    state: DriveState
     fault: bool
     fault_code: int
     moving: bool
@@ -53,7 +57,7 @@ class DriveStatus:
 
     @property
     def enabled(self) -> bool:
-        return self.state == "operation_enabled"
+        return self.state == DriveState.OPERATION_ENABLED
 
 
 @dataclass(frozen=True)
@@ -81,6 +85,76 @@ class TableBank:
 
 
 @dataclass(frozen=True)
+class TableSpec:
+    """What compensation table a device holds: the one description of its limits.
+
+    `max_points` per direction; `max_correction_um` the largest |entry|; `entry_resolution_um`
+    um per stored count (entries are rounded to it; 0 = stored as given); `min_step_mm` the
+    finest spacing; `banks` how many tables it holds (2 = write the inactive bank, then switch,
+    so a failed write leaves the active table untouched; 1 = a file replaced whole).
+    A drive without any table has no TableSpec (`ServoAxis.table_spec()` returns None).
+    """
+
+    max_points: int = 512
+    max_correction_um: float = 300.0
+    entry_resolution_um: float = 0.01
+    min_step_mm: float = 0.001
+    banks: int = 2
+    holder: str = "the drive"  # who holds it, for messages: "the drive", "LinuxCNC", ...
+
+    def check(self, table: "TableBank", where: str = "table", limits: "DriveLimits | None" = None,
+              point_name=None) -> None:
+        """Refuse (TableRefused naming `where`, the point and the field) a table this device must
+        not get: unequal directions, fewer than 2 or more than `max_points` points, a step that is
+        not a finite number >= `min_step_mm`, positions beyond the soft `limits` (when given), or
+        an entry that is not finite or beyond +/-`max_correction_um`.
+
+        `point_name(i)` names point i (0-based) in messages (default "point i+1 (x mm)"; a CSV
+        reader passes its row numbers)."""
+        n = len(table.error_fwd_um)
+        name = point_name or (lambda i: f"point {i + 1} ({table.start_mm + i * table.spacing_mm:+.4f} mm)")
+        if len(table.error_rev_um) != n:
+            raise TableRefused(f"{where}: the table has {n} forward but {len(table.error_rev_um)} reverse entries; "
+                               "both directions need the same points.")
+        if n < 2:
+            raise TableRefused(f"{where}: the table has {n} point(s); a table needs at least two.")
+        if n > self.max_points:
+            raise TableRefused(f"{where}: the table has {n} points ({name(self.max_points)} is one too many); "
+                               f"{self.holder} holds at most {self.max_points}: make it with a coarser step "
+                               "(`station table --step`).")
+        if not (math.isfinite(table.start_mm) and math.isfinite(table.spacing_mm)) \
+                or not table.spacing_mm >= self.min_step_mm - 1e-12:
+            raise TableRefused(f"{where}, {name(1)}, field position_mm: the step {table.spacing_mm:g} mm is not a number >= the minimum "
+                               f"step of {self.holder}, {self.min_step_mm:g} mm (positions must increase strictly).")
+        end = table.start_mm + (n - 1) * table.spacing_mm
+        if limits is not None and (table.start_mm < limits.min_mm - POSITION_TOL_MM or end > limits.max_mm + POSITION_TOL_MM):
+            raise TableRefused(f"{where}: the table covers {table.start_mm:+.3f} .. {end:+.3f} mm, beyond the soft "
+                               f"limits {limits.min_mm:+.3f} .. {limits.max_mm:+.3f} mm; make it with a step that ends "
+                               "within them (`station table --step`).")
+        for field_name, values in (("error_fwd_um", table.error_fwd_um), ("error_rev_um", table.error_rev_um)):
+            for i, v in enumerate(values):
+                if not math.isfinite(v) or abs(v) > self.max_correction_um:
+                    raise TableRefused(f"{where}, {name(i)}, field {field_name}: {v:g} um is beyond the "
+                                       f"correction limit of {self.holder}, +/-{self.max_correction_um:g} um.")
+
+    def quantize(self, table: "TableBank") -> "TableBank":
+        """`table` as this device will hold it: entries rounded to `entry_resolution_um`,
+        positions to 1e-6 mm, checksum cleared (the device computes it)."""
+        q = self.entry_resolution_um
+
+        def r(vals: tuple[float, ...]) -> tuple[float, ...]:
+            if not q > 0:
+                return tuple(vals)
+            return tuple(round(v / q) * q if math.isfinite(v) else v for v in vals)
+
+        return TableBank(round(table.start_mm, 6), round(table.spacing_mm, 6), r(table.error_fwd_um), r(table.error_rev_um))
+
+
+POSITION_TOL_MM = 1e-6
+"""Table positions are stored to 1e-6 mm: an end this close beyond a soft limit is within it."""
+
+
+@dataclass(frozen=True)
 class DriveLimits:
     """Soft travel limits and motion limits from the drive (read from its registers)."""
 
@@ -98,6 +172,8 @@ class ServoAxis(Protocol):
     (before any motion) for a target outside the soft limits, `DriveFault` when the drive
     faults, `CommTimeout` when the drive does not answer or does not arrive in time.
     `stop()` is a quick stop; it must be safe to call at any time, also after a fault.
+    `table_spec()` says what compensation table the drive holds (None: none; then the
+    compensation lives elsewhere, see docs/compensation.md), and the table methods use it.
     """
 
     leg: int
@@ -111,6 +187,7 @@ class ServoAxis(Protocol):
     def move_to(self, target_mm: float, timeout_s: float | None = None) -> DriveStatus: ...
     def stop(self) -> None: ...
     # compensation table
+    def table_spec(self) -> TableSpec | None: ...
     def read_table(self, bank: int) -> TableBank: ...
     def write_table(self, bank: int, table: TableBank) -> None: ...
     def activate_table(self, bank: int) -> None: ...

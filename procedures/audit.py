@@ -32,6 +32,9 @@ Entry fields (JSON keys; absent values are null):
 
 A line that is not a JSON object (e.g. cut short by a crash while being written) is reported by
 `read_entries` as a problem and otherwise skipped; the next append starts on a new line.
+
+Procedures never write here themselves: they yield `AuditRecord` events, and `AuditSink` (a
+critical runner sink) is the only writer, for the command line and the terminal UI alike.
 """
 
 from __future__ import annotations
@@ -46,11 +49,13 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable
 
+from procedures import events as ev
 from procedures.errors import InputError
+from procedures.states import Action, AuditOutcome
 
 AUDIT_VERSION = 1
-ACTIONS = ("push", "verify", "rollback")
-FINAL_PUSH_OUTCOMES = ("ok", "failed", "refused", "cancelled")
+ACTIONS = tuple(Action)
+FINAL_PUSH_OUTCOMES = (AuditOutcome.OK, AuditOutcome.FAILED, AuditOutcome.REFUSED, AuditOutcome.CANCELLED)
 
 
 class AuditError(InputError):
@@ -218,3 +223,43 @@ def read_entries(path: str | os.PathLike) -> tuple[list[AuditEntry], list[AuditP
         except (UnicodeDecodeError, ValueError) as exc:
             problems.append(AuditProblem(number, f"not an audit entry ({exc})"))
     return entries, problems
+
+
+class AuditSink:
+    """The runner sink that writes the `AuditRecord` events of a procedure to `log`: the only
+    writer of the audit log.
+
+    Critical: the runner resumes the procedure only once the entry is on disk, so a push's
+    "started" entry (its backup) is stored before anything is written to the drive, and if it
+    cannot be stored the run stops there (AuditError: nothing was written). A final "ok" that
+    cannot be stored stops the run too, saying the table is active. A refusal, cancellation or
+    failure that cannot be stored does not hide the refusal itself: the problem is kept in
+    `problems` for the front end to show, and the run goes on to report its outcome.
+    """
+
+    critical = True
+
+    def __init__(self, log: AuditLog) -> None:
+        self.log = log
+        self.written: list[AuditEntry] = []
+        self.problems: list[str] = []
+
+    def handle(self, event: ev.Event) -> None:
+        if not isinstance(event, ev.AuditRecord):
+            return
+        entry = event.entry
+        try:
+            self.written.append(self.log.append(entry))
+        except AuditError as exc:
+            text = str(exc.args[0])
+            if entry.outcome == AuditOutcome.STARTED:
+                raise AuditError(f"leg {entry.leg}: {text}; the {entry.action} was not started: nothing was written "
+                                 "to the drive.") from None
+            if entry.outcome == AuditOutcome.OK and entry.action != Action.VERIFY:
+                raise AuditError(f"leg {entry.leg}: the table was written and bank {entry.bank} is active, but the audit "
+                                 f"log could not record it ({text}); its backup is in the 'started' entry "
+                                 f"({entry.op_id}).") from None
+            self.problems.append(text)
+
+    def close(self, outcome: str) -> None:
+        pass

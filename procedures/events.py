@@ -8,6 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from procedures.states import FaultKind, Outcome
+
 
 @dataclass(frozen=True)
 class Event:
@@ -61,7 +63,7 @@ class Fault(Event):
     leg: int
     run: int
     target_mm: float
-    kind: str  # beam_break / drive_fault / timeout / framing
+    kind: FaultKind
     message: str
     attempt: int
     gave_up: bool
@@ -70,7 +72,7 @@ class Fault(Event):
 
 @dataclass(frozen=True)
 class Paused(Event):
-    pass
+    """The run is paused (yielded by `RunControl.checkpoint`, before any further motion)."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +88,7 @@ class Message(Event):
 
 @dataclass(frozen=True)
 class SweepFinished(Event):
-    outcome: str  # completed / aborted / failed
+    outcome: Outcome  # COMPLETED / ABORTED / FAILED
     points: int
     reason: str = ""
 
@@ -104,3 +106,55 @@ class Finding(Event):
     leg: int
     effect: str
     parameters: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class AuditRecord(Event):
+    """An entry for the audit log (a procedures.audit.AuditEntry). Procedures yield these; the
+    audit sink (procedures.audit.AuditSink) is the only writer of the log."""
+
+    entry: Any
+
+
+@dataclass(frozen=True)
+class TablePlanned(Event):
+    """A push or rollback read the drive and checked the table (a procedures.push.PushPlan):
+    what will be written and what it replaces. Nothing is written yet; the procedure asks for
+    confirmation next."""
+
+    plan: Any
+
+
+@dataclass(frozen=True)
+class LegChecked(Event):
+    """A verification found `leg`'s table active and fit to verify: `bank`, `table_sha256`,
+    `description` (points, span, largest correction)."""
+
+    leg: int
+    drive: str
+    bank: int
+    table_sha256: str
+    description: str
+
+
+@dataclass(frozen=True)
+class Verified(Event):
+    """A verification's figures (procedures.verify.LegVerification per leg), after its sweep."""
+
+    results: dict[int, Any]
+    report: str
+    session: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class OperationFinished(Event):
+    """A push, rollback or verification ended. `action`: procedures.states.Action; `outcome`:
+    procedures.states.AuditOutcome (ok / refused / cancelled / failed for a push or rollback;
+    refused / completed / aborted / failed for a verification). `message` says what happened
+    and, after a failed push, which table is active. `result`: a push's PushResult."""
+
+    action: str
+    leg: int | None
+    outcome: str
+    message: str
+    result: Any = None

@@ -30,18 +30,20 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable, Iterator
 
-from drivers.errors import DriverError, TableError
-from drivers.interfaces import DriveLimits, ServoAxis, TableBank
-from procedures.audit import AuditEntry, AuditError, AuditLog, new_id
-from procedures.events import TablePushed
-from procedures.table import LegTable, TableLimits
+from drivers.errors import DriverError, TableError, TableRefused
+from drivers.interfaces import ServoAxis, TableBank, TableSpec
+from procedures import events as ev
+from procedures.audit import AuditEntry, AuditError, AuditLog, AuditSink, new_id
+from procedures.errors import InputError
+from procedures.runner import ListSink, run
+from procedures.states import Action, AuditOutcome
+from procedures.table import LegTable
 
 QUANTUM_UM = 0.01
 """Default entry resolution of a drive table, um per count (drive profile [table] entry_scale_um)."""
 
-POSITION_TOL_MM = 1e-6
 
 
 class PushRefused(DriverError):
@@ -58,13 +60,13 @@ class PushFailed(TableError):
 
 # -- table content -----------------------------------------------------------------------------
 
-def quantize(table: TableBank, quantum_um: float = QUANTUM_UM) -> TableBank:
-    """`table` with entries rounded to the drive's resolution (`quantum_um` um per count) and
-    positions to 1e-6 mm, as the drive will hold it. Checksum cleared (the drive computes it)."""
-    if not quantum_um > 0:
-        raise ValueError(f"quantum_um must be > 0, got {quantum_um}")
-    q = lambda vals: tuple(round(v / quantum_um) * quantum_um if math.isfinite(v) else v for v in vals)  # noqa: E731
-    return TableBank(round(table.start_mm, 6), round(table.spacing_mm, 6), q(table.error_fwd_um), q(table.error_rev_um))
+def quantize(table: TableBank, quantum_um: float | TableSpec = QUANTUM_UM) -> TableBank:
+    """`table` as a drive holding entries in `quantum_um` um steps (or as `TableSpec`) stores it:
+    see `TableSpec.quantize`."""
+    spec = quantum_um if isinstance(quantum_um, TableSpec) else TableSpec(entry_resolution_um=quantum_um)
+    if not spec.entry_resolution_um > 0:
+        raise ValueError(f"quantum_um must be > 0, got {spec.entry_resolution_um}")
+    return spec.quantize(table)
 
 
 def table_sha256(table: TableBank) -> str:
@@ -121,45 +123,16 @@ def describe_table(table: TableBank) -> str:
             f"largest correction {worst:.3f} um")
 
 
-def check_table(table: TableBank, leg: int, limits: DriveLimits | None = None,
-                table_limits: TableLimits | None = None) -> None:
-    """Refuse (PushRefused, naming the leg and the problem) a table the drive should not get:
-    unequal directions, fewer than 2 or more than `table_limits.max_points` points, a step that
-    is not a finite number >= `min_step_mm`, positions outside the drive's soft limits, or a
-    correction beyond +/-`max_correction_um`."""
-    tl = table_limits or TableLimits()
-    n = len(table.error_fwd_um)
-    where = f"leg {leg}"
-    if len(table.error_rev_um) != n:
-        raise PushRefused(f"{where}: the table has {n} forward but {len(table.error_rev_um)} reverse entries.")
-    if n < 2:
-        raise PushRefused(f"{where}: the table has {n} point(s); a table needs at least two.")
-    if n > tl.max_points:
-        raise PushRefused(f"{where}: the table has {n} points, the drive holds at most {tl.max_points}; "
-                          "make it with a coarser step (`station table --step`).")
-    if not (math.isfinite(table.start_mm) and math.isfinite(table.spacing_mm)) or table.spacing_mm < tl.min_step_mm:
-        raise PushRefused(f"{where}: the table step {table.spacing_mm:g} mm is not a number >= the drive's minimum "
-                          f"{tl.min_step_mm:g} mm (positions must increase strictly).")
-    end = table.start_mm + (n - 1) * table.spacing_mm
-    if limits is not None:
-        if table.start_mm < limits.min_mm - POSITION_TOL_MM or end > limits.max_mm + POSITION_TOL_MM:
-            raise PushRefused(f"{where}: the table covers {table.start_mm:+.3f} .. {end:+.3f} mm, beyond the drive's soft "
-                              f"limits {limits.min_mm:+.3f} .. {limits.max_mm:+.3f} mm; make it with a step that ends "
-                              "within them (`station table --step`).")
-    for name, vals in (("error_fwd_um", table.error_fwd_um), ("error_rev_um", table.error_rev_um)):
-        for i, v in enumerate(vals):
-            if not math.isfinite(v) or abs(v) > tl.max_correction_um:
-                raise PushRefused(f"{where}: {name} at {table.start_mm + i * table.spacing_mm:+.4f} mm (point {i + 1}) is "
-                                  f"{v} um, beyond the drive's correction limit of +/-{tl.max_correction_um:g} um.")
-
-
 def _as_bank(table: TableBank | LegTable) -> TableBank:
     return table.to_bank() if isinstance(table, LegTable) else table
 
 
 def _message(exc: BaseException) -> str:
-    """A driver error's sentence without its generic hint (we say what is active ourselves)."""
-    text = str(exc.args[0]) if getattr(exc, "args", None) else str(exc)
+    """A driver error's sentence without its generic hint (we say what is active ourselves); a
+    file error as "FILE: what"."""
+    if isinstance(exc, OSError) and exc.filename:
+        return f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"
+    text = str(exc.args[0]) if isinstance(exc, DriverError) and exc.args else str(exc)
     return text.rstrip(". ")
 
 
@@ -177,7 +150,7 @@ class PushPlan:
     table now (bank `active_bank`), `target_bank` the inactive bank to write.
     """
 
-    action: str  # "push" / "rollback"
+    action: Action
     leg: int
     drive: str
     drive_url: str
@@ -193,7 +166,7 @@ class PushPlan:
 
     def describe(self) -> list[str]:
         """Lines for the confirmation: leg, drive, what is written, what is replaced."""
-        verb = "restore" if self.action == "rollback" else "write"
+        verb = "restore" if self.action == Action.ROLLBACK else "write"
         lines = [
             f"leg {self.leg}: drive {self.drive}" + (f" at {self.drive_url}" if self.drive_url else ""),
             f"  {verb}:    {describe_table(self.table)}",
@@ -206,12 +179,17 @@ class PushPlan:
             lines.append("  note: the drive does not apply its table (table_enable = 0); the table is stored but not applied")
         return lines
 
+    def question(self) -> str:
+        """The confirmation question, naming the leg."""
+        return (f"Push this table to leg {self.leg}?" if self.action == Action.PUSH
+                else f"Restore the previous table on leg {self.leg}?")
+
 
 @dataclass(frozen=True)
 class PushResult:
     """A completed push or rollback: `bank` is now active, `previous_bank` held the backup."""
 
-    action: str
+    action: Action
     leg: int
     drive: str
     bank: int
@@ -222,11 +200,16 @@ class PushResult:
     table_enabled: bool
     op_id: str
 
-    def event(self) -> TablePushed:
-        return TablePushed(self.leg, self.bank, self.table_sha256, self.drive)
+    def event(self) -> ev.TablePushed:
+        return ev.TablePushed(self.leg, self.bank, self.table_sha256, self.drive)
 
 
-# -- push ----------------------------------------------------------------------------------------
+Confirm = Callable[[PushPlan], bool]
+"""Asks the operator to confirm a plan (front ends: a prompt, a dialog). May raise InputError
+when nobody can answer (no terminal): that refuses the operation."""
+
+
+# -- reading the drive ---------------------------------------------------------------------------
 
 def _read_state(axis: ServoAxis, what: str) -> tuple[str, int, TableBank, bool]:
     """(identity, active bank, active table, table enabled); PushRefused if the axis moves or
@@ -249,50 +232,41 @@ def _read_state(axis: ServoAxis, what: str) -> tuple[str, int, TableBank, bool]:
     return identity, active, current, st.table_enabled
 
 
-def prepare_push(axis: ServoAxis, table: TableBank | LegTable, *, table_limits: TableLimits | None = None,
-                 quantum_um: float = QUANTUM_UM, drive_url: str = "", source: dict[str, Any] | None = None) -> PushPlan:
-    """Read the drive and check `table` for it; writes nothing. PushRefused if the axis moves,
-    the drive cannot be read, or the table does not fit the drive (see `check_table`)."""
-    bank_table = quantize(_as_bank(table), quantum_um)
+def drive_table_spec(axis: ServoAxis, what: str = "push") -> TableSpec:
+    """What `axis` holds; PushRefused when it holds no table bank this station can write."""
+    spec = axis.table_spec()
+    if spec is None:
+        raise PushRefused(f"leg {axis.leg}: this drive holds no compensation table, so there is nothing to {what}; "
+                          "compensate in the controller instead (`station table --format linuxcnc`).")
+    if spec.banks < 2:
+        raise PushRefused(f"leg {axis.leg}: the drive holds {spec.banks} table bank(s); a safe {what} needs two "
+                          "(write the inactive one, then switch).")
+    return spec
+
+
+def prepare_push(axis: ServoAxis, table: TableBank | LegTable, *, spec: TableSpec | None = None,
+                 drive_url: str = "", source: dict[str, Any] | None = None) -> PushPlan:
+    """Read the drive and check `table` for it; writes nothing. PushRefused if the axis moves
+    or the drive cannot be read; TableRefused if the table does not fit the drive
+    (`TableSpec.check`: `spec`, default what the drive says it holds, and its soft limits)."""
+    spec = spec or drive_table_spec(axis)
+    bank_table = spec.quantize(_as_bank(table))
     identity, active, current, enabled = _read_state(axis, "push")
     try:
         limits = axis.limits()
     except DriverError as exc:
         raise PushRefused(f"leg {axis.leg}: cannot read the drive's soft limits ({_message(exc)}).") from None
-    check_table(bank_table, axis.leg, limits, table_limits)
-    return PushPlan("push", axis.leg, identity, drive_url, bank_table, table_sha256(bank_table), active, 1 - active,
+    spec.check(bank_table, f"leg {axis.leg}", limits)
+    return PushPlan(Action.PUSH, axis.leg, identity, drive_url, bank_table, table_sha256(bank_table), active, 1 - active,
                     current, table_sha256(current), enabled, source)
 
 
-def push_table(axis: ServoAxis, table: TableBank | LegTable | None = None, *, plan: PushPlan | None = None,
-               audit: AuditLog | None = None, operator: str = "", drive_url: str = "",
-               table_limits: TableLimits | None = None, quantum_um: float = QUANTUM_UM,
-               source: dict[str, Any] | None = None) -> PushResult:
-    """Push `table` (or a `plan` from `prepare_push`) to `axis` the safe way (module docstring).
-
-    Every attempt is appended to `audit` (when given): "started" with the backup before any
-    write, then "ok", "failed" or "refused". Raises PushRefused (nothing written) or PushFailed
-    (the message says which table is active). Returns the PushResult on success.
-    """
-    if plan is None:
-        if table is None:
-            raise ValueError("push_table needs a table or a plan")
-        try:
-            plan = prepare_push(axis, table, table_limits=table_limits, quantum_um=quantum_um,
-                                drive_url=drive_url, source=source)
-        except PushRefused as exc:
-            _log_refusal(audit, "push", axis, drive_url, operator, exc, source)
-            raise
-    return _apply(axis, plan, audit, operator)
-
-
-# -- rollback ------------------------------------------------------------------------------------
-
 def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -> PushPlan:
-    """What `rollback` would restore: the backup of the last successful push of this leg to this
-    drive (by identity) in `audit`. Writes nothing. PushRefused when there is none, when the
-    drive's active table is not the one that push wrote (changed since, or already rolled back),
-    or when the backup is damaged."""
+    """What a rollback would restore: the backup of the last successful push of this leg to this
+    drive (by identity) in `audit` (read only). Writes nothing. PushRefused when there is none,
+    when the drive's active table is not the one that push wrote (changed since, or already
+    rolled back), or when the backup is damaged."""
+    drive_table_spec(axis, "roll back")
     identity, active, current, enabled = _read_state(axis, "rollback")
     leg = axis.leg
     current_sha = table_sha256(current)
@@ -300,7 +274,7 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
     push = None
     for i in range(len(entries) - 1, -1, -1):
         e = entries[i]
-        if e.action == "push" and e.outcome == "ok" and e.leg == leg and e.drive == identity:
+        if e.action == Action.PUSH and e.outcome == AuditOutcome.OK and e.leg == leg and e.drive == identity:
             push, push_at = e, i
             break
     if push is None:
@@ -308,92 +282,114 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
                           "there is nothing to roll back.")
     if push.table_sha256 != current_sha:
         for later in entries[push_at + 1:]:
-            if (later.action == "rollback" and later.outcome == "ok" and later.leg == leg and later.drive == identity
-                    and later.table_sha256 == current_sha):
+            if (later.action == Action.ROLLBACK and later.outcome == AuditOutcome.OK and later.leg == leg
+                    and later.drive == identity and later.table_sha256 == current_sha):
                 raise PushRefused(f"leg {leg}: already rolled back at {later.time_utc}: the active table is the one from "
                                   f"before the push of {push.time_utc}. To use the pushed table again, push it again.")
         raise PushRefused(f"leg {leg}: the drive's active table (sha256 {_short(current_sha)}…) is not the table the last "
                           f"push wrote ({_short(push.table_sha256)}…, {push.time_utc}): it was changed outside this audit "
                           f"log ({audit.path}), so its backup would not undo the right change.")
     restore = table_from_json(push.backup, where=f"{audit.path}, push of {push.time_utc}")
-    return PushPlan("rollback", leg, identity, drive_url, restore, table_sha256(restore), active, 1 - active,
+    return PushPlan(Action.ROLLBACK, leg, identity, drive_url, restore, table_sha256(restore), active, 1 - active,
                     current, current_sha, enabled, push.source,
                     {"rolls_back": push.op_id or push.id, "push_time_utc": push.time_utc})
 
 
-def rollback(axis: ServoAxis, audit: AuditLog, *, plan: PushPlan | None = None, operator: str = "",
-             drive_url: str = "") -> PushResult:
-    """Restore the table that was active before the last successful push of this leg to this
-    drive (from `audit`), the same safe way as a push; appended to `audit` as "rollback"."""
-    if plan is None:
-        try:
-            plan = prepare_rollback(axis, audit, drive_url=drive_url)
-        except PushRefused as exc:
-            _log_refusal(audit, "rollback", axis, drive_url, operator, exc, None)
-            raise
-    return _apply(axis, plan, audit, operator)
+# -- the procedures ------------------------------------------------------------------------------
 
+def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Confirm | None = None,
+                   drive_url: str = "", source: dict[str, Any] | None = None,
+                   spec: TableSpec | None = None) -> Iterator[ev.Event]:
+    """Push `table` to `axis` the safe way (module docstring), as events for the one runner.
 
-# -- the one safe path ---------------------------------------------------------------------------
-
-def _log(audit: AuditLog | None, entry: AuditEntry) -> AuditEntry | None:
-    return audit.append(entry) if audit is not None else None
-
-
-def _log_refusal(audit: AuditLog | None, action: str, axis: ServoAxis, drive_url: str, operator: str,
-                 exc: BaseException, source: dict[str, Any] | None) -> None:
-    """Record a refused attempt; the drive's identity only if it answers (best effort: the
-    refusal itself is what the caller reports)."""
-    if audit is None:
+    Yields `TablePlanned` (what will be written; `confirm(plan)` is then asked, None = confirmed),
+    `AuditRecord`s (the audit sink writes them: "started" with the backup before any write,
+    then the final one) and ends with `OperationFinished` (ok / refused / cancelled / failed;
+    its message says which table is active). On ok a `TablePushed` comes before it.
+    """
+    try:
+        plan = prepare_push(axis, table, spec=spec, drive_url=drive_url, source=source)
+    except (PushRefused, TableRefused) as exc:
+        yield from refused(Action.PUSH, axis.leg, exc, drive=_identity(axis), drive_url=drive_url, source=source)
         return
+    yield from _confirm_and_apply(axis, plan, confirm)
+
+
+def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | None = None,
+                       drive_url: str = "") -> Iterator[ev.Event]:
+    """Restore the table that was active before the last successful push of this leg to this
+    drive (found in `audit`, read only), the same safe way as a push; events as `push_procedure`."""
     try:
-        identity = axis.identity()
+        plan = prepare_rollback(axis, audit, drive_url=drive_url)
+    except (PushRefused, InputError) as exc:
+        yield from refused(Action.ROLLBACK, axis.leg, exc, drive=_identity(axis), drive_url=drive_url)
+        return
+    yield from _confirm_and_apply(axis, plan, confirm)
+
+
+def refused(action: Action, leg: int, reason: BaseException | str, *, drive: str = "", drive_url: str = "",
+            source: dict[str, Any] | None = None, outcome: AuditOutcome = AuditOutcome.REFUSED) -> Iterator[ev.Event]:
+    """A refusal (or a cancellation) as events: its audit entry, then `OperationFinished`. Also
+    what a front end runs for a refusal it finds before a drive is reached (a bad table file)."""
+    text = _message(reason) if isinstance(reason, BaseException) else str(reason)
+    if outcome == AuditOutcome.REFUSED and "written" not in text:
+        text += ". Nothing was written to the drive."
+    yield ev.AuditRecord(AuditEntry(action, leg, outcome, text, drive, drive_url, source=source))
+    yield ev.OperationFinished(action, leg, outcome, text)
+
+
+def _identity(axis: ServoAxis) -> str:
+    """The drive's identity for a refusal's audit entry; best effort (the refusal matters more)."""
+    try:
+        return axis.identity()
     except Exception:
-        identity = ""
-    try:
-        audit.append(AuditEntry(action, axis.leg, "refused", str(exc), identity, drive_url, operator, source=source))
-    except AuditError:
-        pass
+        return ""
 
 
-def _apply(axis: ServoAxis, plan: PushPlan, audit: AuditLog | None, operator: str) -> PushResult:
+def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None) -> Iterator[ev.Event]:
+    yield ev.TablePlanned(plan)
+    if confirm is not None:
+        try:
+            ok = confirm(plan)
+        except InputError as exc:  # nobody can answer: refuse rather than guess
+            yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source)
+            return
+        if not ok:
+            yield from refused(plan.action, plan.leg, "cancelled at the confirmation; nothing written", drive=plan.drive,
+                               drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED)
+            return
+    yield from _apply(axis, plan)
+
+
+def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
     leg, bank, prev = plan.leg, plan.target_bank, plan.active_bank
     op_id = new_id()
-    base = dict(action=plan.action, leg=leg, drive=plan.drive, drive_url=plan.drive_url, operator=operator,
+    base = dict(action=plan.action, leg=leg, drive=plan.drive, drive_url=plan.drive_url,
                 table_sha256=plan.table_sha256, bank=bank, previous_bank=prev, source=plan.source,
-                details=dict(plan.details), op_id=op_id)
-    backup = table_to_json(plan.backup, prev)
-    verb = "rollback" if plan.action == "rollback" else "push"
-    try:
-        _log(audit, AuditEntry(outcome="started", message=f"{verb} to bank {bank} started; backup of bank {prev} recorded",
-                               backup=backup, **base))
-    except AuditError as exc:
-        raise PushRefused(f"leg {leg}: {exc}; the {verb} was not started.") from None
+                details=dict(plan.details), op_id=op_id, backup=table_to_json(plan.backup, prev))
+    verb = "rollback" if plan.action == Action.ROLLBACK else "push"
+    # the audit sink has this on disk before the runner resumes us: a crash can never lose the backup
+    yield ev.AuditRecord(AuditEntry(outcome=AuditOutcome.STARTED,
+                                    message=f"{verb} to bank {bank} started; backup of bank {prev} recorded", **base))
 
-    def refuse(text: str) -> PushRefused:
-        exc = PushRefused(text)
-        try:
-            _log(audit, AuditEntry(outcome="refused", message=str(exc), backup=backup, **base))
-        except AuditError:
-            pass  # the refusal is what matters; nothing was written to the drive
-        return exc
+    def finish(outcome: AuditOutcome, text: str) -> Iterator[ev.Event]:
+        yield ev.AuditRecord(AuditEntry(outcome=outcome, message=text, **base))
+        yield ev.OperationFinished(plan.action, leg, outcome, text)
 
     # the drive may have changed since the plan was made (another station, the drive panel)
     try:
         identity, active, current, _ = _read_state(axis, verb)
     except PushRefused as exc:
-        raise refuse(str(exc.args[0])) from None
+        yield from finish(AuditOutcome.REFUSED, f"{_message(exc)}. {PushRefused.hint}")
+        return
     if identity != plan.drive or active != prev or table_sha256(current) != plan.backup_sha256:
-        raise refuse(f"leg {leg}: the drive changed since its table was read (active bank {active}, was {prev}); "
-                     f"read it again and retry.")
+        yield from finish(AuditOutcome.REFUSED, f"leg {leg}: the drive changed since its table was read (active bank "
+                                                f"{active}, was {prev}); read it again and retry. {PushRefused.hint}")
+        return
 
-    def fail(stage: str, exc: BaseException, state: str) -> PushFailed:
-        text = f"leg {leg}: {verb} to drive {plan.drive} failed while {stage}: {_message(exc)}. {state}"
-        try:
-            _log(audit, AuditEntry(outcome="failed", message=text, backup=backup, **base))
-        except AuditError as aexc:
-            text += f" (The failure could not be logged: {aexc})"
-        return PushFailed(text)
+    def failed(stage: str, exc: BaseException, state: str) -> Iterator[ev.Event]:
+        yield from finish(AuditOutcome.FAILED,
+                          f"leg {leg}: {verb} to drive {plan.drive} failed while {stage}: {_message(exc)}. {state}")
 
     stage = f"writing bank {bank}"
     try:
@@ -404,31 +400,33 @@ def _apply(axis: ServoAxis, plan: PushPlan, audit: AuditLog | None, operator: st
             raise TableError(f"bank {bank} reads back as a different table (sha256 {_short(table_sha256(back))}…, "
                              f"expected {_short(plan.table_sha256)}…)")
     except DriverError as exc:
-        raise fail(stage, exc, f"The previous table (bank {prev}, sha256 {_short(plan.backup_sha256)}…) is still "
-                               "active: the drive only switches tables on the activation, which was not sent.") from None
+        yield from failed(stage, exc, f"The previous table (bank {prev}, sha256 {_short(plan.backup_sha256)}…) is still "
+                                      "active: the drive only switches tables on the activation, which was not sent.")
+        return
     note = ""
     try:
         axis.activate_table(bank)
     except TableError as exc:  # the drive answered with a refusal: nothing switched
-        raise fail(f"activating bank {bank}", exc,
-                   f"The drive refused the switch: the previous table (bank {prev}) is still active.") from None
+        yield from failed(f"activating bank {bank}", exc,
+                          f"The drive refused the switch: the previous table (bank {prev}) is still active.")
+        return
     except DriverError as exc:  # no answer: find out whether the switch landed
         state, text = _state_after_activation(axis, bank, prev, plan.table_sha256)
         if state != "new":
-            raise fail(f"activating bank {bank}", exc, text) from None
+            yield from failed(f"activating bank {bank}", exc, text)
+            return
         note = f" (the activation request got no answer, but the drive then reported bank {bank} active)"
     else:
         state, text = _state_after_activation(axis, bank, prev, plan.table_sha256)
         if state != "new":
-            raise fail("confirming the switch", TableError(f"the drive accepted the switch to bank {bank}"), text) from None
+            yield from failed("confirming the switch", TableError(f"the drive accepted the switch to bank {bank}"), text)
+            return
     text = f"{verb} ok: bank {bank} active on leg {leg} ({describe_table(plan.table)}){note}"
-    try:
-        _log(audit, AuditEntry(outcome="ok", message=text, backup=backup, **base))
-    except AuditError as exc:
-        raise PushFailed(f"leg {leg}: the table was written and bank {bank} is active, but the audit log could not "
-                         f"record it ({exc}); its backup is in the 'started' entry ({op_id}).") from None
-    return PushResult(plan.action, leg, plan.drive, bank, prev, plan.table_sha256, plan.backup_sha256,
-                      plan.table.point_count, plan.table_enabled, op_id)
+    result = PushResult(plan.action, leg, plan.drive, bank, prev, plan.table_sha256, plan.backup_sha256,
+                        plan.table.point_count, plan.table_enabled, op_id)
+    yield ev.AuditRecord(AuditEntry(outcome=AuditOutcome.OK, message=text, **base))
+    yield result.event()
+    yield ev.OperationFinished(plan.action, leg, AuditOutcome.OK, text, result)
 
 
 def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str) -> tuple[str, str]:
@@ -445,3 +443,54 @@ def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str) -> 
         return "previous", f"The drive reports bank {prev} active: the previous table is still active."
     return "unknown", (f"The drive reports bank {now} active but it does not hold the table written; do not use the "
                        "axis before checking its table.")
+
+
+# -- for scripts and tests: run a procedure, return its result or raise ------------------------------
+
+def finished(events: list[ev.Event]) -> ev.OperationFinished | None:
+    """The `OperationFinished` among `events` (the last one), if any."""
+    done = [e for e in events if isinstance(e, ev.OperationFinished)]
+    return done[-1] if done else None
+
+
+def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) -> PushResult:
+    """Run a push/rollback procedure through the runner (with an AuditSink on `audit`) and
+    return its PushResult; PushRefused (refused, cancelled) or PushFailed (failed; the message
+    says which table is active) otherwise."""
+    events = ListSink()
+    sinks = [events] + ([AuditSink(audit)] if audit is not None else [])
+    try:
+        run(procedure, sinks)
+    except AuditError as exc:
+        started = [e for e in events.of(ev.AuditRecord) if e.entry.outcome == AuditOutcome.STARTED]
+        wrote = any(isinstance(e, ev.TablePushed) for e in events.events) or len(events.of(ev.AuditRecord)) > len(started)
+        raise (PushFailed if wrote else PushRefused)(str(exc.args[0])) from None
+    end = finished(events.events)
+    if end is None:
+        raise PushFailed("the operation ended without an outcome")
+    if end.outcome == AuditOutcome.OK:
+        return end.result
+    if end.outcome == AuditOutcome.FAILED:
+        raise PushFailed(end.message)
+    refusal = PushRefused(end.message)
+    refusal.hint = ""  # the message already says that nothing was written
+    raise refusal
+
+
+def push_table(axis: ServoAxis, table: TableBank | LegTable | None = None, *, plan: PushPlan | None = None,
+               audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
+               source: dict[str, Any] | None = None) -> PushResult:
+    """Push `table` (or an already confirmed `plan` from `prepare_push`) to `axis`:
+    `push_procedure` run to its end, every entry appended to `audit` (when given)."""
+    if plan is not None:
+        return run_operation(_apply(axis, plan), audit)
+    if table is None:
+        raise ValueError("push_table needs a table or a plan")
+    return run_operation(push_procedure(axis, table, drive_url=drive_url, source=source, spec=spec), audit)
+
+
+def rollback(axis: ServoAxis, audit: AuditLog, *, plan: PushPlan | None = None, drive_url: str = "") -> PushResult:
+    """`rollback_procedure` run to its end (or an already confirmed `plan`), logged in `audit`."""
+    if plan is not None:
+        return run_operation(_apply(axis, plan), audit)
+    return run_operation(rollback_procedure(axis, audit, drive_url=drive_url), audit)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-from drivers.states import DriveState, FaultKind  # noqa: F401  (re-exported: one import for procedures' users)
+from drivers.interfaces import DriveState, FaultKind  # noqa: F401  (re-exported: one import for procedures' users)
 
 
 class Outcome(StrEnum):

@@ -25,14 +25,15 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Iterable, Iterator, Mapping
 
 import numpy as np
 
-from drivers.interfaces import TableBank
+from drivers.errors import TableRefused
+from drivers.interfaces import TableBank, TableSpec
 from procedures.errors import InputError
 
 CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
@@ -43,22 +44,15 @@ _AUTO_STEP_QUANTUM_MM = 1e-6  # automatic steps: whole nanometres, the drive's s
 
 
 class TableValidationError(InputError):
-    """A compensation table is invalid (the message names file, row and field) or cannot be
-    made within the drive's limits."""
+    """A table file is malformed (the message names file, row and field). A table that is
+    well formed but does not fit the drive is refused with drivers.errors.TableRefused."""
 
 
-@dataclass(frozen=True)
-class TableLimits:
-    """What a drive accepts. Defaults mirror drivers/modbus/profiles/default.toml [table]
-    (max_points per direction, max_correction_um = largest |entry|); the command layer passes
-    the active profile's values. `min_step_mm`: the finest step the drive resolves."""
+DEFAULT_SPEC = TableSpec()
+"""The built-in drive profile's table (drivers/modbus/profiles/default.toml [table])."""
 
-    max_points: int = 512
-    max_correction_um: float = 300.0
-    min_step_mm: float = 0.001
-
-
-LINUXCNC_LIMITS = TableLimits(max_points=LINUXCNC_MAX_LINES, max_correction_um=1000.0, min_step_mm=1e-6)
+LINUXCNC_LIMITS = TableSpec(max_points=LINUXCNC_MAX_LINES, max_correction_um=1000.0, entry_resolution_um=0.0,
+                            min_step_mm=1e-6, banks=1, holder="LinuxCNC")
 """LinuxCNC: at most 256 lines per COMP_FILE; no documented correction limit (1 mm here)."""
 
 
@@ -118,60 +112,56 @@ class CompTable:
 
 # -- making a table from a model ---------------------------------------------------------------
 
-def _auto_step_mm(span_mm: float, native_mm: float, limits: TableLimits) -> float:
+def _auto_step_mm(span_mm: float, native_mm: float, spec: TableSpec) -> float:
     """The recording's spacing (or coarser, to fit max_points), shrunk so that a whole number
     of steps spans the stroke: the table then ends on the stroke end instead of up to a step
     beyond it, where it could cross the soft limits. Rounded up to 1 nm (the drive's unit), so
     the end lies at most max_points nm beyond."""
-    step = max(native_mm, span_mm / max(1, limits.max_points - 1), limits.min_step_mm)
+    step = max(native_mm, span_mm / max(1, spec.max_points - 1), spec.min_step_mm)
     n_steps = max(1, math.ceil(span_mm / step - 1e-9))
     return math.ceil(span_mm / n_steps / _AUTO_STEP_QUANTUM_MM - 1e-9) * _AUTO_STEP_QUANTUM_MM
 
 
-def make_table(model, step_mm: float | None = None, limits: TableLimits | None = None,
+def make_table(model, step_mm: float | None = None, spec: TableSpec | None = None,
                legs: Iterable[int] | None = None) -> CompTable:
     """Resample `model` (a procedures.fit LegErrorModel) on a fixed step over each leg's
-    recorded stroke.
+    recorded stroke, for a device holding tables as `spec` (default: the built-in drive's).
 
     Positions run from the stroke minimum in steps of `step_mm` until the stroke maximum is
     covered (the last point may lie up to one step beyond it; the model holds its end value
     there). Without `step_mm` the step is the recording's target spacing, coarsened until the
-    table fits `limits.max_points` and adjusted so whole steps span the stroke (see
-    `_auto_step_mm`). Raises `TableValidationError`
-    when the step gives too many points or a correction exceeds `limits.max_correction_um`.
+    table fits `spec.max_points` and adjusted so whole steps span the stroke (see
+    `_auto_step_mm`). TableRefused (`TableSpec.check`) when the table does not fit: too many
+    points (the message names the step that fits), a step below the minimum, a correction
+    beyond `spec.max_correction_um`.
     """
-    limits = limits or TableLimits()
+    spec = spec or DEFAULT_SPEC
     if step_mm is not None and not (math.isfinite(step_mm) and step_mm > 0):
         raise TableValidationError(f"table step must be a positive number of mm, got {step_mm}")
-    if step_mm is not None and step_mm < limits.min_step_mm:
-        raise TableValidationError(f"table step {step_mm:g} mm is below the drive's minimum step {limits.min_step_mm:g} mm")
     chosen = list(model.legs) if legs is None else sorted(set(int(x) for x in legs))
     out: dict[int, LegTable] = {}
     for leg in chosen:
         fit = model.leg(leg)
         lo, hi = fit.stroke_mm
         span = hi - lo
-        step = step_mm if step_mm is not None else _auto_step_mm(span, fit.target_spacing_mm, limits)
+        step = step_mm if step_mm is not None else _auto_step_mm(span, fit.target_spacing_mm, spec)
         n = int(math.ceil(span / step - 1e-9)) + 1
-        if n > limits.max_points:
-            need = math.ceil(span / (limits.max_points - 1) / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM
-            raise TableValidationError(
+        if n > spec.max_points:  # before evaluating the model on a needlessly fine grid
+            need = math.ceil(span / (spec.max_points - 1) / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM
+            raise TableRefused(
                 f"leg {leg}: a {step:g} mm step over the {span:g} mm stroke needs {n} points, more than "
-                f"the limit of {limits.max_points}; use a step of at least {need:g} mm"
+                f"{spec.holder} holds ({spec.max_points}); use a step of at least {need:g} mm"
             )
         start = round(lo, 6)
         pos = start + step * np.arange(n)
         fwd = np.asarray(model.predict_um(leg, pos, 1), dtype=float)
         rev = np.asarray(model.predict_um(leg, pos, -1), dtype=float)
-        for name, values in (("error_fwd_um", fwd), ("error_rev_um", rev)):
-            bad = np.flatnonzero(~np.isfinite(values) | (np.abs(values) > limits.max_correction_um))
-            if bad.size:
-                i = int(bad[0])
-                raise TableValidationError(
-                    f"leg {leg}: {name} at {pos[i]:.4f} mm is {values[i]:.3f} um, beyond the drive's limit of "
-                    f"+/-{limits.max_correction_um:g} um; check the recording (is the interferometer zeroed?)"
-                )
-        out[leg] = LegTable(leg, float(start), float(step), tuple(float(v) for v in fwd), tuple(float(v) for v in rev))
+        table = LegTable(leg, float(start), float(step), tuple(float(v) for v in fwd), tuple(float(v) for v in rev))
+        try:
+            spec.check(table.to_bank(), f"leg {leg}")
+        except TableRefused as exc:
+            raise TableRefused(f"{exc.args[0]} Check the recording (is the interferometer zeroed?)") from None
+        out[leg] = table
     return CompTable(out)
 
 
@@ -195,32 +185,16 @@ def _check_legs(where: str, have: Iterable[int], expected_legs) -> None:
         )
 
 
-def validate_table(table: CompTable, limits: TableLimits | None = None, expected_legs=None,
+def validate_table(table: CompTable, spec: TableSpec | None = None, expected_legs=None,
                    where: str = "table") -> None:
-    """Check a CompTable against `limits` (and the expected legs: an int n means legs 1..n).
-    Raises `TableValidationError` naming leg, point and field."""
-    limits = limits or TableLimits()
+    """Check a CompTable against `spec` (`TableSpec.check`, TableRefused naming leg, point and
+    field) and the expected legs (an int n means legs 1..n; TableValidationError)."""
+    spec = spec or DEFAULT_SPEC
     if not table.legs:
         raise TableValidationError(f"{where}: the table is empty")
     _check_legs(where, table.legs, expected_legs)
     for leg, t in table.legs.items():
-        if t.point_count < 2:
-            raise TableValidationError(f"{where}, leg {leg}: {t.point_count} point(s); a table needs at least two")
-        if len(t.error_rev_um) != t.point_count:
-            raise TableValidationError(f"{where}, leg {leg}: {t.point_count} forward but {len(t.error_rev_um)} reverse entries")
-        if t.point_count > limits.max_points:
-            raise TableValidationError(f"{where}, leg {leg}: {t.point_count} points, more than the drive's limit of {limits.max_points}")
-        if not (math.isfinite(t.step_mm) and t.step_mm >= limits.min_step_mm) or not math.isfinite(t.start_mm):
-            raise TableValidationError(f"{where}, leg {leg}: step {t.step_mm:g} mm is below the drive's minimum {limits.min_step_mm:g} mm")
-        for name, values in (("error_fwd_um", t.error_fwd_um), ("error_rev_um", t.error_rev_um)):
-            v = np.asarray(values, dtype=float)
-            bad = np.flatnonzero(~np.isfinite(v) | (np.abs(v) > limits.max_correction_um))
-            if bad.size:
-                i = int(bad[0])
-                raise TableValidationError(
-                    f"{where}, leg {leg}, point {i + 1} ({t.positions_mm[i]:.4f} mm), field {name}: {v[i]} um is "
-                    f"beyond the drive's limit of +/-{limits.max_correction_um:g} um"
-                )
+        spec.check(t.to_bank(), f"{where}, leg {leg}")
 
 
 # -- writing -----------------------------------------------------------------------------------
@@ -251,12 +225,12 @@ def table_csv_text(table: CompTable) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_table_csv(table: CompTable, path: str | os.PathLike, limits: TableLimits | None = None,
+def write_table_csv(table: CompTable, path: str | os.PathLike, spec: TableSpec | None = None,
                     expected_legs=None) -> Path:
-    """Validate `table` (against `limits`, default TableLimits()) and write it as CSV.
+    """Validate `table` (against `spec`, default the built-in drive's) and write it as CSV.
     Positions to 1e-6 mm, errors to 1e-4 um. Nothing is written when validation fails."""
     path = Path(path)
-    validate_table(table, limits, expected_legs, where=str(path))
+    validate_table(table, spec, expected_legs, where=str(path))
     _write_atomic({path: table_csv_text(table)})
     return path
 
@@ -285,14 +259,14 @@ def linuxcnc_text(t: LegTable, comp_type: int = 0) -> str:
 
 
 def write_linuxcnc_comp(table: CompTable, out: str | os.PathLike, comp_type: int = 0,
-                        limits: TableLimits | None = None) -> list[Path]:
+                        spec: TableSpec | None = None) -> list[Path]:
     """Write one LinuxCNC COMP_FILE per leg (paths: `linuxcnc_paths`). A directory OUT is
     created if missing. Nothing is written when any leg fails validation (more than 256
-    lines, beyond `limits`)."""
-    limits = limits or LINUXCNC_LIMITS
-    if limits.max_points > LINUXCNC_MAX_LINES:
-        limits = TableLimits(LINUXCNC_MAX_LINES, limits.max_correction_um, limits.min_step_mm)
-    validate_table(table, limits, where=str(out))
+    lines, beyond `spec`)."""
+    spec = spec or LINUXCNC_LIMITS
+    if spec.max_points > LINUXCNC_MAX_LINES or spec.holder != "LinuxCNC":
+        spec = replace(spec, max_points=min(spec.max_points, LINUXCNC_MAX_LINES), holder="LinuxCNC")
+    validate_table(table, spec, where=str(out))
     if comp_type not in (0, 1):
         raise TableValidationError(f"LinuxCNC COMP_FILE_TYPE must be 0 or 1, got {comp_type}")
     paths = linuxcnc_paths(out, table.legs)
@@ -305,18 +279,18 @@ def write_linuxcnc_comp(table: CompTable, out: str | os.PathLike, comp_type: int
 
 # -- reading -----------------------------------------------------------------------------------
 
-def read_table_csv(path: str | os.PathLike, limits: TableLimits | None = None,
+def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
                    expected_legs: int | Iterable[int] | None = None) -> CompTable:
     """Read and validate a CSV table (see the module docstring).
 
     Refused, with file, row (line number, header = row 1) and field named: a wrong header, a
     row without four fields or with a non-number, rows not sorted by leg, positions not
-    strictly increasing or unevenly spaced within a leg (drives need a fixed step), a step
-    below `limits.min_step_mm`, corrections beyond `limits.max_correction_um`, more than
-    `limits.max_points` points for a leg, fewer than two, and legs other than
-    `expected_legs` (an int n means legs 1..n). Raises `TableValidationError`.
+    strictly increasing or unevenly spaced within a leg (drives need a fixed step), fewer than
+    two points, and legs other than `expected_legs` (an int n means legs 1..n): these raise
+    `TableValidationError`. A well-formed leg that does not fit `spec` (points, step,
+    corrections: `TableSpec.check`) raises TableRefused naming file, leg, row and field.
     """
-    limits = limits or TableLimits()
+    spec = spec or DEFAULT_SPEC
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
@@ -372,15 +346,6 @@ def read_table_csv(path: str | os.PathLike, limits: TableLimits | None = None,
                         f"{path}, row {row}, field position_mm: step {step:.6f} mm differs from the leg's step "
                         f"{step0:.6f} mm; drives need a fixed step: resample with `station table --step`"
                     )
-            elif step < limits.min_step_mm:
-                raise TableValidationError(f"{path}, row {row}, field position_mm: step {step:g} mm is below the drive's "
-                                 f"minimum {limits.min_step_mm:g} mm")
-        for name, v in (("error_fwd_um", f), ("error_rev_um", r)):
-            if abs(v) > limits.max_correction_um:
-                raise TableValidationError(f"{path}, row {row}, field {name}: {v:g} um is beyond the drive's limit of "
-                                 f"+/-{limits.max_correction_um:g} um")
-        if len(d["x"]) >= limits.max_points:
-            raise TableValidationError(f"{path}, row {row}: leg {leg} has more than the drive's limit of {limits.max_points} points")
         d["x"].append(x)
         d["f"].append(f)
         d["r"].append(r)
@@ -395,6 +360,7 @@ def read_table_csv(path: str | os.PathLike, limits: TableLimits | None = None,
         x = np.asarray(d["x"])
         step = float((x[-1] - x[0]) / (x.size - 1))  # the mean step: robust to 1e-6 mm rounding
         legs[leg] = LegTable(leg, float(x[0]), round(step, 9), tuple(d["f"]), tuple(d["r"]))
+        spec.check(legs[leg].to_bank(), f"{path}, leg {leg}", point_name=lambda i, rows=d["row"]: f"row {rows[i]}")
     return CompTable(legs)
 
 

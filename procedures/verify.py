@@ -25,14 +25,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Iterable
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
+from drivers.errors import DriverError
+from drivers.interfaces import Clock, Interferometer, ServoAxis
+from procedures import events as ev
+from procedures.audit import AuditEntry
+from procedures.control import RunControl
 from procedures.errors import InputError
 from procedures.fit.data import split_legs
 from procedures.fit.noise import estimate_noise_floor
 from procedures.iso230 import LegIso230, evaluate_leg
+from procedures.plans import SweepPlan
+from procedures.push import describe_table, refused, table_sha256
+from procedures.states import Action, AuditOutcome, Outcome
+from procedures.sweep import sweep
 
 ACCEPT_RATIO = 1.1
 """A verified leg passes when its residual RMS is at most this times its noise floor."""
@@ -195,3 +205,113 @@ def format_report(results: dict[int, LegVerification]) -> str:
             lines.append(f"  note (after): {note}")
         lines.append("")
     return "\n".join(lines)
+
+
+# -- the procedure ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ActiveTable:
+    """What one leg's drive applies before a verification (read from the drive)."""
+
+    leg: int
+    drive: str
+    bank: int
+    table_sha256: str
+    description: str
+
+
+def verify_procedure(
+    axes: dict[int, ServoAxis], laser: Interferometer, clock: Clock, plan: SweepPlan, out: str | Path, *,
+    read_session: Callable[[Path], Any], before: Any = None, expected_sha256: dict[int, str] | None = None,
+    expected_source: str = "the table", drive_url: str = "", control: RunControl | None = None,
+    sweep_options: dict[str, Any] | None = None,
+) -> Iterator[ev.Event]:
+    """A verification as events for the one runner: check each leg's active table, sweep
+    `plan` with it active (the sweep's events; a recorder sink writes them to `out`), then
+    compare with the calibration `before` (a session as procedures.recording.reader reads it, or
+    None) and log one audit entry per leg.
+
+    Refused (an `AuditRecord` and `OperationFinished(refused)`, nothing moves) when a leg's
+    active table is empty, its drive does not apply it (table_enable = 0), or it is not the
+    one in `expected_sha256` (per leg, hashed as the drive holds it). After the sweep: `Verified`
+    (figures and the report), one `AuditRecord` per leg with the sweep's outcome, and
+    `OperationFinished` (completed / aborted / failed). `read_session(path)` reads the finished
+    recording (the recorder sink finishes it on `SweepFinished`).
+    """
+
+
+    expected = expected_sha256 or {}
+    active: dict[int, ActiveTable] = {}
+    for leg in plan.legs:
+        axis = axes[leg]
+        try:
+            st = axis.status()
+            identity = axis.identity()
+            bank = axis.active_bank()
+            table = axis.read_table(bank)
+        except DriverError as exc:
+            yield from refused(Action.VERIFY, leg, f"leg {leg}: cannot read the drive's table before the verification "
+                               f"({exc.args[0] if exc.args else exc})", drive_url=drive_url)
+            return
+        sha = table_sha256(table)
+        problem = ""
+        if table.point_count == 0:
+            problem = f"leg {leg}: the drive's active table (bank {bank}) is empty; push a table first (`station push`)"
+        elif not st.table_enabled:
+            problem = f"leg {leg}: the drive does not apply its table (table_enable = 0); switch it on first"
+        elif leg in expected and expected[leg] != sha:
+            problem = (f"leg {leg}: the drive's active table (sha256 {sha[:12]}…) is not the leg's rows of {expected_source} "
+                       f"(sha256 {expected[leg][:12]}…); push it first")
+        if problem:
+            yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome.REFUSED, problem, identity, drive_url,
+                                            table_sha256=sha, bank=bank))
+            yield ev.OperationFinished(Action.VERIFY, leg, AuditOutcome.REFUSED, problem)
+            return
+        active[leg] = ActiveTable(leg, identity, bank, sha, describe_table(table))
+        yield ev.LegChecked(leg, identity, bank, sha, active[leg].description)
+
+    def log_all(outcome: str, message: str, details: dict[str, Any] | None = None) -> Iterator[ev.Event]:
+        for leg, a in active.items():
+            yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, outcome, message, a.drive, drive_url,
+                                            table_sha256=a.table_sha256, bank=a.bank, details=dict(details or {})))
+
+    out = Path(out)
+    finished: ev.SweepFinished | None = None
+    try:
+        for event in sweep(plan, axes, laser, clock, control=control, **(sweep_options or {})):
+            if isinstance(event, ev.SweepFinished):
+                finished = event
+            yield event
+    except Exception as exc:  # a device gone mid-sweep: the audit log says so, then the error goes on up
+        yield from log_all(AuditOutcome.FAILED, f"verification sweep failed: {exc}", {"session": str(out)})
+        raise
+    outcome = Outcome(finished.outcome) if finished is not None else Outcome.FAILED
+    session = read_session(out)
+    results = verify(session.points, before.points if before is not None else None, list(active),
+                     after_source=str(out), before_source=str(before.path) if before is not None else "")
+    doc = {"path": str(out), "sha256": session.sha256, "outcome": str(outcome),
+           "reason": finished.reason if finished is not None else ""}
+    yield ev.Verified(results, format_report(results), doc)
+    for leg, r in results.items():
+        a = active[leg]
+        details = {"session": str(out), "session_sha256": session.sha256, **r.to_json()}
+        if before is not None:
+            details["before_session"] = {"path": str(before.path), "sha256": before.sha256}
+        yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome(str(outcome)), summary_line(outcome, r),
+                                        a.drive, drive_url, table_sha256=a.table_sha256, bank=a.bank, details=details))
+    failed = [leg for leg, r in results.items() if not r.passed]
+    if outcome != Outcome.COMPLETED:
+        text = f"the verification sweep did not complete ({outcome}: {doc['reason']})"
+    elif failed:
+        text = f"leg(s) {failed}: residual RMS above {ACCEPT_RATIO:g} x the noise floor (or no floor)"
+    else:
+        text = f"leg(s) {sorted(results)}: residual RMS within {ACCEPT_RATIO:g} x the noise floor"
+    yield ev.OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, results)
+
+
+def summary_line(outcome: str, r: LegVerification) -> str:
+    """One line of a leg's verification, as the audit log and the front ends show it."""
+    ratio = r.ratio
+    return (f"verification {outcome}: residual RMS {r.after.rms_um:.4f} um, noise floor "
+            + (f"{r.after.noise_floor_um:.4f} um, ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
+               if ratio is not None else "n/a"))

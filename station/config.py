@@ -33,6 +33,16 @@ from typing import Any
 from procedures.errors import InputError
 
 
+LEG_COUNT = 6
+"""Legs of the platform this station calibrates (a Gough-Stewart hexapod): legs 1..6."""
+
+AUDIT_NAME = "audit.jsonl"
+"""The audit log's file name in the recordings folder (push, rollback, verify)."""
+
+SIM_NV_NAME = "sim-drive-nv.json"
+"""The simulated drive's table memory in the recordings folder (what `push --sim` wrote)."""
+
+
 @dataclass
 class DriveConfig:
     url: str = "sim"
@@ -66,6 +76,20 @@ class StationConfig:
     @property
     def is_sim(self) -> bool:
         return self.drive.url == "sim" or self.interferometer.port == "sim"
+
+    @property
+    def audit_path(self) -> Path:
+        """<recordings_dir>/audit.jsonl: the audit log both front ends use."""
+        return Path(self.recordings_dir) / AUDIT_NAME
+
+    def with_sim_memory(self) -> "StationConfig":
+        """On the simulated drive, its table memory defaulted to <recordings_dir>/sim-drive-nv.json
+        (so a push, a verification and a rollback see the same drive), its folder created."""
+        if self.drive.url == "sim":
+            if not self.sim.nv_path:
+                self.sim.nv_path = str(Path(self.recordings_dir) / SIM_NV_NAME)
+            Path(self.sim.nv_path).parent.mkdir(parents=True, exist_ok=True)
+        return self
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

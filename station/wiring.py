@@ -12,10 +12,11 @@ from pathlib import Path
 from typing import Any
 
 from drivers.clock import SystemClock
-from drivers.interfaces import Clock, Interferometer, ServoAxis
+from drivers.interfaces import Clock, Interferometer, ServoAxis, TableSpec
 from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
+from procedures.errors import InputError
 from station.config import StationConfig
 
 
@@ -88,6 +89,67 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         raise
     desc = f"drives {cfg.drive.url}, interferometer {cfg.interferometer.port}"
     return Rig(axes, laser, SystemClock(), "live", desc, profile)
+
+
+@dataclass
+class DriveHandle:
+    """One leg's drive opened alone (for a push or rollback): `axis`, `url` (how it was reached,
+    for the audit log), `close()` releases it (and the simulated drive)."""
+
+    axis: ServoAxis
+    url: str
+    close: Any
+
+    def __enter__(self) -> "DriveHandle":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_drive(cfg: StationConfig, leg: int) -> DriveHandle:
+    """Connect to `leg`'s drive alone, never the interferometer: on the simulated rig (its table
+    memory in cfg.sim.nv_path) or on the bus at cfg.drive.url, with cfg.drive.profile."""
+    profile = DriveProfile.load(cfg.drive.profile or None)
+    if cfg.drive.url == "sim":
+        from drivers.sim.rig import SimRig
+
+        sim = SimRig(time_scale=0.0, seed=cfg.sim.seed, nv_path=Path(cfg.sim.nv_path) if cfg.sim.nv_path else None,
+                     profile=profile)
+        port = sim.drive_server.start_tcp()
+        try:
+            axis = connect_axes(f"tcp://127.0.0.1:{port}", [leg], profile, timeout_s=cfg.drive.timeout_s,
+                                clock=sim.clock)[leg]
+        except BaseException:
+            sim.drive_server.stop()
+            raise
+
+        def close() -> None:
+            axis.close()
+            sim.drive_server.stop()
+
+        return DriveHandle(axis, f"sim ({cfg.sim.nv_path})" if cfg.sim.nv_path else "sim", close)
+    axis = connect_axes(cfg.drive.url, [leg], profile, timeout_s=cfg.drive.timeout_s)[leg]
+    return DriveHandle(axis, cfg.drive.url, axis.close)
+
+
+def drive_url_of(cfg: StationConfig) -> str:
+    """How the config reaches the drives, as the audit log records it ("sim (memory file)" or the URL)."""
+    if cfg.drive.url == "sim":
+        return f"sim ({cfg.sim.nv_path})" if cfg.sim.nv_path else "sim"
+    return cfg.drive.url
+
+
+def drive_table_spec(profile_path: str | Path | None = None) -> TableSpec:
+    """What the drive of a profile (the built-in one without a path) holds, without connecting:
+    for making and checking tables offline. InputError naming the profile when it is bad."""
+    from drivers.modbus.client import table_spec
+    from drivers.modbus.profile import ProfileError
+
+    try:
+        return table_spec(DriveProfile.load(str(profile_path) if profile_path else None))
+    except ProfileError as exc:
+        raise InputError(str(exc)) from None
 
 
 REPLAY_LASER_TIMEOUT_S = 0.2

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+from dataclasses import replace
 from typing import Callable, Sequence
 from urllib.parse import parse_qs, urlsplit
 
@@ -21,10 +22,11 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException
 
 from drivers.clock import SystemClock
-from drivers.errors import CommTimeout, DriveFault, DriverError, SoftLimitError, TableError
-from drivers.interfaces import Clock, DriveLimits, DriveStatus, TableBank
+from drivers.errors import CommTimeout, DriveFault, DriverError, SoftLimitError, TableError, TableRefused
+from drivers.interfaces import Clock, DriveLimits, DriveStatus, TableBank, TableSpec
 from drivers.modbus.codec import chunks, crc16_modbus, int_range
 from drivers.modbus.profile import MAX_READ_WORDS, MAX_WRITE_WORDS, DriveProfile
+from drivers.states import DriveState
 
 log = logging.getLogger(__name__)
 
@@ -275,7 +277,7 @@ class ModbusServoAxis:
         self._last_position_mm = v["position_actual"]
         return DriveStatus(
             state=state,
-            fault=state == "fault",
+            fault=state is DriveState.FAULT,
             fault_code=v["fault_code"],
             moving=not reached,
             target_reached=reached,
@@ -304,9 +306,9 @@ class ModbusServoAxis:
         if st.enabled:
             return
         seq = {
-            "quick_stop_active": ["enable_operation"],
-            "switched_on": ["enable_operation"],
-            "ready_to_switch_on": ["switch_on", "enable_operation"],
+            DriveState.QUICK_STOP_ACTIVE: ["enable_operation"],
+            DriveState.SWITCHED_ON: ["enable_operation"],
+            DriveState.READY_TO_SWITCH_ON: ["switch_on", "enable_operation"],
         }.get(st.state, ["shutdown", "switch_on", "enable_operation"])
         for cmd in seq:
             self._command(cmd)
@@ -391,6 +393,10 @@ class ModbusServoAxis:
         if bank not in range(self.profile.table.banks):
             raise TableError(f"leg {self.leg}: table bank {bank!r} does not exist (banks are 0..{self.profile.table.banks - 1}).",
                              hint="")
+
+    def table_spec(self) -> TableSpec:
+        """The table this drive holds (its profile's [table] section)."""
+        return table_spec(self.profile)
 
     def active_bank(self) -> int:
         """The bank the drive applies (0 or 1)."""
@@ -486,29 +492,35 @@ class ModbusServoAxis:
             self.bus.release()
 
 
+def table_spec(profile: DriveProfile) -> TableSpec:
+    """What the drive of `profile` holds: its [table] section as a TableSpec."""
+    t = profile.table
+    return TableSpec(max_points=t.max_points, max_correction_um=t.max_correction_um,
+                     entry_resolution_um=t.entry_scale_um, min_step_mm=TABLE_MIN_STEP_MM, banks=t.banks)
+
+
+TABLE_MIN_STEP_MM = 0.001
+"""The finest table step the station writes to a drive (1 um; the spacing register resolves 1 nm)."""
+
+
 def table_registers(profile: DriveProfile, table: TableBank, where: str = "table") -> tuple[list[int], list[int], list[int]]:
     """(forward entry registers, reverse entry registers, header registers) for `table`.
 
-    Entries are rounded to the profile's entry resolution. TableError naming `where` if the
-    table does not fit the drive: point count, equal lengths, spacing, finite values, and
-    |correction| <= max_correction_um; or if `table.checksum` is given (non-zero) and differs
-    from the CRC of the entries.
+    Entries are rounded to the profile's entry resolution. TableRefused naming `where` if the
+    table does not fit the drive (`TableSpec.check`); TableError if `table.checksum` is given
+    (non-zero) and differs from the CRC of the entries.
     """
     t = profile.table
     n = len(table.error_fwd_um)
-    if len(table.error_rev_um) != n:
-        raise TableError(f"{where}: {n} forward but {len(table.error_rev_um)} reverse entries; both directions need the same points.", hint="")
-    if n > t.max_points:
-        raise TableError(f"{where}: {n} points per direction, the drive holds at most {t.max_points}; use a coarser step.", hint="")
-    if not (math.isfinite(table.start_mm) and math.isfinite(table.spacing_mm)):
-        raise TableError(f"{where}: start and spacing must be finite numbers.", hint="")
-    if n > 1 and not table.spacing_mm > 0:
-        raise TableError(f"{where}: spacing {table.spacing_mm} mm must be > 0 (positions strictly increasing).", hint="")
-    for name, vals in (("error_fwd_um", table.error_fwd_um), ("error_rev_um", table.error_rev_um)):
-        for i, e in enumerate(vals):
-            if not math.isfinite(e) or abs(e) > t.max_correction_um:
-                raise TableError(f"{where}: {name}[{i}] = {e} um at {table.start_mm + i * table.spacing_mm:.4f} mm is beyond "
-                                 f"the drive's correction limit of +/-{t.max_correction_um:g} um.", hint="")
+    spec = table_spec(profile)
+    if n >= 2:
+        spec.check(table, where)
+    else:  # empty (no correction) or a single constant: no step to check, the entries still are
+        padded = TableBank(0.0, 1.0, tuple(table.error_fwd_um) * 2 or (0.0, 0.0), tuple(table.error_rev_um) * 2 or (0.0, 0.0))
+        if len(table.error_rev_um) != n:
+            raise TableRefused(f"{where}: {n} forward but {len(table.error_rev_um)} reverse entries; both directions "
+                               "need the same points.")
+        replace(spec, min_step_mm=0.0).check(padded, where)
     lo, hi = int_range(t.entry_type)
     fwd = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_fwd_um]
     rev = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_rev_um]

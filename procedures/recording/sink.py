@@ -11,6 +11,7 @@ from typing import Any
 
 from procedures import events as ev
 from procedures.recording.writer import SessionWriter
+from procedures.states import Outcome
 
 
 class RecorderSink:
@@ -44,11 +45,19 @@ class RecorderSink:
             if self.writer is not None:
                 self.writer.append_fault({
                     "index": event.index, "leg": event.leg, "run": event.run, "target_mm": event.target_mm,
-                    "time_s": event.t_s, "kind": event.kind.encode()[:16], "attempt": event.attempt,
+                    "time_s": event.t_s, "kind": str(event.kind), "attempt": event.attempt,
                     "gave_up": int(event.gave_up), "message": event.message.encode("utf-8", "replace")[:200],
                 })
+        elif isinstance(event, ev.SweepFinished):
+            # finished here, not only at close: a procedure that goes on after its sweep (a
+            # verification) reads the complete file, with its outcome and content hash
+            self.close(event.outcome)
 
-    def close(self, outcome: str) -> None:
+    def close(self, outcome: Outcome) -> None:
         if self.writer is not None:
-            self.writer.finish(outcome)
-            self.writer = None
+            writer, self.writer = self.writer, None
+            try:
+                writer.finish(outcome)
+            except BaseException:
+                writer.close()  # never leave the file open and its lock behind (outcome unset)
+                raise

@@ -10,6 +10,7 @@ import sys
 from typing import Any
 
 from procedures.audit import ACTIONS
+from procedures.errors import InputError
 from procedures.audit_view import (
     INTERRUPTED,
     AuditView,
@@ -22,8 +23,8 @@ from procedures.audit_view import (
     read_audit,
     select,
 )
-from station.commands.push import AUDIT_NAME, audit_log, check_leg
-from station.config import load_config
+from station.commands.push import audit_log
+from station.config import AUDIT_NAME, LEG_COUNT, load_config
 
 NAME = "audit"
 HELP = "show the audit log: every push, verify and rollback, and which table each leg should hold"
@@ -52,7 +53,8 @@ def run(args) -> int:
     cfg = load_config(args.config)
     path = audit_log(args, cfg).path
     if args.leg is not None:
-        check_leg(args.leg)
+        if not 1 <= args.leg <= LEG_COUNT:
+            raise InputError(f"--leg {args.leg}: leg numbers run from 1 to {LEG_COUNT}")
     since = parse_since(args.since) if args.since else None
     view = read_audit(path)
     _warn_problems(view)

@@ -127,11 +127,11 @@ def model_errors(model, session, recording_path, model_path, *, measured: str | 
 def _table_errors(src: Path, recording, profile, measured: str | None) -> tuple[object, object, dict]:
     from procedures.recording.reader import file_sha256, read_session
     from procedures.table import read_table_csv
-    from station.commands.table import drive_limits
+    from station.wiring import drive_table_spec
 
     if not recording:
         raise InputError(f"{src}: a table does not name its recording; pass --recording FILE.h5 for the measured errors.")
-    table = read_table_csv(src, drive_limits(profile), expected_legs=6)
+    table = read_table_csv(src, drive_table_spec(profile), expected_legs=6)
     rec_path = Path(recording)
     if not rec_path.exists():
         raise FileNotFoundError(f"{rec_path}: no such file")

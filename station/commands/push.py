@@ -1,24 +1,23 @@
 """`station push`: write one leg's compensation table to its drive, safely, with an audit entry.
 
-Also holds what `station rollback` and `station verify` share: reaching one leg's drive
-(--sim / --drive URL / --config), the audit log location, and the confirmation prompt.
+Also holds what `station rollback` shares: the drive arguments and the confirmation prompt.
+The work itself is procedures.push run by station.table_jobs, as in the terminal UI.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, Callable
 
 from drivers.errors import DriverError
-from procedures.audit import AuditEntry, AuditError, AuditLog
+from procedures import events as ev
+from procedures.audit import AuditError, AuditLog
 from procedures.errors import InputError
-from procedures.push import PushRefused, prepare_push, push_table
-from procedures.recording.reader import file_sha256
-from procedures.table import TableLimits, read_table_csv
-from station.config import StationConfig, load_config
+from procedures.push import PushPlan
+from procedures.states import Action, AuditOutcome
+from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
+from station.table_jobs import JobOutcome, load_leg_table, push_job, refusal_job
+from station.wiring import drive_table_spec, drive_url_of, open_drive
 
 NAME = "push"
 HELP = "write a leg's compensation table to its drive (inactive bank, read back, switch), with an audit entry"
@@ -28,12 +27,6 @@ DESCRIPTION = (
     "active table into the audit log, write the inactive bank, read it back and compare, then switch "
     "banks. On any failure the previous table stays active. See docs/compensation.md."
 )
-
-LEG_COUNT = 6
-"""Legs of the platform this station calibrates (a Gough-Stewart hexapod)."""
-
-SIM_NV_NAME = "sim-drive-nv.json"
-AUDIT_NAME = "audit.jsonl"
 
 
 def add_drive_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,7 +39,7 @@ def add_drive_arguments(p: argparse.ArgumentParser) -> None:
     where.add_argument("--drive", metavar="URL", help="the drive's bus: tcp://HOST:PORT or rtu:///dev/ttyUSB0?baud=115200")
     where.add_argument("--config", metavar="C", help="station TOML naming the drives ([drive] url, profile, timeout)")
     p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile (default: the config's, or the built-in one)")
-    p.add_argument("--audit", metavar="FILE", help=f"audit log (default <recordings_dir>/{AUDIT_NAME}, i.e. runs/{AUDIT_NAME})")
+    p.add_argument("--audit", metavar="FILE", help="audit log (default <recordings_dir>/audit.jsonl, i.e. runs/audit.jsonl)")
     p.add_argument("--yes", action="store_true", help="do not ask for confirmation (needed when stdin is not a terminal)")
 
 
@@ -58,8 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # -- shared by push / rollback / verify ------------------------------------------------------------
 
 def station_config(args) -> StationConfig:
-    """The config of --config (or the built-in one), with --drive applied and the simulated
-    drive's table memory defaulted to <recordings_dir>/sim-drive-nv.json."""
+    """The config of --config (or the built-in one), with --drive, --sim and --profile applied
+    and the simulated drive's table memory defaulted (StationConfig.with_sim_memory)."""
     cfg = load_config(getattr(args, "config", None))
     drive = getattr(args, "drive", None)
     if drive:
@@ -68,92 +61,56 @@ def station_config(args) -> StationConfig:
         cfg.drive.url = drive
     if getattr(args, "sim", False):
         cfg.drive.url = "sim"
-    if cfg.drive.url == "sim" and not cfg.sim.nv_path:
-        cfg.sim.nv_path = str(Path(cfg.recordings_dir) / SIM_NV_NAME)
-    if cfg.drive.url == "sim":
-        Path(cfg.sim.nv_path).parent.mkdir(parents=True, exist_ok=True)
-    return cfg
+    if getattr(args, "profile", None):
+        cfg.drive.profile = args.profile
+    return cfg.with_sim_memory()
 
 
 def audit_log(args, cfg: StationConfig) -> AuditLog:
-    path = Path(args.audit) if getattr(args, "audit", None) else Path(cfg.recordings_dir) / AUDIT_NAME
-    return AuditLog(path, operator=cfg.operator)
+    return AuditLog(getattr(args, "audit", None) or cfg.audit_path, operator=cfg.operator)
 
 
-def check_leg(leg: int) -> None:
-    if not 1 <= leg <= LEG_COUNT:
-        raise InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}")
+def prompt(yes: bool, stdin=None, stdout=None):
+    """A `Confirm` for the command line: True with --yes, else the user types y/yes at the
+    terminal. InputError when stdin is not a terminal and --yes was not given (nobody can
+    answer: refuse rather than guess)."""
+
+    def confirm(plan: PushPlan) -> bool:
+        if yes:
+            return True
+        inp = stdin or sys.stdin
+        out = stdout or sys.stdout
+        if not (hasattr(inp, "isatty") and inp.isatty()):
+            raise InputError("not confirmed: stdin is not a terminal, so nobody can answer the question; "
+                             "run it in a terminal, or add --yes to confirm on the command line. Nothing was written.")
+        out.write(f"{plan.question()} [y/N] ")
+        out.flush()
+        return inp.readline().strip().lower() in ("y", "yes")
+
+    return confirm
 
 
-def load_profile(args, cfg: StationConfig):
-    from drivers.modbus.profile import DriveProfile
+class PlanPrinter:
+    """Runner sink: prints a push or rollback plan before the confirmation question."""
 
-    return DriveProfile.load(getattr(args, "profile", None) or cfg.drive.profile or None)
+    critical = False
 
+    def __init__(self, header: str = "") -> None:
+        self.header = header
 
-def table_limits(profile) -> TableLimits:
-    return TableLimits(max_points=profile.table.max_points, max_correction_um=profile.table.max_correction_um)
+    def handle(self, event: ev.Event) -> None:
+        if isinstance(event, ev.TablePlanned):
+            plan = event.plan
+            if plan.action == Action.ROLLBACK:
+                print(f"rollback of the push of {plan.details.get('push_time_utc')}")
+            elif self.header:
+                print(self.header)
+            for line in plan.describe():
+                print(line)
+            sys.stdout.flush()
 
-
-@dataclass
-class DriveHandle:
-    """One leg's drive, opened for a push/rollback; `close()` releases it (and the simulated rig)."""
-
-    axis: Any
-    url: str
-    close: Callable[[], None]
-
-
-def open_drive(cfg: StationConfig, leg: int, profile) -> DriveHandle:
-    """Connect to `leg`'s drive: on the simulated rig (its drive memory in cfg.sim.nv_path), or
-    on the bus at cfg.drive.url. Only the drive is opened, never the interferometer."""
-    if cfg.drive.url == "sim":
-        from drivers.sim.rig import SimRig
-        from drivers.modbus.client import connect_axes
-
-        sim = SimRig(time_scale=0.0, seed=cfg.sim.seed, nv_path=Path(cfg.sim.nv_path), profile=profile)
-        port = sim.drive_server.start_tcp()
-        sim.drive_url = f"tcp://127.0.0.1:{port}"
-        try:
-            axis = connect_axes(sim.drive_url, [leg], profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)[leg]
-        except BaseException:
-            sim.drive_server.stop()
-            raise
-
-        def close() -> None:
-            axis.close()
-            sim.drive_server.stop()
-
-        return DriveHandle(axis, f"sim ({cfg.sim.nv_path})", close)
-    from drivers.modbus.client import connect_axes
-
-    axis = connect_axes(cfg.drive.url, [leg], profile, timeout_s=cfg.drive.timeout_s)[leg]
-    return DriveHandle(axis, cfg.drive.url, axis.close)
-
-
-def confirm(question: str, yes: bool, stdin=None, stdout=None) -> bool:
-    """True when --yes, or the user types y/yes at the terminal. InputError when stdin is not a
-    terminal and --yes was not given (nobody can answer: refuse rather than guess)."""
-    if yes:
-        return True
-    stdin = stdin or sys.stdin
-    stdout = stdout or sys.stdout
-    if not (hasattr(stdin, "isatty") and stdin.isatty()):
-        raise InputError("not confirmed: stdin is not a terminal, so nobody can answer the question; "
-                         "run it in a terminal, or add --yes to confirm on the command line. Nothing was written.")
-    stdout.write(f"{question} [y/N] ")
-    stdout.flush()
-    answer = stdin.readline().strip().lower()
-    return answer in ("y", "yes")
-
-
-def log_refusal(audit: AuditLog, action: str, leg: int, url: str, operator: str, exc: BaseException,
-                source: dict | None = None, drive: str = "", outcome: str = "refused") -> None:
-    """Audit a refusal found by the command itself (bad input, not confirmed); best effort."""
-    try:
-        audit.append(AuditEntry(action, leg, outcome, str(exc), drive, url, operator, source=source))
-    except AuditError as aexc:
-        print(f"warning: {aexc}", file=sys.stderr)
+    def close(self, outcome: str) -> None:
+        pass
 
 
 def warn_audit_problems(audit: AuditLog) -> None:
@@ -165,56 +122,55 @@ def warn_audit_problems(audit: AuditLog) -> None:
         print(f"warning: {audit.path}, line {p.line}: {p.reason} (left as is: the log is append-only)", file=sys.stderr)
 
 
+def report(job: JobOutcome, audit: AuditLog) -> int:
+    """Print how a push or rollback ended; the exit code (0 ok, 1 cancelled, else an error)."""
+    for problem in job.audit_problems:
+        print(f"warning: {problem}", file=sys.stderr)
+    end = job.finished
+    if end is None:
+        raise InputError("the operation ended without an outcome")
+    if end.outcome == AuditOutcome.OK:
+        return 0
+    if end.outcome == AuditOutcome.CANCELLED:
+        print("cancelled; nothing was written")
+        return 1
+    if end.outcome == AuditOutcome.FAILED:
+        raise OperationFailed(end.message)
+    raise InputError(end.message)
+
+
+class OperationFailed(DriverError):
+    """A push or rollback failed after it started writing (the message says which table is active)."""
+
+
+def refuse(args, cfg: StationConfig, audit: AuditLog, action: Action, leg: int, exc: BaseException,
+           source: dict | None = None) -> int:
+    """A refusal found before the drive is opened: logged through the audit sink, then reported."""
+    job = refusal_job(action, leg, exc, audit=audit, drive_url=drive_url_of(cfg), source=source)
+    return report(job, audit)
+
+
 # -- push -----------------------------------------------------------------------------------------
 
 def run(args) -> int:
     cfg = station_config(args)
     audit = audit_log(args, cfg)
     leg = int(args.leg)
-    url = "sim" if cfg.drive.url == "sim" else cfg.drive.url
     source: dict | None = {"path": str(args.table), "leg": leg}
     try:
-        check_leg(leg)
-        profile = load_profile(args, cfg)
-        limits = table_limits(profile)
-        table = read_table_csv(args.table, limits)
-        other = [x for x in table.legs if x > LEG_COUNT]
-        if other:
-            raise InputError(f"{args.table}: the table has legs {list(table.legs)}, but this station drives legs 1-{LEG_COUNT}: "
-                             "it was made for a platform with another leg count; make the table from a model of these legs")
-        if leg not in table.legs:
-            raise InputError(f"{args.table}: the table has no rows for leg {leg} (it has legs {list(table.legs)})")
-        source["sha256"] = file_sha256(args.table)
+        leg_table, source = load_leg_table(args.table, leg, drive_table_spec(cfg.drive.profile or None))
     except (InputError, DriverError, OSError) as exc:
-        log_refusal(audit, "push", leg, url, cfg.operator, exc, source)
-        raise
-    leg_table = table.legs[leg]
-    handle = open_drive(cfg, leg, profile)
-    try:
+        return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
+    with open_drive(cfg, leg) as drive:
         warn_audit_problems(audit)
-        try:
-            plan = prepare_push(handle.axis, leg_table, table_limits=limits, quantum_um=profile.table.entry_scale_um,
-                                drive_url=handle.url, source=source)
-        except PushRefused as exc:
-            log_refusal(audit, "push", leg, handle.url, cfg.operator, exc, source)
-            raise
-        print(f"table: {args.table} (sha256 {source['sha256'][:12]}…), rows of leg {leg}")
-        for line in plan.describe():
-            print(line)
-        print(f"audit log: {audit.path}")
-        try:
-            ok = confirm(f"Push this table to leg {leg}?", args.yes)
-        except InputError as exc:
-            log_refusal(audit, "push", leg, handle.url, cfg.operator, exc, source, plan.drive)
-            raise
-        if not ok:
-            log_refusal(audit, "push", leg, handle.url, cfg.operator, "cancelled at the confirmation; nothing written",
-                        source, plan.drive, outcome="cancelled")
-            print("cancelled; nothing was written")
-            return 1
-        result = push_table(handle.axis, plan=plan, audit=audit, operator=cfg.operator)
-    finally:
-        handle.close()
+        header = f"table: {args.table} (sha256 {source['sha256'][:12]}…), rows of leg {leg}"
+        print_audit = PlanPrinter(header)
+        job = push_job(drive.axis, leg_table, audit=audit, drive_url=drive.url, source=source,
+                       confirm=_with_audit_line(prompt(args.yes), audit), sinks=[print_audit])
+    code = report(job, audit)
+    if code:
+        return code
+    result = job.finished.result
     print(f"pushed: leg {leg} bank {result.bank} active (was bank {result.previous_bank}); "
           f"table sha256 {result.table_sha256}")
     print(f"backup of the previous table (sha256 {result.previous_sha256[:12]}…) is in {audit.path}")
@@ -229,3 +185,13 @@ def run(args) -> int:
     print(f"next: station verify --leg {leg} {verify_where} --before CALIBRATION.h5 --out VERIFY.h5"
           f"   |   undo: station rollback --leg {leg} {undo_where}")
     return 0
+
+
+def _with_audit_line(confirm, audit: AuditLog):
+    """Say where the audit log is just before asking."""
+
+    def ask(plan: PushPlan) -> bool:
+        print(f"audit log: {audit.path}")
+        return confirm(plan)
+
+    return ask

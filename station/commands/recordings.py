@@ -120,13 +120,12 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
     from procedures.fit import fit
     from procedures.push import push_table
     from procedures.recording.reader import read_session
-    from procedures.table import TableLimits, make_table
+    from procedures.table import make_table
     from station.jobs import run_sweep
 
     session = read_session(calibration)
     model = fit(session.points, "default", source={"path": str(calibration), "sha256": session.sha256})
-    layout = rig.profile.table
-    table = make_table(model, limits=TableLimits(max_points=layout.max_points, max_correction_um=layout.max_correction_um))
+    table = make_table(model, spec=rig.axes[min(rig.axes)].table_spec())
     lines = []
     for leg, leg_table in table.legs.items():
         # the station's safe push (inactive bank, read back, switch) over the Modbus client

@@ -4,20 +4,23 @@ from __future__ import annotations
 
 import argparse
 
-from drivers.errors import DriverError
+from procedures import events as ev
 from procedures.errors import InputError
-from procedures.push import PushRefused, describe_table, prepare_rollback, rollback
+from procedures.push import describe_table
+from procedures.states import Action
 from station.commands.push import (
+    PlanPrinter,
     add_drive_arguments,
     audit_log,
-    check_leg,
-    confirm,
-    load_profile,
-    log_refusal,
-    open_drive,
+    prompt,
+    refuse,
+    report,
     station_config,
     warn_audit_problems,
 )
+from station.config import LEG_COUNT
+from station.table_jobs import rollback_job
+from station.wiring import open_drive
 
 NAME = "rollback"
 HELP = "restore the table a drive had before the last successful push (from the audit log)"
@@ -36,37 +39,18 @@ def run(args) -> int:
     cfg = station_config(args)
     audit = audit_log(args, cfg)
     leg = int(args.leg)
-    url = "sim" if cfg.drive.url == "sim" else cfg.drive.url
-    try:
-        check_leg(leg)
-        profile = load_profile(args, cfg)
-    except (InputError, DriverError) as exc:
-        log_refusal(audit, "rollback", leg, url, cfg.operator, exc)
-        raise
-    handle = open_drive(cfg, leg, profile)
-    try:
+    if not 1 <= leg <= LEG_COUNT:
+        return refuse(args, cfg, audit, Action.ROLLBACK, leg,
+                      InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}"))
+    with open_drive(cfg, leg) as drive:
         warn_audit_problems(audit)
-        try:
-            plan = prepare_rollback(handle.axis, audit, drive_url=handle.url)
-        except (PushRefused, InputError) as exc:
-            log_refusal(audit, "rollback", leg, handle.url, cfg.operator, exc)
-            raise
-        print(f"rollback of the push of {plan.details.get('push_time_utc')} (audit log {audit.path})")
-        for line in plan.describe():
-            print(line)
-        try:
-            ok = confirm(f"Restore the previous table on leg {leg}?", args.yes)
-        except InputError as exc:
-            log_refusal(audit, "rollback", leg, handle.url, cfg.operator, exc, drive=plan.drive)
-            raise
-        if not ok:
-            log_refusal(audit, "rollback", leg, handle.url, cfg.operator, "cancelled at the confirmation; nothing written",
-                        drive=plan.drive, outcome="cancelled")
-            print("cancelled; nothing was written")
-            return 1
-        result = rollback(handle.axis, audit, plan=plan, operator=cfg.operator)
-    finally:
-        handle.close()
+        job = rollback_job(drive.axis, audit=audit, drive_url=drive.url, confirm=prompt(args.yes),
+                           sinks=[PlanPrinter()])
+    code = report(job, audit)
+    if code:
+        return code
+    result = job.finished.result
+    plan = job.of(ev.TablePlanned)[-1].plan
     print(f"rolled back: leg {leg} bank {result.bank} active (was bank {result.previous_bank}): "
           f"{describe_table(plan.table)}; sha256 {result.table_sha256}")
     return 0

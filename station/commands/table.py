@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,8 @@ import numpy as np
 from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
-from procedures.table import LINUXCNC_LIMITS, TableLimits, make_table, write_linuxcnc_comp, write_table_csv
+from procedures.table import LINUXCNC_LIMITS, make_table, write_linuxcnc_comp, write_table_csv
+from station.wiring import drive_table_spec
 
 NAME = "table"
 HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"
@@ -37,17 +39,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
 
 
-def drive_limits(profile_path: str | None) -> TableLimits:
-    """Table limits of a drive profile (the built-in one without a path)."""
-    from drivers.modbus.profile import DriveProfile, ProfileError
-
-    try:
-        layout = DriveProfile.load(profile_path).table
-    except ProfileError as exc:
-        raise InputError(str(exc)) from None
-    return TableLimits(max_points=layout.max_points, max_correction_um=layout.max_correction_um)
-
-
 def run(args) -> int:
     model = load_model(args.model)
     legs = parse_legs(args.legs) if args.legs else None
@@ -56,11 +47,12 @@ def run(args) -> int:
         if missing:
             raise InputError(f"{args.model}: the model has no leg(s) {missing} (it has {list(model.legs)})")
     if args.format == "linuxcnc":
-        profile = drive_limits(args.profile) if args.profile else None
-        limits = LINUXCNC_LIMITS if profile is None else TableLimits(
-            min(profile.max_points, LINUXCNC_LIMITS.max_points), profile.max_correction_um, LINUXCNC_LIMITS.min_step_mm)
+        drive = drive_table_spec(args.profile) if args.profile else None
+        limits = LINUXCNC_LIMITS if drive is None else replace(
+            LINUXCNC_LIMITS, max_points=min(drive.max_points, LINUXCNC_LIMITS.max_points),
+            max_correction_um=drive.max_correction_um)
     else:
-        limits = drive_limits(args.profile)
+        limits = drive_table_spec(args.profile)
     table = make_table(model, args.step, limits, legs=legs)
     if args.format == "csv":
         written = [write_table_csv(table, args.out, limits)]

@@ -36,12 +36,7 @@ def run(args) -> int:
         raise InputError(f"--time-scale must be >= 0, got {time_scale:g}")
     if args.replay and not Path(args.replay).is_file():
         raise InputError(f"--replay {args.replay}: no such file (give a session .h5 file)")
-    if cfg.drive.url == "sim" and not cfg.sim.nv_path:
-        # the simulated drives keep their tables where `station push/verify --sim` find them
-        from station.commands.push import SIM_NV_NAME
-
-        cfg.sim.nv_path = str(Path(cfg.recordings_dir) / SIM_NV_NAME)
-        Path(cfg.recordings_dir).mkdir(parents=True, exist_ok=True)
+    cfg.with_sim_memory()  # the simulated drives keep their tables where `station push/verify --sim` find them
     # Textual owns the terminal: log to a file, never to the screen.
     log_dir = Path(cfg.recordings_dir)
     log_dir.mkdir(parents=True, exist_ok=True)

@@ -9,17 +9,16 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from procedures.audit import AuditEntry, AuditError
+from procedures import events as ev
 from procedures.errors import InputError
 from procedures.plans import SweepPlan, iso230_plan, parse_legs
-from procedures.push import describe_table, quantize, table_sha256
 from procedures.recording.reader import read_session
-from procedures.table import read_table_csv
-from procedures.verify import ACCEPT_RATIO, format_report, verify
-from station.commands.push import audit_log, load_profile, station_config, table_limits
-from station.jobs import run_sweep
+from procedures.states import AuditOutcome
+from procedures.verify import ACCEPT_RATIO
+from station.commands.push import audit_log, station_config
 from station.progress import ConsoleProgress
-from station.wiring import open_rig
+from station.table_jobs import expected_tables, verify_job
+from station.wiring import drive_table_spec, drive_url_of, open_rig
 
 NAME = "verify"
 HELP = "verification sweep with the table active: compensated error and ISO 230-2 before vs after"
@@ -68,6 +67,19 @@ def _plan(args, legs: tuple[int, ...], before) -> SweepPlan:
     return replace(plan, legs=legs, kind="verification", notes=())
 
 
+class LegPrinter:
+    """Runner sink: prints each leg's active table as the verification finds it."""
+
+    critical = False
+
+    def handle(self, event: ev.Event) -> None:
+        if isinstance(event, ev.LegChecked):
+            print(f"leg {event.leg}: bank {event.bank} active, {event.description}, sha256 {event.table_sha256[:12]}…")
+
+    def close(self, outcome: str) -> None:
+        pass
+
+
 def run(args) -> int:
     legs = parse_legs(args.leg)
     if args.config and (args.seed is not None or args.noise_seed is not None):
@@ -81,14 +93,9 @@ def run(args) -> int:
         raise InputError(f"{out}: exists; choose another --out (a verification is a new session)")
     before = read_session(args.before) if args.before else None
     plan = _plan(args, legs, before)
-    profile = load_profile(args, cfg)
     expected: dict[int, str] = {}
     if args.table:
-        table = read_table_csv(args.table, table_limits(profile))
-        missing = [leg for leg in legs if leg not in table.legs]
-        if missing:
-            raise InputError(f"{args.table}: no rows for leg(s) {missing} (it has legs {list(table.legs)})")
-        expected = {leg: table_sha256(quantize(table.legs[leg].to_bank(), profile.table.entry_scale_um)) for leg in legs}
+        expected = expected_tables(args.table, legs, drive_table_spec(cfg.drive.profile or None))
     noise_seed = None
     if cfg.is_sim:
         noise_seed = args.noise_seed if args.noise_seed is not None else secrets.randbelow(1 << 31)
@@ -97,73 +104,25 @@ def run(args) -> int:
                   "of the same plan exactly, so it is not an independent verification")
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale, noise_seed=noise_seed) as rig:
         print(f"rig: {rig.description}" + (f"; plant seed {cfg.sim.seed}, noise seed {noise_seed}" if cfg.is_sim else ""))
-        active = {}
-        for leg in legs:
-            axis = rig.axes[leg]
-            st = axis.status()
-            bank = axis.active_bank()
-            t = axis.read_table(bank)
-            sha = table_sha256(t)
-            active[leg] = (axis.identity(), bank, sha, cfg.drive.url)
-            problem = None
-            if t.point_count == 0:
-                problem = f"leg {leg}: the drive's active table (bank {bank}) is empty; push a table first (`station push`)"
-            elif not st.table_enabled:
-                problem = f"leg {leg}: the drive does not apply its table (table_enable = 0); switch it on first"
-            elif leg in expected and expected[leg] != sha:
-                problem = (f"leg {leg}: the drive's active table (sha256 {sha[:12]}…) is not the leg's rows of {args.table} "
-                           f"(sha256 {expected[leg][:12]}…); push it first")
-            if problem:
-                _log(audit, "verify", leg, active[leg], "refused", problem, cfg.operator)
-                raise InputError(problem)
-            print(f"leg {leg}: bank {bank} active, {describe_table(t)}, sha256 {sha[:12]}…")
-        try:
-            result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()])
-        except (Exception, KeyboardInterrupt) as exc:
-            for leg in legs:
-                _log(audit, "verify", leg, active[leg], "failed", f"verification sweep failed: {exc}", cfg.operator,
-                     {"session": str(out)})
-            raise
-    session = read_session(out)
-    results = verify(session.points, before.points if before is not None else None, legs,
-                     after_source=str(out), before_source=str(before.path) if before is not None else "")
-    print(f"session: {out} ({result.outcome}, {result.points} of {plan.total_points} points)")
+        job = verify_job(rig, plan, out, cfg, audit=audit, before=before, expected_sha256=expected,
+                         expected_source=str(args.table), drive_url=drive_url_of(cfg),
+                         sinks=[LegPrinter(), ConsoleProgress()])
+    for problem in job.audit_problems:
+        print(f"warning: {problem}", file=sys.stderr)
+    end = job.finished
+    if end is None or end.outcome == AuditOutcome.REFUSED:
+        raise InputError(end.message if end is not None else "the verification ended without an outcome")
+    verified = job.of(ev.Verified)[-1]
+    doc = {"session": verified.session, "before": None if before is None else {"path": str(before.path), "sha256": before.sha256},
+           "legs": {str(leg): r.to_json() for leg, r in verified.results.items()}}
+    print(f"session: {out} ({verified.session['outcome']}, {job.run.points} of {plan.total_points} points)")
     print()
-    print(format_report(results))
-    doc = {
-        "session": {"path": str(out), "sha256": session.sha256, "outcome": result.outcome},
-        "before": None if before is None else {"path": str(before.path), "sha256": before.sha256},
-        "legs": {str(leg): r.to_json() for leg, r in results.items()},
-    }
-    for leg, r in results.items():
-        ratio = r.ratio
-        msg = (f"verification {result.outcome}: residual RMS {r.after.rms_um:.4f} um, noise floor "
-               + (f"{r.after.noise_floor_um:.4f} um, ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
-                  if ratio is not None else "n/a"))
-        details = {"session": str(out), "session_sha256": session.sha256, **r.to_json()}
-        if before is not None:
-            details["before_session"] = {"path": str(before.path), "sha256": before.sha256}
-        _log(audit, "verify", leg, active[leg], result.outcome, msg, cfg.operator, details)
+    print(verified.report)
     if args.json:
         Path(args.json).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
         print(f"figures: {args.json}")
     print(f"audit log: {audit.path}")
-    if result.outcome != "completed":
-        print(f"the verification sweep did not complete ({result.outcome}: {result.reason})", file=sys.stderr)
-        return 1
-    failed = [leg for leg, r in results.items() if not r.passed]
-    if failed:
-        print(f"leg(s) {failed}: residual RMS above {ACCEPT_RATIO:g} x the noise floor (or no floor); see above",
-              file=sys.stderr)
+    if end.outcome != AuditOutcome.COMPLETED or any(not r.passed for r in verified.results.values()):
+        print(end.message + ("; see above" if end.outcome == AuditOutcome.COMPLETED else ""), file=sys.stderr)
         return 1
     return 0
-
-
-def _log(audit, action: str, leg: int, drive: tuple[str, int, str, str], outcome: str, message: str, operator: str,
-         details: dict | None = None) -> None:
-    identity, bank, sha, url = drive
-    try:
-        audit.append(AuditEntry(action, leg, outcome, message, identity, url, operator, table_sha256=sha, bank=bank,
-                                details=details or {}))
-    except AuditError as exc:
-        print(f"warning: {exc}", file=sys.stderr)

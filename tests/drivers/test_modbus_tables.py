@@ -142,10 +142,10 @@ def test_activation_refused_while_moving(sim_drives):
     "table, words",
     [
         (TableBank(0.0, 0.1, (0.0,) * 513, (0.0,) * 513), "at most 512"),
-        (TableBank(0.0, 1.0, (0.0, 300.01), (0.0, 0.0)), "error_fwd_um[1] = 300.01"),
+        (TableBank(0.0, 1.0, (0.0, 300.01), (0.0, 0.0)), "point 2 (+1.0000 mm), field error_fwd_um: 300.01"),
         (TableBank(0.0, 1.0, (0.0, 1.0), (0.0,)), "reverse entries"),
-        (TableBank(0.0, 0.0, (0.0, 1.0), (0.0, 1.0)), "spacing"),
-        (TableBank(0.0, 1.0, (0.0, float("nan")), (0.0, 1.0)), "error_fwd_um[1]"),
+        (TableBank(0.0, 0.0, (0.0, 1.0), (0.0, 1.0)), "step"),
+        (TableBank(0.0, 1.0, (0.0, float("nan")), (0.0, 1.0)), "field error_fwd_um: nan"),
         (TableBank(0.0, 1.0, (0.0, 1.0), (0.0, 1.0), checksum=0x1234), "checksum"),
     ],
 )

@@ -29,11 +29,13 @@ from procedures.push import (
     rollback,
     table_sha256,
 )
-from procedures.table import LegTable, TableLimits
+from drivers.errors import TableRefused
+from drivers.modbus.client import table_spec
+from procedures.table import LegTable
 
 IDEAL = PlantConfig().only()
 PROFILE = DriveProfile.load()
-LIMITS = TableLimits(PROFILE.table.max_points, PROFILE.table.max_correction_um)
+SPEC = table_spec(PROFILE)
 # 300 points per direction: three entry chunks of <= 123 registers per direction, then the header
 TABLE_A = TableBank(-90.0, 0.6, tuple(1.234 + 0.01 * i for i in range(300)), tuple(-0.5 - 0.013 * i for i in range(300)))
 TABLE_B = TableBank(-90.0, 6.0, tuple(0.1 * i for i in range(31)), tuple(-0.1 * i for i in range(31)))
@@ -94,7 +96,7 @@ def _table_writes(model, on_write):
 def test_push_writes_the_inactive_bank_switches_and_records_the_backup(drive, audit):
     ax = drive.axis
     before = ax.read_table(0)
-    result = push_table(ax, TABLE_A, audit=audit, operator="tester", drive_url=drive.url)
+    result = push_table(ax, TABLE_A, audit=audit, drive_url=drive.url)
     assert (result.bank, result.previous_bank, ax.active_bank()) == (1, 0, 1)
     stored = ax.read_table(1)
     assert stored.error_fwd_um == pytest.approx(quantize(TABLE_A).error_fwd_um, abs=1e-9)
@@ -174,19 +176,19 @@ def test_rollback_matches_the_drive_by_identity(drive, audit):
     "table, words",
     [
         (TableBank(-90.0, 0.3, (0.0,) * 513, (0.0,) * 513), "at most 512"),
-        (TableBank(-90.0, 1.0, (0.0, 300.5, 0.0), (0.0, 0.0, 0.0)), r"error_fwd_um at -89.0000 mm \(point 2\) is 300.5 um"),
+        (TableBank(-90.0, 1.0, (0.0, 300.5, 0.0), (0.0, 0.0, 0.0)), r"point 2 \(-89.0000 mm\), field error_fwd_um: 300.5 um"),
         (TableBank(-90.0, 1.0, (0.0, 1.0), (0.0,)), "1 reverse entries"),
         (TableBank(-90.0, 0.0, (0.0, 1.0), (0.0, 1.0)), "step 0 mm"),
         (TableBank(-90.0, -1.0, (0.0, 1.0), (0.0, 1.0)), "step -1 mm"),
         (TableBank(-90.0, 1.0, (0.0,), (0.0,)), "at least two"),
-        (TableBank(-90.0, 10.0, (0.0,) * 20, (0.0,) * 20), r"-90.000 .. \+100.000 mm, beyond the drive's soft limits"),
+        (TableBank(-90.0, 10.0, (0.0,) * 20, (0.0,) * 20), r"-90.000 .. \+100.000 mm, beyond the soft limits"),
         (TableBank(-90.0, 1.0, (0.0, float("inf")), (0.0, 1.0)), "error_fwd_um"),
     ],
 )
 def test_tables_the_drive_should_not_get_are_refused_and_nothing_is_written(drive, audit, table, words):
     writes = drive.writes()
     with pytest.raises(PushRefused, match=words) as info:
-        push_table(drive.axis, table, audit=audit, table_limits=LIMITS)
+        push_table(drive.axis, table, audit=audit, spec=SPEC)
     assert "Nothing was written" in str(info.value)
     assert drive.writes() == writes and drive.axis.active_bank() == 0
     assert [e.outcome for e in audit.entries()] == ["refused"]

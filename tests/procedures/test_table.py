@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from drivers.errors import TableRefused
 from drivers.interfaces import TableBank
 from drivers.sim.plant import PlantConfig
 from station.synth import synth_session
@@ -15,7 +16,7 @@ from procedures.table import (
     LINUXCNC_LIMITS,
     CompTable,
     LegTable,
-    TableLimits,
+    TableSpec,
     make_table,
     read_linuxcnc_comp,
     read_table_csv,
@@ -48,7 +49,7 @@ def test_table_covers_the_stroke_at_the_recording_spacing(model):
 
 
 def test_step_is_coarsened_to_fit_the_point_limit(model):
-    table = make_table(model, limits=TableLimits(max_points=50))
+    table = make_table(model, spec=TableSpec(max_points=50))
     t = table.legs[1]
     assert t.point_count <= 50 and t.end_mm >= 90.0 - 1e-9
     # whole steps span the stroke: the table ends on the stroke end (within the nm rounding),
@@ -58,14 +59,14 @@ def test_step_is_coarsened_to_fit_the_point_limit(model):
 
 
 def test_too_fine_a_step_is_refused(model):
-    with pytest.raises(InputError) as err:
-        make_table(model, step_mm=0.1, limits=TableLimits(max_points=512))
+    with pytest.raises(TableRefused) as err:
+        make_table(model, step_mm=0.1, spec=TableSpec(max_points=512))
     assert "1801 points" in str(err.value) and "512" in str(err.value) and "at least 0.353" in str(err.value)
 
 
 def test_correction_beyond_the_drive_limit_is_refused(model):
-    with pytest.raises(InputError, match=r"beyond the drive's limit of \+/-1 um"):
-        make_table(model, limits=TableLimits(max_correction_um=1.0))
+    with pytest.raises(TableRefused, match=r"beyond the correction limit of the drive, \+/-1 um"):
+        make_table(model, spec=TableSpec(max_correction_um=1.0))
 
 
 def test_csv_format_and_round_trip(model, tmp_path):
@@ -88,11 +89,11 @@ def test_csv_format_and_round_trip(model, tmp_path):
 def test_invalid_table_is_not_written(tmp_path):
     t = LegTable(1, 0.0, 1.0, (0.0, 400.0), (0.0, 0.0))
     target = tmp_path / "t.csv"
-    with pytest.raises(InputError, match="point 2 .*error_fwd_um"):
+    with pytest.raises(TableRefused, match="point 2 .*error_fwd_um"):
         write_table_csv(CompTable({1: t}), target)
     assert not target.exists() and list(tmp_path.iterdir()) == []
     target.write_text("keep me\n")
-    with pytest.raises(InputError):
+    with pytest.raises(TableRefused):
         write_table_csv(CompTable({1: t}), target)
     assert target.read_text() == "keep me\n"
 
@@ -131,17 +132,17 @@ def _replace(row, field, value):
         (_replace(3, "error_fwd_um", "abc"), None, None, "row 3, field error_fwd_um"),
         (_replace(3, "leg", "x"), None, None, "row 3, field leg"),
         (_replace(3, "error_fwd_um", "nan"), None, None, "row 3, field error_fwd_um"),
-        (GOOD, TableLimits(max_points=8), None, "row 10: leg 1 has more than"),  # too many points
+        (GOOD, TableSpec(max_points=8), None, "leg 1: the table has 9 points (row 10 is one too many)"),  # too many points
         (GOOD, None, 6, "expected [1, 2, 3, 4, 5, 6]"),  # another leg count
         (GOOD[:1] + GOOD[10:] + GOOD[1:10], None, None, "row 11, field leg"),  # legs out of order
         (["position_mm,leg,error_fwd_um,error_rev_um"] + GOOD[1:], None, None, "row 1: header"),
         (GOOD[:2] + ["1,-1.5,0.1"] + GOOD[3:], None, None, "row 3: 3 field(s)"),
-        (GOOD, TableLimits(min_step_mm=1.0), None, "row 3, field position_mm: step 0.5 mm is below"),
+        (GOOD, TableSpec(min_step_mm=1.0), None, "row 3, field position_mm: the step 0.5 mm is not a number >= the minimum"),
     ],
 )
 def test_bad_csv_is_refused_naming_file_row_and_field(tmp_path, lines, limits, expected_legs, where):
     path = _write(tmp_path, lines)
-    with pytest.raises(InputError) as err:
+    with pytest.raises((InputError, TableRefused)) as err:  # malformed file / a table the drive cannot hold
         read_table_csv(path, limits, expected_legs)
     msg = str(err.value)
     assert str(path) in msg and where in msg
@@ -175,7 +176,7 @@ def linuxcnc_motor_mm(nom, fwd_trim, rev_trim, pos_cmd_mm, moving_up):
 
 @pytest.mark.parametrize("comp_type", [0, 1])
 def test_linuxcnc_files_cancel_the_modelled_error(model, tmp_path, comp_type):
-    table = make_table(model, limits=LINUXCNC_LIMITS)
+    table = make_table(model, spec=LINUXCNC_LIMITS)
     paths = write_linuxcnc_comp(table, tmp_path / "comp", comp_type)
     assert [p.name for p in paths] == ["joint0.comp", "joint1.comp"]
     for leg, path in zip((1, 2), paths):
@@ -204,7 +205,7 @@ def test_linuxcnc_files_cancel_the_modelled_error(model, tmp_path, comp_type):
 
 
 def test_linuxcnc_file_naming(model, tmp_path):
-    table = make_table(model, limits=LINUXCNC_LIMITS)
+    table = make_table(model, spec=LINUXCNC_LIMITS)
     paths = write_linuxcnc_comp(table, tmp_path / "leg.comp", 1)
     assert [p.name for p in paths] == ["leg_joint0.comp", "leg_joint1.comp"]
 
@@ -212,6 +213,6 @@ def test_linuxcnc_file_naming(model, tmp_path):
 def test_linuxcnc_refuses_more_than_256_lines_and_writes_nothing(tmp_path):
     t = LegTable(1, 0.0, 0.1, tuple([0.0] * 300), tuple([0.0] * 300))
     t2 = LegTable(2, 0.0, 0.1, tuple([0.0] * 10), tuple([0.0] * 10))
-    with pytest.raises(InputError, match="more than the drive's limit of 256"):
+    with pytest.raises(TableRefused, match="LinuxCNC holds at most 256"):
         write_linuxcnc_comp(CompTable({1: t, 2: t2}), tmp_path / "out.comp", 0)
     assert list(tmp_path.iterdir()) == []

@@ -24,7 +24,7 @@ from procedures.audit import read_entries
 from procedures.push import quantize, table_sha256
 from procedures.table import CompTable, LegTable, table_csv_text
 from station.cli import main
-from station.commands.push import open_drive
+from station.wiring import open_drive
 from station.config import StationConfig
 
 PROFILE = DriveProfile.load()
@@ -67,7 +67,7 @@ def _sim_drive_state(leg: int):
     """(active bank, active table) of the simulated drive, read back from its memory file."""
     cfg = StationConfig()
     cfg.drive.url, cfg.sim.nv_path = "sim", str(NV)
-    h = open_drive(cfg, leg, PROFILE)
+    h = open_drive(cfg, leg)
     try:
         bank = h.axis.active_bank()
         return bank, h.axis.read_table(bank)
@@ -130,7 +130,7 @@ BAD = [
     ("non-increasing", ["1,-90,0.1,0.1", "1,-84,0.1,0.1", "1,-84,0.1,0.1"],
      r"table.csv, row 4, field position_mm: -84 mm is not above the previous position"),
     ("beyond the limit", ["1,-90,0.1,0.1", "1,-84,300.5,0.1", "1,-78,0.1,0.1"],
-     r"table.csv, row 3, field error_fwd_um: 300.5 um is beyond the drive's limit of \+/-300 um"),
+     r"table.csv, leg 1, row 3, field error_fwd_um: 300.5 um is beyond the correction limit of the drive, \+/-300 um"),
     ("uneven", ["1,-90,0.1,0.1", "1,-84,0.1,0.1", "1,-77,0.1,0.1"],
      r"row 4, field position_mm: step 7.000000 mm differs .* resample with `station table --step`"),
     ("other leg count", [f"{leg},{x},0.1,0.1" for leg in range(1, 9) for x in (-90, 90)],

@@ -1,0 +1,129 @@
+"""Jobs both front ends start on a drive's compensation table: push, rollback and verify.
+
+Each runs a procedure (procedures.push, procedures.verify) through the one runner with the audit
+sink (the only writer of the audit log) and the front end's own sinks, and returns what ended
+it. The command line and the terminal UI differ only in how they ask for confirmation and how
+they show the events, so they give the same refusals, audit lines and figures.
+"""
+
+from __future__ import annotations
+
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+from drivers.interfaces import ServoAxis, TableSpec
+from procedures import events as ev
+from procedures.audit import AuditLog, AuditSink
+from procedures.control import RunControl
+from procedures.errors import InputError
+from procedures.plans import SweepPlan
+from procedures.push import Confirm, finished, push_procedure, quantize, refused, rollback_procedure, table_sha256
+from procedures.recording.reader import file_sha256, read_session
+from procedures.recording.sink import RecorderSink
+from procedures.runner import ListSink, RunResult, Sink, run
+from procedures.states import Action, AuditOutcome
+from procedures.table import LegTable, read_table_csv
+from procedures.verify import verify_procedure
+from station import __version__
+from station.config import LEG_COUNT, StationConfig
+from station.wiring import Rig
+
+
+@dataclass
+class JobOutcome:
+    """How a table job ended: its `OperationFinished` (None when the run broke off with an
+    exception, which the runner re-raised), every event, and audit entries that could not be
+    stored (the refusal or failure they describe is still reported)."""
+
+    finished: ev.OperationFinished | None
+    events: list[ev.Event] = field(default_factory=list)
+    audit_problems: list[str] = field(default_factory=list)
+    run: RunResult | None = None
+
+    @property
+    def outcome(self) -> str:
+        return self.finished.outcome if self.finished is not None else AuditOutcome.FAILED
+
+    @property
+    def ok(self) -> bool:
+        return self.outcome in (AuditOutcome.OK, AuditOutcome.COMPLETED)
+
+    def of(self, kind: type) -> list:
+        return [e for e in self.events if isinstance(e, kind)]
+
+
+def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterable[Sink] = (),
+                  control: RunControl | None = None) -> JobOutcome:
+    """Run a table procedure with the audit sink (first: an entry is on disk before any other
+    sink sees the event that follows it) and `sinks`."""
+    events = ListSink()
+    audit_sink = AuditSink(audit)
+    result = run(procedure, [audit_sink, events, *sinks], control)
+    return JobOutcome(finished(events.events), events.events, audit_sink.problems, result)
+
+
+# -- push and rollback ---------------------------------------------------------------------------------
+
+def load_leg_table(path: str | Path, leg: int, spec: TableSpec | None = None) -> tuple[LegTable, dict[str, Any]]:
+    """One leg's rows of a table CSV (from `station table`) and where they came from
+    ({"path", "leg", "sha256"}). InputError / TableRefused naming the file when it is bad, has
+    no rows for `leg`, or was made for a platform with more legs than this station drives."""
+    if not 1 <= leg <= LEG_COUNT:
+        raise InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}")
+    table = read_table_csv(path, spec)
+    other = [x for x in table.legs if x > LEG_COUNT]
+    if other:
+        raise InputError(f"{path}: the table has legs {list(table.legs)}, but this station drives legs 1-{LEG_COUNT}: "
+                         "it was made for a platform with another leg count; make the table from a model of these legs")
+    if leg not in table.legs:
+        raise InputError(f"{path}: the table has no rows for leg {leg} (it has legs {list(table.legs)})")
+    return table.legs[leg], {"path": str(path), "leg": leg, "sha256": file_sha256(path)}
+
+
+def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: str, source: dict[str, Any] | None,
+             confirm: Confirm | None, sinks: Iterable[Sink] = ()) -> JobOutcome:
+    """Push one leg's table to its drive (procedures.push.push_procedure)."""
+    return run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source), audit, sinks)
+
+
+def rollback_job(axis: ServoAxis, *, audit: AuditLog, drive_url: str, confirm: Confirm | None,
+                 sinks: Iterable[Sink] = ()) -> JobOutcome:
+    """Restore what the drive held before the last successful push (procedures.push.rollback_procedure)."""
+    return run_table_job(rollback_procedure(axis, audit, confirm=confirm, drive_url=drive_url), audit, sinks)
+
+
+def refusal_job(action: Action, leg: int, reason: BaseException | str, *, audit: AuditLog, drive_url: str = "",
+                source: dict[str, Any] | None = None, sinks: Iterable[Sink] = ()) -> JobOutcome:
+    """A refusal found before a drive is reached (a bad table file, a leg the platform does not
+    have), logged and reported like any other."""
+    return run_table_job(refused(action, leg, reason, drive_url=drive_url, source=source), audit, sinks)
+
+
+# -- verify ------------------------------------------------------------------------------------------
+
+def expected_tables(path: str | Path, legs: Iterable[int], spec: TableSpec) -> dict[int, str]:
+    """sha256 of each leg's rows of a table CSV as the drive would hold them (for `verify --table`)."""
+    table = read_table_csv(path, spec)
+    missing = [leg for leg in legs if leg not in table.legs]
+    if missing:
+        raise InputError(f"{path}: no rows for leg(s) {missing} (it has legs {list(table.legs)})")
+    return {leg: table_sha256(quantize(table.legs[leg].to_bank(), spec)) for leg in legs}
+
+
+def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *, audit: AuditLog, before: Any = None,
+               expected_sha256: dict[int, str] | None = None, expected_source: str = "the table",
+               drive_url: str = "", sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
+    """A verification sweep of `plan` with the tables active, recorded to `out`, compared with the
+    calibration `before` (procedures.verify.verify_procedure)."""
+    out = Path(out)
+    if out.exists():
+        raise InputError(f"{out}: exists; choose another file (a verification is a new session)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=cfg.to_dict(),
+                            software_version=__version__)
+    procedure = verify_procedure(rig.axes, rig.laser, rig.clock, plan, out, read_session=read_session, before=before,
+                                 expected_sha256=expected_sha256, expected_source=expected_source, drive_url=drive_url,
+                                 control=control, sweep_options={"session_id": uuid.uuid4().hex[:12]})
+    return run_table_job(procedure, audit, [recorder, *sinks], control)
