@@ -21,6 +21,7 @@ from textual.binding import Binding
 
 from procedures.control import RunControl
 from procedures.plans import SweepPlan
+from procedures.states import AuditOutcome
 from station.config import StationConfig
 from station.tui.bridge import SweepEnded, SweepEvent, TuiBridge
 from station.tui.errors import describe
@@ -264,10 +265,12 @@ class StationApp(App):
 
     # -- sweep -----------------------------------------------------------------------------------
     def start_sweep(self, plan: SweepPlan, out: Path, label: str = "sweep",
-                    on_done: Callable[[SweepState], None] | None = None) -> bool:
-        """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner).
-        `label` names the job on screen ("sweep", "verification of leg 2"); `on_done(state)` is
-        called on the app's thread when it has ended (whatever the outcome)."""
+                    on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None) -> bool:
+        """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner), or
+        through `job(rig, sinks, control)` (a job of station.table_jobs, e.g. a verification,
+        returning a JobOutcome). `label` names the job on screen ("sweep", "verification of leg
+        2"); `on_done(state)` is called on the app's thread when it has ended (whatever the
+        outcome), with the job's outcome in `state.result`."""
         if self.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
             return False
@@ -288,14 +291,14 @@ class StationApp(App):
         self._on_sweep_done = on_done
         self.sweep_control = RunControl()
         self._sweep_idle.clear()
-        self._sweep_worker(plan, out, self.sweep_control)
+        self._sweep_worker(plan, out, self.sweep_control, job)
         return True
 
     @work(thread=True, group="sweep", exit_on_error=False)
-    def _sweep_worker(self, plan: SweepPlan, out: Path, control: RunControl) -> None:
+    def _sweep_worker(self, plan: SweepPlan, out: Path, control: RunControl, job: Callable | None = None) -> None:
         from station.jobs import run_sweep
 
-        outcome, points, error = "error", 0, ""
+        outcome, points, error, ended = "error", 0, "", None
         try:
             if not self.rig_lock.acquire(timeout=10.0):
                 error = "the rig stayed busy for 10 s (a rig action is still running); try again"
@@ -305,7 +308,13 @@ class StationApp(App):
                 if rig is None:
                     error = "the rig was disconnected; connect it on the Rig screen (F1)"
                     return
-                result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self)], control=control)
+                if job is None:
+                    result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self)], control=control)
+                else:
+                    ended = job(rig, [TuiBridge(self)], control)
+                    result = ended.run
+                    if ended.outcome == AuditOutcome.REFUSED:  # nothing moved: say why, as the CLI does
+                        error = ended.finished.message
                 outcome, points = result.outcome, result.points
             finally:
                 self.rig_lock.release()
@@ -313,7 +322,7 @@ class StationApp(App):
             error = describe(exc, "the sweep stopped")
         finally:
             self._sweep_idle.set()
-            self.post_message(SweepEnded(outcome, points, error))
+            self.post_message(SweepEnded(outcome, points, error, result=ended))
 
     def start_replay(self, source: Path, speed: float | None) -> bool:
         """Replay `source` through the replay devices and the sweep procedure (station.jobs.
@@ -378,6 +387,7 @@ class StationApp(App):
             s.status = "error" if message.error else message.outcome
             s.reason = message.error
         s.note = message.note
+        s.result = message.result
         s.version += 1
         if message.error:
             self.notify(message.error, title="Sweep", severity="error", timeout=15)

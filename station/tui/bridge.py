@@ -7,6 +7,8 @@ thread and the screens draw from that state.
 
 from __future__ import annotations
 
+from typing import Any
+
 from textual.app import App
 from textual.message import Message
 
@@ -25,12 +27,13 @@ class SweepEnded(Message):
     """The sweep worker returned. `error` is a sentence for the operator when the run could not
     start or broke off (a driver error, a plan outside the soft limits), else ""."""
 
-    def __init__(self, outcome: str, points: int, error: str = "", note: str = "") -> None:
+    def __init__(self, outcome: str, points: int, error: str = "", note: str = "", result: Any = None) -> None:
         super().__init__()
         self.outcome = outcome
         self.points = points
         self.error = error
         self.note = note  # e.g. a replay's comparison with its recording
+        self.result = result  # what a job returned (a verification's JobOutcome), or None
 
 
 class TuiBridge:

@@ -13,9 +13,6 @@ NOT_AVAILABLE = "{what} is not available yet in this build ({where} is missing).
 
 # what -> candidate (module, attribute) pairs, first found wins
 PIECES: dict[str, list[tuple[str, str]]] = {
-    "push": [("procedures.push", "push_table")],
-    "verify": [("procedures.push", "verify"), ("procedures.verify", "verify")],
-    "rollback": [("procedures.push", "rollback")],
     "replay": [("station.wiring", "open_replay_rig")],
     "iso230": [("procedures.iso230", "evaluate")],
 }

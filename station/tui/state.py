@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from procedures import events as ev
 from station.progress import Eta
@@ -57,6 +58,7 @@ class SweepState:
     reason: str = ""
     elapsed_s: float = 0.0
     eta_s: float | None = None
+    result: Any = None  # what the job returned when it ended (a verification's JobOutcome)
     version: int = 0  # bumped on every change: screens redraw when it moved
     _eta: Eta = field(default_factory=Eta)
 

@@ -1,0 +1,210 @@
+"""The Compensation page's controller: reads the drives' tables and runs push, rollback and
+verify through station.table_jobs (the same jobs and procedures as the command line), in
+worker threads. It asks for confirmation with a dialog on the UI thread and posts the outcome
+back as messages; it never touches a widget from a worker.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+from textual.message import Message
+
+from procedures.audit import AuditLog
+from procedures.push import PushPlan
+from procedures.states import Action, AuditOutcome
+from station.tui.errors import describe
+from station.tui.messages import Notice
+from station.tui.screens.common import ConfirmScreen
+from station.tui.screens.compensation_widgets import DriveTable
+
+if TYPE_CHECKING:  # pragma: no cover
+    from station.tui.app import StationApp
+
+
+RIG_WAIT_S = 5.0
+"""How long an action waits for the rig (a status poll, another action) before saying it is busy."""
+
+
+class DriveTablesRead(Message):
+    def __init__(self, tables: dict[int, DriveTable]) -> None:
+        super().__init__()
+        self.tables = tables
+
+
+class TableJobDone(Message):
+    """A push or rollback ended, whichever way (`job`: station.table_jobs.JobOutcome, or None
+    with `error` when it could not run)."""
+
+    def __init__(self, action: Action, leg: int, job: Any = None, error: str = "") -> None:
+        super().__init__()
+        self.action = action
+        self.leg = leg
+        self.job = job
+        self.error = error
+
+
+class VerificationDone(Message):
+    def __init__(self, leg: int, job: Any) -> None:
+        super().__init__()
+        self.leg = leg
+        self.job = job
+
+
+class CompensationController:
+    """Runs the page's jobs for `screen` (a Textual screen: workers and messages go through it)."""
+
+    def __init__(self, screen) -> None:
+        self.screen = screen
+
+    @property
+    def app(self) -> "StationApp":
+        return self.screen.app
+
+    def audit(self) -> AuditLog:
+        """The audit log `station push/rollback/verify` use: <recordings_dir>/audit.jsonl."""
+        return AuditLog(self.app.cfg.audit_path, operator=self.app.cfg.operator)
+
+    def refusal(self, what: str) -> str:
+        """Why the rig cannot take `what` now ("" = it can)."""
+        if self.app.rig is None:
+            return "Not connected to the rig: connect on the Rig screen (F1)."
+        if self.app.sweep.active:
+            return f"A sweep is running: {what.lower()} only when it has ended."
+        return ""
+
+    # -- reading the drives ----------------------------------------------------------------------------
+    def read_drives(self, legs: list[int]) -> None:
+        self.screen.run_worker(lambda: self._read_drives(legs), thread=True, exclusive=True, group="drive-tables",
+                               exit_on_error=False)
+
+    def _read_drives(self, legs: list[int]) -> None:
+        rig, lock = self.app.rig, self.app.rig_lock
+        if rig is None or not lock.acquire(timeout=RIG_WAIT_S):
+            return
+        out: dict[int, DriveTable] = {}
+        try:
+            for leg in legs:
+                dt = DriveTable(leg)
+                axis = rig.axes.get(leg)
+                if axis is None:
+                    dt.error = "no drive connected for this leg"
+                else:
+                    try:
+                        dt.identity = axis.identity()
+                        dt.active_bank = axis.active_bank()
+                        dt.table = axis.read_table(dt.active_bank)
+                    except Exception as exc:
+                        dt.error = describe(exc)
+                out[leg] = dt
+        finally:
+            lock.release()
+        self.screen.post_message(DriveTablesRead(out))
+
+    # -- push and rollback ---------------------------------------------------------------------------
+    def push(self, leg: int, table, source: dict | None) -> None:
+        """Push `table` (a procedures.table.LegTable) to `leg`'s drive after a confirmation."""
+        from station.table_jobs import push_job
+
+        self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
+            axis, table, audit=audit, drive_url=url, source=source, confirm=self.confirm))
+
+    def rollback(self, leg: int) -> None:
+        from station.table_jobs import rollback_job
+
+        self._table_job(Action.ROLLBACK, leg, lambda axis, audit, url: rollback_job(
+            axis, audit=audit, drive_url=url, confirm=self.confirm))
+
+    def _table_job(self, action: Action, leg: int, start) -> None:
+        def work() -> None:
+            from station.wiring import drive_url_of
+
+            rig, lock = self.app.rig, self.app.rig_lock
+            if rig is None:
+                self.screen.post_message(TableJobDone(action, leg, error="Not connected to the rig."))
+                return
+            if not lock.acquire(timeout=RIG_WAIT_S):
+                self.screen.post_message(TableJobDone(action, leg, error="The rig is busy; nothing was written. Try again."))
+                return
+            try:
+                job = start(rig.axes[leg], self.audit(), drive_url_of(self.app.cfg))
+            except Exception as exc:  # an audit log that cannot be written, a drive gone: said, not raised
+                self.screen.post_message(TableJobDone(action, leg, error=describe(exc, f"{action} of leg {leg}")))
+                return
+            finally:
+                lock.release()
+            self.screen.post_message(TableJobDone(action, leg, job))
+
+        self.screen.run_worker(work, thread=True, exclusive=True, group="push", exit_on_error=False)
+
+    def confirm(self, plan: PushPlan) -> bool:
+        """The procedures' `Confirm`, called on the worker thread: a dialog on the UI thread,
+        waited for. False (cancelled) if the app closes meanwhile."""
+        answer: dict[str, bool] = {}
+        done = threading.Event()
+        lines = plan.describe()
+        if self.app.hide_volatile:
+            lines = [line.split(" at ")[0] if line.startswith(f"leg {plan.leg}: drive") else line for line in lines]
+        verb = "Push this table to" if plan.action == Action.PUSH else "Roll back the table of"
+        question = (f"[b]{verb} leg {plan.leg}[/b], drive [b]{plan.drive}[/b]?\n\n" + "\n".join(lines)
+                    + "\n\nThe drive's current table is backed up in the audit log first; on any failure it stays active.")
+
+        def answered(yes: bool | None) -> None:
+            answer["yes"] = bool(yes)
+            done.set()
+
+        def ask() -> None:
+            self.app.push_screen(ConfirmScreen(question, yes="Push" if plan.action == Action.PUSH else "Roll back",
+                                               no="Cancel"), answered)
+
+        self.app.call_from_thread(ask)
+        while not done.wait(0.2):
+            if not self.app.is_running:
+                return False
+        return answer["yes"]
+
+    def notice(self, message: TableJobDone) -> tuple[str, str]:
+        """(text, severity) for how a push or rollback ended."""
+        title = f"{message.action} of leg {message.leg}"
+        if message.error:
+            return message.error, "error"
+        job = message.job
+        problems = "".join(f" (audit log: {p})" for p in job.audit_problems)
+        end = job.finished
+        if end.outcome == AuditOutcome.OK:
+            r = end.result
+            done = "pushed and active" if message.action == Action.PUSH else "rolled back"
+            warn = "" if r.table_enabled else " Warning: the drive does not apply its table (table_enable = 0)."
+            return (f"Leg {r.leg}: table {done} in bank {r.bank} (was bank {r.previous_bank}); backup in the audit log."
+                    f"{warn}{problems}", "information")
+        if end.outcome == AuditOutcome.CANCELLED:
+            return f"{message.action.capitalize()} cancelled; nothing was written.{problems}", "information"
+        return f"{title} {end.outcome}: {end.message}{problems}", "error"
+
+    # -- verify ----------------------------------------------------------------------------------------
+    def verify(self, leg: int, analysis) -> bool:
+        """A verification sweep of `leg` with its table active, repeating the plan of the
+        calibration on show (`analysis.session`), through station.table_jobs.verify_job on the
+        Sweep page. False (and a notice) when it cannot start."""
+        from procedures.plans import SweepPlan
+        from station.table_jobs import verify_job
+        from station.tui.app import default_session_path
+        from station.wiring import drive_url_of
+
+        try:
+            plan = replace(SweepPlan.from_dict(analysis.session.plan), legs=(leg,), kind="verification", notes=())
+        except Exception as exc:
+            self.app.post_message(Notice(describe(exc, "the calibration's plan cannot be repeated"), "error", "Verify"))
+            return False
+        made = default_session_path(self.app.cfg, (leg,))  # runs/ui-STAMP-legN.h5
+        out = made.with_name("verify-" + made.name.removeprefix("ui-"))
+        before, cfg, audit = analysis.session, self.app.cfg, self.audit()
+
+        def job(rig, sinks, control):
+            return verify_job(rig, plan, out, cfg, audit=audit, before=before, drive_url=drive_url_of(cfg),
+                              sinks=sinks, control=control)
+
+        return self.app.start_sweep(plan, out, label=f"verification of leg {leg}", job=job,
+                                    on_done=lambda state: self.screen.post_message(VerificationDone(leg, state.result)))
