@@ -2,13 +2,20 @@
 
 Abort must stop motion even while the procedure is blocked inside a move: `abort()` therefore
 calls the registered stop callbacks (the axes' quick stop) directly from the caller's thread.
+
+Pause is handled in one place, `checkpoint()`: the procedure delegates to it (`yield from`)
+before each motion step; when a pause was requested it yields `Paused`, blocks until resumed or
+aborted, and yields `Resumed`. Every actual pause is therefore announced to the sinks, and nothing
+moves in between. `check()` only raises `Aborted`; it never blocks.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-from typing import Callable
+from typing import Callable, Iterator
+
+from procedures import events as ev
 
 log = logging.getLogger(__name__)
 
@@ -24,6 +31,7 @@ class RunControl:
         self._running.set()  # not paused
         self._stops: list[Callable[[], None]] = []
         self._lock = threading.Lock()
+        self._closing = threading.Event()
         self.reason = ""
 
     # -- front end side ------------------------------------------------------------------
@@ -59,15 +67,34 @@ class RunControl:
         with self._lock:
             self._stops.append(stop)
 
-    def check_pause_only(self) -> None:
-        """Block while paused (returns at once when aborted, so the run can end)."""
-        self._running.wait()
-
     def check(self) -> None:
-        """Raise `Aborted` if aborted; block while paused."""
+        """Raise `Aborted` if aborted (never blocks: pausing is `checkpoint()`'s)."""
         if self._abort.is_set():
             raise Aborted(self.reason)
-        if not self._running.is_set():
-            self._running.wait()
-            if self._abort.is_set():
-                raise Aborted(self.reason)
+
+    def checkpoint(self) -> Iterator[ev.Event]:
+        """Where a procedure may pause: `yield from control.checkpoint()` before a motion step.
+
+        Raises `Aborted` if aborted. If paused, yields `Paused`, blocks until resumed (or aborted:
+        abort wakes a paused run), yields `Resumed`, and raises `Aborted` if the run was aborted
+        meanwhile. The pause is decided here and only here, so a pause is never taken without
+        its events, and a pause requested after this returned is taken at the next checkpoint.
+        """
+        self.check()
+        if self._running.is_set():
+            return
+        yield ev.Paused()
+        self._running.wait()
+        yield ev.Resumed()
+        self.check()
+
+    # -- runner side -----------------------------------------------------------------------
+    @property
+    def closing(self) -> bool:
+        """True once the run is finishing: its sweep has ended (the drives are stopped) or the
+        runner is closing the procedure and the sinks. Nothing moves any more."""
+        return self._closing.is_set()
+
+    def begin_closing(self) -> None:
+        """The runner is finishing: from here on an interrupt must not cut the cleanup short."""
+        self._closing.set()

@@ -4,11 +4,15 @@
   display sink that fails is dropped and logged, the run goes on.
 - The procedure is only resumed after every sink has handled the event, so a point the
   recorder acknowledged is on disk before the next move.
-- Pause: the runner stops pulling events (the procedure is suspended between points, so nothing
-  moves) and emits `Paused`/`Resumed`. Abort: `RunControl.abort()` quick-stops the axes from the
-  caller's thread; the procedure ends with outcome "aborted".
+- Pause: the procedure pauses at its checkpoints (`yield from control.checkpoint()`, before each
+  motion step), which yield `Paused`/`Resumed` around the wait; the runner passes them on like
+  any event. Abort: `RunControl.abort()` quick-stops the axes from the caller's thread; the
+  procedure ends with outcome "aborted".
 - Whatever happens (exception, Ctrl-C, a failed recorder), the `finally` closes the procedure,
-  whose own `finally` stops and disables the drives, and then closes every sink.
+  whose own `finally` stops and disables the drives, and then closes every sink with the outcome:
+  a KeyboardInterrupt (a forced Ctrl-C) closes them "aborted", any other exception "failed".
+  `RunControl.begin_closing()` marks the finishing (from `SweepFinished` on, and the cleanup),
+  so an interrupt handler can keep a further Ctrl-C from cutting it short (station/interrupt.py).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from typing import Callable, Iterable, Iterator, Protocol
 
 from procedures import events as ev
 from procedures.control import RunControl
+from procedures.states import Outcome
 
 log = logging.getLogger(__name__)
 
@@ -26,7 +31,7 @@ class Sink(Protocol):
     critical: bool
 
     def handle(self, event: ev.Event) -> None: ...
-    def close(self, outcome: str) -> None: ...
+    def close(self, outcome: Outcome) -> None: ...
 
 
 class ListSink:
@@ -40,7 +45,7 @@ class ListSink:
     def handle(self, event: ev.Event) -> None:
         self.events.append(event)
 
-    def close(self, outcome: str) -> None:
+    def close(self, outcome: Outcome) -> None:
         pass
 
     def of(self, kind: type) -> list:
@@ -58,13 +63,13 @@ class CallbackSink:
     def handle(self, event: ev.Event) -> None:
         self.fn(event)
 
-    def close(self, outcome: str) -> None:
+    def close(self, outcome: Outcome) -> None:
         pass
 
 
 class RunResult:
     def __init__(self) -> None:
-        self.outcome = "failed"
+        self.outcome: Outcome = Outcome.FAILED
         self.reason = ""
         self.points = 0
         self.finished: ev.SweepFinished | None = None
@@ -92,29 +97,47 @@ def run(
 
     try:
         for event in procedure:
+            if isinstance(event, ev.SweepFinished):
+                control.begin_closing()  # the drives are stopped; what is left is finishing the files
             emit(event)
             if isinstance(event, ev.PointMeasured):
                 result.points = event.done
             if isinstance(event, ev.SweepFinished):
                 result.finished = event
-                result.outcome, result.reason = event.outcome, event.reason
-            if control.paused and not control.aborted:
-                emit(ev.Paused())
-                control.check_pause_only()
-                emit(ev.Resumed())
+                result.outcome, result.reason = Outcome(event.outcome), event.reason
+        control.begin_closing()
     except KeyboardInterrupt:
-        result.outcome, result.reason = "interrupted", "interrupted (Ctrl-C)"
+        # Ctrl-C that was not turned into an abort, or a second one that forces the stop: the
+        # operator stopped the run, and the recording is finished as aborted like any abort
+        control.begin_closing()
+        result.outcome = Outcome.ABORTED
+        result.reason = "interrupted (Ctrl-C twice)" if control.aborted else "interrupted (Ctrl-C)"
         raise
     except Exception as exc:
-        result.outcome, result.reason = "failed", f"{type(exc).__name__}: {exc}"
+        control.begin_closing()
+        result.outcome, result.reason = Outcome.FAILED, f"{type(exc).__name__}: {exc}"
         raise
     finally:
+        control.begin_closing()
         procedure_close = getattr(procedure, "close", None)
-        if procedure_close is not None:
-            procedure_close()  # runs the procedure's finally: drives stopped and disabled
-        for sink in sinks:
-            try:
-                sink.close(result.outcome)
-            except Exception:
-                log.exception("sink %r failed to close", sink)
+        try:
+            if procedure_close is not None:
+                procedure_close()  # runs the procedure's finally: drives stopped and disabled
+        finally:
+            _close_sinks(sinks, result.outcome)
     return result
+
+
+def _close_sinks(sinks: list[Sink], outcome: Outcome) -> None:
+    """Close every sink with `outcome`; one failing (even interrupted) does not keep the others
+    open. A KeyboardInterrupt is re-raised once all are closed."""
+    interrupted: BaseException | None = None
+    for sink in sinks:
+        try:
+            sink.close(outcome)
+        except Exception:
+            log.exception("sink %r failed to close", sink)
+        except KeyboardInterrupt as exc:
+            interrupted = exc
+    if interrupted is not None:
+        raise interrupted

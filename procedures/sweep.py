@@ -31,6 +31,7 @@ from procedures import events as ev
 from procedures.control import Aborted, RunControl
 from procedures.plans import PlanPoint, SweepPlan
 from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
+from procedures.states import FaultKind, Outcome
 
 log = logging.getLogger(__name__)
 
@@ -54,16 +55,16 @@ class SweepFailed(Exception):
         self.fault = fault
 
 
-def _kind(exc: BaseException) -> str:
+def _kind(exc: BaseException) -> FaultKind:
     if isinstance(exc, BeamBreak):
-        return "beam_break"
+        return FaultKind.BEAM_BREAK
     if isinstance(exc, DriveFault):
-        return "drive_fault"
+        return FaultKind.DRIVE_FAULT
     if isinstance(exc, CommTimeout):
-        return "timeout"
+        return FaultKind.TIMEOUT
     if isinstance(exc, FramingError):
-        return "framing"
-    return "error"
+        return FaultKind.FRAMING
+    return FaultKind.ERROR
 
 
 def sweep(
@@ -80,8 +81,9 @@ def sweep(
 ) -> Iterator[ev.Event]:
     """Run `plan`, skipping plan indices in `done_indices` (resume). Yields events.
 
-    Ends with `SweepFinished(outcome=...)`: "completed", "aborted" or "failed" (retries
-    exhausted; the `Fault` event before it names the point).
+    Ends with `SweepFinished(outcome=...)`: COMPLETED, ABORTED or FAILED (retries exhausted;
+    the `Fault` event before it names the point). Pauses at the start of each point and of each
+    retry, before any motion (`RunControl.checkpoint`: `Paused` ... `Resumed`).
     """
     control = control or RunControl()
     missing = [leg for leg in plan.legs if leg not in axes]
@@ -111,7 +113,7 @@ def sweep(
                 "(station rollback), or a table made from this session replaces the active one instead "
                 "of adding to it.", "warning")
 
-    outcome, reason = "completed", ""
+    outcome, reason = Outcome.COMPLETED, ""
     current_leg: int | None = None
     prev: PlanPoint | None = None
     env: Environment | None = None
@@ -119,7 +121,7 @@ def sweep(
     try:
         laser.set_averaging(plan.averaging_s)
         for p in points:
-            control.check()
+            yield from control.checkpoint()
             if p.leg != current_leg:
                 if current_leg is not None:
                     axes[current_leg].disable()
@@ -133,7 +135,7 @@ def sweep(
             record = None
             attempt = 0
             while record is None:
-                control.check()
+                yield from control.checkpoint()
                 attempt += 1
                 try:
                     axis = axes[p.leg]
@@ -161,14 +163,15 @@ def sweep(
                     if control.aborted:
                         raise Aborted(control.reason) from exc
                     kind = _kind(exc)
-                    limit = {"beam_break": retry.beam_retries, "drive_fault": retry.drive_retries}.get(kind, retry.comm_retries)
+                    limit = {FaultKind.BEAM_BREAK: retry.beam_retries, FaultKind.DRIVE_FAULT: retry.drive_retries}.get(
+                        kind, retry.comm_retries)
                     gave_up = attempt > limit
                     fault = ev.Fault(p.index, p.leg, p.run, p.target_mm, kind, str(exc), attempt, gave_up, clock.now() - t_start)
                     yield fault
                     if gave_up:
                         raise SweepFailed(fault) from exc
                     contiguous = False  # re-approach so the point keeps its direction
-                    if kind == "beam_break":
+                    if kind is FaultKind.BEAM_BREAK:
                         flags |= FLAG_RETRIED_BEAM
                         clock.sleep(retry.beam_wait_s)
                         contiguous = True  # the axis did not move: only re-read
@@ -179,9 +182,9 @@ def sweep(
             prev = p
             yield ev.PointMeasured(record, done, total)
     except Aborted as exc:
-        outcome, reason = "aborted", str(exc)
+        outcome, reason = Outcome.ABORTED, str(exc)
     except SweepFailed as exc:
-        outcome, reason = "failed", str(exc)
+        outcome, reason = Outcome.FAILED, str(exc)
     finally:
         _stop_all(axes, plan.legs)
     yield ev.SweepFinished(outcome, done, reason)
