@@ -11,6 +11,7 @@ from procedures.plans import parse_legs, SweepPlan
 from station.config import load_config
 from station.jobs import plan_of_recording, run_sweep
 from procedures.control import RunControl
+from procedures.states import Outcome
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.wiring import open_rig
@@ -77,14 +78,19 @@ def run(args) -> int:
         plan = build_plan(args)
     for note in plan.notes:
         print(f"note: {note}")
+    resume_hint = f"resume with: station sweep --resume {out}" + (" --sim" if cfg.is_sim else f" --config {args.config}")
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:
-            result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
-                               resume=bool(args.resume))
+            try:
+                result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
+                                   resume=bool(args.resume))
+            except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
+                print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))\n{resume_hint}")
+                return 130
     print(f"session: {out} ({result.outcome}, {result.points} of {plan.total_points} points)")
-    if result.outcome == "completed":
+    if result.outcome == Outcome.COMPLETED:
         print(f"next: station iso230 {out}   |   station fit {out} --out model.json")
         return 0
-    print(f"resume with: station sweep --resume {out}" + (" --sim" if cfg.is_sim else f" --config {args.config}"))
+    print(resume_hint)
     return 1
