@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from procedures.states import Outcome
+
 SCHEMA_VERSION = "1.0"  # major.minor; readers refuse another major
 
 # (name, numpy type, unit) -- the unit goes into the `units_<name>` attribute
@@ -55,7 +57,7 @@ FAULT_FIELDS: list[tuple[str, str, str]] = [
     ("run", "<i4", "1"),
     ("target_mm", "<f8", "mm"),
     ("time_s", "<f8", "s"),
-    ("kind", "S16", ""),  # beam_break / drive_fault / timeout / framing / aborted
+    ("kind", "S16", ""),  # a FaultKind value: beam_break / drive_fault / timeout / framing / error
     ("attempt", "<i2", "1"),
     ("gave_up", "<i1", "1"),  # 1 when retries were exhausted and the point was skipped/failed
     ("message", "S200", ""),
@@ -84,8 +86,8 @@ the session was resumed ("[]" when never)."""
 META_ATTRS = ("plan", "station_config", "devices")
 """Attributes of the /meta group: JSON text."""
 
-OUTCOMES = ("completed", "aborted", "failed")
-"""Values of the root `outcome` attribute once a session is finished."""
+# The root `outcome` attribute of a finished session holds an `Outcome.written()` value
+# (procedures/states.py): "completed", "aborted" or "failed"; "" while open or when cut short.
 
 POINTS_CHUNK_ROWS = 32  # 3.5 kB: each flush rewrites the whole last chunk, so keep it about a page
 FAULTS_CHUNK_ROWS = 16

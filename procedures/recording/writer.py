@@ -30,7 +30,6 @@ from procedures.recording.schema import (
     FAULT_DTYPE,
     FAULT_UNITS,
     FAULTS_CHUNK_ROWS,
-    OUTCOMES,
     POINT_DTYPE,
     POINT_REQUIRED_KEYS,
     POINT_UNITS,
@@ -38,6 +37,7 @@ from procedures.recording.schema import (
     SCHEMA_VERSION,
     UNWRITTEN_INDEX,
 )
+from procedures.states import Outcome
 
 # v1.10 file format: needed for SWMR, and still readable by HDF5 1.10 tools (Debian's h5dump).
 LIBVER = ("v110", "v110")
@@ -257,11 +257,13 @@ class SessionLock:
         self._fd: int | None = fd
 
     def release(self) -> None:
-        if self._fd is None:
+        fd, self._fd = self._fd, None  # first: a release cut short is not repeated on a closed fd
+        if fd is None:
             return
-        self.lock_path.unlink(missing_ok=True)
-        os.close(self._fd)
-        self._fd = None
+        try:
+            self.lock_path.unlink(missing_ok=True)
+        finally:
+            os.close(fd)
 
 
 class SessionWriter:
@@ -283,7 +285,7 @@ class SessionWriter:
         self._indices: set[int] = {int(i) for i in points_index}
         self._points_written = len(points_index)
         self._faults_written = faults_written
-        self._finished_outcome: str | None = None
+        self._finished_outcome: Outcome | None = None
         self._f = h5py.File(path, "a", libver=LIBVER)
         try:
             self._pds = self._f["points"]
@@ -462,14 +464,18 @@ class SessionWriter:
 
     # -- ending ----------------------------------------------------------------------------
 
-    def finish(self, outcome: str) -> None:
-        """Record `outcome` ("completed", "aborted" or "failed") and the end time, and close.
+    def finish(self, outcome: Outcome | str) -> None:
+        """Record `outcome` (COMPLETED, ABORTED or FAILED, or their strings) and the end time,
+        and close. The attribute holds the plain string ("completed", ...).
 
         The end attributes are written after leaving SWMR mode (close, reopen): a kill in
         between leaves every point and an unset outcome, read back as "incomplete".
         """
-        if outcome not in OUTCOMES:
-            raise ValueError(f"outcome must be one of {', '.join(OUTCOMES)}, got {outcome!r}")
+        written = Outcome.written()
+        if outcome not in written:
+            # refuse before closing anything: the caller can still finish with a valid outcome
+            raise ValueError(f"outcome must be one of {', '.join(written)}, got {outcome!r}")
+        outcome = Outcome(outcome)
         self._close_file()
         try:
             try:
@@ -480,7 +486,7 @@ class SessionWriter:
                 f = h5py.File(self.path, "a", libver=LIBVER, locking=False)
             with f:
                 f.attrs["ended_utc"] = utc_now()
-                f.attrs["outcome"] = outcome
+                f.attrs["outcome"] = outcome.value  # a plain str: h5py stores it as before
             _fsync_path(self.path)
         finally:
             self._lock.release()
@@ -509,7 +515,7 @@ class SessionWriter:
             self.close()
             return
         try:
-            self.finish("aborted" if issubclass(exc_type, KeyboardInterrupt) else "failed")
+            self.finish(Outcome.ABORTED if issubclass(exc_type, KeyboardInterrupt) else Outcome.FAILED)
         except Exception:
             self.close()
 
