@@ -16,6 +16,7 @@ from types import MappingProxyType
 from typing import Any, Mapping, Sequence
 
 from drivers.errors import DriverError
+from drivers.states import DriveState
 from drivers.modbus.codec import (
     TYPE_WORDS,
     WORD_ORDERS,
@@ -51,10 +52,7 @@ REQUIRED_SW_BITS = (
 REQUIRED_HEADER = ("point_count", "start_position", "spacing", "units", "checksum", "valid")
 REQUIRED_FAULTS = ("soft_limit",)
 
-STATES = (
-    "not_ready", "switch_on_disabled", "ready_to_switch_on", "switched_on",
-    "operation_enabled", "quick_stop_active", "fault",
-)  # fmt: skip
+STATES = tuple(DriveState)  # the CiA 402 states a statusword decodes to
 
 
 class ProfileError(DriverError, ValueError):
@@ -274,35 +272,35 @@ class DriveProfile:
     def cw_bit(self, controlword: int, name: str) -> bool:
         return bool(controlword >> self.controlword_bits[name] & 1)
 
-    def state_of(self, statusword: int) -> str:
-        """CiA 402 state name of a statusword (see drivers.interfaces.DriveStatus.state)."""
+    def state_of(self, statusword: int) -> DriveState:
+        """CiA 402 state of a statusword (see drivers.interfaces.DriveStatus.state)."""
         bit = lambda n: self.sw_bit(statusword, n)  # noqa: E731
         if bit("fault"):
-            return "fault"
+            return DriveState.FAULT
         if bit("switch_on_disabled"):
-            return "switch_on_disabled"
+            return DriveState.SWITCH_ON_DISABLED
         if bit("operation_enabled"):
-            return "operation_enabled" if bit("quick_stop") else "quick_stop_active"
+            return DriveState.OPERATION_ENABLED if bit("quick_stop") else DriveState.QUICK_STOP_ACTIVE
         if bit("switched_on"):
-            return "switched_on"
+            return DriveState.SWITCHED_ON
         if bit("ready_to_switch_on"):
-            return "ready_to_switch_on"
-        return "not_ready"
+            return DriveState.READY_TO_SWITCH_ON
+        return DriveState.NOT_READY
 
-    def statusword_of(self, state: str, **flags: bool) -> int:
+    def statusword_of(self, state: DriveState | str, **flags: bool) -> int:
         """The statusword a drive in `state` reports, with extra bits (`target_reached=True`, ...).
 
         Bit patterns as CiA 402 (voltage_enabled follows the power stage).
         """
         on = {
-            "not_ready": (),
-            "switch_on_disabled": ("switch_on_disabled", "quick_stop"),
-            "ready_to_switch_on": ("ready_to_switch_on", "quick_stop", "voltage_enabled"),
-            "switched_on": ("ready_to_switch_on", "switched_on", "quick_stop", "voltage_enabled"),
-            "operation_enabled": ("ready_to_switch_on", "switched_on", "operation_enabled", "quick_stop", "voltage_enabled"),
-            "quick_stop_active": ("ready_to_switch_on", "switched_on", "operation_enabled", "voltage_enabled"),
-            "fault": ("fault",),
-        }[state]
+            DriveState.NOT_READY: (),
+            DriveState.SWITCH_ON_DISABLED: ("switch_on_disabled", "quick_stop"),
+            DriveState.READY_TO_SWITCH_ON: ("ready_to_switch_on", "quick_stop", "voltage_enabled"),
+            DriveState.SWITCHED_ON: ("ready_to_switch_on", "switched_on", "quick_stop", "voltage_enabled"),
+            DriveState.OPERATION_ENABLED: ("ready_to_switch_on", "switched_on", "operation_enabled", "quick_stop", "voltage_enabled"),
+            DriveState.QUICK_STOP_ACTIVE: ("ready_to_switch_on", "switched_on", "operation_enabled", "voltage_enabled"),
+            DriveState.FAULT: ("fault",),
+        }[DriveState(state)]
         word = 0
         for n in on:
             word |= 1 << self.statusword_bits[n]

@@ -49,6 +49,7 @@ from drivers.interfaces import Clock
 from drivers.modbus.codec import crc16_modbus
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.plant import LegPlant
+from drivers.states import DriveState
 
 log = logging.getLogger(__name__)
 
@@ -147,7 +148,7 @@ class _DriveModel:
                 self.readable[a0 : a0 + self.t.max_points] = b"\1" * self.t.max_points
                 self.writable[a0 : a0 + self.t.max_points] = b"\1" * self.t.max_points
         # drive state
-        self.state = "switch_on_disabled"
+        self.state = DriveState.SWITCH_ON_DISABLED
         self.fault_code = 0
         self.internal_limit = False
         self.set_point_ack = False
@@ -306,7 +307,7 @@ class _DriveModel:
 
     def _fault(self, code: int) -> None:
         self._halt()
-        self.state = "fault"
+        self.state = DriveState.FAULT
         self.fault_code = code
 
     def inject_fault(self, code: int) -> None:
@@ -318,37 +319,37 @@ class _DriveModel:
         bit = lambda n: self.p.cw_bit(cw, n)  # noqa: E731
         rising_reset = bit("fault_reset") and not self.p.cw_bit(self.cw_prev, "fault_reset")
         self.cw_prev = cw
-        if self.state == "fault":
+        if self.state == DriveState.FAULT:
             if rising_reset:
-                self.state = "switch_on_disabled"
+                self.state = DriveState.SWITCH_ON_DISABLED
                 self.fault_code = 0
                 self.internal_limit = False
             return
         ev, qs, so, eo = bit("enable_voltage"), bit("quick_stop"), bit("switch_on"), bit("enable_operation")
         s = self.state
         if not ev:  # disable voltage
-            if s != "switch_on_disabled":
+            if s != DriveState.SWITCH_ON_DISABLED:
                 self._halt()
-            s = "switch_on_disabled"
+            s = DriveState.SWITCH_ON_DISABLED
         elif not qs:  # quick stop
-            if s == "operation_enabled":
+            if s == DriveState.OPERATION_ENABLED:
                 self._halt()
-                s = "quick_stop_active"
-            elif s in ("ready_to_switch_on", "switched_on"):
-                s = "switch_on_disabled"
+                s = DriveState.QUICK_STOP_ACTIVE
+            elif s in (DriveState.READY_TO_SWITCH_ON, DriveState.SWITCHED_ON):
+                s = DriveState.SWITCH_ON_DISABLED
         elif not so:  # shutdown
-            if s in ("switch_on_disabled", "switched_on", "operation_enabled"):
+            if s in (DriveState.SWITCH_ON_DISABLED, DriveState.SWITCHED_ON, DriveState.OPERATION_ENABLED):
                 self._halt()
-                s = "ready_to_switch_on"
+                s = DriveState.READY_TO_SWITCH_ON
         elif not eo:  # switch on (or disable operation)
-            if s in ("ready_to_switch_on", "operation_enabled"):
+            if s in (DriveState.READY_TO_SWITCH_ON, DriveState.OPERATION_ENABLED):
                 self._halt()
-                s = "switched_on"
+                s = DriveState.SWITCHED_ON
         else:  # enable operation
-            if s in ("switched_on", "quick_stop_active"):
-                s = "operation_enabled"
+            if s in (DriveState.SWITCHED_ON, DriveState.QUICK_STOP_ACTIVE):
+                s = DriveState.OPERATION_ENABLED
         self.state = s
-        self.set_point_ack = bit("new_set_point") and s == "operation_enabled"
+        self.set_point_ack = bit("new_set_point") and s == DriveState.OPERATION_ENABLED
         if self.set_point_ack:
             self._start_move(self._get("target_position"))
 
@@ -718,8 +719,8 @@ class SimDriveServer:
             m = self._models[leg]
             return m.reads, m.writes
 
-    def state(self, leg: int) -> str:
-        """CiA 402 state name of drive `leg` (inspection for tests)."""
+    def state(self, leg: int) -> DriveState:
+        """CiA 402 state of drive `leg` (inspection for tests)."""
         with self.lock:
             return self._models[leg].state
 
