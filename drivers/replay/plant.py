@@ -22,6 +22,7 @@ from typing import Callable
 from drivers.replay.clock import ReplayClock
 from drivers.replay.errors import ReplayMismatch
 from drivers.replay.script import ReplayPoint, ReplayScript
+from drivers.states import FaultKind
 
 
 @dataclass(frozen=True)
@@ -118,7 +119,7 @@ class ReplayPlant:
         if p.has_value:
             self.load_n = p.load_n
             self.reported_position_mm = p.drive_position_mm
-        if self._pending and self._pending[0].kind == "drive_fault":
+        if self._pending and self._pending[0].kind == FaultKind.DRIVE_FAULT:
             fault = self._pending.popleft()
             self.state.clock.set_recorded(fault.time_s)
             return fault.code
@@ -136,18 +137,18 @@ class ReplayPlant:
         assert p is not None
         if self._pending:
             fault = self._pending[0]
-            if fault.kind == "drive_fault":
+            if fault.kind == FaultKind.DRIVE_FAULT:
                 return self._mismatch(
                     f"replay: {self.state.script.source} records a drive fault (attempt {fault.attempt}) at "
                     f"{p.describe()} before its reading, but the drive was not commanded to the target again"
                 )
             self._pending.popleft()
             self.state.clock.set_recorded(fault.time_s)
-            if fault.kind == "beam_break":
+            if fault.kind == FaultKind.BEAM_BREAK:
                 return LaserAnswer("beam", p)
-            if fault.kind in ("timeout", "framing"):
+            if fault.kind in (FaultKind.TIMEOUT, FaultKind.FRAMING):
                 # the client retries a silent or garbled reply: stay so until the next move
-                self._laser_mode = "silent" if fault.kind == "timeout" else "garbage"
+                self._laser_mode = "silent" if fault.kind == FaultKind.TIMEOUT else "garbage"
                 return LaserAnswer(self._laser_mode, p)
             return LaserAnswer("error", p, f"replayed fault: {fault.message}")
         if not p.has_value:

@@ -22,9 +22,10 @@ from typing import Mapping
 import numpy as np
 
 from drivers.replay.errors import ReplayDataError
+from drivers.states import FaultKind
 
-FAULT_KINDS = ("beam_break", "drive_fault", "timeout", "framing", "error")
-"""Fault kinds the replay devices reproduce (the sweep's `Fault.kind` values)."""
+FAULT_KINDS = tuple(FaultKind)
+"""Fault kinds the replay devices reproduce (the sweep's `Fault.kind` values: every `FaultKind`)."""
 
 DEFAULT_DRIVE_FAULT_CODE = 0x8611  # following error: used when a recorded message names no code
 
@@ -41,7 +42,7 @@ class ReplayFault:
     drive faults the drive's fault `code` (taken from the message, else a following-error code)."""
 
     attempt: int
-    kind: str
+    kind: FaultKind
     time_s: float
     message: str
     gave_up: bool
@@ -162,7 +163,8 @@ class ReplayScript:
                 )
             message = _text(row["message"])
             code = 0
-            if kind == "drive_fault":
+            kind = FaultKind(kind)
+            if kind is FaultKind.DRIVE_FAULT:
                 m = _CODE.search(message)
                 code = int(m.group(1), 16) if m else DEFAULT_DRIVE_FAULT_CODE
             grouped.setdefault(index, []).append(ReplayFault(
