@@ -10,6 +10,7 @@ from procedures.fit import fit, save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
 from procedures.plans import parse_legs
 from procedures.recording.reader import read_session
+from procedures.states import Outcome
 
 NAME = "fit"
 HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"
@@ -65,8 +66,8 @@ def run(args) -> int:
     model = fit(session.points, args.method, legs=legs, n_params=args.params, lead_mm=args.lead_mm,
                 source={"path": str(session.path), "sha256": session.sha256})
     save_model(model, out, str(session.path), session.sha256)
-    if session.outcome != "completed":
-        print(f"note: the session's outcome is {session.outcome!r}: the model uses the {session.points.size} points recorded")
+    if session.outcome != Outcome.COMPLETED:
+        print(f"note: the session's outcome is '{session.outcome}': the model uses the {session.points.size} points recorded")
     for key, state in sorted(session.devices.items()):
         if key.endswith("_compensation") and " points from " in state:
             print(f"warning: {key.split('_')[0].replace('leg', 'leg ')} was recorded with a compensation table "

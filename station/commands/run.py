@@ -16,6 +16,7 @@ from procedures.plans import parse_legs
 from station.config import load_config
 from station.jobs import run_sweep
 from procedures.control import RunControl
+from procedures.states import Outcome
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.wiring import open_rig
@@ -40,7 +41,7 @@ def run(args) -> int:
         with abort_on_sigint(RunControl()) as control:
             result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control)
     print(f"session recorded: {out.resolve()} ({result.outcome}, {result.points} points)")
-    if result.outcome != "completed":
+    if result.outcome != Outcome.COMPLETED:
         return 1
     from procedures.iso230 import evaluate, format_table
     from procedures.recording.reader import read_session
