@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from procedures.states import Outcome
-
 SCHEMA_VERSION = "1.0"  # major.minor; readers refuse another major
 
 # (name, numpy type, unit) -- the unit goes into the `units_<name>` attribute
