@@ -2,19 +2,18 @@
 
 The seed paper's Section 4 experiment (procedures.platform.experiment) on a session file or a
 fitted model, written as a Markdown + JSON report (the paper's Tables 1 and 2) and histograms
-(its Figs. 9 and 10).
+(its Figs. 9 and 10). Loading the inputs and writing the report live in station/platform_jobs.py,
+which the terminal UI's Platform page uses too.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
-import numpy as np
-
 from procedures.errors import InputError
+from station.platform_jobs import load_errors, write_report
 
 NAME = "platform"
 HELP = "pose errors of the platform from leg errors, before and after compensation (paper's Table 2)"
@@ -28,12 +27,6 @@ DESCRIPTION = (
     "paper's setting) and, on the same poses, one recorded pass (repeatability included); both are "
     "reported. Writes platform_report.md, platform_summary.json and histograms to --out."
 )
-
-REPORT_MD = "platform_report.md"
-SUMMARY_JSON = "platform_summary.json"
-POSITION_PNG = "pose_position_hist.png"
-ORIENTATION_PNG = "pose_orientation_hist.png"
-LEG_PNG = "leg_error_hist.png"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -55,211 +48,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--z-mm", type=float, default=60.0, help="workspace half-range in z about home, mm (default 60)")
     p.add_argument("--tilt-deg", type=float, default=3.0, help="workspace half-range of rx and ry, degrees (default 3)")
     p.add_argument("--yaw-deg", type=float, default=0.0, help="workspace half-range of rz, degrees (default 0)")
-
-
-def _recording_for_model(src: Path, model, recording: str | Path | None) -> tuple[object, Path, bool]:
-    """The session the model's measured errors come from, and whether it is another one than the
-    model was fitted to (held out)."""
-    from procedures.recording.reader import read_session
-
-    source_path = model.source.get("path", "")
-    source_sha = model.source.get("sha256", "")
-    if recording:
-        rec_path = Path(recording)
-    elif source_path:
-        rec_path = Path(source_path)
-        if not rec_path.is_absolute() and not rec_path.exists():
-            rec_path = src.parent / source_path  # recorded relative to the model's folder
-    else:
-        raise InputError(f"{src}: the model names no recording; pass --recording FILE.h5 for the measured errors.")
-    if not rec_path.exists():
-        raise InputError(f"{src}: its recording {rec_path} is not there; pass --recording FILE.h5 for the measured errors.")
-    session = read_session(rec_path)
-    held_out = bool(source_sha) and session.sha256 != source_sha
-    if not recording and held_out:
-        raise InputError(
-            f"{rec_path} changed since {src} was fitted to it (sha256 {session.sha256[:12]}... vs "
-            f"{source_sha[:12]}...); pass --recording {rec_path} to use it anyway."
-        )
-    return session, rec_path, held_out
-
-
-def check_model_legs(model, name) -> None:
-    """Refuse a model that does not cover all six legs (InputError naming `name`)."""
-    missing = [leg for leg in range(1, 7) if leg not in model.legs]
-    if missing:
-        raise InputError(f"{name}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
-
-
-def _both_measurements(session, predicted_um, where: str, what: str, inputs: dict,
-                       measured: str | None) -> tuple[object, object, dict]:
-    """Error sources for the main measurement (`measured`, default 'mean') and the other one,
-    both from the recording's points with `predicted_um` as compensation."""
-    from procedures.platform.experiment import RecordedLegErrors
-
-    measured = measured or "mean"
-    other = "pass" if measured == "mean" else "mean"
-
-    def errors(measurement: str):
-        return RecordedLegErrors(session.points, predicted_um=predicted_um, source=where, measurement=measurement,
-                                 compensation=what)
-
-    inputs["measured"] = measured
-    return errors(measured), errors(other), inputs
-
-
-def model_errors(model, session, recording_path, model_path, *, measured: str | None = None, held_out: bool = False,
-                 model_label: str | None = None) -> tuple[object, object, dict]:
-    """Error sources (main measurement, other measurement) and the report's inputs for a fitted
-    model (procedures.fit) applied to a read session: what `station platform MODEL.json` runs,
-    also for a model held in memory (the terminal UI's; `model_path` None when it is not saved,
-    `model_label` then names it in the description)."""
-    check_model_legs(model, model_path or model_label or "the model")
-    inputs = {
-        "model": {"path": None if model_path is None else str(model_path), "method": model.method, "source": model.source},
-        "recording": {"path": str(recording_path), "sha256": session.sha256},
-        "recording_is_the_models_own": not held_out,
-    }
-    where = f"{recording_path} with model {model_label or model_path} ({model.method})"
-    return _both_measurements(session, model.predict_um, where, "the model's prediction", inputs, measured)
-
-
-def _table_errors(src: Path, recording, profile, measured: str | None) -> tuple[object, object, dict]:
-    from procedures.recording.reader import file_sha256, read_session
-    from procedures.table import read_table_csv
-    from station.wiring import drive_table_spec
-
-    if not recording:
-        raise InputError(f"{src}: a table does not name its recording; pass --recording FILE.h5 for the measured errors.")
-    table = read_table_csv(src, drive_table_spec(profile), expected_legs=6)
-    rec_path = Path(recording)
-    if not rec_path.exists():
-        raise FileNotFoundError(f"{rec_path}: no such file")
-    session = read_session(rec_path)
-
-    def predicted_um(leg, position_mm, direction):
-        return table.legs[leg].correction_um(position_mm, direction)
-
-    inputs = {
-        "table": {"path": str(src), "sha256": file_sha256(src),
-                  "step_mm": {str(leg): t.step_mm for leg, t in table.legs.items()}},
-        "recording": {"path": str(rec_path), "sha256": session.sha256},
-    }
-    return _both_measurements(session, predicted_um, f"{rec_path} with table {src}",
-                              "the table, interpolated as the drive does,", inputs, measured)
-
-
-def load_errors(source, *, recording=None, measured: str | None = None,
-                profile=None) -> tuple[object, object | None, dict]:
-    """The experiment's error source for the main tables, the one for the other measurement
-    (None with FILE.h5 alone) and a description of the inputs for the report, from a session
-    file, a model file or a table (with `recording`), as `station platform` takes them."""
-    from procedures.platform.experiment import RecordedLegErrors
-    from procedures.recording.reader import read_session
-
-    src = Path(source)
-    if not src.exists():
-        raise FileNotFoundError(f"{src}: no such file")
-    suffix = src.suffix.lower()
-    if suffix == ".json":
-        from procedures.fit import load_model
-
-        model = load_model(src)
-        check_model_legs(model, src)
-        session, rec_path, held_out = _recording_for_model(src, model, recording)
-        return model_errors(model, session, rec_path, src, measured=measured, held_out=held_out)
-    if suffix == ".csv":
-        return _table_errors(src, recording, profile, measured)
-    if recording:
-        raise InputError("--recording goes with MODEL.json or TABLE.csv; with FILE.h5 the session itself gives the errors.")
-    if measured == "mean":
-        raise InputError("--measured mean needs MODEL.json or TABLE.csv as compensation; with FILE.h5 the table is the mean "
-                         "of the other passes.")
-    session = read_session(src)
-    return RecordedLegErrors(session.points, source=str(src)), None, {"recording": {"path": str(src), "sha256": session.sha256},
-                                                                     "measured": "pass"}
-
-
-def _hist_figure(orig: np.ndarray, comp: np.ndarray, labels: list[str], unit: str, title: str, path: Path, ylabel: str = "poses") -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(labels), 2, figsize=(9, 2.4 * len(labels)), squeeze=False)
-    for k, label in enumerate(labels):
-        lo = float(min(np.min(orig[:, k]), np.min(comp[:, k])))
-        hi = float(max(np.max(orig[:, k]), np.max(comp[:, k])))
-        if not hi > lo:
-            hi = lo + 1e-12
-        bins = np.linspace(lo, hi, 41)  # same bins left and right, so the narrowing is visible
-        for col, (data, name) in enumerate(((orig[:, k], "original"), (comp[:, k], "compensated"))):
-            ax = axes[k, col]
-            counts, _ = np.histogram(data, bins=bins)
-            # one filled step artist instead of 40 bar patches: drawing stays fast
-            ax.stairs(counts, bins, fill=True, color="tab:red" if col == 0 else "tab:blue")
-            ax.set_title(f"{label}: {name} error", fontsize=9)
-            ax.set_xlabel(f"error ({unit})", fontsize=8)
-            ax.set_ylabel(ylabel, fontsize=8)
-            ax.tick_params(labelsize=7)
-    fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.22 / len(labels), top=1 - 0.25 / len(labels), hspace=0.75, wspace=0.22)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def _write_figures(result, out: Path) -> list[Path]:
-    from procedures.platform.sensitivity import ARCSEC_PER_RAD
-
-    ok = result.valid
-    e0, e1 = result.pose_error[ok], result.pose_error_compensated[ok]
-    paths = [out / POSITION_PNG, out / ORIENTATION_PNG, out / LEG_PNG]
-    _hist_figure(e0[:, :3], e1[:, :3], ["x", "y", "z"], "um", "End-effector position errors (cf. the paper's Fig. 9)", paths[0])
-    _hist_figure(e0[:, 3:] * ARCSEC_PER_RAD, e1[:, 3:] * ARCSEC_PER_RAD, ["rx", "ry", "rz"], "arcsec (1 arcsec = 4.848e-6 rad)",
-                 "End-effector orientation errors (cf. the paper's Fig. 10)", paths[1])
-    legs = result.leg_error_um[ok].reshape(-1, 1)
-    legs_c = result.leg_compensated_um[ok].reshape(-1, 1)
-    _hist_figure(legs, legs_c, ["all legs"], "um", "Leg errors at the sampled positions (cf. the paper's Figs. 7-8)", paths[2],
-                 ylabel="leg positions")
-    return paths
-
-
-def _write_text(path: Path, text: str) -> None:
-    """Write through a temporary file renamed into place: a crash never leaves half a report."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
-
-
-def write_report(out: Path, result, summary: dict, inputs: dict, geometry) -> list[Path]:
-    """Complete `summary` (from `run_measurements`) with the inputs, geometry, home sensitivity
-    and conventions, and write platform_report.md, platform_summary.json and the histograms into
-    `out` (created). Returns the paths written: report, summary, figures."""
-    from procedures.platform.geometry import describe
-    from procedures.platform.report import report_markdown
-    from procedures.platform.sensitivity import sensitivity_report
-
-    home = sensitivity_report(geometry, geometry.home_pose_mm_rad)
-    summary["inputs"] = inputs
-    summary["geometry"] = {
-        "name": geometry.name,
-        "source": geometry.source,
-        "description": describe(geometry),
-        "home_pose_mm_rad": [float(v) for v in geometry.home_pose_mm_rad],
-    }
-    summary["sensitivity_home"] = home
-    summary["conventions"] = {
-        "pose": "x_mm, y_mm, z_mm of the platform origin in the base frame; rx, ry, rz roll-pitch-yaw about fixed X, Y, Z, R = Rz Ry Rx",
-        "pose_error": "FK pose from erroneous lengths minus the nominal pose; x, y, z in um, angles in rad (and arcsec)",
-        "leg_error": "measured minus commanded, um; compensated = measured - predicted",
-        "direction": "poses visited in the order drawn from home; a leg's direction is the sign of its last motion",
-    }
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    _write_text(out / REPORT_MD, report_markdown(summary, describe(geometry), home))
-    _write_text(out / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    figures = _write_figures(result, out)
-    return [out / REPORT_MD, out / SUMMARY_JSON, *figures]
 
 
 def run(args) -> int:
