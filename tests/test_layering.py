@@ -1,5 +1,6 @@
-"""The dependency rule: station -> procedures -> drivers, and procedures see only the driver
-interfaces. Checked on the import statements of every module."""
+"""The dependency rule: station -> procedures -> drivers, procedures see only the driver
+interfaces, and the terminal UI (station/tui) never imports the command line (station/commands).
+Checked on the import statements of every module."""
 
 from __future__ import annotations
 
@@ -9,16 +10,34 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def imports_of(package: str) -> dict[str, set[str]]:
+def imported_modules(source: str, module: str, with_names: bool = False) -> set[str]:
+    """The modules `source` (the text of the module named `module`, e.g. "station.tui.app";
+    "pkg.__init__" for a package) imports, relative imports made absolute. With `with_names`,
+    also "M.N" for every `from M import N` (N may be a submodule: `from station import commands`)."""
+    package = module.rsplit(".", 1)[0]
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(source, module)):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                target = f"{base}.{node.module}" if node.module else base
+            elif node.module:
+                target = node.module
+            else:
+                continue
+            names.add(target)
+            if with_names:
+                names.update(f"{target}.{a.name}" for a in node.names)
+    return names
+
+
+def imports_of(package: str, with_names: bool = False) -> dict[str, set[str]]:
     out: dict[str, set[str]] = {}
     for path in sorted((REPO / package).rglob("*.py")):
-        names: set[str] = set()
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.Import):
-                names.update(a.name for a in node.names)
-            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                names.add(node.module)
-        out[str(path.relative_to(REPO))] = names
+        module = ".".join(path.relative_to(REPO).with_suffix("").parts)
+        out[str(path.relative_to(REPO))] = imported_modules(path.read_text(), module, with_names)
     return out
 
 
@@ -42,6 +61,45 @@ def test_procedures_see_only_driver_interfaces_and_no_front_end():
 
     bad = offending("procedures", allowed)
     assert not bad, "\n".join(bad)
+
+
+def is_command_line(module: str) -> bool:
+    return module == "station.commands" or module.startswith("station.commands.")
+
+
+def test_the_terminal_ui_does_not_import_the_command_line():
+    """station/tui and station/commands are two front ends over the same jobs (station/*_jobs.py,
+    station/twins.py, procedures/): the UI imports no command-line module, not even by name
+    (`importlib.import_module("station.commands...")`). (`station ui`, a command, starts the UI.)"""
+    bad: list[str] = []
+    for path in sorted((REPO / "station" / "tui").rglob("*.py")):
+        module = ".".join(path.relative_to(REPO).with_suffix("").parts)
+        source = path.read_text()
+        names = imported_modules(source, module, with_names=True)
+        names |= {n.value for n in ast.walk(ast.parse(source)) if isinstance(n, ast.Constant) and isinstance(n.value, str)
+                  and n.value.strip() == n.value and " " not in n.value}  # module names given as strings
+        bad += [f"{path.relative_to(REPO)}: imports {m}" for m in sorted(names) if is_command_line(m)]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_command_line_check_sees_every_form_of_import():
+    sources = [
+        ("station.tui.screens.sweep", "import station.commands.sweep"),
+        ("station.tui.screens.sweep", "from station.commands.replay import parse_speed"),
+        ("station.tui.screens.sweep", "from station.commands import replay"),
+        ("station.tui.screens.sweep", "from station import commands"),
+        ("station.tui.app", "from ..commands import push"),
+        ("station.tui.screens.sweep", "from ... import commands"),
+        ("station.tui.screens.sweep", "from ...commands.push import AUDIT_NAME"),
+        ("station.tui.__init__", "from ..commands.replay import replay_sweep"),
+    ]
+    for module, text in sources:
+        names = imported_modules(text, module, with_names=True)
+        assert any(is_command_line(m) for m in names), text
+    # ... and not the modules beside it
+    assert not any(is_command_line(m) for m in imported_modules(
+        "from station.jobs import replay_sweep\nfrom .common import StationScreen\nimport station.commandsx",
+        "station.tui.screens.sweep", with_names=True))
 
 
 def test_the_layering_check_sees_imports():
