@@ -256,7 +256,10 @@ def prepare_push(axis: ServoAxis, table: TableBank | LegTable, *, spec: TableSpe
         limits = axis.limits()
     except DriverError as exc:
         raise PushRefused(f"leg {axis.leg}: cannot read the drive's soft limits ({_message(exc)}).") from None
-    spec.check(bank_table, f"leg {axis.leg}", limits)
+    where = f"leg {axis.leg}"
+    if source and source.get("path"):
+        where = f"{source['path']}, {where}"
+    spec.check(bank_table, where, limits, table.point_name if isinstance(table, LegTable) else None)
     return PushPlan(Action.PUSH, axis.leg, identity, drive_url, bank_table, table_sha256(bank_table), active, 1 - active,
                     current, table_sha256(current), enabled, source)
 

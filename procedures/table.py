@@ -65,6 +65,12 @@ class LegTable:
     step_mm: float
     error_fwd_um: tuple[float, ...]
     error_rev_um: tuple[float, ...]
+    rows: tuple[int, ...] | None = None  # the file's row of each point, when read from a CSV (for messages)
+
+    def point_name(self, i: int) -> str:
+        """Point i (0-based) as messages name it: its file row when read from one, and its position."""
+        x = self.start_mm + i * self.step_mm
+        return f"row {self.rows[i]} ({x:+.4f} mm)" if self.rows and i < len(self.rows) else f"point {i + 1} ({x:+.4f} mm)"
 
     @property
     def point_count(self) -> int:
@@ -150,7 +156,7 @@ def make_table(model, step_mm: float | None = None, spec: TableSpec | None = Non
             need = math.ceil(span / (spec.max_points - 1) / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM
             raise TableRefused(
                 f"leg {leg}: a {step:g} mm step over the {span:g} mm stroke needs {n} points, more than "
-                f"{spec.holder} holds ({spec.max_points}); use a step of at least {need:g} mm"
+                f"{spec.holder} holds ({spec.max_points}); use a step of at least {need:g} mm."
             )
         start = round(lo, 6)
         pos = start + step * np.arange(n)
@@ -280,7 +286,7 @@ def write_linuxcnc_comp(table: CompTable, out: str | os.PathLike, comp_type: int
 # -- reading -----------------------------------------------------------------------------------
 
 def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
-                   expected_legs: int | Iterable[int] | None = None) -> CompTable:
+                   expected_legs: int | Iterable[int] | None = None, check: bool = True) -> CompTable:
     """Read and validate a CSV table (see the module docstring).
 
     Refused, with file, row (line number, header = row 1) and field named: a wrong header, a
@@ -288,7 +294,8 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
     strictly increasing or unevenly spaced within a leg (drives need a fixed step), fewer than
     two points, and legs other than `expected_legs` (an int n means legs 1..n): these raise
     `TableValidationError`. A well-formed leg that does not fit `spec` (points, step,
-    corrections: `TableSpec.check`) raises TableRefused naming file, leg, row and field.
+    corrections: `TableSpec.check`) raises TableRefused naming file, leg, row and field; with
+    `check` False that is left to whoever applies the table (a push checks it against the drive).
     """
     spec = spec or DEFAULT_SPEC
     path = Path(path)
@@ -359,8 +366,9 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
             raise TableValidationError(f"{path}, row {d['row'][0]}: leg {leg} has a single point; a table needs at least two")
         x = np.asarray(d["x"])
         step = float((x[-1] - x[0]) / (x.size - 1))  # the mean step: robust to 1e-6 mm rounding
-        legs[leg] = LegTable(leg, float(x[0]), round(step, 9), tuple(d["f"]), tuple(d["r"]))
-        spec.check(legs[leg].to_bank(), f"{path}, leg {leg}", point_name=lambda i, rows=d["row"]: f"row {rows[i]}")
+        legs[leg] = LegTable(leg, float(x[0]), round(step, 9), tuple(d["f"]), tuple(d["r"]), tuple(d["row"]))
+        if check:
+            spec.check(legs[leg].to_bank(), f"{path}, leg {leg}", point_name=lambda i, rows=d["row"]: f"row {rows[i]}")
     return CompTable(legs)
 
 

@@ -66,13 +66,14 @@ def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterabl
 
 # -- push and rollback ---------------------------------------------------------------------------------
 
-def load_leg_table(path: str | Path, leg: int, spec: TableSpec | None = None) -> tuple[LegTable, dict[str, Any]]:
+def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]]:
     """One leg's rows of a table CSV (from `station table`) and where they came from
-    ({"path", "leg", "sha256"}). InputError / TableRefused naming the file when it is bad, has
-    no rows for `leg`, or was made for a platform with more legs than this station drives."""
+    ({"path", "leg", "sha256"}). InputError naming the file when it is malformed, has no rows
+    for `leg`, or was made for a platform with more legs than this station drives. Whether the
+    drive can hold the table is checked by the push, against what the drive says it holds."""
     if not 1 <= leg <= LEG_COUNT:
         raise InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}")
-    table = read_table_csv(path, spec)
+    table = read_table_csv(path, check=False)
     other = [x for x in table.legs if x > LEG_COUNT]
     if other:
         raise InputError(f"{path}: the table has legs {list(table.legs)}, but this station drives legs 1-{LEG_COUNT}: "

@@ -17,7 +17,7 @@ from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
 from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
 from station.table_jobs import JobOutcome, load_leg_table, push_job, refusal_job
-from station.wiring import drive_table_spec, drive_url_of, open_drive
+from station.wiring import drive_url_of, open_drive
 
 NAME = "push"
 HELP = "write a leg's compensation table to its drive (inactive bank, read back, switch), with an audit entry"
@@ -158,7 +158,7 @@ def run(args) -> int:
     leg = int(args.leg)
     source: dict | None = {"path": str(args.table), "leg": leg}
     try:
-        leg_table, source = load_leg_table(args.table, leg, drive_table_spec(cfg.drive.profile or None))
+        leg_table, source = load_leg_table(args.table, leg)
     except (InputError, DriverError, OSError) as exc:
         return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
     with open_drive(cfg, leg) as drive:

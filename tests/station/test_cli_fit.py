@@ -81,7 +81,7 @@ def test_table_refuses_a_too_fine_step_and_writes_nothing(model_file, tmp_path, 
     csv = tmp_path / "t.csv"
     assert main(["table", str(model_file), "--out", str(csv), "--step", "0.1"]) == 2
     err = capsys.readouterr().err
-    assert "more than the limit of 512" in err and "Traceback" not in err
+    assert "more than the drive holds (512)" in err and "Traceback" not in err
     assert not csv.exists()
 
 

@@ -130,7 +130,7 @@ BAD = [
     ("non-increasing", ["1,-90,0.1,0.1", "1,-84,0.1,0.1", "1,-84,0.1,0.1"],
      r"table.csv, row 4, field position_mm: -84 mm is not above the previous position"),
     ("beyond the limit", ["1,-90,0.1,0.1", "1,-84,300.5,0.1", "1,-78,0.1,0.1"],
-     r"table.csv, leg 1, row 3, field error_fwd_um: 300.5 um is beyond the correction limit of the drive, \+/-300 um"),
+     r"table.csv, leg 1, row 3 \(-84.0000 mm\), field error_fwd_um: 300.5 um is beyond the correction limit of the drive, \+/-300 um"),
     ("uneven", ["1,-90,0.1,0.1", "1,-84,0.1,0.1", "1,-77,0.1,0.1"],
      r"row 4, field position_mm: step 7.000000 mm differs .* resample with `station table --step`"),
     ("other leg count", [f"{leg},{x},0.1,0.1" for leg in range(1, 9) for x in (-90, 90)],

@@ -1,0 +1,174 @@
+"""The command line and the terminal UI give the same refusals, audit lines and figures for push,
+rollback and verify on the same inputs: both run station.table_jobs over the simulated drive
+(a real Modbus server on loopback, its table memory in a file), each in a folder of its own.
+
+The CLI is `station.cli.main` (answering its prompt through a terminal-like stdin); the UI is
+the Compensation page's controller in a running app, answered through its confirmation dialog.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from procedures.audit import read_entries
+from procedures.plans import iso230_plan
+from procedures.recording.reader import read_session
+from station.cli import main
+from station.config import StationConfig
+from station.jobs import run_sweep
+from station.table_jobs import load_leg_table
+from station.wiring import open_rig
+
+LEG = 1
+POSITIONS_MM = [-90.0 + 15.0 * i for i in range(13)]
+GOOD_ROWS = [f"{LEG},{x:.6f},{0.8 + 0.01 * x:.4f},{-0.6 + 0.012 * x:.4f}" for x in POSITIONS_MM]
+BAD_ROWS = list(GOOD_ROWS)
+BAD_ROWS[3] = f"{LEG},{POSITIONS_MM[3]:.6f},300.5000,0.1000"  # beyond the drive's +/-300 um
+
+# (name, table rows, operations): an operation is ("push", answer), ("rollback", answer) or ("verify", None)
+CASES = [
+    ("push refused: an entry beyond the drive's limit", BAD_ROWS, [("push", "y")]),
+    ("push cancelled at the confirmation", GOOD_ROWS, [("push", "n")]),
+    ("push", GOOD_ROWS, [("push", "y")]),
+    ("rollback refused: nothing pushed yet", GOOD_ROWS, [("rollback", "y")]),
+    ("push, then roll back", GOOD_ROWS, [("push", "y"), ("rollback", "y")]),
+    ("verify refused: the drive's table is empty", GOOD_ROWS, [("verify", None)]),
+    ("push, then verify", GOOD_ROWS, [("push", "y"), ("verify", None)]),
+]
+
+
+class Tty(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.fixture(scope="module")
+def calibration(tmp_path_factory) -> Path:
+    """A small calibration of leg 1 on the simulated rig (plant seed 0): the `before` of a verify."""
+    out = tmp_path_factory.mktemp("cal") / "cal.h5"
+    with open_rig(StationConfig(operator="test"), legs=(LEG,), time_scale=0.0) as rig:
+        assert run_sweep(rig, iso230_plan((LEG,), -80.0, 80.0, step_mm=40.0, cycles=2), out, StationConfig()).outcome \
+            == "completed"
+    return out
+
+
+def _table_csv(folder: Path, rows: list[str]) -> Path:
+    path = folder / "table.csv"
+    path.write_text("leg,position_mm,error_fwd_um,error_rev_um\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def _comparable(entries) -> list[dict]:
+    """The audit entries without what differs by nature (ids, times, host, where the files are)."""
+    out = []
+    for e in entries:
+        d = e.to_json()
+        for key in ("id", "op_id", "time_utc", "host", "drive_url"):
+            d.pop(key)
+        details = dict(d["details"])
+        for key in ("session", "session_sha256", "before_session", "push_time_utc", "rolls_back"):  # files differ by ids and times
+            details.pop(key, None)
+        d["details"] = json.loads(json.dumps(details).replace(str(Path.cwd()), ""))
+        if d["source"]:
+            d["source"] = {k: (Path(v).name if k == "path" else v) for k, v in d["source"].items()}
+        d["backup"] = d["backup"]["sha256"] if d["backup"] else None
+        d["message"] = d["message"].replace(str(Path.cwd()) + "/", "")
+        out.append(d)
+    return out
+
+
+def _run_cli(folder: Path, csv: Path, operations, calibration: Path, monkeypatch) -> list:
+    monkeypatch.chdir(folder)
+    for n, (op, answer) in enumerate(operations):
+        if op == "push":
+            monkeypatch.setattr("sys.stdin", Tty(answer + "\n"))
+            main(["push", csv.name, "--leg", str(LEG), "--sim"])
+        elif op == "rollback":
+            monkeypatch.setattr("sys.stdin", Tty(answer + "\n"))
+            main(["rollback", "--leg", str(LEG), "--sim"])
+        else:  # the UI's simulated rig repeats the plant's noise: the same seeds here
+            main(["verify", "--leg", str(LEG), "--sim", "--before", str(calibration), "--out", f"verify-{n}.h5",
+                  "--seed", "0", "--noise-seed", "0"])
+    return read_entries(folder / "runs" / "audit.jsonl")[0]
+
+
+async def _run_tui(folder: Path, csv: Path, operations, calibration: Path) -> list:
+    from station.tui.app import StationApp
+    from station.tui.screens.common import ConfirmScreen
+
+    cfg = StationConfig()  # the same operator as the CLI's: the login name
+    cfg.recordings_dir = str(folder / "runs")
+    cfg.with_sim_memory()
+    audit = folder / "runs" / "audit.jsonl"
+    app = StationApp(cfg, time_scale=0.0, legs=(LEG,))
+
+    async def wait(pilot, condition, what: str, timeout_s: float = 60.0) -> None:
+        for _ in range(int(timeout_s / 0.02)):
+            if condition():
+                return
+            await pilot.pause(0.02)
+        raise AssertionError(f"timed out waiting for {what}")
+
+    def count() -> int:
+        return len(read_entries(audit)[0])
+
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait(pilot, lambda: app.rig is not None, "the rig")
+        await pilot.press("f4")
+        comp = app.screen
+        for op, answer in operations:
+            before = count()
+            if op == "push":
+                table, source = load_leg_table(csv.name, LEG)
+                comp.jobs.push(LEG, table, source)
+            elif op == "rollback":
+                comp.jobs.rollback(LEG)
+            else:
+                assert comp.jobs.verify(LEG, SimpleNamespace(session=read_session(calibration)))
+            if answer is not None:
+                await wait(pilot, lambda: isinstance(app.screen, ConfirmScreen) or count() > before, "the confirmation")
+                if isinstance(app.screen, ConfirmScreen):
+                    await pilot.press(answer)
+            final = {"push": ("ok", "refused", "cancelled", "failed"), "rollback": ("ok", "refused", "cancelled", "failed"),
+                     "verify": ("refused", "completed", "aborted", "failed")}[op]
+            await wait(pilot, lambda: count() > before and read_entries(audit)[0][-1].outcome in final
+                       and not app.sweep.active, f"the end of the {op}")
+            await pilot.pause(0.1)
+    return read_entries(audit)[0]
+
+
+@pytest.mark.parametrize("name, rows, operations", CASES, ids=[c[0] for c in CASES])
+def test_cli_and_tui_log_the_same_refusals_outcomes_and_figures(name, rows, operations, calibration, tmp_path,
+                                                                monkeypatch):
+    cli_dir, tui_dir = tmp_path / "cli", tmp_path / "tui"
+    cli_dir.mkdir()
+    tui_dir.mkdir()
+    cli = _run_cli(cli_dir, _table_csv(cli_dir, rows), operations, calibration, monkeypatch)
+    monkeypatch.chdir(tui_dir)
+    tui = asyncio.run(_run_tui(tui_dir, _table_csv(tui_dir, rows), operations, calibration))
+    assert cli, "the CLI logged nothing"
+    a, b = _comparable(cli), _comparable(tui)
+    assert len(a) == len(b), (a, b)
+    for i, (x, y) in enumerate(zip(a, b)):
+        assert x == y, (i, _diff(x, y))
+    # every operation ended as the case says, the same way in both
+    finals = [e.outcome for e in cli if e.outcome != "started"]
+    assert len(finals) == len(operations)
+    if "refused" in name:
+        assert finals[-1] == "refused"
+    if "verify" in name and "refused" not in name:
+        assert finals[-1] in ("completed",) and cli[-1].details["ratio"] == tui[-1].details["ratio"]
+
+
+
+def _diff(a, b, path: str = "") -> list[str]:
+    """Where two JSON-like values differ, as 'path: a != b' lines."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [d for k in sorted(set(a) | set(b)) for d in _diff(a.get(k), b.get(k), f"{path}.{k}")]
+    return [] if a == b else [f"{path}: {a!r} != {b!r}"]
