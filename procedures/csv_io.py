@@ -9,6 +9,10 @@ commanded, micrometres; `direction` +1 = approached while the position increased
 Import checks the whole file before anything is written and names file, line (the header is
 line 1) and field of each problem; the session file is written under a temporary name and
 renamed at the end, so a failed import leaves nothing behind. Export does the same.
+Every number is checked against physical ranges (`procedures.ranges.PointLimits`): the legs
+declared (a hexapod's 1-6 by default), targets within the drive's soft limits, |error_um|
+within a micrometre sanity limit, temperatures, pressure, humidity, load and time in what a
+workshop sees.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.errors import InputError
+from procedures.ranges import LEG_NUMBERS, PointLimits
 from procedures.recording.reader import Session, read_session
 from procedures.recording.schema import FLAG_IMPORTED, POINT_DTYPE
 from procedures.recording.writer import SessionWriter
@@ -31,7 +36,6 @@ REQUIRED_COLUMNS = ("leg", "run", "direction", "target_mm", "error_um")
 OPTIONAL_COLUMNS = ("time_s", "material_temp_c", "air_temp_c", "air_pressure_hpa", "humidity_pct", "load_n")
 INT_COLUMNS = ("leg", "run", "direction")
 MAX_PROBLEMS_SHOWN = 5
-_INT_LIMITS = {"leg": 32767, "run": 2**31 - 1}
 
 
 def _software_version() -> str:
@@ -79,7 +83,8 @@ def _parse_int(text: str) -> int | None:
     return int(value) if value.is_integer() else None
 
 
-def read_csv_points(csv_path: str | os.PathLike) -> tuple[np.ndarray, list[str]]:
+def read_csv_points(csv_path: str | os.PathLike,
+                    limits: PointLimits | None = None) -> tuple[np.ndarray, list[str]]:
     """Parse and check an interchange CSV; return (POINT_DTYPE rows, optional columns present).
 
     Rows keep the file order and get `index` 0, 1, ...; commanded_mm = target_mm,
@@ -87,8 +92,11 @@ def read_csv_points(csv_path: str | os.PathLike) -> tuple[np.ndarray, list[str]]
     flags FLAG_IMPORTED. Raises InputError naming file, line and field of every problem found
     (up to MAX_PROBLEMS_SHOWN): missing required column, unknown or repeated column, wrong
     number of fields, empty file, non-numeric or non-finite value, empty required value,
-    direction not +1/-1, leg or run < 1, a run mixing directions, duplicate (leg, run, target).
+    direction not +1/-1, leg or run < 1, a run mixing directions, duplicate (leg, run, target),
+    and a value outside `limits` (default `PointLimits()`: legs 1-6, the built-in drive
+    profile's soft limits, the error sanity limit, workshop ranges of the optional columns).
     """
+    limits = limits or PointLimits()
     path = Path(csv_path)
     problems = _Problems(path)
     try:
@@ -184,8 +192,14 @@ def read_csv_points(csv_path: str | os.PathLike) -> tuple[np.ndarray, list[str]]
             if v < 1:
                 problems.add(line, name, f"{v} is not allowed; {name} numbers start at 1")
                 ok = False
-            elif v > _INT_LIMITS[name]:
-                problems.add(line, name, f"{v} is too large (at most {_INT_LIMITS[name]})")
+        if not ok:
+            continue
+        for name, v in values.items():
+            reason = limits.problem(name, v)
+            if reason:
+                if name == "leg":
+                    reason += " of a hexapod" if tuple(limits.legs) == LEG_NUMBERS else " declared for this import"
+                problems.add(line, name, reason)
                 ok = False
         if not ok:
             continue
@@ -230,17 +244,19 @@ def import_csv(
     session_id: str | None = None,
     software_version: str | None = None,
     overwrite: bool = False,
+    limits: PointLimits | None = None,
 ) -> Session:
     """Convert an interchange CSV into a session file (rig "import"); return it as read back.
 
-    The whole CSV is checked first (see read_csv_points); on any problem InputError is raised
-    and no file is created. The plan metadata names the source file and its SHA-256.
+    The whole CSV is checked first (see read_csv_points; `limits`: the physical ranges); on any
+    problem InputError is raised and no file is created. The plan metadata names the source
+    file and its SHA-256, and the legs the points hold.
     """
     csv_path, h5_path = Path(csv_path), Path(h5_path)
     if not csv_path.is_file():
         raise InputError(f"{csv_path}: no such file")
     _check_out(h5_path, overwrite)
-    points, optional = read_csv_points(csv_path)
+    points, optional = read_csv_points(csv_path, limits)
     sha = hashlib.sha256(csv_path.read_bytes()).hexdigest()
     plan = {
         "kind": "import",

@@ -8,7 +8,9 @@
 The content is deterministic: the same points and options give the same file apart from
 `source` and `created_utc` (keys sorted, floats written with Python's round-trip repr).
 A file that is not JSON, is another format, or lacks or mistypes a field is refused with a
-`SchemaError` naming the file and the field.
+`SchemaError` naming the file and the field; so is a value no fit of a real leg gives
+(`procedures.ranges.SESSION_BOUNDS`: a stroke a metre from mid-stroke, an error of 0.1 m, a
+leg other than 1-6, a basis or sample grid too large to evaluate).
 """
 
 from __future__ import annotations
@@ -25,6 +27,11 @@ from procedures.errors import SchemaError
 from procedures.fit.bidirectional import bidirectional_from_json
 from procedures.fit.model import FORMAT, METHODS, VERSION, FitStats, LegErrorModel, LegFit
 from procedures.fit.paper import paper_from_json
+from procedures.ranges import LEG_NUMBERS, SESSION_BOUNDS
+
+MAX_SAMPLES = 100_000  # paper model: samples of the stroke (the paper's sweep has 361)
+MAX_WAVES = 100  # default model: stroke harmonics (the fit tries at most 24)
+MAX_LEAD_HARMONICS = 10  # default model (the fit tries at most 3)
 
 
 def _clean(value: Any) -> Any:
@@ -114,6 +121,21 @@ class _Checker:
             raise self.fail(name, f"expected {length} values, got {len(v)}")
         return v
 
+    def within(self, value: float, name: str, lo: float, hi: float, unit: str = "") -> float:
+        """`value` when lo <= value <= hi, else a SchemaError naming the field and the range."""
+        if not lo <= value <= hi:
+            u = f" {unit}" if unit else ""
+            raise self.fail(name, f"{value:.6g}{u} is outside {lo:.6g} .. {hi:.6g}{u}, which no fit of a real leg gives")
+        return value
+
+    def errors_um(self, values: list[float], name: str, indexed: bool = True) -> None:
+        """Each of `values` (um) within +/- the session bound of an error."""
+        bound = SESSION_BOUNDS.max_error_um
+        for i, v in enumerate(values):
+            if abs(v) > bound:
+                where = f"{name}[{i}]" if indexed else name
+                raise self.fail(where, f"{v:.6g} um is beyond +/-{bound:.6g} um, which no fit of a real leg gives")
+
 
 _STAT_INT = ("n_points", "n_passes", "n_cycles", "dropped", "folds")
 _STAT_OPT = ("noise_floor_um", "within_pass_um", "heldout_rms_um", "range_after_um")
@@ -124,6 +146,12 @@ def _stats(c: _Checker, d: Any, where: str) -> FitStats:
     for k in _STAT_OPT:
         kw[k] = c.number(d, k, where, optional=True)
     kw["range_before_um"] = c.number(d, "range_before_um", where)
+    for k, v in kw.items():
+        if v is not None:
+            if k in _STAT_INT:
+                c.within(v, f"{where}.{k}", 0, 2**31 - 1)
+            else:
+                c.within(v, f"{where}.{k}", 0, SESSION_BOUNDS.max_error_um, "um")
     note = d.get("note", "")
     kw["note"] = note if isinstance(note, str) else ""
     return FitStats(**kw)
@@ -131,10 +159,15 @@ def _stats(c: _Checker, d: Any, where: str) -> FitStats:
 
 def _leg(c: _Checker, method: str, leg: int, d: Any) -> LegFit:
     where = f"legs.{leg}"
+    lo, hi = SESSION_BOUNDS.stroke_mm
     stroke = c.numbers(d, "stroke_mm", where, length=2)
     if not stroke[0] < stroke[1]:
         raise c.fail(f"{where}.stroke_mm", f"minimum {stroke[0]} is not below maximum {stroke[1]}")
+    for i, x in enumerate(stroke):
+        c.within(x, f"{where}.stroke_mm[{i}]", lo, hi, "mm")
     spacing = c.number(d, "target_spacing_mm", where)
+    if not 0 < spacing <= stroke[1] - stroke[0]:
+        raise c.fail(f"{where}.target_spacing_mm", f"{spacing:.6g} mm is not a step within the stroke")
     stats = _stats(c, c.get(d, "stats", where), f"{where}.stats")
     m = c.get(d, "model", where)
     mw = f"{where}.model"
@@ -142,33 +175,43 @@ def _leg(c: _Checker, method: str, leg: int, d: Any) -> LegFit:
         n = c.number(m, "n_samples", mw, integer=True)
         if n < 3:
             raise c.fail(f"{mw}.n_samples", "must be at least 3")
-        c.number(m, "x_start_mm", mw)
+        c.within(n, f"{mw}.n_samples", 3, MAX_SAMPLES, "samples")
+        x0 = c.within(c.number(m, "x_start_mm", mw), f"{mw}.x_start_mm", lo, hi, "mm")
         if c.number(m, "spacing_mm", mw) <= 0:
             raise c.fail(f"{mw}.spacing_mm", "must be positive")
-        c.number(m, "mean_um", mw)
+        c.within(x0 + (n - 1) * m["spacing_mm"], f"{mw}: the last sample (x_start_mm + (n_samples - 1) * spacing_mm)",
+                 lo, hi, "mm")
+        c.errors_um([c.number(m, "mean_um", mw)], f"{mw}.mean_um", indexed=False)
         c.number(m, "n_params", mw, integer=True)
         k = c.numbers(m, "k", mw, integer=True)
-        c.numbers(m, "amplitude_um", mw, length=len(k))
+        c.errors_um(c.numbers(m, "amplitude_um", mw, length=len(k)), f"{mw}.amplitude_um")
         c.numbers(m, "phase_rad", mw, length=len(k))
         if any(not 0 < x < n for x in k):
             raise c.fail(f"{mw}.k", f"frequencies must lie between 1 and {n - 1}")
         return paper_from_json(leg, stroke, spacing, stats, m)
     b = c.get(m, "basis", mw)
     bw = f"{mw}.basis"
-    c.number(b, "center_mm", bw)
+    c.within(c.number(b, "center_mm", bw), f"{bw}.center_mm", lo, hi, "mm")
     if c.number(b, "half_span_mm", bw) <= 0:
         raise c.fail(f"{bw}.half_span_mm", "must be positive")
+    c.within(b["half_span_mm"], f"{bw}.half_span_mm", 1e-3, hi - lo, "mm")
     td = c.number(b, "trend_degree", bw, integer=True)
     rd = c.number(b, "reversal_degree", bw, integer=True)
     wl = c.numbers(b, "wavelengths_mm", bw)
     lead = c.number(b, "lead_mm", bw, optional=True)
     lh = c.number(b, "lead_harmonics", bw, integer=True)
-    if not (0 <= td <= 10 and -1 <= rd <= 10 and lh >= 0):
-        raise c.fail(bw, f"degrees out of range (trend {td}, reversal {rd}, lead harmonics {lh})")
+    if not (0 <= td <= 10 and -1 <= rd <= 10 and 0 <= lh <= MAX_LEAD_HARMONICS and len(wl) <= MAX_WAVES):
+        raise c.fail(bw, f"degrees out of range (trend {td}, reversal {rd}, lead harmonics {lh}, "
+                         f"{len(wl)} stroke harmonics)")
     if any(w <= 0 for w in wl) or (lead is not None and lead <= 0) or (lh > 0 and lead is None):
         raise c.fail(bw, "wavelengths and lead must be positive, and lead harmonics need a lead")
+    for i, w in enumerate(wl + ([lead] if lead is not None else [])):
+        name = f"{bw}.wavelengths_mm[{i}]" if i < len(wl) else f"{bw}.lead_mm"
+        c.within(w, name, 1e-3, 10 * (hi - lo), "mm")
     n_params = (td + 1) + (rd + 1) + 2 * len(wl) + 2 * lh
-    c.numbers(m, "coefficients_um", mw, length=n_params)
+    c.errors_um(c.numbers(m, "coefficients_um", mw, length=n_params), f"{mw}.coefficients_um")
+    if m.get("reversal_um") is not None:
+        c.errors_um([c.number(m, "reversal_um", mw)], f"{mw}.reversal_um", indexed=False)
     if not isinstance(m.get("selection", {}), dict):
         raise c.fail(f"{mw}.selection", "expected an object")
     return bidirectional_from_json(leg, stroke, spacing, stats, m)
@@ -205,8 +248,8 @@ def load_model(path: str | os.PathLike) -> LegErrorModel:
         raise c.fail("legs", "expected a non-empty object of legs")
     legs: dict[int, LegFit] = {}
     for key, d in legs_doc.items():
-        if not key.isdigit() or int(key) < 1:
-            raise c.fail(f"legs.{key}", "leg keys must be leg numbers 1, 2, ...")
+        if not key.isdigit() or int(key) not in LEG_NUMBERS:
+            raise c.fail(f"legs.{key}", f"leg keys must be leg numbers {LEG_NUMBERS[0]} .. {LEG_NUMBERS[-1]}")
         try:
             legs[int(key)] = _leg(c, method, int(key), d)
         except SchemaError:

@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 
 from procedures.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
+from procedures.plans import parse_legs
+from procedures.ranges import MAX_ERROR_UM, PointLimits
 from station import __version__
 
 NAME = "import"
@@ -13,7 +15,9 @@ HELP = "convert an interchange CSV (leg, run, direction, target_mm, error_um, ..
 DESCRIPTION = (
     "Convert measurements in the interchange CSV format to an HDF5 session file. Required columns: "
     f"{', '.join(REQUIRED_COLUMNS)}; optional: {', '.join(OPTIONAL_COLUMNS)} (a missing optional column "
-    "means 'not measured'). The whole file is checked first; on any problem nothing is written."
+    "means 'not measured'). The whole file is checked first; on any problem nothing is written. "
+    "Values are checked against physical ranges: legs (--legs), targets within the drive profile's soft "
+    f"limits, |error_um| <= {MAX_ERROR_UM:g} um, temperatures, pressure, humidity and load a workshop sees."
 )
 
 
@@ -22,11 +26,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="FILE.h5", help="session file to write")
     p.add_argument("--operator", default="", help="operator name stored in the session")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    p.add_argument("--legs", default="1-6", help="legs the file holds, e.g. 1-6 or 1,3 (default 1-6); "
+                   "a point of another leg is refused")
+    p.add_argument("--profile", metavar="PROFILE.toml",
+                   help="drive profile whose soft limits bound target_mm (default: the built-in profile)")
+
+
+def import_limits(legs: str = "1-6", profile: str | None = None) -> PointLimits:
+    """The physical ranges of an import: the legs given, the drive profile's soft limits."""
+    from drivers.modbus.profile import DriveProfile
+
+    soft = DriveProfile.load(profile).limits
+    return PointLimits(legs=parse_legs(legs), stroke_mm=(soft.soft_min_mm, soft.soft_max_mm))
 
 
 def run(args) -> int:
+    limits = import_limits(args.legs, args.profile)
     session = import_csv(Path(args.csv), Path(args.out), operator=args.operator, software_version=__version__,
-                         overwrite=args.force)
+                         overwrite=args.force, limits=limits)
     pts = session.points
     legs = ", ".join(str(leg) for leg in session.legs)
     runs = len({(int(r["leg"]), int(r["run"])) for r in pts[["leg", "run"]]})
