@@ -17,7 +17,9 @@ import ast
 import importlib
 import logging
 import pkgutil
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from drivers.errors import DriverError
@@ -67,6 +69,18 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; its exit code. Ctrl-C at any moment, also while the command's modules
+    load (the first fraction of a second), ends with one line and exit code 130."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # from here Ctrl-C is a KeyboardInterrupt
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("station: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # frame dumps are not for users
     argv = sys.argv[1:] if argv is None else argv
     specs = _command_specs()

@@ -72,6 +72,7 @@ class StationConfig:
     interferometer: LaserConfig = field(default_factory=LaserConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     source: str = "built-in defaults"
+    named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
     @property
     def is_sim(self) -> bool:
@@ -92,7 +93,32 @@ class StationConfig:
         return self
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        d.pop("named")
+        return d
+
+    @property
+    def from_file(self) -> bool:
+        return self.source != "built-in defaults"
+
+    def require_devices(self, *, drive: bool = True, interferometer: bool = True) -> None:
+        """Refuse a config file that does not name the devices a live command drives: an empty
+        or partial file would otherwise fall back on the simulated rig, and someone who meant
+        the real drive would not be told. `url = "sim"` / `port = "sim"` name the simulator."""
+        if not self.from_file:
+            return
+        missing = [f"[{key.split('.')[0]}] {key.split('.')[1]}" for key, wanted in
+                   (("drive.url", drive), ("interferometer.port", interferometer)) if wanted and key not in self.named]
+        if missing:
+            raise InputError(f"{self.source}: names no {' and no '.join(missing)}: say which device to drive "
+                             "(e.g. url = \"tcp://HOST:502\", port = \"/dev/ttyUSB1\"), or \"sim\" for the "
+                             "simulated rig (or use --sim instead of --config)")
+
+    def rig_text(self) -> str:
+        """Which rig this config drives, for the first line a live command prints."""
+        drive = "SIMULATED drives" if self.drive.url == "sim" else f"drives at {self.drive.url}"
+        laser = "SIMULATED interferometer" if self.interferometer.port == "sim" else f"interferometer at {self.interferometer.port}"
+        return f"{drive}, {laser} (config: {self.source})"
 
 
 def _whoami() -> str:
@@ -103,6 +129,14 @@ def _whoami() -> str:
 
 
 _SECTIONS = {"drive": DriveConfig, "interferometer": LaserConfig, "sim": SimConfig}
+
+# (section, key) -> (lowest, strictly above it?, what the value is): physical sense of numbers
+_RANGES = {
+    ("drive", "timeout_s"): (0.0, True, "seconds to wait for a drive's reply"),
+    ("interferometer", "timeout_s"): (0.0, True, "seconds to wait for the interferometer's reply"),
+    ("interferometer", "baudrate"): (0, True, "the serial line's bits per second"),
+    ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
+}
 
 
 def load_config(path: str | Path | None) -> StationConfig:
@@ -132,6 +166,14 @@ def load_config(path: str | Path | None) -> StationConfig:
                 setattr(target, key, want(value))
             except (TypeError, ValueError):
                 raise InputError(f"{p}: [{section}] {key}: expected a {want.__name__}, got {value!r}") from None
+            if (section, key) in _RANGES:
+                low, strict, what = _RANGES[section, key]
+                v = getattr(target, key)
+                if not (v > low if strict else v >= low) or v != v or v in (float("inf"), float("-inf")):
+                    raise InputError(f"{p}: [{section}] {key} = {value!r}: must be a number {'>' if strict else '>='} "
+                                     f"{low:g} ({what})")
+            if (section, key) in (("drive", "url"), ("interferometer", "port")):
+                cfg.named = cfg.named | {f"{section}.{key}"}
     unknown = set(data) - {"station", *_SECTIONS}
     if unknown:
         raise InputError(f"{p}: unknown section(s) {sorted(unknown)}")

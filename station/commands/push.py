@@ -50,10 +50,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 # -- shared by push / rollback / verify ------------------------------------------------------------
 
-def station_config(args) -> StationConfig:
+def station_config(args, interferometer: bool = False) -> StationConfig:
     """The config of --config (or the built-in one), with --drive, --sim and --profile applied
-    and the simulated drive's table memory defaulted (StationConfig.with_sim_memory)."""
+    and the simulated drive's table memory defaulted (StationConfig.with_sim_memory). A config
+    file must name the drive (and the interferometer when `interferometer`)."""
     cfg = load_config(getattr(args, "config", None))
+    cfg.require_devices(interferometer=interferometer)
     drive = getattr(args, "drive", None)
     if drive:
         if drive.strip().lower() == "sim":
@@ -113,6 +115,13 @@ class PlanPrinter:
         pass
 
 
+def drive_text(cfg: StationConfig) -> str:
+    """Which drive a push or rollback writes to, said before anything else."""
+    if cfg.drive.url == "sim":
+        return f"the SIMULATED drive (its table memory {cfg.sim.nv_path}); not a real drive"
+    return f"{cfg.drive.url}" + (f" (config {cfg.source})" if cfg.from_file else "")
+
+
 def warn_audit_problems(audit: AuditLog) -> None:
     try:
         _, problems = audit.read()
@@ -161,6 +170,7 @@ def run(args) -> int:
         leg_table, source = load_leg_table(args.table, leg)
     except (InputError, DriverError, OSError) as exc:
         return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
+    print(f"drive: {drive_text(cfg)}")
     with open_drive(cfg, leg) as drive:
         warn_audit_problems(audit)
         header = f"table: {args.table} (sha256 {source['sha256'][:12]}…), rows of leg {leg}"

@@ -12,6 +12,7 @@ from station.commands.push import (
     PlanPrinter,
     add_drive_arguments,
     audit_log,
+    drive_text,
     prompt,
     refuse,
     report,
@@ -42,6 +43,7 @@ def run(args) -> int:
     if not 1 <= leg <= LEG_COUNT:
         return refuse(args, cfg, audit, Action.ROLLBACK, leg,
                       InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}"))
+    print(f"drive: {drive_text(cfg)}")
     with open_drive(cfg, leg) as drive:
         warn_audit_problems(audit)
         job = rollback_job(drive.axis, audit=audit, drive_url=drive.url, confirm=prompt(args.yes),

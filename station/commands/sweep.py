@@ -12,6 +12,7 @@ from station.config import load_config
 from station.jobs import plan_of_recording, run_sweep
 from procedures.control import RunControl
 from procedures.states import Outcome
+from station import interrupt
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.wiring import open_rig
@@ -62,19 +63,23 @@ def build_plan(args) -> SweepPlan:
 
 def run(args) -> int:
     cfg = load_config(args.config)
+    cfg.require_devices()
     if args.seed is not None:
         cfg.sim.seed = args.seed
     if args.resume:
         out = Path(args.resume)
-        plan = plan_of_recording(out)
         if args.out and Path(args.out) != out:
             raise InputError("--resume appends to the session it names; drop --out")
+        plan = resumable_plan(out)
     else:
         if not args.out:
             raise InputError("--out FILE.h5 is required (where to record the session)")
         out = Path(args.out)
         if out.exists():
             raise InputError(f"{out} exists; choose another --out, or --resume {out} to finish it")
+        if not out.parent.is_dir():
+            raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first or choose "
+                             "another --out (nothing is created behind your back)")
         plan = build_plan(args)
     for note in plan.notes:
         print(f"note: {note}")
@@ -93,4 +98,24 @@ def run(args) -> int:
         print(f"next: station iso230 {out}   |   station fit {out} --out model.json")
         return 0
     print(resume_hint)
-    return 1
+    return 130 if control.reason == interrupt.REASON else 1  # Ctrl-C: as every command ends on it
+
+
+def resumable_plan(path: Path):
+    """The plan of the session file `path`, if there is anything left to measure in it.
+    InputError naming the file when it holds no sweep plan (an imported file) or is complete."""
+    from procedures.recording.reader import read_session
+
+    session = read_session(path)
+    if not session.plan or session.plan.get("kind") == "import":
+        source = f"imported from {session.plan['source']}" if session.plan.get("source") else "imported from a CSV?"
+        raise InputError(f"{path}: holds no sweep plan ({source}), so it cannot be resumed; sweep into a new --out instead")
+    try:
+        plan = plan_of_recording(path)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{path}: its sweep plan cannot be read back ({exc!r}); sweep into a new --out instead") from None
+    done = len({int(i) for i in session.points["index"]})
+    if done >= plan.total_points:
+        raise InputError(f"{path}: already complete ({done} of {plan.total_points} points, outcome {session.outcome}); "
+                         "nothing to resume")
+    return plan

@@ -29,6 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     cfg = load_config(args.config)
+    cfg.require_devices()
     time_scale = args.time_scale
     if time_scale is None and args.config is None:
         time_scale = DEFAULT_SIM_TIME_SCALE

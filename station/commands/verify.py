@@ -84,7 +84,7 @@ def run(args) -> int:
     legs = parse_legs(args.leg)
     if args.config and (args.seed is not None or args.noise_seed is not None):
         raise InputError("--seed/--noise-seed apply to the simulated rig (--sim) only")
-    cfg = station_config(args)
+    cfg = station_config(args, interferometer=True)
     if args.seed is not None:
         cfg.sim.seed = args.seed
     audit = audit_log(args, cfg)
