@@ -318,6 +318,62 @@ def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Con
     yield from _confirm_and_apply(axis, plan, confirm)
 
 
+def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank | LegTable], *,
+                        confirm: Callable[[list[PushPlan]], bool] | None = None, drive_url: str = "",
+                        sources: dict[int, dict[str, Any]] | None = None) -> Iterator[ev.Event]:
+    """Push several legs' tables with one confirmation (a whole platform after a calibration).
+
+    Every leg is read and checked first; if any leg is refused, nothing is written to any leg.
+    Then one `confirm(plans)` (None = confirmed) and the legs are pushed in turn, each the safe
+    way with its own audit entries and `OperationFinished`. A failed leg stops the rest (they
+    keep their tables). Ends with an `OperationFinished` for the whole (leg None): ok when every
+    leg is, else the first refusal or failure.
+    """
+    sources = sources or {}
+    plans: list[PushPlan] = []
+    for leg in sorted(tables):
+        try:
+            plans.append(prepare_push(axes[leg], tables[leg], drive_url=drive_url, source=sources.get(leg)))
+        except (PushRefused, TableRefused) as exc:
+            yield from refused(Action.PUSH, leg, exc, drive=_identity(axes[leg]), drive_url=drive_url,
+                               source=sources.get(leg))
+            yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED,
+                                       f"{_message(exc)}; nothing was written to any leg")
+            return
+    for plan in plans:
+        yield ev.TablePlanned(plan)
+    if confirm is not None:
+        try:
+            ok = confirm(plans)
+        except InputError as exc:
+            for plan in plans:
+                yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source)
+            yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED, _message(exc))
+            return
+        if not ok:
+            for plan in plans:
+                yield from refused(plan.action, plan.leg, "cancelled at the confirmation; nothing written", drive=plan.drive,
+                                   drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED)
+            yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.CANCELLED, "cancelled; nothing was written")
+            return
+    done: list[int] = []
+    for plan in plans:
+        end: ev.OperationFinished | None = None
+        for event in _apply(axes[plan.leg], plan):
+            if isinstance(event, ev.OperationFinished):
+                end = event
+            yield event
+        if end is None or end.outcome != AuditOutcome.OK:
+            left = [p.leg for p in plans if p.leg != plan.leg and p.leg not in done]
+            yield ev.OperationFinished(Action.PUSH, None, end.outcome if end else AuditOutcome.FAILED,
+                                       f"{end.message if end else 'no outcome'}"
+                                       + (f" Pushed before it: legs {done}." if done else "")
+                                       + (f" Not attempted: legs {left} (their tables are unchanged)." if left else ""))
+            return
+        done.append(plan.leg)
+    yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.OK, f"pushed legs {done}: each has its new table active")
+
+
 def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | None = None,
                        drive_url: str = "") -> Iterator[ev.Event]:
     """Restore the table that was active before the last successful push of this leg to this

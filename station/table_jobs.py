@@ -19,7 +19,16 @@ from procedures.audit import AuditLog, AuditSink
 from procedures.control import RunControl
 from procedures.errors import InputError
 from procedures.plans import SweepPlan
-from procedures.push import Confirm, finished, push_procedure, quantize, refused, rollback_procedure, table_sha256
+from procedures.push import (
+    Confirm,
+    finished,
+    push_legs_procedure,
+    push_procedure,
+    quantize,
+    refused,
+    rollback_procedure,
+    table_sha256,
+)
 from procedures.recording.reader import file_sha256, read_session
 from procedures.recording.sink import RecorderSink
 from procedures.runner import ListSink, RunResult, Sink, run
@@ -87,6 +96,13 @@ def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: st
              confirm: Confirm | None, sinks: Iterable[Sink] = ()) -> JobOutcome:
     """Push one leg's table to its drive (procedures.push.push_procedure)."""
     return run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source), audit, sinks)
+
+
+def push_legs_job(axes: dict[int, ServoAxis], tables: dict[int, LegTable], *, audit: AuditLog, drive_url: str,
+                  sources: dict[int, dict[str, Any]] | None, confirm, sinks: Iterable[Sink] = ()) -> JobOutcome:
+    """Push several legs' tables after one confirmation (procedures.push.push_legs_procedure)."""
+    return run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources),
+                         audit, sinks)
 
 
 def rollback_job(axis: ServoAxis, *, audit: AuditLog, drive_url: str, confirm: Confirm | None,

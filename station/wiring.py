@@ -93,12 +93,17 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
 
 @dataclass
 class DriveHandle:
-    """One leg's drive opened alone (for a push or rollback): `axis`, `url` (how it was reached,
-    for the audit log), `close()` releases it (and the simulated drive)."""
+    """Drives opened alone, without the interferometer (for a push or rollback): `axes` by leg,
+    `url` (how they were reached, for the audit log), `close()` releases them (and the
+    simulated drive). `axis` is the first leg's, for a single leg."""
 
-    axis: ServoAxis
+    axes: dict[int, ServoAxis]
     url: str
     close: Any
+
+    @property
+    def axis(self) -> ServoAxis:
+        return self.axes[min(self.axes)]
 
     def __enter__(self) -> "DriveHandle":
         return self
@@ -107,10 +112,17 @@ class DriveHandle:
         self.close()
 
 
-def open_drive(cfg: StationConfig, leg: int) -> DriveHandle:
-    """Connect to `leg`'s drive alone, never the interferometer: on the simulated rig (its table
-    memory in cfg.sim.nv_path) or on the bus at cfg.drive.url, with cfg.drive.profile."""
+def open_drive(cfg: StationConfig, legs: int | tuple[int, ...]) -> DriveHandle:
+    """Connect to the drives of `legs` (one leg number or several) alone, never the
+    interferometer: on the simulated rig (its table memory in cfg.sim.nv_path) or on the bus at
+    cfg.drive.url, with cfg.drive.profile."""
+    legs = (legs,) if isinstance(legs, int) else tuple(legs)
     profile = DriveProfile.load(cfg.drive.profile or None)
+
+    def close_all(axes) -> None:
+        for axis in axes.values():
+            axis.close()
+
     if cfg.drive.url == "sim":
         from drivers.sim.rig import SimRig
 
@@ -118,19 +130,18 @@ def open_drive(cfg: StationConfig, leg: int) -> DriveHandle:
                      profile=profile)
         port = sim.drive_server.start_tcp()
         try:
-            axis = connect_axes(f"tcp://127.0.0.1:{port}", [leg], profile, timeout_s=cfg.drive.timeout_s,
-                                clock=sim.clock)[leg]
+            axes = connect_axes(f"tcp://127.0.0.1:{port}", legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
         except BaseException:
             sim.drive_server.stop()
             raise
 
         def close() -> None:
-            axis.close()
+            close_all(axes)
             sim.drive_server.stop()
 
-        return DriveHandle(axis, f"sim ({cfg.sim.nv_path})" if cfg.sim.nv_path else "sim", close)
-    axis = connect_axes(cfg.drive.url, [leg], profile, timeout_s=cfg.drive.timeout_s)[leg]
-    return DriveHandle(axis, cfg.drive.url, axis.close)
+        return DriveHandle(dict(axes), f"sim ({cfg.sim.nv_path})" if cfg.sim.nv_path else "sim", close)
+    axes = connect_axes(cfg.drive.url, legs, profile, timeout_s=cfg.drive.timeout_s)
+    return DriveHandle(dict(axes), cfg.drive.url, lambda: close_all(axes))
 
 
 def drive_url_of(cfg: StationConfig) -> str:
@@ -152,9 +163,16 @@ def drive_table_spec(profile_path: str | Path | None = None) -> TableSpec:
         raise InputError(str(exc)) from None
 
 
-REPLAY_LASER_TIMEOUT_S = 0.2
-"""Reply timeout of the interferometer client on a replay (the replay answers in well under a
-millisecond; a recorded time-out is replayed as silence, so a short timeout keeps it quick)."""
+REPLAY_LASER_TIMEOUT_S = 10.0
+"""Reply timeout of the interferometer client on a replay. The replay instrument answers in well
+under a millisecond, but on a loaded machine a reply can come late; a timeout firing there
+would ask again, a question the recording does not hold, so the timeout is long. It is measured
+on the replay's TimeoutClock, on which a recorded time-out (replayed as silence) ends at once."""
+
+REPLAY_DRIVE_TIMEOUT_S = 10.0
+"""Reply timeout of the Modbus client on a replay, without retries: a replay drive answers every
+request (a recorded time-out is replayed at the interferometer), so a timeout could only be a
+machine too busy to answer in time, and must not become a fault, nor a write applied twice."""
 
 
 def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationConfig | None = None,
@@ -186,8 +204,10 @@ def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationCo
     profile = DriveProfile.load(recorded if recorded and Path(recorded).is_file() else (cfg.drive.profile or None))
     replay = ReplayRig(script, speed=speed, profile=profile).start()
     try:
-        axes = connect_axes(replay.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s)
-        laser = SerialInterferometer(replay.laser_port, timeout_s=REPLAY_LASER_TIMEOUT_S)
+        # nothing recorded may depend on the wall clock: no timeout may fire on a request the
+        # replay answers, however loaded the machine (drivers/replay/clock.py)
+        axes = connect_axes(replay.drive_url, legs, profile, timeout_s=REPLAY_DRIVE_TIMEOUT_S, retries=0)
+        laser = SerialInterferometer(replay.laser_port, timeout_s=REPLAY_LASER_TIMEOUT_S, clock=replay.timeout_clock)
     except Exception:
         replay.stop()
         raise

@@ -13,10 +13,11 @@ from drivers.errors import DriverError
 from procedures import events as ev
 from procedures.audit import AuditError, AuditLog
 from procedures.errors import InputError
+from procedures.plans import parse_legs
 from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
 from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
-from station.table_jobs import JobOutcome, load_leg_table, push_job, refusal_job
+from station.table_jobs import JobOutcome, load_leg_table, push_job, push_legs_job, refusal_job
 from station.wiring import drive_url_of, open_drive
 
 NAME = "push"
@@ -29,9 +30,13 @@ DESCRIPTION = (
 )
 
 
-def add_drive_arguments(p: argparse.ArgumentParser) -> None:
+def add_drive_arguments(p: argparse.ArgumentParser, several: bool = False) -> None:
     """--leg, where the drive is (--sim | --drive URL | --config C), --profile, --audit, --yes."""
-    p.add_argument("--leg", type=int, required=True, metavar="N", help=f"leg number (1..{LEG_COUNT})")
+    if several:
+        p.add_argument("--leg", required=True, metavar="N|1-6|all",
+                       help=f"leg number (1..{LEG_COUNT}), or several (1-6, 1,4, all): one confirmation for all")
+    else:
+        p.add_argument("--leg", type=int, required=True, metavar="N", help=f"leg number (1..{LEG_COUNT})")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sim", action="store_true",
                        help=f"the simulated drive; its table memory is <recordings_dir>/{SIM_NV_NAME} "
@@ -45,7 +50,7 @@ def add_drive_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("table", metavar="TABLE.csv", help="table CSV from `station table` (it may hold several legs)")
-    add_drive_arguments(p)
+    add_drive_arguments(p, several=True)
 
 
 # -- shared by push / rollback / verify ------------------------------------------------------------
@@ -164,37 +169,82 @@ def refuse(args, cfg: StationConfig, audit: AuditLog, action: Action, leg: int, 
 def run(args) -> int:
     cfg = station_config(args)
     audit = audit_log(args, cfg)
-    leg = int(args.leg)
-    source: dict | None = {"path": str(args.table), "leg": leg}
     try:
-        leg_table, source = load_leg_table(args.table, leg)
-    except (InputError, DriverError, OSError) as exc:
-        return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
+        legs = parse_leg_choice(args.leg)
+    except InputError as exc:
+        first = int(args.leg) if str(args.leg).isdigit() else 0
+        return refuse(args, cfg, audit, Action.PUSH, first, exc, {"path": str(args.table)})
+    tables, sources = {}, {}
+    for leg in legs:
+        source: dict | None = {"path": str(args.table), "leg": leg}
+        try:
+            tables[leg], sources[leg] = load_leg_table(args.table, leg)
+        except (InputError, DriverError, OSError) as exc:
+            return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
     print(f"drive: {drive_text(cfg)}")
-    with open_drive(cfg, leg) as drive:
+    sha = next(iter(sources.values()))["sha256"]
+    with open_drive(cfg, legs) as drive:
         warn_audit_problems(audit)
-        header = f"table: {args.table} (sha256 {source['sha256'][:12]}…), rows of leg {leg}"
-        print_audit = PlanPrinter(header)
-        job = push_job(drive.axis, leg_table, audit=audit, drive_url=drive.url, source=source,
-                       confirm=_with_audit_line(prompt(args.yes), audit), sinks=[print_audit])
+        if len(legs) == 1:
+            leg = legs[0]
+            job = push_job(drive.axis, tables[leg], audit=audit, drive_url=drive.url, source=sources[leg],
+                           confirm=_with_audit_line(prompt(args.yes), audit),
+                           sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…), rows of leg {leg}")])
+        else:
+            job = push_legs_job(drive.axes, tables, audit=audit, drive_url=drive.url, sources=sources,
+                                confirm=_with_audit_line(prompt_all(args.yes, legs), audit),
+                                sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…)")])
+    for end in job.of(ev.OperationFinished):
+        result = end.result
+        if end.leg is not None and result is not None:
+            print(f"pushed: leg {result.leg} bank {result.bank} active (was bank {result.previous_bank}); "
+                  f"table sha256 {result.table_sha256}")
+            if not result.table_enabled:
+                print(f"warning: leg {result.leg}: the drive does not apply its table (table_enable = 0); switch it on "
+                      "before relying on it")
     code = report(job, audit)
     if code:
         return code
-    result = job.finished.result
-    print(f"pushed: leg {leg} bank {result.bank} active (was bank {result.previous_bank}); "
-          f"table sha256 {result.table_sha256}")
-    print(f"backup of the previous table (sha256 {result.previous_sha256[:12]}…) is in {audit.path}")
-    if not result.table_enabled:
-        print("warning: the drive does not apply its table (table_enable = 0); switch it on before relying on it")
+    print(f"backup of the previous table(s) is in {audit.path}")
     if cfg.drive.url == "sim":
         verify_where = undo_where = "--sim"
     elif args.config:
         verify_where = undo_where = f"--config {args.config}"
     else:
         verify_where, undo_where = "--config C", f"--drive {cfg.drive.url}"
-    print(f"next: station verify --leg {leg} {verify_where} --before CALIBRATION.h5 --out VERIFY.h5"
-          f"   |   undo: station rollback --leg {leg} {undo_where}")
+    which = args.leg if len(legs) > 1 else str(legs[0])
+    print(f"next: station verify --leg {which} {verify_where} --before CALIBRATION.h5 --out VERIFY.h5"
+          f"   |   undo: station rollback --leg N {undo_where}")
     return 0
+
+
+def parse_leg_choice(text: str) -> tuple[int, ...]:
+    """"3", "1-6", "1,4" or "all" as leg numbers; InputError naming what is wrong."""
+    if str(text).strip().lower() == "all":
+        return tuple(range(1, LEG_COUNT + 1))
+    try:
+        return parse_legs(str(text))
+    except InputError:
+        raise InputError(f"--leg {text}: give a leg number from 1 to {LEG_COUNT}, a range (1-6), a list (1,4) "
+                         "or all") from None
+
+
+def prompt_all(yes: bool, legs: tuple[int, ...]):
+    """One question for several legs' plans (the plans were printed before)."""
+    one = prompt(yes)
+
+    def confirm(plans) -> bool:
+        return one(_Several(f"Push these tables to legs {', '.join(str(p.leg) for p in plans)}?"))
+
+    return confirm
+
+
+class _Several:
+    def __init__(self, text: str) -> None:
+        self.text = text
+
+    def question(self) -> str:
+        return self.text
 
 
 def _with_audit_line(confirm, audit: AuditLog):

@@ -15,7 +15,7 @@ from procedures.plans import SweepPlan, iso230_plan, parse_legs
 from procedures.recording.reader import read_session
 from procedures.states import AuditOutcome
 from procedures.verify import ACCEPT_RATIO
-from station.commands.push import audit_log, station_config
+from station.commands.push import audit_log, parse_leg_choice, station_config
 from station.progress import ConsoleProgress
 from station.table_jobs import expected_tables, verify_job
 from station.wiring import drive_table_spec, drive_url_of, open_rig
@@ -32,7 +32,7 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--leg", required=True, metavar="N", help="leg(s) to verify: 2, 1-3 or 1,4")
+    p.add_argument("--leg", required=True, metavar="N", help="leg(s) to verify: 2, 1-3, 1,4 or all")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sim", action="store_true",
                        help="the simulated rig, with the drive table memory `station push --sim` wrote")
@@ -81,7 +81,7 @@ class LegPrinter:
 
 
 def run(args) -> int:
-    legs = parse_legs(args.leg)
+    legs = parse_leg_choice(args.leg)
     if args.config and (args.seed is not None or args.noise_seed is not None):
         raise InputError("--seed/--noise-seed apply to the simulated rig (--sim) only")
     cfg = station_config(args, interferometer=True)

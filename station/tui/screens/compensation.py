@@ -34,6 +34,7 @@ class CompensationScreen(StationScreen):
         Binding("g", "read_drives", "Read drives"),
         Binding("w", "save_csv", "Save CSV"),
         Binding("u", "push", "Push"),
+        Binding("U", "push_all", "Push all legs"),
         Binding("v", "verify", "Verify"),
         Binding("b", "rollback", "Rollback"),
         Binding("l", "next_leg", "Next leg"),
@@ -50,6 +51,7 @@ class CompensationScreen(StationScreen):
                 yield Button("Read drives (g)", id="comp-read", compact=True)
                 yield Button("CSV (w)", id="comp-save", compact=True)
                 yield Button("Push… (u)", id="comp-push", compact=True, variant="error")
+                yield Button("All… (U)", id="comp-push-all", compact=True, variant="error")
                 yield Button("Verify (v)", id="comp-verify", compact=True)
                 yield Button("Rollback… (b)", id="comp-rollback", compact=True)
             yield LegTablesView(id="comp-table")
@@ -158,12 +160,23 @@ class CompensationScreen(StationScreen):
             return
         if not self._ready("Pushing a table"):
             return
+        self.jobs.push(leg, self.table.legs[leg], self._source(leg))
+
+    def action_push_all(self) -> None:
+        """Every leg of the table, one confirmation listing each drive and what it gets."""
+        if self.table is None:
+            self.notify("Make a table first (t).", severity="warning")
+            return
+        if not self._ready("Pushing the tables"):
+            return
+        self.jobs.push_all(dict(self.table.legs), {leg: self._source(leg) for leg in self.table.legs})
+
+    def _source(self, leg: int) -> dict | None:
         a = self.app.analysis
-        source = None
-        if a is not None:
-            source = {"path": str(a.model_path or a.path), "leg": leg, "recording": str(a.path),
-                      "recording_sha256": a.session.sha256, "method": a.method}
-        self.jobs.push(leg, self.table.legs[leg], source)
+        if a is None:
+            return None
+        return {"path": str(a.model_path or a.path), "leg": leg, "recording": str(a.path),
+                "recording_sha256": a.session.sha256, "method": a.method}
 
     def action_rollback(self) -> None:
         leg = self._selected_leg() or (self.app.legs[0] if self.app.legs else None)
@@ -207,7 +220,7 @@ class CompensationScreen(StationScreen):
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         action = {"comp-make": self.action_make_table, "comp-read": self.action_read_drives,
-                  "comp-save": self.action_save_csv, "comp-push": self.action_push,
+                  "comp-save": self.action_save_csv, "comp-push": self.action_push, "comp-push-all": self.action_push_all,
                   "comp-verify": self.action_verify, "comp-rollback": self.action_rollback}.get(event.button.id or "")
         if action is not None:
             event.stop()

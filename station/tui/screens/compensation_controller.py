@@ -111,13 +111,24 @@ class CompensationController:
         self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
             axis, table, audit=audit, drive_url=url, source=source, confirm=self.confirm))
 
+    def push_all(self, tables: dict, sources: dict[int, dict]) -> None:
+        """Push every leg's table after one confirmation (procedures.push.push_legs_procedure)."""
+        from station.table_jobs import push_legs_job
+
+        def start(axes, audit, url):
+            return push_legs_job(axes, tables, audit=audit, drive_url=url, sources=sources, confirm=self.confirm_all)
+
+        self._table_job(Action.PUSH, None, start, legs=tuple(sorted(tables)))
+
     def rollback(self, leg: int) -> None:
         from station.table_jobs import rollback_job
 
         self._table_job(Action.ROLLBACK, leg, lambda axis, audit, url: rollback_job(
             axis, audit=audit, drive_url=url, confirm=self.confirm))
 
-    def _table_job(self, action: Action, leg: int, start) -> None:
+    def _table_job(self, action: Action, leg: int | None, start, legs: tuple[int, ...] = ()) -> None:
+        """Run `start(axis or axes, audit, drive_url)` in a worker holding the rig; `legs` for
+        several legs (then `start` gets the axes by leg)."""
         def work() -> None:
             from station.wiring import drive_url_of
 
@@ -125,11 +136,17 @@ class CompensationController:
             if rig is None:
                 self.screen.post_message(TableJobDone(action, leg, error="Not connected to the rig."))
                 return
+            missing = [x for x in legs if x not in rig.axes]
+            if missing:
+                self.screen.post_message(TableJobDone(action, leg, error=f"No drive connected for leg(s) {missing}; "
+                                                      "nothing was written."))
+                return
             if not lock.acquire(timeout=RIG_WAIT_S):
                 self.screen.post_message(TableJobDone(action, leg, error="The rig is busy; nothing was written. Try again."))
                 return
             try:
-                job = start(rig.axes[leg], self.audit(), drive_url_of(self.app.cfg))
+                target = {x: rig.axes[x] for x in legs} if legs else rig.axes[leg]
+                job = start(target, self.audit(), drive_url_of(self.app.cfg))
             except Exception as exc:  # an audit log that cannot be written, a drive gone: said, not raised
                 self.screen.post_message(TableJobDone(action, leg, error=describe(exc, f"{action} of leg {leg}")))
                 return
@@ -142,22 +159,25 @@ class CompensationController:
     def confirm(self, plan: PushPlan) -> bool:
         """The procedures' `Confirm`, called on the worker thread: a dialog on the UI thread,
         waited for. False (cancelled) if the app closes meanwhile."""
-        answer: dict[str, bool] = {}
-        done = threading.Event()
         lines = plan.describe()
         if self.app.hide_volatile:
             lines = [line.split(" at ")[0] if line.startswith(f"leg {plan.leg}: drive") else line for line in lines]
         verb = "Push this table to" if plan.action == Action.PUSH else "Roll back the table of"
         question = (f"[b]{verb} leg {plan.leg}[/b], drive [b]{plan.drive}[/b]?\n\n" + "\n".join(lines)
                     + "\n\nThe drive's current table is backed up in the audit log first; on any failure it stays active.")
+        return self._ask(question, "Push" if plan.action == Action.PUSH else "Roll back")
+
+    def _ask(self, question: str, yes: str) -> bool:
+        """A dialog on the UI thread, waited for from the worker; False if the app closes meanwhile."""
+        answer: dict[str, bool] = {}
+        done = threading.Event()
 
         def answered(yes: bool | None) -> None:
             answer["yes"] = bool(yes)
             done.set()
 
         def ask() -> None:
-            self.app.push_screen(ConfirmScreen(question, yes="Push" if plan.action == Action.PUSH else "Roll back",
-                                               no="Cancel"), answered)
+            self.app.push_screen(ConfirmScreen(question, yes=yes, no="Cancel"), answered)
 
         self.app.call_from_thread(ask)
         while not done.wait(0.2):
@@ -165,14 +185,27 @@ class CompensationController:
                 return False
         return answer["yes"]
 
+    def confirm_all(self, plans: list[PushPlan]) -> bool:
+        """One dialog for several legs' plans (a whole platform)."""
+        lines = []
+        for plan in plans:
+            lines.append(f"leg {plan.leg}: drive {plan.drive}")
+            lines.extend(line for line in plan.describe()[1:] if not line.startswith("            sha256"))
+        question = (f"[b]Push the tables of legs {', '.join(str(p.leg) for p in plans)}[/b]?\n\n" + "\n".join(lines)
+                    + "\n\nEach drive's current table is backed up in the audit log first; a leg that fails keeps its "
+                    "table and stops the rest.")
+        return self._ask(question, "Push all")
+
     def notice(self, message: TableJobDone) -> tuple[str, str]:
         """(text, severity) for how a push or rollback ended."""
-        title = f"{message.action} of leg {message.leg}"
+        title = f"{message.action} of leg {message.leg}" if message.leg is not None else f"{message.action} of every leg"
         if message.error:
             return message.error, "error"
         job = message.job
         problems = "".join(f" (audit log: {p})" for p in job.audit_problems)
         end = job.finished
+        if end.outcome == AuditOutcome.OK and end.leg is None:  # several legs
+            return f"{end.message}; backups in the audit log.{problems}", "information"
         if end.outcome == AuditOutcome.OK:
             r = end.result
             done = "pushed and active" if message.action == Action.PUSH else "rolled back"
