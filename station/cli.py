@@ -100,6 +100,7 @@ def _main(argv: list[str] | None) -> int:
         message = str(exc)
         if isinstance(exc, OSError) and exc.filename and exc.strerror:
             message = f"{exc.filename}: {exc.strerror.lower()}"  # not "[Errno 2] ..."
+        message = "; ".join(part.strip() for part in message.splitlines() if part.strip())  # one line
         print(f"station {args.command}: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
