@@ -5,6 +5,15 @@ redraws: the screens only draw from `app.sweep` (a `SweepState`) and call the ap
 All device I/O runs in thread workers; results come back as messages. Device access is
 serialised by `rig_lock` (the sweep holds it for its whole run; status polling skips a beat
 instead of waiting), except the quick stop of an abort, which must not wait for anything.
+
+One owner: the app's thread is the only one that assigns the app's state (`rig`, `rig_state`,
+`rig_error`, `sweep`, `sweep_control`, `replay_rig`, ...) or folds events into `sweep`. A worker
+gets the rig, the lock and the run control as arguments and reports back only with messages
+(station.tui.messages, station.tui.bridge). After a change the app posts `SweepChanged` /
+`RigStateChanged` to the screens on show, which redraw from it: no screen polls the app's state.
+Pause, resume and abort are asked for in one place each (`action_pause_sweep`,
+`action_abort_sweep`); the status shown follows the procedure's Paused / Resumed / SweepFinished
+events (`SweepState.apply`).
 """
 
 from __future__ import annotations
@@ -25,7 +34,15 @@ from procedures.states import AuditOutcome
 from station.config import StationConfig
 from station.tui.bridge import SweepEnded, SweepEvent, TuiBridge
 from station.tui.errors import describe
-from station.tui.messages import Notice, RigActionDone, RigConnected, RigConnectFailed
+from station.tui.messages import (
+    Notice,
+    ReplayRigOpened,
+    RigActionDone,
+    RigConnected,
+    RigConnectFailed,
+    RigStateChanged,
+    SweepChanged,
+)
 from station.tui.screens.common import ConfirmScreen
 from station.tui.screens.compensation import CompensationScreen
 from station.tui.screens.diagnosis import DiagnosisScreen
@@ -66,6 +83,9 @@ class StationApp(App):
         "platform": PlatformScreen,
     }
     DEFAULT_MODE = "rig"
+    # The screens are told of sweep changes at most this often (s): a fast sweep folds many
+    # events in between, and one redraw shows them all.
+    SWEEP_REDRAW_S = 0.1
     # The page keys (F1-F7) are shown in the tab bar at the top of every page; the footer keeps
     # the current page's actions.
     BINDINGS = [
@@ -99,17 +119,23 @@ class StationApp(App):
         self.autoconnect = autoconnect
         self.hide_volatile = hide_volatile
         self.poll_interval_s = poll_interval_s
+        # Assigned on the app's thread only (see the module docstring).
         self.rig = None  # station.wiring.Rig once connected
         self.rig_state = "not connected"  # "connecting" / "connected" / "not connected"
         self.rig_error = ""
         self.rig_lock = threading.Lock()
+        self._connect_attempt = 0  # numbers the connect requests: only the newest one's rig is kept
         self.sweep = SweepState()
         self.sweep_control: RunControl | None = None
-        self._sweep_idle = threading.Event()
+        self._sweep_idle = threading.Event()  # set by the job's worker when it has returned
         self._sweep_idle.set()
         self._quit_after_sweep = False
         self.replay_rig = None  # the replay devices of the running (or last) replay
-        self._on_sweep_done: Callable[[SweepState], None] | None = None
+        self._sweep_run = 0  # numbers the jobs started: their messages carry it
+        # run number -> (its SweepState, its on_done), until its SweepEnded has been handled
+        self._runs: dict[int, tuple[SweepState, Callable[[SweepState], None] | None]] = {}
+        self._sweep_redraw_due = None  # the Timer of the coalesced SweepChanged still to post
+        self._sweep_told_at = -1e9  # time.monotonic() of the last SweepChanged posted
         self.last_session: Path | None = None  # the newest recording made or opened here
         self.analysis = None  # results.Analysis: the session, model and ISO figures on show (Compensation, Platform use it)
         self.session_listeners: list[Callable[[Path], None]] = []
@@ -131,11 +157,7 @@ class StationApp(App):
 
     def _close_rig(self) -> None:
         rig, self.rig = self.rig, None
-        if rig is not None:
-            try:
-                rig.close()
-            except Exception:
-                log.exception("closing the rig failed")
+        _close_quietly(rig, "closing the rig failed")
 
     # -- notifications -----------------------------------------------------------------------
     def on_notice(self, message: Notice) -> None:
@@ -156,45 +178,51 @@ class StationApp(App):
         self.connect_rig()
 
     def connect_rig(self) -> None:
+        """(Re)connect. The current rig is detached here, on the app's thread, so `app.rig` never
+        names a rig that is being closed; the worker closes it, then opens the new one."""
+        old, self.rig = self.rig, None
+        self._connect_attempt += 1
         self.rig_state, self.rig_error = "connecting", ""
-        self._refresh_rig_screen()
-        self._connect_worker()
+        self._rig_changed()
+        self._connect_worker(old, self._connect_attempt, self.rig_lock)
 
-    @work(thread=True, exclusive=True, group="connect", exit_on_error=False)
-    def _connect_worker(self) -> None:
+    @work(thread=True, group="connect", exit_on_error=False)
+    def _connect_worker(self, old, attempt: int, lock: threading.Lock) -> None:
         from station.wiring import open_rig  # imported here: a missing driver is a notice, not a crash
 
-        with self.rig_lock:
-            old, self.rig = self.rig, None
-            if old is not None:
-                try:
-                    old.close()
-                except Exception:
-                    log.exception("closing the previous rig failed")
+        with lock:  # a poll or an action still using the old rig finishes first
+            _close_quietly(old, "closing the previous rig failed")
             try:
                 rig = open_rig(self.cfg, legs=self.legs, time_scale=self.time_scale)
             except Exception as exc:
-                self.post_message(RigConnectFailed(describe(exc, "cannot connect to the rig")))
+                self.post_message(RigConnectFailed(describe(exc, "cannot connect to the rig"), attempt))
                 return
-        self.post_message(RigConnected(rig))
+        self.post_message(RigConnected(rig, attempt))
 
     def on_rig_connected(self, message: RigConnected) -> None:
+        if message.attempt != self._connect_attempt:  # a newer connect request is under way
+            self._close_worker(message.rig)
+            return
         self.rig = message.rig
         self.rig_state, self.rig_error = "connected", ""
         self.notify(f"Connected: {self._rig_kind_text()}.", timeout=4)
-        self._refresh_rig_screen()
+        self._rig_changed()
 
     def on_rig_connect_failed(self, message: RigConnectFailed) -> None:
+        if message.attempt != self._connect_attempt:
+            return
         self.rig_state, self.rig_error = "not connected", message.error
         self.notify(message.error + " Press c on the Rig screen (F1) to retry.", title="Rig",
                     severity="error", timeout=15)
-        self._refresh_rig_screen()
+        self._rig_changed()
 
-    def _refresh_rig_screen(self) -> None:
-        for screen in self._screen_stacks.get("rig", []):
-            show = getattr(screen, "_show_connection", None)
-            if show is not None and screen.is_mounted:
-                show()
+    @work(thread=True, group="connect", exit_on_error=False)
+    def _close_worker(self, rig) -> None:
+        _close_quietly(rig, "closing a superseded rig failed")
+
+    def _rig_changed(self) -> None:
+        """Tell the screens on show that the connection changed (the others redraw when shown)."""
+        self._tell_screens(RigStateChanged)
 
     def _rig_kind_text(self) -> str:
         if self.rig is None:
@@ -213,16 +241,13 @@ class StationApp(App):
         if action != "stop" and self.sweep.active:
             self.notify("A sweep is running: pause or abort it first (Sweep screen, F2).", severity="warning")
             return
-        self._rig_action_worker(action, legs)
+        self._rig_action_worker(self.rig, self.rig_lock, action, legs)
 
     @work(thread=True, group="rig-action", exit_on_error=False)
-    def _rig_action_worker(self, action: str, legs: tuple[int, ...]) -> None:
-        rig = self.rig
-        if rig is None:
-            return
+    def _rig_action_worker(self, rig, lock: threading.Lock, action: str, legs: tuple[int, ...]) -> None:
         locked = False
         if action != "stop":  # a stop must never wait behind another transaction
-            locked = self.rig_lock.acquire(timeout=5.0)
+            locked = lock.acquire(timeout=5.0)
             if not locked:
                 self.post_message(RigActionDone(action, legs, "the rig is busy (another action is running); try again"))
                 return
@@ -253,7 +278,7 @@ class StationApp(App):
             return
         finally:
             if locked:
-                self.rig_lock.release()
+                lock.release()
         self.post_message(RigActionDone(action, legs))
 
     def on_rig_action_done(self, message: RigActionDone) -> None:
@@ -286,43 +311,47 @@ class StationApp(App):
         if out.exists():
             self.notify(f"{out} exists already; choose another file name.", severity="error")
             return False
-        self.sweep = SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting",
-                                total=plan.total_points, label=label)
-        self._on_sweep_done = on_done
-        self.sweep_control = RunControl()
-        self._sweep_idle.clear()
-        self._sweep_worker(plan, out, self.sweep_control, job)
+        run = self._begin_run(SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting",
+                                         total=plan.total_points, label=label), on_done)
+        self._sweep_worker(run, self.rig, self.rig_lock, plan, out, self.sweep_control, self._sweep_idle, job)
         return True
 
+    def _begin_run(self, state: SweepState, on_done: Callable[[SweepState], None] | None) -> int:
+        """Make `state` the sweep on show with a new run control; the new job's run number."""
+        self._sweep_run += 1
+        self._runs[self._sweep_run] = (state, on_done)
+        self.sweep = state
+        self.sweep_control = RunControl()
+        self._sweep_idle.clear()
+        self._sweep_changed()
+        return self._sweep_run
+
     @work(thread=True, group="sweep", exit_on_error=False)
-    def _sweep_worker(self, plan: SweepPlan, out: Path, control: RunControl, job: Callable | None = None) -> None:
+    def _sweep_worker(self, run: int, rig, lock: threading.Lock, plan: SweepPlan, out: Path, control: RunControl,
+                      idle: threading.Event, job: Callable | None = None) -> None:
         from station.jobs import run_sweep
 
         outcome, points, error, ended = "error", 0, "", None
         try:
-            if not self.rig_lock.acquire(timeout=10.0):
+            if not lock.acquire(timeout=10.0):
                 error = "the rig stayed busy for 10 s (a rig action is still running); try again"
                 return
             try:
-                rig = self.rig
-                if rig is None:
-                    error = "the rig was disconnected; connect it on the Rig screen (F1)"
-                    return
                 if job is None:
-                    result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self)], control=control)
+                    result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self, run)], control=control)
                 else:
-                    ended = job(rig, [TuiBridge(self)], control)
+                    ended = job(rig, [TuiBridge(self, run)], control)
                     result = ended.run
                     if ended.outcome == AuditOutcome.REFUSED:  # nothing moved: say why, as the CLI does
                         error = ended.finished.message
                 outcome, points = result.outcome, result.points
             finally:
-                self.rig_lock.release()
+                lock.release()
         except Exception as exc:  # the runner has already stopped the drives in its finally
             error = describe(exc, "the sweep stopped")
         finally:
-            self._sweep_idle.set()
-            self.post_message(SweepEnded(outcome, points, error, result=ended))
+            idle.set()
+            self.post_message(SweepEnded(outcome, points, error, result=ended, run=run))
 
     def start_replay(self, source: Path, speed: float | None) -> bool:
         """Replay `source` through the replay devices and the sweep procedure (station.jobs.
@@ -332,15 +361,13 @@ class StationApp(App):
             self.notify("A sweep is already running.", severity="warning")
             return False
         out = replay_output_path(self.cfg, source)
-        self.sweep = SweepState(out=out, label=f"replay of {source.name}", status="starting")
-        self._on_sweep_done = None
-        self.sweep_control = RunControl()
-        self._sweep_idle.clear()
-        self._replay_worker(source, speed, out, self.sweep_control)
+        run = self._begin_run(SweepState(out=out, label=f"replay of {source.name}", status="starting"), None)
+        self._replay_worker(run, source, speed, out, self.sweep_control, self._sweep_idle)
         return True
 
     @work(thread=True, group="sweep", exit_on_error=False)
-    def _replay_worker(self, source: Path, speed: float | None, out: Path, control: RunControl) -> None:
+    def _replay_worker(self, run: int, source: Path, speed: float | None, out: Path, control: RunControl,
+                       idle: threading.Event) -> None:
         outcome, points, error, note = "error", 0, "", ""
         try:
             from procedures.recording.reader import read_session
@@ -352,8 +379,8 @@ class StationApp(App):
             if not session.plan:
                 raise ValueError(f"{source.name}: the session stores no sweep plan, so there is nothing to replay")
             with open_replay_rig(source, speed, self.cfg) as rig:
-                self.replay_rig = rig  # tests look at its devices
-                result = replay_sweep(rig, session, out, self.cfg, sinks=[TuiBridge(self)], control=control)
+                self.post_message(ReplayRigOpened(rig))  # the app keeps it as replay_rig (tests look at its devices)
+                result = replay_sweep(rig, session, out, self.cfg, sinks=[TuiBridge(self, run)], control=control)
                 mismatch = rig.sim.mismatch
             outcome, points = result.outcome, result.points
             if mismatch is not None:
@@ -365,30 +392,42 @@ class StationApp(App):
         except Exception as exc:
             error = describe(exc, "the replay stopped")
         finally:
-            self._sweep_idle.set()
-            self.post_message(SweepEnded(outcome, points, error, note))
+            idle.set()
+            self.post_message(SweepEnded(outcome, points, error, note, run=run))
+
+    def on_replay_rig_opened(self, message: ReplayRigOpened) -> None:
+        self.replay_rig = message.rig
 
     def on_sweep_event(self, message: SweepEvent) -> None:
-        self.sweep.apply(message.event)
         from procedures import events as ev
 
+        run = self._runs.get(message.run)
+        if run is None:  # its job has ended already (an event after its end: nothing to show)
+            return
+        s = run[0]
+        if s.apply(message.event) and s is self.sweep:
+            self._sweep_changed()
         event = message.event
         if isinstance(event, ev.Fault):
             self.notify(f"leg {event.leg} run {event.run} at {event.target_mm:+.3f} mm: {event.message}",
                         title=f"{event.kind} ({'gave up' if event.gave_up else f'attempt {event.attempt}, retrying'})",
                         severity="error" if event.gave_up else "warning", timeout=10)
-        elif isinstance(event, ev.Message) and event.level != "info" and self.sweep.label == "sweep":
+        elif isinstance(event, ev.Message) and event.level != "info" and s.label == "sweep":
             # e.g. a calibration sweep on a leg whose compensation table is active
             self.notify(event.text, title="Sweep", severity="warning", timeout=15)
 
     def on_sweep_ended(self, message: SweepEnded) -> None:
-        s = self.sweep
+        run = self._runs.pop(message.run, None)
+        if run is None:
+            return
+        s, done = run
         if s.active:  # no SweepFinished came: the run broke off with an exception
             s.status = "error" if message.error else message.outcome
             s.reason = message.error
         s.note = message.note
         s.result = message.result
-        s.version += 1
+        if s is self.sweep:
+            self._sweep_changed()
         if message.error:
             self.notify(message.error, title="Sweep", severity="error", timeout=15)
         else:
@@ -400,38 +439,73 @@ class StationApp(App):
                         severity="information" if s.status == "completed" else "warning", timeout=8)
         if s.out is not None and s.out.exists():
             self.set_session(s.out)
-        done, self._on_sweep_done = self._on_sweep_done, None
         if done is not None:
             try:
                 done(s)
             except Exception as exc:  # a follow-up must not take the app down
                 self.notify(describe(exc, f"after the {s.label}"), severity="error", timeout=12)
-        if self._quit_after_sweep:
+        if self._quit_after_sweep and s is self.sweep:
             self.exit()
 
-    def action_pause_sweep(self) -> None:
-        """Pause between points (nothing moves while paused), or resume."""
+    # -- telling the screens -----------------------------------------------------------------------
+    def _sweep_changed(self) -> None:
+        """`app.sweep` changed: post `SweepChanged` to the screens on show, at once when the last
+        one is `SWEEP_REDRAW_S` old, else once at the end of that interval (a single one for
+        every change in between)."""
+        if self._sweep_redraw_due is not None:
+            return  # one is due already; it shows this change too
+        wait = self._sweep_told_at + self.SWEEP_REDRAW_S - time.monotonic()
+        if wait <= 0:
+            self._post_sweep_changed()
+        else:
+            self._sweep_redraw_due = self.set_timer(wait, self._post_sweep_changed, name="sweep-changed")
+
+    def _post_sweep_changed(self) -> None:
+        self._sweep_redraw_due = None
+        self._sweep_told_at = time.monotonic()
+        self._tell_screens(SweepChanged)
+
+    def _tell_screens(self, message_type: type) -> None:
+        """Post a new `message_type()` to each screen of the current page's stack (a dialog and
+        the page under it); a page not on show redraws when it is shown again."""
+        try:
+            screens = list(self.screen_stack)
+        except Exception:  # no screen yet (the app is starting or has ended)
+            return
+        for screen in screens:
+            screen.post_message(message_type())
+
+    # -- pause, resume, abort: asked for here only -----------------------------------------------
+    def _control_of_running_sweep(self) -> RunControl | None:
         if not self.sweep.active or self.sweep_control is None:
             self.notify("No sweep is running.", severity="warning")
+            return None
+        return self.sweep_control
+
+    def action_pause_sweep(self) -> None:
+        """Pause between points (nothing moves while paused), or resume: the one place the UI
+        asks for either. The status on show changes when the procedure has paused or resumed
+        (its Paused / Resumed events, folded in by on_sweep_event), not here."""
+        control = self._control_of_running_sweep()
+        if control is None or self.sweep.status == "aborting":
             return
-        if self.sweep.status == "aborting":
-            return
-        if self.sweep_control.paused:
-            self.sweep_control.resume()
+        if control.paused:
+            control.resume()
             self.notify("Resuming the sweep.", timeout=3)
         else:
-            self.sweep_control.pause()
+            control.pause()
             self.notify("Pausing after the current point…", timeout=3)
 
     def action_abort_sweep(self) -> None:
-        """Abort: quick-stop the axes now (from a worker, the UI stays live), end the sweep."""
-        if not self.sweep.active or self.sweep_control is None:
-            self.notify("No sweep is running.", severity="warning")
+        """Abort: quick-stop the axes now (from a worker, the UI stays live), end the sweep. The
+        one place the UI asks for an abort (the Rig page's stop-all and quitting come here too);
+        the status shows "aborting" (SweepState.request_abort) until SweepFinished says how it ended."""
+        control = self._control_of_running_sweep()
+        if control is None:
             return
-        if self.sweep.status != "aborting":
-            self.sweep.status = "aborting"
-            self.sweep.version += 1
-            self._abort_worker(self.sweep_control)
+        if self.sweep.request_abort():
+            self._sweep_changed()
+            self._abort_worker(control)
             self.notify("Aborting: stopping the drives…", severity="warning", timeout=4)
 
     @work(thread=True, group="abort", exit_on_error=False)
@@ -466,6 +540,16 @@ class StationApp(App):
 
 class _ActionRefused(Exception):
     pass
+
+
+def _close_quietly(rig, what: str) -> None:
+    """Close `rig` (None: nothing to close), logging instead of raising."""
+    if rig is None:
+        return
+    try:
+        rig.close()
+    except Exception:
+        log.exception(what)
 
 
 def replay_output_path(cfg: StationConfig, source: Path) -> Path:

@@ -1,4 +1,10 @@
-"""Messages posted from worker threads to the app (never widget calls from a thread)."""
+"""Messages: from worker threads to the app (never widget calls from a thread, never an
+assignment on the app), and from the app to the screens when what they show has changed.
+
+The app's thread is the only writer of the app's state (`app.rig`, `app.rig_state`,
+`app.sweep`, `app.sweep_control`, `app.replay_rig`, ...): a worker gets what it needs as
+arguments and reports back with one of these messages, which the app folds in on its thread.
+"""
 
 from __future__ import annotations
 
@@ -8,15 +14,28 @@ from textual.message import Message
 
 
 class RigConnected(Message):
-    def __init__(self, rig: Any) -> None:
+    """A connect worker opened `rig`; `attempt` names the connect request it answers (the app
+    takes only the newest one's rig and has an older one closed)."""
+
+    def __init__(self, rig: Any, attempt: int = 0) -> None:
         super().__init__()
         self.rig = rig
+        self.attempt = attempt
 
 
 class RigConnectFailed(Message):
-    def __init__(self, error: str) -> None:
+    def __init__(self, error: str, attempt: int = 0) -> None:
         super().__init__()
         self.error = error
+        self.attempt = attempt
+
+
+class ReplayRigOpened(Message):
+    """The replay worker opened its replay devices (`rig`): the app keeps them as `replay_rig`."""
+
+    def __init__(self, rig: Any) -> None:
+        super().__init__()
+        self.rig = rig
 
 
 class RigActionDone(Message):
@@ -37,3 +56,18 @@ class Notice(Message):
         self.text = text
         self.severity = severity
         self.title = title
+
+
+class SweepChanged(Message):
+    """Posted by the app to the screens on show after it changed `app.sweep` (an event folded
+    in, a sweep started or ended, an abort requested): redraw what shows the sweep. Coalesced by
+    the app (at most one per `StationApp.SWEEP_REDRAW_S`), so a fast sweep does not flood the UI."""
+
+    bubble = False  # each screen gets its own; the app is not told again
+
+
+class RigStateChanged(Message):
+    """Posted by the app to the screens on show after the connection changed (`app.rig`,
+    `app.rig_state`, `app.rig_error`)."""
+
+    bubble = False

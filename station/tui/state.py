@@ -1,7 +1,13 @@
 """What the UI knows about the current (or last) sweep, folded from procedure events.
 
 Owned and mutated by the app's thread only (the bridge posts events as messages). Screens
-read it to draw, so a sweep survives screen changes and redraws.
+read it to draw, so a sweep survives screen changes and redraws; the app tells them when it has
+changed with a `SweepChanged` message (station.tui.messages), they never poll it.
+
+The status follows the procedure's events (`apply`): "paused" and "running" again come from its
+Paused / Resumed events (procedures.control.RunControl.checkpoint), the outcome from
+SweepFinished, never from the operator's request. The one request state is "aborting"
+(`request_abort`), set by the app's abort action while the run winds down.
 """
 
 from __future__ import annotations
@@ -59,7 +65,6 @@ class SweepState:
     elapsed_s: float = 0.0
     eta_s: float | None = None
     result: Any = None  # what the job returned when it ended (a verification's JobOutcome)
-    version: int = 0  # bumped on every change: screens redraw when it moved
     _eta: Eta = field(default_factory=Eta)
 
     @property
@@ -67,13 +72,24 @@ class SweepState:
         """True while the sweep worker runs (the drives may move)."""
         return self.status in ("starting", "running", "paused", "aborting")
 
-    def apply(self, event: ev.Event) -> None:
+    def request_abort(self) -> bool:
+        """The operator asked to abort (StationApp.action_abort_sweep, the only caller): show
+        "aborting" until SweepFinished says how it ended. False if it was asked already or the
+        sweep is not running."""
+        if not self.active or self.status == "aborting":
+            return False
+        self.status = "aborting"
+        return True
+
+    def apply(self, event: ev.Event) -> bool:
+        """Fold `event` in; True if it changed what the screens show."""
         if isinstance(event, ev.SweepStarted):
             self.session_id = event.session_id
             self.legs = tuple(event.legs)
             self.total = event.total_points
             self.done = self.resumed_points = event.resumed_points
-            self.status = "running"
+            if self.status != "aborting":
+                self.status = "running"
         elif isinstance(event, ev.LegStarted):
             self.current_leg = event.leg
             self.traces.setdefault(event.leg, LegTrace())
@@ -98,4 +114,6 @@ class SweepState:
             self.done = event.points
             self.reason = event.reason
             self.eta_s = None
-        self.version += 1
+        else:
+            return False
+        return True

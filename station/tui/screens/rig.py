@@ -1,7 +1,10 @@
 """Rig screen: each leg's drive state, the interferometer and the environment, at a glance.
 
 Status is read in a thread worker every `app.poll_interval_s` while this screen is shown and
-no sweep holds the rig (a poll never waits for the rig: it skips a beat instead).
+no sweep holds the rig (a poll never waits for the rig: it skips a beat instead). The worker is
+handed the rig and its lock, and posts what it read (`RigPolled`); it never writes the app's
+state. The connection line is redrawn when the app says the connection or the sweep changed
+(`RigStateChanged`, `SweepChanged`), not on a timer.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from textual.widgets import DataTable, Static
 
 from drivers.interfaces import DriveStatus, Environment, Reading
 from station.tui.errors import describe
+from station.tui.messages import RigStateChanged, SweepChanged
 from station.tui.screens.common import StationScreen
 
 STATE_TEXT = {
@@ -44,9 +48,12 @@ class RigSnapshot:
 
 
 class RigPolled(Message):
-    def __init__(self, snapshot: RigSnapshot) -> None:
+    """One poll of `rig` (the rig it was read from: a poll of a rig since replaced is not shown)."""
+
+    def __init__(self, snapshot: RigSnapshot, rig=None) -> None:
         super().__init__()
         self.snapshot = snapshot
+        self.rig = rig
 
 
 class RigScreen(StationScreen):
@@ -78,24 +85,28 @@ class RigScreen(StationScreen):
             table.add_row(str(leg), "–", "–", "–", "–", "–", "–", "–", key=str(leg))
         self.snapshot: RigSnapshot | None = None
         self._show_connection()
-        self.set_interval(max(self.app.poll_interval_s, 0.05), self._tick)
-        self.set_interval(0.5, self._show_connection)
+        self.set_interval(max(self.app.poll_interval_s, 0.05), self._tick)  # the devices' status
 
     def on_screen_resume(self) -> None:
         self._show_connection()
 
+    def on_rig_state_changed(self, message: RigStateChanged) -> None:
+        self._show_connection()
+
+    def on_sweep_changed(self, message: SweepChanged) -> None:
+        self._show_connection()
+
     # -- polling ---------------------------------------------------------------------------------
     def _tick(self) -> None:
-        if self.app.screen is not self or self.app.rig is None or self.app.sweep.active:
+        app = self.app
+        if app.screen is not self or app.rig is None or app.sweep.active:
             return
-        self._poll()
+        self._poll(app.rig, app.rig_lock)
 
     @work(thread=True, exclusive=True, group="poll", exit_on_error=False)
-    def _poll(self) -> None:
-        app = self.app
-        rig = app.rig
-        if rig is None or not app.rig_lock.acquire(blocking=False):
-            return  # busy (a sweep or an action): skip this beat
+    def _poll(self, rig, lock) -> None:
+        if not lock.acquire(blocking=False):
+            return  # busy (a sweep, an action, a reconnect): skip this beat
         t0 = time.monotonic()
         snap = RigSnapshot()
         try:
@@ -118,11 +129,13 @@ class RigScreen(StationScreen):
                     except Exception as exc:
                         snap.readings[leg] = describe(exc)
         finally:
-            app.rig_lock.release()
+            lock.release()
         snap.poll_ms = (time.monotonic() - t0) * 1000.0
-        self.post_message(RigPolled(snap))
+        self.post_message(RigPolled(snap, rig))
 
     def on_rig_polled(self, message: RigPolled) -> None:
+        if message.rig is not self.app.rig:  # read from a rig since detached (a reconnect)
+            return
         self.snapshot = message.snapshot
         self._show_snapshot(message.snapshot)
 

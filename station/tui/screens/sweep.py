@@ -1,5 +1,8 @@
 """Sweep screen: choose legs and plan, start; live error plot, progress, environment; pause,
 resume, abort. The sweep itself belongs to the app, so leaving this screen does not stop it.
+
+The screen draws `app.sweep` when the app says it changed (a `SweepChanged` message, coalesced
+by the app), when it is shown again, and after the operator's own actions here; it never polls.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from procedures.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
 from procedures.plans import parse_legs
 from station.progress import fmt_duration
 from station.tui.errors import describe
+from station.tui.messages import SweepChanged
 from station.tui.screens.common import StationScreen
 from station.tui.widgets import XYPlot
 
@@ -67,13 +71,14 @@ class SweepScreen(StationScreen):
         yield from self.compose_footer()
 
     def on_mount(self) -> None:
-        self._drawn_version = -1
         self.plot_leg: int | None = None
         self._update_summary()
-        self.set_interval(0.2, self._redraw_if_changed)
         self._redraw()
 
     def on_screen_resume(self) -> None:
+        self._redraw()
+
+    def on_sweep_changed(self, message: SweepChanged) -> None:
         self._redraw()
 
     # -- form --------------------------------------------------------------------------------------
@@ -167,13 +172,8 @@ class SweepScreen(StationScreen):
         self._redraw()
 
     # -- drawing -----------------------------------------------------------------------------------
-    def _redraw_if_changed(self) -> None:
-        if self.app.sweep.version != self._drawn_version:
-            self._redraw()
-
     def _redraw(self) -> None:
         s = self.app.sweep
-        self._drawn_version = s.version
         active = s.active
         if active != getattr(self, "_form_locked", None):  # the form is locked while a sweep runs
             self._form_locked = active
