@@ -73,7 +73,7 @@ def main() -> int:
             full_d = fit_leg(data, "default", nested=False)
             n_cycles = data.n_cycles
             ideal = FitStats(data.n_points, data.n_passes, n_cycles, 0, n_cycles, noise.noise_floor_um,
-                             noise.within_pass_um, None, 0.0, None).ratio_floor
+                             noise.within_pass_um, None, 0.0, None).ideal_heldout_ratio
             before = float(np.ptp(data.error_um))
             rms_d, rms_p = float(np.sqrt(np.mean(res_d**2))), float(np.sqrt(np.mean(res_p**2)))
             red_d = 100 * (1 - np.ptp(res_d) / before)

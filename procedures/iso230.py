@@ -297,6 +297,8 @@ _ROWS = (
     ("B", "reversal value (max |B_i|)"),
     ("B_mean", "mean reversal value"),
 )
+MEANINGS: dict[str, str] = dict(_ROWS)
+"""The name of each ISO 230-2 value, as `station iso230` and `station report` print it."""
 
 
 def format_table(results: dict[int, LegIso230]) -> str:

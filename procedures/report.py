@@ -8,9 +8,12 @@ Files written into the output directory:
 - spectrum.png    amplitude spectrum of the residual per leg, screw lead and harmonics marked
 - summary.md, summary.json  per-leg figures (um)
 
-"After compensation" is the residual of the model on this session's points: in-sample when
-the model was fitted to this session, a true test when it came from another recording. The
-model's own held-out figures (cross-validation over cycles) are quoted from the model.
+"After compensation" is the residual (error minus model) on this session's points: in-sample
+when the model was fitted to this session, a true test when it came from another recording. Its
+figures are the "residual range" and "residual RMS" (not the "held-out range" of `station fit`,
+which scores each cycle with a model fitted without it). The model's own held-out figures are
+quoted from the model as "model held-out RMS" and "model held-out ratio". Names and definitions:
+docs/figures.md.
 """
 
 from __future__ import annotations
@@ -27,7 +30,9 @@ from procedures.errors import InputError
 from procedures.fit import LegErrorModel, fit
 from procedures.fit.bidirectional import MIN_POINTS_PER_WAVE, pair_amplitudes
 from procedures.fit.data import LegData, split_legs
+from procedures.fit.figures import range_um, reduction_pct, rms_about_mean_um
 from procedures.fit.noise import estimate_noise_floor
+from procedures.iso230 import MEANINGS as ISO_MEANINGS
 
 UP_COLOR = "tab:blue"
 DOWN_COLOR = "tab:red"
@@ -81,8 +86,7 @@ def _iso_figures(points: np.ndarray, leg: int, residual_points: np.ndarray) -> d
     }
 
 
-ISO_ROWS = (("E", "systematic deviation E"), ("M", "mean bidirectional range M"), ("A", "accuracy A"),
-            ("B", "reversal B"), ("R", "repeatability R"))
+ISO_ROWS = tuple((k, f"{k}: {ISO_MEANINGS[k]}") for k in ("E", "M", "A", "B", "R"))
 
 
 def _json_safe(v: Any) -> Any:
@@ -95,10 +99,6 @@ def _json_safe(v: Any) -> Any:
     if isinstance(v, float) and not np.isfinite(v):
         return None
     return v
-
-
-def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(x))))
 
 
 def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorModel | None = None, *,
@@ -175,7 +175,7 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
             m = d.direction == sign
             ax.plot(d.position_mm[m], resid[leg][m], ".", ms=2, color=color, alpha=0.4)
         ax.axhline(0.0, color="k", lw=0.8)
-        ax.set_title(f"leg {leg}: residual (RMS {_rms(resid[leg]):.3f} um)")
+        ax.set_title(f"leg {leg}: residual (residual RMS {rms_about_mean_um(resid[leg]):.3f} um)")
         ax.set_xlabel("position (mm)")
         ax.set_ylabel("error - model (um)")
         ax.grid(alpha=0.3)
@@ -230,8 +230,8 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
         noise = estimate_noise_floor(d)
         up = d.error_um[d.direction == 1]
         down = d.error_um[d.direction == -1]
-        before_range = float(np.ptp(d.error_um))
-        after_range = float(np.ptp(resid[leg]))
+        before_range = range_um(d.error_um)
+        residual_range = range_um(resid[leg])
         residual_points = points[points["leg"] == leg].copy()
         # the same rows split_legs kept (finite target and error), in the same order
         residual_points = residual_points[np.isfinite(residual_points["target_mm"]) & np.isfinite(residual_points["error_um"])]
@@ -243,18 +243,18 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
             "cycles": d.n_cycles,
             "stroke_mm": list(f.stroke_mm),
             "range_before_um": before_range,
-            "range_after_um": after_range,
-            "range_reduction_pct": 100.0 * (1.0 - after_range / before_range) if before_range > 0 else None,
-            "rms_before_um": _rms(d.error_um - d.error_um.mean()),
-            "rms_after_um": _rms(resid[leg]),
+            "residual_range_um": residual_range,
+            "residual_range_reduction_pct": reduction_pct(before_range, residual_range),
+            "rms_before_um": rms_about_mean_um(d.error_um),
+            "residual_rms_um": rms_about_mean_um(resid[leg]),
             "mean_abs_before_um": float(np.mean(np.abs(d.error_um))),
-            "mean_abs_after_um": float(np.mean(np.abs(resid[leg]))),
+            "residual_mean_abs_um": float(np.mean(np.abs(resid[leg]))),
             "reversal_um": float(down.mean() - up.mean()) if up.size and down.size else None,
             "noise_floor_um": noise.noise_floor_um,
             "model_terms": f.describe(),
             "model_heldout_rms_um": f.stats.heldout_rms_um,
             "model_noise_floor_um": f.stats.noise_floor_um,
-            "model_ratio": f.stats.ratio,
+            "model_heldout_ratio": f.stats.heldout_ratio,
             "iso230_2": _iso_figures(points, leg, residual_points),
         }
         rows.append(row)
@@ -283,19 +283,23 @@ def _markdown(s: dict[str, Any], title: str) -> str:
     m = s["model"]
     lines.append(f"Model: {m['method']} (from `{m['source'].get('path') or 'n/a'}`); residuals are {s['residuals']}.")
     lines.append("")
-    lines.append("| leg | points | cycles | range before (um) | range after (um) | reduction | RMS before (um) | "
-                 "RMS after (um) | reversal (um) | noise floor (um) | model held-out RMS (um) | ratio |")
+    lines.append("| leg | points | cycles | range before (um) | residual range (um) | residual range reduction | "
+                 "RMS before (um) | residual RMS (um) | reversal (um) | noise floor (um) | model held-out RMS (um) | "
+                 "model held-out ratio |")
     lines.append("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in s["legs"]:
         lines.append(
-            f"| {r['leg']} | {r['points']} | {r['cycles']} | {_f(r['range_before_um'])} | {_f(r['range_after_um'])} | "
-            f"{_f(r['range_reduction_pct'], '.1f')} % | {_f(r['rms_before_um'])} | {_f(r['rms_after_um'])} | "
-            f"{_f(r['reversal_um'])} | {_f(r['noise_floor_um'])} | {_f(r['model_heldout_rms_um'])} | {_f(r['model_ratio'], '.2f')} |"
+            f"| {r['leg']} | {r['points']} | {r['cycles']} | {_f(r['range_before_um'])} | {_f(r['residual_range_um'])} | "
+            f"{_f(r['residual_range_reduction_pct'], '.1f')} % | {_f(r['rms_before_um'])} | {_f(r['residual_rms_um'])} | "
+            f"{_f(r['reversal_um'])} | {_f(r['noise_floor_um'])} | {_f(r['model_heldout_rms_um'])} | "
+            f"{_f(r['model_heldout_ratio'], '.2f')} |"
         )
     lines.append("")
-    lines.append("Range: max - min of all points; RMS before about the mean; reversal: mean error approaching "
-                 "downwards minus upwards; noise floor: pooled pass-to-pass scatter at the same target and direction; "
-                 "held-out RMS: each cycle scored by a model fitted without it (see docs/models.md).")
+    lines.append("Range before: max - min of the measured errors; residual: error minus model on this session's points "
+                 f"({s['residuals']}); residual range: its max - min; RMS before and residual RMS: about the mean; "
+                 "reversal: mean error approaching downwards minus upwards; noise floor: pooled pass-to-pass scatter "
+                 "at the same target and direction; model held-out RMS and ratio: from the model's own cross-validation "
+                 "(each cycle scored by a model fitted without it), as `station fit` prints them (see docs/figures.md).")
     lines.append("")
     lines.append("ISO 230-2 (um), before -> after compensation:")
     lines.append("")

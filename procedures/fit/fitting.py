@@ -10,6 +10,7 @@ from procedures.errors import InputError
 from procedures.fit.bidirectional import MAX_FOURIER_TERMS, fit_bidirectional_leg
 from procedures.fit.crossval import cycle_folds, heldout_residuals_um
 from procedures.fit.data import LegData, split_legs
+from procedures.fit.figures import range_um, rms_um
 from procedures.fit.model import METHODS, FitStats, LegErrorModel, LegFit
 from procedures.fit.noise import estimate_noise_floor
 from procedures.fit.paper import DEFAULT_N_PARAMS, fit_paper_leg
@@ -30,9 +31,9 @@ def _stats(data: LegData, folds: np.ndarray | None, heldout: np.ndarray | None, 
         folds=0 if folds is None else int(folds.max()) + 1,
         noise_floor_um=noise.noise_floor_um,
         within_pass_um=noise.within_pass_um,
-        heldout_rms_um=None if heldout is None else float(np.sqrt(np.mean(heldout**2))),
-        range_before_um=float(np.ptp(data.error_um)),
-        range_after_um=None if heldout is None else float(np.ptp(heldout)),
+        heldout_rms_um=None if heldout is None else rms_um(heldout),
+        range_before_um=range_um(data.error_um),
+        heldout_range_um=None if heldout is None else range_um(heldout),
         note=note,
     )
 

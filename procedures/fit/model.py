@@ -13,6 +13,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from procedures.fit.figures import reduction_pct
+
 FORMAT = "station-leg-error-model"
 VERSION = 1
 METHODS = ("default", "paper")
@@ -21,11 +23,14 @@ METHODS = ("default", "paper")
 @dataclass(frozen=True)
 class FitStats:
     """How well a leg's model does (um). Held-out figures come from cross-validation over whole
-    cycles (docs/models.md): a model fitted without a cycle is scored on that cycle.
+    cycles (docs/models.md): a model fitted without a cycle is scored on that cycle. Names and
+    definitions of every figure: docs/figures.md.
 
-    `heldout_rms_um` / `range_after_um` are None when the leg has fewer than two cycles.
-    `range_before_um` is max - min of the measured errors; `range_after_um` of the held-out
-    residuals (error minus prediction).
+    `noise_floor_um` / `within_pass_um`: procedures.fit.noise. `heldout_rms_um`: RMS of the
+    held-out residuals (error minus prediction); `range_before_um`: max - min of the measured
+    errors; `heldout_range_um`: max - min of the held-out residuals. Held-out figures are None
+    when the leg has fewer than two cycles. (Model files written before the rename call
+    `heldout_range_um` `range_after_um`; `load_model` reads both.)
     """
 
     n_points: int
@@ -37,22 +42,22 @@ class FitStats:
     within_pass_um: float | None
     heldout_rms_um: float | None
     range_before_um: float
-    range_after_um: float | None
+    heldout_range_um: float | None
     note: str = ""
 
     @property
-    def ratio(self) -> float | None:
+    def heldout_ratio(self) -> float | None:
         """Held-out RMS divided by the noise floor (1.0 = as good as repeat passes allow)."""
         if self.heldout_rms_um is None or not self.noise_floor_um:
             return None
         return self.heldout_rms_um / self.noise_floor_um
 
     @property
-    def ratio_floor(self) -> float | None:
-        """The ratio a perfect static model would score in this cross-validation: a model fitted
-        on n_train cycles misses the held-out cycle's offset by the offset scatter / sqrt(n_train),
-        so ratio^2 = 1 + rho / n_train, rho = share of the scatter that is shared within a pass
-        (1 - within_pass^2 / noise_floor^2). See docs/models.md."""
+    def ideal_heldout_ratio(self) -> float | None:
+        """The held-out ratio a perfect static model would score in this cross-validation: a
+        model fitted on n_train cycles misses the held-out cycle's offset by the offset scatter /
+        sqrt(n_train), so ratio^2 = 1 + rho / n_train, rho = share of the scatter that is shared
+        within a pass (1 - within_pass^2 / noise_floor^2). See docs/models.md."""
         if not self.noise_floor_um or self.within_pass_um is None or self.folds < 2 or self.n_cycles < 2:
             return None
         rho = max(0.0, 1.0 - (self.within_pass_um / self.noise_floor_um) ** 2)
@@ -60,10 +65,9 @@ class FitStats:
         return float(np.sqrt(1.0 + rho / n_train))
 
     @property
-    def range_reduction_pct(self) -> float | None:
-        if self.range_after_um is None or self.range_before_um <= 0:
-            return None
-        return 100.0 * (1.0 - self.range_after_um / self.range_before_um)
+    def heldout_range_reduction_pct(self) -> float | None:
+        """100 (1 - held-out range / range before)."""
+        return reduction_pct(self.range_before_um, self.heldout_range_um)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

@@ -138,13 +138,18 @@ class _Checker:
 
 
 _STAT_INT = ("n_points", "n_passes", "n_cycles", "dropped", "folds")
-_STAT_OPT = ("noise_floor_um", "within_pass_um", "heldout_rms_um", "range_after_um")
+_STAT_OPT = ("noise_floor_um", "within_pass_um", "heldout_rms_um", "heldout_range_um")
+_STAT_OLD = {"heldout_range_um": "range_after_um"}  # the name in files written before docs/figures.md
 
 
 def _stats(c: _Checker, d: Any, where: str) -> FitStats:
     kw: dict[str, Any] = {k: c.number(d, k, where, integer=True) for k in _STAT_INT}
     for k in _STAT_OPT:
-        kw[k] = c.number(d, k, where, optional=True)
+        old = _STAT_OLD.get(k)
+        if old is not None and isinstance(d, dict) and k not in d and old in d:
+            kw[k] = c.number(d, old, where, optional=True)
+        else:
+            kw[k] = c.number(d, k, where, optional=True)
     kw["range_before_um"] = c.number(d, "range_before_um", where)
     for k, v in kw.items():
         if v is not None:

@@ -17,8 +17,8 @@ HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier mod
 DESCRIPTION = (
     "Fit a leg-error model to a recorded session (FILE.h5) and save it as JSON naming the "
     "recording and its SHA-256. Per leg it prints the terms chosen, the held-out RMS (cross-"
-    "validation over whole cycles), the noise floor from repeat passes, their ratio and the "
-    "error range reduction on held-out cycles. See docs/models.md."
+    "validation over whole cycles), the noise floor from repeat passes, the held-out ratio and the "
+    "held-out range reduction. See docs/models.md and docs/figures.md."
 )
 
 
@@ -74,21 +74,23 @@ def run(args) -> int:
                   f"active ({state}): this model describes the compensated leg, and a table made from it "
                   "replaces the active one instead of adding to it")
     print(f"method: {args.method}" + (f" ({args.params} cosine terms)" if args.method == "paper" else ""))
-    print(f"{'leg':>3}  {'held-out RMS':>12}  {'noise floor':>11}  {'ratio':>5}  {'(ideal)':>7}  {'range before':>12}  {'after':>7}  {'reduction':>9}  terms")
+    print(f"{'leg':>3}  {'held-out RMS':>12}  {'noise floor':>11}  {'held-out ratio':>14}  {'(ideal)':>7}  "
+          f"{'range before':>12}  {'held-out range':>14}  {'held-out range reduction':>24}  terms")
     for leg, f in model.legs.items():
         s = f.stats
-        rr = s.range_reduction_pct
+        rr = s.heldout_range_reduction_pct
         print(
-            f"{leg:>3}  {_fmt(s.heldout_rms_um):>9} um  {_fmt(s.noise_floor_um):>8} um  {_fmt(s.ratio, '.2f'):>5}  "
-            f"{_fmt(s.ratio_floor, '.2f'):>7}  {s.range_before_um:>9.3f} um  {_fmt(s.range_after_um):>7}  "
-            f"{_fmt(rr, '.1f') + ' %' if rr is not None else 'n/a':>9}  {f.describe()}"
+            f"{leg:>3}  {_fmt(s.heldout_rms_um):>9} um  {_fmt(s.noise_floor_um):>8} um  {_fmt(s.heldout_ratio, '.2f'):>14}  "
+            f"{_fmt(s.ideal_heldout_ratio, '.2f'):>7}  {s.range_before_um:>9.3f} um  {_fmt(s.heldout_range_um):>11} um  "
+            f"{_fmt(rr, '.1f') + ' %' if rr is not None else 'n/a':>24}  {f.describe()}"
         )
         if s.note:
             print(f"     note: {s.note}")
         if s.dropped:
             print(f"     note: {s.dropped} point(s) without a finite error were left out")
-    print("held-out: each cycle scored by a model fitted without it; ratio = held-out RMS / noise floor;"
-          " (ideal) = what a perfect static model would score")
+    print("held-out: each cycle scored by a model fitted without it; held-out ratio = held-out RMS / noise floor;"
+          " (ideal) = the held-out ratio a perfect static model would score; held-out range = max - min of the"
+          " held-out residuals (figures: docs/figures.md)")
     print(f"model: {out}")
     print(f"next: station table {out} --out table.csv   |   station report {session.path} --out report --model {out}")
     return 0

@@ -36,12 +36,14 @@ def run(args) -> int:
                          source_sha256=session.sha256, lead_mm=args.lead_mm)
     if model is not None and not result.summary["model"]["fitted_to_this_session"]:
         print(f"note: the model was fitted to {model.source.get('path') or 'another recording'}, "
-              "not to this session: the 'after' figures are a true test of it")
+              "not to this session: the residual figures are a true test of it")
     for row in result.summary["legs"]:
-        rr = row["range_reduction_pct"]
-        print(f"leg {row['leg']}: range {row['range_before_um']:.3f} -> {row['range_after_um']:.3f} um"
-              + (f" ({rr:.1f} % less)" if rr is not None else "")
-              + f", RMS {row['rms_before_um']:.3f} -> {row['rms_after_um']:.3f} um")
+        rr = row["residual_range_reduction_pct"]
+        print(f"leg {row['leg']}: range before {row['range_before_um']:.3f} um, residual range {row['residual_range_um']:.3f} um"
+              + (f" (residual range reduction {rr:.1f} %)" if rr is not None else "")
+              + f"; RMS before {row['rms_before_um']:.3f} um, residual RMS {row['residual_rms_um']:.3f} um")
+    print(f"residual = error minus model on this session's points: {result.summary['residuals']}; "
+          "figures: docs/figures.md")
     for path in result.files:
         print(f"wrote {path}")
     return 0

@@ -37,8 +37,8 @@ def test_heldout_residual_within_10_percent_of_noise_floor_with_backlash(default
     assert s.folds == 6 and s.n_cycles == 6 and s.n_points == 121 * 12
     assert s.heldout_rms_um <= 1.1 * s.noise_floor_um
     # and it is at what a perfect static model would score in this cross-validation
-    assert s.ratio <= 1.02 * s.ratio_floor
-    assert s.range_reduction_pct > 70
+    assert s.heldout_ratio <= 1.02 * s.ideal_heldout_ratio
+    assert s.heldout_range_reduction_pct > 70
 
 
 def test_paper_method_does_much_worse_on_the_same_data(default_plant_points, default_plant_fit):
@@ -81,7 +81,7 @@ def test_irregular_spacing_is_fitted_at_the_real_positions():
     # a new offset (0.04 um std) at every reversal: 5 + 5 passes give the reversal to
     # 0.04 * sqrt(2/5) = 0.025 um (1 sigma); allow 4 sigma
     assert leg.reversal_um == pytest.approx(cfg.reversal_um, abs=0.1)
-    assert leg.stats.ratio < 1.25
+    assert leg.stats.heldout_ratio < 1.25
     # the model follows the true screw error between the targets too
     from drivers.sim.plant import screw_error_um
 
@@ -119,7 +119,7 @@ def test_finds_the_screw_lead_in_the_data(default_plant_points, default_plant_fi
 def test_given_lead_is_used(default_plant_points):
     leg = fit(default_plant_points[1], lead_mm=5.0).legs[1]
     assert leg.basis.lead_mm == 5.0 and leg.basis.lead_harmonics >= 1
-    assert leg.stats.ratio <= 1.1
+    assert leg.stats.heldout_ratio <= 1.1
 
 
 def test_cycles_are_the_cross_validation_groups():

@@ -101,4 +101,4 @@ def test_heldout_figures_leave_backlash_in():
     assert s.folds == 4 and s.n_cycles == 4
     # half the reversal is left on every point: RMS ~ reversal / 2 = 0.5 um >> noise 0.03 um
     assert s.heldout_rms_um == pytest.approx(cfg.reversal_um / 2, rel=0.1)
-    assert s.ratio > 5
+    assert s.heldout_ratio > 5

@@ -34,8 +34,8 @@ def test_report_files_and_summary(points, tmp_path):
     assert [r["leg"] for r in summary["legs"]] == [1, 2]
     for r in summary["legs"]:
         assert r["points"] == 91 * 6 and r["cycles"] == 3
-        assert r["range_after_um"] < 0.3 * r["range_before_um"]
-        assert r["rms_after_um"] < r["rms_before_um"]
+        assert r["residual_range_um"] < 0.3 * r["range_before_um"]
+        assert r["residual_rms_um"] < r["rms_before_um"]
         assert r["reversal_um"] == pytest.approx(1.0, abs=0.1)
         assert r["noise_floor_um"] > 0 and r["model_heldout_rms_um"] > 0
         iso = r["iso230_2"]  # procedures.iso230 before and after: the systematic part is gone
@@ -54,7 +54,7 @@ def test_report_with_a_model_from_another_recording(points, tmp_path):
     assert result.summary["model"]["fitted_to_this_session"] is False
     assert [r["leg"] for r in result.summary["legs"]] == [2]  # only the legs the model has
     row = result.summary["legs"][0]
-    assert row["range_after_um"] < 0.5 * row["range_before_um"]  # same plant: the model still helps
+    assert row["residual_range_um"] < 0.5 * row["range_before_um"]  # same plant: the model still helps
 
 
 def test_report_refuses_a_model_without_common_legs(points, tmp_path):

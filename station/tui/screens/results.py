@@ -98,8 +98,8 @@ class ResultsScreen(StationScreen):
     def on_mount(self) -> None:
         table = self.query_one("#results-table", DataTable)
         # µm throughout; "held-out" = RMS of the residual on cycles the fit did not see
-        table.add_columns("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Ratio",
-                          "Range before→after", "A", "E", "M", "B", "R")
+        table.add_columns("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Held-out ratio",
+                          "Range before → held-out range", "A", "E", "M", "B", "R")
         self.plot_leg: int | None = None
         self.follow_sessions()
         self._show()
@@ -225,11 +225,11 @@ class ResultsScreen(StationScreen):
         for leg, lf in a.model.legs.items():
             st = lf.stats
             iso = iso_figures(a.iso, leg)
-            ratio = st.ratio
+            ratio = st.heldout_ratio
             table.add_row(
                 str(leg), str(st.n_points), str(st.n_cycles), _fmt(st.noise_floor_um), _fmt(st.heldout_rms_um),
                 _fmt(ratio, ".2f") if ratio is not None else "n/a",
-                f"{st.range_before_um:.2f} → {_fmt(st.range_after_um, '.2f')}",
+                f"{st.range_before_um:.2f} → {_fmt(st.heldout_range_um, '.2f')}",
                 *(_fmt(iso.get(k)) for k in "AEMBR"),
                 key=str(leg),
             )
@@ -260,4 +260,5 @@ class ResultsScreen(StationScreen):
                           p["error_um"] - a.model.predict_um(leg, p["target_mm"], d), "scatter" if d > 0 else "scatter:x"))
         st = lf.stats
         mplot.show(series, title=f"leg {leg}: measured and {a.method} model")
-        rplot.show(resid, title=f"leg {leg}: held-out RMS {_fmt(st.heldout_rms_um)} µm, noise floor {_fmt(st.noise_floor_um)} µm")
+        rplot.show(resid, title=f"leg {leg}: residual (in-sample); held-out RMS {_fmt(st.heldout_rms_um)} µm, "
+                                f"noise floor {_fmt(st.noise_floor_um)} µm")
