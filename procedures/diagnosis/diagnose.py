@@ -2,14 +2,18 @@
 
 `diagnose(points, twin=None)` returns a JSON-able report (see docs/diagnosis.md):
 
-    {"format": "station-diagnosis", "version": 1, "recording": {...}, "twin": {...},
+    {"format": "station-diagnosis", "version": 2, "recording": {...}, "twin": {...},
      "settings": {...},
      "findings": [{"leg": 2, "effect": "backlash", "parameters": {"reversal_um": 1.23},
                    "uncertainty": {"reversal_um": 0.02}, "heldout_rms_before_um": 0.61,
                    "heldout_rms_after_um": 0.07, ...}, ...],
-     "legs": {"2": {...where..., "noise_floor_um": 0.05, "combined": {...}, "candidates": [...],
-                    "cannot_conclude": [...]}},
+     "legs": {"2": {...where..., "noise_floor_um": 0.25, "repeat_scatter_after_effects_um": 0.05,
+                    "combined": {...}, "candidates": [...], "cannot_conclude": [...]}},
      "notes": [...]}
+
+`noise_floor_um` is the noise floor of `station fit` (procedures.fit.noise, the same function);
+`repeat_scatter_after_effects_um` the scatter of repeat passes left once the twin and the named
+effects are taken out (version 1 called it `noise_floor_um`). Names: docs/figures.md.
 
 Units are in the keys; error = measured minus commanded (um); no NaN anywhere (a value that
 cannot be computed is null with a reason beside it).
@@ -31,9 +35,10 @@ from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.errors import InputError
 from procedures.events import Finding
+from procedures.fit.noise import noise_floor
 
 FORMAT = "station-diagnosis"
-VERSION = 1
+VERSION = 2  # 2: `noise_floor_um` is the noise floor of station fit; version 1's is repeat_scatter_after_effects_um
 
 
 @dataclass(frozen=True)
@@ -148,11 +153,13 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
         gap = problem.y - x @ np.linalg.lstsq(x, problem.y, rcond=None)[0]
     rep = {"points": leg.n_points, "dropped_points": leg.dropped, "passes": leg.n_passes, "cycles": leg.n_cycles,
            "targets": leg.n_targets, "target_spacing_mm": leg.spacing_mm,
-           "stroke_mm": list(leg.span_mm), "twin": ctx.twin_info}
+           "stroke_mm": list(leg.span_mm), "twin": ctx.twin_info,
+           # the noise floor of station fit, computed the same way (pass offsets kept, no effect removed)
+           "noise_floor_um": noise_floor(leg.x_mm, leg.direction, leg.run, leg.error_um).noise_floor_um}
     cannot = _cannot_conclude(leg, s, twin is not None)
 
-    def where(noise_floor_um):
-        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, noise_floor_um))
+    def where(scatter_um):
+        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, scatter_um))
         for p in rep.get("outlier_passes", []):
             cannot.append(f"run {p['run']} is {p['offset_um']:+.3g} um off the other passes: it dominates the pass "
                           "scatter against which effects are tested")
@@ -171,8 +178,9 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     bonf = {"cyclic": EFFECTS["cyclic"].independent_frequencies(leg)} if isinstance(EFFECTS["cyclic"], Cyclic) else {}
     if not can_cv:
         fit = problem.full_fit((), bonf)
-        rep["noise_floor_um"] = repeatability_um(leg, fit.resid_um, outlier_mask(leg, gap, s.threshold_um))
-        rep["noise_floor_note"] = "scatter of repeat passes at the same target and direction (one cycle only: rough)"
+        rep["repeat_scatter_after_effects_um"] = repeatability_um(leg, fit.resid_um, outlier_mask(leg, gap, s.threshold_um))
+        rep["repeat_scatter_after_effects_note"] = ("scatter of repeat passes at the same target and direction about the "
+                                                    "twin (one cycle only: rough)")
         where(None)
         rep["combined"] = None
         rep["combined_note"] = "no held-out passes"
@@ -197,13 +205,13 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     baseline = problem.cv_rms(())
     final = problem.full_fit(chosen, bonf)
     outliers = outlier_mask(leg, gap, s.threshold_um)
-    rep["noise_floor_um"] = repeatability_um(leg, final.resid_um, outliers)
-    rep["noise_floor_note"] = ("scatter of repeat passes at the same target and direction, after the named "
-                               "effects (pass offsets included" + (f"; {int(outliers.sum())} outlier point(s) left out)"
-                                                                   if outliers.any() else ")"))
-    rep["within_pass_scatter_um"] = final.gls.sigma_e_um
-    rep["pass_offset_scatter_um"] = final.gls.sigma_u_um
-    where(rep["noise_floor_um"])
+    rep["repeat_scatter_after_effects_um"] = repeatability_um(leg, final.resid_um, outliers)
+    rep["repeat_scatter_after_effects_note"] = (
+        "scatter of repeat passes at the same target and direction, after the twin and the named effects (pass "
+        "offsets included" + (f"; {int(outliers.sum())} outlier point(s) left out)" if outliers.any() else ")"))
+    rep["within_pass_scatter_after_effects_um"] = final.gls.sigma_e_um
+    rep["pass_offset_scatter_after_effects_um"] = final.gls.sigma_u_um
+    where(rep["repeat_scatter_after_effects_um"])
     # before/after in the order the effects were chosen, each on top of the ones before it; two
     # effects that only help together (chosen as a pair) share their before/after
     steps, i = [], 0

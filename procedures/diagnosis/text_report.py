@@ -54,16 +54,18 @@ def text_report(report: dict) -> str:
                      f"{leg['targets']} targets {leg['stroke_mm'][0]:.4g}..{leg['stroke_mm'][1]:.4g} mm")
         tw = leg["twin"]
         if tw.get("kind") == "fitted" and tw.get("form") == "target means":
-            lines.append(f"  twin: the mean error at each of the {tw['targets']} targets; held-out RMS "
+            lines.append(f"  twin: the mean error at each of the {tw['targets']} targets; twin held-out RMS "
                          f"{_f(tw.get('heldout_rms_um'))} um")
         elif tw.get("kind") == "fitted":
-            lines.append(f"  twin: trend + {tw['sinusoids']} sinusoid(s); held-out RMS {_f(tw.get('heldout_rms_um'))} um"
+            lines.append(f"  twin: trend + {tw['sinusoids']} sinusoid(s); twin held-out RMS {_f(tw.get('heldout_rms_um'))} um"
                          + (f" (chosen with {', '.join(tw['fitted_without'])} taken out)" if tw.get("fitted_without") else ""))
         else:
             lines.append(f"  twin: {tw.get('kind')}; zero offset of the recording against it {_um(tw.get('offset_um', 0), True)} um")
         g = leg["gap"]
-        lines.append(f"  gap: RMS {_um(g['rms_um'])} um, peak to peak {_um(g['p2p_um'])} um, mean {_um(g['mean_um'], True)} um; "
-                     f"noise floor {_f(leg.get('noise_floor_um'))} um")
+        lines.append(f"  gap: RMS {_um(g['rms_um'])} um, peak to peak {_um(g['p2p_um'])} um, mean {_um(g['mean_um'], True)} um")
+        # the noise floor to 3 decimals, as station fit and station report print it
+        lines.append(f"  noise floor {_f(leg.get('noise_floor_um'), '.3f')} um (as station fit); repeat scatter after effects "
+                     f"{_f(leg.get('repeat_scatter_after_effects_um'))} um")
         lines.append(f"  where: {leg['dominant']}")
         vs = leg["variance_share_pct"]
         lines.append("  variance of the gap: " + ", ".join(f"{k} {v:.0f} %" for k, v in vs.items()))

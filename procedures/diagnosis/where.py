@@ -132,9 +132,10 @@ def by_target(leg: LegData, gap_um: np.ndarray) -> dict:
 
 
 def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: float | None = 5.0,
-              regions: int = 4, threshold_um: float = 0.1, noise_floor_um: float | None = None) -> dict:
-    """The where-report of one leg (JSON-able dict; units in the keys). `noise_floor_um`, when
-    known, lets the words say that a gap is no larger than the scatter of repeat passes."""
+              regions: int = 4, threshold_um: float = 0.1, scatter_um: float | None = None) -> dict:
+    """The where-report of one leg (JSON-able dict; units in the keys). `scatter_um` (the
+    repeat scatter after effects), when known, lets the words say that a gap is no larger than
+    the scatter of repeat passes."""
     g = gap_um
     n = g.size
     counts = np.bincount(leg.pass_id).astype(float)
@@ -249,9 +250,9 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
     s = sum(parts.values())
     out["variance_share_pct"] = {k: (100.0 * v / s if s > 0 else 0.0) for k, v in parts.items()}
     out["dominant"] = _dominant(out, parts, reg, regions, external_twin, leg, n, total)
-    if noise_floor_um is not None and out["gap"]["rms_um"] <= 1.25 * noise_floor_um:
-        text = (f"the gap ({out['gap']['rms_um']:.3g} um RMS) is at the noise floor of repeat passes "
-                f"({noise_floor_um:.3g} um): nothing systematic stands out")
+    if scatter_um is not None and out["gap"]["rms_um"] <= 1.25 * scatter_um:
+        text = (f"the gap ({out['gap']['rms_um']:.3g} um RMS) is at the repeat scatter after effects "
+                f"({scatter_um:.3g} um): nothing systematic stands out")
         if max(parts, key=parts.get) != "rest":
             text += "; what there is, is " + out["dominant"][len("the gap is "):]
         out["dominant"] = text

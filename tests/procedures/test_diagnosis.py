@@ -41,8 +41,11 @@ def test_backlash_is_named_on_its_leg_only_with_the_reversal():
     (event,) = finding_events(report)
     assert isinstance(event, Finding) and (event.leg, event.effect) == (1, "backlash")
     assert report["legs"]["2"]["combined"]["effects"] == []
-    # the clean leg's gap is at the plant's noise (white 0.03 um + pass offsets 0.04 um)
+    # the clean leg's gap is at the plant's noise (white 0.03 um + pass offsets 0.04 um); with no
+    # effect named, the repeat scatter after effects is the noise floor (of station fit)
     assert report["legs"]["2"]["noise_floor_um"] == pytest.approx(0.05, rel=0.35)
+    assert report["legs"]["2"]["repeat_scatter_after_effects_um"] == pytest.approx(
+        report["legs"]["2"]["noise_floor_um"], rel=0.05)
 
 
 def test_drift_with_a_changing_temperature_is_named_drift_not_thermal():
@@ -111,7 +114,8 @@ def test_the_report_is_strict_json_with_units_in_the_keys():
         assert key in f
     leg = back["legs"]["1"]
     for key in ("gap", "by_direction", "by_region", "by_pass", "spectrum", "by_condition", "dominant",
-                "noise_floor_um", "combined", "candidates", "cannot_conclude"):
+                "noise_floor_um", "repeat_scatter_after_effects_um", "within_pass_scatter_after_effects_um",
+                "pass_offset_scatter_after_effects_um", "combined", "candidates", "cannot_conclude"):
         assert key in leg
     assert leg["spectrum"]["lead_mm"] == 5.0
     assert len(leg["by_region"]) == 4

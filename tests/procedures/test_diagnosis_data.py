@@ -42,8 +42,8 @@ def test_example_names_backlash_on_leg_1_and_thermal_on_leg_2_only(shared_data, 
         truth["effects_by_leg"]["2"]["thermal"]["expansion_ppm_per_k"], rel=0.1)
     # the scatter within a pass is the truth's measurement noise (the noise floor adds pass offsets)
     for leg, noise in truth["noise_um"].items():
-        assert report["legs"][leg]["within_pass_scatter_um"] == pytest.approx(noise, rel=0.2)
-        assert report["legs"][leg]["noise_floor_um"] >= 0.9 * noise
+        assert report["legs"][leg]["within_pass_scatter_after_effects_um"] == pytest.approx(noise, rel=0.2)
+        assert report["legs"][leg]["repeat_scatter_after_effects_um"] >= 0.9 * noise
     for f in got.values():
         assert f["heldout_rms_after_um"] < 0.25 * f["heldout_rms_before_um"]
 
@@ -65,7 +65,7 @@ def test_real_files_give_a_report_and_say_what_cannot_be_concluded(shared_data, 
     assert "only 5 distinct targets" in text
     assert "no material temperature" in text and "no axial load" in text and "no time recorded" in text
     assert leg["twin"]["form"] == "target means"
-    assert leg["noise_floor_um"] > 0
+    assert leg["repeat_scatter_after_effects_um"] > 0
     assert leg["dominant"].startswith("the gap")
     # thermal and load cannot be tested, and say why
     cands = {c["effect"]: c for c in leg["candidates"]}
