@@ -1,0 +1,216 @@
+"""One name per definition (issue 17): `station fit`, `station diagnose`, `station report` and
+`station iso230` on the committed sample recording; every figure they show under the same name
+has the same value, and the figures that used to share a name ("noise floor" of fit vs diagnose,
+"range after" of fit vs report) now have different names (docs/figures.md)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from procedures.fit import load_model, save_model
+from procedures.fit.figures import LABELS
+from procedures.iso230 import MEANINGS, VALUE_NAMES
+from station.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE = REPO / "recordings" / "calibration-6legs.h5"
+FIGURES_DOC = REPO / "docs" / "figures.md"
+
+pytestmark = pytest.mark.timeout(300)
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory):
+    """stdout and JSON of the four commands on the sample (capsys is function-scoped: capture
+    by hand)."""
+    import contextlib
+    import io
+
+    tmp = tmp_path_factory.mktemp("figures")
+    runs = {
+        "fit": ["fit", str(SAMPLE), "--out", str(tmp / "model.json")],
+        "diagnose": ["diagnose", str(SAMPLE), "--json", str(tmp / "diagnosis.json")],
+        "report": ["report", str(SAMPLE), "--out", str(tmp / "report")],
+        "iso230": ["iso230", str(SAMPLE), "--json", str(tmp / "iso230.json")],
+    }
+    text = {}
+    for name, argv in runs.items():
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            assert main(argv) == 0, name
+        text[name] = buf.getvalue()
+    return {
+        "text": text,
+        "model_path": tmp / "model.json",
+        "model": load_model(tmp / "model.json"),
+        "diagnosis": json.loads((tmp / "diagnosis.json").read_text()),
+        "report": json.loads((tmp / "report" / "summary.json").read_text()),
+        "report_md": (tmp / "report" / "summary.md").read_text(),
+        "iso230": json.loads((tmp / "iso230.json").read_text()),
+    }
+
+
+def figures_by_command(o) -> dict[str, dict[int, dict[str, float]]]:
+    """command -> leg -> {JSON key: value} of every figure it shows (procedures.fit.figures
+    keys; ISO 230-2 values as iso230:NAME). A figure of the model a report compensates with is
+    the figure of that model; the report fitted it to this recording with the default options,
+    as `station fit` did, so it is the same model."""
+    out: dict[str, dict[int, dict[str, float]]] = {"fit": {}, "diagnose": {}, "report": {}, "report (model)": {},
+                                                   "iso230": {}}
+    for leg, lf in o["model"].legs.items():
+        s = lf.stats
+        out["fit"][leg] = {
+            "noise_floor_um": s.noise_floor_um, "within_pass_um": s.within_pass_um,
+            "heldout_rms_um": s.heldout_rms_um, "heldout_ratio": s.heldout_ratio,
+            "ideal_heldout_ratio": s.ideal_heldout_ratio, "range_before_um": s.range_before_um,
+            "heldout_range_um": s.heldout_range_um, "heldout_range_reduction_pct": s.heldout_range_reduction_pct,
+        }
+    for key, leg in o["diagnosis"]["legs"].items():
+        out["diagnose"][int(key)] = {k: leg[k] for k in (
+            "noise_floor_um", "repeat_scatter_after_effects_um", "within_pass_scatter_after_effects_um",
+            "pass_offset_scatter_after_effects_um")}
+    assert o["report"]["model"]["fitted_to_this_session"] is True
+    for row in o["report"]["legs"]:
+        figs = {k: row[k] for k in ("noise_floor_um", "range_before_um", "residual_range_um",
+                                    "residual_range_reduction_pct", "rms_before_um", "residual_rms_um")}
+        figs.update({f"iso230:{k}": v for k, v in row["iso230_2"]["before"].items()})
+        out["report"][row["leg"]] = figs
+        out["report (model)"][row["leg"]] = {"noise_floor_um": row["model_noise_floor_um"],
+                                             "heldout_rms_um": row["model_heldout_rms_um"],
+                                             "heldout_ratio": row["model_heldout_ratio"]}
+    for key, leg in o["iso230"]["legs"].items():
+        out["iso230"][int(key)] = {f"iso230:{k}": leg[k] for k in VALUE_NAMES}
+    return out
+
+
+def test_every_figure_shown_by_two_commands_has_one_value(outputs):
+    by_cmd = figures_by_command(outputs)
+    legs = sorted(by_cmd["fit"])
+    assert legs == [1, 2, 3, 4, 5, 6]
+    shared = 0
+    for leg in legs:
+        seen: dict[str, tuple[str, float]] = {}
+        for cmd, per_leg in by_cmd.items():
+            for key, value in per_leg[leg].items():
+                if key in seen:
+                    first_cmd, first = seen[key]
+                    assert value == pytest.approx(first, rel=1e-12, abs=1e-12), (
+                        f"leg {leg}: {key} is {first} from {first_cmd} but {value} from {cmd}")
+                    shared += 1
+                else:
+                    seen[key] = (cmd, value)
+    # noise floor (fit, diagnose, report), range before, held-out RMS and ratio (fit, report),
+    # the ISO 230-2 values (iso230, report) were compared on every leg
+    assert shared >= 6 * (2 + 1 + 2 + 12)
+    # every JSON key of a figure is a named figure (or an ISO 230-2 value)
+    for per_leg in by_cmd.values():
+        for figs in per_leg.values():
+            assert all(k in LABELS or k.startswith("iso230:") for k in figs), set(figs) - set(LABELS)
+
+
+def test_the_formerly_conflicting_figures_have_different_names_and_values(outputs):
+    by_cmd = figures_by_command(outputs)
+    fit1, diag1, rep1 = by_cmd["fit"][1], by_cmd["diagnose"][1], by_cmd["report"][1]
+    # "noise floor": fit's pooled pass-to-pass scatter; what diagnose used to print under that name
+    # is the scatter of repeat passes left after the twin and the named effects
+    assert LABELS["noise_floor_um"] != LABELS["repeat_scatter_after_effects_um"]
+    assert diag1["noise_floor_um"] == fit1["noise_floor_um"]
+    assert diag1["repeat_scatter_after_effects_um"] < 0.5 * fit1["noise_floor_um"]  # 0.073 vs 0.708 um
+    # "range after": fit's is of the held-out residuals, report's of the in-sample residuals
+    assert LABELS["heldout_range_um"] != LABELS["residual_range_um"]
+    assert fit1["heldout_range_um"] > rep1["residual_range_um"] * 1.05  # 2.678 vs 2.281 um
+    assert fit1["range_before_um"] == rep1["range_before_um"]
+    # and the old names are gone from every output
+    for name, text in [*outputs["text"].items(), ("report summary.md", outputs["report_md"])]:
+        lowered = text.lower()
+        for old in ("range after", "range before→after", "rms after", "| ratio |"):
+            assert old not in lowered, (name, old)
+    for old in ("range_after_um", "range_reduction_pct", "rms_after_um", "model_ratio", "mean_abs_after_um"):
+        assert old not in outputs["report"]["legs"][0]
+    for old in ("within_pass_scatter_um", "pass_offset_scatter_um", "noise_floor_note"):
+        assert old not in outputs["diagnosis"]["legs"]["1"]
+    assert "range_after_um" not in json.loads(outputs["model_path"].read_text())["legs"]["1"]["stats"]
+
+
+def _fit_table(text: str) -> dict[str, str]:
+    """Leg 1's row of `station fit`'s table: printed name -> printed value."""
+    lines = text.splitlines()
+    header = next(line for line in lines if line.startswith("leg "))
+    row = next(line for line in lines if line.strip().startswith("1 "))
+    names = re.split(r"\s{2,}", header.strip())
+    values = re.split(r"\s{2,}", row.strip())
+    return dict(zip(names, values))
+
+
+def _number(text: str) -> str:
+    return re.match(r"-?[\d.]+", text.strip()).group(0)
+
+
+def test_every_name_printed_by_two_commands_shows_one_value(outputs):
+    """What an engineer reads: leg 1's figures as printed (3 decimals) by fit, diagnose, report
+    (stdout and summary.md): one printed value per printed name."""
+    printed: dict[str, dict[str, str]] = {}
+
+    def add(cmd: str, name: str, value: str) -> None:
+        printed.setdefault(name, {})[cmd] = _number(value)
+
+    for name, value in _fit_table(outputs["text"]["fit"]).items():
+        if name in ("leg", "terms"):
+            continue
+        add("fit", "ideal held-out ratio" if name == "(ideal)" else name, value)
+    leg1 = outputs["text"]["diagnose"].split("LEG 1:")[1].split("LEG 2:")[0]
+    for name in ("noise floor", "repeat scatter after effects", "twin held-out RMS"):
+        add("diagnose", name, re.search(re.escape(name) + r" ([-\d.]+) um", leg1).group(1))
+    rep = next(line for line in outputs["text"]["report"].splitlines() if line.startswith("leg 1: "))
+    for name in ("range before", "residual range", "residual range reduction", "RMS before", "residual RMS"):
+        add("report", name, re.search(r"(?:^|[ (;,])" + re.escape(name) + r" ([-\d.]+)", rep[len("leg 1:"):]).group(1))
+    md = outputs["report_md"].splitlines()
+    header = next(line for line in md if line.startswith("| leg | points |"))
+    row = next(line for line in md if line.startswith("| 1 |"))
+    for name, value in zip(header.strip("|").split("|"), row.strip("|").split("|")):
+        name = name.strip().removesuffix(" (um)")
+        if name in ("leg", "points", "cycles", "reversal"):
+            continue
+        # the model the report compensates with is the one station fit made of this recording
+        add("report.md", name.removeprefix("model "), value)
+    assert {"fit", "diagnose", "report.md"} <= set(printed["noise floor"])
+    assert {"fit", "report", "report.md"} <= set(printed["range before"])
+    assert {"fit", "report.md"} <= set(printed["held-out RMS"]) and {"fit", "report.md"} <= set(printed["held-out ratio"])
+    for name, by in printed.items():
+        assert len(set(by.values())) == 1, f"{name!r} printed as {by}"
+    # every printed name is a named figure, and the two pairs are apart
+    labels = set(LABELS.values()) | {"twin held-out RMS"}
+    assert set(printed) <= labels, set(printed) - labels
+    assert printed["noise floor"]["diagnose"] != printed["repeat scatter after effects"]["diagnose"]
+    assert printed["held-out range"]["fit"] != printed["residual range"]["report"]
+
+
+def test_iso230_values_have_the_same_names_in_report_and_iso230(outputs):
+    md = outputs["report_md"]
+    for key in "EMABR":
+        assert f"{key}: {MEANINGS[key]}" in md
+        assert MEANINGS[key] in outputs["text"]["iso230"]
+
+
+def test_names_are_unique_and_documented():
+    assert len(set(LABELS.values())) == len(LABELS)
+    doc = FIGURES_DOC.read_text()
+    for key, name in LABELS.items():
+        assert f"`{key}`" in doc and name in doc, key
+
+
+def test_a_model_file_with_the_old_range_key_still_loads(outputs, tmp_path):
+    doc = json.loads(outputs["model_path"].read_text())
+    for leg in doc["legs"].values():
+        leg["stats"]["range_after_um"] = leg["stats"].pop("heldout_range_um")
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(doc))
+    model = load_model(old)
+    for leg, lf in model.legs.items():
+        assert lf.stats.heldout_range_um == outputs["model"].legs[leg].stats.heldout_range_um
+    save_model(model, tmp_path / "again.json", str(SAMPLE), doc["source"]["sha256"])
+    assert "heldout_range_um" in json.loads((tmp_path / "again.json").read_text())["legs"]["1"]["stats"]
