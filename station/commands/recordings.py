@@ -129,7 +129,7 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
     lines = []
     for leg, leg_table in table.legs.items():
         # the station's safe push (inactive bank, read back, switch) over the Modbus client
-        res = push_table(rig.axes[leg], leg_table, drive_url=rig.sim.drive_url, operator=cfg.operator,
+        res = push_table(rig.axes[leg], leg_table, drive_url=rig.sim.drive_url,
                          source={"path": calibration.name, "sha256": session.sha256})
         lines.append(f"leg {leg}: table of {res.points} points, step {leg_table.step_mm:g} mm, pushed to bank "
                      f"{res.bank} (active), sha256 {res.table_sha256[:12]}")
