@@ -189,7 +189,7 @@ def format_report(results: dict[int, LegVerification]) -> str:
         ratio = r.ratio
         verdict = ("n/a (no repeat passes)" if ratio is None else
                    f"{ratio:.3f} -> {'PASS' if r.passed else 'ABOVE'} (limit {ACCEPT_RATIO:g})")
-        lines.append(f"  residual RMS / noise floor: {verdict}")
+        lines.append(f"  verification ratio (residual RMS / noise floor): {verdict}")
         red = r.range_reduction_pct
         if red is not None:
             lines.append(f"  range reduction: {red:.1f} %, RMS reduction: {r.rms_reduction_pct:.1f} %")
@@ -313,5 +313,5 @@ def summary_line(outcome: str, r: LegVerification) -> str:
     """One line of a leg's verification, as the audit log and the front ends show it."""
     ratio = r.ratio
     return (f"verification {outcome}: residual RMS {r.after.rms_um:.4f} um, noise floor "
-            + (f"{r.after.noise_floor_um:.4f} um, ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
+            + (f"{r.after.noise_floor_um:.4f} um, verification ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
                if ratio is not None else "n/a"))
