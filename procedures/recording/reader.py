@@ -214,7 +214,7 @@ def damaged(path: str | os.PathLike, detail: str) -> InputError:
 # reader would, by a child process that is killed when it takes longer than PROBE_TIMEOUT_S.
 # The child stays alive between files (starting Python and h5py costs a few tenths of a second).
 _PROBE_WORKER = r"""
-import json, sys, h5py
+import json, signal, sys, h5py
 def touch(obj):
     for key in obj.attrs:
         obj.attrs[key]
@@ -224,7 +224,8 @@ def visit(name, obj):
         obj[...]
 print("ready", flush=True)
 for line in sys.stdin:
-    path, swmr = json.loads(line)
+    path, swmr, alarm_s = json.loads(line)
+    signal.alarm(alarm_s)  # ends this process if it is stuck in HDF5 and its parent died meanwhile
     try:
         try:
             f = h5py.File(path, "r")
@@ -238,6 +239,7 @@ for line in sys.stdin:
         print("ok", flush=True)
     except Exception as exc:
         print("error " + " ".join(str(exc).split())[:300], flush=True)
+    signal.alarm(0)
 """
 _PROBE_START_TIMEOUT_S = 60.0  # starting Python and h5py on a loaded machine: not the file's fault
 
@@ -299,13 +301,14 @@ class _Prober:
             if self._proc is None or self._pid != os.getpid() or self._proc.poll() is not None:
                 self._proc = None  # not ours (forked) or dead: start another
                 self._start()
+            request = (json.dumps([str(path.resolve()), swmr, int(timeout_s) + 10]) + "\n").encode()
             try:
-                self._proc.stdin.write((json.dumps([str(path.resolve()), swmr]) + "\n").encode())
+                self._proc.stdin.write(request)
                 self._proc.stdin.flush()
             except OSError:
                 self.stop()
                 self._start()
-                self._proc.stdin.write((json.dumps([str(path.resolve()), swmr]) + "\n").encode())
+                self._proc.stdin.write(request)
                 self._proc.stdin.flush()
             answer = self._readline(timeout_s)
             if answer is None:
