@@ -150,6 +150,8 @@ class StationApp(App):
 
     def on_unmount(self) -> None:
         # Last line of defence (e.g. the terminal closed): stop motion, close the recording.
+        # Not through action_abort_sweep: no worker starts and nothing is drawn any more, so the
+        # abort is sent from here and waited for.
         if self.sweep_control is not None and not self._sweep_idle.is_set():
             self.sweep_control.abort("the station UI closed")
             self._sweep_idle.wait(QUIT_WAIT_S)
