@@ -77,11 +77,11 @@ class CompensationController:
 
     # -- reading the drives ----------------------------------------------------------------------------
     def read_drives(self, legs: list[int]) -> None:
-        self.screen.run_worker(lambda: self._read_drives(legs), thread=True, exclusive=True, group="drive-tables",
-                               exit_on_error=False)
+        rig, lock = self.app.rig, self.app.rig_lock  # read on the UI thread, the rig's only owner
+        self.screen.run_worker(lambda: self._read_drives(rig, lock, legs), thread=True, exclusive=True,
+                               group="drive-tables", exit_on_error=False)
 
-    def _read_drives(self, legs: list[int]) -> None:
-        rig, lock = self.app.rig, self.app.rig_lock
+    def _read_drives(self, rig, lock, legs: list[int]) -> None:
         if rig is None or not lock.acquire(timeout=RIG_WAIT_S):
             return
         out: dict[int, DriveTable] = {}
@@ -129,10 +129,11 @@ class CompensationController:
     def _table_job(self, action: Action, leg: int | None, start, legs: tuple[int, ...] = ()) -> None:
         """Run `start(axis or axes, audit, drive_url)` in a worker holding the rig; `legs` for
         several legs (then `start` gets the axes by leg)."""
+        rig, lock, audit, cfg = self.app.rig, self.app.rig_lock, self.audit(), self.app.cfg  # read on the UI thread
+
         def work() -> None:
             from station.wiring import drive_url_of
 
-            rig, lock = self.app.rig, self.app.rig_lock
             if rig is None:
                 self.screen.post_message(TableJobDone(action, leg, error="Not connected to the rig."))
                 return
@@ -146,7 +147,7 @@ class CompensationController:
                 return
             try:
                 target = {x: rig.axes[x] for x in legs} if legs else rig.axes[leg]
-                job = start(target, self.audit(), drive_url_of(self.app.cfg))
+                job = start(target, audit, drive_url_of(cfg))
             except Exception as exc:  # an audit log that cannot be written, a drive gone: said, not raised
                 self.screen.post_message(TableJobDone(action, leg, error=describe(exc, f"{action} of leg {leg}")))
                 return
