@@ -112,7 +112,9 @@ class SessionPicker(Horizontal):
 
     def on_select_changed(self, event: Select.Changed) -> None:
         event.stop()
-        if event.value is not Select.BLANK:
+        # Nothing chosen (a rescan resets the list) leaves the path field as it is. Textual 8's
+        # "no selection" is Select.NULL; Select.BLANK is False and never equals it.
+        if event.value is not Select.NULL:
             self.set_path(Path(str(event.value)))
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
