@@ -343,7 +343,8 @@ class ModbusServoAxis:
         d = abs(distance_mm)
         return 2 * math.sqrt(d / a) if d <= v * v / a else v / a + d / v
 
-    def move_to(self, target_mm: float, timeout_s: float | None = None) -> DriveStatus:
+    def move_to(self, target_mm: float, timeout_s: float | None = None,
+                velocity_mm_s: float | None = None) -> DriveStatus:
         """Move to `target_mm` (leg coordinates) and return the status once the drive reports
         the target reached.
 
@@ -351,7 +352,12 @@ class ModbusServoAxis:
         drive reports; DriveFault when the drive faults or is not enabled; CommTimeout when it
         does not answer, or does not arrive within `timeout_s` (default: `move_timeout_s`, or
         twice the trapezoid time plus 1 s) on this axis' clock.
+
+        `velocity_mm_s`: the profile velocity for this move only (`_move_at`), limited to the
+        drive's maximum; None moves at the drive's profile velocity as it stands.
         """
+        if velocity_mm_s is not None:
+            return self._move_at(target_mm, timeout_s, velocity_mm_s)
         lim = self.limits()
         if not (isinstance(target_mm, (int, float)) and math.isfinite(target_mm)):
             raise SoftLimitError(f"leg {self.leg}: target {target_mm!r} is not a finite position in mm; nothing moved.")
@@ -387,6 +393,32 @@ class ModbusServoAxis:
                                   f"(at {st.position_mm:.4f} mm); it was quick-stopped.",
                                   hint="Check the mechanics and the drive's motion profile.")
             self.clock.sleep(self.poll_interval_s)
+
+    def _move_at(self, target_mm: float, timeout_s: float | None, velocity_mm_s: float) -> DriveStatus:
+        """`move_to` at `velocity_mm_s` (limited to the drive's maximum): the profile velocity
+        register is written before the move and the drive's own value written back after it,
+        however the move ends, so later moves (a sweep) keep the drive's profile. A target
+        `move_to` refuses is refused before anything is written."""
+        if not (isinstance(velocity_mm_s, (int, float)) and math.isfinite(velocity_mm_s) and velocity_mm_s > 0):
+            raise ValueError(f"leg {self.leg}: velocity {velocity_mm_s!r} is not a speed > 0 mm/s; nothing moved.")
+        lim = self.limits()
+        if not (isinstance(target_mm, (int, float)) and math.isfinite(target_mm) and lim.min_mm <= target_mm <= lim.max_mm):
+            return self.move_to(target_mm, timeout_s)  # SoftLimitError, nothing written
+        reg = self.profile.registers["profile_velocity"]
+        before = reg.decode(self.bus.read(self.unit, reg.address, reg.words))
+        motion = self._profile_motion
+        v = min(float(velocity_mm_s), lim.max_velocity_mm_s)
+        self.bus.write(self.unit, reg.address, reg.encode(v))
+        if motion is not None:
+            self._profile_motion = (v, motion[1])  # the default timeout follows this move's speed
+        try:
+            return self.move_to(target_mm, timeout_s)
+        finally:
+            self._profile_motion = motion
+            try:
+                self.bus.write(self.unit, reg.address, reg.encode(before))
+            except Exception as exc:  # the move's own outcome (or exception) matters more
+                log.warning("leg %s: profile velocity %.3f mm/s not written back: %s", self.leg, before, exc)
 
     # -- compensation tables ------------------------------------------------------------------------
     def _check_bank(self, bank: int) -> None:
