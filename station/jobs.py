@@ -55,6 +55,25 @@ def plan_of_recording(path: str | Path) -> SweepPlan:
     return SweepPlan.from_dict(read_session(path).plan)
 
 
+def resumable_plan(path: str | Path) -> SweepPlan:
+    """The plan of the session file `path`, if there is anything left to measure in it (what
+    `run_sweep(..., resume=True)` then finishes: `station sweep --resume`, the UI's Sweep page).
+    InputError naming the file when it holds no sweep plan (an imported file) or is complete."""
+    session = read_session(path)
+    if not session.plan or session.plan.get("kind") == "import":
+        source = f"imported from {session.plan['source']}" if (session.plan or {}).get("source") else "imported from a CSV?"
+        raise InputError(f"{path}: holds no sweep plan ({source}), so it cannot be resumed; sweep into a new session file instead")
+    try:
+        plan = plan_of_recording(path)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{path}: its sweep plan cannot be read back ({exc!r}); sweep into a new session file instead") from None
+    done = len({int(i) for i in session.points["index"]})
+    if done >= plan.total_points:
+        raise InputError(f"{path}: already complete ({done} of {plan.total_points} points, outcome {session.outcome}); "
+                         "nothing to resume")
+    return plan
+
+
 # -- replay of a recorded session ------------------------------------------------------------------
 
 _KIND_LIMIT = {"beam_break": "beam_retries", "drive_fault": "drive_retries"}  # other kinds: comm_retries

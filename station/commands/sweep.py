@@ -9,7 +9,7 @@ from procedures.errors import InputError
 from procedures.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
 from procedures.plans import parse_legs, SweepPlan
 from station.config import load_config
-from station.jobs import plan_of_recording, run_sweep
+from station.jobs import resumable_plan, run_sweep
 from procedures.control import RunControl
 from procedures.states import Outcome
 from station import interrupt
@@ -100,22 +100,3 @@ def run(args) -> int:
     print(resume_hint)
     return 130 if control.reason == interrupt.REASON else 1  # Ctrl-C: as every command ends on it
 
-
-def resumable_plan(path: Path):
-    """The plan of the session file `path`, if there is anything left to measure in it.
-    InputError naming the file when it holds no sweep plan (an imported file) or is complete."""
-    from procedures.recording.reader import read_session
-
-    session = read_session(path)
-    if not session.plan or session.plan.get("kind") == "import":
-        source = f"imported from {session.plan['source']}" if session.plan.get("source") else "imported from a CSV?"
-        raise InputError(f"{path}: holds no sweep plan ({source}), so it cannot be resumed; sweep into a new --out instead")
-    try:
-        plan = plan_of_recording(path)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(f"{path}: its sweep plan cannot be read back ({exc!r}); sweep into a new --out instead") from None
-    done = len({int(i) for i in session.points["index"]})
-    if done >= plan.total_points:
-        raise InputError(f"{path}: already complete ({done} of {plan.total_points} points, outcome {session.outcome}); "
-                         "nothing to resume")
-    return plan
