@@ -1,6 +1,11 @@
 """Replay screen: pick a recorded session (recordings/, the runs folder, or a path), see what it
 holds, open it on the Results and Diagnosis screens, or replay it at a chosen speed through the
 same sweep screen once replay devices are installed (see station.tui.capabilities).
+
+The faults the session recorded (/faults: every retry and the point given up) are listed in a
+table; after a replay of the session on show, the replayed run's faults are listed under them,
+so the two can be compared. Sessions are read in a thread worker, never on the UI thread: a
+damaged file is refused by the reader within seconds and said in a notification.
 """
 
 from __future__ import annotations
@@ -12,7 +17,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
-from textual.widgets import Button, Input, Label, Static
+from textual.widgets import Button, DataTable, Input, Label, Static
 
 from station.tui import capabilities
 from station.tui.errors import describe
@@ -21,11 +26,32 @@ from station.tui.widgets import SessionPicker, sample_folders
 
 
 class SessionRead(Message):
-    def __init__(self, path: Path, session=None, error: str = "") -> None:
+    """A session read for the page (`replayed`: the output of a replay of `source`)."""
+
+    def __init__(self, path: Path, session=None, error: str = "", replayed: bool = False,
+                 source: Path | None = None) -> None:
         super().__init__()
         self.path = path
         self.session = session
         self.error = error
+        self.replayed = replayed
+        self.source = source
+
+
+FAULT_COLUMNS = ("Session", "Point", "Leg", "Run", "Target mm", "Time s", "Kind", "Attempt", "Gave up", "Message")
+
+
+def _text(value) -> str:
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+
+
+def fault_rows(faults, session: str) -> list[tuple[str, ...]]:
+    """One row per fault record (procedures.recording.schema.FAULT_DTYPE, file order): index
+    (the plan point), leg, run, target mm, time s, kind, attempt, gave up, message."""
+    return [(session, str(int(f["index"])), str(int(f["leg"])), str(int(f["run"])), f"{float(f['target_mm']):+.4f}",
+             f"{float(f['time_s']):.3f}", _text(f["kind"]), str(int(f["attempt"])),
+             "yes" if int(f["gave_up"]) else "no", _text(f["message"]))
+            for f in faults]
 
 
 class ReplayScreen(StationScreen):
@@ -36,6 +62,9 @@ class ReplayScreen(StationScreen):
         Binding("d", "open_diagnosis", "Diagnose"),
         Binding("r", "replay", "Replay"),
     ]
+    DEFAULT_CSS = """
+    #replay-faults { height: auto; max-height: 14; margin: 1 0 0 0; }
+    """
 
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
@@ -49,11 +78,18 @@ class ReplayScreen(StationScreen):
                 yield Button("Open in Results (o)", id="replay-results", compact=True)
                 yield Button("Diagnose (d)", id="replay-diagnose", compact=True)
             yield Static("choose a session above (sample sessions live in recordings/)", id="replay-info", classes="status")
+            yield DataTable(id="replay-faults", cursor_type="row", zebra_stripes=True)
         yield from self.compose_footer()
 
     def on_mount(self) -> None:
         self.session = None
         self.session_path: Path | None = None
+        self._reading: Path | None = None  # the last file asked for: an earlier read's answer is dropped
+        self.replay_source: Path | None = None  # the session the last replay started here replayed
+        self.replayed = None  # the replay's recorded session (its faults are listed), for replay_source
+        self.replayed_path: Path | None = None
+        self.info_lines: list[str] = []  # what #replay-info says of the session on show
+        self.query_one("#replay-faults", DataTable).add_columns(*FAULT_COLUMNS)
         if self.app.replay_path is not None:
             self.query_one(SessionPicker).set_path(self.app.replay_path)
             self._read(self.app.replay_path)
@@ -66,12 +102,20 @@ class ReplayScreen(StationScreen):
         picker.rescan()
         if path != self.session_path:
             picker.set_path(path)
+        sweep = self.app.sweep
+        source = self.replay_source
+        if source is not None and sweep.out == path and sweep.label == f"replay of {source.name}":
+            self._read_replayed(path, source)  # the replay started here has ended: list its faults
 
     def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
         self._read(message.path)
 
-    @work(thread=True, exclusive=True, group="replay-read", exit_on_error=False)
     def _read(self, path: Path) -> None:
+        self._reading = path
+        self._read_worker(path)
+
+    @work(thread=True, exclusive=True, group="replay-read", exit_on_error=False)
+    def _read_worker(self, path: Path) -> None:
         try:
             from procedures.recording.reader import read_session
 
@@ -79,12 +123,28 @@ class ReplayScreen(StationScreen):
         except Exception as exc:
             self.post_message(SessionRead(path, error=describe(exc, f"cannot read {path.name}")))
 
+    @work(thread=True, exclusive=True, group="replay-read-replayed", exit_on_error=False)
+    def _read_replayed(self, path: Path, source: Path) -> None:
+        try:
+            from procedures.recording.reader import read_session
+
+            self.post_message(SessionRead(path, read_session(path), replayed=True, source=source))
+        except Exception as exc:
+            self.post_message(SessionRead(path, error=describe(exc, f"cannot read the replay {path.name}"),
+                                          replayed=True, source=source))
+
     def on_session_read(self, message: SessionRead) -> None:
+        if message.replayed:
+            self._replayed_read(message)
+            return
+        if message.path != self._reading:  # the answer to an earlier Open: another file is on its way
+            return
         info = self.query_one("#replay-info", Static)
         if message.error:
             self.session = None
             info.update(f"[red]{message.error}[/red]")
-            self.notify(message.error, severity="error", timeout=12)
+            self._show_faults()
+            self.notify(message.error, title="Replay", severity="error", timeout=12)
             return
         s = self.session = message.session
         self.session_path = message.path
@@ -105,8 +165,41 @@ class ReplayScreen(StationScreen):
         if capabilities.find("replay") is None:
             lines.append("[yellow]" + capabilities.missing_text("replay", "Replay through the drivers") +
                          "[/yellow] You can still analyse the session (o, d).")
-        info.update("\n".join(lines))
+        self.info_lines = lines
+        info.update("\n".join(lines + self._replayed_lines()))
+        self._show_faults()
         self.app.set_session(message.path)
+
+    def _replayed_read(self, message: SessionRead) -> None:
+        if message.source != self.replay_source:
+            return
+        if message.error:
+            self.notify(message.error, title="Replay", severity="error", timeout=12)
+            return
+        self.replayed, self.replayed_path = message.session, message.path
+        if self.session is not None and self.session_path == message.source:
+            self.query_one("#replay-info", Static).update("\n".join(self.info_lines + self._replayed_lines()))
+        self._show_faults()
+
+    def _replayed_lines(self) -> list[str]:
+        r = self.replayed
+        if r is None or self.session is None or self.session_path != self.replay_source:
+            return []
+        name = self.replayed_path.name
+        return [f"replayed as [b]{name}[/b]: outcome [b]{r.outcome}[/b]; {len(r.points)} points; "
+                f"{len(r.faults)} fault record(s) (listed below as 'replayed')"]
+
+    def _show_faults(self) -> None:
+        """The faults of the session on show, then those of its replay (when replayed here)."""
+        table = self.query_one("#replay-faults", DataTable)
+        table.clear()
+        if self.session is None:
+            return
+        rows = fault_rows(self.session.faults, "recorded")
+        if self.replayed is not None and self.session_path == self.replay_source:
+            rows += fault_rows(self.replayed.faults, "replayed")
+        for row in rows:
+            table.add_row(*row)
 
     # -- actions -------------------------------------------------------------------------------------
     def on_button_pressed(self, event: Button.Pressed) -> None:
@@ -149,4 +242,6 @@ class ReplayScreen(StationScreen):
             self.notify(f"Speed {exc}", title="Replay", severity="error", timeout=10)
             return
         if self.app.start_replay(self.session_path, speed):
+            self.replay_source, self.replayed, self.replayed_path = self.session_path, None, None
+            self._show_faults()
             await self.app.switch_mode("sweep")
