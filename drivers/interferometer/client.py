@@ -10,13 +10,13 @@ beam status other than OK as `BeamBreak`: retrying those is the caller's decisio
 from __future__ import annotations
 
 import numbers
-import time
 from urllib.parse import parse_qs, urlparse
 
 import serial
 
+from drivers.clock import SystemClock
 from drivers.errors import BeamBreak, CommTimeout, DriverError, FramingError
-from drivers.interfaces import Environment, Reading
+from drivers.interfaces import Clock, Environment, Reading
 from drivers.interferometer import protocol as p
 
 _POLL_S = 0.02  # longest blocking read: bounds how late a deadline is noticed
@@ -28,12 +28,14 @@ class SerialInterferometer:
     `port` is a device path (``/dev/ttyUSB0``, a pty path from the simulator, ``COM3``);
     `baudrate` in baud (8N1); `timeout_s` is the wait for one complete reply line, seconds (a
     position query waits `timeout_s` plus the averaging time); `retries` is how many times a
-    missing or malformed reply is asked again; `axes` the instrument's axis count.
+    missing or malformed reply is asked again; `axes` the instrument's axis count. `clock`
+    measures the reply timeouts (default: the system's monotonic clock; a replay gives its
+    `drivers.replay.TimeoutClock`, on which a replayed silence ends at once).
 
     Timing guarantee: a silent port raises `CommTimeout` after
     ``(timeout_s + averaging_s) * (retries + 1)`` seconds (averaging_s = 0 except for a
-    position query), plus at most 20 ms per attempt (the read poll slice); a port that only
-    returns garbage raises `FramingError` within the same bound, usually at once.
+    position query) on `clock`, plus at most 20 ms per attempt (the read poll slice); a port
+    that only returns garbage raises `FramingError` within the same bound, usually at once.
 
     The port is opened with an exclusive (advisory) lock where the platform supports it, so two
     programs cannot talk to one instrument at once. Not thread-safe: one owner at a time.
@@ -47,6 +49,7 @@ class SerialInterferometer:
         timeout_s: float = 0.5,
         retries: int = 2,
         axes: int = 6,
+        clock: Clock | None = None,
     ):
         if timeout_s <= 0:
             raise ValueError(f"interferometer timeout_s must be > 0 seconds, got {timeout_s}")
@@ -59,6 +62,7 @@ class SerialInterferometer:
         self.timeout_s = float(timeout_s)
         self.retries = int(retries)
         self.axes = int(axes)
+        self._clock = clock or SystemClock()
         self.transactions = 0
         self.retried = 0  # exchanges that had to be asked again (noise statistics)
         self._averaging_s: float | None = None  # unknown until set or asked
@@ -198,6 +202,9 @@ class SerialInterferometer:
             # so it cannot pass for the answer to this command
             self._serial.reset_input_buffer()
             self.transactions += 1
+            # the deadline is taken before the command goes out, so whatever the device does
+            # after receiving it (on a replay: a recorded silence moving `clock` on) counts
+            deadline = self._clock.now() + wait_s
             try:
                 self._serial.write(command)
             except serial.SerialTimeoutException:
@@ -208,7 +215,7 @@ class SerialInterferometer:
                     f"interferometer on {self.port}: writing {shown!r} failed: {exc}",
                     hint="The port went away (cable unplugged, simulator stopped?). Reconnect.",
                 ) from exc
-            line = self._read_line(wait_s)
+            line = self._read_line(deadline)
             if not line:
                 timeouts += 1
                 continue
@@ -230,16 +237,15 @@ class SerialInterferometer:
             f"({timeouts} without reply): {reason}; last line {p.show_line(line)}."
         )
 
-    def _read_line(self, wait_s: float) -> bytes:
-        """Read one reply line within `wait_s` seconds; b'' on silence, the partial line if the
-        terminator did not come in time (the caller's split_reply rejects it).
+    def _read_line(self, deadline: float) -> bytes:
+        """Read one reply line until `deadline` (on the client's clock); b'' on silence, the
+        partial line if the terminator did not come in time (the caller's split_reply rejects it).
 
         Not readline(): its timeout is per byte and a partial line looks complete. Not
         read_until() either: it reads byte by byte (0.35 ms per reply on a pty). Instead, wait
         for the first byte, then take what is waiting; the port's own timeout is a short poll
         slice so the deadline is kept within _POLL_S.
         """
-        deadline = time.monotonic() + wait_s
         line = bytearray()
         try:
             while True:
@@ -249,7 +255,7 @@ class SerialInterferometer:
                 if end >= 0:
                     # bytes after the terminator are not an answer to anything: dropped
                     return bytes(line[: end + len(p.TERMINATOR)])
-                if len(line) >= p.MAX_LINE_BYTES or time.monotonic() >= deadline:
+                if len(line) >= p.MAX_LINE_BYTES or self._clock.now() >= deadline:
                     return bytes(line)
         except (serial.SerialException, OSError) as exc:
             raise DriverError(

@@ -3,8 +3,10 @@
 Time comes from the recording. Whenever a replay device answers with a recorded point (or
 raises a recorded fault) the clock is *set* to the time recorded for it, so a procedure that
 stamps `clock.now() - t_start` (with t_start = 0) gets the recorded `time_s` bit for bit. In
-between, the clock advances by the procedure's own sleeps and the devices' move/averaging
-times, like the simulated rig's virtual clock at time scale 0.
+between, the clock advances by the procedure's own sleeps and the drives' move times, like the
+simulated rig's virtual clock at time scale 0. A position query that the recording does not
+answer afresh (the same point read again, the client's own retries into a replayed silence or
+line noise) leaves it where it is: the recorded time of a fault is the time the client gave up.
 
 Speed: `speed=None` runs as fast as possible; `speed=1` replays in real time; `speed=10` ten
 times faster. The waiting happens only in `sleep()` calls of the procedure's thread (the
@@ -13,6 +15,15 @@ request, where a wait would look like a silent device to the client. The waiting
 `wall - wall0 = (now - t0) / speed` from an anchor taken at the first sleep; the anchor is
 taken again when the recorded time goes backwards (a resumed session starts its clock again)
 and when the replay has fallen behind (after a pause of the run), so it never rushes.
+
+Nothing the replay records may depend on the wall clock, so nothing may depend on how busy the
+machine is. The wall-clock waits left are the clients' reply timeouts, and on a replay none of
+them may fire for a request the replay devices answer: a timed-out request is asked again (a
+question the recording does not hold: the same reading served twice, or the next recorded fault
+taken for it) or becomes a fault the recording does not have. So on a replay both timeouts are
+long (station.wiring.open_replay_rig), and the interferometer client measures its timeout on a
+`TimeoutClock`: the system's monotonic clock, jumping past any reply timeout whenever the
+replay instrument replays a recorded silence, so a recorded time-out still ends at once.
 """
 
 from __future__ import annotations
@@ -100,3 +111,35 @@ class DeviceClock:
 
     def sleep(self, dt_s: float) -> None:
         self._clock.advance(dt_s)
+
+
+SILENCE_S = 3600.0
+"""How far a replayed silence moves the `TimeoutClock` on: past any client reply timeout."""
+
+
+class TimeoutClock:
+    """The clock the interferometer client measures its reply timeouts on during a replay
+    (`SerialInterferometer(clock=...)`): the system's monotonic clock, moved on by `SILENCE_S`
+    by `silence()`, which the replay instrument calls when it replays a recorded silence (it
+    then answers nothing). The client takes each deadline before sending its command, so the
+    silence it provokes puts the deadline behind at once: a recorded time-out costs one read
+    poll (20 ms) per attempt, not the timeout. Thread-safe."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._skipped_s = 0.0
+        self.silences = 0  # replayed silences (statistics)
+
+    def now(self) -> float:
+        with self._lock:
+            return time.monotonic() + self._skipped_s
+
+    def sleep(self, dt_s: float) -> None:
+        if dt_s > 0:
+            time.sleep(dt_s)
+
+    def silence(self) -> None:
+        """A query is left unanswered (a recorded time-out): end the client's wait for it now."""
+        with self._lock:
+            self._skipped_s += SILENCE_S
+            self.silences += 1

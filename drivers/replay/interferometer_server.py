@@ -14,7 +14,7 @@ import math
 import threading
 
 from drivers.interferometer import protocol as p
-from drivers.replay.clock import DeviceClock
+from drivers.replay.clock import DeviceClock, TimeoutClock
 from drivers.replay.plant import ReplayPlant, ReplayState
 from drivers.sim.interferometer_server import SimInterferometer
 
@@ -34,12 +34,17 @@ class ReplayInterferometer(SimInterferometer):
     """Serves the replay plants on a pty (`start()` returns the path for the client)."""
 
     def __init__(self, state: ReplayState, plants: dict[int, ReplayPlant], clock: DeviceClock,
-                 lock: threading.RLock, identity: tuple[str, str, str, str], axes: int = 6):
+                 lock: threading.RLock, identity: tuple[str, str, str, str], axes: int = 6,
+                 timeout_clock: TimeoutClock | None = None):
         super().__init__(plants, clock, lock=lock, axes=axes, identity=identity)
         self.state = state
+        self.timeout_clock = timeout_clock
 
     def _position(self, axis: int) -> bytes | None:
-        self.clock.sleep(self._averaging_s)  # the averaging window passes on the replay clock
+        # No averaging window on the replay clock: a fresh answer (a reading, a fault) sets the
+        # clock to its recorded time, and a query answered again (the same reading, the client's
+        # retries into a replayed silence or line noise) must not move it, or the time the sweep
+        # records after it would depend on how often the client asked.
         with self.lock:
             plant = self.plants.get(axis)
             if plant is None:
@@ -56,6 +61,8 @@ class ReplayInterferometer(SimInterferometer):
         if kind == "beam":
             return p.frame_reply("POS", axis, exact(last), "BEAM", "0.0", f"{t_s:.6f}")
         if kind == "silent":
+            if self.timeout_clock is not None:
+                self.timeout_clock.silence()  # the client's wait for this reply ends now
             return None
         if kind == "garbage":
             good = p.frame_reply("POS", axis, exact(last), "OK", "90.0", f"{t_s:.6f}")

@@ -2,7 +2,8 @@
 
 Like drivers.sim.rig.SimRig, but the plants answer from a `ReplayScript` and the clock is a
 `ReplayClock` (recorded time, played at `speed`). Connect the station's normal clients to
-`drive_url` and `laser_port`, and give procedures `clock`.
+`drive_url` and `laser_port` (the interferometer client measuring its reply timeouts on
+`timeout_clock`), and give procedures `clock`.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import threading
 from typing import Callable
 
 from drivers.modbus.profile import DriveProfile
-from drivers.replay.clock import ReplayClock
+from drivers.replay.clock import ReplayClock, TimeoutClock
 from drivers.replay.drive_server import ReplayDriveServer, replay_profile
 from drivers.replay.errors import ReplayMismatch
 from drivers.replay.interferometer_server import ReplayInterferometer
@@ -36,6 +37,7 @@ class ReplayRig:
                  rtu: bool = False):
         self.script = script
         self.clock = ReplayClock(speed)
+        self.timeout_clock = TimeoutClock()
         base = profile or DriveProfile.load()
         tol_mm = base.registers["target_position"].scale or 1e-6
         self.state = ReplayState(script, self.clock, target_tol_mm=tol_mm)
@@ -47,7 +49,8 @@ class ReplayRig:
         device_clock = self.clock.device_clock()
         self.drive_server = ReplayDriveServer(self.plants, device_clock, self.profile, lock=self.lock)
         identity = ("StationReplay", "LI-6", f"R{tag}", (script.session_id or "replay")[:24].replace(",", " ") or "replay")
-        self.laser_server = ReplayInterferometer(self.state, self.plants, device_clock, self.lock, identity, axes=axes)
+        self.laser_server = ReplayInterferometer(self.state, self.plants, device_clock, self.lock, identity, axes=axes,
+                                                 timeout_clock=self.timeout_clock)
         self.rtu = rtu
         self.drive_url = ""
         self.rtu_port = ""
