@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from procedures.csv_io import export_csv
+from station.report_jobs import export_lines
 
 NAME = "export"
 HELP = "write a session file's points as an interchange CSV"
@@ -23,7 +24,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     summary = export_csv(Path(args.h5), Path(args.out), overwrite=args.force)
-    print(f"exported {summary.rows} points to {summary.path} (columns: {', '.join(summary.columns)})")
-    if summary.skipped_no_error:
-        print(f"left out {summary.skipped_no_error} points without a measured error")
+    for line in export_lines(summary):
+        print(line)
     return 0

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.recording.reader import read_session
-from procedures.report import make_report
 from station.commands.fit import _lead
+from station.report_jobs import report_lines, session_report
 
 NAME = "report"
 HELP = "plots (PNG) and a summary (Markdown, JSON) of a session before and after compensation"
@@ -29,21 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     session = read_session(args.session)
-    if session.points.size == 0:
-        raise InputError(f"{session.path}: the session has no points; record a sweep first")
     model = load_model(args.model) if args.model else None
-    result = make_report(session.points, args.out, model, source_path=str(session.path),
-                         source_sha256=session.sha256, lead_mm=args.lead_mm)
-    if model is not None and not result.summary["model"]["fitted_to_this_session"]:
-        print(f"note: the model was fitted to {model.source.get('path') or 'another recording'}, "
-              "not to this session: the residual figures are a true test of it")
-    for row in result.summary["legs"]:
-        rr = row["residual_range_reduction_pct"]
-        print(f"leg {row['leg']}: range before {row['range_before_um']:.3f} um, residual range {row['residual_range_um']:.3f} um"
-              + (f" (residual range reduction {rr:.1f} %)" if rr is not None else "")
-              + f"; RMS before {row['rms_before_um']:.3f} um, residual RMS {row['residual_rms_um']:.3f} um")
-    print(f"residual = error minus model on this session's points: {result.summary['residuals']}; "
-          "figures: docs/figures.md")
-    for path in result.files:
-        print(f"wrote {path}")
+    result = session_report(session, args.out, model, lead_mm=args.lead_mm)
+    for line in report_lines(result, model):
+        print(line)
     return 0

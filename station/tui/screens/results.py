@@ -2,7 +2,16 @@
 residual, and the held-out residual against the noise floor; method default or paper.
 
 Reading, fitting and evaluating run in a thread worker; the result is kept on the app
-(`app.analysis`) for the Compensation screen.
+(`app.analysis`) for the Compensation screen. A damaged session file is refused by the reader
+within seconds, in the worker, and said in a notification.
+
+`r` writes the report of `station report` and `e` the CSV of `station export` for the session
+on show, through the same functions (station.report_jobs, procedures.csv_io.export_csv), beside
+the recording: report/<session>.<method>/ and <session>.csv. Neither replaces what is there.
+
+The status says what the table shows; a failed fit's error line belongs to the method it was
+asked for and goes when another method is chosen. An answer of a fit asked for before the last
+request (another file, another method) is dropped.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
 from station.tui.widgets import SessionPicker, XYPlot
 
+NO_SESSION = "no session open: finish a sweep, or open a session file above"
 METHODS = [("default (bidirectional, cross-validated)", "default"), ("paper (Fourier, Algorithm 1)", "paper")]
 
 
@@ -40,15 +50,39 @@ class Analysis:
 
 
 class AnalysisReady(Message):
-    def __init__(self, analysis: Analysis) -> None:
+    def __init__(self, analysis: Analysis, request: int = 0) -> None:
         super().__init__()
         self.analysis = analysis
+        self.request = request  # the fit request it answers (ResultsScreen._request)
 
 
 class AnalysisFailed(Message):
-    def __init__(self, error: str) -> None:
+    def __init__(self, error: str, method: str = "", request: int = 0) -> None:
         super().__init__()
         self.error = error
+        self.method = method
+        self.request = request
+
+
+class FilesWritten(Message):
+    """A report or CSV written (`error` empty) or refused, from the writing worker."""
+
+    def __init__(self, title: str, text: str, error: str = "") -> None:
+        super().__init__()
+        self.title = title
+        self.text = text
+        self.error = error
+
+
+def report_folder(recording: Path, method: str) -> Path:
+    """Where `r` writes: report/<session name>.<method>/ beside the recording (the `--out` of
+    `station report`), so reports of several sessions and methods do not overwrite each other."""
+    return recording.parent / "report" / f"{recording.stem}.{method}"
+
+
+def csv_path(recording: Path) -> Path:
+    """Where `e` writes: <session name>.csv beside the recording (the `--out` of `station export`)."""
+    return recording.with_suffix(".csv")
 
 
 def iso_figures(iso: Any, leg: int) -> dict[str, float | None]:
@@ -72,6 +106,8 @@ class ResultsScreen(StationScreen):
         Binding("m", "toggle_method", "Method"),
         Binding("l", "next_leg", "Next leg"),
         Binding("w", "save_model", "Save model"),
+        Binding("r", "write_report", "Report"),
+        Binding("e", "export_csv", "Export CSV"),
     ]
 
     def compose(self) -> ComposeResult:
@@ -83,7 +119,9 @@ class ResultsScreen(StationScreen):
                 yield Select(METHODS, value="default", allow_blank=False, id="method", compact=True)
                 yield Button("Fit (f)", id="fit", compact=True, variant="success")
                 yield Button("Save model (w)", id="save-model", compact=True)
-            yield Static("no session open: finish a sweep, or open a session file above", id="results-status")
+                yield Button("Report (r)", id="write-report", compact=True)
+                yield Button("CSV (e)", id="export-csv", compact=True)
+            yield Static(NO_SESSION, id="results-status")
             yield DataTable(id="results-table", cursor_type="row", zebra_stripes=True)
             with Horizontal(id="results-plots"):
                 yield XYPlot("measured and model", "position mm", "error µm", id="model-plot")
@@ -101,6 +139,9 @@ class ResultsScreen(StationScreen):
         table.add_columns("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Held-out ratio",
                           "Range before → held-out range", "A", "E", "M", "B", "R")
         self.plot_leg: int | None = None
+        self._request = 0  # numbers the fit requests: only the newest one's answer is shown
+        self._fitting: tuple[Path, str] | None = None  # (path, method) of the fit under way
+        self.failure: tuple[str, str] | None = None  # (method, error) of the last failed fit
         self.follow_sessions()
         self._show()
 
@@ -116,14 +157,35 @@ class ResultsScreen(StationScreen):
         elif event.button.id == "save-model":
             event.stop()
             self.action_save_model()
+        elif event.button.id == "write-report":
+            event.stop()
+            self.action_write_report()
+        elif event.button.id == "export-csv":
+            event.stop()
+            self.action_export_csv()
 
     def action_toggle_method(self) -> None:
         select = self.query_one("#method", Select)
         select.value = "paper" if select.value == "default" else "default"
 
+    def _method(self) -> str:
+        value = self.query_one("#method", Select).value
+        return "default" if value is Select.NULL else str(value)  # allow_blank=False: never NULL
+
     def on_select_changed(self, event: Select.Changed) -> None:
-        if event.select.id == "method" and self.app.analysis is not None and self.app.analysis.method != event.value:
-            self.action_fit()
+        if event.select.id != "method":
+            return
+        event.stop()
+        # Another method: the error of the one before is not this one's, and a fit under way
+        # for the one before is not wanted any more.
+        self.failure = None
+        a = self.app.analysis
+        if self._fitting is not None:
+            self._start_fit(self._fitting[0], self._method())
+        elif a is not None and a.method != self._method():
+            self._start_fit(a.path, self._method())
+        else:  # the analysis on show is of this method already
+            self._show()
 
     def action_fit(self) -> None:
         text = self.query_one("#session-path").value.strip()
@@ -131,12 +193,17 @@ class ResultsScreen(StationScreen):
         if path is None:
             self.notify("Open a session first (a finished sweep opens itself here).", severity="warning")
             return
-        method = str(self.query_one("#method", Select).value)
+        self._start_fit(Path(path), self._method())
+
+    def _start_fit(self, path: Path, method: str) -> None:
+        self._request += 1
+        self._fitting = (path, method)
+        self.failure = None
         self.query_one("#results-status", Static).update(f"reading and fitting ({method})…")
-        self._analyse(Path(path), method)
+        self._analyse(path, method, self._request)
 
     @work(thread=True, exclusive=True, group="analysis", exit_on_error=False)
-    def _analyse(self, path: Path, method: str) -> None:
+    def _analyse(self, path: Path, method: str, request: int = 0) -> None:
         try:
             from procedures.fit import fit
             from procedures.recording.reader import read_session
@@ -144,7 +211,7 @@ class ResultsScreen(StationScreen):
             session = read_session(path)
             model = fit(session.points, method, source={"path": str(path), "sha256": session.sha256})
         except Exception as exc:
-            self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}")))
+            self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}"), method, request))
             return
         iso, note = None, ""
         try:
@@ -156,16 +223,23 @@ class ResultsScreen(StationScreen):
                 iso = iso230.evaluate(session.points)
             except Exception as exc:
                 note = describe(exc, "ISO 230-2")
-        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note)))
+        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note), request))
 
     def on_analysis_ready(self, message: AnalysisReady) -> None:
+        if message.request != self._request:  # asked for before the last request
+            return
+        self._fitting = None
         self.app.analysis = message.analysis
         self.app.last_session = message.analysis.path
         self.plot_leg = None
         self._show()
 
     def on_analysis_failed(self, message: AnalysisFailed) -> None:
-        self.query_one("#results-status", Static).update(f"[red]{message.error}[/red]")
+        if message.request != self._request:
+            return
+        self._fitting = None
+        self.failure = (message.method, message.error)
+        self._show()
         self.notify(message.error, title="Results", severity="error", timeout=12)
 
     def action_next_leg(self) -> None:
@@ -200,13 +274,96 @@ class ResultsScreen(StationScreen):
         a.model_path = out
         self.notify(f"Model saved: {out if not self.app.hide_volatile else out.name}", timeout=6)
 
+    # -- report and CSV (station report, station export) ----------------------------------------------
+    def _where(self, path: Path) -> str:
+        return path.name if self.app.hide_volatile else str(path)
+
+    def action_write_report(self) -> None:
+        """`station report SESSION --out report/<session>.<method>/` with the model on show (the
+        default model is the one `station report` fits; another is as `--model` its saved file)."""
+        a = self.app.analysis
+        if a is None:
+            self.notify("Open a session first: the report is of the session and model on show.", title="Report",
+                        severity="warning")
+            return
+        out = report_folder(a.path, a.method)
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            self.notify(f"{self._where(out)} exists already (a report written before): rename or delete it, "
+                        "then press r again.", title="Report", severity="warning", timeout=12)
+            return
+        self.notify(f"Writing the report of {a.path.name} ({a.method} model)…", title="Report", timeout=4)
+        self._report_worker(a.session, a.model, out, self.app.hide_volatile)
+
+    @work(thread=True, group="results-write", exit_on_error=False)
+    def _report_worker(self, session, model, out: Path, hide: bool) -> None:
+        try:
+            from station.report_jobs import report_lines, session_report
+
+            result = session_report(session, out, model)
+        except Exception as exc:
+            self.post_message(FilesWritten("Report", "", describe(exc, f"cannot write the report to {out}")))
+            return
+        where = f"report/{out.name}/" if hide else str(out)
+        notes = [line for line in report_lines(result, model) if line.startswith("note:")]
+        self.post_message(FilesWritten("Report", f"Report written to {where}: "
+                                       + ", ".join(p.name for p in result.files) + "".join("\n" + n for n in notes)))
+
+    def action_export_csv(self) -> None:
+        """`station export SESSION --out <session>.csv` (no --force: an existing file is kept)."""
+        a = self.app.analysis
+        if a is None:
+            self.notify("Open a session first: the CSV is of the session on show.", title="Export CSV",
+                        severity="warning")
+            return
+        out = csv_path(a.path)
+        if out.exists():
+            self.notify(f"{self._where(out)} exists already: rename or delete it, then press e again.",
+                        title="Export CSV", severity="warning", timeout=12)
+            return
+        self._export_worker(a.path, out, self.app.hide_volatile)
+
+    @work(thread=True, group="results-write", exit_on_error=False)
+    def _export_worker(self, session_path: Path, out: Path, hide: bool) -> None:
+        try:
+            from procedures.csv_io import export_csv
+            from station.report_jobs import export_lines
+
+            summary = export_csv(session_path, out, overwrite=False)
+        except Exception as exc:
+            self.post_message(FilesWritten("Export CSV", "", describe(exc, f"cannot export {session_path.name}")))
+            return
+        text = "\n".join(export_lines(summary))
+        if hide:
+            text = text.replace(str(out), out.name)
+        self.post_message(FilesWritten("Export CSV", text))
+
+    def on_files_written(self, message: FilesWritten) -> None:
+        if message.error:
+            self.notify(message.error, title=message.title, severity="error", timeout=12)
+        else:
+            self.notify(message.text, title=message.title, timeout=10)
+
     # -- drawing -----------------------------------------------------------------------------------
+    def _failure_text(self, a: Analysis | None) -> str:
+        """The error of the last failed fit, if it was of the method now chosen."""
+        if self.failure is None or self.failure[0] != self._method():
+            return ""
+        text = f"[red]{self.failure[1]}[/red]"
+        if a is not None:
+            text += f"\n[dim]the table shows the {a.method} model of {a.path.name}[/dim]"
+        return text
+
     def _show(self) -> None:
         a = self.app.analysis
         status = self.query_one("#results-status", Static)
         table = self.query_one("#results-table", DataTable)
         table.clear()
+        failure = self._failure_text(a)
         if a is None:
+            if self._fitting is not None:
+                status.update(f"reading and fitting ({self._fitting[1]})…")
+            else:
+                status.update(failure or NO_SESSION)
             self._show_plots()
             return
         s = a.session
@@ -221,6 +378,8 @@ class ResultsScreen(StationScreen):
             extra += [f"[yellow]leg {leg}: not computed:[/yellow] {why}" for why in sorted(set(r.reasons.values()))]
         if extra:  # ISO 230-2 caveats (too few approaches, a stray run, ...): the first few
             text += "\n" + "\n".join(extra[:3]) + (f"\n… and {len(extra) - 3} more" if len(extra) > 3 else "")
+        if failure:
+            text = failure + "\n" + text
         status.update(text)
         for leg, lf in a.model.legs.items():
             st = lf.stats

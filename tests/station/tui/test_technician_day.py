@@ -109,3 +109,152 @@ async def _faults(path, cfg, size, wait_until, notes):
         six = read_session(SAMPLE_6LEGS)
         await wait_until(pilot, lambda: replay.session_path == SAMPLE_6LEGS, 30, "the other session")
         assert table.row_count == len(six.faults)
+
+
+# -- 3. report and CSV from the Results page: the files of `station report` and `station export` -----
+
+async def open_on(pilot, wait_until, key: str, path) -> None:
+    app = pilot.app
+    await pilot.press(key)
+    await wait_until(pilot, lambda: app.screen.query("#session-path"), what="the session picker")
+    app.screen.query_one("#session-path", Input).value = str(path)
+    await pilot.click("#session-open")
+
+
+def test_results_writes_the_report_and_csv_of_the_cli(recorded_session, cfg, size, wait_until, notes, tmp_path):
+    session = tmp_path / "day" / "two-legs.h5"
+    session.parent.mkdir()
+    shutil.copy(recorded_session, session)
+    asyncio.run(_report_and_csv(session, cfg, size, wait_until, notes, tmp_path / "cli"))
+
+
+async def _report_and_csv(path, cfg, size, wait_until, notes, cli_dir):
+    from station.cli import main
+
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        await open_on(pilot, wait_until, "f3", path)
+        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        # r: the report of `station report FILE --out DIR` (the default model, fitted to the session)
+        await pilot.press("r")
+        out = path.parent / "report" / "two-legs.default"
+        await wait_until(pilot, lambda: any("Report written to" in n for n in notes(app)), 60, "the report")
+        note = next(n for n in notes(app) if "Report written to" in n)
+        assert str(out) in note and "summary.md" in note
+        assert main(["report", str(path), "--out", str(cli_dir / "report")]) == 0
+        for name in ("errors.png", "residuals.png", "histograms.png", "spectrum.png"):
+            assert (out / name).stat().st_size > 0
+        for name in ("summary.json", "summary.md"):
+            assert (out / name).read_text() == (cli_dir / "report" / name).read_text(), name
+        # again: refused, nothing replaced
+        app.clear_notifications()
+        before = (out / "summary.json").stat().st_mtime_ns
+        await pilot.press("r")
+        await wait_until(pilot, lambda: any("exists already" in n for n in notes(app)), 10, "the refusal")
+        assert str(out) in notes(app)[-1] and "rename or delete it" in notes(app)[-1]
+        assert (out / "summary.json").stat().st_mtime_ns == before
+        # e: the CSV of `station export FILE --out FILE.csv`
+        await pilot.press("e")
+        csv = path.with_suffix(".csv")
+        await wait_until(pilot, lambda: any("exported" in n for n in notes(app)), 30, "the CSV")
+        assert f"to {csv}" in next(n for n in notes(app) if "exported" in n)
+        assert main(["export", str(path), "--out", str(cli_dir / "x.csv")]) == 0
+        assert csv.read_bytes() == (cli_dir / "x.csv").read_bytes()
+        app.clear_notifications()
+        csv.write_text("keep me")
+        await pilot.press("e")
+        await wait_until(pilot, lambda: any("exists already" in n for n in notes(app)), 10, "the refusal")
+        assert str(csv) in notes(app)[-1] and csv.read_text() == "keep me"
+        # the paper model on show: as `station report --model` its saved file
+        await pilot.press("m")
+        await wait_until(pilot, lambda: app.analysis.method == "paper", 60, "the paper fit")
+        await pilot.press("w")
+        await wait_until(pilot, lambda: app.analysis.model_path is not None, 10, "the saved model")
+        await pilot.press("r")
+        paper = path.parent / "report" / "two-legs.paper"
+        await wait_until(pilot, lambda: any(f"{paper}" in n for n in notes(app)), 60, "the paper report")
+        assert main(["report", str(path), "--out", str(cli_dir / "paper"), "--model", str(app.analysis.model_path)]) == 0
+        for name in ("summary.json", "summary.md"):
+            assert (paper / name).read_text() == (cli_dir / "paper" / name).read_text(), name
+
+
+def test_results_report_needs_a_session(cfg, size, wait_until, notes):
+    asyncio.run(_no_session(cfg, size, wait_until, notes))
+
+
+async def _no_session(cfg, size, wait_until, notes):
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        await pilot.press("f3")
+        await wait_until(pilot, lambda: app.screen.MODE == "results", what="Results")
+        await pilot.press("r")
+        await pilot.press("e")
+        await wait_until(pilot, lambda: len(notes(app)) == 2, 5, "two notices")
+        assert all("Open a session first" in n for n in notes(app))
+
+
+# -- 5. Results: the error line belongs to the method on show ------------------------------------------
+
+@pytest.fixture
+def irregular_session(tmp_path):
+    """Legs 1 and 2 on ISO 230-2 irregular targets: the paper's method refuses them."""
+    from drivers.sim.plant import default_leg_configs
+    from procedures.plans import irregular_targets
+    from station.synth import synth_session
+    from tests.tooling import write_points_session
+
+    cfgs = default_leg_configs(seed=0)
+    points = synth_session({1: cfgs[0], 2: cfgs[1]}, irregular_targets(-90.0, 90.0, 21, 0), cycles=3, seed=0)
+    folder = tmp_path / "irregular"
+    folder.mkdir()
+    return write_points_session(folder / "irregular.h5", points)
+
+
+def test_results_drops_the_paper_error_when_switching_back(irregular_session, cfg, size, wait_until, notes,
+                                                          monkeypatch):
+    import procedures.fit
+
+    real_fit = procedures.fit.fit
+    slow = {"paper": 0.0}
+
+    def fit(points, method="default", **kwargs):  # the paper fit takes its time when asked to
+        time.sleep(slow.get(method, 0.0))
+        return real_fit(points, method, **kwargs)
+
+    monkeypatch.setattr(procedures.fit, "fit", fit)
+    asyncio.run(_stale_error(irregular_session, cfg, size, wait_until, notes, slow))
+
+
+async def _stale_error(path, cfg, size, wait_until, notes, slow):
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        await open_on(pilot, wait_until, "f3", path)
+        await wait_until(pilot, lambda: app.analysis is not None, 60, "the default fit")
+        screen = app.screen
+        table = screen.query_one("#results-table", DataTable)
+        assert table.row_count == 2
+        # m: the paper's method, which refuses irregular targets
+        await pilot.press("m")
+        await wait_until(pilot, lambda: any("uniformly spaced" in n for n in notes(app)), 60, "the paper error")
+        status = status_text(app, "#results-status")
+        assert "uniformly spaced" in status and "the table shows the default model" in status
+        assert app.analysis.method == "default" and table.row_count == 2
+        # m again: back to default, on show already; the paper's error goes
+        await pilot.press("m")
+        await wait_until(pilot, lambda: "uniformly spaced" not in status_text(app, "#results-status"), 5,
+                         "the error line to go")
+        status = status_text(app, "#results-status")
+        assert "method default" in status and table.row_count == 2
+        assert screen.query_one("#method", Select).value == "default"
+        # m, and m again while the paper fit is under way: its answer is dropped, its error never shows
+        app.clear_notifications()
+        slow["paper"] = 1.5
+        await pilot.press("m")
+        await wait_until(pilot, lambda: screen._fitting is not None and screen._fitting[1] == "paper", 5,
+                         "the paper fit to start")
+        await pilot.press("m")
+        await wait_until(pilot, lambda: screen._fitting is None, 60, "the default fit")
+        await pilot.pause(2.5)  # the paper fit has answered by now
+        assert "uniformly spaced" not in status_text(app, "#results-status")
+        assert not any("uniformly spaced" in n for n in notes(app))
+        assert app.analysis.method == "default" and screen.query_one("#method", Select).value == "default"

@@ -1,0 +1,47 @@
+"""A session's report and its CSV export, for both front ends: `station report` / `station
+export` and the terminal UI's Results page call these, so they write the same files and say the
+same about them. The export itself is procedures.csv_io.export_csv. Moved here from
+station/commands/report.py and export_csv.py (the UI never imports a command module)."""
+
+from __future__ import annotations
+
+import os
+
+from procedures.csv_io import ExportSummary
+from procedures.errors import InputError
+from procedures.report import ReportResult, make_report
+
+
+def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: float | str | None = "auto") -> ReportResult:
+    """`station report`: the report files of `session` (procedures.recording.reader.Session)
+    into `out_dir`, before and after `model` (None: the default model fitted to the session)."""
+    if session.points.size == 0:
+        raise InputError(f"{session.path}: the session has no points; record a sweep first")
+    return make_report(session.points, out_dir, model, source_path=str(session.path),
+                       source_sha256=session.sha256, lead_mm=lead_mm)
+
+
+def report_lines(result: ReportResult, model=None) -> list[str]:
+    """What `station report` prints about `result` (`model`: the one given, None when fitted)."""
+    lines = []
+    if model is not None and not result.summary["model"]["fitted_to_this_session"]:
+        lines.append(f"note: the model was fitted to {model.source.get('path') or 'another recording'}, "
+                     "not to this session: the residual figures are a true test of it")
+    for row in result.summary["legs"]:
+        rr = row["residual_range_reduction_pct"]
+        lines.append(f"leg {row['leg']}: range before {row['range_before_um']:.3f} um, residual range {row['residual_range_um']:.3f} um"
+                     + (f" (residual range reduction {rr:.1f} %)" if rr is not None else "")
+                     + f"; RMS before {row['rms_before_um']:.3f} um, residual RMS {row['residual_rms_um']:.3f} um")
+    lines.append(f"residual = error minus model on this session's points: {result.summary['residuals']}; "
+                 "figures: docs/figures.md")
+    lines += [f"wrote {path}" for path in result.files]
+    return lines
+
+
+def export_lines(summary: ExportSummary) -> list[str]:
+    """What `station export` prints about what `export_csv` wrote."""
+    lines = [f"exported {summary.rows} points to {summary.path} (columns: {', '.join(summary.columns)})"]
+    if summary.skipped_no_error:
+        lines.append(f"left out {summary.skipped_no_error} points without a measured error")
+    return lines
+
