@@ -1,7 +1,13 @@
 """Diagnosis screen: the gap between the digital twin and a recording — where it lies, which
 unmodelled effect explains it, how far it shrinks — with a per-leg plot of the gap along the
 stroke. The diagnosis is procedures.diagnosis.diagnose (the same as `station diagnose`), run in a
-thread worker.
+thread worker, which also reads the session (a damaged file is refused within seconds and said in
+a notification) and builds the twin.
+
+The twin is chosen as `station diagnose --twin` chooses it (station.twins.load_twin): fitted on
+the recording itself (no --twin, the default), the simulated plant (sim:default), or a file typed
+in (MODEL.json, REFERENCE.h5 or sim:CONFIG.toml); and, in the UI only, the model on the Results
+page.
 """
 
 from __future__ import annotations
@@ -13,27 +19,37 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
-from textual.widgets import Button, DataTable, Label, Select, Static
+from textual.widgets import Button, DataTable, Input, Label, Select, Static
 
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
 from station.tui.widgets import SessionPicker, sample_folders, XYPlot
 
-TWINS = [("fitted on the recording", "fitted"), ("simulated plant (sim:default)", "sim"),
-         ("model on the Results screen", "results")]
+# The choices of `station diagnose --twin` (the first, no --twin, is its default), and the model on Results.
+TWINS = [("fitted on the recording (default)", "fitted"), ("simulated plant (sim:default)", "sim"),
+         ("file: MODEL.json, REFERENCE.h5, sim:CONFIG.toml", "file"), ("model on the Results page", "results")]
+TWIN_SPEC_HINT = "MODEL.json, REFERENCE.h5 or sim:CONFIG.toml"
+
+
+def twin_spec(kind: str, typed: str = "") -> str | None:
+    """What `station diagnose --twin` gets for the choice `kind` (None: no --twin, the twin fitted
+    on the recording); "results" has no command-line spelling (save the model, then MODEL.json)."""
+    return {"fitted": None, "sim": "sim:default", "file": typed.strip()}.get(kind)
 
 
 class DiagnosisReady(Message):
-    def __init__(self, path: Path, report: dict) -> None:
+    def __init__(self, path: Path, report: dict, request: int = 0) -> None:
         super().__init__()
         self.path = path
         self.report = report
+        self.request = request  # the diagnosis request it answers (DiagnosisScreen._request)
 
 
 class DiagnosisFailed(Message):
-    def __init__(self, error: str) -> None:
+    def __init__(self, error: str, request: int = 0) -> None:
         super().__init__()
         self.error = error
+        self.request = request
 
 
 class DiagnosisScreen(StationScreen):
@@ -51,6 +67,8 @@ class DiagnosisScreen(StationScreen):
             with Horizontal(classes="controls"):
                 yield Label("Twin ")
                 yield Select(TWINS, value="fitted", allow_blank=False, id="twin", compact=True)
+                yield Input(placeholder=TWIN_SPEC_HINT, id="twin-spec", compact=True,
+                            tooltip="the twin file or plant config (station diagnose --twin)")
                 yield Button("Diagnose (d)", id="diag-run", compact=True, variant="success")
             yield Static("no diagnosis yet: choose a session and press d", id="diag-status", classes="status")
             yield DataTable(id="diag-table", cursor_type="row", zebra_stripes=True)
@@ -60,9 +78,16 @@ class DiagnosisScreen(StationScreen):
                     yield Static("", id="diag-text")
         yield from self.compose_footer()
 
+    CSS = """
+    #diag-body .controls Select { width: 50; }
+    #diag-body .controls #twin-spec { width: 1fr; }
+    """
+
     def on_mount(self) -> None:
         self.report: dict | None = None
         self.plot_leg: str | None = None
+        self._request = 0  # numbers the diagnosis requests: only the newest one's answer is shown
+        self.running = False
         t = self.query_one("#diag-table", DataTable)
         t.add_columns("Leg", "Effect", "Parameters", "Held-out gap µm", "Shrink", "p")
         self.follow_sessions()
@@ -81,13 +106,27 @@ class DiagnosisScreen(StationScreen):
             event.stop()
             self.action_diagnose()
 
+    def on_input_changed(self, event: Input.Changed) -> None:
+        if event.input.id == "twin-spec" and event.value.strip():
+            self.query_one("#twin", Select).value = "file"  # typing a twin chooses it
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        if event.input.id == "twin-spec":
+            event.stop()
+            self.action_diagnose()
+
+    def twin_kind(self) -> str:
+        value = self.query_one("#twin", Select).value
+        return "fitted" if value is Select.NULL else str(value)  # allow_blank=False: never NULL
+
     def action_diagnose(self) -> None:
         text = self.query_one("#session-path").value.strip()
         path = Path(text).expanduser() if text else self.app.last_session
         if path is None:
             self.notify("Choose a session first (a finished sweep appears here).", severity="warning")
             return
-        twin_kind = str(self.query_one("#twin", Select).value)
+        twin_kind = self.twin_kind()
+        spec = twin_spec(twin_kind, self.query_one("#twin-spec", Input).value)
         model = None
         if twin_kind == "results":
             if self.app.analysis is None:
@@ -95,37 +134,48 @@ class DiagnosisScreen(StationScreen):
                             severity="warning")
                 return
             model = (self.app.analysis.model, str(self.app.analysis.model_path or self.app.analysis.path))
+        elif twin_kind == "file" and not spec:
+            self.notify(f"Type the twin beside the list: {TWIN_SPEC_HINT}.", title="Diagnosis", severity="warning")
+            return
+        self._request += 1
+        self.running = True
         self.query_one("#diag-status", Static).update("diagnosing…")
-        self._run(Path(path), twin_kind, model)
+        self._run(Path(path), twin_kind, spec, model, self._request)
 
     @work(thread=True, exclusive=True, group="diagnosis", exit_on_error=False)
-    def _run(self, path: Path, twin_kind: str, model) -> None:
+    def _run(self, path: Path, twin_kind: str, spec: str | None, model, request: int = 0) -> None:
         try:
             from procedures.diagnosis import DiagnosisSettings, diagnose, twin_from_model
             from procedures.recording.reader import read_session
 
             session = read_session(path)
             twin = None
-            if twin_kind == "sim":
+            if twin_kind == "results" and model is not None:
+                twin = twin_from_model(model[0], model[1])
+            elif spec is not None:  # as `station diagnose --twin SPEC`
                 from station.twins import load_twin
 
-                twin = load_twin("sim:default")
-            elif twin_kind == "results" and model is not None:
-                twin = twin_from_model(model[0], model[1])
+                twin = load_twin(spec)
             report = diagnose(session.points, twin, DiagnosisSettings(),
                               recording={"path": str(path), "sha256": session.sha256}, source=str(path))
         except Exception as exc:
-            self.post_message(DiagnosisFailed(describe(exc, f"cannot diagnose {path.name}")))
+            self.post_message(DiagnosisFailed(describe(exc, f"cannot diagnose {path.name}"), request))
             return
-        self.post_message(DiagnosisReady(path, report))
+        self.post_message(DiagnosisReady(path, report, request))
 
     def on_diagnosis_ready(self, message: DiagnosisReady) -> None:
+        if message.request != self._request:  # asked for before the last request
+            return
+        self.running = False
         self.report = message.report
         self.report_path = message.path
         self.plot_leg = None
         self._show()
 
     def on_diagnosis_failed(self, message: DiagnosisFailed) -> None:
+        if message.request != self._request:
+            return
+        self.running = False
         self.query_one("#diag-status", Static).update(f"[red]{message.error}[/red]")
         self.notify(message.error, title="Diagnosis", severity="error", timeout=12)
 

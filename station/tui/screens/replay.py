@@ -62,7 +62,7 @@ class ReplayScreen(StationScreen):
         Binding("d", "open_diagnosis", "Diagnose"),
         Binding("r", "replay", "Replay"),
     ]
-    DEFAULT_CSS = """
+    CSS = """
     #replay-faults { height: auto; max-height: 14; margin: 1 0 0 0; }
     """
 

@@ -258,3 +258,66 @@ async def _stale_error(path, cfg, size, wait_until, notes, slow):
         assert "uniformly spaced" not in status_text(app, "#results-status")
         assert not any("uniformly spaced" in n for n in notes(app))
         assert app.analysis.method == "default" and screen.query_one("#method", Select).value == "default"
+
+
+# -- 4. the twin of the Diagnosis page: the choices of `station diagnose --twin` ------------------------
+
+def test_diagnosis_twin_choices_give_the_cli_report(recorded_session, cfg, size, wait_until, notes, tmp_path):
+    from procedures.fit import fit, save_model
+
+    session = tmp_path / "day" / "two-legs.h5"
+    session.parent.mkdir()
+    shutil.copy(recorded_session, session)
+    s = read_session(session)
+    model = save_model(fit(s.points, "paper"), tmp_path / "day" / "two-legs.paper.model.json",
+                       source_path=session, source_sha256=s.sha256)
+    asyncio.run(_twins(session, model, cfg, size, wait_until, notes, tmp_path / "cli"))
+
+
+async def _twins(path, model, cfg, size, wait_until, notes, cli_dir):
+    import json
+
+    from procedures.diagnosis import to_json
+    from station.cli import main
+
+    cli_dir.mkdir()
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        await pilot.press("f6")
+        await wait_until(pilot, lambda: app.screen.MODE == "diagnosis", what="the Diagnosis page")
+        screen = app.screen
+        twin = screen.query_one("#twin", Select)
+        assert twin.value == "fitted"  # the command's default: no --twin, the twin fitted on the recording
+        spec = screen.query_one("#twin-spec", Input)
+        screen.query_one("#session-path", Input).value = str(path)
+
+        async def diagnose_with(kind: str, cli_args: list[str]) -> None:
+            screen.report = None
+            twin.value = kind
+            await pilot.pause()
+            await pilot.press("d")
+            await wait_until(pilot, lambda: screen.report is not None, 90, f"the diagnosis with twin {kind}")
+            out = cli_dir / f"{kind}-{len(cli_args)}.json"
+            assert main(["diagnose", str(path), *cli_args, "--json", str(out)]) == 0
+            assert json.loads(to_json(screen.report)) == json.loads(out.read_text()), kind
+
+        await diagnose_with("fitted", [])
+        await diagnose_with("sim", ["--twin", "sim:default"])
+        assert "simulated plant (default)" in status_text(app, "#diag-status")
+        spec.value = str(model)  # typing a twin chooses "file"
+        await wait_until(pilot, lambda: twin.value == "file", 5, "the file choice")
+        await diagnose_with("file", ["--twin", str(model)])
+        spec.value = str(path)  # a reference recording
+        await diagnose_with("file", ["--twin", str(path), "--alpha", "0.001"])
+        # a file that is not there: said in a notification, as the command says it
+        spec.value = str(path.with_name("none.json"))
+        await pilot.press("d")
+        await wait_until(pilot, lambda: any("none.json: no such file" in n for n in notes(app)), 10, "the refusal")
+        assert "none.json" in status_text(app, "#diag-status")
+        # "file" with nothing typed: asks for it
+        spec.value = ""
+        twin.value = "file"
+        app.clear_notifications()
+        await pilot.pause()
+        await pilot.press("d")
+        await wait_until(pilot, lambda: any("Type the twin" in n for n in notes(app)), 5, "the question")
