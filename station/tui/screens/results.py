@@ -147,8 +147,9 @@ class ResultsScreen(StationScreen):
 
     # -- actions -----------------------------------------------------------------------------------
     def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
-        self.app.last_session = message.path
-        self.action_fit()
+        # app.last_session follows once the file is read and fitted (on_analysis_ready): a file
+        # that cannot be read does not become the session the other pages offer
+        self._start_fit(message.path, self._method())
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "fit":

@@ -321,3 +321,65 @@ async def _twins(path, model, cfg, size, wait_until, notes, cli_dir):
         await pilot.pause()
         await pilot.press("d")
         await wait_until(pilot, lambda: any("Type the twin" in n for n in notes(app)), 5, "the question")
+
+
+# -- 6. a damaged session file on Results, Replay and Diagnosis ------------------------------------------
+
+@pytest.mark.parametrize("percent", [10, 50])
+def test_a_cut_session_file_is_a_notice_on_every_page_and_the_ui_stays_live(percent, tmp_path, cfg, size,
+                                                                            wait_until, notes, monkeypatch):
+    import threading
+
+    import procedures.recording.reader as reader
+
+    data = SAMPLE_6LEGS.read_bytes()
+    cut = tmp_path / "cut" / f"calibration-6legs-{percent}.h5"
+    cut.parent.mkdir()
+    cut.write_bytes(data[: len(data) * percent // 100])
+    real_read = reader.read_session
+    threads: list[threading.Thread] = []
+
+    def read_session(path, *args, **kwargs):  # where the pages read sessions
+        threads.append(threading.current_thread())
+        return real_read(path, *args, **kwargs)
+
+    monkeypatch.setattr(reader, "read_session", read_session)
+    asyncio.run(_cut_file(cut, cfg, size, wait_until, notes, threads))
+
+
+async def _cut_file(cut, cfg, size, wait_until, notes, threads):
+    app = StationApp(cfg, autoconnect=False)
+    async with app.run_test(size=size) as pilot:
+        ui = threading_current()
+        for key, page, status in (("f3", "Results", "#results-status"), ("f5", "Replay", "#replay-info"),
+                                  ("f6", "Diagnosis", "#diag-status")):
+            app.clear_notifications()
+            await open_on(pilot, wait_until, key, cut)
+            t0 = time.monotonic()
+            await wait_until(pilot, lambda: any(cut.name in n for n in notes(app)), 5.0, f"the notice on {page}")
+            assert time.monotonic() - t0 < 5.0
+            notice = next(n for n in notes(app) if cut.name in n)
+            assert str(cut) in notice and "cut short" in notice and "copy it again" in notice, notice
+            assert "Traceback" not in notice
+            assert "cut short" in status_text(app, status)
+        assert threads and all(t is not ui for t in threads), "a page read a session on the UI thread"
+        assert app.analysis is None and app.last_session is None
+        # still live: another page, a key that reacts
+        await pilot.press("f3")
+        await wait_until(pilot, lambda: app.screen.MODE == "results", 5, "the Results page")
+        method = app.screen.query_one("#method", Select)
+        assert method.value == "default"
+        await pilot.press("m")
+        await wait_until(pilot, lambda: method.value == "paper", 5, "m to switch the method")
+        await pilot.press("f5")
+        await wait_until(pilot, lambda: app.screen.MODE == "replay", 5, "the Replay page")
+        assert app.screen.session is None and app.screen.query_one("#replay-faults", DataTable).row_count == 0
+        app.clear_notifications()
+        await pilot.press("o")
+        await wait_until(pilot, lambda: any("Choose a session first" in n for n in notes(app)), 5, "o to answer")
+
+
+def threading_current():
+    import threading
+
+    return threading.current_thread()
