@@ -200,13 +200,27 @@ class ModbusBus:
                           lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit))
 
 
+MOVE_TIMEOUT_FACTOR = 2.0
+MOVE_TIMEOUT_MARGIN_S = 1.0
+"""The default move timeout is MOVE_TIMEOUT_FACTOR times the trapezoid time of the move plus
+MOVE_TIMEOUT_MARGIN_S, in seconds of the axis' clock: the clock the drive's motion runs on (the
+rig's virtual clock on the simulated rig, where one second lasts `time_scale` real seconds, so
+this margin is 20 ms of real time at scale 0.02). The margin is for the drive (settling, a
+profile a little slower than the one read). The station's own delays are not counted against
+it: `move_to` starts the timeout once the drive has acknowledged the move and judges a "not
+reached" by when that status was asked for, not by when the answer was looked at, so a late
+reply or a process busy drawing cannot turn into a timeout."""
+
+
 class ModbusServoAxis:
     """One leg's drive on a `ModbusBus` (unit id = leg unless `unit_id` is given).
 
     Implements `drivers.interfaces.ServoAxis`. Positions are mm in leg coordinates (as the drive
     reports them: compensated), errors um (measured minus commanded). `clock` paces the status
-    polling (`poll_interval_s` between reads while moving) and measures move timeouts;
-    `move_timeout_s` None = twice the trapezoid time of the move plus 1 s.
+    polling (`poll_interval_s` between reads while moving) and measures move timeouts: it must be
+    the clock the drive's motion runs on (the rig's clock on the simulated rig);
+    `move_timeout_s` None = twice the trapezoid time of the move plus 1 s (MOVE_TIMEOUT_FACTOR,
+    MOVE_TIMEOUT_MARGIN_S).
     """
 
     def __init__(
@@ -351,7 +365,8 @@ class ModbusServoAxis:
         SoftLimitError before anything is written when the target lies outside the limits the
         drive reports; DriveFault when the drive faults or is not enabled; CommTimeout when it
         does not answer, or does not arrive within `timeout_s` (default: `move_timeout_s`, or
-        twice the trapezoid time plus 1 s) on this axis' clock.
+        twice the trapezoid time plus 1 s) on this axis' clock, counted from the drive's
+        acknowledgement of the move to the asking of a status that still says not arrived.
 
         `velocity_mm_s`: the profile velocity for this move only (`_move_at`), limited to the
         drive's maximum; None moves at the drive's profile velocity as it stands.
@@ -370,13 +385,19 @@ class ModbusServoAxis:
         if timeout_s is None:
             span = lim.max_mm - lim.min_mm
             dist = abs(target_mm - self._last_position_mm) if self._last_position_mm is not None else span
-            timeout_s = 2.0 * self._trapezoid_s(dist) + 1.0
-        t0 = self.clock.now()
+            timeout_s = MOVE_TIMEOUT_FACTOR * self._trapezoid_s(dist) + MOVE_TIMEOUT_MARGIN_S
         try:
             self.bus.write(self.unit, self._move_block.start, words)
         except RequestRefused as exc:
             raise DriveFault(f"leg {self.leg}: the drive refused the move to {target_mm:.4f} mm: {exc}", 0) from None
+        # Judged on the clock the motion runs on, and only on the drive's time: from the write's
+        # acknowledgement (the drive began the move no later than its reply) to the asking of a
+        # status (the drive reports its state no earlier than that). Measuring from before the
+        # write to after the reply counted the station's delays as motion time: on the simulated
+        # rig at time scale 0.02 a reply looked at 60 ms late (the UI drawing) is 3 s on its clock.
+        t0 = self.clock.now()
         while True:
+            asked = self.clock.now()
             st = self.status()
             if st.fault:
                 raise DriveFault(f"leg {self.leg}: drive fault {self.profile.fault_text(st.fault_code)} "
@@ -387,7 +408,7 @@ class ModbusServoAxis:
                                  hint="Enable the axis (it may have been quick-stopped or disabled).")
             if st.target_reached:
                 return st
-            if self.clock.now() - t0 > timeout_s:
+            if asked - t0 > timeout_s:
                 self.stop()
                 raise CommTimeout(f"leg {self.leg}: the drive did not reach {target_mm:.4f} mm within {timeout_s:.3g} s "
                                   f"(at {st.position_mm:.4f} mm); it was quick-stopped.",

@@ -14,6 +14,10 @@ virtual clock by the move's duration. At scale > 0 the position follows the cloc
 evaluated on every request (and by a background tick, so the plant the interferometer reads
 stays current).
 
+Tests and the sample recordings inject faults: `inject_fault` (a latched drive fault),
+`set_stalled` (the axis cannot move: set-points accepted, the target never reached) and
+`set_unresponsive` (no reply at all).
+
 Run standalone (used by tests that kill it):
     python -m drivers.sim.drive_server [--port 0] [--rtu] [--nv FILE] [--time-scale 0] [--seed 0]
 It prints `tcp://127.0.0.1:PORT` (and `rtu PATH`) on stdout once it listens.
@@ -159,6 +163,7 @@ class _DriveModel:
         self.direction = plant.direction
         self.corr_um = 0.0  # table correction applied to the current/last move
         self.unresponsive = False
+        self.stalled = False  # the nut cannot move (a jammed screw): set-points accepted, never reached
         self.reads = 0
         self.writes = 0
         self._bank_cache: dict[int, tuple | None] = {}
@@ -253,7 +258,7 @@ class _DriveModel:
     # -- motion -------------------------------------------------------------------------------------
     def refresh(self) -> None:
         """Bring the motion up to the clock's now and the status registers up to date."""
-        if self.motion is not None:
+        if self.motion is not None and not self.stalled:
             now = self.clock.now()
             m = self.motion
             if now >= m.t_end:
@@ -272,6 +277,8 @@ class _DriveModel:
 
     def _halt(self) -> None:
         """Stop where the nut is now (quick stop, disable, fault)."""
+        if self.motion is not None and self.stalled:
+            self.motion = None  # a stalled nut is where it stopped
         if self.motion is not None:
             now = self.clock.now()
             if now >= self.motion.t_end:
@@ -299,7 +306,7 @@ class _DriveModel:
         a = min(self._get("profile_acceleration"), lim.max_accel_mm_s2)
         self.cmd_mm = target_mm
         self.motion = _Motion(self.nut_mm, nut_target, self.clock.now(), v, a)
-        if getattr(self.clock, "time_scale", 1.0) == 0:
+        if getattr(self.clock, "time_scale", 1.0) == 0 and not self.stalled:
             # no waiting: the move happens within this request, on virtual time
             self.clock.sleep(self.motion.duration)
             self.motion.t0 = self.clock.now() - self.motion.duration
@@ -312,6 +319,17 @@ class _DriveModel:
 
     def inject_fault(self, code: int) -> None:
         self._fault(code)
+        self._update_status()
+
+    def set_stalled(self, on: bool) -> None:
+        """Stall the nut where it is now (on), or free it (off): a move under way then goes on
+        from where it stalled, at the same velocity and acceleration, as a new trapezoid."""
+        self.refresh()
+        on = bool(on)
+        if self.stalled and not on and self.motion is not None:
+            m = self.motion
+            self.motion = _Motion(self.nut_mm, m.p1, self.clock.now(), m.v, m.a)
+        self.stalled = on
         self._update_status()
 
     # -- CiA 402 state machine ----------------------------------------------------------------------
@@ -362,7 +380,7 @@ class _DriveModel:
             set_point_acknowledge=self.set_point_ack,
             remote=True,
         )
-        if self.motion is not None:
+        if self.motion is not None and not self.stalled:
             now = self.clock.now()
             v = self.motion.velocity(now)
         else:
@@ -707,6 +725,14 @@ class SimDriveServer:
             code = self.profile.fault_by_name(code).code
         with self.lock:
             self._models[leg].inject_fault(int(code))
+
+    def set_stalled(self, leg: int, on: bool = True) -> None:
+        """Make drive `leg`'s axis unable to move (a jammed screw, a seized bearing): it stays
+        enabled and accepts set-points, but the nut stays where it is and the target is never
+        reached, until `set_stalled(leg, False)` frees it. The station sees a move that does
+        not arrive: a real non-arrival, which its move timeout must catch."""
+        with self.lock:
+            self._models[leg].set_stalled(on)
 
     def set_unresponsive(self, leg: int, on: bool = True) -> None:
         """Make drive `leg` ignore every request (no reply), as a drive with a dead link would."""
