@@ -182,7 +182,8 @@ class ResultsScreen(StationScreen):
         self.failure = None
         a = self.app.analysis
         if self._fitting is not None:
-            self._start_fit(self._fitting[0], self._method())
+            if self._fitting[1] != self._method():  # (not when it is this method's fit already)
+                self._start_fit(self._fitting[0], self._method())
         elif a is not None and a.method != self._method():
             self._start_fit(a.path, self._method())
         else:  # the analysis on show is of this method already
