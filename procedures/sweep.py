@@ -127,7 +127,16 @@ def sweep(
                     axes[current_leg].disable()
                 current_leg = p.leg
                 yield ev.LegStarted(p.leg)
-                _prepare_leg(axes[p.leg], laser, p.leg, clock, plan)
+                try:
+                    _prepare_leg(axes[p.leg], laser, p.leg, clock, plan)
+                except DriverError as exc:  # recorded like a point's fault: the session says where it stopped
+                    if control.aborted:
+                        raise Aborted(control.reason) from exc
+                    fault = ev.Fault(p.index, p.leg, p.run, 0.0, _kind(exc),
+                                     f"preparing leg {p.leg} (enable, zero at mid-stroke): {exc}", 1, True,
+                                     clock.now() - t_start)
+                    yield fault
+                    raise SweepFailed(fault) from exc
                 prev = None
             flags = 0
             # approach from the pass's side unless we just measured the previous point of this pass
