@@ -106,3 +106,22 @@ def test_the_layering_check_sees_imports():
     # guard against a check that passes because it reads nothing
     assert "drivers.interfaces" in set().union(*imports_of("procedures").values())
     assert "procedures.runner" in set().union(*imports_of("station").values())
+
+
+def test_the_audit_sink_is_the_only_writer_of_the_audit_log():
+    """Procedures yield AuditRecord events; procedures.audit.AuditSink alone appends them. No other
+    module calls `<audit log>.append(...)` or appends an AuditEntry it builds."""
+    bad = []
+    for top in ("station", "procedures"):
+        for path in sorted((REPO / top).rglob("*.py")):
+            rel = str(path.relative_to(REPO))
+            if rel == "procedures/audit.py":
+                continue
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "append"):
+                    continue
+                owner = ast.unparse(node.func.value)
+                built = [a for a in node.args if isinstance(a, ast.Call) and ast.unparse(a.func).endswith("AuditEntry")]
+                if "audit" in owner.lower() or built:
+                    bad.append(f"{rel}:{node.lineno}: {ast.unparse(node)[:80]}")
+    assert not bad, "\n".join(bad)
