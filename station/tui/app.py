@@ -19,15 +19,19 @@ events (`SweepState.apply`).
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from textual import work
 from textual.app import App
 from textual.binding import Binding
+from textual.message import Message
 
+from drivers.errors import DriveFault
 from procedures.control import RunControl
 from procedures.plans import SweepPlan
 from procedures.states import AuditOutcome
@@ -46,18 +50,60 @@ from station.tui.messages import (
 from station.tui.screens.common import ConfirmScreen
 from station.tui.screens.compensation import CompensationScreen
 from station.tui.screens.diagnosis import DiagnosisScreen
+from station.tui.screens.help import HelpScreen
 from station.tui.screens.platform import PlatformScreen
 from station.tui.screens.replay import ReplayScreen
 from station.tui.screens.results import ResultsScreen
 from station.tui.screens.rig import RigScreen
 from station.tui.screens.sweep import SweepScreen
-from station.tui.state import SweepState
+from station.tui.state import LegTrace, SweepState
 
 log = logging.getLogger("station.tui")
 
 ALL_LEGS = (1, 2, 3, 4, 5, 6)
 # How long quitting waits for an aborted sweep to stop the drives and close its recording.
 QUIT_WAIT_S = 15.0
+# A move or jog from the Rig page without a speed typed in runs at this fraction of the drive's
+# maximum velocity (DriveLimits.max_velocity_mm_s).
+JOG_SPEED_FRACTION = 0.25
+# Drive states a move is refused in, as the refusal names them (fault is refused separately).
+_NOT_ENABLED_TEXT = {
+    "switch_on_disabled": "disabled",
+    "ready_to_switch_on": "switched off (ready to switch on)",
+    "switched_on": "switched on but not enabled",
+    "quick_stop_active": "quick-stopped",
+    "not_ready": "not ready",
+}
+
+
+@dataclass(frozen=True)
+class MoveRequest:
+    """What a "move" rig action does: go to `target_mm`, or by `step_mm` from where the leg is
+    (a jog), at `speed_mm_s` (None: JOG_SPEED_FRACTION of the drive's maximum velocity; more than
+    the maximum is limited to it)."""
+
+    target_mm: float | None = None
+    step_mm: float | None = None
+    speed_mm_s: float | None = None
+
+    def describe(self) -> str:
+        where = f"to {self.target_mm:+.3f} mm" if self.step_mm is None else f"by {self.step_mm:+g} mm"
+        speed = f"{self.speed_mm_s:g} mm/s" if self.speed_mm_s else "the default speed"
+        return f"{where} at {speed}"
+
+
+class RigMoveDone(Message):
+    """A "move" rig action ended. `error` is "" when the leg arrived at `position_mm`; else why
+    it did not move, or where it stopped (`stopped`: quick-stopped on the way)."""
+
+    def __init__(self, leg: int, error: str = "", position_mm: float | None = None, speed_mm_s: float | None = None,
+                 stopped: bool = False) -> None:
+        super().__init__()
+        self.leg = leg
+        self.error = error
+        self.position_mm = position_mm
+        self.speed_mm_s = speed_mm_s
+        self.stopped = stopped
 
 
 class StationApp(App):
@@ -87,7 +133,7 @@ class StationApp(App):
     # events in between, and one redraw shows them all.
     SWEEP_REDRAW_S = 0.1
     # The page keys (F1-F7) are shown in the tab bar at the top of every page; the footer keeps
-    # the current page's actions.
+    # the current page's actions, the help (?, F12: every page's keys) and quit.
     BINDINGS = [
         Binding("f1", "switch_mode('rig')", "Rig", show=False),
         Binding("f2", "switch_mode('sweep')", "Sweep", show=False),
@@ -96,6 +142,8 @@ class StationApp(App):
         Binding("f5", "switch_mode('replay')", "Replay", show=False),
         Binding("f6", "switch_mode('diagnosis')", "Diagnosis", show=False),
         Binding("f7", "switch_mode('platform')", "Platform", show=False),
+        Binding("question_mark", "station_help", "Help", key_display="?"),
+        Binding("f12", "station_help", "Help", show=False),
         Binding("ctrl+q", "quit", "Quit", priority=True),
         Binding("ctrl+c", "quit", "Quit", show=False, priority=True),
     ]
@@ -124,6 +172,8 @@ class StationApp(App):
         self.rig_state = "not connected"  # "connecting" / "connected" / "not connected"
         self.rig_error = ""
         self.rig_lock = threading.Lock()
+        self.rig_motion: dict[int, MoveRequest] = {}  # leg -> the move/jog under way (Rig page)
+        self.rig_motion_text = ""  # how the last move/jog ended, for the Rig page
         self._connect_attempt = 0  # numbers the connect requests: only the newest one's rig is kept
         self.sweep = SweepState()
         self.sweep_control: RunControl | None = None
@@ -166,6 +216,13 @@ class StationApp(App):
         self.notify(message.text, title=message.title, severity=message.severity,  # type: ignore[arg-type]
                     timeout=12 if message.severity == "error" else 6)
 
+    def action_station_help(self) -> None:
+        """Open the key help (every page's keys, from their BINDINGS), or close it when open."""
+        if isinstance(self.screen, HelpScreen):
+            self.screen.dismiss()
+        else:
+            self.push_screen(HelpScreen())
+
     def set_session(self, path: Path) -> None:
         """Make `path` the session the Results/Compensation/Diagnosis screens work on."""
         self.last_session = Path(path)
@@ -173,9 +230,23 @@ class StationApp(App):
             listener(self.last_session)
 
     # -- rig connection ------------------------------------------------------------------------
+    def sweep_refusal(self) -> str:
+        """'' when no job holds the rig; else the sentence a refused rig action shows: what the
+        job is doing and the way out (a paused sweep still holds the rig)."""
+        s = self.sweep
+        if not s.active:
+            return ""
+        if s.status == "paused":
+            return (f"The {s.label} is paused, and a paused {s.label} still holds the rig: abort it (a), or resume "
+                    "it (p) and let it finish, first (Sweep page, F2).")
+        if s.status == "aborting":
+            return f"The {s.label} is being aborted: wait until the drives have stopped (Sweep page, F2)."
+        return f"A {s.label} is running: abort it first (a on the Sweep page, F2)."
+
     def action_connect(self) -> None:
-        if self.sweep.active:
-            self.notify("A sweep is running; abort it before reconnecting.", severity="warning")
+        refusal = self.sweep_refusal()
+        if refusal:
+            self.notify(refusal, title="Reconnect", severity="warning")
             return
         self.connect_rig()
 
@@ -233,20 +304,40 @@ class StationApp(App):
             return {"sim": "simulated rig", "live": "live rig", "replay": "replayed session"}.get(self.rig.kind, self.rig.kind)
         return self.rig.description
 
-    # -- rig actions (enable, disable, home, reset, stop) ----------------------------------------
-    def rig_action(self, action: str, legs: tuple[int, ...]) -> None:
-        """Run a rig action on `legs` in a worker. Refused while a sweep holds the rig
-        (except "stop", which always goes through)."""
+    # -- rig actions (enable, disable, home, reset, stop, move) ----------------------------------
+    def rig_action(self, action: str, legs: tuple[int, ...], move: MoveRequest | None = None) -> bool:
+        """Run a rig action on `legs` in a worker; True if it was started. Refused while a sweep
+        holds the rig (except "stop", which always goes through and quick-stops a move too).
+        "move" takes one leg and `move` (where to, how fast); it is refused while another move
+        runs, and the worker refuses it on a leg in fault or not enabled, or beyond the drive's
+        soft limits, before anything moves (`_move_axis`)."""
         if self.rig is None:
             self.notify("Not connected to the rig: press c on the Rig screen to connect.", severity="warning")
-            return
-        if action != "stop" and self.sweep.active:
-            self.notify("A sweep is running: pause or abort it first (Sweep screen, F2).", severity="warning")
-            return
-        self._rig_action_worker(self.rig, self.rig_lock, action, legs)
+            return False
+        refusal = self.sweep_refusal() if action != "stop" else ""
+        if refusal:
+            self.notify(refusal, title=f"{action} leg {', '.join(str(leg) for leg in legs)}", severity="warning")
+            return False
+        if action == "move":
+            if move is None or len(legs) != 1:
+                raise ValueError("a move is one leg's, with its MoveRequest")
+            if self.rig_motion:
+                leg, running = next(iter(self.rig_motion.items()))
+                self.notify(f"Leg {leg} is still moving ({running.describe()}): wait for it, or stop it (x).",
+                            title=f"move leg {legs[0]}", severity="warning")
+                return False
+            self.rig_motion[legs[0]] = move
+            self.rig_motion_text = ""
+            self._rig_changed()
+        self._rig_action_worker(self.rig, self.rig_lock, action, legs, move)
+        return True
 
     @work(thread=True, group="rig-action", exit_on_error=False)
-    def _rig_action_worker(self, rig, lock: threading.Lock, action: str, legs: tuple[int, ...]) -> None:
+    def _rig_action_worker(self, rig, lock: threading.Lock, action: str, legs: tuple[int, ...],
+                           move: MoveRequest | None = None) -> None:
+        if action == "move":
+            self._move_worker_body(rig, lock, legs[0], move)
+            return
         locked = False
         if action != "stop":  # a stop must never wait behind another transaction
             locked = lock.acquire(timeout=5.0)
@@ -283,6 +374,27 @@ class StationApp(App):
                 lock.release()
         self.post_message(RigActionDone(action, legs))
 
+    def _move_worker_body(self, rig, lock: threading.Lock, leg: int, move: MoveRequest) -> None:
+        """The "move" action, on the rig-action worker: always ends with one RigMoveDone."""
+        done = RigMoveDone(leg, "the move stopped before it began (see the log)")
+        try:
+            if not lock.acquire(timeout=5.0):
+                done = RigMoveDone(leg, "the rig is busy (another action is running); try again")
+                return
+            try:
+                position, speed = _move_axis(rig.axes[leg], leg, move)
+                done = RigMoveDone(leg, position_mm=position, speed_mm_s=speed)
+            finally:
+                lock.release()
+        except _MoveStopped as exc:
+            done = RigMoveDone(leg, str(exc), stopped=True)
+        except _ActionRefused as exc:
+            done = RigMoveDone(leg, str(exc))
+        except Exception as exc:
+            done = RigMoveDone(leg, describe(exc, f"move of leg {leg} failed"))
+        finally:
+            self.post_message(done)
+
     def on_rig_action_done(self, message: RigActionDone) -> None:
         legs = ", ".join(str(leg) for leg in message.legs)
         if message.error:
@@ -290,14 +402,28 @@ class StationApp(App):
         else:
             self.notify(f"{message.action}: leg {legs} done.", timeout=3)
 
+    def on_rig_move_done(self, message: RigMoveDone) -> None:
+        self.rig_motion.pop(message.leg, None)
+        if message.error:
+            self.rig_motion_text = message.error
+            self.notify(message.error, title=f"move leg {message.leg}",
+                        severity="warning" if message.stopped else "error", timeout=12)
+        else:
+            self.rig_motion_text = (f"leg {message.leg} at {message.position_mm:+.4f} mm "
+                                    f"(moved at {message.speed_mm_s:g} mm/s)")
+            self.notify(f"move: {self.rig_motion_text}.", timeout=3)
+        self._rig_changed()
+
     # -- sweep -----------------------------------------------------------------------------------
     def start_sweep(self, plan: SweepPlan, out: Path, label: str = "sweep",
-                    on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None) -> bool:
+                    on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None,
+                    resume: bool = False) -> bool:
         """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner), or
         through `job(rig, sinks, control)` (a job of station.table_jobs, e.g. a verification,
         returning a JobOutcome). `label` names the job on screen ("sweep", "verification of leg
         2"); `on_done(state)` is called on the app's thread when it has ended (whatever the
-        outcome), with the job's outcome in `state.result`."""
+        outcome), with the job's outcome in `state.result`. `resume`: `out` is an unfinished
+        session and `plan` its plan (see `resume_sweep`): the run appends to it."""
         if self.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
             return False
@@ -310,13 +436,44 @@ class StationApp(App):
             self.notify(f"No drive connected for leg(s) {missing}; connected: {sorted(self.rig.axes)}.",
                         severity="error", timeout=10)
             return False
-        if out.exists():
+        if self.rig_motion:
+            leg = next(iter(self.rig_motion))
+            self.notify(f"Leg {leg} is still moving (Rig page): wait for it, or stop it (x), first.",
+                        severity="warning", timeout=10)
+            return False
+        if out.exists() and not resume:
             self.notify(f"{out} exists already; choose another file name.", severity="error")
             return False
-        run = self._begin_run(SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting",
-                                         total=plan.total_points, label=label), on_done)
-        self._sweep_worker(run, self.rig, self.rig_lock, plan, out, self.sweep_control, self._sweep_idle, job)
+        state = SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting",
+                           total=plan.total_points, label=label)
+        if resume:
+            _show_recorded_points(state, out)
+        run = self._begin_run(state, on_done)
+        self._sweep_worker(run, self.rig, self.rig_lock, plan, out, self.sweep_control, self._sweep_idle, job,
+                           resume)
         return True
+
+    def resume_sweep(self, path: Path) -> bool:
+        """Finish the aborted (or failed) session `path`: its own plan, appended to the same
+        file, by the job `station sweep --resume` runs (station.jobs.resumable_plan, then
+        run_sweep(resume=True)). Refusals (a complete or imported file, a sweep running, no rig)
+        are notifications; True if it started."""
+        from station.jobs import resumable_plan
+
+        path = Path(path).expanduser()
+        if self.sweep.active:
+            self.notify(self.sweep_refusal(), title="Resume", severity="warning")
+            return False
+        if self.rig is None:
+            self.notify("Not connected to the rig: go to the Rig screen (F1) and press c to connect.",
+                        title="Resume", severity="error", timeout=10)
+            return False
+        try:
+            plan = resumable_plan(path)
+        except Exception as exc:
+            self.notify(describe(exc, "cannot resume"), title="Resume", severity="error", timeout=15)
+            return False
+        return self.start_sweep(plan, path, resume=True)
 
     def _begin_run(self, state: SweepState, on_done: Callable[[SweepState], None] | None) -> int:
         """Make `state` the sweep on show with a new run control; the new job's run number."""
@@ -330,7 +487,7 @@ class StationApp(App):
 
     @work(thread=True, group="sweep", exit_on_error=False)
     def _sweep_worker(self, run: int, rig, lock: threading.Lock, plan: SweepPlan, out: Path, control: RunControl,
-                      idle: threading.Event, job: Callable | None = None) -> None:
+                      idle: threading.Event, job: Callable | None = None, resume: bool = False) -> None:
         from station.jobs import run_sweep
 
         outcome, points, error, ended = "error", 0, "", None
@@ -340,7 +497,8 @@ class StationApp(App):
                 return
             try:
                 if job is None:
-                    result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self, run)], control=control)
+                    result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self, run)], control=control,
+                                       resume=resume)
                 else:
                     ended = job(rig, [TuiBridge(self, run)], control)
                     result = ended.run
@@ -433,9 +591,10 @@ class StationApp(App):
         if message.error:
             self.notify(message.error, title="Sweep", severity="error", timeout=15)
         else:
+            resume = " Finish it later: r on the Sweep page (F2)." if s.label == "sweep" else ""
             note = {"completed": "completed." + (" Results: F3." if s.label == "sweep" else ""),
-                    "aborted": "aborted; drives stopped, recording kept.",
-                    "failed": f"failed: {s.reason}"}.get(s.status, s.status)
+                    "aborted": "aborted; drives stopped, recording kept." + resume,
+                    "failed": f"failed: {s.reason}" + resume}.get(s.status, s.status)
             extra = f"; {s.note}" if s.note else ""
             self.notify(f"{s.label.capitalize()} {note} ({s.done} of {s.total} points){extra}", title="Sweep",
                         severity="information" if s.status == "completed" else "warning", timeout=8)
@@ -531,7 +690,8 @@ class StationApp(App):
                 ConfirmScreen(
                     f"A {self.sweep.label} is running on leg {legs}.\n\nQuit anyway? It is aborted, the drives "
                     "are stopped and disabled, and the recording is kept"
-                    + (f" (finish it later with `station sweep --resume {self.sweep.out}`)." if self.sweep.label == "sweep" else "."),
+                    + (f" (finish it later with r on the Sweep page, or `station sweep --resume {self.sweep.out}`)."
+                       if self.sweep.label == "sweep" else "."),
                     yes="Abort and quit", no="Keep sweeping",
                 ),
                 confirmed,
@@ -542,6 +702,65 @@ class StationApp(App):
 
 class _ActionRefused(Exception):
     pass
+
+
+class _MoveStopped(Exception):
+    """A move was quick-stopped on its way (the message says where)."""
+
+
+def _move_axis(axis, leg: int, move: MoveRequest) -> tuple[float, float]:
+    """Check, then move one leg as `move` asks; (position reached mm, speed mm/s). Before any
+    motion, _ActionRefused with what to do for a leg in fault or not enabled, or a target beyond
+    the drive's soft limits (the driver would refuse it too, with SoftLimitError); _MoveStopped
+    when a quick stop (Stop all, x) ended it on the way."""
+    lim = axis.limits()
+    st = axis.status()
+    if st.fault:
+        raise _ActionRefused(f"leg {leg} is in fault: reset the fault (r), then enable it (e), first; nothing moved")
+    if not st.enabled:
+        state = _NOT_ENABLED_TEXT.get(str(st.state), str(st.state))
+        raise _ActionRefused(f"leg {leg} is {state}, not enabled: enable it (e) first; nothing moved")
+    if move.step_mm is not None:
+        target = st.position_mm + move.step_mm
+        how = f" (a jog of {move.step_mm:+g} mm from {st.position_mm:+.3f} mm)"
+    else:
+        target, how = move.target_mm, ""
+    if target is None or not math.isfinite(target) or not lim.min_mm <= target <= lim.max_mm:
+        shown = f"{target:+.3f} mm" if isinstance(target, (int, float)) else repr(target)
+        raise _ActionRefused(f"leg {leg}: {shown}{how} is beyond the drive's soft limits {lim.min_mm:+.3f} .. "
+                             f"{lim.max_mm:+.3f} mm; nothing moved")
+    speed = move.speed_mm_s if move.speed_mm_s is not None else JOG_SPEED_FRACTION * lim.max_velocity_mm_s
+    if not (math.isfinite(speed) and speed > 0):
+        raise _ActionRefused(f"leg {leg}: speed {speed:g} mm/s is not a speed > 0; nothing moved")
+    speed = min(speed, lim.max_velocity_mm_s)
+    try:
+        reached = axis.move_to(target, velocity_mm_s=speed)
+    except DriveFault:  # a quick stop ends move_to so: "not operation_enabled" (a timeout is a CommTimeout)
+        try:
+            now = axis.status()
+        except Exception:
+            now = None
+        if now is not None and str(now.state) == "quick_stop_active":
+            raise _MoveStopped(f"leg {leg} was quick-stopped at {now.position_mm:+.3f} mm on its way to "
+                               f"{target:+.3f} mm; enable it (e) to move again") from None
+        raise
+    return reached.position_mm, speed
+
+
+def _show_recorded_points(state: SweepState, path: Path) -> None:
+    """Put the points `path` holds already into `state`'s plot, so a resumed sweep shows its
+    whole session (the procedure's SweepStarted then sets the counts)."""
+    from procedures.recording.reader import read_session
+
+    try:
+        points = read_session(path).points
+    except Exception:  # the plot is a nicety; the job reads the file itself and says what is wrong
+        log.exception("reading the points of %s for the plot", path)
+        return
+    for r in points:
+        state.traces.setdefault(int(r["leg"]), LegTrace()).add(float(r["target_mm"]), float(r["error_um"]),
+                                                               int(r["direction"]))
+    state.done = state.resumed_points = len(points)
 
 
 def _close_quietly(rig, what: str) -> None:

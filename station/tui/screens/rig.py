@@ -1,25 +1,32 @@
-"""Rig screen: each leg's drive state, the interferometer and the environment, at a glance.
+"""Rig screen: each leg's drive state, the interferometer and the environment, at a glance;
+moving one leg to a position at a speed, or jogging it by a step.
 
 Status is read in a thread worker every `app.poll_interval_s` while this screen is shown and
 no sweep holds the rig (a poll never waits for the rig: it skips a beat instead). The worker is
 handed the rig and its lock, and posts what it read (`RigPolled`); it never writes the app's
 state. The connection line is redrawn when the app says the connection or the sweep changed
 (`RigStateChanged`, `SweepChanged`), not on a timer.
+
+Moves and jogs go through the app's `rig_action("move", ...)` (a worker; refused while a sweep
+holds the rig, on a leg in fault or not enabled, and beyond the drive's soft limits); the
+page checks what it can first (the numbers typed, the soft limits of the last poll). Stop all
+(x) quick-stops a move at once, also while typing in the move fields.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Vertical
+from textual.containers import Horizontal, Vertical
 from textual.message import Message
-from textual.widgets import DataTable, Static
+from textual.widgets import Button, DataTable, Input, Label, Select, Static
 
-from drivers.interfaces import DriveStatus, Environment, Reading
+from drivers.interfaces import DriveLimits, DriveStatus, Environment, Reading
 from station.tui.errors import describe
 from station.tui.messages import RigStateChanged, SweepChanged
 from station.tui.screens.common import StationScreen
@@ -33,6 +40,15 @@ STATE_TEXT = {
     "fault": "[red b]FAULT[/red b]",
     "not_ready": "[yellow]not ready[/yellow]",
 }
+JOG_STEPS_MM = (0.1, 1.0, 10.0)
+
+
+class MoveField(Input):
+    """A number field of the move bar. It does not claim the x key (a number has no x), so
+    Stop all (x, a priority key of the page) acts while the technician types a target."""
+
+    def check_consume_key(self, key: str, character: str | None) -> bool:
+        return key != "x" and super().check_consume_key(key, character)
 
 
 @dataclass
@@ -40,6 +56,7 @@ class RigSnapshot:
     """One poll of the rig. Values or, per device, the sentence saying why it could not be read."""
 
     drives: dict[int, DriveStatus | str] = field(default_factory=dict)
+    limits: dict[int, DriveLimits] = field(default_factory=dict)
     readings: dict[int, Reading | str] = field(default_factory=dict)
     environment: Environment | str | None = None
     laser_identity: str = ""
@@ -58,14 +75,20 @@ class RigPolled(Message):
 
 class RigScreen(StationScreen):
     MODE = "rig"
-    PAGE_HELP = "drive state per leg, interferometer, environment; select a leg row, then act on it"
+    snapshot: RigSnapshot | None = None  # the last poll shown
+    PAGE_HELP = "drive state per leg, interferometer, environment; select a leg row, then act on it: enable, move, jog; x stops"
     BINDINGS = [
         Binding("c", "app.connect", "Connect"),
         Binding("e", "leg_action('enable')", "Enable"),
         Binding("d", "leg_action('disable')", "Disable"),
         Binding("h", "leg_action('home')", "Home (0 mm)"),
         Binding("r", "leg_action('reset')", "Reset fault"),
-        Binding("x", "stop_all", "Stop all"),
+        # priority (and the move fields do not claim x): stops also while typing a target
+        Binding("x", "stop_all", "Stop all", priority=True),
+        Binding("m", "move", "Move to"),
+        Binding("plus,equals_sign", "jog(1)", "Jog +", key_display="+"),
+        Binding("minus", "jog(-1)", "Jog −", key_display="-"),
+        Binding("j", "next_step", "Jog step"),
     ]
 
     def compose(self) -> ComposeResult:
@@ -74,6 +97,23 @@ class RigScreen(StationScreen):
             yield Static("", id="rig-connection")
             table = DataTable(id="drives", cursor_type="row", zebra_stripes=True)
             yield table
+            with Horizontal(id="move-bar"):
+                yield Label("leg 1", id="move-leg")
+                yield Label(" to ")
+                yield MoveField("", id="move-target", type="number", placeholder="target", compact=True,
+                            tooltip="target position, mm (0 = mid-stroke); Enter moves")
+                yield Label(" mm at ")
+                yield MoveField("", id="move-speed", type="number", placeholder="default", compact=True,
+                            tooltip="speed, mm/s; blank: a safe fraction of the drive's maximum")
+                yield Label(" mm/s ")
+                yield Button("Move (m)", id="move", compact=True, variant="primary")
+                yield Label("   jog ")
+                yield Button("− (-)", id="jog-minus", compact=True)
+                yield Select([(f"{step:g} mm", step) for step in JOG_STEPS_MM], value=1.0, allow_blank=False,
+                             id="jog-step", compact=True, tooltip="jog step (j: next)")
+                yield Button("+ (+)", id="jog-plus", compact=True)
+                yield Button("Stop (x)", id="stop", compact=True, variant="error")
+            yield Static("", id="move-status")
             yield Static("", id="laser")
             yield Static("", id="environment")
         yield from self.compose_footer()
@@ -85,13 +125,18 @@ class RigScreen(StationScreen):
             table.add_row(str(leg), "–", "–", "–", "–", "–", "–", "–", key=str(leg))
         self.snapshot: RigSnapshot | None = None
         self._show_connection()
+        self._show_motion()
         self.set_interval(max(self.app.poll_interval_s, 0.05), self._tick)  # the devices' status
 
     def on_screen_resume(self) -> None:
         self._show_connection()
+        self._show_motion()
 
     def on_rig_state_changed(self, message: RigStateChanged) -> None:
         self._show_connection()
+        self._show_motion()
+        if not self.app.rig_motion:
+            self._tick()  # a move ended (or the rig changed): show where the legs are now
 
     def on_sweep_changed(self, message: SweepChanged) -> None:
         self._show_connection()
@@ -112,6 +157,7 @@ class RigScreen(StationScreen):
         try:
             for leg, axis in sorted(rig.axes.items()):
                 try:
+                    snap.limits[leg] = axis.limits()  # read once by the driver, then cached
                     st = snap.drives[leg] = axis.status()
                     if st.fault and rig.profile is not None:
                         snap.fault_text[leg] = rig.profile.fault_text(st.fault_code)
@@ -146,7 +192,7 @@ class RigScreen(StationScreen):
         if app.rig_state == "connected":
             text = f"[green]●[/green] connected: {app._rig_kind_text()}"
             if app.sweep.active:
-                text += "   [yellow]sweep running: status polling paused (see Sweep, F2)[/yellow]"
+                text += f"   [yellow]{app.sweep.label} {app.sweep.status}: status polling paused (see Sweep, F2)[/yellow]"
             elif self.snapshot is not None and not app.hide_volatile:
                 text += f"   [dim]last poll {self.snapshot.poll_ms:.0f} ms[/dim]"
         elif app.rig_state == "connecting":
@@ -196,11 +242,118 @@ class RigScreen(StationScreen):
         elif isinstance(env, str):
             widget.update(f"[red]environment unreadable:[/red] {env}")
         self._show_connection()
+        self._show_motion()
+
+    def _show_motion(self) -> None:
+        """The move bar's leg, default speed and the line under it: the selected leg's soft
+        limits and speeds, the move under way, or how the last one ended."""
+        from station.tui.app import JOG_SPEED_FRACTION
+
+        app = self.app
+        leg = self.selected_leg()
+        self.query_one("#move-leg", Label).update(f"[b]leg {leg}[/b]")
+        lim = self.snapshot.limits.get(leg) if self.snapshot is not None else None
+        speed = self.query_one("#move-speed", Input)
+        if lim is not None:
+            speed.placeholder = f"{JOG_SPEED_FRACTION * lim.max_velocity_mm_s:g}"
+            limits = (f"leg {leg}: soft limits {lim.min_mm:+.3f} .. {lim.max_mm:+.3f} mm, max {lim.max_velocity_mm_s:g} "
+                      f"mm/s (blank speed: {JOG_SPEED_FRACTION * lim.max_velocity_mm_s:g} mm/s)")
+        else:
+            speed.placeholder = "default"
+            limits = (f"leg {leg}: soft limits not read yet (blank speed: {JOG_SPEED_FRACTION:.0%} of the drive's "
+                      "maximum)")
+        if app.rig_motion:
+            moving = "; ".join(f"leg {n} moving {m.describe()}" for n, m in app.rig_motion.items())
+            text = f"[yellow b]{moving}…[/yellow b]  x stops it"
+        elif app.rig_motion_text:
+            text = f"{limits}\n[dim]last move:[/dim] {app.rig_motion_text}"
+        else:
+            text = limits
+        self.query_one("#move-status", Static).update(text)
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        if event.data_table.id == "drives":
+            self._show_motion()
 
     # -- actions ---------------------------------------------------------------------------------
     def selected_leg(self) -> int:
         table = self.query_one("#drives", DataTable)
         return self.app.legs[max(table.cursor_row, 0)]
+
+    def _number(self, wid: str, what: str) -> float | None:
+        """The number in field `wid` (None if blank); ValueError naming `what` otherwise."""
+        text = self.query_one(f"#{wid}", Input).value.strip()
+        if not text:
+            return None
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"{what}: {text!r} is not a number") from None
+        if not math.isfinite(value):
+            raise ValueError(f"{what}: {text!r} is not a finite number")
+        return value
+
+    def move_request(self, step_mm: float | None = None):
+        """The MoveRequest the fields ask for (a jog by `step_mm` when given), checked as far as
+        the page can (numbers, speed > 0, the target within the last poll's soft limits);
+        ValueError saying what is wrong. The worker checks the target against the drive again."""
+        from station.tui.app import MoveRequest
+
+        leg = self.selected_leg()
+        speed = self._number("move-speed", "speed")
+        if speed is not None and speed <= 0:
+            raise ValueError(f"speed: {speed:g} mm/s; type a speed > 0 mm/s, or leave it blank for the default")
+        lim = self.snapshot.limits.get(leg) if self.snapshot is not None else None
+        if speed is not None and lim is not None and speed > lim.max_velocity_mm_s:
+            self.notify(f"{speed:g} mm/s is above the drive's maximum: leg {leg} moves at "
+                        f"{lim.max_velocity_mm_s:g} mm/s.", title=f"move leg {leg}", severity="warning")
+        if step_mm is not None:
+            return MoveRequest(step_mm=step_mm, speed_mm_s=speed)
+        target = self._number("move-target", "target")
+        if target is None:
+            raise ValueError("type a target position in mm (0 = mid-stroke), then press Enter or m")
+        if lim is not None and not lim.min_mm <= target <= lim.max_mm:
+            raise ValueError(f"leg {leg}: {target:+.3f} mm is beyond the drive's soft limits {lim.min_mm:+.3f} .. "
+                             f"{lim.max_mm:+.3f} mm; nothing moved")
+        return MoveRequest(target_mm=target, speed_mm_s=speed)
+
+    def _start_move(self, step_mm: float | None = None) -> None:
+        leg = self.selected_leg()
+        try:
+            move = self.move_request(step_mm)
+        except ValueError as exc:
+            self.notify(str(exc), title=f"move leg {leg}", severity="error", timeout=10)
+            return
+        if self.app.rig_action("move", (leg,), move):
+            self.query_one("#drives", DataTable).focus()  # the letter keys (x: stop) act again
+
+    def action_move(self) -> None:
+        self._start_move()
+
+    def action_jog(self, sign: int) -> None:
+        step = float(self.query_one("#jog-step", Select).value)
+        self._start_move(step_mm=sign * step)
+
+    def action_next_step(self) -> None:
+        select = self.query_one("#jog-step", Select)
+        now = float(select.value)
+        select.value = JOG_STEPS_MM[(JOG_STEPS_MM.index(now) + 1) % len(JOG_STEPS_MM)] if now in JOG_STEPS_MM else 1.0
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        if event.input.id in ("move-target", "move-speed"):
+            event.stop()
+            self.action_move()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        if event.button.id == "move":
+            self.action_move()
+        elif event.button.id == "jog-minus":
+            self.action_jog(-1)
+        elif event.button.id == "jog-plus":
+            self.action_jog(1)
+        elif event.button.id == "stop":
+            self.action_stop_all()
 
     def action_leg_action(self, action: str) -> None:
         self.app.rig_action(action, (self.selected_leg(),))

@@ -1,5 +1,6 @@
 """Sweep screen: choose legs and plan, start; live error plot, progress, environment; pause,
-resume, abort. The sweep itself belongs to the app, so leaving this screen does not stop it.
+resume, abort; finish an aborted session (r: `StationApp.resume_sweep`, the job of `station
+sweep --resume`). The sweep itself belongs to the app, so leaving this screen does not stop it.
 
 The screen draws `app.sweep` when the app says it changed (a `SweepChanged` message, coalesced
 by the app), when it is shown again, and after the operator's own actions here; it never polls.
@@ -7,9 +8,12 @@ by the app), when it is shown again, and after the operator's own actions here; 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
+from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Label, ProgressBar, Select, Static
 
 from procedures.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
@@ -18,7 +22,7 @@ from station.progress import fmt_duration
 from station.tui.errors import describe
 from station.tui.messages import SweepChanged
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import XYPlot
+from station.tui.widgets import XYPlot, known_sessions
 
 PLANS = [("ISO 230-2", "iso230"), ("Paper (361 × 0.5 mm)", "paper")]
 
@@ -32,6 +36,7 @@ class SweepScreen(StationScreen):
         Binding("p", "app.pause_sweep", "Pause/Resume"),
         Binding("a", "app.abort_sweep", "Abort"),
         Binding("l", "next_leg", "Plot next leg"),
+        Binding("r", "resume_session", "Resume aborted"),
     ]
 
     def compose(self) -> ComposeResult:
@@ -163,6 +168,30 @@ class SweepScreen(StationScreen):
             self.query_one("#abort", Button).focus()
             self._redraw()
 
+    def resumable_default(self) -> Path | None:
+        """The session `r` offers: the last sweep here if it was aborted or failed, else the
+        newest session made or opened in this UI (None: none yet)."""
+        s = self.app.sweep
+        if s.label == "sweep" and s.status in ("aborted", "failed", "error") and s.out is not None and s.out.exists():
+            return s.out
+        last = self.app.last_session
+        return last if last is not None and Path(last).exists() else None
+
+    def action_resume_session(self) -> None:
+        """Ask which session to finish (the last aborted one offered), then resume it."""
+        refusal = self.app.sweep_refusal()
+        if refusal:
+            self.notify(refusal, title="Resume", severity="warning")
+            return
+
+        def chosen(path: Path | None) -> None:
+            if path is not None and self.app.resume_sweep(path):
+                self.plot_leg = None
+                self.query_one("#abort", Button).focus()
+                self._redraw()
+
+        self.app.push_screen(ResumeScreen(self.resumable_default(), [self.app.cfg.recordings_dir]), chosen)
+
     def action_next_leg(self) -> None:
         legs = sorted(self.app.sweep.traces)
         if not legs:
@@ -207,6 +236,8 @@ class SweepScreen(StationScreen):
             colour = {"completed": "green", "aborted": "yellow", "failed": "red", "error": "red",
                       "paused": "yellow", "aborting": "yellow"}.get(s.status, "cyan")
             line = f"{s.label}: [{colour} b]{s.status}[/{colour} b]  {s.done}/{s.total} points"
+            if s.resumed_points:
+                line += f" ({s.resumed_points} recorded before the resume)"
             r = s.last_record
             if r:
                 line += (f"   leg {int(r['leg'])} run {int(r['run'])} {r['target_mm']:+.3f} mm "
@@ -236,3 +267,57 @@ class SweepScreen(StationScreen):
                                     f"{f.kind} (attempt {f.attempt}{', gave up' if f.gave_up else ''})" for f in last))
         else:
             faults.update("")
+
+
+class ResumeScreen(ModalScreen["Path | None"]):
+    """Which aborted session to finish: `default` (the last aborted sweep) offered, or one of
+    the recent sessions, or a path typed in. Dismisses with the path, or None (Esc)."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+
+    def __init__(self, default: Path | None, folders) -> None:
+        super().__init__()
+        self.default = default
+        self.folders = folders
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="resume-dialog"):
+            yield Static("[b]Resume an aborted sweep[/b]\nThe session's own plan is finished on its legs, appending "
+                         "to the same file (as `station sweep --resume`): [b]the legs move[/b]. A complete or "
+                         "imported session is refused.", id="resume-about")
+            yield Select([(str(p), str(p)) for p in known_sessions(self.folders)], prompt="recent sessions",
+                         id="resume-list", compact=True)
+            yield Input(str(self.default or ""), placeholder="session file: FILE.h5", id="resume-path", compact=True)
+            with Horizontal(id="resume-buttons"):
+                yield Button("Resume (Enter)", id="resume-yes", variant="warning")
+                yield Button("Cancel (Esc)", id="resume-no", variant="primary")
+
+    def on_mount(self) -> None:
+        self.query_one("#resume-path", Input).focus()
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        event.stop()
+        if event.value is not Select.BLANK:
+            self.query_one("#resume-path", Input).value = str(event.value)
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        self._resume()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        if event.button.id == "resume-yes":
+            self._resume()
+        else:
+            self.dismiss(None)
+
+    def _resume(self) -> None:
+        text = self.query_one("#resume-path", Input).value.strip()
+        if not text:
+            self.notify("Choose a recent session or type the path of the session file to finish (.h5).",
+                        title="Resume", severity="warning")
+            return
+        self.dismiss(Path(text).expanduser())
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
