@@ -164,7 +164,8 @@ def test_moves_are_refused_while_a_sweep_runs_or_is_paused(cfg, size, connected,
 
 
 async def _refused_during_sweep(cfg, size, connected, wait_until, notes):
-    app = StationApp(cfg, time_scale=0.0, poll_interval_s=0.1)
+    # 1 simulated s = 20 ms: the paper plan (dwell 1 s a point) runs for minutes, long enough to act
+    app = StationApp(cfg, time_scale=0.02, poll_interval_s=0.1)
     async with app.run_test(size=size) as pilot:
         await connected(pilot)
         await pilot.press("f2")

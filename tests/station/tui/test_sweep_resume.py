@@ -1,7 +1,7 @@
 """Resuming an aborted sweep from the Sweep page (r): the same job as `station sweep --resume`
 (station.jobs.resumable_plan, then run_sweep(resume=True)), appending to the same file;
-refusals (complete, no plan, missing, a sweep running) are notifications. Simulated rig at
-time scale 0 (real Modbus TCP + serial pty)."""
+refusals (complete, no plan, missing, a sweep running) are notifications. Simulated rig (real
+Modbus TCP + serial pty) at time scale 0.02, so a sweep in the UI lasts long enough to act on."""
 
 from __future__ import annotations
 
@@ -58,7 +58,8 @@ def test_r_resumes_the_aborted_sweep_into_the_same_file(cfg, size, connected, wa
 
 
 async def _resume_the_aborted_one(cfg, size, connected, wait_until):
-    app = StationApp(cfg, time_scale=0.0, hide_volatile=True)
+    # 1 simulated s = 20 ms: the paper plan (dwell 1 s a point) runs for minutes, long enough to act
+    app = StationApp(cfg, time_scale=0.02, hide_volatile=True)
     async with app.run_test(size=size) as pilot:
         await connected(pilot)
         await pilot.press("f2")
@@ -102,7 +103,7 @@ def test_r_finishes_a_chosen_session_file_and_says_why_it_refuses_others(cfg, si
 
 
 async def _resume_a_file(cfg, size, connected, wait_until, notes, path, plan, recorded_session, six_leg_session):
-    app = StationApp(cfg, time_scale=0.0, hide_volatile=True)
+    app = StationApp(cfg, time_scale=0.02, hide_volatile=True)  # as above: a sweep to refuse r during
     async with app.run_test(size=size) as pilot:
         await pilot.press("f2")
         await wait_until(pilot, lambda: app.screen.MODE == "sweep", what="the Sweep page")
