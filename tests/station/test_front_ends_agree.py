@@ -106,7 +106,11 @@ async def _run_tui(folder: Path, csv: Path, operations, calibration: Path) -> li
     cfg.recordings_dir = str(folder / "runs")
     cfg.with_sim_memory()
     audit = folder / "runs" / "audit.jsonl"
-    app = StationApp(cfg, time_scale=0.0, legs=(LEG,))
+    # no Rig-page status polls: each reads the simulated interferometer, which draws its noise
+    # from the plant's random stream, so the verification's noise would depend on how many
+    # polls the UI happened to make (the CLI makes none). The Rig page polls only while shown:
+    # connect from the Compensation page.
+    app = StationApp(cfg, time_scale=0.0, legs=(LEG,), autoconnect=False)
 
     async def wait(pilot, condition, what: str, timeout_s: float = 60.0) -> None:
         for _ in range(int(timeout_s / 0.02)):
@@ -119,9 +123,10 @@ async def _run_tui(folder: Path, csv: Path, operations, calibration: Path) -> li
         return len(read_entries(audit)[0])
 
     async with app.run_test(size=(120, 40)) as pilot:
-        await wait(pilot, lambda: app.rig is not None, "the rig")
         await pilot.press("f4")
         comp = app.screen
+        app.connect_rig()
+        await wait(pilot, lambda: app.rig is not None, "the rig")
         for op, answer in operations:
             before = count()
             if op == "push":
