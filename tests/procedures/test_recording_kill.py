@@ -145,7 +145,7 @@ with SessionWriter.create(sys.argv[1], session_id="c", operator="t", rig="sim", 
                           devices={}, software_version="t") as w:
     print("ready", flush=True)
     for i in range(10**7):
-        w.append_point(dict(index=i, leg=1, run=1, direction=1, target_mm=float(i)))
+        w.append_point(dict(index=i, leg=1, run=1, direction=1, target_mm=float(i % 180) - 90.0))  # within the stroke
         print(i, flush=True)
 """
 
@@ -182,7 +182,7 @@ w = SessionWriter.create(sys.argv[1], session_id="live", operator="t", rig="sim"
 print("ready", flush=True)
 for line in sys.stdin:  # one point per line from the parent, acknowledged after it is on disk
     i = int(line)
-    w.append_point(dict(index=i, leg=1, run=1, direction=1, target_mm=float(i), error_um=i / 10))
+    w.append_point(dict(index=i, leg=1, run=1, direction=1, target_mm=float(i % 180) - 90.0, error_um=i / 10))
     print(i, flush=True)
 w.finish("completed")
 print("finished", flush=True)

@@ -71,8 +71,11 @@ async def _unreachable(cfg, size, wait_until, notes):
         text = " ".join(notes(app))
         assert f"127.0.0.1:{port}" in text and "press c on the rig screen" in text.lower()
         assert "Traceback" not in text
-        shown = str(app.screen.query_one("#rig-connection", Static).render())
-        assert "not connected" in shown and f"127.0.0.1:{port}" in shown
+        def shown() -> str:  # the page redraws on the RigStateChanged message that follows the state
+            return str(app.screen.query_one("#rig-connection", Static).render())
+
+        await wait_until(pilot, lambda: "not connected" in shown(), 10, "the Rig page to show it")
+        assert f"127.0.0.1:{port}" in shown()
         # starting a sweep without a rig is refused with the way out
         await pilot.press("f2")
         await wait_until(pilot, lambda: app.screen.MODE == "sweep", what="the Sweep screen")
