@@ -69,3 +69,15 @@ def default_legs_points(legs=range(1, 7), cycles: int = 3, step_mm: float = 3.0,
 
     cfgs = {leg: c for leg, c in zip(range(1, 7), default_leg_configs(seed=seed)) if leg in legs}
     return synth_session(cfgs, np.arange(-90.0, 90.01, step_mm), cycles=cycles, seed=seed)
+
+
+async def start_paper_sweep(pilot, legs: str) -> None:
+    """On the terminal UI's Sweep page: the paper plan (361 targets, dwell 1 s: minutes of rig
+    time at time scale 0.02) on `legs`, started with the Start button."""
+    from textual.widgets import Input
+
+    pilot.app.screen.query_one("#plan").value = "paper"
+    await pilot.pause()
+    pilot.app.screen.query_one("#legs", Input).value = legs
+    await pilot.pause()
+    await pilot.click("#start")

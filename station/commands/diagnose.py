@@ -119,7 +119,7 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
     two effects present in the plant but withheld from the twin, at a random magnitude (RMS
     contribution log-uniform in SELF_CHECK_CONTRIBUTION_UM). Odd seeds use the simulated plant
     as twin, even seeds the twin fitted on the session."""
-    from drivers.sim.plant import PlantConfig, default_leg_configs, systematic_error_um
+    from drivers.sim.plant import default_leg_configs, systematic_error_um
     from station.synth import synth_session
 
     rng = np.random.default_rng(10_000 + seed)

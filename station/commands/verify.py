@@ -11,7 +11,7 @@ from pathlib import Path
 
 from procedures import events as ev
 from procedures.errors import InputError
-from procedures.plans import SweepPlan, iso230_plan, parse_legs
+from procedures.plans import SweepPlan, iso230_plan
 from procedures.recording.reader import read_session
 from procedures.states import AuditOutcome
 from procedures.verify import ACCEPT_RATIO

@@ -29,7 +29,6 @@ from procedures.push import (
     rollback,
     table_sha256,
 )
-from drivers.errors import TableRefused
 from drivers.modbus.client import table_spec
 from procedures.table import LegTable
 

@@ -10,7 +10,6 @@ import asyncio
 import io
 from pathlib import Path
 
-import pytest
 
 from procedures.audit import read_entries
 from station.cli import main

@@ -18,6 +18,7 @@ from textual.widgets import ProgressBar, Static
 from procedures import events as ev
 from procedures.plans import iso230_plan
 from procedures.states import Outcome
+from tests.tooling import start_paper_sweep
 from station.tui.app import StationApp
 from station.tui.messages import SweepChanged
 from station.tui.state import SweepState
@@ -123,11 +124,7 @@ async def _only_the_ui_thread(cfg, size, connected, wait_until, recorded_session
         # a sweep, paused, resumed and aborted through the app's actions
         await pilot.press("f2")
         await wait_until(pilot, lambda: app.screen.MODE == "sweep", what="the Sweep screen")
-        app.screen.query_one("#plan").value = "paper"
-        await pilot.pause()
-        app.screen.query_one("#legs").value = "1"
-        await pilot.pause()
-        await pilot.click("#start")
+        await start_paper_sweep(pilot, "1")
         await wait_never_closed(lambda: app.sweep.done >= 3, "first points")
         app.action_pause_sweep()
         assert app.sweep.status == "running"  # asked for: the status waits for the procedure's Paused

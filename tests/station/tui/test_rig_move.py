@@ -10,6 +10,7 @@ import time
 import pytest
 from textual.widgets import DataTable, Input, Select, Static
 
+from tests.tooling import start_paper_sweep
 from station.tui.app import StationApp
 
 pytestmark = pytest.mark.timeout(180)
@@ -170,11 +171,7 @@ async def _refused_during_sweep(cfg, size, connected, wait_until, notes):
         await connected(pilot)
         await pilot.press("f2")
         await wait_until(pilot, lambda: app.screen.MODE == "sweep", what="the Sweep page")
-        app.screen.query_one("#plan").value = "paper"
-        await pilot.pause()
-        app.screen.query_one("#legs", Input).value = "3"
-        await pilot.pause()
-        await pilot.click("#start")
+        await start_paper_sweep(pilot, "3")
         await wait_until(pilot, lambda: app.sweep.done >= 3, what="first points")
         await pilot.press("f1")
         await wait_until(pilot, lambda: app.screen.MODE == "rig", what="the Rig page")

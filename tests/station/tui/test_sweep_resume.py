@@ -16,6 +16,7 @@ from procedures.control import RunControl
 from procedures.plans import iso230_plan
 from procedures.recording.reader import read_session
 from procedures.runner import CallbackSink
+from tests.tooling import start_paper_sweep
 from station.config import StationConfig
 from station.jobs import run_sweep
 from station.tui.app import StationApp
@@ -64,11 +65,7 @@ async def _resume_the_aborted_one(cfg, size, connected, wait_until):
         await connected(pilot)
         await pilot.press("f2")
         await wait_until(pilot, lambda: app.screen.MODE == "sweep", what="the Sweep page")
-        app.screen.query_one("#plan").value = "paper"
-        await pilot.pause()
-        app.screen.query_one("#legs", Input).value = "1"
-        await pilot.pause()
-        await pilot.click("#start")
+        await start_paper_sweep(pilot, "1")
         await wait_until(pilot, lambda: app.sweep.done >= 10, what="ten points")
         await pilot.press("a")
         await wait_until(pilot, lambda: app.sweep.status == "aborted", what="the abort")
@@ -144,11 +141,7 @@ async def _resume_a_file(cfg, size, connected, wait_until, notes, path, plan, re
         assert app.last_session == path
 
         # r while a sweep runs is refused at once, without the dialog
-        app.screen.query_one("#plan").value = "paper"
-        await pilot.pause()
-        app.screen.query_one("#legs", Input).value = "3"
-        await pilot.pause()
-        await pilot.click("#start")
+        await start_paper_sweep(pilot, "3")
         await wait_until(pilot, lambda: app.sweep.active and app.sweep.done >= 1, what="a new sweep")
         app.clear_notifications()
         await pilot.press("r")
