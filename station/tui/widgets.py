@@ -48,6 +48,66 @@ class XYPlot(PlotextPlot):
         self.refresh()
 
 
+# -- small terminals ------------------------------------------------------------------------------
+
+def wrap_items(items: Sequence[str], width: int, sep: str = "   ") -> str:
+    """`items` (Rich markup) joined by `sep`, broken into lines of at most `width` cells between
+    items, never inside one (an item wider than `width` gets a line of its own)."""
+    from rich.text import Text
+
+    lines: list[list[str]] = [[]]
+    used = 0
+    gap = len(sep)
+    for item in items:
+        n = Text.from_markup(item).cell_len
+        if lines[-1] and used + gap + n > width:
+            lines.append([])
+            used = 0
+        used += n + (gap if lines[-1] else 0)
+        lines[-1].append(item)
+    return "\n".join(sep.join(line) for line in lines)
+
+
+def set_columns(table, labels: Sequence[str]) -> bool:
+    """Give the DataTable `table` the columns `labels` (e.g. shorter ones on a narrow terminal);
+    its rows go with the old columns. False (nothing done) when it has them already."""
+    if [str(c.label) for c in table.columns.values()] == list(labels):
+        return False
+    table.clear(columns=True)
+    table.add_columns(*labels)
+    return True
+
+
+def columns_fit(table, labels: Sequence[str], rows: Sequence[Sequence[str]], width: int) -> bool:
+    """Whether the DataTable `table`'s columns `labels`, with the cells of `rows` (Rich markup,
+    in the same order), fit in `width` cells."""
+    from rich.text import Text
+
+    pad = 2 * table.cell_padding
+    return sum(max([Text.from_markup(label).cell_len, *(Text.from_markup(str(row[i])).cell_len for row in rows)]) + pad
+               for i, label in enumerate(labels)) <= width
+
+
+def fit_columns(table, variants: Sequence[tuple[Sequence[str], Sequence[int] | None]],
+                rows: Sequence[Sequence[str]], width: int) -> list[int]:
+    """Give the DataTable `table` the columns of the first of `variants` whose columns, with the
+    cells of `rows` (Rich markup), fit in `width` cells; else of the last one (the table then
+    scrolls sideways). A variant is (labels, order): `order` the indices of the row's cells
+    shown, left to right (None: all, as they come), so a narrow terminal can have shorter labels
+    and the columns that matter most first. Returns the order chosen: the caller adds each row
+    as `[cells[i] for i in order]`."""
+    n_cells = len(variants[0][0])
+    chosen = None
+    for labels, order in variants:
+        order = list(range(n_cells)) if order is None else list(order)
+        chosen = labels, order
+        if columns_fit(table, labels, [[row[i] for i in order] for row in rows], width):
+            break
+    labels, order = chosen
+    set_columns(table, labels)
+    return order
+
+
 # -- choosing a session file -------------------------------------------------------------------
 
 from pathlib import Path  # noqa: E402

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from rich.text import Text
+from textual import events
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Grid, Horizontal
+from textual.containers import Grid, Horizontal, VerticalScroll
 from textual.screen import ModalScreen, Screen
 from textual.widgets import Button, Footer, Header, Label, Static
 
@@ -14,15 +16,52 @@ PAGES = [("rig", "F1", "Rig"), ("sweep", "F2", "Sweep"), ("results", "F3", "Resu
          ("platform", "F7", "Platform")]
 
 
-def nav_bar(current: str) -> str:
-    """The page tabs with their keys; the current page highlighted."""
-    parts = []
-    for mode, key, title in PAGES:
-        if mode == current:
-            parts.append(f"[reverse b] {key} {title} [/reverse b]")
-        else:
-            parts.append(f" [b]{key}[/b] {title} ")
-    return "│".join(parts)
+# Shorter page titles for the tab bar of a narrow terminal (the help keeps the full ones).
+SHORT_TITLES = {"compensation": "Comp", "diagnosis": "Diag", "platform": "Platf"}
+
+# Below these sizes (cells) a page is laid out for a small terminal (an 80x24 bench laptop, an
+# SSH session): the screen gets the class "-narrow" / "-short", which station.tcss styles
+# (controls on two rows, no margins, smaller plots, no title bar, ...).
+NARROW_WIDTH = 120
+SHORT_HEIGHT = 32
+
+
+def nav_bar(current: str, width: int | None = None) -> str:
+    """The page tabs with their keys; the current page highlighted. Given the `width` (cells)
+    it has, the widest form that fits: spaced, tight, short titles, then only the current
+    page's title; every page's key is always there."""
+    def tabs(spaced: bool, titles) -> str:
+        pad = " " if spaced else ""
+        parts = []
+        for mode, key, title in PAGES:
+            title = titles(mode, title)
+            text = f"{key} {title}" if title else key
+            if mode == current:
+                parts.append(f"[reverse b]{pad}{text}{pad}[/reverse b]")
+            else:
+                parts.append(f"{pad}[b]{key}[/b]{' ' + title if title else ''}{pad}")
+        return "│".join(parts)
+
+    forms = [tabs(True, lambda m, t: t), tabs(False, lambda m, t: t),
+             tabs(False, lambda m, t: SHORT_TITLES.get(m, t)),
+             tabs(False, lambda m, t: t if m == current else "")]
+    if width is None:
+        return forms[0]
+    for form in forms:
+        if Text.from_markup(form).cell_len <= width:
+            return form
+    return forms[-1]
+
+
+class StationFooter(Footer):
+    """The footer; on a narrow terminal the help key (?) stays on show at its right end, however
+    many keys the page has (the help lists them all)."""
+
+    def compose(self) -> ComposeResult:
+        for widget in super().compose():
+            if getattr(widget, "key", None) == "question_mark":  # a FooterKey
+                widget.add_class("-help-key")
+            yield widget
 
 
 class StationScreen(Screen):
@@ -44,11 +83,50 @@ class StationScreen(Screen):
 
     def compose_header(self) -> ComposeResult:
         yield Header(show_clock=False, icon="≡")
-        yield Static(nav_bar(self.MODE), classes="nav-bar")
+        yield Static(nav_bar(self.MODE, self.app.size.width or None), classes="nav-bar")
         yield Static(f"[dim]{self.PAGE_HELP}[/dim]", classes="page-help")
 
     def compose_footer(self) -> ComposeResult:
-        yield Footer(show_command_palette=False, compact=True)
+        yield StationFooter(show_command_palette=False, compact=True)
+
+    # -- small terminals ---------------------------------------------------------------------------
+    _fitted: tuple[int, int] | None = None  # the terminal size the page was last laid out for
+
+    @property
+    def narrow(self) -> bool:
+        """The terminal is narrower than NARROW_WIDTH."""
+        return 0 < self.app.size.width < NARROW_WIDTH
+
+    @property
+    def short(self) -> bool:
+        """The terminal is shorter than SHORT_HEIGHT."""
+        return 0 < self.app.size.height < SHORT_HEIGHT
+
+    def fit_to_size(self) -> None:
+        """Set the classes -narrow / -short for the terminal's size and the tab bar for its
+        width; call `size_changed` when the size is not the one the page was laid out for (not
+        the first time: a page draws itself for the size it has when it is mounted)."""
+        self.set_class(self.narrow, "-narrow")
+        self.set_class(self.short, "-short")
+        for bar in self.query(".nav-bar").results(Static):
+            bar.update(nav_bar(self.MODE, self.app.size.width or None))
+        before, self._fitted = self._fitted, tuple(self.app.size)
+        if before is not None and before != self._fitted:
+            self.size_changed()
+
+    def size_changed(self) -> None:
+        """Hook: the terminal has another size (`self.narrow`, `self.short`; e.g. the columns of
+        a table that fit)."""
+
+    def on_mount(self) -> None:
+        self.fit_to_size()
+
+    def on_resize(self, event: events.Resize) -> None:
+        self.fit_to_size()
+
+    def on_screen_resume(self) -> None:
+        # a page not on show was not told of a resize
+        self.fit_to_size()
 
     # -- pages that analyse a session (a SessionPicker) follow the newest recording -------------
     def follow_sessions(self) -> None:
@@ -82,7 +160,8 @@ class ConfirmScreen(ModalScreen[bool]):
 
     def compose(self) -> ComposeResult:
         with Grid(id="confirm-dialog"):
-            yield Label(self.question, id="confirm-question")
+            with VerticalScroll(id="confirm-scroll"):  # a long question scrolls (Tab, arrows); the buttons stay
+                yield Label(self.question, id="confirm-question")
             with Horizontal(id="confirm-buttons"):
                 yield Button(f"{self.yes_label} (y)", variant="error", id="confirm-yes")
                 yield Button(f"{self.no_label} (n)", variant="primary", id="confirm-no")

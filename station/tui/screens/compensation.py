@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, VerticalScroll
 from textual.widgets import Button, DataTable, Input, Label, Static
 
 from station.tui.errors import describe
@@ -42,18 +42,20 @@ class CompensationScreen(StationScreen):
 
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
-        with Vertical(id="comp-body"):
+        with VerticalScroll(id="comp-body"):  # a verification report can push the plots below, a scroll away
             yield Static("", id="comp-source", classes="status")
-            with Horizontal(classes="controls"):
-                yield Label("Step mm ")
-                yield Input("", id="comp-step", placeholder="auto", type="number", compact=True)
-                yield Button("Make (t)", id="comp-make", compact=True, variant="success")
-                yield Button("Read drives (g)", id="comp-read", compact=True)
-                yield Button("CSV (w)", id="comp-save", compact=True)
-                yield Button("Push… (u)", id="comp-push", compact=True, variant="error")
-                yield Button("All… (U)", id="comp-push-all", compact=True, variant="error")
-                yield Button("Verify (v)", id="comp-verify", compact=True)
-                yield Button("Rollback… (b)", id="comp-rollback", compact=True)
+            with Horizontal(classes="controls split-controls"):  # one row, or two on a narrow terminal
+                with Horizontal(classes="control-group"):
+                    yield Label("Step mm ")
+                    yield Input("", id="comp-step", placeholder="auto", type="number", compact=True)
+                    yield Button("Make (t)", id="comp-make", compact=True, variant="success")
+                    yield Button("Read drives (g)", id="comp-read", compact=True)
+                    yield Button("CSV (w)", id="comp-save", compact=True)
+                with Horizontal(classes="control-group"):
+                    yield Button("Push… (u)", id="comp-push", compact=True, variant="error")
+                    yield Button("All… (U)", id="comp-push-all", compact=True, variant="error")
+                    yield Button("Verify (v)", id="comp-verify", compact=True)
+                    yield Button("Rollback… (b)", id="comp-rollback", compact=True)
             yield LegTablesView(id="comp-table")
             yield Static("", id="comp-status", classes="status")
             yield AuditTail("", id="comp-audit", classes="status")
@@ -68,6 +70,10 @@ class CompensationScreen(StationScreen):
         self.plot_leg: int | None = None
         self.verify_text = ""
         self._show()
+
+    def size_changed(self) -> None:
+        self.query_one(LegTablesView).show(self.table, self.drive_tables)  # the table's labels for the width
+        self._show_audit()
 
     def on_screen_resume(self) -> None:
         a = self.app.analysis
@@ -259,7 +265,9 @@ class CompensationScreen(StationScreen):
             entries, error = self.jobs.audit().entries()[-3:], ""
         except Exception as exc:
             entries, error = [], describe(exc)
-        self.query_one(AuditTail).show(entries, error, hide_time=self.app.hide_volatile)
+        # one line an entry: as wide as the page (no wider than the log's usual 112 cells)
+        self.query_one(AuditTail).show(entries, error, hide_time=self.app.hide_volatile,
+                                       width=min(112, self.app.size.width - 4))
 
     def _show_plots(self) -> None:
         leg = self._selected_leg()

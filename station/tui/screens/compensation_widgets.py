@@ -13,7 +13,7 @@ import numpy as np
 from textual.containers import Horizontal
 from textual.widgets import DataTable, Static
 
-from station.tui.widgets import XYPlot
+from station.tui.widgets import XYPlot, fit_columns
 
 
 @dataclass
@@ -43,6 +43,9 @@ class LegTablesView(DataTable):
 
     COLUMNS = ("Leg", "Start mm", "Step mm", "Points", "Fwd µm (min..max)", "Rev µm (min..max)",
                "Drive bank", "Max |new − active| µm")
+    # A narrow terminal: shorter labels, and what the push and verify are about (the table's
+    # range, the drive's bank, the difference) beside the leg; the table's span last.
+    NARROW = (("Leg", "Fwd µm", "Rev µm", "Bank", "|Δ| µm", "Pts", "Step", "Start mm"), (0, 4, 5, 6, 7, 3, 2, 1))
 
     def on_mount(self) -> None:
         self.cursor_type = "row"
@@ -51,9 +54,8 @@ class LegTablesView(DataTable):
 
     def show(self, table, drives: dict[int, DriveTable]) -> None:
         self.clear()
-        if table is None:
-            return
-        for leg, t in table.legs.items():
+        rows = []
+        for leg, t in (table.legs.items() if table is not None else ()):
             dt = drives.get(leg)
             if dt is None:
                 bank, diff = "–", "–"
@@ -65,9 +67,12 @@ class LegTablesView(DataTable):
                 d = max(float(np.max(np.abs(np.asarray(t.error_fwd_um) - dt.correction_um(x, 1)))),
                         float(np.max(np.abs(np.asarray(t.error_rev_um) - dt.correction_um(x, -1)))))
                 diff = f"{d:.3f}"
-            self.add_row(str(leg), f"{t.start_mm:+.3f}", f"{t.step_mm:g}", str(t.point_count),
+            rows.append((str(leg), f"{t.start_mm:+.3f}", f"{t.step_mm:g}", str(t.point_count),
                          f"{min(t.error_fwd_um):+.3f}..{max(t.error_fwd_um):+.3f}",
-                         f"{min(t.error_rev_um):+.3f}..{max(t.error_rev_um):+.3f}", bank, diff, key=str(leg))
+                         f"{min(t.error_rev_um):+.3f}..{max(t.error_rev_um):+.3f}", bank, diff))
+        order = fit_columns(self, [(self.COLUMNS, None), self.NARROW], rows, self.app.size.width - 2)
+        for cells in rows:
+            self.add_row(*(cells[i] for i in order), key=cells[0])
 
 
 class TablePlots(Horizontal):

@@ -89,7 +89,8 @@ class DiagnosisScreen(StationScreen):
         self._request = 0  # numbers the diagnosis requests: only the newest one's answer is shown
         self.running = False
         t = self.query_one("#diag-table", DataTable)
-        t.add_columns("Leg", "Effect", "Parameters", "Held-out gap µm", "Shrink", "p")
+        # the parameters (the widest cells) last, so the figures stay on show on a narrower terminal
+        t.add_columns("Leg", "Effect", "Held-out gap µm", "Shrink", "p", "Parameters")
         self.follow_sessions()
         self._show()
 
@@ -207,9 +208,9 @@ class DiagnosisScreen(StationScreen):
         for f in r["findings"]:
             params = ", ".join(f"{k} {v:.3g}" + (f" ± {f['uncertainty'][k]:.2g}" if f["uncertainty"].get(k) is not None else "")
                                for k, v in f["parameters"].items())
-            table.add_row(str(f["leg"]), f["effect"], params,
+            table.add_row(str(f["leg"]), f["effect"],
                           f"{f['heldout_rms_before_um']:.3g} → {f['heldout_rms_after_um']:.3g}",
-                          f"{f['shrink_pct']:.0f} %", f"{f['p_value']:.2g}")
+                          f"{f['shrink_pct']:.0f} %", f"{f['p_value']:.2g}", params)
         report_text = text_report(r)
         if self.app.hide_volatile:  # the recording's path and hash vary from run to run
             report_text = "\n".join(line for line in report_text.splitlines() if not line.startswith("recording:"))

@@ -86,9 +86,9 @@ def key_lines(app, bindings: list[Binding]) -> list[str]:
     return [_item(" / ".join(k), desc) for (_, desc), k in keys.items()]
 
 
-def help_sections(app) -> list[tuple[str, str]]:
+def help_sections(app, width: int = KEYS_WIDTH) -> list[tuple[str, str]]:
     """(heading, keys) per page (its key, title and what it is for; its keys), then the keys
-    that work everywhere."""
+    that work everywhere; the keys in lines of at most `width` cells."""
     out = []
     for mode, key, title in PAGES:
         screen_cls = app.MODES.get(mode)
@@ -97,10 +97,10 @@ def help_sections(app) -> list[tuple[str, str]]:
         about = getattr(screen_cls, "PAGE_HELP", "")
         keys = key_lines(app, page_bindings(screen_cls))
         out.append((f"[reverse b] {key} [/reverse b] [b]{title}[/b]" + (f"  [dim]{about}[/dim]" if about else ""),
-                    _lines_of(keys) if keys else "[dim](no keys of its own)[/dim]"))
+                    _lines_of(keys, width) if keys else "[dim](no keys of its own)[/dim]"))
     out.append(("[b u]Everywhere[/b u]", _lines_of([_item(f"{PAGES[0][1]}..{PAGES[-1][1]}", "pages"),
                                                     *key_lines(app, global_bindings(app)),
-                                                    _item("tab / shift+tab", "next / previous field")])))
+                                                    _item("tab / shift+tab", "next / previous field")], width)))
     return out
 
 
@@ -123,7 +123,8 @@ class HelpScreen(ModalScreen[None]):
             with VerticalScroll(id="help-scroll"):
                 yield Static("[dim]A page's letter keys act when the focus is not in a text field (Esc leaves "
                              "it).[/dim]")
-                for heading, keys in help_sections(self.app):
+                # the dialog's border and padding, the keys' indent, the scroll bar: 12 cells
+                for heading, keys in help_sections(self.app, min(KEYS_WIDTH, self.app.size.width - 12)):
                     yield Static(heading, classes="help-heading")
                     yield Static(keys, classes="help-keys")
             yield Static("[dim]Esc or q closes this help[/dim]", id="help-close")

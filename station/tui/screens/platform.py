@@ -20,13 +20,13 @@ import numpy as np
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Static
 
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import XYPlot
+from station.tui.widgets import XYPlot, columns_fit, set_columns
 
 DEFAULT_POSES = 2000
 DEFAULT_SEED = 0
@@ -159,6 +159,17 @@ def histogram_steps(orig: np.ndarray, comp: np.ndarray, bins: int = 40) -> tuple
     return [float(x) for x in xs], [float(c) for c in np.repeat(c0, 2)], [float(c) for c in np.repeat(c1, 2)]
 
 
+# Table 2 on a narrow terminal: shorter labels for its measures and components.
+NARROW_MEASURES = {
+    "Maximum original error": "Max original", "Minimum original error": "Min original",
+    "Maximum compensated error": "Max compensated", "Minimum compensated error": "Min compensated",
+    "Range reduction (%)": "Range reduction", "Mean of original abs(error)": "Mean |original|",
+    "Mean of compensated abs(error)": "Mean |compensated|",
+}
+POSE_COLUMNS = ("Measure", "x (µm)", "y (µm)", "z (µm)", "rx (arcsec)", "ry (arcsec)", "rz (arcsec)")
+NARROW_POSE_COLUMNS = ("Measure", "x µm", "y µm", "z µm", "rx ″", "ry ″", "rz ″")
+
+
 def _pct(value) -> str:
     return "n/a" if value is None else f"{value:.2f} %"
 
@@ -176,7 +187,7 @@ class PlatformScreen(StationScreen):
 
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
-        with Vertical(id="plat-body"):
+        with VerticalScroll(id="plat-body"):  # on a short terminal the histograms are below, a scroll away
             with Horizontal(classes="controls", id="plat-inputs"):
                 yield Label("Compensation ")
                 yield Input(placeholder="TABLE.csv or MODEL.json (empty: model on F3)", id="plat-comp",
@@ -202,9 +213,10 @@ class PlatformScreen(StationScreen):
         self.platform_run: PlatformRun | None = None
         self.component = COMPONENTS[0]
         self.running = False
-        self.query_one("#plat-table", DataTable).add_columns(
-            "Measure", "x (µm)", "y (µm)", "z (µm)", "rx (arcsec)", "ry (arcsec)", "rz (arcsec)")
         self._show()
+
+    def size_changed(self) -> None:
+        self._show()  # the tables' labels for the width
 
     def on_screen_resume(self) -> None:
         if self.platform_run is None:
@@ -376,13 +388,21 @@ class PlatformScreen(StationScreen):
         legs.clear(columns=True)
         self._show_status()
         run = self.platform_run
+        width = self.app.size.width - 4  # the body's padding, its scroll bar
         if run is None:
+            set_columns(table, POSE_COLUMNS if columns_fit(table, POSE_COLUMNS, [], width) else NARROW_POSE_COLUMNS)
             legs.add_columns("Component", "Pose range reduction", "Legs (pooled)", "At least as much", "Dominant leg")
             self._show_plot()
             return
         s = run.summary
-        for label, cells in pose_table_rows(s):
-            table.add_row(label, *cells)
+        rows = [(label, *cells) for label, cells in pose_table_rows(s)]
+        if columns_fit(table, POSE_COLUMNS, rows, width):
+            set_columns(table, POSE_COLUMNS)
+        else:  # a narrow terminal: the short labels
+            set_columns(table, NARROW_POSE_COLUMNS)
+            rows = [(NARROW_MEASURES.get(row[0], row[0]), *row[1:]) for row in rows]
+        for row in rows:
+            table.add_row(*row)
         columns = [(s.get("measured"), s["acceptance"], s["legs"]["all"]["range_reduction_pct"])]
         other = s.get("other_measurement")
         if other:

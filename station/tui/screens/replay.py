@@ -22,7 +22,7 @@ from textual.widgets import Button, DataTable, Input, Label, Static
 from station.tui import capabilities
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import SessionPicker, sample_folders
+from station.tui.widgets import SessionPicker, fit_columns, sample_folders
 
 
 class SessionRead(Message):
@@ -39,6 +39,11 @@ class SessionRead(Message):
 
 
 FAULT_COLUMNS = ("Session", "Point", "Leg", "Run", "Target mm", "Time s", "Kind", "Attempt", "Gave up", "Message")
+# A narrow terminal: shorter labels, the kind and the start of the message beside the leg and
+# run; where and when last. (The message is long: the table scrolls sideways for the rest.)
+NARROW_FAULT_COLUMNS = (("Session", "Leg", "Run", "Pt", "Kind", "Try", "Gave up", "Message", "Target mm", "Time s"),
+                        (0, 2, 3, 1, 6, 7, 8, 9, 4, 5))
+MESSAGE_SHOWN = 30  # cells of the message the full columns must leave room for
 
 
 def _text(value) -> str:
@@ -89,7 +94,7 @@ class ReplayScreen(StationScreen):
         self.replayed = None  # the replay's recorded session (its faults are listed), for replay_source
         self.replayed_path: Path | None = None
         self.info_lines: list[str] = []  # what #replay-info says of the session on show
-        self.query_one("#replay-faults", DataTable).add_columns(*FAULT_COLUMNS)
+        self._show_faults()
         if self.app.replay_path is not None:
             self.query_one(SessionPicker).set_path(self.app.replay_path)
             self._read(self.app.replay_path)
@@ -193,13 +198,18 @@ class ReplayScreen(StationScreen):
         """The faults of the session on show, then those of its replay (when replayed here)."""
         table = self.query_one("#replay-faults", DataTable)
         table.clear()
-        if self.session is None:
-            return
-        rows = fault_rows(self.session.faults, "recorded")
-        if self.replayed is not None and self.session_path == self.replay_source:
-            rows += fault_rows(self.replayed.faults, "replayed")
+        rows = []
+        if self.session is not None:
+            rows = fault_rows(self.session.faults, "recorded")
+            if self.replayed is not None and self.session_path == self.replay_source:
+                rows += fault_rows(self.replayed.faults, "replayed")
+        measured = [(*row[:-1], row[-1][:MESSAGE_SHOWN]) for row in rows]
+        order = fit_columns(table, [(FAULT_COLUMNS, None), NARROW_FAULT_COLUMNS], measured, self.app.size.width - 2)
         for row in rows:
-            table.add_row(*row)
+            table.add_row(*(row[i] for i in order))
+
+    def size_changed(self) -> None:
+        self._show_faults()  # the table's labels for the width
 
     # -- actions -------------------------------------------------------------------------------------
     def on_button_pressed(self, event: Button.Pressed) -> None:

@@ -30,9 +30,20 @@ from textual.widgets import Button, DataTable, Label, Select, Static
 
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import SessionPicker, XYPlot
+from station.tui.widgets import SessionPicker, XYPlot, fit_columns
 
 NO_SESSION = "no session open: finish a sweep, or open a session file above"
+# The table's columns (µm throughout; "held-out" = RMS of the residual on cycles the fit did not
+# see) as (labels, order of the cells): the first that fits the terminal is shown; a narrow one
+# has shorter labels and the ISO 230-2 figures beside the leg (points and cycles last).
+COLUMNS = [
+    (("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Held-out ratio", "Range before → held-out range",
+      "A", "E", "M", "B", "R"), None),
+    (("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Ratio", "Range → held-out",
+      "A", "E", "M", "B", "R"), None),
+    (("Leg", "A", "E", "M", "B", "R", "HO RMS", "Noise", "Ratio", "Range → HO", "Points", "Cycles"),
+     (0, 7, 8, 9, 10, 11, 4, 3, 5, 6, 1, 2)),
+]
 METHODS = [("default (bidirectional, cross-validated)", "default"), ("paper (Fourier, Algorithm 1)", "paper")]
 
 
@@ -134,10 +145,6 @@ class ResultsScreen(StationScreen):
         return [self.app.cfg.recordings_dir, *sample_folders()]
 
     def on_mount(self) -> None:
-        table = self.query_one("#results-table", DataTable)
-        # µm throughout; "held-out" = RMS of the residual on cycles the fit did not see
-        table.add_columns("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Held-out ratio",
-                          "Range before → held-out range", "A", "E", "M", "B", "R")
         self.plot_leg: int | None = None
         self._request = 0  # numbers the fit requests: only the newest one's answer is shown
         self._fitting: tuple[Path, str] | None = None  # (path, method) of the fit under way
@@ -355,6 +362,9 @@ class ResultsScreen(StationScreen):
             text += f"\n[dim]the table shows the {a.method} model of {a.path.name}[/dim]"
         return text
 
+    def size_changed(self) -> None:
+        self._show()  # the table's labels for the width
+
     def _show(self) -> None:
         a = self.app.analysis
         status = self.query_one("#results-status", Static)
@@ -362,6 +372,7 @@ class ResultsScreen(StationScreen):
         table.clear()
         failure = self._failure_text(a)
         if a is None:
+            fit_columns(table, COLUMNS, [], self.app.size.width - 2)
             if self._fitting is not None:
                 status.update(f"reading and fitting ({self._fitting[1]})…")
             else:
@@ -383,17 +394,20 @@ class ResultsScreen(StationScreen):
         if failure:
             text = failure + "\n" + text
         status.update(text)
+        rows = {}
         for leg, lf in a.model.legs.items():
             st = lf.stats
             iso = iso_figures(a.iso, leg)
             ratio = st.heldout_ratio
-            table.add_row(
+            rows[leg] = (
                 str(leg), str(st.n_points), str(st.n_cycles), _fmt(st.noise_floor_um), _fmt(st.heldout_rms_um),
                 _fmt(ratio, ".2f") if ratio is not None else "n/a",
                 f"{st.range_before_um:.2f} → {_fmt(st.heldout_range_um, '.2f')}",
                 *(_fmt(iso.get(k)) for k in "AEMBR"),
-                key=str(leg),
             )
+        order = fit_columns(table, COLUMNS, list(rows.values()), self.app.size.width - 2)
+        for leg, cells in rows.items():
+            table.add_row(*(cells[i] for i in order), key=str(leg))
         self._show_plots()
 
     def _show_plots(self) -> None:

@@ -30,6 +30,7 @@ from drivers.interfaces import DriveLimits, DriveStatus, Environment, Reading
 from station.tui.errors import describe
 from station.tui.messages import RigStateChanged, SweepChanged
 from station.tui.screens.common import StationScreen
+from station.tui.widgets import wrap_items
 
 STATE_TEXT = {
     "operation_enabled": "[green]enabled[/green]",
@@ -97,22 +98,24 @@ class RigScreen(StationScreen):
             yield Static("", id="rig-connection")
             table = DataTable(id="drives", cursor_type="row", zebra_stripes=True)
             yield table
-            with Horizontal(id="move-bar"):
-                yield Label("leg 1", id="move-leg")
-                yield Label(" to ")
-                yield MoveField("", id="move-target", type="number", placeholder="target", compact=True,
-                            tooltip="target position, mm (0 = mid-stroke); Enter moves")
-                yield Label(" mm at ")
-                yield MoveField("", id="move-speed", type="number", placeholder="default", compact=True,
-                            tooltip="speed, mm/s; blank: a safe fraction of the drive's maximum")
-                yield Label(" mm/s ")
-                yield Button("Move (m)", id="move", compact=True, variant="primary")
-                yield Label("   jog ")
-                yield Button("− (-)", id="jog-minus", compact=True)
-                yield Select([(f"{step:g} mm", step) for step in JOG_STEPS_MM], value=1.0, allow_blank=False,
-                             id="jog-step", compact=True, tooltip="jog step (j: next)")
-                yield Button("+ (+)", id="jog-plus", compact=True)
-                yield Button("Stop (x)", id="stop", compact=True, variant="error")
+            with Horizontal(id="move-bar"):  # the move and the jog: one row, or two on a narrow terminal
+                with Horizontal(id="move-to", classes="move-group"):
+                    yield Label("leg 1", id="move-leg")
+                    yield Label(" to ")
+                    yield MoveField("", id="move-target", type="number", placeholder="target", compact=True,
+                                tooltip="target position, mm (0 = mid-stroke); Enter moves")
+                    yield Label(" mm at ")
+                    yield MoveField("", id="move-speed", type="number", placeholder="default", compact=True,
+                                tooltip="speed, mm/s; blank: a safe fraction of the drive's maximum")
+                    yield Label(" mm/s ")
+                    yield Button("Move (m)", id="move", compact=True, variant="primary")
+                with Horizontal(id="move-jog", classes="move-group"):
+                    yield Label("   jog ", id="jog-label")
+                    yield Button("− (-)", id="jog-minus", compact=True)
+                    yield Select([(f"{step:g} mm", step) for step in JOG_STEPS_MM], value=1.0, allow_blank=False,
+                                 id="jog-step", compact=True, tooltip="jog step (j: next)")
+                    yield Button("+ (+)", id="jog-plus", compact=True)
+                    yield Button("Stop (x)", id="stop", compact=True, variant="error")
             yield Static("", id="move-status")
             yield Static("", id="laser")
             yield Static("", id="environment")
@@ -223,6 +226,14 @@ class RigScreen(StationScreen):
                 ]
             for col, value in enumerate(cells, start=1):
                 table.update_cell_at((table.get_row_index(str(leg)), col), value, update_width=True)
+        self._show_readings(snap)
+        self._show_connection()
+        self._show_motion()
+
+    def _show_readings(self, snap: RigSnapshot) -> None:
+        """The interferometer's beam per leg and the environment, lines broken between legs (the
+        width of the terminal: a narrow one gets more lines, never a leg cut in two)."""
+        width = max(self.app.size.width - 4, 20)  # the body's padding, a scroll bar
         laser = self.query_one("#laser", Static)
         parts = []
         for leg, r in sorted(snap.readings.items()):
@@ -232,17 +243,19 @@ class RigScreen(StationScreen):
                 beam = "[green]beam ok[/green]" if r.beam_ok else "[red]beam broken[/red]"
                 parts.append(f"leg {leg}: {beam} {r.signal_pct:3.0f} %")
         ident = snap.laser_identity or "interferometer"
-        laser.update(f"[b]{ident}[/b]\n" + ("   ".join(parts) if parts else "no readings"))
+        laser.update(f"[b]{ident}[/b]\n" + (wrap_items(parts, width) if parts else "no readings"))
         env = snap.environment
         widget = self.query_one("#environment", Static)
         if isinstance(env, Environment):
-            mats = "  ".join(f"leg {i + 1} {t:.2f}" for i, t in enumerate(env.material_temp_c))
+            mats = ["material °C:", *(f"leg {i + 1} {t:.2f}" for i, t in enumerate(env.material_temp_c))]
             widget.update(f"air {env.air_temp_c:.2f} °C   {env.air_pressure_hpa:.1f} hPa   "
-                          f"{env.humidity_pct:.1f} %RH\nmaterial °C: {mats}")
+                          f"{env.humidity_pct:.1f} %RH\n" + wrap_items(mats, width, "  "))
         elif isinstance(env, str):
             widget.update(f"[red]environment unreadable:[/red] {env}")
-        self._show_connection()
-        self._show_motion()
+
+    def size_changed(self) -> None:
+        if self.snapshot is not None:  # break the readings' lines for the new width
+            self._show_readings(self.snapshot)
 
     def _show_motion(self) -> None:
         """The move bar's leg, default speed and the line under it: the selected leg's soft

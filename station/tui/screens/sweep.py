@@ -77,11 +77,17 @@ class SweepScreen(StationScreen):
 
     def on_mount(self) -> None:
         self.plot_leg: int | None = None
+        self.size_changed()
         self._update_summary()
         self._redraw()
 
     def on_screen_resume(self) -> None:
         self._redraw()
+
+    def size_changed(self) -> None:
+        # a short terminal: one-line buttons, so the whole form (legs, plan, Start, Abort) is on show
+        for button in self.query("#sweep-form Button").results(Button):
+            button.compact = self.short
 
     def on_sweep_changed(self, message: SweepChanged) -> None:
         self._redraw()
