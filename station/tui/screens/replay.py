@@ -212,12 +212,12 @@ class ReplayScreen(StationScreen):
         self._show_faults()  # the table's labels for the width
 
     # -- actions -------------------------------------------------------------------------------------
-    def on_button_pressed(self, event: Button.Pressed) -> None:
+    async def on_button_pressed(self, event: Button.Pressed) -> None:
         action = {"replay-run": "replay", "replay-results": "open_results",
                   "replay-diagnose": "open_diagnosis"}.get(event.button.id or "")
         if action is not None:
             event.stop()
-            self.run_action(action)
+            await self.run_action(action)  # a coroutine: not awaited, the buttons did nothing
 
     def _need_session(self) -> bool:
         if self.session is None:
