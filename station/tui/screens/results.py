@@ -24,7 +24,7 @@ import numpy as np
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Label, Select, Static
 
@@ -123,7 +123,7 @@ class ResultsScreen(StationScreen):
 
     def compose(self) -> ComposeResult:
         yield from self.compose_header()
-        with Vertical(id="results-body"):
+        with VerticalScroll(id="results-body"):  # ISO 230-2 caveats can push the plots below, a scroll away
             yield SessionPicker(self._folders, id="results-picker")
             with Horizontal(id="results-controls"):
                 yield Label("Method ")
