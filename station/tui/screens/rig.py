@@ -30,7 +30,10 @@ from drivers.interfaces import DriveLimits, DriveStatus, Environment, Reading
 from station.tui.errors import describe
 from station.tui.messages import RigStateChanged, SweepChanged
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import wrap_items
+from station.tui.widgets import set_columns, wrap_items
+
+DRIVE_COLUMNS = ("Leg", "State", "Position mm", "Moving", "Foll. err um", "Load N", "Table", "Fault")
+NARROW_DRIVE_COLUMNS = ("Leg", "State", "Pos. mm", "Moving", "Foll. µm", "Load N", "Table", "Fault")
 
 STATE_TEXT = {
     "operation_enabled": "[green]enabled[/green]",
@@ -122,10 +125,7 @@ class RigScreen(StationScreen):
         yield from self.compose_footer()
 
     def on_mount(self) -> None:
-        table = self.query_one("#drives", DataTable)
-        table.add_columns("Leg", "State", "Position mm", "Moving", "Foll. err um", "Load N", "Table", "Fault")
-        for leg in self.app.legs:
-            table.add_row(str(leg), "–", "–", "–", "–", "–", "–", "–", key=str(leg))
+        self._drives_columns()
         self.snapshot: RigSnapshot | None = None
         self._show_connection()
         self._show_motion()
@@ -253,9 +253,20 @@ class RigScreen(StationScreen):
         elif isinstance(env, str):
             widget.update(f"[red]environment unreadable:[/red] {env}")
 
+    def _drives_columns(self) -> None:
+        """The drives table's columns, shorter labels on a narrow terminal (so a leg's state, a
+        quick stop say, still leaves the fault column on show); its rows anew, the cursor kept."""
+        table = self.query_one("#drives", DataTable)
+        row = table.cursor_row
+        if set_columns(table, NARROW_DRIVE_COLUMNS if self.narrow else DRIVE_COLUMNS):
+            for leg in self.app.legs:
+                table.add_row(str(leg), "–", "–", "–", "–", "–", "–", "–", key=str(leg))
+            table.move_cursor(row=max(row, 0))
+
     def size_changed(self) -> None:
-        if self.snapshot is not None:  # break the readings' lines for the new width
-            self._show_readings(self.snapshot)
+        self._drives_columns()
+        if self.snapshot is not None:  # the drives again; the readings' lines broken for the new width
+            self._show_snapshot(self.snapshot)
 
     def _show_motion(self) -> None:
         """The move bar's leg, default speed and the line under it: the selected leg's soft

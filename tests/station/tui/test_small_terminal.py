@@ -320,3 +320,41 @@ async def _replay_diagnosis_platform(cfg, wait_until, session):
         assert len(labels) == 7 and labels[0] == "Measure"
         status = str(plat.query_one("#plat-status", Static).render())
         assert "2000 of 2000 poses" in status or "poses used" in status
+
+
+def test_a_resized_terminal_lays_the_pages_out_again(cfg, wait_until, recorded_session):
+    asyncio.run(_resized(cfg, wait_until, recorded_session))
+
+
+async def _resized(cfg, wait_until, session):
+    app = make_app(cfg)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await show_page(pilot, "results", wait_until)
+        app.screen.query_one("#session-path", Input).value = str(session)
+        await click(pilot, "#session-open")
+        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        results = app.screen
+
+        def labels(screen, selector) -> list[str]:
+            return [str(c.label) for c in screen.query_one(selector).columns.values()]
+
+        def bar(screen) -> str:
+            return Text.from_markup(str(screen.query_one(".nav-bar").content)).plain
+
+        assert labels(results, "#results-table")[:3] == ["Leg", "Points", "Cycles"]
+        assert "F4 Compensation" in bar(results) and not results.has_class("-narrow")
+        await pilot.resize_terminal(*SMALL)
+        await wait_until(pilot, lambda: results.has_class("-narrow") and results.has_class("-short"), what="-narrow")
+        await wait_until(pilot, lambda: labels(results, "#results-table")[:6] == ["Leg", "A", "E", "M", "B", "R"],
+                         what="the narrow columns")
+        assert results.query_one("#results-table").row_count == 2  # the rows again
+        assert len(bar(results)) <= SMALL[0] and "F7" in bar(results)
+        # a page not on show when the terminal changed is laid out when shown
+        await show_page(pilot, "rig", wait_until)
+        assert labels(app.screen, "#drives")[2] == "Pos. mm" and app.screen.has_class("-short")
+        await pilot.resize_terminal(120, 40)
+        await wait_until(pilot, lambda: labels(app.screen, "#drives")[2] == "Position mm", what="the wide Rig columns")
+        await show_page(pilot, "results", wait_until)
+        await wait_until(pilot, lambda: labels(results, "#results-table")[:3] == ["Leg", "Points", "Cycles"],
+                         what="the wide columns")
+        assert not results.has_class("-narrow") and "F4 Compensation" in bar(results)
