@@ -46,7 +46,7 @@ def assert_on_show(app, selector: str, screen=None):
     geometry = screen.find_widget(widget)
     region = geometry.region
     assert region.area > 0, f"{selector} has no room on screen"
-    assert screen.region.contains_region(region), f"{selector} at {region} is cut by the {SMALL} terminal"
+    assert screen.region.contains_region(region), f"{selector} at {region} is cut by the {screen.region.size} terminal"
     assert geometry.visible_region == region, f"{selector} at {region} is cut by its container to {geometry.visible_region}"
     under, _ = screen.get_widget_at(region.x + region.width // 2, region.y + region.height // 2)
     assert under is widget or widget in under.ancestors, f"{selector} is covered by {under!r}"
@@ -90,22 +90,23 @@ def test_the_tab_bar_names_all_seven_pages_in_80_columns_and_wider():
     assert all(key in tiny for _, key, _ in PAGES) and "Results" in tiny
 
 
-def test_every_page_has_its_controls_the_tab_bar_and_the_help_key_on_show_at_80x24(cfg, wait_until):
-    asyncio.run(_controls_on_show(cfg, wait_until))
+@pytest.mark.parametrize("size", [SMALL, (100, 30), (120, 40), (130, 40)], ids=lambda s: f"{s[0]}x{s[1]}")
+def test_every_page_has_its_controls_the_tab_bar_and_the_help_key_on_show(cfg, wait_until, size):
+    asyncio.run(_controls_on_show(cfg, wait_until, size))
 
 
-async def _controls_on_show(cfg, wait_until):
+async def _controls_on_show(cfg, wait_until, size=SMALL):
     app = make_app(cfg)
-    async with app.run_test(size=SMALL) as pilot:
+    async with app.run_test(size=size) as pilot:
         for mode, (_, selectors) in CONTROLS.items():
             await show_page(pilot, mode, wait_until)
             screen = app.screen
-            assert screen.has_class("-narrow") and screen.has_class("-short")
+            assert screen.has_class("-narrow") == (size[0] < 120) and screen.has_class("-short") == (size[1] < 32)
             bar = assert_on_show(app, ".nav-bar")
             text = Text.from_markup(str(bar.content)).plain
             assert all(key in text for _, key, _ in PAGES), text
-            assert bar.region.width == SMALL[0]
-            assert_on_show(app, "StationFooter FooterKey.-help-key")  # ? Help, however many keys
+            assert bar.region.width == size[0]
+            assert_on_show(app, "StationFooter FooterKey" + (".-help-key" if size[0] < 120 else ""))
             for selector in selectors:
                 assert_on_show(app, selector)
             if mode == "sweep":  # the form opens at its top
