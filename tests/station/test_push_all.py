@@ -108,3 +108,40 @@ async def _ui_push_all(tmp_path):
         await wait(pilot, lambda: any("pushed legs [1, 2, 3, 4, 5, 6]" in n.message for n in app._notifications),
                    "the notice")
         assert {leg: axis.active_bank() for leg, axis in app.rig.axes.items()} == {leg: 1 for leg in LEGS}
+
+
+def test_closing_the_ui_while_a_push_awaits_its_confirmation_writes_nothing(tmp_path):
+    """Nobody can answer any more: the push is cancelled (and logged so), the drive untouched."""
+    asyncio.run(_close_during_confirmation(tmp_path))
+
+
+async def _close_during_confirmation(tmp_path):
+    from procedures.table import read_table_csv
+    from station.tui.app import StationApp
+    from station.tui.screens.common import ConfirmScreen
+
+    cfg = StationConfig()
+    cfg.recordings_dir = str(tmp_path / "runs")
+    cfg.with_sim_memory()
+    app = StationApp(cfg, time_scale=0.0)
+    async with app.run_test(size=(120, 40)) as pilot:
+        for _ in range(3000):
+            if app.rig is not None:
+                break
+            await pilot.pause(0.02)
+        await pilot.press("f4")
+        app.screen.table = read_table_csv(_table(tmp_path / "t.csv"))
+        await pilot.press("u")
+        for _ in range(3000):
+            if isinstance(app.screen, ConfirmScreen):
+                break
+            await pilot.pause(0.02)
+        assert isinstance(app.screen, ConfirmScreen)
+        app.exit()
+    audit = Path(cfg.recordings_dir) / "audit.jsonl"
+    for _ in range(100):  # the worker notices within its 0.2 s wait
+        if audit.exists() and read_entries(audit)[0]:
+            break
+        await asyncio.sleep(0.05)
+    assert [(e.leg, e.outcome) for e in read_entries(audit)[0]] == [(1, "cancelled")]
+    assert _active_banks(Path(cfg.sim.nv_path)) == {leg: 0 for leg in LEGS}

@@ -177,12 +177,17 @@ class CompensationController:
             answer["yes"] = bool(yes)
             done.set()
 
-        def ask() -> None:
-            self.app.push_screen(ConfirmScreen(question, yes=yes, no="Cancel"), answered)
+        try:
+            app = self.app
 
-        self.app.call_from_thread(ask)
+            def ask() -> None:
+                app.push_screen(ConfirmScreen(question, yes=yes, no="Cancel"), answered)
+
+            app.call_from_thread(ask)
+        except Exception:  # the app is closing: nobody can answer, so nothing is written (cancelled)
+            return False
         while not done.wait(0.2):
-            if not self.app.is_running:
+            if not app.is_running:
                 return False
         return answer["yes"]
 
