@@ -103,27 +103,28 @@ class TableSpec:
     holder: str = "the drive"  # who holds it, for messages: "the drive", "LinuxCNC", ...
 
     def check(self, table: "TableBank", where: str = "table", limits: "DriveLimits | None" = None,
-              point_name=None) -> None:
+              point_name=None, min_points: int = 2) -> None:
         """Refuse (TableRefused naming `where`, the point and the field) a table this device must
         not get: unequal directions, fewer than 2 or more than `max_points` points, a step that is
         not a finite number >= `min_step_mm`, positions beyond the soft `limits` (when given), or
         an entry that is not finite or beyond +/-`max_correction_um`.
 
         `point_name(i)` names point i (0-based) in messages (default "point i+1 (x mm)"; a CSV
-        reader passes its row numbers)."""
+        reader passes its row numbers). `min_points`: 2 for a table to push; a drive also holds an
+        empty table (no correction) or a single constant, which have no step to check."""
         n = len(table.error_fwd_um)
         name = point_name or (lambda i: f"point {i + 1} ({table.start_mm + i * table.spacing_mm:+.4f} mm)")
         if len(table.error_rev_um) != n:
             raise TableRefused(f"{where}: the table has {n} forward but {len(table.error_rev_um)} reverse entries; "
                                "both directions need the same points.")
-        if n < 2:
-            raise TableRefused(f"{where}: the table has {n} point(s); a table needs at least two.")
+        if n < min_points:
+            raise TableRefused(f"{where}: the table has {n} point(s); a table needs at least {min_points}.")
         if n > self.max_points:
             raise TableRefused(f"{where}: the table has {n} points ({name(self.max_points)} is one too many); "
                                f"{self.holder} holds at most {self.max_points}: make it with a coarser step "
                                "(`station table --step`).")
         if not (math.isfinite(table.start_mm) and math.isfinite(table.spacing_mm)) \
-                or not table.spacing_mm >= self.min_step_mm - 1e-12:
+                or (n >= 2 and not table.spacing_mm >= self.min_step_mm - 1e-12):
             raise TableRefused(f"{where}, {name(1)}, field position_mm: the step {table.spacing_mm:g} mm is not a number >= the minimum "
                                f"step of {self.holder}, {self.min_step_mm:g} mm (positions must increase strictly).")
         end = table.start_mm + (n - 1) * table.spacing_mm

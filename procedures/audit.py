@@ -225,6 +225,14 @@ def read_entries(path: str | os.PathLike) -> tuple[list[AuditEntry], list[AuditP
     return entries, problems
 
 
+class AuditStopped(AuditError):
+    """The audit sink stopped a run because `entry` (a push's "started" or "ok") could not be stored."""
+
+    def __init__(self, entry: AuditEntry, message: str) -> None:
+        super().__init__(message)
+        self.entry = entry
+
+
 class AuditSink:
     """The runner sink that writes the `AuditRecord` events of a procedure to `log`: the only
     writer of the audit log.
@@ -253,12 +261,12 @@ class AuditSink:
         except AuditError as exc:
             text = str(exc.args[0])
             if entry.outcome == AuditOutcome.STARTED:
-                raise AuditError(f"leg {entry.leg}: {text}; the {entry.action} was not started: nothing was written "
-                                 "to the drive.") from None
+                raise AuditStopped(entry, f"leg {entry.leg}: {text}; the {entry.action} was not started: nothing was "
+                                   "written to the drive.") from None
             if entry.outcome == AuditOutcome.OK and entry.action != Action.VERIFY:
-                raise AuditError(f"leg {entry.leg}: the table was written and bank {entry.bank} is active, but the audit "
-                                 f"log could not record it ({text}); its backup is in the 'started' entry "
-                                 f"({entry.op_id}).") from None
+                raise AuditStopped(entry, f"leg {entry.leg}: the table was written and bank {entry.bank} is active, but "
+                                   f"the audit log could not record it ({text}); its backup is in the 'started' entry "
+                                   f"({entry.op_id}).") from None
             self.problems.append(text)
 
     def close(self, outcome: str) -> None:

@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator
 from drivers.errors import DriverError, TableError, TableRefused
 from drivers.interfaces import ServoAxis, TableBank, TableSpec
 from procedures import events as ev
-from procedures.audit import AuditEntry, AuditError, AuditLog, AuditSink, new_id
+from procedures.audit import AuditEntry, AuditLog, AuditSink, AuditStopped, new_id
 from procedures.errors import InputError
 from procedures.runner import ListSink, run
 from procedures.states import Action, AuditOutcome
@@ -520,10 +520,8 @@ def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) 
     sinks = [events] + ([AuditSink(audit)] if audit is not None else [])
     try:
         run(procedure, sinks)
-    except AuditError as exc:
-        started = [e for e in events.of(ev.AuditRecord) if e.entry.outcome == AuditOutcome.STARTED]
-        wrote = any(isinstance(e, ev.TablePushed) for e in events.events) or len(events.of(ev.AuditRecord)) > len(started)
-        raise (PushFailed if wrote else PushRefused)(str(exc.args[0])) from None
+    except AuditStopped as exc:  # "started" not stored: nothing written; "ok" not stored: written and active
+        raise (PushRefused if exc.entry.outcome == AuditOutcome.STARTED else PushFailed)(str(exc.args[0])) from None
     end = finished(events.events)
     if end is None:
         raise PushFailed("the operation ended without an outcome")

@@ -14,7 +14,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from dataclasses import replace
 from typing import Callable, Sequence
 from urllib.parse import parse_qs, urlsplit
 
@@ -22,7 +21,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException
 
 from drivers.clock import SystemClock
-from drivers.errors import CommTimeout, DriveFault, DriverError, SoftLimitError, TableError, TableRefused
+from drivers.errors import CommTimeout, DriveFault, DriverError, SoftLimitError, TableError
 from drivers.interfaces import Clock, DriveLimits, DriveStatus, TableBank, TableSpec
 from drivers.modbus.codec import chunks, crc16_modbus, int_range
 from drivers.modbus.profile import MAX_READ_WORDS, MAX_WRITE_WORDS, DriveProfile
@@ -565,15 +564,7 @@ def table_registers(profile: DriveProfile, table: TableBank, where: str = "table
     """
     t = profile.table
     n = len(table.error_fwd_um)
-    spec = table_spec(profile)
-    if n >= 2:
-        spec.check(table, where)
-    else:  # empty (no correction) or a single constant: no step to check, the entries still are
-        padded = TableBank(0.0, 1.0, tuple(table.error_fwd_um) * 2 or (0.0, 0.0), tuple(table.error_rev_um) * 2 or (0.0, 0.0))
-        if len(table.error_rev_um) != n:
-            raise TableRefused(f"{where}: {n} forward but {len(table.error_rev_um)} reverse entries; both directions "
-                               "need the same points.")
-        replace(spec, min_step_mm=0.0).check(padded, where)
+    table_spec(profile).check(table, where, min_points=0)
     lo, hi = int_range(t.entry_type)
     fwd = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_fwd_um]
     rev = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_rev_um]

@@ -78,11 +78,11 @@ def audit_log(args, cfg: StationConfig) -> AuditLog:
 
 
 def prompt(yes: bool, stdin=None, stdout=None):
-    """A `Confirm` for the command line: True with --yes, else the user types y/yes at the
-    terminal. InputError when stdin is not a terminal and --yes was not given (nobody can
+    """`ask(question) -> bool` for the command line: True with --yes, else the user types y/yes at
+    the terminal. InputError when stdin is not a terminal and --yes was not given (nobody can
     answer: refuse rather than guess)."""
 
-    def confirm(plan: PushPlan) -> bool:
+    def ask(question: str) -> bool:
         if yes:
             return True
         inp = stdin or sys.stdin
@@ -90,11 +90,11 @@ def prompt(yes: bool, stdin=None, stdout=None):
         if not (hasattr(inp, "isatty") and inp.isatty()):
             raise InputError("not confirmed: stdin is not a terminal, so nobody can answer the question; "
                              "run it in a terminal, or add --yes to confirm on the command line. Nothing was written.")
-        out.write(f"{plan.question()} [y/N] ")
+        out.write(f"{question} [y/N] ")
         out.flush()
         return inp.readline().strip().lower() in ("y", "yes")
 
-    return confirm
+    return ask
 
 
 class PlanPrinter:
@@ -192,7 +192,7 @@ def run(args) -> int:
                            sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…), rows of leg {leg}")])
         else:
             job = push_legs_job(drive.axes, tables, audit=audit, drive_url=drive.url, sources=sources,
-                                confirm=_with_audit_line(prompt_all(args.yes, legs), audit),
+                                confirm=_with_audit_line(prompt(args.yes), audit),
                                 sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…)")])
     for end in job.of(ev.OperationFinished):
         result = end.result
@@ -229,29 +229,13 @@ def parse_leg_choice(text: str) -> tuple[int, ...]:
                          "or all") from None
 
 
-def prompt_all(yes: bool, legs: tuple[int, ...]):
-    """One question for several legs' plans (the plans were printed before)."""
-    one = prompt(yes)
+def _with_audit_line(ask, audit: AuditLog):
+    """A `Confirm` for one plan or several: say where the audit log is, then ask."""
 
     def confirm(plans) -> bool:
-        return one(_Several(f"Push these tables to legs {', '.join(str(p.leg) for p in plans)}?"))
+        print(f"audit log: {audit.path}")
+        if isinstance(plans, PushPlan):
+            return ask(plans.question())
+        return ask(f"Push these tables to legs {', '.join(str(p.leg) for p in plans)}?")
 
     return confirm
-
-
-class _Several:
-    def __init__(self, text: str) -> None:
-        self.text = text
-
-    def question(self) -> str:
-        return self.text
-
-
-def _with_audit_line(confirm, audit: AuditLog):
-    """Say where the audit log is just before asking."""
-
-    def ask(plan: PushPlan) -> bool:
-        print(f"audit log: {audit.path}")
-        return confirm(plan)
-
-    return ask

@@ -46,7 +46,8 @@ def run(args) -> int:
     print(f"drive: {drive_text(cfg)}")
     with open_drive(cfg, leg) as drive:
         warn_audit_problems(audit)
-        job = rollback_job(drive.axis, audit=audit, drive_url=drive.url, confirm=prompt(args.yes),
+        ask = prompt(args.yes)
+        job = rollback_job(drive.axis, audit=audit, drive_url=drive.url, confirm=lambda plan: ask(plan.question()),
                            sinks=[PlanPrinter()])
     code = report(job, audit)
     if code:
