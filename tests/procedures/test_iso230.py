@@ -61,7 +61,7 @@ def hand_iso230(rows: list[dict[str, str]]) -> tuple[dict[str, float | None], bo
     return v, True
 
 
-def test_real_files_are_there():
+def test_real_files_are_there(shared_data):
     assert len(REAL) >= 9, "shared/data/real/*.csv not found beside the checkout"
 
 
