@@ -20,13 +20,40 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     time_scale = 0.0            # real seconds per simulated second (0 = no waiting)
     seed = 0
     nv_path = ""                # file for the simulated drive's table memory ("" = none)
+
+    [metrology]                 # the measurement chain (docs/metrology.md); all optional
+    reference_temp_c = 20.0     # lengths are normalised to this material temperature (ISO 1)
+    wavelength_nm = 632.991     # the laser's VACUUM wavelength, 400..1700 nm
+    co2_ppm = 450.0             # CO2 content for the refractive index when not measured
+    dead_path_mm = 0.0          # laser to interferometer zero, beam path not counted by the laser
+    laser_accuracy_ppm = 0.5    # instrument's stated accuracy, EXPANDED (k = 2)
+    laser_resolution_nm = 1.0
+    model = ""                  # instrument identification
+    serial = ""
+    calibration_date = ""       # ISO date of its last calibration, YYYY-MM-DD
+    air_temp_u_c = 0.1          # STANDARD uncertainties (k = 1) of the sensors
+    pressure_u_pa = 50.0
+    humidity_u_pct = 3.0
+    material_temp_u_c = 0.1
+    misalignment_mm = 0.0       # lateral beam offset over the stroke (cosine error)
+    abbe_offset_mm = 0.0
+    abbe_angle_u_urad = 0.0
+
+    [legs]                      # material of every leg (defaults: steel)
+    expansion_um_m_k = 11.5     # linear expansion coefficient, um/m/K
+    expansion_u_um_m_k = 1.0    # its standard uncertainty
+    fixed_point_mm = 0.0        # target_mm where the leg is fixed (zero thermal expansion)
+    [legs.3]                    # per-leg override, legs 1..6
+    fixed_point_mm = -150.0
 """
 
 from __future__ import annotations
 
+import datetime as _dt
 import getpass
+import math
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -65,12 +92,59 @@ class SimConfig:
 
 
 @dataclass
+class MetrologyConfig:
+    """The measurement chain's settings (docs/metrology.md). Uncertainties named `*_u_*` are
+    standard uncertainties (k = 1); `laser_accuracy_ppm` is the instrument's stated accuracy,
+    an expanded uncertainty (k = 2), as laser makers state it."""
+
+    reference_temp_c: float = 20.0  # ISO 1 reference temperature of lengths
+    wavelength_nm: float = 632.991  # vacuum wavelength of the laser (HeNe)
+    co2_ppm: float = 450.0  # CO2 mole fraction used when the session has no CO2 reading
+    dead_path_mm: float = 0.0  # beam path between the laser and the interferometer's zero
+    laser_accuracy_ppm: float = 0.5  # stated accuracy, k = 2
+    laser_resolution_nm: float = 1.0  # display/count resolution
+    model: str = ""  # instrument identification: maker and model
+    serial: str = ""
+    calibration_date: str = ""  # ISO date (YYYY-MM-DD) of the instrument's calibration; "" = not stated
+    air_temp_u_c: float = 0.1  # standard uncertainty of the air temperature sensor
+    pressure_u_pa: float = 50.0  # of the pressure sensor
+    humidity_u_pct: float = 3.0  # of the humidity sensor, %RH
+    material_temp_u_c: float = 0.1  # of the material temperature sensor
+    misalignment_mm: float = 0.0  # lateral beam offset over the whole stroke (cosine error)
+    abbe_offset_mm: float = 0.0  # distance between the beam and the leg's axis
+    abbe_angle_u_urad: float = 0.0  # standard uncertainty of the pitch/yaw angle over the stroke
+
+    @property
+    def instrument_model(self) -> str:
+        return self.model
+
+    @property
+    def instrument_serial(self) -> str:
+        return self.serial
+
+
+@dataclass(frozen=True)
+class LegMaterial:
+    """A leg's thermal expansion: `expansion_um_m_k` (um per metre per kelvin, steel 11.5) with
+    its standard uncertainty `expansion_u_um_m_k`, and `fixed_point_mm`, the position in the
+    station's target_mm coordinate where the leg is fixed, so that its thermal expansion is
+    zero there (docs/metrology.md)."""
+
+    expansion_um_m_k: float = 11.5
+    expansion_u_um_m_k: float = 1.0
+    fixed_point_mm: float = 0.0
+
+
+@dataclass
 class StationConfig:
     operator: str = field(default_factory=lambda: _whoami())
     recordings_dir: str = "runs"
     drive: DriveConfig = field(default_factory=DriveConfig)
     interferometer: LaserConfig = field(default_factory=LaserConfig)
     sim: SimConfig = field(default_factory=SimConfig)
+    metrology: MetrologyConfig = field(default_factory=MetrologyConfig)
+    legs: LegMaterial = field(default_factory=LegMaterial)  # [legs]: the default of every leg
+    leg_overrides: dict[int, LegMaterial] = field(default_factory=dict)  # [legs.N]
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -95,7 +169,17 @@ class StationConfig:
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d.pop("named")
+        d["leg_overrides"] = {str(k): v for k, v in d["leg_overrides"].items()}  # JSON keys are strings
         return d
+
+    def material_of(self, leg: int) -> LegMaterial:
+        """Leg `leg`'s material: its `[legs.N]` override, else the `[legs]` default."""
+        return self.leg_overrides.get(int(leg), self.legs)
+
+    def metrology_record(self) -> dict[str, Any]:
+        """The metrology config and every leg's material, as a session records it."""
+        return {"metrology": asdict(self.metrology),
+                "legs": {str(n): asdict(self.material_of(n)) for n in range(1, LEG_COUNT + 1)}}
 
     @property
     def from_file(self) -> bool:
@@ -139,6 +223,105 @@ _RANGES = {
 }
 
 
+# (section, key) -> (lowest, highest, what the value is): both bounds inclusive; the physical
+# sense of the metrology numbers (a value outside is a typo or a unit mix-up, never a setting)
+_BOUNDS = {
+    ("metrology", "reference_temp_c"): (-10.0, 50.0, "the reference temperature of lengths, degC (ISO 1: 20)"),
+    ("metrology", "wavelength_nm"): (400.0, 1700.0, "the laser's vacuum wavelength in nm (HeNe: 632.991); "
+                                     "the refractive-index equations hold over 400..1700 nm"),
+    ("metrology", "co2_ppm"): (0.0, 5000.0, "CO2 content of the air in ppm (about 450 outdoors)"),
+    ("metrology", "dead_path_mm"): (0.0, 10000.0, "laser-to-zero beam path in mm"),
+    ("metrology", "laser_accuracy_ppm"): (0.0, 100.0, "the laser's stated accuracy in ppm, k = 2"),
+    ("metrology", "laser_resolution_nm"): (0.0, 10000.0, "the laser's resolution in nm"),
+    ("metrology", "air_temp_u_c"): (0.0, 10.0, "standard uncertainty of the air temperature, K"),
+    ("metrology", "pressure_u_pa"): (0.0, 10000.0, "standard uncertainty of the air pressure, Pa"),
+    ("metrology", "humidity_u_pct"): (0.0, 100.0, "standard uncertainty of the relative humidity, %RH (0..100)"),
+    ("metrology", "material_temp_u_c"): (0.0, 10.0, "standard uncertainty of the material temperature, K"),
+    ("metrology", "misalignment_mm"): (0.0, 100.0, "lateral beam offset over the stroke, mm"),
+    ("metrology", "abbe_offset_mm"): (0.0, 1000.0, "Abbe offset between beam and leg axis, mm"),
+    ("metrology", "abbe_angle_u_urad"): (0.0, 10000.0, "standard uncertainty of the angular error, urad"),
+    ("legs", "expansion_um_m_k"): (0.0, 50.0, "the linear expansion coefficient in um/m/K (steel 11.5, "
+                                   "aluminium 23; none above 50)"),
+    ("legs", "expansion_u_um_m_k"): (0.0, 50.0, "the standard uncertainty of the expansion coefficient, um/m/K"),
+    ("legs", "fixed_point_mm"): (-5000.0, 5000.0, "target_mm where the leg is fixed, mm from mid-stroke"),
+}
+
+
+def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, float, str] | None) -> float:
+    """`value` as a finite float within `bounds`, else InputError naming file, section and key."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{p}: [{where}] {key}: expected a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise InputError(f"{p}: [{where}] {key} = {value!r}: must be a finite number")
+    if bounds is not None:
+        low, high, what = bounds
+        if not low <= v <= high:
+            raise InputError(f"{p}: [{where}] {key} = {value!r}: must be within {low:g}..{high:g} ({what})")
+    return v
+
+
+def _iso_date(p: Path, value: Any) -> str:
+    text = str(value) if isinstance(value, _dt.date) else value  # TOML may give a date literal
+    if not isinstance(text, str):
+        raise InputError(f"{p}: [metrology] calibration_date: expected an ISO date YYYY-MM-DD, got {value!r}")
+    if text == "":
+        return ""
+    try:
+        _dt.date.fromisoformat(text)
+        if len(text) != 10:
+            raise ValueError
+    except ValueError:
+        raise InputError(f"{p}: [metrology] calibration_date = {value!r}: not an ISO date; write it as "
+                         "YYYY-MM-DD, e.g. 2026-03-14") from None
+    return text
+
+
+def _load_metrology(p: Path, table: Any) -> MetrologyConfig:
+    if not isinstance(table, dict):
+        raise InputError(f"{p}: [metrology] must be a table of keys")
+    m = MetrologyConfig()
+    fields = MetrologyConfig.__dataclass_fields__
+    for key, value in table.items():
+        if key not in fields:
+            raise InputError(f"{p}: [metrology] {key}: unknown key (known: {', '.join(fields)})")
+        if key == "calibration_date":
+            setattr(m, key, _iso_date(p, value))
+        elif isinstance(getattr(m, key), str):
+            if not isinstance(value, str):
+                raise InputError(f"{p}: [metrology] {key}: expected text, got {value!r}")
+            setattr(m, key, value)
+        else:
+            setattr(m, key, _number(p, "metrology", key, value, _BOUNDS.get(("metrology", key))))
+    return m
+
+
+def _material(p: Path, where: str, table: dict, base: LegMaterial) -> LegMaterial:
+    fields = LegMaterial.__dataclass_fields__
+    values = {}
+    for key, value in table.items():
+        if key not in fields:
+            raise InputError(f"{p}: [{where}] {key}: unknown key (known: {', '.join(fields)}; per-leg "
+                             "overrides go in [legs.1] .. [legs.6])")
+        values[key] = _number(p, where, key, value, _BOUNDS[("legs", key)])
+    return replace(base, **values)
+
+
+def _load_legs(p: Path, table: Any) -> tuple[LegMaterial, dict[int, LegMaterial]]:
+    if not isinstance(table, dict):
+        raise InputError(f"{p}: [legs] must be a table of keys")
+    own = {k: v for k, v in table.items() if not isinstance(v, dict)}
+    default = _material(p, "legs", own, LegMaterial())
+    overrides: dict[int, LegMaterial] = {}
+    for key, sub in table.items():
+        if not isinstance(sub, dict):
+            continue
+        if not (key.isdigit() and 1 <= int(key) <= LEG_COUNT):
+            raise InputError(f"{p}: [legs.{key}]: not a leg; per-leg sections are [legs.1] .. [legs.{LEG_COUNT}]")
+        overrides[int(key)] = _material(p, f"legs.{key}", sub, default)
+    return default, overrides
+
+
 def load_config(path: str | Path | None) -> StationConfig:
     """Read a station TOML; unknown keys and wrong types are refused with file and key named."""
     cfg = StationConfig()
@@ -174,7 +357,11 @@ def load_config(path: str | Path | None) -> StationConfig:
                                      f"{low:g} ({what})")
             if (section, key) in (("drive", "url"), ("interferometer", "port")):
                 cfg.named = cfg.named | {f"{section}.{key}"}
-    unknown = set(data) - {"station", *_SECTIONS}
+    if "metrology" in data:
+        cfg.metrology = _load_metrology(p, data["metrology"])
+    if "legs" in data:
+        cfg.legs, cfg.leg_overrides = _load_legs(p, data["legs"])
+    unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs"}
     if unknown:
         raise InputError(f"{p}: unknown section(s) {sorted(unknown)}")
     return cfg
