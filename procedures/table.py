@@ -375,9 +375,10 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
 def read_linuxcnc_comp(path: str | os.PathLike, comp_type: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A COMP_FILE as LinuxCNC loads it: (nominal_mm, forward_trim_mm, reverse_trim_mm).
     Type 0 lines are converted as LinuxCNC does (trim = nominal - actual). Reading stops at the
-    first line that is not three numbers, as LinuxCNC's does."""
+    first line that is not three numbers, as LinuxCNC's does (a line that is not text, too)."""
     nom, fwd, rev = [], [], []
-    for line in Path(path).read_text().splitlines():
+    # bytes that are not UTF-8 become U+FFFD, which no number parses: reading stops there
+    for line in Path(path).read_text(encoding="utf-8", errors="replace").splitlines():
         parts = line.split()
         if len(parts) < 3:
             break
