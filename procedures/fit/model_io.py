@@ -83,6 +83,14 @@ def save_model(model: LegErrorModel, path: str | os.PathLike, source_path: str |
 
 # -- reading ---------------------------------------------------------------------------------
 
+def _finite(x: int | float) -> bool:
+    """math.isfinite, False for an integer beyond any float (JSON integers are unbounded)."""
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
 class _Checker:
     def __init__(self, path: Path):
         self.path = path
@@ -105,7 +113,7 @@ class _Checker:
             return None
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not isinstance(v, int)):
             raise self.fail(name, f"expected {'an integer' if integer else 'a number'}, got {v!r:.40}")
-        if not math.isfinite(v):
+        if not _finite(v):
             raise self.fail(name, "not a finite number")
         return v
 
@@ -115,7 +123,7 @@ class _Checker:
         if not isinstance(v, list):
             raise self.fail(name, "expected a list of numbers")
         for i, x in enumerate(v):
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or (integer and not isinstance(x, int)) or not math.isfinite(x):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or (integer and not isinstance(x, int)) or not _finite(x):
                 raise self.fail(f"{name}[{i}]", f"expected a finite {'integer' if integer else 'number'}, got {x!r:.40}")
         if length is not None and len(v) != length:
             raise self.fail(name, f"expected {length} values, got {len(v)}")
