@@ -135,6 +135,46 @@ class LegMaterial:
     fixed_point_mm: float = 0.0
 
 
+COMPENSATION_TARGETS = ("drive", "station", "controller")
+"""Where a leg's compensation table lives (docs/compensation.md): the drive's table banks, the
+station (it subtracts the table from every target it commands), or a controller's files."""
+
+STATION_TABLES_NAME = "station-tables.json"
+"""The station-side table store's default file name in the recordings folder."""
+
+
+@dataclass
+class CompensationConfig:
+    """[compensation]: `target` for every leg, `legs` overrides per leg ({3 = "station"}),
+    `tables_path` the station-side table store ("" = <recordings_dir>/station-tables.json)."""
+
+    target: str = "drive"
+    legs: dict = field(default_factory=dict)
+    tables_path: str = ""
+
+    def target_of(self, leg: int) -> str:
+        return self.legs.get(int(leg), self.target)
+
+    def check(self, where: str) -> None:
+        """InputError naming `where` and the key for an unknown target or leg; keys become ints."""
+        if self.target not in COMPENSATION_TARGETS:
+            raise InputError(f"{where}: [compensation] target = {self.target!r}: must be one of "
+                             f"{', '.join(COMPENSATION_TARGETS)}")
+        legs = {}
+        for key, value in self.legs.items():
+            try:
+                leg = int(key)
+            except (TypeError, ValueError):
+                leg = 0
+            if not 1 <= leg <= LEG_COUNT:
+                raise InputError(f"{where}: [compensation] legs key {key!r}: not a leg number 1..{LEG_COUNT}")
+            if value not in COMPENSATION_TARGETS:
+                raise InputError(f"{where}: [compensation] legs.{key} = {value!r}: must be one of "
+                                 f"{', '.join(COMPENSATION_TARGETS)}")
+            legs[leg] = value
+        self.legs = legs
+
+
 @dataclass
 class StationConfig:
     operator: str = field(default_factory=lambda: _whoami())
@@ -145,6 +185,7 @@ class StationConfig:
     metrology: MetrologyConfig = field(default_factory=MetrologyConfig)
     legs: LegMaterial = field(default_factory=LegMaterial)  # [legs]: the default of every leg
     leg_overrides: dict[int, LegMaterial] = field(default_factory=dict)  # [legs.N]
+    compensation: CompensationConfig = field(default_factory=CompensationConfig)
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -156,6 +197,11 @@ class StationConfig:
     def audit_path(self) -> Path:
         """<recordings_dir>/audit.jsonl: the audit log both front ends use."""
         return Path(self.recordings_dir) / AUDIT_NAME
+
+    @property
+    def station_tables_path(self) -> Path:
+        """The station-side table store: [compensation] tables_path, or <recordings_dir>/station-tables.json."""
+        return Path(self.compensation.tables_path or Path(self.recordings_dir) / STATION_TABLES_NAME)
 
     def with_sim_memory(self) -> "StationConfig":
         """On the simulated drive, its table memory defaulted to <recordings_dir>/sim-drive-nv.json
@@ -170,6 +216,7 @@ class StationConfig:
         d = asdict(self)
         d.pop("named")
         d["leg_overrides"] = {str(k): v for k, v in d["leg_overrides"].items()}  # JSON keys are strings
+        d["compensation"]["legs"] = {str(k): v for k, v in d["compensation"]["legs"].items()}
         return d
 
     def material_of(self, leg: int) -> LegMaterial:
@@ -212,7 +259,8 @@ def _whoami() -> str:
         return "unknown"
 
 
-_SECTIONS = {"drive": DriveConfig, "interferometer": LaserConfig, "sim": SimConfig}
+_SECTIONS = {"drive": DriveConfig, "interferometer": LaserConfig, "sim": SimConfig,
+             "compensation": CompensationConfig}
 
 # (section, key) -> (lowest, strictly above it?, what the value is): physical sense of numbers
 _RANGES = {
@@ -361,6 +409,7 @@ def load_config(path: str | Path | None) -> StationConfig:
         cfg.metrology = _load_metrology(p, data["metrology"])
     if "legs" in data:
         cfg.legs, cfg.leg_overrides = _load_legs(p, data["legs"])
+    cfg.compensation.check(str(p))
     unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs"}
     if unknown:
         raise InputError(f"{p}: unknown section(s) {sorted(unknown)}")

@@ -73,6 +73,11 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
                          nv_path=nv, profile=profile).start()
         try:
             axes = connect_axes(sim.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
+            try:
+                axes = compensation_axes(cfg, axes)
+            except BaseException:
+                _close_axes(axes)
+                raise
             laser = SerialInterferometer(sim.laser_port, timeout_s=cfg.interferometer.timeout_s)
         except Exception:
             sim.stop()
@@ -81,6 +86,7 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         return Rig(axes, laser, sim.clock, "sim", desc, profile, sim, [sim.stop])
     axes = connect_axes(cfg.drive.url, legs, profile, timeout_s=cfg.drive.timeout_s)
     try:
+        axes = compensation_axes(cfg, axes)
         laser = SerialInterferometer(cfg.interferometer.port, baudrate=cfg.interferometer.baudrate,
                                      timeout_s=cfg.interferometer.timeout_s)
     except Exception:
@@ -131,6 +137,11 @@ def open_drive(cfg: StationConfig, legs: int | tuple[int, ...]) -> DriveHandle:
         port = sim.drive_server.start_tcp()
         try:
             axes = connect_axes(f"tcp://127.0.0.1:{port}", legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
+            try:
+                axes = compensation_axes(cfg, axes)
+            except BaseException:
+                _close_axes(axes)
+                raise
         except BaseException:
             sim.drive_server.stop()
             raise
@@ -141,7 +152,42 @@ def open_drive(cfg: StationConfig, legs: int | tuple[int, ...]) -> DriveHandle:
 
         return DriveHandle(dict(axes), f"sim ({cfg.sim.nv_path})" if cfg.sim.nv_path else "sim", close)
     axes = connect_axes(cfg.drive.url, legs, profile, timeout_s=cfg.drive.timeout_s)
+    try:
+        axes = compensation_axes(cfg, axes)
+    except BaseException:
+        close_all(axes)
+        raise
     return DriveHandle(dict(axes), cfg.drive.url, lambda: close_all(axes))
+
+
+def _close_axes(axes) -> None:
+    for axis in axes.values():
+        try:
+            axis.close()
+        except Exception:
+            pass
+
+
+def compensation_axes(cfg: StationConfig, axes: dict[int, ServoAxis]) -> dict[int, ServoAxis]:
+    """`axes` with every leg whose [compensation] target is `station` wrapped in the station-side
+    table (drivers/station_compensation.py, its store at cfg.station_tables_path). TableError
+    (one line) when such a leg's drive applies a non-empty table of its own: both would correct.
+    Legs with target `drive` or `controller` keep their drive as it is (a push to a drive without
+    a table is refused by the push itself, offering the other two targets)."""
+    from drivers.station_compensation import StationCompensatedAxis, StationTableStore
+
+    out = dict(axes)
+    for leg, axis in axes.items():
+        if cfg.compensation.target_of(leg) == "station":
+            wrapped = StationCompensatedAxis(axis, StationTableStore(cfg.station_tables_path))
+            wrapped.check_drive_table()
+            out[leg] = wrapped
+    return out
+
+
+def compensation_target_of(axis: ServoAxis) -> str:
+    """"station" for a leg the station compensates, else "drive" (what the axis itself holds)."""
+    return getattr(axis, "compensation_target", "drive")
 
 
 def drive_url_of(cfg: StationConfig) -> str:
