@@ -1,0 +1,2 @@
+"""The measurement chain: air refractive index, re-correction of the laser's air compensation,
+normalisation of lengths to the 20 degC reference temperature (docs/metrology.md)."""
