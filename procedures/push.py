@@ -18,6 +18,13 @@ works, real, simulated or replayed. The safe path, for a push and for a rollback
    because the drive only changes tables on the activation write; the error says so, and says
    honestly when the state could not be confirmed.
 
+Compensation targets (docs/compensation.md): the same procedures serve a leg whose table the
+drive holds (target "drive") and a leg whose table the station applies to every command
+(target "station": drivers/station_compensation.py, a ServoAxis with the same two banks, wired
+in station/wiring.py). `compensation_target(axis)` tells them apart; the plan shows it, every
+audit entry records it in `details["target"]`, and a rollback only restores a push made to the
+same target.
+
 Conventions: table entries are predicted errors (measured minus commanded, um) that the drive
 subtracts; positions mm. `table_sha256` is the hash of a table's content as the drive stores it
 (entries quantised to the drive's resolution), so a table read back from a drive hashes the
@@ -140,6 +147,22 @@ def _short(sha: str) -> str:
     return sha[:12]
 
 
+def compensation_target(axis: ServoAxis) -> str:
+    """Where `axis`'s table is applied: "station" for the station-side wrapper (its
+    `compensation_target` attribute), else "drive"."""
+    return str(getattr(axis, "compensation_target", "drive"))
+
+
+def _target_details(axis: ServoAxis) -> dict[str, Any]:
+    """The audit details naming the target (and the station's store file, where it applies)."""
+    target = compensation_target(axis)
+    d: dict[str, Any] = {"target": target}
+    store = getattr(getattr(axis, "store", None), "path", None)
+    if target == "station" and store is not None:
+        d["store"] = str(store)
+    return d
+
+
 # -- plans and results -------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -164,11 +187,19 @@ class PushPlan:
     source: dict[str, Any] | None = None
     details: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def target(self) -> str:
+        """The leg's compensation target: "drive" (its table banks) or "station"."""
+        return str(self.details.get("target", "drive"))
+
     def describe(self) -> list[str]:
-        """Lines for the confirmation: leg, drive, what is written, what is replaced."""
+        """Lines for the confirmation: leg, drive, target, what is written, what is replaced."""
         verb = "restore" if self.action == Action.ROLLBACK else "write"
         lines = [
             f"leg {self.leg}: drive {self.drive}" + (f" at {self.drive_url}" if self.drive_url else ""),
+            f"  target:   {self.target}" + (f" (the station applies the table to every command; tables in "
+                                            f"{self.details.get('store')})" if self.target == "station"
+                                            else " (the drive's table banks)"),
             f"  {verb}:    {describe_table(self.table)}",
             f"            sha256 {self.table_sha256}, into bank {self.target_bank} (inactive), then switch to it",
             f"  replaces: bank {self.active_bank}, {describe_table(self.backup)}, sha256 {_short(self.backup_sha256)}…",
@@ -176,7 +207,8 @@ class PushPlan:
         if self.table_sha256 == self.backup_sha256:
             lines.append("  note: the drive's active table already holds exactly this table")
         if not self.table_enabled:
-            lines.append("  note: the drive does not apply its table (table_enable = 0); the table is stored but not applied")
+            lines.append(f"  note: {'the station' if self.target == 'station' else 'the drive'} does not apply this leg's table "
+                         "(table compensation off); the table is stored but not applied")
         return lines
 
     def question(self) -> str:
@@ -236,8 +268,10 @@ def drive_table_spec(axis: ServoAxis, what: str = "push") -> TableSpec:
     """What `axis` holds; PushRefused when it holds no table bank this station can write."""
     spec = axis.table_spec()
     if spec is None:
-        raise PushRefused(f"leg {axis.leg}: this drive holds no compensation table, so there is nothing to {what}; "
-                          "compensate in the controller instead (`station table --format linuxcnc`).")
+        raise PushRefused(f"leg {axis.leg}: this drive holds no compensation table, so there is nothing to {what} "
+                          "with compensation target drive; choose target station (the station applies the table to "
+                          f"every command: [compensation] legs = {{ {axis.leg} = \"station\" }} in the config) or "
+                          "controller (files for the motion controller: `station table --format linuxcnc`).")
     if spec.banks < 2:
         raise PushRefused(f"leg {axis.leg}: the drive holds {spec.banks} table bank(s); a safe {what} needs two "
                           "(write the inactive one, then switch).")
@@ -261,7 +295,7 @@ def prepare_push(axis: ServoAxis, table: TableBank | LegTable, *, spec: TableSpe
         where = f"{source['path']}, {where}"
     spec.check(bank_table, where, limits, table.point_name if isinstance(table, LegTable) else None)
     return PushPlan(Action.PUSH, axis.leg, identity, drive_url, bank_table, table_sha256(bank_table), active, 1 - active,
-                    current, table_sha256(current), enabled, source)
+                    current, table_sha256(current), enabled, source, _target_details(axis))
 
 
 def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -> PushPlan:
@@ -272,21 +306,27 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
     drive_table_spec(axis, "roll back")
     identity, active, current, enabled = _read_state(axis, "rollback")
     leg = axis.leg
+    target = compensation_target(axis)
+
+    def same_target(e: AuditEntry) -> bool:  # entries before targets existed were all drive pushes
+        return str((e.details or {}).get("target", "drive")) == target
+
     current_sha = table_sha256(current)
     entries = audit.entries()
     push = None
     for i in range(len(entries) - 1, -1, -1):
         e = entries[i]
-        if e.action == Action.PUSH and e.outcome == AuditOutcome.OK and e.leg == leg and e.drive == identity:
+        if (e.action == Action.PUSH and e.outcome == AuditOutcome.OK and e.leg == leg and e.drive == identity
+                and same_target(e)):
             push, push_at = e, i
             break
     if push is None:
-        raise PushRefused(f"leg {leg}: the audit log {audit.path} has no successful push to drive {identity}; "
-                          "there is nothing to roll back.")
+        raise PushRefused(f"leg {leg}: the audit log {audit.path} has no successful push to drive {identity} "
+                          f"with compensation target {target}; there is nothing to roll back.")
     if push.table_sha256 != current_sha:
         for later in entries[push_at + 1:]:
             if (later.action == Action.ROLLBACK and later.outcome == AuditOutcome.OK and later.leg == leg
-                    and later.drive == identity and later.table_sha256 == current_sha):
+                    and later.drive == identity and later.table_sha256 == current_sha and same_target(later)):
                 raise PushRefused(f"leg {leg}: already rolled back at {later.time_utc}: the active table is the one from "
                                   f"before the push of {push.time_utc}. To use the pushed table again, push it again.")
         raise PushRefused(f"leg {leg}: the drive's active table (sha256 {_short(current_sha)}…) is not the table the last "
@@ -295,7 +335,7 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
     restore = table_from_json(push.backup, where=f"{audit.path}, push of {push.time_utc}")
     return PushPlan(Action.ROLLBACK, leg, identity, drive_url, restore, table_sha256(restore), active, 1 - active,
                     current, current_sha, enabled, push.source,
-                    {"rolls_back": push.op_id or push.id, "push_time_utc": push.time_utc})
+                    {**_target_details(axis), "rolls_back": push.op_id or push.id, "push_time_utc": push.time_utc})
 
 
 # -- the procedures ------------------------------------------------------------------------------
@@ -313,7 +353,8 @@ def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Con
     try:
         plan = prepare_push(axis, table, spec=spec, drive_url=drive_url, source=source)
     except (PushRefused, TableRefused) as exc:
-        yield from refused(Action.PUSH, axis.leg, exc, drive=_identity(axis), drive_url=drive_url, source=source)
+        yield from refused(Action.PUSH, axis.leg, exc, drive=_identity(axis), drive_url=drive_url, source=source,
+                           details=_target_details(axis))
         return
     yield from _confirm_and_apply(axis, plan, confirm)
 
@@ -336,7 +377,7 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
             plans.append(prepare_push(axes[leg], tables[leg], drive_url=drive_url, source=sources.get(leg)))
         except (PushRefused, TableRefused) as exc:
             yield from refused(Action.PUSH, leg, exc, drive=_identity(axes[leg]), drive_url=drive_url,
-                               source=sources.get(leg))
+                               source=sources.get(leg), details=_target_details(axes[leg]))
             yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED,
                                        f"{_message(exc)}; nothing was written to any leg")
             return
@@ -347,13 +388,15 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
             ok = confirm(plans)
         except InputError as exc:
             for plan in plans:
-                yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source)
+                yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source,
+                               details={"target": plan.target})
             yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED, _message(exc))
             return
         if not ok:
             for plan in plans:
                 yield from refused(plan.action, plan.leg, "cancelled at the confirmation; nothing written", drive=plan.drive,
-                                   drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED)
+                                   drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED,
+                               details={"target": plan.target})
             yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.CANCELLED, "cancelled; nothing was written")
             return
     done: list[int] = []
@@ -381,19 +424,23 @@ def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | N
     try:
         plan = prepare_rollback(axis, audit, drive_url=drive_url)
     except (PushRefused, InputError) as exc:
-        yield from refused(Action.ROLLBACK, axis.leg, exc, drive=_identity(axis), drive_url=drive_url)
+        yield from refused(Action.ROLLBACK, axis.leg, exc, drive=_identity(axis), drive_url=drive_url,
+                           details=_target_details(axis))
         return
     yield from _confirm_and_apply(axis, plan, confirm)
 
 
 def refused(action: Action, leg: int, reason: BaseException | str, *, drive: str = "", drive_url: str = "",
-            source: dict[str, Any] | None = None, outcome: AuditOutcome = AuditOutcome.REFUSED) -> Iterator[ev.Event]:
+            source: dict[str, Any] | None = None, outcome: AuditOutcome = AuditOutcome.REFUSED,
+            details: dict[str, Any] | None = None) -> Iterator[ev.Event]:
     """A refusal (or a cancellation) as events: its audit entry, then `OperationFinished`. Also
-    what a front end runs for a refusal it finds before a drive is reached (a bad table file)."""
+    what a front end runs for a refusal it finds before a drive is reached (a bad table file).
+    `details` go into the audit entry (the compensation target, `{"target": ...}`)."""
     text = _message(reason) if isinstance(reason, BaseException) else str(reason)
     if outcome == AuditOutcome.REFUSED and "written" not in text:
         text += ". Nothing was written to the drive."
-    yield ev.AuditRecord(AuditEntry(action, leg, outcome, text, drive, drive_url, source=source))
+    yield ev.AuditRecord(AuditEntry(action, leg, outcome, text, drive, drive_url, source=source,
+                                    details=dict(details or {})))
     yield ev.OperationFinished(action, leg, outcome, text)
 
 
@@ -411,11 +458,13 @@ def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None)
         try:
             ok = confirm(plan)
         except InputError as exc:  # nobody can answer: refuse rather than guess
-            yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source)
+            yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source,
+                               details={"target": plan.target})
             return
         if not ok:
             yield from refused(plan.action, plan.leg, "cancelled at the confirmation; nothing written", drive=plan.drive,
-                               drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED)
+                               drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED,
+                               details={"target": plan.target})
             return
     yield from _apply(axis, plan)
 

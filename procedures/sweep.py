@@ -28,6 +28,7 @@ from drivers.interfaces import (
     ServoAxis,
 )
 from procedures import events as ev
+from procedures.applied_table import applied_tables_devices
 from procedures.control import Aborted, RunControl
 from procedures.plans import PlanPoint, SweepPlan
 from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
@@ -103,6 +104,7 @@ def sweep(
     devices["interferometer"] = laser.identity()
     tables = {leg: table_state(axes[leg]) for leg in plan.legs}
     devices.update({f"leg{leg}_compensation": text for leg, (_, text) in tables.items()})
+    devices.update(applied_tables_devices(axes, plan.legs))  # target, bank, sha256: in the file from its creation
     t_start = clock.now() if t0_s is None else t0_s
     yield ev.SweepStarted(session_id or uuid.uuid4().hex[:12], tuple(plan.legs), total, plan.to_dict(), devices, done)
     for leg, (active, text) in tables.items():

@@ -40,7 +40,7 @@ from procedures.fit.data import split_legs
 from procedures.fit.noise import estimate_noise_floor
 from procedures.iso230 import LegIso230, evaluate_leg
 from procedures.plans import SweepPlan
-from procedures.push import describe_table, refused, table_sha256
+from procedures.push import compensation_target, describe_table, drive_table_spec, PushRefused, refused, table_sha256
 from procedures.states import Action, AuditOutcome, Outcome
 from procedures.sweep import sweep
 
@@ -218,6 +218,7 @@ class ActiveTable:
     bank: int
     table_sha256: str
     description: str
+    target: str = "drive"  # who applies the table: "drive" or "station" (procedures.push.compensation_target)
 
 
 def verify_procedure(
@@ -244,6 +245,13 @@ def verify_procedure(
     active: dict[int, ActiveTable] = {}
     for leg in plan.legs:
         axis = axes[leg]
+        target = compensation_target(axis)
+        holder = "the station" if target == "station" else "the drive"
+        try:
+            drive_table_spec(axis, "verify")  # a drive without a table: refused, naming the other targets
+        except PushRefused as exc:
+            yield from refused(Action.VERIFY, leg, exc.args[0], drive_url=drive_url, details={"target": target})
+            return
         try:
             st = axis.status()
             identity = axis.identity()
@@ -251,29 +259,31 @@ def verify_procedure(
             table = axis.read_table(bank)
         except DriverError as exc:
             yield from refused(Action.VERIFY, leg, f"leg {leg}: cannot read the drive's table before the verification "
-                               f"({exc.args[0] if exc.args else exc})", drive_url=drive_url)
+                               f"({exc.args[0] if exc.args else exc})", drive_url=drive_url, details={"target": target})
             return
         sha = table_sha256(table)
         problem = ""
         if table.point_count == 0:
-            problem = f"leg {leg}: the drive's active table (bank {bank}) is empty; push a table first (`station push`)"
+            problem = (f"leg {leg}: {holder}'s active table (bank {bank}) is empty; push a table first (`station push`"
+                       + ("; compensation target station)" if target == "station" else ")"))
         elif not st.table_enabled:
-            problem = f"leg {leg}: the drive does not apply its table (table_enable = 0); switch it on first"
+            problem = f"leg {leg}: {holder} does not apply its table (table compensation off); switch it on first"
         elif leg in expected and expected[leg] != sha:
-            problem = (f"leg {leg}: the drive's active table (sha256 {sha[:12]}…) is not the leg's rows of {expected_source} "
+            problem = (f"leg {leg}: {holder}'s active table (sha256 {sha[:12]}…) is not the leg's rows of {expected_source} "
                        f"(sha256 {expected[leg][:12]}…); push it first")
         if problem:
             yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome.REFUSED, problem, identity, drive_url,
-                                            table_sha256=sha, bank=bank))
+                                            table_sha256=sha, bank=bank, details={"target": target}))
             yield ev.OperationFinished(Action.VERIFY, leg, AuditOutcome.REFUSED, problem)
             return
-        active[leg] = ActiveTable(leg, identity, bank, sha, describe_table(table))
+        active[leg] = ActiveTable(leg, identity, bank, sha, f"{describe_table(table)}; target {target}", target)
         yield ev.LegChecked(leg, identity, bank, sha, active[leg].description)
 
     def log_all(outcome: str, message: str, details: dict[str, Any] | None = None) -> Iterator[ev.Event]:
         for leg, a in active.items():
             yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, outcome, message, a.drive, drive_url,
-                                            table_sha256=a.table_sha256, bank=a.bank, details=dict(details or {})))
+                                            table_sha256=a.table_sha256, bank=a.bank,
+                                            details={"target": a.target, **(details or {})}))
 
     out = Path(out)
     finished: ev.SweepFinished | None = None
@@ -294,7 +304,7 @@ def verify_procedure(
     yield ev.Verified(results, format_report(results), doc)
     for leg, r in results.items():
         a = active[leg]
-        details = {"session": str(out), "session_sha256": session.sha256, **r.to_json()}
+        details = {"target": a.target, "session": str(out), "session_sha256": session.sha256, **r.to_json()}
         if before is not None:
             details["before_session"] = {"path": str(before.path), "sha256": before.sha256}
         yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome(str(outcome)), summary_line(outcome, r),

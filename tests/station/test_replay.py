@@ -103,7 +103,7 @@ def test_replay_via_cli_gives_the_same_points_model_table_iso230_and_diagnosis(r
     assert schema_of(out) == schema_of(recorded)
     assert rep.attrs["rig"] == "replay" and live.attrs["rig"] == "sim" and rep.outcome == "completed"
     assert rep.plan == live.plan
-    identities = {k: v for k, v in rep.devices.items() if not k.endswith("_compensation")}
+    identities = {k: v for k, v in rep.devices.items() if not k.endswith(("_compensation", "_compensation_table"))}
     assert identities and all(v.startswith("StationReplay") for v in identities.values())
     assert [v for k, v in rep.devices.items() if k.endswith("_compensation")] == ["bank 0 active, empty"] * 2
     assert f"R{live.sha256[:8]}" in rep.devices["interferometer"]
