@@ -9,6 +9,7 @@ key, e.g. ``default.toml: [registers.position_actual] type: must be one of ...``
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -330,6 +331,8 @@ class _Parser:
         v = sec.get(name)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise self.err(key, f"{name}: must be a number, got {v!r}")
+        if not math.isfinite(v):  # inf/nan are TOML numbers; no limit or scale is infinite
+            raise self.err(key, f"{name}: must be a finite number, got {v!r}")
         if positive and not v > 0:
             raise self.err(key, f"{name}: must be > 0, got {v!r}")
         return float(v)
@@ -491,7 +494,7 @@ class _Parser:
         if entry_type != "i16":
             raise self.err("table", f"entry_type: only \"i16\" is supported, got {entry_type!r}")
         scale = self.num(sec, "table", "entry_scale_um", positive=True)
-        if round(max_corr / scale) > 0x7FFF:
+        if not max_corr / scale < 0x7FFF + 0.5:  # (rounds above 0x7FFF; also a quotient overflowing to inf)
             raise self.err("table", f"max_correction_um {max_corr} does not fit an i16 entry of {scale} um")
         units_code = self.integer(sec, "table", "units_code")
         bases = sec.get("bank_base")
