@@ -370,6 +370,18 @@ def _load_legs(p: Path, table: Any) -> tuple[LegMaterial, dict[int, LegMaterial]
     return default, overrides
 
 
+def _convert(want: type, value: Any) -> Any:
+    """`value` as a `want` (str, int, float, dict) without guessing: TypeError / ValueError for a
+    value of another type (a bool or a fraction for an int, a number for a text...)."""
+    if isinstance(value, bool) and want is not bool:
+        raise TypeError(value)
+    if want is str and not isinstance(value, str) or want is dict and not isinstance(value, dict):
+        raise TypeError(value)
+    if want is int and isinstance(value, float) and not value.is_integer():
+        raise ValueError(value)
+    return want(value)
+
+
 def load_config(path: str | Path | None) -> StationConfig:
     """Read a station TOML; unknown keys and wrong types are refused with file and key named."""
     cfg = StationConfig()
@@ -380,9 +392,14 @@ def load_config(path: str | Path | None) -> StationConfig:
         data = tomllib.loads(p.read_text())
     except FileNotFoundError:
         raise InputError(f"{p}: config file not found") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{p}: not a UTF-8 text file (byte {exc.start}); a config is TOML text") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{p}: not valid TOML ({exc})") from None
     cfg.source = str(p)
+    for section in ("station", *_SECTIONS):
+        if not isinstance(data.get(section, {}), dict):
+            raise InputError(f"{p}: {section} must be a section ([{section}] and its keys), got {data[section]!r}")
     for key, value in data.get("station", {}).items():
         if key not in ("operator", "recordings_dir"):
             raise InputError(f"{p}: [station] {key}: unknown key (known: operator, recordings_dir)")
@@ -394,8 +411,8 @@ def load_config(path: str | Path | None) -> StationConfig:
                 raise InputError(f"{p}: [{section}] {key}: unknown key (known: {', '.join(cls.__dataclass_fields__)})")
             want = type(getattr(target, key))
             try:
-                setattr(target, key, want(value))
-            except (TypeError, ValueError):
+                setattr(target, key, _convert(want, value))
+            except (TypeError, ValueError, OverflowError):
                 raise InputError(f"{p}: [{section}] {key}: expected a {want.__name__}, got {value!r}") from None
             if (section, key) in _RANGES:
                 low, strict, what = _RANGES[section, key]
