@@ -1,12 +1,16 @@
 """Modbus client for the leg servo drives: a shared bus and one `ServoAxis` per leg.
 
 `ModbusBus` wraps a pymodbus sync client (TCP or RTU) with one lock (six axes share one bus),
-a transaction counter, chunked writes (<= 123 registers), and errors a technician can act on:
-`CommTimeout` names the URL, unit id and timeout. `ModbusServoAxis` implements
-`drivers.interfaces.ServoAxis` on the register map of a `DriveProfile`
-(docs/register-map.md). A move is one write (controlword with new-set-point + target) plus
-status reads until the drive reports the target reached: two transactions when the drive
-arrives at once (simulated rig at time scale 0).
+a transaction counter, the silence between frames the slowest drive on the line needs, requests
+split to the length a drive accepts, and errors a technician can act on: `CommTimeout` names
+the URL, unit id and timeout. `ModbusServoAxis` implements `drivers.interfaces.ServoAxis` on the
+register map of a `DriveProfile` (docs/register-map.md, docs/drive-profiles.md): its unit id,
+request lengths, word order and scaling come from the profile. A move is one write
+(controlword with new-set-point + target) plus status reads until the drive reports the target
+reached: two transactions when the drive arrives at once (simulated rig at time scale 0). A
+drive whose controlword and target are not contiguous gets the target first, then the
+controlword (`[protocol] move_write`), and one whose set-point latches on a rising edge gets
+the new-set-point bit cleared after the move is acknowledged (`set_point_latch = "edge"`).
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from typing import Callable, Sequence
 from urllib.parse import parse_qs, urlsplit
 
@@ -65,7 +70,9 @@ class ModbusBus:
     Thread-safe: one request at a time. `timeout_s` bounds one request including its
     retries (each attempt waits timeout_s / (retries + 1)). `transactions` counts requests
     sent (each write chunk and each read is one). `on_request(kind, unit, address, count)` is
-    called before each request ("read"/"write"), e.g. for tracing.
+    called before each request ("read"/"write"), e.g. for tracing. `min_frame_gap_s`: silence
+    kept between the end of one exchange (reply or failure) and the next request, in real
+    seconds (`require_gap`: the largest any drive on the line asks for).
     """
 
     def __init__(self, client, where: str, timeout_s: float, retries: int):
@@ -75,8 +82,15 @@ class ModbusBus:
         self.retries = retries
         self.transactions = 0
         self.on_request: Callable[[str, int, int, int], None] | None = None
+        self.min_frame_gap_s = 0.0
+        self._last_frame_end = -math.inf  # time.monotonic() when the last exchange ended
         self._lock = threading.RLock()
         self._users = 0
+
+    def require_gap(self, gap_s: float) -> None:
+        """Keep at least `gap_s` seconds of silence between frames (a drive's manual asks for it)."""
+        with self._lock:
+            self.min_frame_gap_s = max(self.min_frame_gap_s, float(gap_s))
 
     # -- construction -------------------------------------------------------------------------------
     @staticmethod
@@ -151,8 +165,17 @@ class ModbusBus:
                 log.debug("closing %s failed", self.where, exc_info=True)
 
     # -- requests ------------------------------------------------------------------------------------
+    def _wait_gap(self) -> None:
+        """Sleep until the line has been silent for `min_frame_gap_s` (real time: a line's property)."""
+        if self.min_frame_gap_s > 0:
+            wait = self._last_frame_end + self.min_frame_gap_s - time.monotonic()
+            while wait > 0:
+                time.sleep(wait)
+                wait = self._last_frame_end + self.min_frame_gap_s - time.monotonic()
+
     def _execute(self, kind: str, unit: int, address: int, count: int, call):
         with self._lock:
+            self._wait_gap()
             if self.on_request:
                 self.on_request(kind, unit, address, count)
             self.transactions += 1
@@ -173,6 +196,8 @@ class ModbusBus:
                 self.close()
                 raise CommTimeout(f"drive at {self.where}, unit id {unit}: {exc.strerror or exc} while trying to "
                                   f"{kind} register {address} (+{count}).") from None
+            finally:
+                self._last_frame_end = time.monotonic()
             if rsp.isError():
                 code = int(getattr(rsp, "exception_code", 0))
                 name = EXCEPTION_NAMES.get(code, "unknown exception")
@@ -180,10 +205,12 @@ class ModbusBus:
                                      f"(+{count}): Modbus exception {code} ({name}).", code, address)
             return rsp
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
-        """Read `count` holding registers (several requests when count > 125)."""
+    def read(self, unit: int, address: int, count: int, max_words: int = MAX_READ_WORDS) -> list[int]:
+        """Read `count` holding registers, in requests of at most `max_words` (the drive's limit;
+        Modbus' own is 125)."""
+        max_words = max(1, min(int(max_words), MAX_READ_WORDS))
         out: list[int] = []
-        for a, n in ((address + i, min(MAX_READ_WORDS, count - i)) for i in range(0, count, MAX_READ_WORDS)):
+        for a, n in ((address + i, min(max_words, count - i)) for i in range(0, count, max_words)):
             rsp = self._execute("read", unit, a, n,
                                 lambda a=a, n=n: self._client.read_holding_registers(a, count=n, device_id=unit))
             regs = list(rsp.registers)
@@ -192,9 +219,11 @@ class ModbusBus:
             out += regs
         return out
 
-    def write(self, unit: int, address: int, values: Sequence[int]) -> None:
-        """Write holding registers, in chunks of at most 123 (one request each)."""
-        for a, vals in chunks(address, list(values), MAX_WRITE_WORDS):
+    def write(self, unit: int, address: int, values: Sequence[int], max_words: int = MAX_WRITE_WORDS) -> None:
+        """Write holding registers, in requests of at most `max_words` (the drive's limit;
+        Modbus' own is 123)."""
+        max_words = max(1, min(int(max_words), MAX_WRITE_WORDS))
+        for a, vals in chunks(address, list(values), max_words):
             self._execute("write", unit, a, len(vals),
                           lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit))
 
@@ -212,7 +241,8 @@ reply or a process busy drawing cannot turn into a timeout."""
 
 
 class ModbusServoAxis:
-    """One leg's drive on a `ModbusBus` (unit id = leg unless `unit_id` is given).
+    """One leg's drive on a `ModbusBus` (unit id: `unit_id` if given, else the profile's
+    `[protocol] unit_ids`, by default the leg number).
 
     Implements `drivers.interfaces.ServoAxis`. Positions are mm in leg coordinates (as the drive
     reports them: compensated), errors um (measured minus commanded). `clock` paces the status
@@ -234,10 +264,10 @@ class ModbusServoAxis:
     ):
         self.bus = bus
         self.leg = int(leg)
-        self.unit = int(unit_id if unit_id is not None else leg)
+        self.profile = profile or DriveProfile.load()
+        self.unit = int(unit_id if unit_id is not None else self.profile.protocol.unit_id(leg))
         if not 1 <= self.unit <= 247:
             raise BusConfigError(f"leg {leg}: unit id {self.unit} is outside 1..247.")
-        self.profile = profile or DriveProfile.load()
         self.clock = clock or SystemClock()
         self.poll_interval_s = poll_interval_s
         self.move_timeout_s = move_timeout_s
@@ -246,28 +276,56 @@ class ModbusServoAxis:
         self._last_position_mm: float | None = None
         self._closed = False
         p = self.profile
-        self._status_block = p.blocks["status"]
-        self._move_block = p.blocks["move_command"]
+        self._proto = p.protocol
+        self._move_block = p.blocks.get("move_command")
         self._target_reg = p.registers["target_position"]
         self._cw_addr = p.address("controlword")
-        self._move_cw = p.commands["enable_operation"] | (1 << p.controlword_bits["new_set_point"])
+        # `move` in [commands] when the drive wants more than new-set-point (Kinco: 0x3F, bit 5
+        # "change set immediately" too)
+        self._move_cw = p.commands.get("move", p.commands["enable_operation"] | (1 << p.controlword_bits["new_set_point"]))
+        bus.require_gap(self._proto.min_frame_gap_ms / 1000.0)
         bus.acquire()
 
     def __repr__(self) -> str:
         return f"ModbusServoAxis(leg={self.leg}, unit={self.unit}, {self.bus.where})"
 
     # -- reading ------------------------------------------------------------------------------------
+    def _read_names(self, names: Sequence[str]) -> dict:
+        """Values of registers `names`: contiguous ones share a request, none longer than the
+        drive accepts, no value split across two requests."""
+        p = self.profile
+        out = {}
+        for address, words, regs in p.runs(names):
+            got = self.bus.read(self.unit, address, words, self._proto.max_read_words)
+            for n in regs:
+                r = p.registers[n]
+                out[n] = r.decode(got[r.address - address : r.end - address])
+        return out
+
     def _read_block(self, name: str) -> dict:
-        b = self.profile.blocks[name]
-        return self.profile.decode_block(name, self.bus.read(self.unit, b.start, b.words))
+        b = self.profile.blocks.get(name)
+        return self._read_names(b.names) if b else {}
+
+    def _write(self, address: int, words: Sequence[int]) -> None:
+        self.bus.write(self.unit, address, words, self._proto.max_write_words)
 
     def identity(self) -> str:
-        """'vendor product s/n SERIAL fw FIRMWARE' as the drive reports it."""
+        """'vendor product s/n SERIAL fw FIRMWARE' as the drive reports it; for a drive without
+        identity registers, the profile's vendor and product and the unit id, said as such."""
         v = self._read_block("identity")
+        if not {"vendor", "product", "serial", "firmware"} <= set(v):
+            ident = self.profile.identity
+            return (f"{ident['vendor']} {ident['product']} unit {self.unit} (identity from profile "
+                    f"{self.profile.name}; the drive has no identity registers)")
         return f"{v['vendor']} {v['product']} s/n {v['serial']} fw {v['firmware']}"
 
     def check_map_version(self) -> None:
-        """Refuse a drive whose register map version differs from the profile's."""
+        """Refuse a drive whose register map version differs from the profile's. A drive without a
+        map-version register (a real drive) is checked by reading its statusword instead: it must
+        answer at the profile's address."""
+        if not self.profile.has("map_version"):
+            self._read_names(["statusword"])
+            return
         v = self._read_block("identity")
         if v["map_version"] != self.profile.map_version:
             raise DriveFault(f"leg {self.leg}: the drive at {self.bus.where} unit {self.unit} reports register map "
@@ -275,9 +333,14 @@ class ModbusServoAxis:
                              f"{self.profile.map_version}.", hint="Use the drive profile that matches the drive's firmware.")
 
     def limits(self, refresh: bool = False) -> DriveLimits:
-        """Soft travel limits and motion limits as the drive reports them (read once, cached)."""
+        """Soft travel limits and motion limits as the drive reports them (read once, cached);
+        a limit the profile maps to no register is the profile's [limits] value."""
         if self._limits is None or refresh:
-            v = self._read_block("limits")
+            lim = self.profile.limits
+            v = {"soft_limit_min": lim.soft_min_mm, "soft_limit_max": lim.soft_max_mm,
+                 "max_velocity": lim.max_velocity_mm_s, "max_acceleration": lim.max_accel_mm_s2,
+                 "profile_velocity": lim.profile_velocity_mm_s, "profile_acceleration": lim.profile_accel_mm_s2}
+            v.update(self._read_block("limits"))
             self._limits = DriveLimits(v["soft_limit_min"], v["soft_limit_max"], v["max_velocity"], v["max_acceleration"])
             self._profile_motion = (min(v["profile_velocity"], v["max_velocity"]), min(v["profile_acceleration"], v["max_acceleration"]))
         return self._limits
@@ -288,17 +351,18 @@ class ModbusServoAxis:
         state = p.state_of(sw)
         reached = p.sw_bit(sw, "target_reached")
         self._last_position_mm = v["position_actual"]
+        # registers a drive does not have: not measured (NaN), no code, no table
         return DriveStatus(
             state=state,
             fault=state is DriveState.FAULT,
-            fault_code=v["fault_code"],
+            fault_code=v.get("fault_code", 0),
             moving=not reached,
             target_reached=reached,
             position_mm=v["position_actual"],
-            following_error_um=v["following_error"],
-            load_n=v["axial_load"],
-            active_bank=v["active_bank"],
-            table_enabled=bool(v["table_enable"]),
+            following_error_um=v.get("following_error", math.nan),
+            load_n=v.get("axial_load", math.nan),
+            active_bank=v.get("active_bank", 0),
+            table_enabled=bool(v.get("table_enable", 0)),
         )
 
     def status(self) -> DriveStatus:
@@ -307,7 +371,7 @@ class ModbusServoAxis:
 
     # -- state machine ------------------------------------------------------------------------------
     def _command(self, name: str) -> None:
-        self.bus.write(self.unit, self._cw_addr, [self.profile.commands[name]])
+        self._write(self._cw_addr, [self.profile.commands[name]])
 
     def enable(self) -> None:
         """Walk the CiA 402 state machine to operation enabled. DriveFault if the drive is in
@@ -318,6 +382,10 @@ class ModbusServoAxis:
                              f"reset the fault before enabling.", st.fault_code)
         if st.enabled:
             return
+        if self._proto.mode_of_operation is not None:
+            # profile position mode before the power stage comes on (CiA 402 6060h)
+            r = self.profile.registers["modes_of_operation"]
+            self._write(r.address, r.encode(self._proto.mode_of_operation))
         seq = {
             DriveState.QUICK_STOP_ACTIVE: ["enable_operation"],
             DriveState.SWITCHED_ON: ["enable_operation"],
@@ -378,7 +446,6 @@ class ModbusServoAxis:
         if not lim.min_mm <= target_mm <= lim.max_mm:
             raise SoftLimitError(f"leg {self.leg}: target {target_mm:.4f} mm is outside the soft limits "
                                  f"{lim.min_mm:.3f} .. {lim.max_mm:.3f} mm reported by the drive; nothing moved.")
-        words = [self._move_cw] + self._target_reg.encode(target_mm)
         if timeout_s is None:
             timeout_s = self.move_timeout_s
         if timeout_s is None:
@@ -386,7 +453,7 @@ class ModbusServoAxis:
             dist = abs(target_mm - self._last_position_mm) if self._last_position_mm is not None else span
             timeout_s = MOVE_TIMEOUT_FACTOR * self._trapezoid_s(dist) + MOVE_TIMEOUT_MARGIN_S
         try:
-            self.bus.write(self.unit, self._move_block.start, words)
+            self._write_move(target_mm)
         except RequestRefused as exc:
             raise DriveFault(f"leg {self.leg}: the drive refused the move to {target_mm:.4f} mm: {exc}", 0) from None
         # Judged on the clock the motion runs on, and only on the drive's time: from the write's
@@ -414,6 +481,25 @@ class ModbusServoAxis:
                                   hint="Check the mechanics and the drive's motion profile.")
             self.clock.sleep(self.poll_interval_s)
 
+    def _write_move(self, target_mm: float) -> None:
+        """Command the move: one write of controlword + target where the profile's move_command
+        block allows it; else the target first and then the controlword (the drive latches the
+        target it holds when the set-point bit arrives). A drive latching on the rising edge
+        gets the bit cleared once the move has been accepted, ready for the next one."""
+        target = self._target_reg.encode(target_mm)
+        if self._proto.move_write == "single":
+            b = self._move_block
+            words = [0] * b.words
+            words[self._cw_addr - b.start] = self._move_cw
+            a = self._target_reg.address - b.start
+            words[a : a + len(target)] = target
+            self._write(b.start, words)
+        else:
+            self._write(self._target_reg.address, target)
+            self._write(self._cw_addr, [self._move_cw])
+        if self._proto.set_point_latch == "edge":
+            self._command("enable_operation")
+
     def _move_at(self, target_mm: float, timeout_s: float | None, velocity_mm_s: float) -> DriveStatus:
         """`move_to` at `velocity_mm_s` (limited to the drive's maximum): the profile velocity
         register is written before the move and the drive's own value written back after it,
@@ -424,11 +510,15 @@ class ModbusServoAxis:
         lim = self.limits()
         if not (isinstance(target_mm, (int, float)) and math.isfinite(target_mm) and lim.min_mm <= target_mm <= lim.max_mm):
             return self.move_to(target_mm, timeout_s)  # SoftLimitError, nothing written
-        reg = self.profile.registers["profile_velocity"]
-        before = reg.decode(self.bus.read(self.unit, reg.address, reg.words))
+        reg = self.profile.registers.get("profile_velocity")
+        if reg is None:
+            raise DriveFault(f"leg {self.leg}: the drive profile {self.profile.name} maps no profile velocity register, "
+                             f"so a move at {velocity_mm_s:g} mm/s cannot be commanded; nothing moved.", 0,
+                             hint="Move at the drive's own speed (no velocity), or map profile_velocity in the profile.")
+        before = reg.decode(self.bus.read(self.unit, reg.address, reg.words, self._proto.max_read_words))
         motion = self._profile_motion
         v = min(float(velocity_mm_s), lim.max_velocity_mm_s)
-        self.bus.write(self.unit, reg.address, reg.encode(v))
+        self._write(reg.address, reg.encode(v))
         if motion is not None:
             self._profile_motion = (v, motion[1])  # the default timeout follows this move's speed
         try:
@@ -436,24 +526,50 @@ class ModbusServoAxis:
         finally:
             self._profile_motion = motion
             try:
-                self.bus.write(self.unit, reg.address, reg.encode(before))
+                self._write(reg.address, reg.encode(before))
             except Exception as exc:  # the move's own outcome (or exception) matters more
                 log.warning("leg %s: profile velocity %.3f mm/s not written back: %s", self.leg, before, exc)
 
+    # -- position compare (on-the-fly capture, docs/onthefly.md) ---------------------------------
+    def arm_position_compare(self, start_mm: float, step_mm: float, count: int) -> None:
+        """Arm the position-compare output: a pulse each time position actual passes
+        `start_mm + i * step_mm` (i < `count`) in the direction of the step's sign; count 0
+        switches it off. One write of the profile's `compare` block. DriverError when the
+        drive's profile has no compare registers."""
+        if "compare" not in self.profile.blocks:
+            raise DriverError(f"leg {self.leg}: the drive profile {self.profile.name} has no position-compare "
+                              "registers (block `compare`), so on-the-fly capture is not possible; use a "
+                              "stop-and-go plan")
+        values = {"compare_start": float(start_mm), "compare_step": float(step_mm), "compare_count": int(count)}
+        b = self.profile.blocks["compare"]
+        words: list[int] = []
+        for name in b.names:
+            words += self.profile.registers[name].encode(values[name])
+        self.bus.write(self.unit, b.start, words)
+
     # -- compensation tables ------------------------------------------------------------------------
+    def _no_table(self) -> TableError:
+        return TableError(f"leg {self.leg}: the drive (profile {self.profile.name}) holds no compensation table: "
+                          f"{self.profile.table_note}",
+                          hint="Compensate in the station or in the motion controller instead (docs/compensation.md).")
+
     def _check_bank(self, bank: int) -> None:
+        if self.profile.table is None:
+            raise self._no_table()
         if bank not in range(self.profile.table.banks):
             raise TableError(f"leg {self.leg}: table bank {bank!r} does not exist (banks are 0..{self.profile.table.banks - 1}).",
                              hint="")
 
-    def table_spec(self) -> TableSpec:
-        """The table this drive holds (its profile's [table] section)."""
+    def table_spec(self) -> TableSpec | None:
+        """The table this drive holds (its profile's [table] section); None when it holds none."""
         return table_spec(self.profile)
 
     def active_bank(self) -> int:
-        """The bank the drive applies (0 or 1)."""
+        """The bank the drive applies (0 or 1); TableError for a drive without tables."""
+        if self.profile.table is None:
+            raise self._no_table()
         r = self.profile.registers["active_bank"]
-        return r.decode(self.bus.read(self.unit, r.address, r.words))
+        return r.decode(self.bus.read(self.unit, r.address, r.words, self._proto.max_read_words))
 
     def read_table(self, bank: int) -> TableBank:
         """The table held in `bank`. TableError if the bank's entries do not match its checksum
@@ -461,12 +577,13 @@ class ModbusServoAxis:
         self._check_bank(bank)
         t = self.profile.table
         base = t.bank_base[bank]
-        h = t.decode_header(self.bus.read(self.unit, base, t.header_words))
+        mx = self._proto.max_read_words
+        h = t.decode_header(self.bus.read(self.unit, base, t.header_words, mx))
         n = h["point_count"]
         if n > t.max_points:
             raise TableError(f"leg {self.leg}: bank {bank} claims {n} points, more than the drive's {t.max_points}.", hint="")
-        fwd = self.bus.read(self.unit, t.fwd_address(bank), n) if n else []
-        rev = self.bus.read(self.unit, t.rev_address(bank), n) if n else []
+        fwd = self.bus.read(self.unit, t.fwd_address(bank), n, mx) if n else []
+        rev = self.bus.read(self.unit, t.rev_address(bank), n, mx) if n else []
         crc = crc16_modbus(fwd + rev)
         if crc != h["checksum"] or h["units"] != t.units_code:
             raise TableError(f"leg {self.leg}: bank {bank} holds an inconsistent table (header checksum 0x{h['checksum']:04X}, "
@@ -475,8 +592,8 @@ class ModbusServoAxis:
         return TableBank(h["start_position"], h["spacing"], to_um(fwd), to_um(rev), h["checksum"])
 
     def write_table(self, bank: int, table: TableBank) -> None:
-        """Write `table` into the inactive `bank`: entries in chunks of <= 123 registers, the
-        header (with the checksum) last, then read everything back and compare.
+        """Write `table` into the inactive `bank`: entries in requests as long as the drive
+        accepts, the header (with the checksum) last, then read everything back and compare.
 
         Refuses (TableError, before writing) a bank that is active, a table the drive cannot
         hold (points, spacing, corrections beyond the profile's limits), or a given checksum
@@ -495,16 +612,17 @@ class ModbusServoAxis:
         try:
             for address, words in plan:
                 if words:
-                    self.bus.write(self.unit, address, words)
+                    self._write(address, words)
         except RequestRefused as exc:
             raise TableError(f"leg {self.leg}: the drive refused the table write to bank {bank}: {exc}") from None
         except CommTimeout as exc:
             raise CommTimeout(f"leg {self.leg}: table push to bank {bank} interrupted: {exc}",
                               hint="The previously active table is still active; push again when the drive answers.") from None
         # read back and compare
-        got_h = self.bus.read(self.unit, base, t.header_words)
-        got_f = self.bus.read(self.unit, t.fwd_address(bank), len(fwd)) if fwd else []
-        got_r = self.bus.read(self.unit, t.rev_address(bank), len(rev)) if rev else []
+        mx = self._proto.max_read_words
+        got_h = self.bus.read(self.unit, base, t.header_words, mx)
+        got_f = self.bus.read(self.unit, t.fwd_address(bank), len(fwd), mx) if fwd else []
+        got_r = self.bus.read(self.unit, t.rev_address(bank), len(rev), mx) if rev else []
         for what, want, got, a0 in (("forward entries", fwd, got_f, t.fwd_address(bank)),
                                     ("reverse entries", rev, got_r, t.rev_address(bank))):
             if want != got:
@@ -526,7 +644,7 @@ class ModbusServoAxis:
         self._check_bank(bank)
         r = self.profile.registers["active_bank"]
         try:
-            self.bus.write(self.unit, r.address, r.encode(bank))
+            self._write(r.address, r.encode(bank))
         except RequestRefused as exc:
             why = {3: "its entries do not match its checksum (write it completely first)",
                    6: "the axis is moving (stop it first)"}.get(exc.exception_code, str(exc))
@@ -534,8 +652,10 @@ class ModbusServoAxis:
 
     def set_table_enabled(self, on: bool) -> None:
         """Switch applying the active table on or off (one register write)."""
+        if self.profile.table is None:
+            raise self._no_table()
         r = self.profile.registers["table_enable"]
-        self.bus.write(self.unit, r.address, r.encode(1 if on else 0))
+        self._write(r.address, r.encode(1 if on else 0))
 
     def close(self) -> None:
         """Release the bus (the connection closes when its last axis is closed). Idempotent."""
@@ -544,9 +664,12 @@ class ModbusServoAxis:
             self.bus.release()
 
 
-def table_spec(profile: DriveProfile) -> TableSpec:
-    """What the drive of `profile` holds: its [table] section as a TableSpec."""
+def table_spec(profile: DriveProfile) -> TableSpec | None:
+    """What the drive of `profile` holds: its [table] section as a TableSpec; None for a drive
+    without a table ([table] kind = "none")."""
     t = profile.table
+    if t is None:
+        return None
     return TableSpec(max_points=t.max_points, max_correction_um=t.max_correction_um,
                      entry_resolution_um=t.entry_scale_um, min_step_mm=TABLE_MIN_STEP_MM, banks=t.banks)
 
@@ -563,8 +686,11 @@ def table_registers(profile: DriveProfile, table: TableBank, where: str = "table
     (non-zero) and differs from the CRC of the entries.
     """
     t = profile.table
+    spec = table_spec(profile)
+    if t is None or spec is None:
+        raise TableError(f"{where}: the drive profile {profile.name} holds no compensation table: {profile.table_note}", hint="")
     n = len(table.error_fwd_um)
-    table_spec(profile).check(table, where, min_points=0)
+    spec.check(table, where, min_points=0)
     lo, hi = int_range(t.entry_type)
     fwd = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_fwd_um]
     rev = [max(lo, min(hi, t.entry_counts(e))) & 0xFFFF for e in table.error_rev_um]
@@ -605,8 +731,9 @@ def connect_axes(
     clock: Clock | None = None,
     **axis_options,
 ) -> dict[int, ModbusServoAxis]:
-    """Connect to the drives of `legs` on one bus (unit id = leg) and check each answers with
-    the profile's register map version. CommTimeout naming the URL if one does not."""
+    """Connect to the drives of `legs` on one bus (unit ids from the profile: by default the leg
+    number) and check each answers with the profile's register map version (or, for a drive
+    without one, at its statusword). CommTimeout naming the URL if one does not."""
     profile = profile or DriveProfile.load()
     bus = ModbusBus.from_url(url, timeout_s=timeout_s, retries=retries)
     axes: dict[int, ModbusServoAxis] = {}

@@ -5,13 +5,21 @@ dataclasses. Everything protocol-specific (addresses, types, word order, scaling
 and statusword bits, fault codes, the compensation-table layout) comes from the file, so the
 client and the simulated drive share one definition. Validation errors name the file and the
 key, e.g. ``default.toml: [registers.position_actual] type: must be one of ...``.
+
+`[protocol]` holds what a real drive's manual prescribes for the line: registers per read and
+per write request, the silence between frames, the address base the manual prints, the unit id
+of each leg, whether controlword and target may share one frame, how the new-set-point bit
+latches, and what the drive does with a request longer than it accepts. `[scaling]` names the
+counts per engineering unit (electronic gear, user units) that registers refer to by name.
+A profile whose `[table]` says `kind = "none"` describes a drive without a compensation table
+(`DriveProfile.table` is None). docs/drive-profiles.md lists every key.
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping, Sequence
@@ -30,19 +38,29 @@ from drivers.modbus.codec import (
 
 DEFAULT_PROFILE = Path(__file__).resolve().parent / "profiles" / "default.toml"
 
-MAX_READ_WORDS = 125  # Modbus read_holding_registers limit
-MAX_WRITE_WORDS = 123  # Modbus write_registers limit
+MAX_READ_WORDS = 125  # Modbus read_holding_registers limit (the protocol's, not a drive's)
+MAX_WRITE_WORDS = 123  # Modbus write_registers limit (the protocol's, not a drive's)
 
-# registers the client and the simulated drive rely on
-REQUIRED_REGISTERS = (
+# registers every drive must have: the CiA 402 state machine and the position
+REQUIRED_REGISTERS = ("controlword", "target_position", "statusword", "position_actual")
+# registers a drive with a compensation table must have
+TABLE_REGISTERS = ("active_bank", "table_enable")
+# registers a profile may map; where one is absent the client falls back on the profile
+# ([identity], [limits]) or reports the value as not measured (NaN / 0)
+OPTIONAL_REGISTERS = (
     "vendor", "product", "serial", "firmware", "map_version",
     "soft_limit_min", "soft_limit_max", "max_velocity", "max_acceleration",
     "profile_velocity", "profile_acceleration",
-    "controlword", "target_position",
-    "statusword", "position_actual", "following_error", "fault_code", "axial_load",
-    "active_bank", "table_enable",
+    "following_error", "fault_code", "axial_load", "modes_of_operation", "modes_of_operation_display",
+    *TABLE_REGISTERS,
 )  # fmt: skip
-REQUIRED_BLOCKS = ("identity", "limits", "move_command", "status")
+REQUIRED_BLOCKS = ("status",)
+IDENTITY_REGISTERS = ("vendor", "product", "serial", "firmware", "map_version")
+LIMIT_REGISTERS = ("soft_limit_min", "soft_limit_max", "max_velocity", "max_acceleration",
+                   "profile_velocity", "profile_acceleration")
+MOVE_WRITES = ("single", "target_then_controlword")
+SET_POINT_LATCHES = ("level", "edge")
+OVERSIZE_REPLIES = ("exception", "silence")
 REQUIRED_CW_BITS = ("switch_on", "enable_voltage", "quick_stop", "enable_operation", "new_set_point", "fault_reset")
 REQUIRED_COMMANDS = ("disable_voltage", "quick_stop", "shutdown", "switch_on", "enable_operation", "fault_reset")
 REQUIRED_SW_BITS = (
@@ -77,6 +95,7 @@ class Register:
     unit: str = ""
     access: str = "r"
     word_order: str = "big"
+    object: str = ""  # what the manual calls it (CiA 402 "6041h", Delta "P0-46"), for messages and docs
 
     @property
     def writable(self) -> bool:
@@ -199,8 +218,55 @@ class TableLayout:
 
 
 @dataclass(frozen=True)
+class ProtocolSettings:
+    """How a drive wants to be talked to on the line ([protocol] of the profile).
+
+    `max_read_words` / `max_write_words`: the longest request the drive accepts (the client
+    splits longer ones; a 32-bit value is never split across two requests).
+    `min_frame_gap_ms`: silence the drive needs between the end of one frame and the next
+    request (the client waits it; RTU's own 3.5 characters come on top).
+    `address_base`: 0 when the profile's addresses are PDU addresses as sent on the wire, 1 when
+    they are printed 1-based (register 1 = PDU address 0) like many manuals do; the loaded
+    Register.address is always the PDU address.
+    `unit_ids`: leg -> Modbus unit id; None = unit id = leg number.
+    `move_write`: "single" = controlword and target in one write (the drive latches the target
+    with the controlword); "target_then_controlword" = the target is written first, then the
+    controlword (for drives whose objects are not contiguous).
+    `set_point_latch`: "level" = every controlword write with new_set_point set starts a move;
+    "edge" = only a rising edge does (CiA 402), so the client clears the bit after each move.
+    `oversize_reply`: what the drive does with a request longer than allowed: "exception"
+    (Modbus exception 03, illegal data value) or "silence" (no reply).
+    `mode_of_operation`: value the client writes to modes_of_operation before enabling
+    (1 = CiA 402 profile position mode); None = the drive has no such register.
+    """
+
+    max_read_words: int = MAX_READ_WORDS
+    max_write_words: int = MAX_WRITE_WORDS
+    min_frame_gap_ms: float = 0.0
+    address_base: int = 0
+    unit_ids: Mapping[int, int] | None = None
+    move_write: str = "single"
+    set_point_latch: str = "level"
+    oversize_reply: str = "exception"
+    mode_of_operation: int | None = None
+
+    def unit_id(self, leg: int) -> int:
+        """Modbus unit id of `leg`; ProfileError if the profile's table has no entry for it."""
+        if self.unit_ids is None:
+            return int(leg)
+        try:
+            return self.unit_ids[int(leg)]
+        except KeyError:
+            raise ProfileError(f"[protocol] unit_ids has no unit id for leg {leg}; add `{leg} = <unit id>` "
+                               "to the drive profile") from None
+
+
+@dataclass(frozen=True)
 class DriveProfile:
-    """A drive's register map and semantics. Load with `DriveProfile.load(path=None)`."""
+    """A drive's register map and semantics. Load with `DriveProfile.load(path=None)`.
+
+    `table` is None for a drive that holds no compensation table ([table] kind = "none");
+    `table_note` then says why (shown to the user)."""
 
     path: str
     name: str
@@ -214,7 +280,34 @@ class DriveProfile:
     commands: Mapping[str, int]
     statusword_bits: Mapping[str, int]
     faults: Mapping[int, FaultCode]
-    table: TableLayout
+    table: TableLayout | None
+    protocol: ProtocolSettings = field(default_factory=ProtocolSettings)
+    scaling: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    table_note: str = ""
+
+    @property
+    def has_table(self) -> bool:
+        return self.table is not None
+
+    def has(self, name: str) -> bool:
+        """Whether the profile maps register `name`."""
+        return name in self.registers
+
+    def runs(self, names: Sequence[str], max_words: int | None = None) -> list[tuple[int, int, tuple[str, ...]]]:
+        """(address, words, register names) of the requests that read registers `names`:
+        contiguous registers share a request of at most `max_words` (default: the profile's
+        max_read_words); a register is never split across two requests."""
+        limit = max_words or self.protocol.max_read_words
+        regs = sorted((self.registers[n] for n in names), key=lambda r: r.address)
+        out: list[tuple[int, int, tuple[str, ...]]] = []
+        for r in regs:
+            if out:
+                a, w, ns = out[-1]
+                if a + w == r.address and w + r.words <= limit:
+                    out[-1] = (a, w + r.words, ns + (r.name,))
+                    continue
+            out.append((r.address, r.words, (r.name,)))
+        return out
 
     # -- loading ------------------------------------------------------------------------------
     @classmethod
@@ -259,7 +352,8 @@ class DriveProfile:
         return f"0x{code:04X} {f.name}: {f.text}" if f else f"0x{code:04X} (not in profile {self.name})"
 
     def decode_block(self, block: str, words: Sequence[int]) -> dict[str, Any]:
-        """Values of the registers of `block` from the words read at its start."""
+        """Values of the registers of `block` from the words read at its start (all of its span,
+        gaps included: for contiguous blocks)."""
         b = self.blocks[block]
         out = {}
         for n in b.names:
@@ -317,6 +411,8 @@ class _Parser:
     def __init__(self, path: Path, data: dict):
         self.path = path
         self.data = data
+        self.scaling: dict[str, float] = {}
+        self.address_base = 0
 
     def err(self, key: str, what: str) -> ProfileError:
         return ProfileError(f"{self.path}: [{key}] {what}; fix the drive profile")
@@ -343,31 +439,50 @@ class _Parser:
             raise self.err(key, f"{name}: must be an integer in {lo}..{hi}, got {v!r}")
         return v
 
+    def choice(self, sec: dict, key: str, name: str, options: Sequence[str], default: str) -> str:
+        v = sec.get(name, default)
+        if v not in options:
+            raise self.err(key, f"{name}: must be one of {', '.join(repr(o) for o in options)}, got {v!r}")
+        return v
+
     def reg(self, key: str, name: str, spec: Any, word_order: str, addr_key: str = "address") -> Register:
         if not isinstance(spec, dict):
             raise self.err(key, f"must be a table like {{ {addr_key} = 100, type = \"u16\" }}")
         typ = spec.get("type")
         if typ not in (*TYPE_WORDS, "ascii"):
             raise self.err(key, f"type: must be one of u16, i16, u32, i32, ascii, got {typ!r}")
-        address = self.integer(spec, key, addr_key)
+        if addr_key == "address":
+            # as printed in the manual; on the wire it is printed - address_base
+            printed = self.integer(spec, key, addr_key, self.address_base, 0xFFFF + self.address_base)
+            address = printed - self.address_base
+        else:
+            address = self.integer(spec, key, addr_key)
         if typ == "ascii":
             words = self.integer(spec, key, "words", 1, 60)
         else:
             words = TYPE_WORDS[typ]
         scale = spec.get("scale")
-        if scale is not None:
+        if isinstance(scale, str):
+            # a [scaling] entry: counts per engineering unit, so one count is 1/that
+            if scale not in self.scaling:
+                raise self.err(key, f"scale: {scale!r} is not a key of [scaling] (known: {', '.join(self.scaling) or 'none'})")
+            scale = 1.0 / self.scaling[scale]
+        elif scale is not None:
             scale = self.num(spec, key, "scale", positive=True)
-            if typ == "ascii":
-                raise self.err(key, "scale: not allowed for ascii")
+        if scale is not None and typ == "ascii":
+            raise self.err(key, "scale: not allowed for ascii")
         access = spec.get("access", "rw" if addr_key == "offset" else "r")
         if access not in ("r", "rw"):
             raise self.err(key, f"access: must be \"r\" or \"rw\", got {access!r}")
         unit = spec.get("unit", "")
         if not isinstance(unit, str):
             raise self.err(key, f"unit: must be a string, got {unit!r}")
+        obj = spec.get("object", "")
+        if not isinstance(obj, str):
+            raise self.err(key, f"object: must be a string such as \"6041h\" or \"P0-46\", got {obj!r}")
         if address + words > 0x10000:
             raise self.err(key, f"{addr_key}: {address} + {words} words runs past 65535")
-        return Register(name, address, typ, words, scale, unit, access, word_order)
+        return Register(name, address, typ, words, scale, unit, access, word_order, obj)
 
     def bits(self, key: str, required: Sequence[str], hi: int) -> dict[str, int]:
         sec = self.section(key)
@@ -379,6 +494,63 @@ class _Parser:
             raise self.err(key, f"missing {', '.join(missing)}")
         return out
 
+    def protocol(self) -> ProtocolSettings:
+        """[protocol]: optional; every key has the default of a drive that accepts whatever
+        Modbus carries (the built-in simulated drive)."""
+        sec = self.data.get("protocol", {})
+        if not isinstance(sec, dict):
+            raise self.err("protocol", "must be a table")
+        known = {"max_read_words", "max_write_words", "min_frame_gap_ms", "address_base", "unit_ids", "move_write",
+                 "set_point_latch", "oversize_reply", "mode_of_operation"}
+        unknown = sorted(set(sec) - known)
+        if unknown:
+            raise self.err("protocol", f"unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})")
+        g = lambda n, d: sec.get(n, d)  # noqa: E731
+        max_read = self._int_default(sec, "max_read_words", MAX_READ_WORDS, 1, MAX_READ_WORDS)
+        max_write = self._int_default(sec, "max_write_words", MAX_WRITE_WORDS, 1, MAX_WRITE_WORDS)
+        gap = g("min_frame_gap_ms", 0.0)
+        if isinstance(gap, bool) or not isinstance(gap, (int, float)) or not 0 <= gap <= 1000:
+            raise self.err("protocol", f"min_frame_gap_ms: must be a number of milliseconds 0..1000, got {gap!r}")
+        base = self._int_default(sec, "address_base", 0, 0, 1)
+        units = g("unit_ids", "leg")
+        unit_ids: dict[int, int] | None
+        if units == "leg":
+            unit_ids = None
+        elif isinstance(units, dict) and units:
+            unit_ids = {}
+            for k, v in units.items():
+                if not (isinstance(k, str) and k.isdigit() and 1 <= int(k) <= 247):
+                    raise self.err("protocol.unit_ids", f"key {k!r}: must be a leg number 1..247")
+                if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 247:
+                    raise self.err("protocol.unit_ids", f"{k}: unit id must be an integer 1..247, got {v!r}")
+                unit_ids[int(k)] = v
+            if len(set(unit_ids.values())) != len(unit_ids):
+                raise self.err("protocol.unit_ids", "two legs share a unit id; each drive needs its own")
+        else:
+            raise self.err("protocol", f"unit_ids: must be \"leg\" (unit id = leg number) or a table "
+                                       f"{{ 1 = 11, 2 = 12, ... }}, got {units!r}")
+        mode = g("mode_of_operation", None)
+        if mode is not None and (isinstance(mode, bool) or not isinstance(mode, int) or not -128 <= mode <= 127):
+            raise self.err("protocol", f"mode_of_operation: must be an integer -128..127 (1 = profile position), got {mode!r}")
+        self.address_base = base
+        return ProtocolSettings(
+            max_read_words=max_read, max_write_words=max_write, min_frame_gap_ms=float(gap), address_base=base,
+            unit_ids=MappingProxyType(unit_ids) if unit_ids is not None else None,
+            move_write=self.choice(sec, "protocol", "move_write", MOVE_WRITES, "single"),
+            set_point_latch=self.choice(sec, "protocol", "set_point_latch", SET_POINT_LATCHES, "level"),
+            oversize_reply=self.choice(sec, "protocol", "oversize_reply", OVERSIZE_REPLIES, "exception"),
+            mode_of_operation=mode,
+        )  # fmt: skip
+
+    def _int_default(self, sec: dict, name: str, default: int, lo: int, hi: int) -> int:
+        return self.integer(sec, "protocol", name, lo, hi) if name in sec else default
+
+    def scaling_section(self) -> dict[str, float]:
+        sec = self.data.get("scaling", {})
+        if not isinstance(sec, dict):
+            raise self.err("scaling", "must be a table of counts per unit, e.g. position_counts_per_mm = 10000")
+        return {n: self.num(sec, "scaling", n, positive=True) for n in sec}
+
     def profile(self) -> DriveProfile:
         prof = self.section("profile")
         word_order = prof.get("word_order", "big")
@@ -388,6 +560,8 @@ class _Parser:
         if not isinstance(name, str) or not name:
             raise self.err("profile", "name: must be a non-empty string")
         map_version = self.integer(prof, "profile", "map_version")
+        protocol = self.protocol()
+        self.scaling = self.scaling_section()
 
         lim = self.section("limits")
         limits = ProfileLimits(
@@ -415,18 +589,25 @@ class _Parser:
         if missing:
             raise self.err("registers", f"missing {', '.join(missing)}")
         for n in ("statusword", "controlword", "fault_code", "active_bank", "table_enable", "map_version"):
-            if registers[n].type != "u16":
+            if n in registers and registers[n].type != "u16":
                 raise self.err(f"registers.{n}", f"type: must be u16, got {registers[n].type}")
-        for n in ("controlword", "target_position", "active_bank", "table_enable"):
-            if not registers[n].writable:
+        for n in ("controlword", "target_position", "active_bank", "table_enable", "modes_of_operation"):
+            if n in registers and not registers[n].writable:
                 raise self.err(f"registers.{n}", "access: must be \"rw\" (the station writes it)")
         for n in ("vendor", "product", "serial", "firmware"):
-            if registers[n].type != "ascii":
+            if n in registers and registers[n].type != "ascii":
                 raise self.err(f"registers.{n}", "type: must be ascii")
+        if ("modes_of_operation" in registers) != (protocol.mode_of_operation is not None):
+            raise self.err("protocol", "mode_of_operation and [registers.modes_of_operation] go together: "
+                                       "give both (a drive with operating modes) or neither")
         ordered = sorted(registers.values(), key=lambda r: r.address)
         for a, b in zip(ordered, ordered[1:]):
             if b.address < a.end:
                 raise self.err(f"registers.{b.name}", f"address: {b.address} overlaps {a.name} ({a.address}..{a.end - 1})")
+        for r in registers.values():
+            if r.words > min(protocol.max_read_words, protocol.max_write_words if r.writable else MAX_WRITE_WORDS):
+                raise self.err(f"registers.{r.name}", f"{r.words} words do not fit one request of this drive "
+                                                      f"([protocol] max_read_words / max_write_words)")
 
         blocks_sec = self.section("blocks")
         blocks = {}
@@ -438,21 +619,39 @@ class _Parser:
             if unknown:
                 raise self.err(key, f"unknown register(s) {', '.join(unknown)}")
             rs = sorted((registers[n] for n in names), key=lambda r: r.address)
-            for a, b in zip(rs, rs[1:]):
-                if b.address != a.end:
-                    raise self.err(key, f"registers must be contiguous: gap between {a.name} and {b.name}")
             words = rs[-1].end - rs[0].address
-            limit = MAX_WRITE_WORDS if bname == "move_command" else MAX_READ_WORDS
-            if words > limit:
-                raise self.err(key, f"spans {words} registers, more than one request carries ({limit})")
+            if bname == "move_command":
+                # one frame carries it: it must be contiguous and fit one write of this drive
+                for a, b in zip(rs, rs[1:]):
+                    if b.address != a.end:
+                        raise self.err(key, f"registers must be contiguous (one write carries them): gap between "
+                                            f"{a.name} and {b.name}; or set [protocol] move_write = \"target_then_controlword\"")
+                if words > protocol.max_write_words:
+                    raise self.err(key, f"spans {words} registers, more than one write of this drive carries "
+                                        f"([protocol] max_write_words = {protocol.max_write_words})")
+            elif bname in ("identity", "limits", "status") and all(b.address == a.end for a, b in zip(rs, rs[1:])) \
+                    and words > MAX_READ_WORDS:
+                raise self.err(key, f"spans {words} registers, more than one request carries ({MAX_READ_WORDS})")
             blocks[bname] = Block(bname, rs[0].address, words, tuple(r.name for r in rs))
         missing = [n for n in REQUIRED_BLOCKS if n not in blocks]
         if missing:
             raise self.err("blocks", f"missing {', '.join(missing)}")
-        if blocks["move_command"].names[0] != "controlword":
-            raise self.err("blocks.move_command", "controlword must come first (the drive latches the target on the controlword write)")
+        if protocol.move_write == "single":
+            if "move_command" not in blocks:
+                raise self.err("blocks", "missing move_command (controlword + target_position in one write); or set "
+                                         "[protocol] move_write = \"target_then_controlword\"")
+            if blocks["move_command"].names[0] != "controlword" or "target_position" not in blocks["move_command"].names:
+                raise self.err("blocks.move_command", "controlword must come first, then target_position (the drive "
+                                                      "latches the target on the controlword write)")
         if "statusword" not in blocks["status"].names:
             raise self.err("blocks.status", "must include statusword")
+        for bname, want in (("identity", IDENTITY_REGISTERS), ("limits", LIMIT_REGISTERS)):
+            if bname not in blocks:
+                # derived: the registers of that kind the profile maps
+                names = tuple(n for n in want if n in registers)
+                if names:
+                    rs = sorted((registers[n] for n in names), key=lambda r: r.address)
+                    blocks[bname] = Block(bname, rs[0].address, rs[-1].end - rs[0].address, tuple(r.name for r in rs))
 
         cw_bits = self.bits("controlword", REQUIRED_CW_BITS, 15)
         commands = self.bits("commands", REQUIRED_COMMANDS, 0xFFFF)
@@ -477,17 +676,32 @@ class _Parser:
         if missing:
             raise self.err("fault", f"missing fault(s) named {', '.join(missing)}")
 
-        table = self.table(word_order, registers)
+        table, note = self.table(word_order, registers)
         return DriveProfile(
             path=str(self.path), name=name, map_version=map_version, word_order=word_order,
             limits=limits, identity=MappingProxyType(identity), registers=MappingProxyType(registers),
             blocks=MappingProxyType(blocks), controlword_bits=MappingProxyType(cw_bits),
             commands=MappingProxyType(commands), statusword_bits=MappingProxyType(sw_bits),
-            faults=MappingProxyType(faults), table=table,
+            faults=MappingProxyType(faults), table=table, protocol=protocol,
+            scaling=MappingProxyType(dict(self.scaling)), table_note=note,
         )  # fmt: skip
 
-    def table(self, word_order: str, registers: dict[str, Register]) -> TableLayout:
+    def table(self, word_order: str, registers: dict[str, Register]) -> tuple[TableLayout | None, str]:
         sec = self.section("table")
+        kind = self.choice(sec, "table", "kind", ("banks", "none"), "banks")
+        if kind == "none":
+            note = sec.get("note", "")
+            if not isinstance(note, str) or not note.strip():
+                raise self.err("table", "note: say why the drive holds no table (e.g. \"no compensation table over "
+                                        "Modbus in the manual\"), so the station can tell the user")
+            extra = sorted(set(sec) - {"kind", "note"})
+            if extra:
+                raise self.err("table", f"kind = \"none\" takes only a note, not {', '.join(extra)}")
+            return None, note.strip()
+        missing = [n for n in TABLE_REGISTERS if n not in registers]
+        if missing:
+            raise self.err("registers", f"missing {', '.join(missing)} (a drive with table banks needs them; "
+                                        "or set [table] kind = \"none\")")
         max_points = self.integer(sec, "table", "max_points", 2, 4096)
         max_corr = self.num(sec, "table", "max_correction_um", positive=True)
         entry_type = sec.get("entry_type")
@@ -500,6 +714,7 @@ class _Parser:
         bases = sec.get("bank_base")
         if not isinstance(bases, list) or len(bases) != 2 or not all(isinstance(b, int) and not isinstance(b, bool) for b in bases):
             raise self.err("table", f"bank_base: must be a list of two addresses, got {bases!r}")
+        bases = [b - self.address_base for b in bases]
         fwd = self.integer(sec, "table", "fwd_offset")
         rev = self.integer(sec, "table", "rev_offset")
         hsec = sec.get("header")
@@ -524,4 +739,4 @@ class _Parser:
                 raise self.err("table", f"{bn} at {b0} overlaps {an} ({a0}..{a1 - 1})")
         if used[-1][1] > 0x10000:
             raise self.err("table", "bank_base: the banks run past address 65535")
-        return layout
+        return layout, ""

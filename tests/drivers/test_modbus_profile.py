@@ -90,7 +90,8 @@ def _broken(tmp_path: Path, old: str, new: str) -> Path:
         ("bank_base = [1000, 3000]", "bank_base = [1000, 1500]", "overlaps"),
         ("soft_min_mm = -95.0", "soft_min_mm = 96.0", "[limits] soft_min_mm"),
         ('name = "soft_limit"', 'name = "limit"', "soft_limit"),
-        ("serial               = {", "serialnumber         = {", "[registers] missing serial"),
+        ("serial               = {", "serialnumber         = {", "[blocks.identity] unknown register(s) serial"),
+        ("statusword           = {", "statusword_x         = {", "[registers] missing statusword"),
     ],
 )
 def test_profile_errors_name_file_and_key(tmp_path, old, new, words):
