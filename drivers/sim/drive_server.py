@@ -1,8 +1,14 @@
 """The simulated servo drives: a real pymodbus server (TCP on 127.0.0.1, RTU over a pty) in
 front of the leg plants.
 
-One server serves every leg on one bus: unit id n = leg n, each with its own register space
-laid out by the drive profile (drivers/modbus/profiles/default.toml, docs/register-map.md).
+One server serves every leg on one bus: unit id from the profile (by default leg n = unit n),
+each with its own register space laid out by the drive profile (drivers/modbus/profiles/*.toml,
+docs/register-map.md, docs/drive-profiles.md). It serves any profile and keeps its line rules
+like the real drive would (`FrameStats`): a request longer than the profile's
+max_read_words / max_write_words is answered with exception 03 or not at all
+(`[protocol] oversize_reply`), a request arriving sooner than min_frame_gap_ms after the
+previous reply is counted and not answered (on a real RTU line it would run into the previous
+frame), and a set-point latches on the level or the rising edge of the bit as the profile says.
 Each unit runs the CiA 402 state machine, trapezoidal moves on the shared clock against its
 `LegPlant`, soft-limit refusal with a fault, and the active compensation table. Tables and the
 active bank live in "non-volatile memory": a JSON file rewritten atomically on every change and
@@ -36,6 +42,7 @@ import signal
 import sys
 import tempfile
 import threading
+import time
 import tty
 from dataclasses import dataclass
 from functools import partial
@@ -132,8 +139,10 @@ class _DriveModel:
         self.plant = plant
         self.clock = clock
         self.p = profile
-        self.t = profile.table
-        size = max(max(r.end for r in profile.registers.values()), self.t.bank_end(len(self.t.bank_base) - 1))
+        self.t = profile.table  # None: a drive without a compensation table
+        size = max(r.end for r in profile.registers.values())
+        if self.t is not None:
+            size = max(size, self.t.bank_end(len(self.t.bank_base) - 1))
         self.regs = [0] * size
         self.readable = bytearray(size)
         self.writable = bytearray(size)
@@ -141,7 +150,7 @@ class _DriveModel:
             self.readable[r.address : r.end] = b"\1" * r.words
             if r.writable:
                 self.writable[r.address : r.end] = b"\1" * r.words
-        for b in range(self.t.banks):
+        for b in range(self.t.banks if self.t else 0):
             base = self.t.bank_base[b]
             for r in self.t.header.values():
                 self.readable[base + r.address : base + r.end] = b"\1" * r.words
@@ -167,16 +176,27 @@ class _DriveModel:
         self.reads = 0
         self.writes = 0
         self._bank_cache: dict[int, tuple | None] = {}
+        self._internal: dict[str, object] = {}  # values the profile maps to no register
         self._init_registers()
 
     # -- registers ------------------------------------------------------------------------------
     def _set(self, name: str, value) -> None:
-        r = self.p.registers[name]
+        r = self.p.registers.get(name)
+        if r is None:  # the profile maps no register for it: the drive keeps it internally
+            self._internal[name] = value
+            return
         self.regs[r.address : r.end] = r.encode(value)
 
     def _get(self, name: str):
-        r = self.p.registers[name]
+        r = self.p.registers.get(name)
+        if r is None:
+            return self._internal.get(name, 0)
         return r.decode(self.regs[r.address : r.end])
+
+    def _touched(self, name: str, address: int, count: int) -> bool:
+        """Whether a request at `address` (+`count`) covers register `name` (False if unmapped)."""
+        r = self.p.registers.get(name)
+        return r is not None and r.address < address + count and r.end > address
 
     def _init_registers(self) -> None:
         ident = self.p.identity
@@ -194,7 +214,9 @@ class _DriveModel:
         self._set("profile_acceleration", lim.profile_accel_mm_s2)
         self._set("table_enable", 1)
         self._set("active_bank", 0)
-        for b in range(self.t.banks):
+        if self.p.protocol.mode_of_operation is not None:
+            self._set("modes_of_operation", 0)  # like a drive at power-on: no mode until told
+        for b in range(self.t.banks if self.t else 0):
             self._write_header(b, {"point_count": 0, "start_position": 0.0, "spacing": 0.0,
                                    "units": self.t.units_code, "checksum": crc16_modbus([])})
             self._revalidate(b)
@@ -240,7 +262,7 @@ class _DriveModel:
     def correction_um(self, target_mm: float, direction: int) -> float:
         """Active table's predicted error at `target_mm` approaching in `direction`, um (linear
         interpolation, end values held outside the table); 0 when disabled or empty."""
-        if not self._get("table_enable"):
+        if self.t is None or not self._get("table_enable"):
             return 0.0
         cache = self._bank_cache.get(self._get("active_bank"))
         if not cache or not cache[2]:
@@ -336,6 +358,7 @@ class _DriveModel:
     def _controlword(self, cw: int) -> None:
         bit = lambda n: self.p.cw_bit(cw, n)  # noqa: E731
         rising_reset = bit("fault_reset") and not self.p.cw_bit(self.cw_prev, "fault_reset")
+        prev = self.cw_prev
         self.cw_prev = cw
         if self.state == DriveState.FAULT:
             if rising_reset:
@@ -367,7 +390,13 @@ class _DriveModel:
             if s in (DriveState.SWITCHED_ON, DriveState.QUICK_STOP_ACTIVE):
                 s = DriveState.OPERATION_ENABLED
         self.state = s
-        self.set_point_ack = bit("new_set_point") and s == DriveState.OPERATION_ENABLED
+        latch = bit("new_set_point")
+        if self.p.protocol.set_point_latch == "edge":
+            latch = latch and not self.p.cw_bit(prev, "new_set_point")  # CiA 402: the rising edge
+        mode = self.p.protocol.mode_of_operation
+        if mode is not None and self._get("modes_of_operation") != mode:
+            latch = False  # not in profile position mode: a set-point means nothing
+        self.set_point_ack = latch and s == DriveState.OPERATION_ENABLED
         if self.set_point_ack:
             self._start_move(self._get("target_position"))
 
@@ -401,7 +430,7 @@ class _DriveModel:
 
     def _bank_of(self, address: int, count: int) -> set[int]:
         hit = set()
-        for b in range(self.t.banks):
+        for b in range(self.t.banks if self.t else 0):
             if address < self.t.bank_end(b) and address + count > self.t.bank_base[b]:
                 hit.add(b)
         return hit
@@ -413,7 +442,7 @@ class _DriveModel:
         if address < 0 or address + count > len(self.regs) or not all(self.writable[address : address + count]):
             return ExcCodes.ILLEGAL_ADDRESS
         self.refresh()
-        touched = lambda name: self.p.registers[name].address < address + count and self.p.registers[name].end > address  # noqa: E731
+        touched = lambda name: self._touched(name, address, count)  # noqa: E731
         banks = self._bank_of(address, count)
         active = self._get("active_bank")
         if active in banks:
@@ -446,8 +475,9 @@ class _DriveModel:
         return None
 
     def touches_nv(self, address: int, count: int) -> bool:
-        names = ("active_bank", "table_enable")
-        if any(self.p.registers[n].address < address + count and self.p.registers[n].end > address for n in names):
+        if self.t is None:
+            return False
+        if any(self._touched(n, address, count) for n in ("active_bank", "table_enable")):
             return True
         return bool(self._bank_of(address, count))
 
@@ -455,24 +485,40 @@ class _DriveModel:
         return {
             "active_bank": self._get("active_bank"),
             "table_enable": self._get("table_enable"),
-            "banks": [self.bank_registers(b) for b in range(self.t.banks)],
+            "banks": [self.bank_registers(b) for b in range(self.t.banks if self.t else 0)],
         }
 
     def load_nv_state(self, state: dict, where: str) -> None:
         banks = state.get("banks")
-        if not isinstance(banks, list) or len(banks) != self.t.banks:
-            raise NvError(f"{where}: 'banks' must be a list of {self.t.banks} register lists")
+        nbanks = self.t.banks if self.t else 0
+        if not isinstance(banks, list) or len(banks) != nbanks:
+            raise NvError(f"{where}: 'banks' must be a list of {nbanks} register lists")
         for b, words in enumerate(banks):
             size = self.t.bank_end(b) - self.t.bank_base[b]
             if not isinstance(words, list) or len(words) != size or not all(isinstance(w, int) and 0 <= w <= 0xFFFF for w in words):
                 raise NvError(f"{where}: bank {b} must hold {size} register values 0..65535")
             self.load_bank_registers(b, words)
         active, enable = state.get("active_bank"), state.get("table_enable")
-        if active not in range(self.t.banks) or enable not in (0, 1):
-            raise NvError(f"{where}: active_bank must be 0..{self.t.banks - 1} and table_enable 0 or 1")
+        if (nbanks and active not in range(nbanks)) or enable not in (0, 1):
+            raise NvError(f"{where}: active_bank must be 0..{nbanks - 1} and table_enable 0 or 1")
         self._set("active_bank", active)
         self._set("table_enable", enable)
         self._update_status()
+
+
+@dataclass
+class FrameStats:
+    """What the simulated drive saw on its line, for tests that check the client keeps the
+    profile's rules: the longest read and write requests (words), requests longer than the
+    profile allows, requests that came sooner than the profile's silence after the previous
+    reply, and the shortest silence seen (seconds, real time)."""
+
+    requests: int = 0
+    longest_read_words: int = 0
+    longest_write_words: int = 0
+    oversize: int = 0
+    gap_violations: int = 0
+    shortest_gap_s: float = math.inf
 
 
 class SimDriveServer:
@@ -510,6 +556,8 @@ class SimDriveServer:
         self._tick: asyncio.Task | None = None
         self.tcp_port: int | None = None
         self.rtu_port: str | None = None
+        self.frames = FrameStats()
+        self._last_reply_t = -math.inf  # time.monotonic() when the previous request was answered
 
     # -- non-volatile memory ----------------------------------------------------------------------
     def _load_nv(self) -> None:
@@ -559,8 +607,42 @@ class SimDriveServer:
             pass
 
     # -- request handling (runs in the server thread) ------------------------------------------------
+    def _line_rules(self, count: int, write: bool) -> ExcCodes | None:
+        """Apply the profile's line rules to a request of `count` words; count what breaks them.
+        Returns the exception to answer with; raises NoSuchIdException for no answer."""
+        proto = self.profile.protocol
+        f = self.frames
+        now = time.monotonic()
+        gap = now - self._last_reply_t
+        f.requests += 1
+        f.shortest_gap_s = min(f.shortest_gap_s, gap)
+        if write:
+            f.longest_write_words = max(f.longest_write_words, count)
+        else:
+            f.longest_read_words = max(f.longest_read_words, count)
+        if gap * 1000.0 < proto.min_frame_gap_ms:
+            f.gap_violations += 1
+            # on an RTU line the frame would have merged with the previous one: no reply
+            raise NoSuchIdException(f"request {gap * 1000.0:.2f} ms after the previous reply, the drive needs "
+                                    f"{proto.min_frame_gap_ms:g} ms")
+        if count > (proto.max_write_words if write else proto.max_read_words):
+            f.oversize += 1
+            if proto.oversize_reply == "silence":
+                raise NoSuchIdException(f"request of {count} words, longer than the drive accepts")
+            return ExcCodes.ILLEGAL_VALUE  # exception 03, as the manuals say
+        return None
+
     async def _action(self, leg, function_code, start_address, address, count, registers, set_values):
+        try:
+            return await self._answer(leg, start_address, address, count, registers, set_values)
+        finally:
+            self._last_reply_t = time.monotonic()
+
+    async def _answer(self, leg, start_address, address, count, registers, set_values):
         with self.lock:
+            refused = self._line_rules(count, set_values is not None)
+            if refused is not None:
+                return refused
             model = self._models[leg]
             if model.unresponsive:
                 raise NoSuchIdException(f"leg {leg} set unresponsive")  # no reply at all
@@ -582,7 +664,7 @@ class SimDriveServer:
     def _devices(self) -> list[SimDevice]:
         size = len(next(iter(self._models.values())).regs)
         devices = [
-            SimDevice(id=leg, simdata=[SimData(address=0, count=size, datatype=DataType.REGISTERS)],
+            SimDevice(id=self.profile.protocol.unit_id(leg), simdata=[SimData(address=0, count=size, datatype=DataType.REGISTERS)],
                       action=partial(self._action, leg))
             for leg in self._models
         ]  # fmt: skip
@@ -738,6 +820,11 @@ class SimDriveServer:
         """Make drive `leg` ignore every request (no reply), as a drive with a dead link would."""
         with self.lock:
             self._models[leg].unresponsive = bool(on)
+
+    def frame_stats(self) -> FrameStats:
+        """A copy of what the drives saw on their line (see FrameStats)."""
+        with self.lock:
+            return FrameStats(**vars(self.frames))
 
     def request_counts(self, leg: int) -> tuple[int, int]:
         """(reads, writes) drive `leg` has answered or refused since start."""
