@@ -73,6 +73,25 @@ def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterabl
     return JobOutcome(finished(events.events), events.events, audit_sink.problems, result)
 
 
+# -- compensation targets ----------------------------------------------------------------------------
+
+def controller_refusal(cfg: StationConfig, legs: Iterable[int], action: Action) -> tuple[int, str] | None:
+    """(leg, reason) for the first of `legs` whose [compensation] target is `controller`: the
+    station neither writes nor verifies its table (the controller applies it); None otherwise."""
+    for leg in legs:
+        if cfg.compensation.target_of(leg) == "controller":
+            return leg, (f"leg {leg}: compensation target is controller ([compensation] in {cfg.source}), so the "
+                         f"station does not {action} its table: the controller applies it; export the table for it "
+                         "(`station table MODEL.json --format linuxcnc`), or set the leg's target to drive or station")
+    return None
+
+
+def target_text(cfg: StationConfig, leg: int) -> str:
+    """How a front end names leg `leg`'s compensation target: "drive", "station (STORE)", "controller"."""
+    target = cfg.compensation.target_of(leg)
+    return f"station ({cfg.station_tables_path})" if target == "station" else target
+
+
 # -- push and rollback ---------------------------------------------------------------------------------
 
 def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]]:
@@ -131,9 +150,11 @@ def expected_tables(path: str | Path, legs: Iterable[int], spec: TableSpec) -> d
 
 def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *, audit: AuditLog, before: Any = None,
                expected_sha256: dict[int, str] | None = None, expected_source: str = "the table",
-               drive_url: str = "", sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
+               drive_url: str = "", sinks: Iterable[Sink] = (), control: RunControl | None = None,
+               normalise: bool = True) -> JobOutcome:
     """A verification sweep of `plan` with the tables active, recorded to `out`, compared with the
-    calibration `before` (procedures.verify.verify_procedure)."""
+    calibration `before` (procedures.verify.verify_procedure); errors normalised to 20 degC
+    unless `normalise` is False."""
     out = Path(out)
     if out.exists():
         raise InputError(f"{out}: exists; choose another file (a verification is a new session)")
@@ -142,5 +163,6 @@ def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *
                             software_version=__version__)
     procedure = verify_procedure(rig.axes, rig.laser, rig.clock, plan, out, read_session=read_session, before=before,
                                  expected_sha256=expected_sha256, expected_source=expected_source, drive_url=drive_url,
-                                 control=control, sweep_options={"session_id": uuid.uuid4().hex[:12]})
+                                 control=control, sweep_options={"session_id": uuid.uuid4().hex[:12]},
+                                 normalise=normalise)
     return run_table_job(procedure, audit, [recorder, *sinks], control)

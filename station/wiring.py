@@ -61,15 +61,14 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
     the plant seed, which repeats a session's noise exactly."""
     profile = DriveProfile.load(cfg.drive.profile or None)
     if cfg.is_sim:
-        from drivers.sim.plant import default_leg_configs
         from drivers.sim.rig import SimRig
 
         scale = cfg.sim.time_scale if time_scale is None else time_scale
         nv = Path(cfg.sim.nv_path) if cfg.sim.nv_path else None
         if noise_seed is None:
-            sim = SimRig(time_scale=scale, seed=cfg.sim.seed, nv_path=nv, profile=profile).start()
+            sim = SimRig(time_scale=scale, seed=cfg.sim.seed, configs=cfg.sim.leg_configs(), nv_path=nv, profile=profile).start()
         else:
-            sim = SimRig(time_scale=scale, seed=int(noise_seed), configs=default_leg_configs(cfg.sim.seed),
+            sim = SimRig(time_scale=scale, seed=int(noise_seed), configs=cfg.sim.leg_configs(),
                          nv_path=nv, profile=profile).start()
         try:
             axes = connect_axes(sim.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
@@ -197,16 +196,40 @@ def drive_url_of(cfg: StationConfig) -> str:
     return cfg.drive.url
 
 
-def drive_table_spec(profile_path: str | Path | None = None) -> TableSpec:
+def drive_table_spec(profile_path: str | Path | None = None) -> TableSpec | None:
     """What the drive of a profile (the built-in one without a path) holds, without connecting:
-    for making and checking tables offline. InputError naming the profile when it is bad."""
+    for making and checking tables offline; None for a drive without a table. InputError naming
+    the profile when it is bad."""
     from drivers.modbus.client import table_spec
     from drivers.modbus.profile import ProfileError
 
     try:
-        return table_spec(DriveProfile.load(str(profile_path) if profile_path else None))
+        profile = DriveProfile.load(str(profile_path) if profile_path else None)
+        if getattr(profile, "table", None) is None:
+            return None
+        return table_spec(profile)
     except ProfileError as exc:
         raise InputError(str(exc)) from None
+
+
+def leg_table_spec(cfg: StationConfig, leg: int) -> TableSpec:
+    """What holds leg `leg`'s table by its [compensation] target, without connecting: the
+    station's store (target station) or the drive of cfg's profile (target drive). InputError
+    for a leg whose target is controller, or drive on a drive without a table (naming the others)."""
+    target = cfg.compensation.target_of(leg)
+    if target == "station":
+        from drivers.station_compensation import station_table_spec
+
+        return station_table_spec(cfg.station_tables_path)
+    if target == "controller":
+        raise InputError(f"leg {leg}: compensation target is controller ([compensation] in {cfg.source}): the "
+                         "controller applies the table; export it with `station table --format linuxcnc`")
+    spec = drive_table_spec(cfg.drive.profile or None)
+    if spec is None:
+        raise InputError(f"leg {leg}: the drive (profile {cfg.drive.profile or 'built-in'}) holds no compensation "
+                         f"table; set its target to station ([compensation] legs = {{ {leg} = \"station\" }}: the "
+                         "station applies the table to every command) or controller (`station table --format linuxcnc`)")
+    return spec
 
 
 REPLAY_LASER_TIMEOUT_S = 10.0

@@ -17,7 +17,15 @@ from procedures.plans import parse_legs
 from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
 from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
-from station.table_jobs import JobOutcome, load_leg_table, push_job, push_legs_job, refusal_job
+from station.table_jobs import (
+    JobOutcome,
+    controller_refusal,
+    load_leg_table,
+    push_job,
+    push_legs_job,
+    refusal_job,
+    target_text,
+)
 from station.wiring import drive_url_of, open_drive
 
 NAME = "push"
@@ -181,7 +189,13 @@ def run(args) -> int:
             tables[leg], sources[leg] = load_leg_table(args.table, leg)
         except (InputError, DriverError, OSError) as exc:
             return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
+    controller = controller_refusal(cfg, legs, Action.PUSH)
+    if controller:
+        return refuse(args, cfg, audit, Action.PUSH, controller[0], InputError(controller[1]), sources[controller[0]])
     print(f"drive: {drive_text(cfg)}")
+    for leg in legs:  # the plan names every leg's target; said first where it is not the drive
+        if cfg.compensation.target_of(leg) != "drive":
+            print(f"compensation target of leg {leg}: {target_text(cfg, leg)}")
     sha = next(iter(sources.values()))["sha256"]
     with open_drive(cfg, legs) as drive:
         warn_audit_problems(audit)
@@ -198,7 +212,7 @@ def run(args) -> int:
         result = end.result
         if end.leg is not None and result is not None:
             print(f"pushed: leg {result.leg} bank {result.bank} active (was bank {result.previous_bank}); "
-                  f"table sha256 {result.table_sha256}")
+                  f"table sha256 {result.table_sha256}; compensation target {target_text(cfg, result.leg)}")
             if not result.table_enabled:
                 print(f"warning: leg {result.leg}: the drive does not apply its table (table_enable = 0); switch it on "
                       "before relying on it")
@@ -206,10 +220,10 @@ def run(args) -> int:
     if code:
         return code
     print(f"backup of the previous table(s) is in {audit.path}")
-    if cfg.drive.url == "sim":
-        verify_where = undo_where = "--sim"
-    elif args.config:
+    if args.config:  # before --sim: the config holds the legs' compensation targets
         verify_where = undo_where = f"--config {args.config}"
+    elif cfg.drive.url == "sim":
+        verify_where = undo_where = "--sim"
     else:
         verify_where, undo_where = "--config C", f"--drive {cfg.drive.url}"
     which = args.leg if len(legs) > 1 else str(legs[0])

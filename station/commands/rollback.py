@@ -20,7 +20,7 @@ from station.commands.push import (
     warn_audit_problems,
 )
 from station.config import LEG_COUNT
-from station.table_jobs import rollback_job
+from station.table_jobs import controller_refusal, rollback_job, target_text
 from station.wiring import open_drive
 
 NAME = "rollback"
@@ -43,7 +43,12 @@ def run(args) -> int:
     if not 1 <= leg <= LEG_COUNT:
         return refuse(args, cfg, audit, Action.ROLLBACK, leg,
                       InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}"))
+    controller = controller_refusal(cfg, (leg,), Action.ROLLBACK)
+    if controller:
+        return refuse(args, cfg, audit, Action.ROLLBACK, leg, InputError(controller[1]))
     print(f"drive: {drive_text(cfg)}")
+    if cfg.compensation.target_of(leg) != "drive":
+        print(f"compensation target of leg {leg}: {target_text(cfg, leg)}")
     with open_drive(cfg, leg) as drive:
         warn_audit_problems(audit)
         ask = prompt(args.yes)

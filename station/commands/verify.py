@@ -13,12 +13,12 @@ from procedures import events as ev
 from procedures.errors import InputError
 from procedures.plans import SweepPlan, iso230_plan
 from procedures.recording.reader import read_session
-from procedures.states import AuditOutcome
+from procedures.states import Action, AuditOutcome
 from procedures.verify import ACCEPT_RATIO
 from station.commands.push import audit_log, parse_leg_choice, station_config
 from station.progress import ConsoleProgress
-from station.table_jobs import expected_tables, verify_job
-from station.wiring import drive_table_spec, drive_url_of, open_rig
+from station.table_jobs import controller_refusal, expected_tables, refusal_job, target_text, verify_job
+from station.wiring import drive_url_of, leg_table_spec, open_rig
 
 NAME = "verify"
 HELP = "verification sweep with the table active: compensated error and ISO 230-2 before vs after"
@@ -50,6 +50,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-seed", type=int, metavar="N",
                    help="simulated rig only: seed of the measurement noise (default: a new one, so the verification "
                         "does not repeat the calibration's noise; printed for reproduction)")
+    p.add_argument("--raw", action="store_true",
+                   help="compare the raw errors (default: both sessions normalised to 20 degC material temperature, "
+                        "docs/metrology.md)")
 
 
 def _plan(args, legs: tuple[int, ...], before) -> SweepPlan:
@@ -82,12 +85,16 @@ class LegPrinter:
 
 def run(args) -> int:
     legs = parse_leg_choice(args.leg)
-    if args.config and (args.seed is not None or args.noise_seed is not None):
-        raise InputError("--seed/--noise-seed apply to the simulated rig (--sim) only")
     cfg = station_config(args, interferometer=True)
+    if not cfg.is_sim and (args.seed is not None or args.noise_seed is not None):
+        raise InputError("--seed/--noise-seed apply to the simulated rig (--sim, or a config naming \"sim\") only")
     if args.seed is not None:
         cfg.sim.seed = args.seed
     audit = audit_log(args, cfg)
+    controller = controller_refusal(cfg, legs, Action.VERIFY)
+    if controller:
+        job = refusal_job(Action.VERIFY, controller[0], controller[1], audit=audit, drive_url=drive_url_of(cfg))
+        raise InputError(job.finished.message)
     out = Path(args.out)
     if out.exists():
         raise InputError(f"{out}: exists; choose another --out (a verification is a new session)")
@@ -95,7 +102,8 @@ def run(args) -> int:
     plan = _plan(args, legs, before)
     expected: dict[int, str] = {}
     if args.table:
-        expected = expected_tables(args.table, legs, drive_table_spec(cfg.drive.profile or None))
+        for leg in legs:  # as the leg's table holder stores it: the drive, or the station (its target)
+            expected.update(expected_tables(args.table, (leg,), leg_table_spec(cfg, leg)))
     noise_seed = None
     if cfg.is_sim:
         noise_seed = args.noise_seed if args.noise_seed is not None else secrets.randbelow(1 << 31)
@@ -104,9 +112,11 @@ def run(args) -> int:
                   "of the same plan exactly, so it is not an independent verification")
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale, noise_seed=noise_seed) as rig:
         print(f"rig: {rig.description}" + (f"; plant seed {cfg.sim.seed}, noise seed {noise_seed}" if cfg.is_sim else ""))
+        for leg in plan.legs:
+            print(f"compensation target of leg {leg}: {target_text(cfg, leg)}")
         job = verify_job(rig, plan, out, cfg, audit=audit, before=before, expected_sha256=expected,
                          expected_source=str(args.table), drive_url=drive_url_of(cfg),
-                         sinks=[LegPrinter(), ConsoleProgress()])
+                         sinks=[LegPrinter(), ConsoleProgress()], normalise=not args.raw)
     for problem in job.audit_problems:
         print(f"warning: {problem}", file=sys.stderr)
     end = job.finished
