@@ -7,6 +7,8 @@ Files written into the output directory:
 - histograms.png  error before / after compensation per leg, like the paper's Figs. 7-8
 - spectrum.png    amplitude spectrum of the residual per leg, screw lead and harmonics marked
 - summary.md, summary.json  per-leg figures (um)
+- iso230-2.md, .json, .png, .pdf  the ISO 230-2 test report with the expanded uncertainty of every
+  value (procedures.iso230_report; written when the session's metadata is given)
 
 "After compensation" is the residual (error minus model) on this session's points: in-sample
 when the model was fitted to this session, a true test when it came from another recording. Its
@@ -43,6 +45,7 @@ class ReportResult:
     out_dir: Path
     files: list[Path] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
+    iso230: dict[str, Any] | None = None  # the ISO 230-2 test report (procedures.iso230_report.build)
 
 
 def _lead_of(model: LegErrorModel, leg: int) -> float | None:
@@ -103,10 +106,11 @@ def _json_safe(v: Any) -> Any:
 
 def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorModel | None = None, *,
                 source_path: str = "", source_sha256: str = "", lead_mm: float | str | None = "auto",
-                title: str = "") -> ReportResult:
+                title: str = "", session_meta: dict[str, Any] | None = None) -> ReportResult:
     """Write the report files (module docstring) for a session's points into `out_dir`
     (created if missing). Without `model`, the default model is fitted to the points.
-    Errors are measured minus commanded (um), positions mm."""
+    `session_meta` ({"plan", "devices", "station_config", "attrs"} of the session) adds the
+    ISO 230-2 test report (iso230-2.*). Errors are measured minus commanded (um), positions mm."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -269,6 +273,13 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
     result.files.append(out / "summary.json")
     (out / "summary.md").write_text(_markdown(result.summary, title or f"Report: {source_path or 'session'}"))
     result.files.append(out / "summary.md")
+    if session_meta is not None:
+        from procedures import iso230_report
+
+        meta = {k: session_meta.get(k) or {} for k in ("plan", "devices", "station_config", "attrs")}
+        result.iso230, paths = iso230_report.write(points, out, source={"path": source_path, "sha256": source_sha256},
+                                                   **meta)
+        result.files.extend(paths)
     return result
 
 

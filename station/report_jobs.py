@@ -17,8 +17,10 @@ def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: 
     into `out_dir`, before and after `model` (None: the default model fitted to the session)."""
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
+    meta = {"plan": session.plan, "devices": session.devices, "station_config": session.station_config,
+            "attrs": session.attrs}
     return make_report(session.points, out_dir, model, source_path=str(session.path),
-                       source_sha256=session.sha256, lead_mm=lead_mm)
+                       source_sha256=session.sha256, lead_mm=lead_mm, session_meta=meta)
 
 
 def report_lines(result: ReportResult, model=None) -> list[str]:
@@ -34,7 +36,23 @@ def report_lines(result: ReportResult, model=None) -> list[str]:
                      + f"; RMS before {row['rms_before_um']:.3f} um, residual RMS {row['residual_rms_um']:.3f} um")
     lines.append(f"residual = error minus model on this session's points: {result.summary['residuals']}; "
                  "figures: docs/figures.md")
+    lines += iso_lines(result.iso230)
     lines += [f"wrote {path}" for path in result.files]
+    return lines
+
+
+def iso_lines(iso: dict | None) -> list[str]:
+    """One line per leg: the ISO 230-2 values with their expanded uncertainty (k = 2)."""
+    if not iso:
+        return []
+    lines = [f"ISO 230-2 ({iso['error_basis']['basis']} error), U with k = 2 (docs/uncertainty.md):"]
+    for leg, entry in iso["legs"].items():
+        cells = []
+        for name in ("E", "M", "A", "B", "R"):
+            v = entry["values"][name]
+            cells.append(f"{name} {v['value_um']:.3f} +/- {v['U_um']:.3f}" if v["value_um"] is not None
+                         and v["U_um"] is not None else f"{name} n/a")
+        lines.append(f"  leg {leg}: " + ", ".join(cells) + " um")
     return lines
 
 

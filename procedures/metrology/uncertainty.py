@@ -82,10 +82,11 @@ class UncertaintyInputs:
 
     @classmethod
     def from_record(cls, station_config: dict, leg: int) -> "UncertaintyInputs":
-        """From a session's recorded station_config (StationConfig.to_dict as the session holds it):
-        a session made before [metrology] existed gets the defaults."""
-        legs = station_config.get("leg_overrides") or {}
-        mat = legs.get(str(leg)) or station_config.get("legs") or {}
+        """From a session's recorded station_config (its `metrology` and `leg_materials`, or
+        StationConfig.to_dict's `legs`/`leg_overrides`): a session made before [metrology] existed
+        gets the defaults."""
+        per_leg = station_config.get("leg_materials") or station_config.get("leg_overrides") or {}
+        mat = per_leg.get(str(leg)) or station_config.get("legs") or {}
         return cls.from_dicts(station_config.get("metrology") or {}, mat)
 
     @classmethod
@@ -509,7 +510,7 @@ class _Model:
                             f"independent (recorded range {self.env.dn_range_ppm:.3g} ppm)")
             rows.append(Contribution(source, quantity, unit, u, total / u if u > 0 else 0.0, dist))
         if v.r > 0:
-            rows.append(Contribution("choice of extreme", "max/min over near-equal candidates (Clark 1961)", "um",
+            rows.append(Contribution("near-equal extremes", "which target sets the max/min (Clark 1961)", "um",
                                      v.r, 1.0, "from the candidates' spread"))
         return tuple(rows)
 
