@@ -420,6 +420,9 @@ def _meta_json(f: h5py.File, key: str, path: Path) -> dict:
         value = json.loads(text)
     except (TypeError, ValueError) as exc:
         raise SchemaError(f"{path}: attribute /meta/{key} is not valid JSON ({exc})") from None
+    if not isinstance(value, dict):  # every reader of plan/station_config/devices takes an object
+        raise SchemaError(f"{path}: attribute /meta/{key} is JSON {type(value).__name__}, not an object; "
+                          f"{_COPY_AGAIN}")
     return value
 
 
@@ -488,8 +491,10 @@ def read_session(path: str | os.PathLike) -> Session:
     check_points(points, path, meta["plan"])
     try:
         resumed = json.loads(attrs.get("resumed_utc", "[]") or "[]")
-    except ValueError:
-        raise SchemaError(f"{path}: root attribute resumed_utc is not a JSON list") from None
+    except (TypeError, ValueError):  # not text (an array), or not JSON
+        resumed = None
+    if not isinstance(resumed, list) or not all(isinstance(t, str) for t in resumed):
+        raise SchemaError(f"{path}: root attribute resumed_utc is not a JSON list of UTC times") from None
     return Session(
         path=path,
         sha256=sha,
