@@ -251,14 +251,23 @@ class CompensationScreen(StationScreen):
         a = self.app.analysis
         src = self.query_one("#comp-source", Static)
         if a is None:
-            src.update("no model yet: fit one on the Results screen (F3), then come back and press t")
+            src.update("no model yet: fit one on the Results screen (F3), then come back and press t"
+                       + self._targets_text())
         else:
             src.update(f"model: [b]{a.method}[/b] fitted on {a.path.name}"
-                       + (f" (saved {a.model_path.name})" if a.model_path else ""))
+                       + (f" (saved {a.model_path.name})" if a.model_path else "") + self._targets_text())
         self.query_one(LegTablesView).show(self.table, self.drive_tables)
         self.query_one("#comp-status", Static).update(self.verify_text.rstrip())
         self._show_audit()
         self._show_plots()
+
+    def _targets_text(self) -> str:
+        """"; compensation target: station (every leg), leg 3 drive" where a leg's table is not the
+        drive's (the default, also named in every push's confirmation); "" when every leg uses its drive."""
+        comp = self.app.cfg.compensation
+        parts = [] if comp.target == "drive" else [f"{comp.target} (every leg)"]
+        parts += [f"leg {leg} {t}" for leg, t in sorted(comp.legs.items()) if t != comp.target]
+        return f"; compensation target: {', '.join(parts)}" if parts else ""
 
     def _show_audit(self) -> None:
         try:

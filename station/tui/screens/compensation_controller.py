@@ -93,6 +93,7 @@ class CompensationController:
                     dt.error = "no drive connected for this leg"
                 else:
                     try:
+                        dt.target = str(getattr(axis, "compensation_target", "drive"))
                         dt.identity = axis.identity()
                         dt.active_bank = axis.active_bank()
                         dt.table = axis.read_table(dt.active_bank)
@@ -134,8 +135,19 @@ class CompensationController:
         def work() -> None:
             from station.wiring import drive_url_of
 
+            from station.table_jobs import controller_refusal, refusal_job
+
             if rig is None:
                 self.screen.post_message(TableJobDone(action, leg, error="Not connected to the rig."))
+                return
+            controller = controller_refusal(cfg, legs or (leg,), action)
+            if controller:  # the controller applies this leg's table: refused and logged, as on the command line
+                try:
+                    job = refusal_job(action, controller[0], controller[1], audit=audit, drive_url=drive_url_of(cfg))
+                except Exception as exc:
+                    self.screen.post_message(TableJobDone(action, leg, error=describe(exc, f"{action} of leg {leg}")))
+                    return
+                self.screen.post_message(TableJobDone(action, leg, job))
                 return
             missing = [x for x in legs if x not in rig.axes]
             if missing:
@@ -164,8 +176,10 @@ class CompensationController:
         if self.app.hide_volatile:
             lines = [line.split(" at ")[0] if line.startswith(f"leg {plan.leg}: drive") else line for line in lines]
         verb = "Push this table to" if plan.action == Action.PUSH else "Roll back the table of"
-        question = (f"[b]{verb} leg {plan.leg}[/b], drive [b]{plan.drive}[/b]?\n\n" + "\n".join(lines)
-                    + "\n\nThe drive's current table is backed up in the audit log first; on any failure it stays active.")
+        holder = "The station's" if plan.target == "station" else "The drive's"
+        question = (f"[b]{verb} leg {plan.leg}[/b], drive [b]{plan.drive}[/b], compensation target "
+                    f"[b]{plan.target}[/b]?\n\n" + "\n".join(lines)
+                    + f"\n\n{holder} current table is backed up in the audit log first; on any failure it stays active.")
         return self._ask(question, "Push" if plan.action == Action.PUSH else "Roll back")
 
     def _ask(self, question: str, yes: str) -> bool:
@@ -236,6 +250,16 @@ class CompensationController:
             plan = replace(SweepPlan.from_dict(analysis.session.plan), legs=(leg,), kind="verification", notes=())
         except Exception as exc:
             self.app.post_message(Notice(describe(exc, "the calibration's plan cannot be repeated"), "error", "Verify"))
+            return False
+        from station.table_jobs import controller_refusal, refusal_job
+
+        controller = controller_refusal(self.app.cfg, (leg,), Action.VERIFY)
+        if controller:  # the station cannot verify a table the controller applies: refused and logged
+            try:
+                refusal_job(Action.VERIFY, leg, controller[1], audit=self.audit(), drive_url=drive_url_of(self.app.cfg))
+            except Exception:
+                pass  # the refusal itself is what matters; the notice says it
+            self.app.post_message(Notice(controller[1], "error", "Verify"))
             return False
         made = default_session_path(self.app.cfg, (leg,))  # runs/ui-STAMP-legN.h5
         out = made.with_name("verify-" + made.name.removeprefix("ui-"))

@@ -18,10 +18,13 @@ from station.tui.widgets import XYPlot, fit_columns
 
 @dataclass
 class DriveTable:
-    """What one drive holds: its identity, active bank and that bank's table (or why not)."""
+    """What one leg's table holder holds: the drive's identity, the compensation `target`
+    ("drive": the drive's banks; "station": the station's table store), the active bank and
+    that bank's table (or why not)."""
 
     leg: int
     identity: str = ""
+    target: str = "drive"
     active_bank: int | None = None
     table: Any = None  # drivers.interfaces.TableBank
     error: str = ""
@@ -62,7 +65,7 @@ class LegTablesView(DataTable):
             elif dt.error:
                 bank, diff = "[red]?[/red]", dt.error[:40]
             else:
-                bank = f"{dt.active_bank} ({dt.table.point_count} pts)"
+                bank = f"{dt.active_bank} ({dt.table.point_count} pts)" + (" station" if dt.target == "station" else "")
                 x = t.positions_mm
                 d = max(float(np.max(np.abs(np.asarray(t.error_fwd_um) - dt.correction_um(x, 1)))),
                         float(np.max(np.abs(np.asarray(t.error_rev_um) - dt.correction_um(x, -1)))))
