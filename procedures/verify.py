@@ -39,6 +39,7 @@ from procedures.errors import InputError
 from procedures.fit.data import split_legs
 from procedures.fit.noise import estimate_noise_floor
 from procedures.iso230 import LegIso230, evaluate_leg
+from procedures.metrology.thermal import normalise_session
 from procedures.plans import SweepPlan
 from procedures.push import compensation_target, describe_table, drive_table_spec, PushRefused, refused, table_sha256
 from procedures.states import Action, AuditOutcome, Outcome
@@ -225,7 +226,7 @@ def verify_procedure(
     axes: dict[int, ServoAxis], laser: Interferometer, clock: Clock, plan: SweepPlan, out: str | Path, *,
     read_session: Callable[[Path], Any], before: Any = None, expected_sha256: dict[int, str] | None = None,
     expected_source: str = "the table", drive_url: str = "", control: RunControl | None = None,
-    sweep_options: dict[str, Any] | None = None,
+    sweep_options: dict[str, Any] | None = None, normalise: bool = True,
 ) -> Iterator[ev.Event]:
     """A verification as events for the one runner: check each leg's active table, sweep
     `plan` with it active (the sweep's events; a recorder sink writes them to `out`), then
@@ -238,6 +239,10 @@ def verify_procedure(
     (figures and the report), one `AuditRecord` per leg with the sweep's outcome, and
     `OperationFinished` (completed / aborted / failed). `read_session(path)` reads the finished
     recording (the recorder sink finishes it on `SweepFinished`).
+
+    `normalise` (default): both sessions' errors are normalised to 20 degC material temperature
+    with the materials each recorded (procedures.metrology.thermal), and the report says so;
+    False compares the raw errors.
     """
 
 
@@ -297,11 +302,12 @@ def verify_procedure(
         raise
     outcome = Outcome(finished.outcome) if finished is not None else Outcome.FAILED
     session = read_session(out)
-    results = verify(session.points, before.points if before is not None else None, list(active),
+    after_points, before_points, basis, basis_doc = error_basis(session, before, normalise)
+    results = verify(after_points, before_points, list(active),
                      after_source=str(out), before_source=str(before.path) if before is not None else "")
     doc = {"path": str(out), "sha256": session.sha256, "outcome": str(outcome),
-           "reason": finished.reason if finished is not None else ""}
-    yield ev.Verified(results, format_report(results), doc)
+           "reason": finished.reason if finished is not None else "", "error_basis": basis_doc}
+    yield ev.Verified(results, "\n".join(basis) + "\n" + format_report(results), doc)
     for leg, r in results.items():
         a = active[leg]
         details = {"target": a.target, "session": str(out), "session_sha256": session.sha256, **r.to_json()}
@@ -325,3 +331,20 @@ def summary_line(outcome: str, r: LegVerification) -> str:
     return (f"verification {outcome}: residual RMS {r.after.rms_um:.4f} um, noise floor "
             + (f"{r.after.noise_floor_um:.4f} um, verification ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
                if ratio is not None else "n/a"))
+def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
+    """The verification's and the calibration's points as compared: normalised to 20 degC with
+    the materials each session recorded (`normalise`), or raw; with the lines saying which."""
+    before_points = before.points if before is not None else None
+    if not normalise:
+        return session.points, before_points, ["error: raw, not normalised to 20 degC (--raw)"], {"normalised": False}
+    after = normalise_session(session.points, getattr(session, "station_config", None))
+    lines = [f"verification {after.lines()[0]}", *after.lines()[1:]]
+    doc = {"normalised": True, "verification": after.to_json()}
+    if before is not None:
+        cal = normalise_session(before.points, getattr(before, "station_config", None))
+        before_points = cal.points
+        lines += [f"calibration {cal.lines()[0]}", *cal.lines()[1:]]
+        doc["calibration"] = cal.to_json()
+    return after.points, before_points, lines, doc
+
+

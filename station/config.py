@@ -89,6 +89,16 @@ class SimConfig:
     time_scale: float = 0.0
     seed: int = 0
     nv_path: str = ""
+    ambient_ramp_k_per_h: float = 0.0  # the simulated hall warms by this (a leg warming during a sweep)
+    thermal_tau_s: float = 1800.0  # how fast the simulated legs' material follows the hall
+
+    def leg_configs(self) -> list:
+        """The simulated legs' plant configurations (drivers.sim.plant) for this seed, ramp and
+        time constant."""
+        from drivers.sim.plant import PlantConfig, default_leg_configs
+
+        return default_leg_configs(self.seed, base=PlantConfig(ambient_ramp_k_per_h=self.ambient_ramp_k_per_h,
+                                                               tau_s=self.thermal_tau_s))
 
 
 @dataclass
@@ -185,6 +195,7 @@ class StationConfig:
     metrology: MetrologyConfig = field(default_factory=MetrologyConfig)
     legs: LegMaterial = field(default_factory=LegMaterial)  # [legs]: the default of every leg
     leg_overrides: dict[int, LegMaterial] = field(default_factory=dict)  # [legs.N]
+    legs_from_file: bool = False  # the file has a [legs] section
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
@@ -216,12 +227,22 @@ class StationConfig:
         d = asdict(self)
         d.pop("named")
         d["leg_overrides"] = {str(k): v for k, v in d["leg_overrides"].items()}  # JSON keys are strings
+        # what the session's normalisation uses: every leg's effective material
+        d["leg_materials"] = {str(n): asdict(self.material_of(n)) for n in range(1, LEG_COUNT + 1)}
         d["compensation"]["legs"] = {str(k): v for k, v in d["compensation"]["legs"].items()}
         return d
 
     def material_of(self, leg: int) -> LegMaterial:
-        """Leg `leg`'s material: its `[legs.N]` override, else the `[legs]` default."""
-        return self.leg_overrides.get(int(leg), self.legs)
+        """Leg `leg`'s material: its `[legs.N]` override, else the `[legs]` default. On the
+        simulated rig, when the file gives neither, the simulated leg's own material (its
+        expansion coefficient, fixed at its bearing), so the normalisation and the twin agree."""
+        leg = int(leg)
+        if leg in self.leg_overrides:
+            return self.leg_overrides[leg]
+        if self.is_sim and not self.legs_from_file and 1 <= leg <= LEG_COUNT:
+            plant = self.sim.leg_configs()[leg - 1]
+            return replace(self.legs, expansion_um_m_k=plant.expansion_ppm_per_k, fixed_point_mm=plant.bearing_mm)
+        return self.legs
 
     def metrology_record(self) -> dict[str, Any]:
         """The metrology config and every leg's material, as a session records it."""
@@ -268,6 +289,7 @@ _RANGES = {
     ("interferometer", "timeout_s"): (0.0, True, "seconds to wait for the interferometer's reply"),
     ("interferometer", "baudrate"): (0, True, "the serial line's bits per second"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
+    ("sim", "thermal_tau_s"): (0.0, True, "seconds the simulated material takes to follow the hall"),
 }
 
 
@@ -426,6 +448,7 @@ def load_config(path: str | Path | None) -> StationConfig:
         cfg.metrology = _load_metrology(p, data["metrology"])
     if "legs" in data:
         cfg.legs, cfg.leg_overrides = _load_legs(p, data["legs"])
+        cfg.legs_from_file = True
     cfg.compensation.check(str(p))
     unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs"}
     if unknown:

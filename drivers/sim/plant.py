@@ -17,7 +17,11 @@ shared/docs/domain.md section 4:
   error is -reversal/2 approaching upwards and +reversal/2 approaching downwards.
 - ``thermal``: the screw expands between its fixed bearing (at `bearing_mm`) and the nut:
   `expansion_ppm_per_k * (x - bearing_mm)/1000 * (T - temp_ref_c)` um, with the material
-  temperature T following a first-order model heated by travel (`heating_k_per_m`, `tau_s`).
+  temperature T following a first-order model heated by travel (`heating_k_per_m`, `tau_s`)
+  towards an ambient that may swing (`ambient_swing_k`) or ramp (`ambient_ramp_k_per_h`).
+  A leg warm by dT is longer by expansion_ppm_per_k * dT * (x - bearing_mm) / 1000 um: the
+  station's normalisation to 20 degC (procedures/metrology/thermal.py) removes exactly this
+  when the leg's material is configured as the plant's (fixed point = bearing_mm).
 - ``load``: elastic compliance under axial load (compression positive shortens the leg):
   `-(bearing_compliance_um_per_kn + screw_compliance_um_per_kn_per_m*(x - bearing_mm)/1000) * load_kn`.
 - ``drift``: setup/laser drift growing with time, `drift_um_per_h`, independent of position.
@@ -65,6 +69,9 @@ class PlantConfig:
     noise_um: float = 0.03
     run_offset_um: float = 0.04
     enabled: frozenset[str] = field(default_factory=lambda: ALL_SOURCES)
+    # the hall warming (or cooling) steadily: ambient += ambient_ramp_k_per_h * hours since the
+    # session start; the material follows with tau_s (a leg warming during a sweep)
+    ambient_ramp_k_per_h: float = 0.0
     # ambient cycling (air conditioning, day/night): ambient = ambient_temp_c + swing*sin(2 pi t/period);
     # makes the material temperature non-monotonic in time, so thermal and drift are separable
     ambient_swing_k: float = 0.0
@@ -202,6 +209,9 @@ class LegPlant:
             systematic_error_um(self.cfg, self.x_mm, self.direction, self.temp_c, self.load_n, t_s - self.t0_s)
         )
 
+        if self.cfg.ambient_ramp_k_per_h:
+            # ambient at the middle of the interval, as for the swing: intervals are short against tau_s
+            amb += self.cfg.ambient_ramp_k_per_h * (0.5 * (t_s + self._t_last_s) - self.t0_s) / 3600.0
     def true_position_mm(self, t_s: float) -> float:
         return self.x_mm + self.error_um(t_s) / 1000.0
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from procedures.errors import InputError
 from procedures.fit import fit, save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
+from procedures.metrology.thermal import error_basis
 from procedures.plans import parse_legs
 from procedures.recording.reader import read_session
 from procedures.states import Outcome
@@ -47,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lead-mm", type=_lead, default="auto", metavar="MM|auto|none",
                    help="default method: screw lead for the once-per-revolution terms (default auto: look for it in the data)")
     p.add_argument("--legs", help="fit only these legs, e.g. 1-3 or 2,5 (default: all in the session)")
+    p.add_argument("--raw", action="store_true",
+                   help="fit the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
 
 
 def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
@@ -63,9 +66,13 @@ def run(args) -> int:
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
     legs = parse_legs(args.legs) if args.legs else None
-    model = fit(session.points, args.method, legs=legs, n_params=args.params, lead_mm=args.lead_mm,
+    points, basis_lines, basis = error_basis(session, args.raw)
+    model = fit(points, args.method, legs=legs, n_params=args.params, lead_mm=args.lead_mm,
                 source={"path": str(session.path), "sha256": session.sha256})
+    model.options["error_basis"] = basis  # `station table` says which error its table holds
     save_model(model, out, str(session.path), session.sha256)
+    for line in basis_lines:
+        print(line)
     if session.outcome != Outcome.COMPLETED:
         print(f"note: the session's outcome is '{session.outcome}': the model uses the {session.points.size} points recorded")
     for key, state in sorted(session.devices.items()):

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from procedures.errors import InputError
 from procedures.iso230 import dumps, evaluate, format_table
+from procedures.metrology.thermal import error_basis
 from procedures.recording.reader import read_session
 
 NAME = "iso230"
@@ -22,18 +23,23 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("h5", metavar="FILE.h5", help="session file (import a CSV first with `station import`)")
     p.add_argument("--json", metavar="OUT", help="also write the values as JSON to OUT")
+    p.add_argument("--raw", action="store_true",
+                   help="evaluate the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
 
 
 def run(args) -> int:
     session = read_session(Path(args.h5))
     if not len(session.points):
         raise InputError(f"{args.h5}: the session holds no points")
-    results = evaluate(session.points)
+    points, basis_lines, basis = error_basis(session, args.raw)
+    results = evaluate(points)
     print(f"{args.h5} (sha256 {session.sha256[:16]}..., outcome {session.outcome})")
+    for line in basis_lines:
+        print(line)
     print(format_table(results), end="")
     if args.json:
         out = Path(args.json)
-        text = dumps(results, source={"path": str(args.h5), "sha256": session.sha256})
+        text = dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis})
         tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
         try:
             tmp.write_text(text + "\n")

@@ -58,6 +58,14 @@ def run(args) -> int:
     else:
         written = write_linuxcnc_comp(table, args.out, args.comp_type, limits)
     print(f"model: {args.model} ({model.method}; from {model.source.get('path') or 'unknown recording'})")
+    basis = model.options.get("error_basis")
+    if isinstance(basis, dict):  # what `station fit` fitted (docs/metrology.md)
+        ref = basis.get("reference_temp_c", 20.0)
+        print("error: normalised to " + f"{ref:g} degC material temperature (the table holds the leg's error at {ref:g} degC)"
+              if basis.get("normalised") else "error: RAW, not normalised to 20 degC (the table holds the error at the "
+              "calibration's temperatures)")
+    else:
+        print("error: not stated by the model (fitted before normalisation to 20 degC existed: raw)")
     for leg, t in table.legs.items():
         worst = max(float(np.max(np.abs(t.error_fwd_um))), float(np.max(np.abs(t.error_rev_um))))
         print(f"leg {leg}: {t.point_count} points, {t.start_mm:g} .. {t.end_mm:g} mm step {t.step_mm:g} mm, "

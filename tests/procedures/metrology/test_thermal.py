@@ -1,0 +1,86 @@
+"""Normalisation to 20 degC (procedures.metrology.thermal): sign and size against the plant's own
+thermal expansion, the reference point, missing temperatures, the materials a session records."""
+
+import numpy as np
+import pytest
+
+from drivers.sim.plant import PlantConfig
+from procedures.metrology.thermal import (Material, nde_correction_um, normalise_points, normalise_session,
+                                          recorded_materials)
+from station.config import load_config
+from station.synth import synth_session
+
+TARGETS = np.linspace(-90.0, 90.0, 31)
+
+
+def _warm_leg(initial_c: float, ambient_c: float, bearing_mm: float = -150.0) -> tuple[PlantConfig, np.ndarray]:
+    cfg = PlantConfig(initial_temp_c=initial_c, ambient_temp_c=ambient_c, tau_s=300.0, heating_k_per_m=0.0,
+                      bearing_mm=bearing_mm).only("lead", "thermal")
+    return cfg, synth_session({1: cfg}, TARGETS, cycles=2)
+
+
+def test_a_warm_leg_reads_longer_and_the_normalisation_removes_exactly_the_plants_expansion():
+    cfg, pts = _warm_leg(20.0, 23.0)  # warms from 20 towards 23 degC during the sweep
+    temp = pts["material_temp_c"]
+    assert temp.max() - temp.min() > 1.5
+    at_20 = cfg.lead_slope_um_per_m * pts["target_mm"] / 1000.0  # the leg's error at 20 degC
+    # the sign: warm, the leg is longer, so the raw error is larger than at 20 degC above the bearing
+    assert np.all(pts["error_um"] - at_20 > 0)
+    n = normalise_points(pts, {1: Material(cfg.expansion_ppm_per_k, 1.0, cfg.bearing_mm)})
+    assert n.normalised == (1,)
+    assert np.max(np.abs(n.points["error_um"] - at_20)) < 1e-9
+    assert pts["error_um"] is not n.points["error_um"] and np.any(pts["error_um"] != n.points["error_um"])  # raw kept
+    lo, hi = n.temp_range_c[1]
+    assert lo == pytest.approx(temp.min()) and hi == pytest.approx(temp.max())
+
+
+def test_correction_figure_and_reference_point():
+    steel = Material(11.5, 1.0, 0.0)
+    # 1 K over 90 mm: 11.5 um/m/K * 1 K * 0.09 m = 1.035 um; nothing at the fixed point
+    assert nde_correction_um(90.0, 21.0, steel) == pytest.approx(1.035)
+    assert nde_correction_um(-90.0, 21.0, steel) == pytest.approx(-1.035)
+    assert nde_correction_um(0.0, 25.0, steel) == 0.0
+    assert nde_correction_um(-150.0, 25.0, Material(11.5, 1.0, -150.0)) == 0.0
+    assert nde_correction_um(90.0, 20.0, steel) == 0.0  # at the reference temperature
+    assert nde_correction_um(90.0, 19.0, steel, reference_temp_c=19.0) == 0.0
+
+
+def test_a_wrong_fixed_point_leaves_only_a_position_independent_part():
+    cfg, pts = _warm_leg(21.0, 21.0)  # a steady 1 K above reference
+    n = normalise_points(pts, {1: Material(cfg.expansion_ppm_per_k, 1.0, 0.0)})  # fixed point wrong by 150 mm
+    left = n.points["error_um"] - cfg.lead_slope_um_per_m * pts["target_mm"] / 1000.0
+    assert np.ptp(left) < 1e-9 and left[0] == pytest.approx(11.5 * 1.0 * 0.150)
+
+
+def test_missing_material_temperature():
+    _, pts = _warm_leg(20.0, 22.0)
+    none = pts.copy()
+    none["material_temp_c"] = np.nan
+    n = normalise_points(none, {1: Material()})
+    assert n.normalised == () and "no material temperature" in n.raw[1]
+    assert np.array_equal(n.points["error_um"], none["error_um"]) and "raw" in n.lines()[0]
+    gaps = pts.copy()
+    gaps["material_temp_c"][5:9] = np.nan
+    n = normalise_points(gaps, {1: Material()})
+    full = normalise_points(pts, {1: Material()})
+    assert n.filled == {1: 4} and "4 point(s) without a reading interpolated" in "\n".join(n.lines())
+    assert np.max(np.abs(n.points["error_um"] - full.points["error_um"])) < 0.01
+
+
+def test_materials_recorded_by_the_station_config(tmp_path):
+    p = tmp_path / "station.toml"
+    p.write_text('[drive]\nurl = "tcp://127.0.0.1:5020"\n[interferometer]\nport = "/dev/null"\n'
+                 '[metrology]\nreference_temp_c = 20.0\n[legs]\nfixed_point_mm = -140\n[legs.2]\nexpansion_um_m_k = 23.0\n')
+    rec = recorded_materials(load_config(p).to_dict())
+    assert rec is not None
+    ref, mats = rec
+    assert ref == 20.0 and mats[1] == Material(11.5, 1.0, -140.0) and mats[2] == Material(23.0, 1.0, -140.0)
+    # the simulated rig without [legs]: every leg's material is the simulated plant's own
+    sim = load_config(None)
+    mats_sim = recorded_materials(sim.to_dict())[1]
+    plant = sim.sim.leg_configs()
+    assert [mats_sim[k].fixed_point_mm for k in range(1, 7)] == [c.bearing_mm for c in plant]
+    # a session that recorded none: the defaults, and the output says so
+    _, pts = _warm_leg(21.0, 21.0)
+    n = normalise_session(pts, {})
+    assert n.normalised == (1,) and "defaults" in n.lines()[0]
