@@ -508,24 +508,25 @@ def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
             raise TableError(f"bank {bank} reads back as a different table (sha256 {_short(table_sha256(back))}…, "
                              f"expected {_short(plan.table_sha256)}…)")
     except DriverError as exc:
-        yield from failed(stage, exc, f"The previous table (bank {prev}, sha256 {_short(plan.backup_sha256)}…) is still "
-                                      "active: the drive only switches tables on the activation, which was not sent.")
+        yield from failed(stage, exc, _previous_state(axis, plan, f"The previous table (bank {prev}, sha256 "
+                                      f"{_short(plan.backup_sha256)}…) is still active: the drive only switches tables on "
+                                      "the activation, which was not sent"))
         return
     note = ""
     try:
         axis.activate_table(bank)
     except TableError as exc:  # the drive answered with a refusal: nothing switched
-        yield from failed(f"activating bank {bank}", exc,
-                          f"The drive refused the switch: the previous table (bank {prev}) is still active.")
+        yield from failed(f"activating bank {bank}", exc, _previous_state(
+            axis, plan, f"The drive refused the switch: the previous table (bank {prev}) is still active"))
         return
     except DriverError as exc:  # no answer: find out whether the switch landed
-        state, text = _state_after_activation(axis, bank, prev, plan.table_sha256)
+        state, text = _state_after_activation(axis, bank, prev, plan.table_sha256, plan.backup_sha256)
         if state != "new":
             yield from failed(f"activating bank {bank}", exc, text)
             return
         note = f" (the activation request got no answer, but the drive then reported bank {bank} active)"
     else:
-        state, text = _state_after_activation(axis, bank, prev, plan.table_sha256)
+        state, text = _state_after_activation(axis, bank, prev, plan.table_sha256, plan.backup_sha256)
         if state != "new":
             yield from failed("confirming the switch", TableError(f"the drive accepted the switch to bank {bank}"), text)
             return
@@ -537,8 +538,34 @@ def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
     yield ev.OperationFinished(plan.action, leg, AuditOutcome.OK, text, result)
 
 
-def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str) -> tuple[str, str]:
-    """After an activation request: ("new" | "previous" | "unknown", sentence for the error)."""
+def _previous_still_active(axis: ServoAxis, prev: int, backup_sha: str) -> bool | None:
+    """True when the drive reads back bank `prev` active, holding the backed-up table, twice in
+    a row (one reply corrupted on the way cannot fake that); False when it reads otherwise; None
+    when it does not answer."""
+    try:
+        for _ in range(2):
+            if axis.active_bank() != prev or table_sha256(axis.read_table(prev)) != backup_sha:
+                return False
+    except DriverError:
+        return None
+    return True
+
+
+def _previous_state(axis: ServoAxis, plan: PushPlan, claim: str) -> str:
+    """The sentence for a push that failed before its switch took: `claim` (the previous table is
+    active), checked on the drive, since a request garbled on the link can land where it should not."""
+    confirmed = _previous_still_active(axis, plan.active_bank, plan.backup_sha256)
+    if confirmed:
+        return f"{claim} (read back from the drive)."
+    if confirmed is None:
+        return f"{claim} (the drive did not answer the check that reads it back)."
+    return (f"It is NOT known which table is active: the drive does not read back bank {plan.active_bank} holding the "
+            f"previous table. Do not use the axis before checking its table (register active_bank, docs/register-map.md).")
+
+
+def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str, backup_sha: str) -> tuple[str, str]:
+    """After an activation request: ("new" | "previous" | "unknown", sentence for the error).
+    "previous" only when read back twice (`_previous_still_active`)."""
     try:
         now = axis.active_bank()
         if now == bank and table_sha256(axis.read_table(bank)) == sha:
@@ -547,8 +574,12 @@ def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str) -> 
         return "unknown", (f"It is NOT known whether the drive switched: it stopped answering. Before moving the axis, "
                            f"read its active bank (register active_bank, docs/register-map.md): {prev} = the previous "
                            f"table, {bank} = the new one.")
-    if now == prev:
+    if now == prev and _previous_still_active(axis, prev, backup_sha):
         return "previous", f"The drive reports bank {prev} active: the previous table is still active."
+    if now == prev:
+        return "unknown", (f"It is NOT known whether the drive switched: bank {prev} read back once, not twice with the "
+                           f"previous table. Before moving the axis, read its active bank (register active_bank, "
+                           f"docs/register-map.md): {prev} = the previous table, {bank} = the new one.")
     return "unknown", (f"The drive reports bank {now} active but it does not hold the table written; do not use the "
                        "axis before checking its table.")
 

@@ -31,6 +31,7 @@ from procedures import events as ev
 from procedures.applied_table import applied_tables_devices
 from procedures.control import Aborted, RunControl
 from procedures.plans import PlanPoint, SweepPlan
+from procedures.onthefly import onthefly_passes
 from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
 from procedures.states import FaultKind, Outcome
 
@@ -121,21 +122,29 @@ def sweep(
     env: Environment | None = None
     env_t = -1e18
     try:
-        laser.set_averaging(plan.averaging_s)
+        if plan.onthefly:  # whole passes at constant speed, captured on the fly (procedures/onthefly.py)
+            done = yield from onthefly_passes(plan, points, axes, laser, clock, control, retry, t_start, done, total,
+                                              _prepare_leg, _recover_axis, _kind, SweepFailed)
+            points = []
         for p in points:
             yield from control.checkpoint()
             if p.leg != current_leg:
-                if current_leg is not None:
-                    axes[current_leg].disable()
-                current_leg = p.leg
+                last_leg, current_leg = current_leg, p.leg
                 yield ev.LegStarted(p.leg)
                 try:
+                    # in here, so a link failing while switching legs stops the session resumable,
+                    # with its fault recorded, like a failure while preparing the leg
+                    if last_leg is None:
+                        laser.set_averaging(plan.averaging_s)
+                    else:
+                        axes[last_leg].disable()
                     _prepare_leg(axes[p.leg], laser, p.leg, clock, plan)
                 except DriverError as exc:  # recorded like a point's fault: the session says where it stopped
                     if control.aborted:
                         raise Aborted(control.reason) from exc
+                    what = "set the averaging, " if last_leg is None else f"disable leg {last_leg}, "
                     fault = ev.Fault(p.index, p.leg, p.run, 0.0, _kind(exc),
-                                     f"preparing leg {p.leg} (enable, zero at mid-stroke): {exc}", 1, True,
+                                     f"preparing leg {p.leg} ({what}enable, zero at mid-stroke): {exc}", 1, True,
                                      clock.now() - t_start)
                     yield fault
                     raise SweepFailed(fault) from exc

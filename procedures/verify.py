@@ -302,6 +302,14 @@ def verify_procedure(
         raise
     outcome = Outcome(finished.outcome) if finished is not None else Outcome.FAILED
     session = read_session(out)
+    unmeasured = sorted(set(active) - {int(v) for v in session.points["leg"]})
+    if outcome != Outcome.COMPLETED and unmeasured:
+        # stopped before a leg's first point (a link lost while preparing): no figures to compare
+        text = (f"the verification sweep did not complete ({outcome}: {finished.reason if finished is not None else ''}); "
+                f"no point measured on leg(s) {unmeasured}, so no figures")
+        yield from log_all(AuditOutcome(str(outcome)), text, {"session": str(out)})
+        yield ev.OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, {})
+        return
     after_points, before_points, basis, basis_doc = error_basis(session, before, normalise)
     results = verify(after_points, before_points, list(active),
                      after_source=str(out), before_source=str(before.path) if before is not None else "")

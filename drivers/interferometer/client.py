@@ -10,6 +10,7 @@ beam status other than OK as `BeamBreak`: retrying those is the caller's decisio
 from __future__ import annotations
 
 import numbers
+import time
 from urllib.parse import parse_qs, urlparse
 
 import serial
@@ -20,6 +21,12 @@ from drivers.interfaces import Clock, Environment, Reading
 from drivers.interferometer import protocol as p
 
 _POLL_S = 0.02  # longest blocking read: bounds how late a deadline is noticed
+try:  # pyserial's POSIX backend raises termios.error from tcflush on a port that went away
+    import termios
+
+    _PORT_GONE: tuple[type[BaseException], ...] = (serial.SerialException, OSError, termios.error)
+except ImportError:  # pragma: no cover - Windows
+    _PORT_GONE = (serial.SerialException, OSError)
 
 
 class SerialInterferometer:
@@ -65,6 +72,8 @@ class SerialInterferometer:
         self._clock = clock or SystemClock()
         self.transactions = 0
         self.retried = 0  # exchanges that had to be asked again (noise statistics)
+        self.reopened = 0  # times the port was opened again after it went away (unplugged)
+        self._closed = False  # closed by the owner (a port that went away is reopened instead)
         self._averaging_s: float | None = None  # unknown until set or asked
         try:
             self._serial = serial.Serial(
@@ -170,6 +179,7 @@ class SerialInterferometer:
 
     def close(self) -> None:
         """Release the port. Safe to call twice."""
+        self._closed = True
         if self._serial.is_open:
             self._serial.close()
 
@@ -189,33 +199,39 @@ class SerialInterferometer:
     def _transact(self, command: bytes, parse, extra_wait_s: float = 0.0):
         """Send `command`, read one reply line, check and `parse` its fields; retry on
         missing or malformed replies. Returns what `parse` returns."""
-        if not self._serial.is_open:
+        if self._closed:
             raise DriverError(f"interferometer on {self.port} is closed", hint="Open a new connection.")
         shown = command.decode("ascii").strip()
         wait_s = self.timeout_s + extra_wait_s
         last_problem: tuple[str, bytes] | None = None  # (reason, line) of the last malformed reply
+        gone: BaseException | None = None  # why the port failed on the last attempt, if it did
         timeouts = 0
         for attempt in range(self.retries + 1):
             if attempt:
                 self.retried += 1
-            # drop anything unsolicited (the rest of a garbled line, a reply that came too late)
-            # so it cannot pass for the answer to this command
-            self._serial.reset_input_buffer()
-            self.transactions += 1
-            # the deadline is taken before the command goes out, so whatever the device does
-            # after receiving it (on a replay: a recorded silence moving `clock` on) counts
-            deadline = self._clock.now() + wait_s
+            gone = None
             try:
+                if not self._serial.is_open and not self._reopen(self._clock.now() + wait_s):
+                    raise serial.SerialException(f"{self.port} is not there")
+                # drop anything unsolicited (the rest of a garbled line, a reply that came too
+                # late) so it cannot pass for the answer to this command
+                self._serial.reset_input_buffer()
+                self.transactions += 1
+                # the deadline is taken before the command goes out, so whatever the device does
+                # after receiving it (on a replay: a recorded silence moving `clock` on) counts
+                deadline = self._clock.now() + wait_s
                 self._serial.write(command)
+                line = self._read_line(deadline)
             except serial.SerialTimeoutException:
                 timeouts += 1
                 continue
-            except (serial.SerialException, OSError) as exc:
-                raise DriverError(
-                    f"interferometer on {self.port}: writing {shown!r} failed: {exc}",
-                    hint="The port went away (cable unplugged, simulator stopped?). Reconnect.",
-                ) from exc
-            line = self._read_line(deadline)
+            except _PORT_GONE as exc:
+                # the port went away (a USB adapter unplugged, the device restarted): open it
+                # again by its name for the next attempt; a device back under that name answers
+                gone = exc
+                self._serial.close()
+                timeouts += 1
+                continue
             if not line:
                 timeouts += 1
                 continue
@@ -226,6 +242,11 @@ class SerialInterferometer:
             except p.ProtocolError as exc:
                 last_problem = (str(exc), line)
         attempts = self.retries + 1
+        if gone is not None:
+            raise DriverError(
+                f"interferometer on {self.port}: the port failed on {attempts} attempts ({gone}).",
+                hint="The port went away (cable unplugged, simulator stopped?); it was not back in time. Reconnect.",
+            )
         if last_problem is None:
             raise CommTimeout(
                 f"interferometer on {self.port} did not answer {shown!r} within {wait_s:g} s "
@@ -240,6 +261,7 @@ class SerialInterferometer:
     def _read_line(self, deadline: float) -> bytes:
         """Read one reply line until `deadline` (on the client's clock); b'' on silence, the
         partial line if the terminator did not come in time (the caller's split_reply rejects it).
+        A port that fails raises (serial.SerialException, OSError): the caller reopens it.
 
         Not readline(): its timeout is per byte and a partial line looks complete. Not
         read_until() either: it reads byte by byte (0.35 ms per reply on a pty). Instead, wait
@@ -247,18 +269,26 @@ class SerialInterferometer:
         slice so the deadline is kept within _POLL_S.
         """
         line = bytearray()
-        try:
-            while True:
-                waiting = self._serial.in_waiting
-                line += self._serial.read(waiting if waiting else 1)
-                end = line.find(p.TERMINATOR)
-                if end >= 0:
-                    # bytes after the terminator are not an answer to anything: dropped
-                    return bytes(line[: end + len(p.TERMINATOR)])
-                if len(line) >= p.MAX_LINE_BYTES or self._clock.now() >= deadline:
-                    return bytes(line)
-        except (serial.SerialException, OSError) as exc:
-            raise DriverError(
-                f"interferometer on {self.port}: reading the reply failed: {exc}",
-                hint="The port went away (cable unplugged, simulator stopped?). Reconnect.",
-            ) from exc
+        while True:
+            waiting = self._serial.in_waiting
+            line += self._serial.read(waiting if waiting else 1)
+            end = line.find(p.TERMINATOR)
+            if end >= 0:
+                # bytes after the terminator are not an answer to anything: dropped
+                return bytes(line[: end + len(p.TERMINATOR)])
+            if len(line) >= p.MAX_LINE_BYTES or self._clock.now() >= deadline:
+                return bytes(line)
+
+    def _reopen(self, deadline: float) -> bool:
+        """Open the port again by its name (same settings, exclusive) until `deadline` on the
+        client's clock; True when it is open. For a port that went away and may come back."""
+        while True:
+            try:
+                self._serial.open()
+                self.reopened += 1
+                return True
+            except _PORT_GONE:
+                if self._clock.now() >= deadline:
+                    return False
+                time.sleep(_POLL_S)
+
