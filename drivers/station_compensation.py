@@ -429,7 +429,12 @@ class StationCompensatedAxis:
             self._last_target_mm = float(target_mm)
             self._direction = direction
             self._corr_um = e_um
-        st = self.inner.move_to(commanded, timeout_s=timeout_s, velocity_mm_s=velocity_mm_s)
+        try:
+            st = self.inner.move_to(commanded, timeout_s=timeout_s, velocity_mm_s=velocity_mm_s)
+        except BaseException:
+            # stopped short (fault, timeout, quick stop): the next direction from where the leg is
+            self._last_target_mm = None
+            raise
         with self._lock:
             return self._report(st, e_um)
 

@@ -129,3 +129,22 @@ def test_drive_with_its_own_table_is_refused(sim_drives, tmp_path):
         StationCompensatedAxis(raw, StationTableStore(tmp_path / "st.json")).check_drive_table()
     raw.set_table_enabled(False)
     StationCompensatedAxis(raw, StationTableStore(tmp_path / "st.json")).check_drive_table()
+
+
+def test_after_a_move_that_failed_the_direction_comes_from_where_the_leg_stopped(sim_drives, tmp_path):
+    """Like the drive, which takes the next direction from where a halted leg is: a move to 50 mm
+    stalled at about 10 mm and timed out, then a move to 30 mm approaches upwards (from 10)."""
+    sd = sim_drives(configs=[PlantConfig().only()], time_scale=0.0)
+    ax = StationCompensatedAxis(sd.axis(1), StationTableStore(tmp_path / "st.json"))
+    _pushed(ax)
+    ax.enable()
+    ax.move_to(10.0)
+    sd.server.set_stalled(1, True)
+    with pytest.raises(Exception):
+        ax.move_to(50.0, timeout_s=0.5)
+    sd.server.set_stalled(1, False)
+    ax.reset_fault()
+    ax.enable()
+    assert ax.command_for(30.0)[2] == 1
+    ax.move_to(30.0)
+    assert sd.plants[1].x_mm == pytest.approx(30.0 - correction_um(TABLE, 30.0, 1) * 1e-3, abs=2e-6)
