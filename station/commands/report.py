@@ -1,4 +1,5 @@
-"""`station report`: PNG plots and a summary table of a session, before and after a model."""
+"""`station report`: PNG plots and a summary table of a session, before and after a model, and
+its ISO 230-2 test report with the expanded uncertainty of every value (Markdown, JSON, PDF)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,13 @@ from station.commands.fit import _lead
 from station.report_jobs import report_lines, session_report
 
 NAME = "report"
-HELP = "plots (PNG) and a summary (Markdown, JSON) of a session before and after compensation"
+HELP = "plots, a summary before/after compensation and the ISO 230-2 test report with uncertainties (Markdown, JSON, PDF)"
 DESCRIPTION = (
     "Write errors.png, residuals.png, histograms.png (before/after, like the paper's Figs. 7-8), "
-    "spectrum.png (residual spectrum, screw lead marked), summary.md and summary.json into DIR. "
+    "spectrum.png (residual spectrum, screw lead marked), summary.md and summary.json into DIR, and the "
+    "ISO 230-2 test report iso230-2.md/.json/.pdf with its graph iso230-2.png: identification, instrument and "
+    "calibration date, environment, expansion coefficient and NDE, test parameters, compensation state, every "
+    "value with its expanded uncertainty U (k = 2) and budget (docs/uncertainty.md). "
     "Without --model the default model is fitted to the session."
 )
 

@@ -58,6 +58,7 @@ class Analysis:
     iso: Any = None
     iso_note: str = ""
     model_path: Path | None = None
+    iso_u: dict[int, dict[str, float | None]] | None = None  # leg -> value name -> U (k = 2), um
 
 
 class AnalysisReady(Message):
@@ -105,8 +106,31 @@ def iso_figures(iso: Any, leg: int) -> dict[str, float | None]:
     return {k: values.get(k) for k in "AEMBR"}
 
 
+def iso_uncertainty(iso: Any, points: Any, station_config: dict) -> dict[int, dict[str, float | None]]:
+    """U (k = 2, um) of every ISO 230-2 value per leg (procedures.metrology.uncertainty), with the
+    session's recorded [metrology] and leg materials (the station's defaults when it has none)."""
+    from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
+
+    out = {}
+    for leg, r in iso.items():
+        b = leg_budget(r, points, UncertaintyInputs.from_record(station_config or {}, leg))
+        out[leg] = {name: b.U(name) for name in r.values}
+    return out
+
+
 def _fmt(value: float | None, spec: str = ".3f") -> str:
     return "n/a" if value is None else format(value, spec)
+
+
+def _with_u(value: float | None, u: float | None) -> str:
+    """An ISO value over its expanded uncertainty, two lines: "3.924" / "±1.191"."""
+    if value is None:
+        return "n/a"
+    return f"{value:.3f}" if u is None else f"{value:.3f}\n±{u:.3f}"
+
+
+def _widest_line(cell: str) -> str:
+    return max(cell.split("\n"), key=len)
 
 
 class ResultsScreen(StationScreen):
@@ -222,7 +246,7 @@ class ResultsScreen(StationScreen):
         except Exception as exc:
             self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}"), method, request))
             return
-        iso, note = None, ""
+        iso, note, iso_u = None, "", None
         try:
             from procedures import iso230
         except ImportError:
@@ -232,7 +256,12 @@ class ResultsScreen(StationScreen):
                 iso = iso230.evaluate(session.points)
             except Exception as exc:
                 note = describe(exc, "ISO 230-2")
-        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note), request))
+        if iso:
+            try:
+                iso_u = iso_uncertainty(iso, session.points, session.station_config)
+            except Exception as exc:  # the values stand without their U; say why
+                note = describe(exc, "ISO 230-2 uncertainty")
+        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note, iso_u=iso_u), request))
 
     def on_analysis_ready(self, message: AnalysisReady) -> None:
         if message.request != self._request:  # asked for before the last request
@@ -382,7 +411,7 @@ class ResultsScreen(StationScreen):
         s = a.session
         name = a.path.name if self.app.hide_volatile else str(a.path)
         text = (f"[b]{name}[/b]  {s.outcome}, {len(s.points)} points, legs {s.legs}   method [b]{a.method}[/b]"
-                "   [dim](figures in µm)[/dim]")
+                "   [dim](figures in µm; ISO 230-2 values over ±U, k = 2)[/dim]")
         if a.iso_note:
             text += f"\n[yellow]{a.iso_note}[/yellow]"
         extra = []
@@ -398,16 +427,20 @@ class ResultsScreen(StationScreen):
         for leg, lf in a.model.legs.items():
             st = lf.stats
             iso = iso_figures(a.iso, leg)
+            iso_u = (a.iso_u or {}).get(leg, {})
             ratio = st.heldout_ratio
             rows[leg] = (
                 str(leg), str(st.n_points), str(st.n_cycles), _fmt(st.noise_floor_um), _fmt(st.heldout_rms_um),
                 _fmt(ratio, ".2f") if ratio is not None else "n/a",
                 f"{st.range_before_um:.2f} → {_fmt(st.heldout_range_um, '.2f')}",
-                *(_fmt(iso.get(k)) for k in "AEMBR"),
+                *(_with_u(iso.get(k), iso_u.get(k)) for k in "AEMBR"),
             )
-        order = fit_columns(table, COLUMNS, list(rows.values()), self.app.size.width - 2)
+        # two-line cells (value over ±U): the columns are as wide as their widest line
+        widths = [[_widest_line(c) for c in cells] for cells in rows.values()]
+        order = fit_columns(table, COLUMNS, widths, self.app.size.width - 2)
+        height = 2 if any("\n" in c for cells in rows.values() for c in cells) else 1
         for leg, cells in rows.items():
-            table.add_row(*(cells[i] for i in order), key=str(leg))
+            table.add_row(*(cells[i] for i in order), key=str(leg), height=height)
         self._show_plots()
 
     def _show_plots(self) -> None:

@@ -58,7 +58,9 @@ async def _results(path, cfg, size, wait_until, notes):
             for row, leg in enumerate(expected.legs):
                 shown = table.get_row_at(row)[7:12]
                 want = [iso[leg].values[k] for k in "AEMBR"]
-                assert shown == [("n/a" if v is None else f"{v:.3f}") for v in want]
+                # each cell: the value over its expanded uncertainty ("3.924\n±1.191", issue 13)
+                assert [c.split("\n")[0] for c in shown] == [("n/a" if v is None else f"{v:.3f}") for v in want]
+                assert all(c.split("\n")[1].startswith("±") for c in shown)
                 assert all(v is not None for v in want)  # 3 cycles, same targets both ways: all computable
         # the model plot shows measured points of both directions and the two model curves
         mplot = app.screen.query_one("#model-plot", XYPlot)
