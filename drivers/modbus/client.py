@@ -279,10 +279,12 @@ class ModbusServoAxis:
         self._proto = p.protocol
         self._move_block = p.blocks.get("move_command")
         self._target_reg = p.registers["target_position"]
-        self._cw_addr = p.address("controlword")
-        # `move` in [commands] when the drive wants more than new-set-point (Kinco: 0x3F, bit 5
-        # "change set immediately" too)
-        self._move_cw = p.commands.get("move", p.commands["enable_operation"] | (1 << p.controlword_bits["new_set_point"]))
+        self._pr = p.control == "pr_trigger"  # servo-on parameter + path trigger, no controlword
+        if not self._pr:
+            self._cw_addr = p.address("controlword")
+            # `move` in [commands] when the drive wants more than new-set-point (Kinco: 0x3F, bit 5
+            # "change set immediately" too)
+            self._move_cw = p.commands.get("move", p.commands["enable_operation"] | (1 << p.controlword_bits["new_set_point"]))
         bus.require_gap(self._proto.min_frame_gap_ms / 1000.0)
         bus.acquire()
 
@@ -373,6 +375,11 @@ class ModbusServoAxis:
     def _command(self, name: str) -> None:
         self._write(self._cw_addr, [self.profile.commands[name]])
 
+    def _set_param(self, register: str, command: str) -> None:
+        """pr_trigger drives: write [commands] `command` to register `register`."""
+        r = self.profile.registers[register]
+        self._write(r.address, r.encode(self.profile.commands[command]))
+
     def enable(self) -> None:
         """Walk the CiA 402 state machine to operation enabled. DriveFault if the drive is in
         fault (reset it first) or does not get there."""
@@ -381,6 +388,13 @@ class ModbusServoAxis:
             raise DriveFault(f"leg {self.leg}: the drive is in fault {self.profile.fault_text(st.fault_code)}; "
                              f"reset the fault before enabling.", st.fault_code)
         if st.enabled:
+            return
+        if self._pr:
+            self._set_param("servo_on", "servo_on")
+            st = self.status()
+            if not st.enabled:
+                raise DriveFault(f"leg {self.leg}: the drive did not switch the servo on (state {st.state}, alarm "
+                                 f"0x{st.fault_code:04X}).", st.fault_code)
             return
         if self._proto.mode_of_operation is not None:
             # profile position mode before the power stage comes on (CiA 402 6060h)
@@ -399,21 +413,35 @@ class ModbusServoAxis:
                              st.fault_code)
 
     def disable(self) -> None:
-        """Power stage off (CiA 402 disable voltage -> switch on disabled)."""
+        """Power stage off (CiA 402 disable voltage -> switch on disabled; servo off)."""
+        if self._pr:
+            self._set_param("servo_on", "servo_off")
+            return
         self._command("disable_voltage")
 
     def reset_fault(self) -> None:
-        """Clear a drive fault (rising edge of the fault-reset bit); DriveFault if it persists."""
-        self._command("disable_voltage")
-        self._command("fault_reset")
+        """Clear a drive fault (rising edge of the fault-reset bit; on a pr_trigger drive, servo
+        off and the alarm-reset write); DriveFault if it persists."""
+        if self._pr:
+            self._set_param("servo_on", "servo_off")
+            self._set_param("fault_code", "alarm_reset")
+        else:
+            self._command("disable_voltage")
+            self._command("fault_reset")
         st = self.status()
         if st.fault:
             raise DriveFault(f"leg {self.leg}: the fault {self.profile.fault_text(st.fault_code)} persists after reset.",
                              st.fault_code)
 
     def stop(self) -> None:
-        """Quick stop. Never raises: after a fault or with a dead link it only logs."""
+        """Quick stop (a pr_trigger drive: stop the path, then servo off, so that as after a
+        CiA 402 quick stop the axis is not enabled). Never raises: after a fault or with a dead
+        link it only logs."""
         try:
+            if self._pr:
+                self._set_param("pr_trigger", "stop_path")
+                self._set_param("servo_on", "servo_off")
+                return
             self._command("quick_stop")
         except Exception as exc:  # the caller is making the rig safe; it cannot act on this
             log.warning("leg %s: quick stop not delivered: %s", self.leg, exc)
@@ -487,6 +515,11 @@ class ModbusServoAxis:
         target it holds when the set-point bit arrives). A drive latching on the rising edge
         gets the bit cleared once the move has been accepted, ready for the next one."""
         target = self._target_reg.encode(target_mm)
+        if self._pr:
+            # the path's target first, then the trigger that runs the path
+            self._write(self._target_reg.address, target)
+            self._set_param("pr_trigger", "run_path")
+            return
         if self._proto.move_write == "single":
             b = self._move_block
             words = [0] * b.words

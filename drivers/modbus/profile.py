@@ -68,6 +68,12 @@ REQUIRED_SW_BITS = (
     "quick_stop", "switch_on_disabled", "target_reached", "internal_limit_active",
     "set_point_acknowledge",
 )  # fmt: skip
+# control = "pr_trigger": a drive without a CiA 402 state machine on Modbus (Delta ASDA: servo
+# on by a parameter, moves by triggering a stored position path, status from an output word)
+CONTROLS = ("cia402", "pr_trigger")
+PR_REGISTERS = ("servo_on", "pr_trigger", "fault_code")
+PR_SW_BITS = ("servo_ready", "servo_on", "target_reached", "alarm")
+PR_COMMANDS = ("servo_on", "servo_off", "run_path", "stop_path", "alarm_reset")
 REQUIRED_HEADER = ("point_count", "start_position", "spacing", "units", "checksum", "valid")
 REQUIRED_FAULTS = ("soft_limit",)
 
@@ -284,6 +290,7 @@ class DriveProfile:
     protocol: ProtocolSettings = field(default_factory=ProtocolSettings)
     scaling: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     table_note: str = ""
+    control: str = "cia402"  # or "pr_trigger" (see CONTROLS)
 
     @property
     def has_table(self) -> bool:
@@ -368,8 +375,16 @@ class DriveProfile:
         return bool(controlword >> self.controlword_bits[name] & 1)
 
     def state_of(self, statusword: int) -> DriveState:
-        """CiA 402 state of a statusword (see drivers.interfaces.DriveStatus.state)."""
+        """CiA 402 state of a statusword (see drivers.interfaces.DriveStatus.state). For a
+        `pr_trigger` drive the "statusword" is its servo output status: alarm = fault, servo on
+        = operation enabled, otherwise switch on disabled (ready) or not ready."""
         bit = lambda n: self.sw_bit(statusword, n)  # noqa: E731
+        if self.control == "pr_trigger":
+            if bit("alarm"):
+                return DriveState.FAULT
+            if bit("servo_on"):
+                return DriveState.OPERATION_ENABLED
+            return DriveState.SWITCH_ON_DISABLED if bit("servo_ready") else DriveState.NOT_READY
         if bit("fault"):
             return DriveState.FAULT
         if bit("switch_on_disabled"):
@@ -385,9 +400,18 @@ class DriveProfile:
     def statusword_of(self, state: DriveState | str, **flags: bool) -> int:
         """The statusword a drive in `state` reports, with extra bits (`target_reached=True`, ...).
 
-        Bit patterns as CiA 402 (voltage_enabled follows the power stage).
+        Bit patterns as CiA 402 (voltage_enabled follows the power stage); for a `pr_trigger`
+        drive its servo output status (a quick-stopped one is servo off, ready).
         """
-        on = {
+        if self.control == "pr_trigger":
+            on = {
+                DriveState.NOT_READY: (),
+                DriveState.OPERATION_ENABLED: ("servo_ready", "servo_on"),
+                DriveState.FAULT: ("alarm",),
+            }.get(DriveState(state), ("servo_ready",))
+        else:
+            on = None
+        on = on if on is not None else {
             DriveState.NOT_READY: (),
             DriveState.SWITCH_ON_DISABLED: ("switch_on_disabled", "quick_stop"),
             DriveState.READY_TO_SWITCH_ON: ("ready_to_switch_on", "quick_stop", "voltage_enabled"),
@@ -560,6 +584,7 @@ class _Parser:
         if not isinstance(name, str) or not name:
             raise self.err("profile", "name: must be a non-empty string")
         map_version = self.integer(prof, "profile", "map_version")
+        control = self.choice(prof, "profile", "control", CONTROLS, "cia402")
         protocol = self.protocol()
         self.scaling = self.scaling_section()
 
@@ -585,13 +610,18 @@ class _Parser:
 
         regs_sec = self.section("registers")
         registers = {n: self.reg(f"registers.{n}", n, spec, word_order) for n, spec in regs_sec.items()}
-        missing = [n for n in REQUIRED_REGISTERS if n not in registers]
+        required = REQUIRED_REGISTERS if control == "cia402" else \
+            ("target_position", "statusword", "position_actual", *PR_REGISTERS)
+        missing = [n for n in required if n not in registers]
         if missing:
             raise self.err("registers", f"missing {', '.join(missing)}")
-        for n in ("statusword", "controlword", "fault_code", "active_bank", "table_enable", "map_version"):
+        for n in ("statusword" if control == "cia402" else "", "controlword", "active_bank", "table_enable", "map_version"):
             if n in registers and registers[n].type != "u16":
                 raise self.err(f"registers.{n}", f"type: must be u16, got {registers[n].type}")
-        for n in ("controlword", "target_position", "active_bank", "table_enable", "modes_of_operation"):
+        if "fault_code" in registers and registers["fault_code"].type not in ("u16", "u32"):
+            raise self.err("registers.fault_code", f"type: must be u16 or u32, got {registers['fault_code'].type}")
+        writable = ("servo_on", "pr_trigger", "fault_code") if control == "pr_trigger" else ()
+        for n in ("controlword", "target_position", "active_bank", "table_enable", "modes_of_operation", *writable):
             if n in registers and not registers[n].writable:
                 raise self.err(f"registers.{n}", "access: must be \"rw\" (the station writes it)")
         for n in ("vendor", "product", "serial", "firmware"):
@@ -636,6 +666,9 @@ class _Parser:
         missing = [n for n in REQUIRED_BLOCKS if n not in blocks]
         if missing:
             raise self.err("blocks", f"missing {', '.join(missing)}")
+        if control == "pr_trigger" and protocol.move_write != "target_then_controlword":
+            raise self.err("protocol", "move_write: a pr_trigger drive gets the target, then the trigger: "
+                                       "set move_write = \"target_then_controlword\"")
         if protocol.move_write == "single":
             if "move_command" not in blocks:
                 raise self.err("blocks", "missing move_command (controlword + target_position in one write); or set "
@@ -653,9 +686,14 @@ class _Parser:
                     rs = sorted((registers[n] for n in names), key=lambda r: r.address)
                     blocks[bname] = Block(bname, rs[0].address, rs[-1].end - rs[0].address, tuple(r.name for r in rs))
 
-        cw_bits = self.bits("controlword", REQUIRED_CW_BITS, 15)
-        commands = self.bits("commands", REQUIRED_COMMANDS, 0xFFFF)
-        sw_bits = self.bits("statusword", REQUIRED_SW_BITS, 15)
+        if control == "cia402":
+            cw_bits = self.bits("controlword", REQUIRED_CW_BITS, 15)
+            commands = self.bits("commands", REQUIRED_COMMANDS, 0xFFFF)
+            sw_bits = self.bits("statusword", REQUIRED_SW_BITS, 15)
+        else:
+            cw_bits = {}
+            commands = self.bits("commands", PR_COMMANDS, 0xFFFF)
+            sw_bits = self.bits("statusword", PR_SW_BITS, 31 if registers["statusword"].words == 2 else 15)
 
         faults_list = self.data.get("fault", [])
         if not isinstance(faults_list, list):
@@ -683,7 +721,7 @@ class _Parser:
             blocks=MappingProxyType(blocks), controlword_bits=MappingProxyType(cw_bits),
             commands=MappingProxyType(commands), statusword_bits=MappingProxyType(sw_bits),
             faults=MappingProxyType(faults), table=table, protocol=protocol,
-            scaling=MappingProxyType(dict(self.scaling)), table_note=note,
+            scaling=MappingProxyType(dict(self.scaling)), table_note=note, control=control,
         )  # fmt: skip
 
     def table(self, word_order: str, registers: dict[str, Register]) -> tuple[TableLayout | None, str]:

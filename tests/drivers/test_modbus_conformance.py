@@ -23,7 +23,7 @@ def profile(request) -> DriveProfile:
 
 
 def test_the_real_drive_profiles_are_shipped():
-    assert {"default", "kinco_fd"} <= {p.stem for p in PROFILES}
+    assert {"default", "kinco_fd", "delta_asda_a2"} <= {p.stem for p in PROFILES}
 
 
 @pytest.fixture(params=["tcp", "rtu"])

@@ -204,3 +204,38 @@ def test_mbpoll_reads_the_kinco_statusword_at_0x3200():
         counts = poll(0x3700, "4:int")
         assert counts == round(-12.5 * prof.scaling["position_counts_per_mm"]) == -163840
         assert counts / prof.scaling["position_counts_per_mm"] == pytest.approx(st.position_mm, abs=1e-9)
+
+
+def test_mbpoll_reads_the_delta_parameters_and_the_gap_is_kept():
+    """mbpoll reads the simulated Delta drive's P0-46 (servo output status, 0x005C) and P0-09
+    (feedback position in PUU, 0x0012, low word first), after the station's client drove it
+    keeping the 10 ms silence and 10-word reads of the Delta manual."""
+    mbpoll = require_tool("mbpoll")
+    prof = DriveProfile.load(PROFILES_DIR / "delta_asda_a2.toml")
+    assert (prof.protocol.max_read_words, prof.protocol.min_frame_gap_ms) == (10, 10.0)
+    with _server(prof, legs=2) as (server, port):
+        axes = connect_axes(f"tcp://127.0.0.1:{port}", (2,), prof, timeout_s=1.0)
+        ax = axes[2]
+        try:
+            ax.enable()
+            st = ax.move_to(31.25)
+            ax.move_to(-4.5)
+            st = ax.move_to(31.25)
+        finally:
+            ax.close()
+        f = server.frame_stats()
+        assert f.oversize == 0 and f.gap_violations == 0 and f.shortest_gap_s >= 0.010, f
+        assert f.longest_read_words <= 10 and f.longest_write_words <= 2, f
+        time.sleep(0.02)  # mbpoll keeps no gap of its own before its first frame
+
+        def poll(address: int, typ: str) -> int:
+            out = subprocess.run([mbpoll, "-m", "tcp", "-p", str(port), "-a", "2", "-r", str(address), "-t", typ,
+                                  "-c", "1", "-1", "-0", "127.0.0.1"], capture_output=True, text=True, timeout=10)
+            assert out.returncode == 0, out.stdout + out.stderr
+            line = next(ln for ln in out.stdout.splitlines() if ln.startswith(f"[{address}]:"))
+            return int(line.split(":", 1)[1].split()[0])
+
+        status = poll(0x005C, "4")  # the low word of P0-46 holds its bits 0..15
+        assert status & 0b0101_0011 == 0b0001_0011  # SRDY, SON, TPOS set; ALRM clear
+        time.sleep(0.02)
+        assert poll(0x0012, "4:int") == 31250 == round(st.position_mm * 1000)  # PUU = 1 um
