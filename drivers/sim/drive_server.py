@@ -400,6 +400,27 @@ class _DriveModel:
         if self.set_point_ack:
             self._start_move(self._get("target_position"))
 
+    def _pr_command(self, touched) -> None:
+        """A pr_trigger drive (Delta ASDA): alarm reset, servo on/off, run or stop the path."""
+        cmd = self.p.commands
+        if touched("fault_code") and self._get("fault_code") == cmd["alarm_reset"] and self.state == DriveState.FAULT:
+            self.state = DriveState.SWITCH_ON_DISABLED  # the alarm clears with the servo off
+            self.fault_code = 0
+            self.internal_limit = False
+        if touched("servo_on") and self.state != DriveState.FAULT:
+            if self._get("servo_on") == cmd["servo_on"]:
+                self.state = DriveState.OPERATION_ENABLED
+            elif self.state != DriveState.SWITCH_ON_DISABLED:
+                self._halt()
+                self.state = DriveState.SWITCH_ON_DISABLED
+        self.set_point_ack = False
+        if touched("pr_trigger") and self.state == DriveState.OPERATION_ENABLED:
+            if self._get("pr_trigger") == cmd["stop_path"]:
+                self._halt()
+            else:
+                self.set_point_ack = True
+                self._start_move(self._get("target_position"))
+
     def _update_status(self) -> None:
         moving = self.motion is not None
         sw = self.p.statusword_of(
@@ -466,11 +487,16 @@ class _DriveModel:
         for n in ("profile_velocity", "profile_acceleration"):
             if touched(n) and not value(n) > 0:
                 return ExcCodes.ILLEGAL_VALUE
+        if self.p.control == "pr_trigger" and touched("pr_trigger") and \
+                value("pr_trigger") not in (self.p.commands["run_path"], self.p.commands["stop_path"]):
+            return ExcCodes.ILLEGAL_VALUE  # the simulated drive holds one path and no homing
         self.regs[address : address + count] = values
         for b in banks:
             self._revalidate(b)
         if touched("controlword"):
             self._controlword(self._get("controlword"))
+        if self.p.control == "pr_trigger":
+            self._pr_command(touched)
         self._update_status()
         return None
 
