@@ -244,6 +244,27 @@ class Interferometer(Protocol):
     def close(self) -> None: ...
 
 
+# -- on-the-fly capture (docs/onthefly.md): optional abilities of an axis and an interferometer --
+
+@runtime_checkable
+class PositionCompareAxis(Protocol):
+    """A drive with a position-compare output wired to the interferometer's trigger input: a
+    pulse each time its position actual passes `start_mm + i * step_mm`, i = 0..count-1,
+    moving in the direction of the sign of `step_mm`. Arming again replaces the list."""
+
+    def arm_position_compare(self, start_mm: float, step_mm: float, count: int) -> None: ...
+
+
+@runtime_checkable
+class CapturingInterferometer(Protocol):
+    """An interferometer that latches a reading at each trigger pulse (`arm_capture`), read
+    back after the pass (`capture_sample`, BeamBreak for a sample taken without beam)."""
+
+    def arm_capture(self, axis: int, count: int) -> None: ...
+    def capture_count(self, axis: int) -> tuple[int, int]: ...
+    def capture_sample(self, axis: int, index: int) -> Reading: ...
+
+
 @runtime_checkable
 class Clock(Protocol):
     """Time source. The simulated rig runs on a virtual clock (see drivers.clock)."""

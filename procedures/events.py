@@ -158,3 +158,17 @@ class OperationFinished(Event):
     outcome: str
     message: str
     result: Any = None
+
+
+@dataclass(frozen=True)
+class PassesStopped(Event):
+    """Adaptive stopping (procedures/adaptive.py): `leg` needs no more passes after `cycles`
+    cycles. `reason` says why (the rule and the figures); `heldout_um` lists the
+    cross-validated held-out RMS after each round, um; `skipped_points` were planned, not measured."""
+
+    leg: int
+    cycles: int
+    reason: str
+    heldout_um: tuple[float, ...]
+    noise_floor_um: float | None
+    skipped_points: int

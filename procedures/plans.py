@@ -43,6 +43,14 @@ class SweepPlan:
 
     `dwell_s`: settle time at each target before reading; `averaging_s`: interferometer
     averaging per reading; `overrun_mm`: distance beyond the end targets before reversing.
+
+    On-the-fly capture (docs/onthefly.md) when `speeds_mm_s` is not empty: each pass runs
+    through all targets at constant speed without stopping, and the interferometer latches a
+    reading as the drive's position passes each target (position compare), so the targets must
+    be evenly spaced and `overrun_mm` is the run-up to full speed. Cycle c runs at
+    `speeds_mm_s[(c - 1) % n]`, the order reversed every other round of n cycles (a slow drift
+    then weighs on every speed alike). `adaptive`: repeat rounds only until the cross-validated
+    held-out error stops improving (procedures/adaptive.py), `cycles` being the most.
     """
 
     kind: str
@@ -53,6 +61,8 @@ class SweepPlan:
     dwell_s: float = 1.0
     averaging_s: float = 0.1
     notes: tuple[str, ...] = field(default=())
+    speeds_mm_s: tuple[float, ...] = field(default=())
+    adaptive: bool = False
 
     def __post_init__(self) -> None:
         t = np.asarray(self.targets_mm, dtype=float)
@@ -68,6 +78,39 @@ class SweepPlan:
             raise PlanError(f"legs must be distinct numbers >= 1, got {list(self.legs)}")
         if self.overrun_mm < 0 or self.dwell_s < 0 or self.averaging_s < 0:
             raise PlanError("overrun_mm, dwell_s and averaging_s must be >= 0")
+        if self.speeds_mm_s:
+            if not all(math.isfinite(v) and v > 0 for v in self.speeds_mm_s):
+                raise PlanError(f"on-the-fly speeds must be positive mm/s, got {list(self.speeds_mm_s)}")
+            steps = np.diff(t)
+            if np.ptp(steps) > 1e-6:
+                raise PlanError("on-the-fly capture needs evenly spaced targets (the drive's position compare "
+                                "fires every step); use a uniform step")
+        elif self.adaptive:
+            raise PlanError("adaptive stopping needs an on-the-fly plan (speeds_mm_s)")
+
+    # -- on-the-fly ----------------------------------------------------------------------
+    @property
+    def onthefly(self) -> bool:
+        return bool(self.speeds_mm_s)
+
+    @property
+    def step_mm(self) -> float:
+        return float(self.targets_mm[1] - self.targets_mm[0])
+
+    def speed_of_run(self, run: int) -> float:
+        """Speed (mm/s, > 0) of pass `run` of an on-the-fly plan (0.0: a stop-and-go plan)."""
+        if not self.speeds_mm_s:
+            return 0.0
+        n = len(self.speeds_mm_s)
+        c = (run - 1) // 2  # 0-based cycle
+        rnd, k = divmod(c, n)
+        order = self.speeds_mm_s if rnd % 2 == 0 else self.speeds_mm_s[::-1]
+        return float(order[k])
+
+    @property
+    def cycles_per_round(self) -> int:
+        """Cycles of one round: every speed once (1 for stop-and-go)."""
+        return max(1, len(self.speeds_mm_s))
 
     # -- expansion -----------------------------------------------------------------------
     @property
@@ -115,8 +158,12 @@ class SweepPlan:
             )
 
     def estimated_duration_s(self, velocity_mm_s: float) -> float:
-        """Rough duration: travel at `velocity_mm_s` plus dwell and averaging at each point."""
+        """Rough duration: travel at `velocity_mm_s` plus dwell and averaging at each point (on
+        the fly: each pass at its own speed, and the return to its start)."""
         span = self.targets_mm[-1] - self.targets_mm[0] + 2 * self.overrun_mm
+        if self.speeds_mm_s:
+            passes = [span / self.speed_of_run(r) + 1.0 for r in range(1, 2 * self.cycles + 1)]
+            return sum(passes) * len(self.legs)
         per_leg = 2 * self.cycles * (span / max(velocity_mm_s, 1e-9) + len(self.targets_mm) * (self.dwell_s + self.averaging_s))
         return per_leg * len(self.legs)
 
@@ -126,6 +173,10 @@ class SweepPlan:
         d["targets_mm"] = [float(x) for x in self.targets_mm]
         d["legs"] = list(self.legs)
         d["notes"] = list(self.notes)
+        if self.speeds_mm_s:  # on the fly; a stop-and-go plan is stored as before these fields existed
+            d["speeds_mm_s"] = [float(v) for v in self.speeds_mm_s]
+        else:
+            del d["speeds_mm_s"], d["adaptive"]
         return d
 
     @classmethod
@@ -140,6 +191,8 @@ class SweepPlan:
                 dwell_s=float(d.get("dwell_s", 1.0)),
                 averaging_s=float(d.get("averaging_s", 0.1)),
                 notes=tuple(d.get("notes", ())),
+                speeds_mm_s=tuple(float(v) for v in d.get("speeds_mm_s", ())),
+                adaptive=bool(d.get("adaptive", False)),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise PlanError(f"the stored sweep plan is incomplete or malformed ({exc!r})") from exc
@@ -221,6 +274,30 @@ def paper_plan(legs: Iterable[int] = (1, 2, 3, 4, 5, 6), cycles: int = 6, overru
     bidirectional cycles, so direction effects are visible)."""
     targets = uniform_targets(-PAPER_HALF_STROKE_MM, PAPER_HALF_STROKE_MM, PAPER_STEP_MM)
     return SweepPlan("paper", targets, cycles, tuple(legs), overrun_mm, dwell_s, averaging_s)
+
+
+ONTHEFLY_SPEEDS_MM_S = (10.0, 20.0)
+"""Two speeds, so the speed-proportional dynamic error can be extrapolated to standstill."""
+ONTHEFLY_OVERRUN_MM = 4.0  # run-up to 20 mm/s: v^2/2a + v*a/(2 jerk) = 2.5 mm at 100 mm/s^2, 2000 mm/s^3
+
+
+def onthefly_plan(legs: Iterable[int] = (1,), cycles: int = 6, speeds_mm_s: tuple[float, ...] = ONTHEFLY_SPEEDS_MM_S,
+                  step_mm: float = PAPER_STEP_MM, min_mm: float = -PAPER_HALF_STROKE_MM,
+                  max_mm: float = PAPER_HALF_STROKE_MM, overrun_mm: float = ONTHEFLY_OVERRUN_MM,
+                  adaptive: bool = False, dwell_s: float = 1.0) -> SweepPlan:
+    """On-the-fly capture at the paper's 361 positions (0.5 mm), `cycles` bidirectional passes
+    cycling through `speeds_mm_s`; `adaptive` stops a leg's passes once the held-out error of
+    its table stops improving (then `cycles` is the most). `dwell_s` is used once per leg (the
+    zeroing at mid-stroke): nothing stops at the targets."""
+    if len(speeds_mm_s) < 2 or len(set(speeds_mm_s)) < 2:
+        raise PlanError("on-the-fly capture needs two different speeds, to separate the speed-dependent error")
+    if cycles < len(speeds_mm_s):
+        raise PlanError(f"an on-the-fly plan needs at least {len(speeds_mm_s)} cycles (one per speed), got {cycles}")
+    targets = uniform_targets(min_mm, max_mm, step_mm)
+    kind = "onthefly-adaptive" if adaptive else "onthefly"
+    notes = _lead_warning(step_mm, 5.0)
+    return SweepPlan(kind, targets, cycles, tuple(legs), overrun_mm, dwell_s, 0.0, tuple(notes),
+                     tuple(float(v) for v in speeds_mm_s), adaptive)
 
 
 def targets_from_file(path) -> tuple[float, ...]:

@@ -55,7 +55,7 @@ def synth_session(
                         (
                             index, leg, run, direction, target, target, target, measured,
                             (measured - target) * 1000.0, t, air[0], air[1], air[2],
-                            plant.material_temp_c(t), plant.load_n, 90.0, 0,
+                            plant.material_temp_c(t), plant.load_n, 90.0, 0, float("nan"),  # speed: read at rest
                         )
                     )
                     index += 1

@@ -189,6 +189,32 @@ class SerialInterferometer:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    # -- on-the-fly capture (docs/interferometer-protocol.md, "On-the-fly capture") ---------------
+    def arm_capture(self, axis: int, count: int) -> None:
+        """Clear `axis`'s capture buffer and latch a reading at each of the next `count`
+        trigger pulses (the drive's position-compare output)."""
+        axis = self._check_axis(axis)
+        if not 0 <= int(count) <= p.MAX_CAPTURE:
+            raise ValueError(f"capture count must be within 0..{p.MAX_CAPTURE}, got {count}")
+        self._transact(p.cmd_capture_arm(axis, count), p.parse_ok)
+
+    def capture_count(self, axis: int) -> tuple[int, int]:
+        """(samples captured, samples armed) of `axis`."""
+        axis = self._check_axis(axis)
+        return self._transact(p.cmd_capture_count(axis), lambda f: p.parse_capture_count(f, axis))
+
+    def capture_sample(self, axis: int, index: int) -> Reading:
+        """Sample `index` (0-based) of `axis`'s capture. `t_s` is the instrument time of the
+        trigger pulse. BeamBreak when the beam was interrupted or weak at that pulse."""
+        axis = self._check_axis(axis)
+        s = self._transact(p.cmd_capture_read(axis, index), lambda f: p.parse_capture_sample(f, axis, int(index)))
+        if s.status != "OK":
+            why = "beam interrupted" if s.status == "BEAM" else "signal too weak"
+            raise BeamBreak(f"interferometer axis {axis} on {self.port}: {why} at capture sample {index} "
+                            f"(status {s.status}, signal {s.signal_pct:.1f} %, at t = {s.t_s:.3f} s).")
+        return Reading(axis=axis, position_mm=s.position_mm, beam_ok=True, signal_pct=s.signal_pct, t_s=s.t_s)
+
+
     # -- one exchange ------------------------------------------------------------------------
 
     def _check_axis(self, axis: int) -> int:

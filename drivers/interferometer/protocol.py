@@ -281,3 +281,79 @@ def parse_averaging(fields: list[str]) -> float:
     if not 0.0 <= value <= MAX_AVERAGING_S:
         raise ProtocolError(f"field 1 (averaging_s) is {value}, outside 0..{MAX_AVERAGING_S:g}")
     return value
+
+
+# -- on-the-fly capture (docs/interferometer-protocol.md, "On-the-fly capture") ---------------
+# The instrument latches one reading of an axis at each pulse on that axis' trigger input (wired
+# to the drive's position-compare output), into a buffer the host reads after the pass.
+
+CMD_CAP_ARM = "CAPARM"  # CAPARM <n> <count>: clear axis n's buffer, latch the next <count> pulses
+CMD_CAP_COUNT = "CAPN?"  # CAPN? <n> -> CAPN,<n>,<captured>,<armed>
+CMD_CAP_READ = "CAP?"  # CAP? <n> <i> -> CAP,<n>,<i>,<position_mm>,<status>,<signal_pct>,<t_s>
+MAX_CAPTURE = 8192  # samples one axis buffers
+
+
+@dataclass(frozen=True)
+class CaptureSample:
+    """Sample `index` (0-based, in trigger order) of a capture: the reading latched at the
+    trigger pulse, `t_s` = instrument time of the pulse."""
+
+    axis: int
+    index: int
+    position_mm: float
+    status: str
+    signal_pct: float
+    t_s: float
+
+
+def cmd_capture_arm(axis: int, count: int) -> bytes:
+    return f"{CMD_CAP_ARM} {int(axis)} {int(count)}\n".encode("ascii")
+
+
+def cmd_capture_count(axis: int) -> bytes:
+    return f"{CMD_CAP_COUNT} {int(axis)}\n".encode("ascii")
+
+
+def cmd_capture_read(axis: int, index: int) -> bytes:
+    return f"{CMD_CAP_READ} {int(axis)} {int(index)}\n".encode("ascii")
+
+
+def format_capture_count(axis: int, captured: int, armed: int) -> bytes:
+    return frame_reply("CAPN", int(axis), int(captured), int(armed))
+
+
+def format_capture_sample(axis: int, index: int, position: str, status: str, signal: str, t_s: str) -> bytes:
+    """A CAP reply; the numbers are given as text (the simulator: fixed decimals like POS; a
+    replay: the recorded values exactly)."""
+    return frame_reply("CAP", int(axis), int(index), position, status, signal, t_s)
+
+
+def _integer(fields: list[str], index: int, what: str) -> int:
+    try:
+        return int(fields[index])
+    except ValueError:
+        raise ProtocolError(f"field {index} ({what}) is {fields[index]!r}, not an integer") from None
+
+
+def parse_capture_count(fields: list[str], axis: int) -> tuple[int, int]:
+    """(captured, armed) of a CAPN reply for `axis`."""
+    _expect(fields, "CAPN", 4)
+    if _integer(fields, 1, "axis") != axis:
+        raise ProtocolError(f"reply is for axis {fields[1]}, asked for axis {axis}")
+    captured, armed = _integer(fields, 2, "captured"), _integer(fields, 3, "armed")
+    if not 0 <= captured <= armed <= MAX_CAPTURE:
+        raise ProtocolError(f"CAPN reply says {captured} of {armed} captured, not 0 <= captured <= armed <= {MAX_CAPTURE}")
+    return captured, armed
+
+
+def parse_capture_sample(fields: list[str], axis: int, index: int) -> CaptureSample:
+    _expect(fields, "CAP", 7)
+    if _integer(fields, 1, "axis") != axis or _integer(fields, 2, "index") != index:
+        raise ProtocolError(f"reply is for axis {fields[1]} sample {fields[2]}, asked for axis {axis} sample {index}")
+    status = fields[4]
+    if status not in STATUSES:
+        raise ProtocolError(f"field 4 (status) is {status!r}, expected one of {', '.join(STATUSES)}")
+    signal = _number(fields, 5, "signal_pct")
+    if not 0.0 <= signal <= 100.0:
+        raise ProtocolError(f"field 5 (signal_pct) is {signal}, outside 0..100")
+    return CaptureSample(axis, index, _number(fields, 3, "position_mm"), status, signal, _number(fields, 6, "t_s"))

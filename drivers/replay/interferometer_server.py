@@ -73,6 +73,18 @@ class ReplayInterferometer(SimInterferometer):
         code = ERR_REPLAYED if kind == "error" else ERR_NOT_RECORDED
         return p.format_error(code, answer.text[:_MAX_ERR_TEXT])
 
+    def _capture_sample(self, axis: int, t_s: float) -> tuple[str, str, str, str]:
+        """A trigger pulse of an on-the-fly pass (the replay drive's position compare): latch the
+        next recorded point of the leg, if it is the one at this compare position, with its
+        recorded reading and time, exactly; a pulse the recording does not hold latches a BEAM
+        sample and the mismatch is kept (docs/replay.md)."""
+        plant = self.plants.get(axis)
+        pt = plant.capture() if plant is not None else None
+        if pt is None:
+            return exact(self._last_position_mm[axis]), "BEAM", "0.0", f"{t_s:.6f}"
+        self._last_position_mm[axis] = pt.measured_mm
+        return exact(pt.measured_mm), "OK", exact(pt.signal_pct), exact(pt.time_s)
+
     def _environment(self) -> bytes:
         with self.lock:
             air_c, pressure_hpa, humidity_pct, temps = self.state.environment(self.plants, self.axes)

@@ -163,6 +163,30 @@ class ReplayPlant:
         self._at = "served"
         return LaserAnswer("value", p)
 
+    def capture(self) -> ReplayPoint | None:
+        """A compare pulse of an on-the-fly pass: the next recorded point, served as the sample
+        latched at it (the drive's nut is at the pulse's position now). None, with the mismatch
+        kept, when the next recorded point is not at this position and direction, holds faults
+        (not replayed on the fly), or there is none."""
+        p = self.current
+        x, d = self.x_mm, self.direction
+        if p is None or not p.has_value or p.direction != d or abs(x - p.target_mm) > max(self.state.target_tol_mm, 1e-5) \
+                or p.faults:
+            self._arrival = (x, d)
+            why = " (its recorded faults are not replayed on the fly)" if p is not None and p.faults else ""
+            self._mismatch(self._describe_mismatch() + why)
+            return None
+        self.state.clock.set_recorded(p.time_s)
+        self.load_n = p.load_n
+        self._last_served = p
+        self.state.last_served = p
+        self.state.served += 1
+        self._cursor += 1
+        nxt = self.current
+        self._pending = deque(nxt.faults if nxt else ())
+        self._at = None
+        return p
+
     # -- when the recording does not hold what is asked -----------------------------------------
     def _not_recorded(self) -> LaserAnswer:
         st = self.state

@@ -18,6 +18,7 @@ from drivers.replay.errors import ReplayMismatch
 from drivers.replay.interferometer_server import ReplayInterferometer
 from drivers.replay.plant import ReplayPlant, ReplayState
 from drivers.replay.script import ReplayScript
+from drivers.sim.position_compare import TriggerLine
 
 AXES = 6
 
@@ -51,6 +52,10 @@ class ReplayRig:
         identity = ("StationReplay", "LI-6", f"R{tag}", (script.session_id or "replay")[:24].replace(",", " ") or "replay")
         self.laser_server = ReplayInterferometer(self.state, self.plants, device_clock, self.lock, identity, axes=axes,
                                                  timeout_clock=self.timeout_clock)
+        # on-the-fly sessions: the replay drives' position compare triggers the replay laser's capture
+        self.trigger_line = TriggerLine()
+        self.trigger_line.connect(self.laser_server.trigger)
+        self.drive_server.connect_trigger(self.trigger_line)
         self.rtu = rtu
         self.drive_url = ""
         self.rtu_port = ""

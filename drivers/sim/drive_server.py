@@ -59,7 +59,9 @@ from drivers.errors import DriverError
 from drivers.interfaces import Clock
 from drivers.modbus.codec import crc16_modbus
 from drivers.modbus.profile import DriveProfile
+from drivers.sim.motion import SmoothedMove
 from drivers.sim.plant import LegPlant
+from drivers.sim.position_compare import PositionCompare, TriggerLine
 from drivers.states import DriveState
 
 log = logging.getLogger(__name__)
@@ -177,6 +179,10 @@ class _DriveModel:
         self.writes = 0
         self._bank_cache: dict[int, tuple | None] = {}
         self._internal: dict[str, object] = {}  # values the profile maps to no register
+        # on-the-fly capture (docs/onthefly.md): position-compare output, wired by the rig
+        self.compare = PositionCompare()
+        self.trigger: TriggerLine | None = None
+        self._compare_t = 0.0  # compare pulses are given up to this time of the current move
         self._init_registers()
 
     # -- registers ------------------------------------------------------------------------------
@@ -283,11 +289,13 @@ class _DriveModel:
         if self.motion is not None and not self.stalled:
             now = self.clock.now()
             m = self.motion
+            self._fire_compare(min(now, m.t_end))
             if now >= m.t_end:
                 self._arrive()
             else:
                 self.nut_mm = m.position(now)
                 self.plant.move(self.nut_mm, now)
+                self._plant_velocity(m.velocity(now))
         self._update_status()
 
     def _arrive(self) -> None:
@@ -295,6 +303,7 @@ class _DriveModel:
         assert m is not None
         self.nut_mm = m.p1
         self.plant.move(m.p1, m.t_end)
+        self._plant_stopped(m.t_end, m.sign, m.a)
         self.motion = None
 
     def _halt(self) -> None:
@@ -308,6 +317,7 @@ class _DriveModel:
             else:
                 self.nut_mm = self.motion.position(now)
                 self.plant.move(self.nut_mm, now)
+                self._plant_stopped(now, self.motion.sign, self.motion.a)
                 self.motion = None
         # the demand becomes where the leg is, so a later move starts from here
         self.cmd_mm = self.nut_mm + self.corr_um / 1000.0
@@ -327,12 +337,45 @@ class _DriveModel:
         v = min(self._get("profile_velocity"), lim.max_velocity_mm_s)
         a = min(self._get("profile_acceleration"), lim.max_accel_mm_s2)
         self.cmd_mm = target_mm
-        self.motion = _Motion(self.nut_mm, nut_target, self.clock.now(), v, a)
+        self.motion = SmoothedMove(self.nut_mm, nut_target, self.clock.now(), v, a, self._jerk_mm_s3())
+        self._compare_t = self.motion.t0
         if getattr(self.clock, "time_scale", 1.0) == 0 and not self.stalled:
             # no waiting: the move happens within this request, on virtual time
             self.clock.sleep(self.motion.duration)
             self.motion.t0 = self.clock.now() - self.motion.duration
+            self._compare_t = self.motion.t0
+            self._fire_compare(self.motion.t_end)
             self._arrive()
+
+    # -- motion dynamics and position compare (on-the-fly capture, docs/onthefly.md) ---------------
+    def _jerk_mm_s3(self) -> float | None:
+        """The leg's jerk limit (the plant's motion dynamics; a replay plant has none)."""
+        return getattr(getattr(self.plant, "cfg", None), "jerk_mm_s3", None)
+
+    def _plant_velocity(self, v_mm_s: float) -> None:
+        setter = getattr(self.plant, "set_velocity", None)
+        if setter is not None:
+            setter(v_mm_s)
+
+    def _plant_stopped(self, t_s: float, sign: float, decel_mm_s2: float) -> None:
+        stopped = getattr(self.plant, "stopped", None)
+        if stopped is not None:
+            stopped(t_s, int(sign), decel_mm_s2)
+
+    def _fire_compare(self, t_to: float) -> None:
+        """Give the compare pulses the current move passes up to `t_to`: the nut (and the plant)
+        at each crossing, at its speed, then a pulse on the trigger line."""
+        m = self.motion
+        if m is None or not self.compare.armed:
+            return
+        offset_mm = self.corr_um / 1000.0  # position actual = nut + the table's shift
+        for _, pos_mm, t_s, v_mm_s in self.compare.due(m, self._compare_t, t_to, offset_mm):
+            self.nut_mm = pos_mm - offset_mm
+            self.plant.move(self.nut_mm, t_s)
+            self._plant_velocity(v_mm_s)
+            if self.trigger is not None:
+                self.trigger.pulse(self.leg, t_s)
+        self._compare_t = max(self._compare_t, t_to)
 
     def _fault(self, code: int) -> None:
         self._halt()
@@ -350,7 +393,8 @@ class _DriveModel:
         on = bool(on)
         if self.stalled and not on and self.motion is not None:
             m = self.motion
-            self.motion = _Motion(self.nut_mm, m.p1, self.clock.now(), m.v, m.a)
+            self.motion = SmoothedMove(self.nut_mm, m.p1, self.clock.now(), m.v, m.a, self._jerk_mm_s3())
+            self._compare_t = self.motion.t0
         self.stalled = on
         self._update_status()
 
@@ -437,7 +481,10 @@ class _DriveModel:
             v = 0.0
         self._set("statusword", sw)
         self._set("position_actual", self.nut_mm + self.corr_um / 1000.0)
-        self._set("following_error", v * FOLLOWING_LAG_S * 1000.0)
+        lag = getattr(getattr(self.plant, "cfg", None), "following_lag_s", None)
+        self._set("following_error", v * (lag(v) if lag is not None else FOLLOWING_LAG_S) * 1000.0)
+        if "compare_fired" in self.p.registers:
+            self._set("compare_fired", self.compare.fired)
         self._set("fault_code", self.fault_code)
         self._set("axial_load", self.plant.load_n)
 
@@ -493,6 +540,8 @@ class _DriveModel:
         self.regs[address : address + count] = values
         for b in banks:
             self._revalidate(b)
+        if "compare_count" in self.p.registers and touched("compare_count"):
+            self.compare.arm(self._get("compare_start"), self._get("compare_step"), self._get("compare_count"))
         if touched("controlword"):
             self._controlword(self._get("controlword"))
         if self.p.control == "pr_trigger":
@@ -846,6 +895,12 @@ class SimDriveServer:
         """Make drive `leg` ignore every request (no reply), as a drive with a dead link would."""
         with self.lock:
             self._models[leg].unresponsive = bool(on)
+
+    def connect_trigger(self, line: TriggerLine) -> None:
+        """Wire every drive's position-compare output to `line` (on-the-fly capture)."""
+        with self.lock:
+            for m in self._models.values():
+                m.trigger = line
 
     def frame_stats(self) -> FrameStats:
         """A copy of what the drives saw on their line (see FrameStats)."""

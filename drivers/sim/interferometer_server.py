@@ -74,6 +74,8 @@ class SimInterferometer:
         self._garbage_kind: str | None = None
         self._garbage_count = 0
         self._silent = False
+        # on-the-fly capture: per axis [armed count, samples (position text, status, signal, t_s)]
+        self._capture: dict[int, list] = {axis: [0, []] for axis in range(1, self.axes + 1)}
         self.commands = Counter()  # command word -> count received (statistics for tests/bench)
         self.failures: list[BaseException] = []  # exceptions inside the server (should stay empty)
         self._master = self._slave = self._wake_r = self._wake_w = -1
@@ -247,7 +249,60 @@ class SimInterferometer:
                 return p.format_error(p.ERR_OUT_OF_RANGE, f"AVG must be 0..{p.MAX_AVERAGING_S:g} s; got {args[0][:20]}")
             self._averaging_s = value
             return p.frame_reply("OK")
+        if word in (p.CMD_CAP_ARM, p.CMD_CAP_COUNT, p.CMD_CAP_READ):
+            return self._capture_command(word, args)
         return p.format_error(p.ERR_UNKNOWN_COMMAND, f"unknown command {word[:20]}")
+
+    # -- on-the-fly capture (docs/interferometer-protocol.md, "On-the-fly capture") ----------------
+
+    def trigger(self, leg: int, t_s: float) -> None:
+        """A pulse on axis `leg`'s trigger input (the drive's position-compare output, through a
+        drivers.sim.position_compare.TriggerLine), at `t_s`, with the plant at the crossing:
+        latch a sample if the axis is armed. Called under the rig lock."""
+        cap = self._capture.get(leg)
+        if cap is None or len(cap[1]) >= cap[0]:
+            return
+        cap[1].append(self._capture_sample(leg, t_s))
+
+    def _capture_sample(self, axis: int, t_s: float) -> tuple[str, str, str, str]:
+        """(position, status, signal, t_s) texts of the reading latched at a pulse: no averaging
+        (the latch is instantaneous), the plant's speed-dependent dynamics included."""
+        with self._faults:
+            broken = axis in self._beam_break
+            nominal_pct = self._signal_pct[axis]
+        plant = self.plants.get(axis)
+        if plant is None or broken:
+            return f"{self._last_position_mm[axis]:+.9f}", "BEAM", "0.0", f"{t_s:.6f}"
+        position_mm = plant.measured_position_mm(t_s, 0.0) - self._datum_mm[axis]
+        signal = float(np.clip(nominal_pct + self._rng.normal(0.0, 0.3), 0.0, 100.0))
+        status = "LOW" if signal < p.LOW_SIGNAL_PCT else "OK"
+        return f"{position_mm:+.9f}", status, f"{signal:.1f}", f"{t_s:.6f}"
+
+    def _capture_command(self, word: str, args: list[str]) -> bytes:
+        want = 2 if word in (p.CMD_CAP_ARM, p.CMD_CAP_READ) else 1
+        if len(args) != want:
+            return p.format_error(p.ERR_BAD_ARGUMENT, f"{word} takes {want} argument(s)")
+        axis = self._axis(args[:1])
+        if isinstance(axis, bytes):
+            return axis
+        number = 0
+        if want == 2:
+            try:
+                number = int(args[1])
+            except ValueError:
+                return p.format_error(p.ERR_BAD_ARGUMENT, f"{word} needs an integer; got {args[1][:20]}")
+        with self.lock:
+            cap = self._capture[axis]
+            if word == p.CMD_CAP_ARM:
+                if not 0 <= number <= p.MAX_CAPTURE:
+                    return p.format_error(p.ERR_OUT_OF_RANGE, f"CAPARM count must be 0..{p.MAX_CAPTURE}; got {number}")
+                cap[0], cap[1] = number, []
+                return p.frame_reply("OK")
+            if word == p.CMD_CAP_COUNT:
+                return p.format_capture_count(axis, len(cap[1]), cap[0])
+            if not 0 <= number < len(cap[1]):
+                return p.format_error(p.ERR_OUT_OF_RANGE, f"sample {number} not captured; axis {axis} holds {len(cap[1])}")
+            return p.format_capture_sample(axis, number, *cap[1][number])
 
     def _axis(self, args: list[str]) -> int | bytes:
         """The axis argument, or an ERR reply."""

@@ -28,6 +28,20 @@ shared/docs/domain.md section 4:
 - ``scale``: a scale error of the measurement chain (cosine/Abbe, wavelength), `scale_ppm` of x.
 - ``noise``: white measurement noise, `noise_um` standard deviation per reading.
 - ``run_offset``: run-to-run scatter; a new offset (std `run_offset_um`) at every reversal.
+
+Motion dynamics (how the leg moves, not a static error; docs/onthefly.md). Set by the drive as it
+moves the nut (`set_velocity`, `stopped`); none of it is in `systematic_error_um`:
+- the drive's servo lags its demand by `following_lag_up_s` / `following_lag_down_s` times the
+  speed (the following error it reports; direction-dependent: gravity and friction differ);
+- the leg end follows the motor encoder as a first-order lag: while moving at `v` mm/s the leg
+  is `dynamic_lag_*_s * v` shorter than the encoder says (longer while moving down), so
+  on-the-fly readings carry `-dynamic_lag_s * v * 1000` um (`dynamic_error_um`), which a
+  stop-and-go reading after the dwell does not;
+- after a stop the leg rings out: an overshoot of `settle_um_per_mm_s2` per mm/s^2 of
+  deceleration in the direction of motion, decaying with `settling_tau_s` (a reading is stable
+  after `settling_time_s`, 12 time constants: 0.72 s);
+- the drive limits jerk to `jerk_mm_s3` (its trapezoid is smoothed over accel / jerk seconds;
+  0 = not limited, the default; `with_leg_motion()` gives a real leg's `LEG_JERK_MM_S3`).
 """
 
 from __future__ import annotations
@@ -36,6 +50,9 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+LEG_JERK_MM_S3 = 2000.0
+"""Jerk limit of a real leg's drive tuning: 50 ms to reach 100 mm/s^2 (docs/onthefly.md)."""
 
 ALL_SOURCES = frozenset(
     {"lead", "longwave", "wobble", "backlash", "thermal", "load", "drift", "scale", "noise", "run_offset"}
@@ -69,13 +86,23 @@ class PlantConfig:
     noise_um: float = 0.03
     run_offset_um: float = 0.04
     enabled: frozenset[str] = field(default_factory=lambda: ALL_SOURCES)
-    # the hall warming (or cooling) steadily: ambient += ambient_ramp_k_per_h * hours since the
-    # session start; the material follows with tau_s (a leg warming during a sweep)
-    ambient_ramp_k_per_h: float = 0.0
     # ambient cycling (air conditioning, day/night): ambient = ambient_temp_c + swing*sin(2 pi t/period);
     # makes the material temperature non-monotonic in time, so thermal and drift are separable
     ambient_swing_k: float = 0.0
     ambient_period_s: float = 3600.0
+    # the hall warming (or cooling) steadily: ambient += ambient_ramp_k_per_h * hours since the
+    # session start; the material follows with tau_s (a leg warming during a sweep)
+    ambient_ramp_k_per_h: float = 0.0
+    # -- motion dynamics (see the module docstring; additive: defaults keep static results) --
+    # 0 = not limited: the default keeps the timing of the committed sample recordings (a jerk
+    # limit lengthens every move by accel/jerk); LEG_JERK_MM_S3 is a real leg's (bench, docs)
+    jerk_mm_s3: float = 0.0
+    following_lag_up_s: float = 0.002
+    following_lag_down_s: float = 0.0025
+    dynamic_lag_up_s: float = 0.00012  # 1.2 um at 10 mm/s moving up
+    dynamic_lag_down_s: float = 0.00008
+    settling_tau_s: float = 0.06
+    settle_um_per_mm_s2: float = 0.01  # 1 um overshoot after a 100 mm/s^2 stop
 
     def __post_init__(self) -> None:
         unknown = set(self.enabled) - ALL_SOURCES
@@ -85,6 +112,28 @@ class PlantConfig:
             raise ValueError("tau_s, lead_mm and stroke_half_mm must be positive")
         if self.ambient_period_s <= 0:
             raise ValueError("ambient_period_s must be positive")
+        if self.jerk_mm_s3 < 0 or self.settling_tau_s < 0 or min(
+                self.following_lag_up_s, self.following_lag_down_s, self.dynamic_lag_up_s, self.dynamic_lag_down_s) < 0:
+            raise ValueError("jerk_mm_s3 (0 = not limited), the lags and settling_tau_s must be >= 0")
+
+    def following_lag_s(self, velocity_mm_s: float) -> float:
+        """The servo's following-error lag for a move at `velocity_mm_s` (signed), s."""
+        return self.following_lag_up_s if velocity_mm_s >= 0 else self.following_lag_down_s
+
+    def dynamic_lag_s(self, velocity_mm_s: float) -> float:
+        """Encoder-to-leg-end lag for a move at `velocity_mm_s` (signed), s."""
+        return self.dynamic_lag_up_s if velocity_mm_s >= 0 else self.dynamic_lag_down_s
+
+    @property
+    def settling_time_s(self) -> float:
+        """Time after a stop until the ring-out is below 1e-5 of its start (12 time constants):
+        from then on the leg is settled, its ring-out exactly 0 (so a reading after the dwell is
+        the static one, to the last digit)."""
+        return 12.0 * self.settling_tau_s
+
+    def with_leg_motion(self, jerk_mm_s3: float = LEG_JERK_MM_S3) -> "PlantConfig":
+        """This configuration with a real leg's jerk limit (the other motion dynamics are on by default)."""
+        return replace(self, jerk_mm_s3=float(jerk_mm_s3))
 
     def only(self, *sources: str) -> "PlantConfig":
         """This configuration with only the named error sources switched on."""
@@ -159,6 +208,9 @@ class LegPlant:
         self._pass_offset_um = self._draw_offset()
         self.load_n = cfg.load_per_pass_n[0] if cfg.load_per_pass_n else 0.0
         self._zero_um = 0.0
+        # motion dynamics: speed now (mm/s, signed) and the ring-out of the last stop
+        self.velocity_mm_s = 0.0
+        self._ring = (0.0, 0.0)  # (time of the stop, overshoot um at that time)
 
     # -- time evolution -------------------------------------------------------------------
     def _advance_thermal(self, t_s: float, travel_mm: float = 0.0) -> None:
@@ -169,6 +221,9 @@ class LegPlant:
             # ambient at the middle of the interval: intervals are short against the period
             t_mid = 0.5 * (t_s + self._t_last_s) - self.t0_s
             amb += self.cfg.ambient_swing_k * math.sin(2 * math.pi * t_mid / self.cfg.ambient_period_s)
+        if self.cfg.ambient_ramp_k_per_h:
+            # ambient at the middle of the interval, as for the swing: intervals are short against tau_s
+            amb += self.cfg.ambient_ramp_k_per_h * (0.5 * (t_s + self._t_last_s) - self.t0_s) / 3600.0
         if dt == 0.0:
             self.temp_c += heat_k
         else:
@@ -201,17 +256,37 @@ class LegPlant:
         if loads:
             self.load_n = float(loads[self.pass_index % len(loads)])
 
+    # -- motion dynamics (set by the drive) ---------------------------------------------------
+    def set_velocity(self, velocity_mm_s: float) -> None:
+        """The nut moves at `velocity_mm_s` now (signed, mm/s; 0 = at rest)."""
+        self.velocity_mm_s = float(velocity_mm_s)
+
+    def stopped(self, t_s: float, direction: int, decel_mm_s2: float) -> None:
+        """The nut came to rest at `t_s` after decelerating at `decel_mm_s2` while moving in
+        `direction`: the leg overshoots and rings out (`settle_um_per_mm_s2`, `settling_tau_s`)."""
+        self.velocity_mm_s = 0.0
+        self._ring = (float(t_s), float(np.sign(direction)) * self.cfg.settle_um_per_mm_s2 * abs(decel_mm_s2))
+
+    def dynamic_error_um(self, t_s: float) -> float:
+        """Leg end minus encoder beyond the static error, um: the speed-proportional lag while
+        moving, the decaying overshoot after a stop (module docstring)."""
+        v = self.velocity_mm_s
+        if v != 0.0:
+            return -self.cfg.dynamic_lag_s(v) * v * 1000.0
+        t_stop, amp_um = self._ring
+        if amp_um == 0.0 or self.cfg.settling_tau_s <= 0 or not 0.0 <= t_s - t_stop < self.cfg.settling_time_s:
+            return 0.0
+        return amp_um * math.exp(-(t_s - t_stop) / self.cfg.settling_tau_s)
+
     # -- observations -----------------------------------------------------------------------
     def error_um(self, t_s: float) -> float:
-        """Systematic error now (true minus commanded at the nut), um."""
+        """Systematic error now (true minus commanded at the nut), um; with the motion dynamics
+        (`dynamic_error_um`) on top."""
         self._advance_thermal(t_s)
         return float(
             systematic_error_um(self.cfg, self.x_mm, self.direction, self.temp_c, self.load_n, t_s - self.t0_s)
-        )
+        ) + self.dynamic_error_um(t_s)
 
-        if self.cfg.ambient_ramp_k_per_h:
-            # ambient at the middle of the interval, as for the swing: intervals are short against tau_s
-            amb += self.cfg.ambient_ramp_k_per_h * (0.5 * (t_s + self._t_last_s) - self.t0_s) / 3600.0
     def true_position_mm(self, t_s: float) -> float:
         return self.x_mm + self.error_um(t_s) / 1000.0
 

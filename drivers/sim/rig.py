@@ -14,6 +14,7 @@ from drivers.clock import VirtualClock
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
 from drivers.sim.interferometer_server import SimInterferometer
+from drivers.sim.position_compare import TriggerLine
 from drivers.sim.plant import LegPlant, PlantConfig, default_leg_configs
 
 
@@ -44,6 +45,10 @@ class SimRig:
         self.profile = self.profile or DriveProfile.load()
         self.drive_server = SimDriveServer(self.plants, self.clock, self.profile, nv_path=self.nv_path, lock=self.lock)
         self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed)
+        # the drives' position-compare outputs wired to the laser's trigger inputs (on-the-fly capture)
+        self.trigger_line = TriggerLine()
+        self.trigger_line.connect(self.laser_server.trigger)
+        self.drive_server.connect_trigger(self.trigger_line)
         self._started = False
 
     def start(self) -> "SimRig":

@@ -9,6 +9,7 @@ import numpy as np
 from procedures.errors import InputError
 from procedures.fit.bidirectional import MAX_FOURIER_TERMS, fit_bidirectional_leg
 from procedures.fit.crossval import cycle_folds, heldout_residuals_um
+from procedures.fit.dynamic import is_onthefly, static_points
 from procedures.fit.data import LegData, split_legs
 from procedures.fit.figures import range_um, rms_um
 from procedures.fit.model import METHODS, FitStats, LegErrorModel, LegFit
@@ -97,6 +98,8 @@ def fit(
     elif lead_mm is not None and not (np.isfinite(lead_mm) and lead_mm > 0):
         raise InputError(f"screw lead must be a positive number of mm, got {lead_mm}")
     src = (source or {}).get("path", "") or "the session"
+    if is_onthefly(points):  # on-the-fly readings: fit their static part (docs/onthefly.md)
+        points = static_points(points, src)
     by_leg = split_legs(points, source=src)
     if legs is not None:
         wanted = sorted(set(int(x) for x in legs))

@@ -43,6 +43,7 @@ import numpy as np
 from procedures.errors import InputError, SchemaError
 from procedures.ranges import SESSION_BOUNDS
 from procedures.recording.schema import (
+    ADDED_POINT_FIELDS,
     FAULT_DTYPE,
     META_ATTRS,
     OPTIONAL_NAN_FIELDS,
@@ -396,7 +397,7 @@ def _rows(f: h5py.File, name: str, dtype: np.dtype, path: Path) -> np.ndarray:
         raise SchemaError(f"{path}: dataset /{name} is missing")
     ds = f[name]
     have = ds.dtype.names or ()
-    missing = [n for n in dtype.names if n not in have]
+    missing = [n for n in dtype.names if n not in have and n not in ADDED_POINT_FIELDS]
     if missing:
         raise SchemaError(f"{path}: /{name} lacks field(s) {', '.join(missing)}")
     if ds.ndim != 1:
@@ -406,7 +407,7 @@ def _rows(f: h5py.File, name: str, dtype: np.dtype, path: Path) -> np.ndarray:
         return data
     out = np.empty(len(data), dtype)
     for n in dtype.names:
-        out[n] = data[n]
+        out[n] = data[n] if n in have else np.nan  # a field added later: unknown in older files
     return out
 
 

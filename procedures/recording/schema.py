@@ -39,6 +39,10 @@ POINT_FIELDS: list[tuple[str, str, str]] = [
     ("load_n", "<f8", "N"),  # axial load, compression positive
     ("signal_pct", "<f4", "%"),
     ("flags", "<u4", "bitfield"),  # see FLAG_*
+    # on-the-fly capture (docs/onthefly.md): signed speed of the axis when the reading was
+    # latched, + = increasing position; NaN for stop-and-go readings (taken at rest after the
+    # dwell) and in files written before the field existed
+    ("speed_mm_s", "<f8", "mm/s"),
 ]
 POINT_DTYPE = np.dtype([(n, t) for n, t, _ in POINT_FIELDS])
 POINT_UNITS = {n: u for n, _, u in POINT_FIELDS}
@@ -92,6 +96,11 @@ FAULTS_CHUNK_ROWS = 16
 UNWRITTEN_INDEX = -1
 """Fill value of `index`: a row whose index is -1 was allocated but never written (a kill
 between growing the dataset and writing the row). Readers drop such rows."""
+
+
+ADDED_POINT_FIELDS = ("speed_mm_s",)
+"""Point fields added after schema 1.0 (minor additions): a file without them is read with them
+unknown (NaN), not refused."""
 
 
 def schema_major(version: str) -> int:

@@ -46,7 +46,7 @@ def make_points(legs=(1, 2), cycles: int = 2, seed: int = 0) -> np.ndarray:
                         20.0 + float(rng.normal(0, 0.01)), 1013.25 + float(rng.normal(0, 0.1)),
                         45.0 + float(rng.normal(0, 0.3)), 20.5 + float(rng.normal(0, 0.05)),
                         int(rng.integers(0, 50000)) * 0.01,  # load as the 0.01 N register reports it
-                        np.float32(92.0 + rng.normal(0, 0.3)), 0,
+                        np.float32(92.0 + rng.normal(0, 0.3)), 0, np.nan,
                     ))
                     index += 1
     return np.array(rows, dtype=POINT_DTYPE)

@@ -23,7 +23,7 @@ def points_from(targets_mm, error_fn, passes=2, leg=1):
         seq = targets if d == 1 else targets[::-1]
         for x in seq:
             rows.append((len(rows), leg, run, d, x, x, x, x, error_fn(x, d), float(len(rows)),
-                         20.0, 1013.25, 45.0, 20.0, 0.0, 90.0, 0))
+                         20.0, 1013.25, 45.0, 20.0, 0.0, 90.0, 0, np.nan))
     return np.array(rows, dtype=POINT_DTYPE)
 
 

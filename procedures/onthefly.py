@@ -1,0 +1,215 @@
+"""The on-the-fly passes of a sweep (docs/onthefly.md): move through all targets at constant
+speed; the drive's position-compare output triggers the interferometer at every target.
+
+For each pass: move (at the profile speed) to the run-up start `overrun_mm` before the first
+target, arm the drive's compare list (first target, step signed by the direction, count) and
+the laser's capture, move at the pass speed to `overrun_mm` beyond the last target, then read
+the samples back. A sample's position is the compare position (the drive's position actual at
+the pulse, by construction), its reading the laser's latched one, its time the instrument's
+time of the pulse, its speed the central difference of positions over those times.
+
+A fault during a pass (a sample taken without beam, fewer samples than pulses expected, a drive
+fault) is retried as the stop-and-go sweep retries a point, but for the whole pass (a moving
+axis cannot go back for one sample). `sweep()` calls `onthefly_passes` in place of its loop
+over points; safety (limits checked before any motion, stop and disable on every exit) stays
+with `sweep()`.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Callable, Iterator, Mapping
+
+import numpy as np
+
+from drivers.interfaces import (
+    BeamBreak,
+    CapturingInterferometer,
+    Clock,
+    DriverError,
+    Environment,
+    Interferometer,
+    PositionCompareAxis,
+    ServoAxis,
+)
+from procedures import events as ev
+from procedures.adaptive import AdaptiveRule
+from procedures.control import Aborted, RunControl
+from procedures.plans import PlanPoint, SweepPlan
+from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, POINT_DTYPE
+from procedures.recording.writer import point_row
+from procedures.states import FaultKind
+
+log = logging.getLogger(__name__)
+
+
+class CaptureShort(DriverError):
+    """The laser latched fewer samples than the drive's compare list should have fired."""
+
+
+def _passes(points: list[PlanPoint]) -> list[list[PlanPoint]]:
+    out: list[list[PlanPoint]] = []
+    for p in points:
+        if out and out[-1][0].leg == p.leg and out[-1][0].run == p.run:
+            out[-1].append(p)
+        else:
+            out.append([p])
+    return out
+
+
+def speeds_of(positions_mm: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """Signed speed at each sample, mm/s: central differences (one-sided at the ends)."""
+    if positions_mm.size < 2:
+        return np.zeros(positions_mm.size)
+    return np.gradient(positions_mm, t_s)
+
+
+def onthefly_passes(
+    plan: SweepPlan,
+    points: list[PlanPoint],
+    axes: Mapping[int, ServoAxis],
+    laser: Interferometer,
+    clock: Clock,
+    control: RunControl,
+    retry,
+    t_start: float,
+    done: int,
+    total: int,
+    prepare: Callable[[ServoAxis, Interferometer, int, Clock, SweepPlan], None],
+    recover: Callable[[ServoAxis], None],
+    kind_of: Callable[[BaseException], FaultKind],
+    failed: Callable[[ev.Fault], BaseException],
+) -> Iterator[ev.Event]:
+    """Measure the passes of `points` (the plan's points not yet done) on the fly; yields the
+    sweep's events and returns the count of points done. `prepare`, `recover`, `kind_of` and
+    `failed` are the sweep's own helpers (enable and zero a leg, recover an axis, name a fault,
+    the exception that ends the sweep when retries run out)."""
+    if not isinstance(laser, CapturingInterferometer):
+        raise DriverError("the interferometer has no capture mode (CAPARM/CAP?), so an on-the-fly plan cannot run; "
+                          "use a stop-and-go plan")
+    for leg in plan.legs:
+        if not isinstance(axes[leg], PositionCompareAxis):
+            raise DriverError(f"leg {leg}: the drive has no position-compare output; use a stop-and-go plan")
+    all_targets = np.asarray(plan.targets_mm, dtype=float)
+    n = all_targets.size
+    step = plan.step_mm
+    rounds_cycles = 2 * plan.cycles_per_round  # passes per round
+    current_leg: int | None = None
+    env: Environment | None = None
+    env_t = -1e18
+    stopped: set[int] = set()
+    rules: dict[int, AdaptiveRule] = {}
+    measured: dict[int, list[np.ndarray]] = {}
+    planned_left: dict[int, int] = {}
+    for p in points:
+        planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
+    for pas in _passes(points):
+        first = pas[0]
+        leg, run, d = first.leg, first.run, first.direction
+        if leg in stopped:
+            continue
+        yield from control.checkpoint()
+        if leg != current_leg:
+            last_leg, current_leg = current_leg, leg
+            yield ev.LegStarted(leg)
+            try:
+                if last_leg is None:
+                    laser.set_averaging(plan.averaging_s)
+                else:
+                    axes[last_leg].disable()
+                prepare(axes[leg], laser, leg, clock, plan)
+            except DriverError as exc:
+                if control.aborted:
+                    raise Aborted(control.reason) from exc
+                fault = ev.Fault(first.index, leg, run, 0.0, kind_of(exc),
+                                 f"preparing leg {leg} (enable, zero at mid-stroke): {exc}", 1, True, clock.now() - t_start)
+                yield fault
+                raise failed(fault) from exc
+        axis = axes[leg]
+        speed = plan.speed_of_run(run)
+        seq = all_targets if d > 0 else all_targets[::-1]
+        start_mm = float(seq[0] - d * plan.overrun_mm)
+        end_mm = float(seq[-1] + d * plan.overrun_mm)
+        flags = 0
+        attempt = 0
+        samples = None
+        while samples is None:
+            yield from control.checkpoint()
+            attempt += 1
+            try:
+                axis.move_to(start_mm)
+                axis.arm_position_compare(float(seq[0]), d * step, n)  # type: ignore[attr-defined]
+                laser.arm_capture(leg, n)  # type: ignore[attr-defined]
+                status = axis.move_to(end_mm, velocity_mm_s=speed)
+                axis.arm_position_compare(float(seq[0]), d * step, 0)  # type: ignore[attr-defined]  # off
+                captured, _ = laser.capture_count(leg)  # type: ignore[attr-defined]
+                if captured < n:
+                    raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
+                                       "(trigger wiring, or the move stopped short)")
+                readings = [laser.capture_sample(leg, i) for i in range(n)]  # type: ignore[attr-defined]
+                if env is None or clock.now() - env_t >= retry.env_interval_s:
+                    env = laser.environment()
+                    env_t = clock.now()
+                samples = (readings, status, env)
+            except Aborted:
+                raise
+            except DriverError as exc:
+                if control.aborted:
+                    raise Aborted(control.reason) from exc
+                kind = kind_of(exc)
+                limit = {FaultKind.BEAM_BREAK: retry.beam_retries, FaultKind.DRIVE_FAULT: retry.drive_retries}.get(
+                    kind, retry.comm_retries)
+                gave_up = attempt > limit
+                fault = ev.Fault(first.index, leg, run, first.target_mm, kind, f"on-the-fly pass: {exc}", attempt,
+                                 gave_up, clock.now() - t_start)
+                yield fault
+                if gave_up:
+                    raise failed(fault) from exc
+                if isinstance(exc, BeamBreak):
+                    flags |= FLAG_RETRIED_BEAM
+                    clock.sleep(retry.beam_wait_s)
+                else:
+                    flags |= FLAG_RETRIED_DRIVE
+                    recover(axis)
+        readings, status, env = samples
+        t_abs = np.array([r.t_s for r in readings], dtype=float)
+        v = speeds_of(seq, t_abs)
+        by_target = {round(float(x), 9): i for i, x in enumerate(seq)}
+        rows = []
+        for p in pas:
+            i = by_target[round(p.target_mm, 9)]
+            r = readings[i]
+            record = {
+                "index": p.index, "leg": leg, "run": run, "direction": d,
+                "target_mm": p.target_mm, "commanded_mm": p.target_mm,
+                # the compare fires when position actual passes the target: that is the drive's position
+                "drive_position_mm": p.target_mm, "measured_mm": r.position_mm,
+                "error_um": (r.position_mm - p.target_mm) * 1000.0,
+                "time_s": r.t_s - t_start,
+                "air_temp_c": env.air_temp_c, "air_pressure_hpa": env.air_pressure_hpa,
+                "humidity_pct": env.humidity_pct, "material_temp_c": env.material_temp_of(leg),
+                "load_n": status.load_n, "signal_pct": r.signal_pct, "flags": flags,
+                "speed_mm_s": float(v[i]),
+            }
+            done += 1
+            planned_left[leg] -= 1
+            rows.append(record)
+            yield ev.PointMeasured(record, done, total)
+        if plan.adaptive:
+            measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
+            if run % rounds_cycles == 0 and planned_left[leg] > 0:
+                rule = rules.setdefault(leg, AdaptiveRule())
+                reason = rule.after_round(np.concatenate(measured[leg]).astype(POINT_DTYPE), leg)
+                if reason is not None:
+                    stopped.add(leg)
+                    skipped = planned_left[leg]
+                    total -= skipped
+                    yield ev.PassesStopped(leg, run // 2, reason, tuple(rule.heldout_um), rule.noise_floor_um, skipped)
+                    yield ev.Message(f"leg {leg}: adaptive stop after {run // 2} cycles: {reason}; "
+                                     f"{skipped} planned points not needed", "info")
+            elif planned_left[leg] == 0:
+                rule = rules.setdefault(leg, AdaptiveRule())
+                reason = f"the plan's most cycles ({plan.cycles}) measured before the held-out RMS stopped improving"
+                yield ev.PassesStopped(leg, run // 2, reason, tuple(rule.heldout_um), rule.noise_floor_um, 0)
+                yield ev.Message(f"leg {leg}: {reason}", "info")
+    return done

@@ -1,0 +1,149 @@
+"""Motion dynamics of the simulated leg and on-the-fly capture over the real protocols: the
+drive's position compare (Modbus TCP on 127.0.0.1) triggers the interferometer's capture (a pty)."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+import pytest
+
+from drivers.errors import BeamBreak
+from drivers.interferometer import protocol as p
+from drivers.interferometer.client import SerialInterferometer
+from drivers.interferometer.protocol import InstrumentError
+from drivers.modbus.client import connect_axes
+from drivers.sim.motion import SmoothedMove
+from drivers.sim.plant import LEG_JERK_MM_S3, LegPlant, PlantConfig, default_leg_configs
+from drivers.sim.rig import SimRig
+
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+
+# -- motion dynamics ------------------------------------------------------------------------------
+
+def test_jerk_limited_move_is_an_s_curve_lasting_accel_over_jerk_longer():
+    trap = SmoothedMove(0.0, 50.0, 0.0, 10.0, 100.0)
+    s = SmoothedMove(0.0, 50.0, 0.0, 10.0, 100.0, jerk=2000.0)
+    assert s.duration == pytest.approx(trap.duration + 100.0 / 2000.0)
+    t = np.linspace(0.0, s.duration, 4001)
+    x = np.array([s.position(u) for u in t])
+    v = np.array([s.velocity(u) for u in t])
+    assert x[0] == 0.0 and x[-1] == pytest.approx(50.0, abs=1e-12)
+    assert np.all(np.diff(x) >= -1e-12)  # monotone
+    assert v.max() == pytest.approx(10.0, abs=1e-9)
+    acc = np.diff(v) / np.diff(t)
+    jerk = np.diff(acc) / np.diff(t)[1:]
+    assert np.abs(acc).max() <= 100.0 + 1e-6  # the acceleration limit holds
+    assert np.abs(jerk).max() <= 2000.0 * 1.01  # and the jerk limit: no step in acceleration
+    # velocity is the derivative of position
+    assert np.allclose(np.gradient(x, t), v, atol=0.05)
+    # a short (triangular) move too
+    short = SmoothedMove(0.0, -0.5, 1.0, 10.0, 100.0, jerk=2000.0)
+    assert short.position(short.t_end) == pytest.approx(-0.5, abs=1e-12)
+    assert short.time_at(-0.25) == pytest.approx(1.0 + short.duration / 2, abs=1e-9)  # symmetric
+
+
+def test_plant_dynamic_error_is_proportional_to_speed_per_direction_and_rings_out_after_a_stop():
+    cfg = PlantConfig().only()  # no static error: only the dynamics
+    plant = LegPlant(cfg)
+    plant.set_velocity(10.0)
+    assert plant.dynamic_error_um(1.0) == pytest.approx(-cfg.dynamic_lag_up_s * 10.0 * 1000.0)
+    plant.set_velocity(-20.0)
+    assert plant.dynamic_error_um(1.0) == pytest.approx(cfg.dynamic_lag_down_s * 20.0 * 1000.0)
+    assert cfg.dynamic_lag_up_s != cfg.dynamic_lag_down_s  # direction-dependent
+    plant.stopped(2.0, -1, 100.0)
+    first = plant.dynamic_error_um(2.0)
+    assert first == pytest.approx(-cfg.settle_um_per_mm_s2 * 100.0)  # overshoot in the direction of motion
+    assert abs(plant.dynamic_error_um(2.0 + cfg.settling_tau_s)) == pytest.approx(abs(first) / math.e)
+    assert plant.dynamic_error_um(2.0 + cfg.settling_time_s + 1e-9) == 0.0  # settled: exactly static
+
+
+def test_drive_reports_a_direction_dependent_following_error_while_moving():
+    cfg = PlantConfig()
+    assert cfg.following_lag_s(5.0) != cfg.following_lag_s(-5.0)
+    assert cfg.following_lag_s(5.0) * 10.0 * 1000.0 == pytest.approx(20.0)  # 20 um at 10 mm/s
+
+
+# -- capture over the real protocols -----------------------------------------------------------------
+
+@pytest.fixture
+def rig():
+    cfgs = [c.with_leg_motion() for c in default_leg_configs(3, 2)]
+    with SimRig(time_scale=0.0, legs=2, configs=cfgs) as r:
+        axes = connect_axes(r.drive_url, [1, 2], clock=r.clock)
+        laser = SerialInterferometer(r.laser_port)
+        try:
+            yield r, axes, laser
+        finally:
+            laser.close()
+            for a in axes.values():
+                a.close()
+
+
+def test_position_compare_triggers_the_laser_at_every_target_with_the_dynamic_offset(rig):
+    r, axes, laser = rig
+    ax = axes[1]
+    ax.enable()
+    ax.move_to(-2.0)
+    ax.move_to(0.0)
+    laser.zero(1)
+    ax.move_to(-94.0)
+    ax.arm_position_compare(-90.0, 1.0, 181)
+    laser.arm_capture(1, 181)
+    for speed in (10.0, 20.0):
+        if speed == 20.0:
+            ax.move_to(-94.0)
+            ax.arm_position_compare(-90.0, 1.0, 181)
+            laser.arm_capture(1, 181)
+        ax.move_to(94.0, velocity_mm_s=speed)
+        assert laser.capture_count(1) == (181, 181)
+        s = [laser.capture_sample(1, i) for i in range(181)]
+        t = np.array([x.t_s for x in s])
+        assert np.allclose(np.diff(t), 1.0 / speed, atol=2e-6)  # constant speed through every target
+        pos = np.array([x.position_mm for x in s])
+        err_um = (pos - np.arange(-90.0, 91.0, 1.0)) * 1000.0
+        if speed == 10.0:
+            slow = err_um
+    # the speed-dependent part: 10 mm/s more makes the leg lag by 10 * dynamic_lag_up more
+    cfg = r.plants[1].cfg
+    diff = float(np.mean(err_um - slow))
+    assert diff == pytest.approx(-cfg.dynamic_lag_up_s * 10.0 * 1000.0, abs=0.15)
+
+
+def test_capture_refusals_and_a_beam_break_during_a_pass(rig):
+    r, axes, laser = rig
+    with pytest.raises(InstrumentError, match="not captured"):
+        laser.capture_sample(2, 0)
+    with pytest.raises(ValueError, match="capture count"):
+        laser.arm_capture(2, p.MAX_CAPTURE + 1)
+    ax = axes[2]
+    ax.enable()
+    ax.move_to(-10.0)
+    ax.arm_position_compare(0.0, 2.0, 3)
+    laser.arm_capture(2, 3)
+    r.laser_server.set_beam_break(2, True)
+    ax.move_to(10.0, velocity_mm_s=5.0)
+    r.laser_server.set_beam_break(2, False)
+    assert laser.capture_count(2) == (3, 3)
+    with pytest.raises(BeamBreak, match="capture sample 0"):
+        laser.capture_sample(2, 0)
+    # the compare counts one direction only: a downward move gives no pulse for an upward list
+    ax.arm_position_compare(0.0, 2.0, 3)
+    laser.arm_capture(2, 3)
+    ax.move_to(-10.0, velocity_mm_s=5.0)
+    assert laser.capture_count(2) == (0, 3)
+
+
+def test_capture_line_protocol_round_trip():
+    reply = p.format_capture_sample(3, 7, "+1.000000001", "OK", "91.5", "12.500000")
+    fields = p.split_reply(reply)
+    s = p.parse_capture_sample(fields, 3, 7)
+    assert (s.axis, s.index, s.position_mm, s.status, s.signal_pct, s.t_s) == (3, 7, 1.000000001, "OK", 91.5, 12.5)
+    with pytest.raises(p.ProtocolError, match="asked for axis 3 sample 8"):
+        p.parse_capture_sample(fields, 3, 8)
+    assert p.parse_capture_count(p.split_reply(p.format_capture_count(2, 5, 9)), 2) == (5, 9)
+    with pytest.raises(p.ProtocolError):
+        p.parse_capture_count(p.split_reply(p.format_capture_count(2, 10, 9)), 2)
+    assert LEG_JERK_MM_S3 > 0
