@@ -222,3 +222,26 @@ def error_basis(session: Any, raw: bool = False) -> tuple[np.ndarray, list[str],
         return session.points, ["error: raw, not normalised to 20 degC (--raw)"], {"normalised": False}
     n = normalise_session(session.points, getattr(session, "station_config", None))
     return n.points, n.lines(), {"normalised": n.any, **n.to_json()}
+
+
+def diagnosis_temperature_note(points: np.ndarray, station_config: Mapping[str, Any] | None = None
+                               ) -> tuple[list[str], dict]:
+    """For `station diagnose`, which works on the raw error (thermal expansion stays an effect it
+    can find): per leg the material temperature range that the normalisation to 20 degC (the
+    reference the session recorded) has to cover in the other analyses, as lines and as JSON."""
+    rec = recorded_materials(station_config)
+    reference_temp_c = rec[0] if rec is not None else REFERENCE_TEMP_C
+    ranges = material_temp_ranges(points)
+    doc = {"error": "raw", "reference_temp_c": reference_temp_c,
+           "legs": {str(k): {"min_c": lo, "max_c": hi, "span_k": hi - lo,
+                             "max_from_reference_k": max(abs(lo - reference_temp_c), abs(hi - reference_temp_c))}
+                    for k, (lo, hi) in ranges.items()}}
+    if not ranges:
+        return ["error: raw; no material temperature recorded (fit, iso230 and verify cannot normalise it to "
+                f"{reference_temp_c:g} degC either)"], doc
+    lines = [f"error: raw (diagnosis does not normalise: thermal expansion stays a diagnosable effect); material "
+             f"temperature that the normalisation to {reference_temp_c:g} degC of fit, iso230 and verify covers:"]
+    for k, v in doc["legs"].items():
+        lines.append(f"  leg {k}: {v['min_c']:.2f} .. {v['max_c']:.2f} degC (span {v['span_k']:.2f} K, up to "
+                     f"{v['max_from_reference_k']:.2f} K from {reference_temp_c:g} degC)")
+    return lines, doc

@@ -89,6 +89,10 @@ def run(args) -> int:
     report = diagnose(session.points, twin, settings, recording={"path": str(path), "sha256": session.sha256},
                       source=str(path))
     print(text_report(report))
+    from procedures.metrology.thermal import diagnosis_temperature_note
+
+    temp_lines, report["material_temperature"] = diagnosis_temperature_note(session.points, session.station_config)
+    print("\n" + "\n".join(temp_lines))
     if args.json:
         Path(args.json).write_text(to_json(report))
         print(f"\nreport written to {args.json}")

@@ -75,3 +75,11 @@ def test_table_from_normalised_error_verifies_at_20c_and_raw_table_does_not(caps
         assert np.max(vt) < 20.6  # the verification is at 20 degC (travel heating only)
     assert ratios["norm"] <= ACCEPT
     assert ratios["raw"] > 3 * ACCEPT
+
+
+    # diagnosis keeps the raw error and says which temperature range the normalisation covered
+    out = station(capsys, "diagnose", "cal.h5", "--json", "diag.json")
+    assert "error: raw (diagnosis does not normalise" in out
+    assert f"leg 1: {temp.min():.2f} .. {temp.max():.2f} degC (span {warming_k:.2f} K" in out
+    legs = json.loads(Path("diag.json").read_text())["material_temperature"]["legs"]
+    assert legs["1"]["span_k"] == pytest.approx(warming_k)
