@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import pytest
 
@@ -148,3 +149,39 @@ def test_after_a_move_that_failed_the_direction_comes_from_where_the_leg_stopped
     assert ax.command_for(30.0)[2] == 1
     ax.move_to(30.0)
     assert sd.plants[1].x_mm == pytest.approx(30.0 - correction_um(TABLE, 30.0, 1) * 1e-3, abs=2e-6)
+
+
+def test_station_compensation_through_a_real_drive_profile_without_table(tmp_path):
+    """The Kinco FD profile (CiA 402 objects mapped to registers, no table, 13107.2 counts/mm,
+    two words per request) served by the simulated drive: the compensated command lands on the
+    drive's nearest count to target - e, and reads back as the target within half a count."""
+    import threading
+
+    from drivers.clock import VirtualClock
+    from drivers.modbus.client import connect_axes
+    from drivers.modbus.profile import DriveProfile
+    from drivers.sim.drive_server import SimDriveServer
+    from drivers.sim.plant import LegPlant
+
+    profile = DriveProfile.load(str(Path(__file__).resolve().parents[2] / "drivers/modbus/profiles/kinco_fd.toml"))
+    assert profile.table is None
+    clock = VirtualClock(0.0)
+    plants = {1: LegPlant(PlantConfig().only(), seed=1)}
+    server = SimDriveServer(plants, clock, profile, lock=threading.RLock())
+    url = f"tcp://127.0.0.1:{server.start_tcp('127.0.0.1', 0)}"
+    try:
+        raw = connect_axes(url, (1,), profile, clock=clock)[1]
+        assert raw.table_spec() is None
+        ax = StationCompensatedAxis(raw, StationTableStore(tmp_path / "st.json"))
+        ax.check_drive_table()  # no table of its own: nothing to correct twice
+        _pushed(ax)
+        ax.enable()
+        q_mm = 1 / 13107.2
+        for target, direction in ((-33.3, -1), (12.34, 1), (5.0, -1)):
+            st = ax.move_to(target)
+            want = target - correction_um(TABLE, target, direction) * 1e-3
+            assert abs(plants[1].x_mm - want) <= q_mm / 2 + 1e-9
+            assert abs(st.position_mm - target) <= q_mm / 2 + 1e-9
+        ax.close()
+    finally:
+        server.stop()
