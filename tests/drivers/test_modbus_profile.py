@@ -142,3 +142,78 @@ def test_register_map_doc_matches_the_profile(profile):
     assert {f"header.{n}" for n in profile.table.header} <= seen
     assert {f"fault.{c}" for c in profile.faults} <= seen
     assert f"-r {profile.address('position_actual')} -t 4:int -B" in doc
+
+
+@pytest.mark.parametrize(
+    "old, new, words",
+    [
+        ("max_read_words = 125", "max_read_words = 126", "[protocol] max_read_words: must be an integer in 1..125"),
+        ("max_write_words = 123", "max_write_words = 0", "[protocol] max_write_words"),
+        ("min_frame_gap_ms = 0.0", "min_frame_gap_ms = -1", "[protocol] min_frame_gap_ms"),
+        ("address_base = 0 ", "address_base = 2 ", "[protocol] address_base"),
+        ('unit_ids = "leg"', 'unit_ids = "auto"', "[protocol] unit_ids"),
+        ('unit_ids = "leg"', "unit_ids = { 1 = 300 }", "[protocol.unit_ids] 1: unit id must be an integer 1..247"),
+        ('move_write = "single"', 'move_write = "double"', "[protocol] move_write"),
+        ('set_point_latch = "level"', 'set_point_latch = "rising"', "[protocol] set_point_latch"),
+        ("max_read_words = 125", "max_read_words = 125\nframe_gap = 3", "[protocol] unknown key(s) frame_gap"),
+        ("max_write_words = 123", "max_write_words = 2", "[blocks.move_command] spans 3 registers"),
+        ('kind = "banks" ', 'kind = "none"\nnote = "none here" ', "[table] kind = \"none\" takes only a note"),
+        ("address_base = 0 ", "address_base = 1 ", "[registers.vendor] address: must be an integer in 1..65536, got 0"),
+        ('unit = "mm", access = "r" }\nfollowing_error', 'unit = "mm", access = "r", object = 6064 }\nfollowing_error',
+         "[registers.position_actual] object"),
+        ('position_actual      = { address = 111, type = "i32", scale = 1e-6,',
+         'position_actual      = { address = 111, type = "i32", scale = "counts_per_mm",', "not a key of [scaling]"),
+        ('move_write = "single"', 'move_write = "single"\nmode_of_operation = 1', "mode_of_operation and [registers.modes_of_operation]"),
+    ],
+)
+def test_protocol_keys_are_checked_naming_file_and_key(tmp_path, old, new, words):
+    p = _broken(tmp_path, old, new)
+    with pytest.raises(ProfileError) as info:
+        DriveProfile.load(p)
+    text = str(info.value)
+    assert str(p) in text and words in text, text
+
+
+def test_a_profile_without_a_table_says_why(tmp_path):
+    text = DEFAULT_PROFILE.read_text()
+    start = text.index("[table]\n")
+    end = text.index("[table.header]")
+    end = text.index("\n\n", text.index("valid", end)) if "\n\n" in text[end:] else len(text)
+    body = text[:start] + '[table]\nkind = "none"\nnote = "no table in this drive"\n' + text[end:]
+    p = tmp_path / "notable.toml"
+    p.write_text(body)
+    prof = DriveProfile.load(p)
+    assert prof.table is None and prof.table_note == "no table in this drive"
+    from drivers.modbus.client import table_spec
+    assert table_spec(prof) is None
+    p.write_text(body.replace('note = "no table in this drive"\n', ""))
+    with pytest.raises(ProfileError, match=r"\[table\] note: say why"):
+        DriveProfile.load(p)
+
+
+def test_scaling_address_base_and_runs(tmp_path):
+    """A register's scale may name [scaling] (counts per unit); address_base = 1 shifts every
+    printed address down by one; reads group contiguous registers up to the drive's limit."""
+    text = DEFAULT_PROFILE.read_text()
+    text = text.replace("[limits]\n", "[scaling]\nposition_counts_per_mm = 1e6\n\n[limits]\n", 1)
+    text = text.replace('position_actual      = { address = 111, type = "i32", scale = 1e-6,',
+                        'position_actual      = { address = 111, type = "i32", scale = "position_counts_per_mm",')
+    text = text.replace("max_read_words = 125", "max_read_words = 8")
+    p = tmp_path / "scaled.toml"
+    p.write_text(text)
+    prof = DriveProfile.load(p)
+    r = prof.register("position_actual")
+    assert r.address == 111 and r.scale == pytest.approx(1e-6)
+    assert r.decode(r.encode(-12.345678)) == pytest.approx(-12.345678, abs=1e-9)
+    runs = prof.runs(prof.blocks["status"].names)
+    assert [w for _, w, _ in runs] == [8, 2]  # 10 words in reads of at most 8, no value split
+    assert [n for _, _, ns in runs for n in ns] == list(prof.blocks["status"].names)
+
+    kinco = (DEFAULT_PROFILE.parent / "kinco_fd.toml").read_text()
+    assert kinco.count("address_base = 0 ") == 1
+    p1 = tmp_path / "kinco_base1.toml"
+    p1.write_text(kinco.replace("address_base = 0 ", "address_base = 1 "))
+    base0 = DriveProfile.load(DEFAULT_PROFILE.parent / "kinco_fd.toml")
+    base1 = DriveProfile.load(p1)
+    for name in base0.registers:  # the same printed numbers, one lower on the wire
+        assert base1.address(name) == base0.address(name) - 1
