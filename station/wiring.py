@@ -18,6 +18,7 @@ from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
 from procedures.errors import InputError
 from station.config import StationConfig
+from station.drive_lock import holds_drive_lock
 
 
 @dataclass
@@ -52,6 +53,7 @@ class Rig:
         self.close()
 
 
+@holds_drive_lock(whole_rig=True)  # a leg another station process uses is refused (station/drive_lock.py)
 def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | None = None,
              noise_seed: int | None = None) -> Rig:
     """Connect to the rig named by `cfg`; on "sim" start the simulated rig in-process first.
@@ -117,6 +119,7 @@ class DriveHandle:
         self.close()
 
 
+@holds_drive_lock(whole_rig=False)
 def open_drive(cfg: StationConfig, legs: int | tuple[int, ...]) -> DriveHandle:
     """Connect to the drives of `legs` (one leg number or several) alone, never the
     interferometer: on the simulated rig (its table memory in cfg.sim.nv_path) or on the bus at
