@@ -78,7 +78,8 @@ def test_station_target_push_verify_rollback_and_kill(capsys, tmp_path):
     # calibration on the drive without a table (the store is empty: nothing is applied)
     station(capsys, "sweep", "--config", cfg, "--legs", "1", "--step", "6", "--time-scale", "0", "--out", "cal.h5")
     station(capsys, "fit", "cal.h5", "--out", "model.json")
-    station(capsys, "table", "model.json", "--out", "table.csv")
+    out, _ = station(capsys, "table", "model.json", "--out", "table.csv", "--profile", str(profile))
+    assert "holds no compensation table; the table is checked for the station's table store" in out
 
     out, _ = station(capsys, "push", "table.csv", "--leg", "1", "--config", cfg, "--yes")
     assert "compensation target of leg 1: station (runs/station-tables.json)" in out
