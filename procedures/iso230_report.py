@@ -67,8 +67,8 @@ def _normalised(points: np.ndarray, station_config: dict) -> tuple[np.ndarray, d
         legs = ", ".join(str(leg) for leg in norm.normalised)
         info["basis"] = "normalised"
         info["statement"] = (f"Deviations normalised to {norm.reference_temp_c:g} degC material temperature by the "
-                             f"nominal differential expansion (NDE) correction (legs {legs}; materials from "
-                             f"{norm.source}); the session keeps the raw error.")
+                             f"nominal differential expansion (NDE) correction, legs {legs}; materials from "
+                             f"{norm.source}. The session keeps the raw error.")
         if norm.raw:
             info["statement"] += " Raw error on " + "; ".join(f"leg {k}: {v}" for k, v in sorted(norm.raw.items())) + "."
     else:
@@ -386,7 +386,7 @@ def pdf(d: dict[str, Any], graph_png: Path, path: Path) -> None:
         doc.multi_cell(0, 6, _latin1(heading), new_x="LMARGIN", new_y="NEXT")
         doc.set_font("helvetica", "", 8.5)
         for p in paras:
-            doc.multi_cell(0, 4.5, _latin1(p), new_x="LMARGIN", new_y="NEXT")
+            doc.multi_cell(0, 4.5, _latin1(p), new_x="LMARGIN", new_y="NEXT", align="L")
         if rows:
             doc.ln(1)
             widths = _col_widths(rows, doc.epw)
@@ -405,7 +405,7 @@ def pdf(d: dict[str, Any], graph_png: Path, path: Path) -> None:
 
 def _col_widths(rows: list[list[str]], total: float) -> tuple[float, ...]:
     longest = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    weights = [min(max(n, 7), 60) for n in longest]
+    weights = [min(max(n, 9), 60) for n in longest]
     return tuple(total * w / sum(weights) for w in weights)
 
 

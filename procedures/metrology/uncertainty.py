@@ -362,9 +362,8 @@ class _Var:
     load: dict
     r: float = 0.0
 
-    @property
-    def var(self) -> float:
-        return sum(a * a for a in self.load.values()) + self.r * self.r
+    def __post_init__(self) -> None:
+        self.var = sum(a * a for a in self.load.values()) + self.r * self.r  # fixed once built
 
     def cov(self, other: "_Var") -> float:
         small, big = (self.load, other.load) if len(self.load) < len(other.load) else (other.load, self.load)
@@ -402,9 +401,18 @@ def _max2(a: _Var, b: _Var) -> _Var:
     load = {k: wa * v for k, v in a.load.items()}
     for k, v in b.load.items():
         load[k] = load.get(k, 0.0) + wb * v
-    out = _Var(m1, load)
-    out.r = math.sqrt(max(m2 - m1 * m1 - out.var, 0.0))
-    return out
+    shared = sum(v * v for v in load.values())
+    r2 = (a.r * wa) ** 2 + (b.r * wb) ** 2  # the operands' own parts, as far as they carry over
+    # loadings of candidates that (almost) never set the max: moved into its own part, so the
+    # running max of hundreds of targets does not carry every one of them
+    tiny = 1e-3 * math.sqrt(shared)
+    small = [k for k, v in load.items() if abs(v) < tiny]
+    for k in small:
+        v = load.pop(k)
+        shared -= v * v
+        r2 += v * v
+    own = math.sqrt(max(m2 - m1 * m1 - shared - r2, 0.0))
+    return _Var(m1, load, math.sqrt(r2 + own * own))
 
 
 def _max(vs: list[_Var]) -> _Var:
@@ -412,6 +420,8 @@ def _max(vs: list[_Var]) -> _Var:
     vs = sorted(vs, key=lambda v: -v.mean)
     out = vs[0]
     for v in vs[1:]:
+        if out.mean - v.mean > 8.0 * (math.sqrt(out.var) + math.sqrt(v.var)):
+            break  # this one and all after it are below the max for sure (Phi(-8) ~ 6e-16)
         out = _max2(out, v)
     return out
 
