@@ -11,6 +11,7 @@ reading minus target, micrometres (positive = leg longer than commanded).
 
 from __future__ import annotations
 
+import json
 import logging
 import uuid
 from dataclasses import dataclass
@@ -69,6 +70,19 @@ def _kind(exc: BaseException) -> FaultKind:
     return FaultKind.ERROR
 
 
+def laser_compensation_record(laser: Interferometer) -> str:
+    """How the interferometer compensated its readings for the air, as JSON text for the
+    session's devices (procedures/metrology/recorrect.py redoes it from this); "not reported
+    (...)" when the instrument cannot say (no COMP? command, a replay)."""
+    ask = getattr(laser, "compensation", None)
+    if ask is None:
+        return "not reported (the interferometer driver has no compensation query)"
+    try:
+        return json.dumps(ask(), sort_keys=True)
+    except DriverError as exc:
+        return f"not reported ({exc.args[0] if exc.args else exc})"
+
+
 def sweep(
     plan: SweepPlan,
     axes: Mapping[int, ServoAxis],
@@ -103,6 +117,7 @@ def sweep(
     done = total - len(points)
     devices = {f"leg{leg}": axes[leg].identity() for leg in plan.legs}
     devices["interferometer"] = laser.identity()
+    devices["laser_air_compensation"] = laser_compensation_record(laser)
     tables = {leg: table_state(axes[leg]) for leg in plan.legs}
     devices.update({f"leg{leg}_compensation": text for leg, (_, text) in tables.items()})
     devices.update(applied_tables_devices(axes, plan.legs))  # target, bank, sha256: in the file from its creation

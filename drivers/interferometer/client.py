@@ -148,6 +148,12 @@ class SerialInterferometer:
             axis=axis, position_mm=reply.position_mm, beam_ok=True, signal_pct=reply.signal_pct, t_s=reply.t_s
         )
 
+    def compensation(self) -> dict:
+        """How the instrument compensates its readings for the air (COMP?): mode, equation,
+        vacuum wavelength, the air values of a MANUAL compensation, CO2, dead path; as the JSON
+        record a session stores (docs/interferometer-protocol.md, "Air compensation")."""
+        return self._transact(p.cmd_compensation(), p.parse_compensation).to_json()
+
     def environment(self) -> Environment:
         """Air temperature (C), pressure (hPa), humidity (%RH) and material temperature per
         leg (C, index 0 = leg 1, NaN = no sensor on that axis)."""

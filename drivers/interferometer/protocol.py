@@ -357,3 +357,70 @@ def parse_capture_sample(fields: list[str], axis: int, index: int) -> CaptureSam
     if not 0.0 <= signal <= 100.0:
         raise ProtocolError(f"field 5 (signal_pct) is {signal}, outside 0..100")
     return CaptureSample(axis, index, _number(fields, 3, "position_mm"), status, signal, _number(fields, 6, "t_s"))
+
+
+# -- air compensation record (docs/interferometer-protocol.md, "Air compensation") -----------
+# How the instrument turns fringe counts into millimetres: which refractive-index equation, from
+# which air values, for which vacuum wavelength. The station records it in each session so the
+# correction can be redone later (procedures/metrology/recorrect.py).
+
+CMD_COMP = "COMP?"  # COMP? -> COMP,<mode>,<equation>,<wavelength_nm>,<air_temp_c>,<air_pressure_hpa>,<humidity_pct>,<co2_ppm>,<dead_path_mm>
+COMP_MODES = ("AUTO", "MANUAL", "OFF")
+"""AUTO: the index from the instrument's own air sensors at each reading (the values ENV? reports;
+the air fields of COMP are NAN); MANUAL: from the fixed air values in the reply; OFF: none
+(positions in vacuum wavelengths, n = 1)."""
+COMP_EQUATIONS = ("EDLEN", "CIDDOR", "NONE")
+
+
+@dataclass(frozen=True)
+class CompensationReply:
+    """The instrument's air compensation. Air values NaN in AUTO mode (per reading, from its
+    sensors) and OFF mode; `co2_ppm` the CO2 its equation assumes; `dead_path_mm` the dead path it
+    corrects for (0 = none)."""
+
+    mode: str
+    equation: str
+    wavelength_nm: float
+    air_temp_c: float
+    air_pressure_hpa: float
+    humidity_pct: float
+    co2_ppm: float
+    dead_path_mm: float
+
+    def to_json(self) -> dict:
+        """The record a session stores (NaN as None: JSON has no NaN)."""
+        return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in self.__dict__.items()}
+
+
+def cmd_compensation() -> bytes:
+    return CMD_COMP.encode("ascii") + COMMAND_TERMINATOR
+
+
+def _opt(value: float, spec: str) -> str:
+    return "NAN" if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
+
+
+def format_compensation(c: CompensationReply) -> bytes:
+    return frame_reply("COMP", c.mode, c.equation, f"{c.wavelength_nm:.4f}", _opt(c.air_temp_c, ".3f"),
+                       _opt(c.air_pressure_hpa, ".2f"), _opt(c.humidity_pct, ".1f"), _opt(c.co2_ppm, ".1f"),
+                       f"{c.dead_path_mm:.3f}")
+
+
+def parse_compensation(fields: list[str]) -> CompensationReply:
+    _expect(fields, "COMP", 9)
+    mode, equation = fields[1], fields[2]
+    if mode not in COMP_MODES:
+        raise ProtocolError(f"field 1 (mode) is {mode!r}, expected one of {', '.join(COMP_MODES)}")
+    if equation not in COMP_EQUATIONS:
+        raise ProtocolError(f"field 2 (equation) is {equation!r}, expected one of {', '.join(COMP_EQUATIONS)}")
+    if (mode == "OFF") != (equation == "NONE"):
+        raise ProtocolError(f"mode {mode} with equation {equation}: OFF goes with NONE and only with it")
+    wavelength = _number(fields, 3, "wavelength_nm")
+    if not 400.0 <= wavelength <= 1700.0:
+        raise ProtocolError(f"field 3 (wavelength_nm) is {wavelength}, outside 400..1700")
+    air = [_number(fields, i, name, allow_nan=True) for i, name in
+           ((4, "air_temp_c"), (5, "air_pressure_hpa"), (6, "humidity_pct"))]
+    if mode == "MANUAL" and any(math.isnan(v) for v in air):
+        raise ProtocolError("MANUAL compensation without its air values")
+    return CompensationReply(mode, equation, wavelength, *air, co2_ppm=_number(fields, 7, "co2_ppm", allow_nan=True),
+                             dead_path_mm=_number(fields, 8, "dead_path_mm"))

@@ -58,6 +58,11 @@ class SimInterferometer:
         self.clock = clock
         self.lock = lock if lock is not None else threading.RLock()
         self.air = tuple(float(v) for v in air)
+        # the air compensation the simulated readings carry: AUTO from the air sensors ENV? reports,
+        # by the modified Edlen equation, HeNe vacuum wavelength. The plant's readings are true
+        # displacements, i.e. this compensation taken as exact. `set_compensation` changes what
+        # COMP? reports (a misconfigured instrument, for re-correction tests).
+        self.compensation = p.CompensationReply("AUTO", "EDLEN", 632.991, math.nan, math.nan, math.nan, 450.0, 0.0)
         self.axes = int(axes)
         self.identity = tuple(identity)
         self._rng = np.random.default_rng(seed)
@@ -147,6 +152,10 @@ class SimInterferometer:
         with self._faults:
             self._silent = bool(on)
 
+    def set_compensation(self, compensation: "p.CompensationReply") -> None:
+        """What COMP? reports from now on (the readings themselves do not change)."""
+        self.compensation = compensation
+
     @property
     def averaging_s(self) -> float:
         return self._averaging_s
@@ -224,6 +233,8 @@ class SimInterferometer:
             return axis if isinstance(axis, bytes) else self._position(axis)
         if word == p.CMD_ENV:
             return self._environment() if not args else _bad_args(word)
+        if word == p.CMD_COMP:
+            return p.format_compensation(self.compensation) if not args else _bad_args(word)
         if word == p.CMD_ZERO:
             axis = self._axis(args)
             if isinstance(axis, bytes):
