@@ -66,6 +66,7 @@ def test_table_corrects_a_leg_with_errors(sim_drives):
     uncorrected = []
     for t in targets:
         ax.move_to(t)
+        sd.clock.sleep(cfg.settling_time_s)  # read the settled leg, after its ring-out (a sweep's dwell)
         uncorrected.append(abs(plant.true_position_mm(sd.clock.now()) - t) * 1000.0)
     from drivers.sim.plant import systematic_error_um
 
@@ -80,6 +81,7 @@ def test_table_corrects_a_leg_with_errors(sim_drives):
     corrected = []
     for t in targets:
         ax.move_to(t)
+        sd.clock.sleep(cfg.settling_time_s)
         corrected.append(abs(plant.true_position_mm(sd.clock.now()) - t) * 1000.0)
     assert max(uncorrected) > 0.5
     assert max(corrected) < 0.05, corrected
