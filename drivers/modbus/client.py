@@ -213,6 +213,7 @@ class ModbusBus:
         for a, n in ((address + i, min(max_words, count - i)) for i in range(0, count, max_words)):
             rsp = self._execute("read", unit, a, n,
                                 lambda a=a, n=n: self._client.read_holding_registers(a, count=n, device_id=unit))
+            self._check_function(rsp, 3, "read", unit, a, n)
             regs = list(rsp.registers)
             if len(regs) != n:
                 raise CommTimeout(f"drive at {self.where}, unit id {unit}: asked for {n} registers at {a}, got {len(regs)}.")
@@ -224,8 +225,19 @@ class ModbusBus:
         Modbus' own is 123)."""
         max_words = max(1, min(int(max_words), MAX_WRITE_WORDS))
         for a, vals in chunks(address, list(values), max_words):
-            self._execute("write", unit, a, len(vals),
-                          lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit))
+            rsp = self._execute("write", unit, a, len(vals),
+                                lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit))
+            self._check_function(rsp, 16, "write", unit, a, len(vals))
+
+    def _check_function(self, rsp, expected: int, kind: str, unit: int, address: int, count: int) -> None:
+        """pymodbus matches a reply to its request by transaction id only: a reply of another
+        function (line noise, a confused gateway) would be taken for the answer. Refused, and the
+        connection closed so that nothing else of that exchange is read as the next reply."""
+        got = getattr(rsp, "function_code", expected)
+        if got != expected:
+            self.close()
+            raise CommTimeout(f"drive at {self.where}, unit id {unit}: answered a request to {kind} register {address} "
+                              f"(+{count}) with Modbus function {got}, not {expected}.")
 
 
 MOVE_TIMEOUT_FACTOR = 2.0
