@@ -106,6 +106,20 @@ def _test_parameters(plan: dict, legs: list[int], iso: dict) -> dict[str, Any]:
     }
 
 
+def _air_compensation(record: Any) -> str:
+    """What the session recorded about the instrument's air compensation (procedures.sweep's
+    laser_compensation_record: JSON text, or a sentence), as one line."""
+    if not record:
+        return "not recorded"
+    try:
+        d = json.loads(record)
+    except (TypeError, ValueError):
+        return str(record)
+    if isinstance(d, dict):
+        return ", ".join(f"{k} {v}" for k, v in sorted(d.items()))
+    return str(d)
+
+
 def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, legs: list[int]) -> dict[str, Any]:
     used = UncertaintyInputs.from_dicts(metrology, {})
     said = "" if metrology else " (station default: the session recorded no [metrology])"
@@ -125,7 +139,7 @@ def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, l
             "resolution_nm": used.laser_resolution_nm,
             "settings_source": said.strip(" ()") or "the session's recorded [metrology]",
         },
-        "air_compensation": devices.get("air_compensation") or metrology.get("air_compensation") or "not recorded",
+        "air_compensation": _air_compensation(devices.get("laser_air_compensation") or devices.get("air_compensation")),
     }
 
 

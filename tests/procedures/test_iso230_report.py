@@ -27,7 +27,8 @@ CONFIG = {
                       "2": {"expansion_um_m_k": 23.0, "expansion_u_um_m_k": 2.0, "fixed_point_mm": 0.0}},
 }
 DEVICES = {"interferometer": "StationSim,LI-6,SIM-0001,1.0", "leg1": "LegServo s/n A1", "leg2": "LegServo s/n A2",
-           "leg1_compensation": "table compensation off", "leg2_compensation": "bank B active, empty"}
+           "leg1_compensation": "table compensation off", "leg2_compensation": "bank B active, empty",
+           "laser_air_compensation": json.dumps({"equation": "edlen", "wavelength_nm": 632.991})}
 ATTRS = {"session_id": "abc123", "operator": "jdoe", "rig": "sim", "started_utc": "2026-11-24T08:00:00+00:00",
          "ended_utc": "2026-11-24T09:00:00+00:00", "outcome": "completed"}
 
@@ -93,7 +94,7 @@ def test_pdf_states_what_the_standard_asks(report):
     for phrase in ("ISO 230-2 test report", "Renishaw XL-80", "XL-12345", "2026-03-14", "Environment",
                    "Expansion coefficient and NDE", "normalised to 20 degC", "Test parameters", "Cycles: 5",
                    "overrun 2 mm", "Compensation state", "table compensation off", "bank B active, empty",
-                   "U (k = 2)", "LegServo s/n A2", "+/-2s bands"):
+                   "U (k = 2)", "LegServo s/n A2", "+/-2s bands", "equation edlen"):
         assert phrase in text, phrase
     d = result.iso230
     for leg in ("1", "2"):
