@@ -269,9 +269,11 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
         "legs": rows,
     }
     result.summary = _json_safe(summary)
-    (out / "summary.json").write_text(json.dumps(result.summary, indent=2, sort_keys=True) + "\n")
+    from procedures.iso230_report import _atomic_write  # temp + os.replace: never half a file
+
+    _atomic_write(out / "summary.json", (json.dumps(result.summary, indent=2, sort_keys=True) + "\n").encode())
     result.files.append(out / "summary.json")
-    (out / "summary.md").write_text(_markdown(result.summary, title or f"Report: {source_path or 'session'}"))
+    _atomic_write(out / "summary.md", _markdown(result.summary, title or f"Report: {source_path or 'session'}").encode())
     result.files.append(out / "summary.md")
     if session_meta is not None:
         from procedures import iso230_report
