@@ -134,6 +134,8 @@ class StationTableStore:
             return {}
         except OSError as exc:
             raise StoreError(f"{self.path}: cannot read the station's table store ({exc.strerror or exc}).") from None
+        except UnicodeDecodeError as exc:
+            raise StoreError(f"{self.path}: not UTF-8 text (byte {exc.start}); the station's table store is damaged.") from None
         try:
             doc = json.loads(text)
         except ValueError as exc:
@@ -181,7 +183,7 @@ class StationTableStore:
             rev = tuple(float(x) for x in b["error_rev_um"])
             table = TableBank(float(b["start_mm"]), float(b["spacing_mm"]), fwd, rev)
             sha = b["sha256"]
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:  # Overflow: a JSON integer beyond any float
             raise StoreError(f"{where}: malformed table ({exc!r}): needs start_mm, spacing_mm, error_fwd_um, "
                              "error_rev_um, sha256.") from None
         if len(fwd) != len(rev) or not all(math.isfinite(x) for x in fwd + rev + (table.start_mm, table.spacing_mm)):
