@@ -1,0 +1,58 @@
+"""`station recorrect`: redo a session's air refractive-index correction into a new file."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from procedures.metrology.air import EQUATIONS
+from procedures.metrology.recorrect import RecorrectOptions, recorrect_session
+from station.config import load_config
+
+NAME = "recorrect"
+HELP = "re-correct a session's laser readings for the air refractive index (Ciddor/Edlen) into a new file"
+DESCRIPTION = (
+    "Replace the refractive index the interferometer applied (its record in the session) by the one the "
+    "station computes (Ciddor 1996 or modified Edlen, NIST) from the recorded air temperature, pressure, "
+    "humidity and CO2, corrected or replaced by the options, for the configured vacuum wavelength, and "
+    "correct for the configured dead path. Writes a NEW session file stating what was done (source file and "
+    "SHA-256, equation, inputs); the original stays untouched. A session without the instrument's record is "
+    "refused. See docs/metrology.md."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("session", metavar="SESSION.h5", help="recorded session (not changed)")
+    p.add_argument("--out", required=True, metavar="NEW.h5", help="the re-corrected session file to write")
+    p.add_argument("--equation", choices=EQUATIONS, default="ciddor", help="refractive-index equation (default ciddor)")
+    air = p.add_mutually_exclusive_group()
+    air.add_argument("--air-temp-offset-c", type=float, default=0.0, metavar="K",
+                     help="add this to every recorded air temperature (a sensor found reading low by K: +K)")
+    air.add_argument("--air-temp-c", type=float, metavar="C", help="use this air temperature for every point")
+    p.add_argument("--pressure-pa", type=float, metavar="PA", help="use this air pressure (Pa) for every point")
+    p.add_argument("--humidity-pct", type=float, metavar="RH", help="use this relative humidity (%%RH) for every point")
+    p.add_argument("--co2-ppm", type=float, metavar="PPM",
+                   help="CO2 where the session has no reading (default: the config's [metrology] co2_ppm, 450)")
+    p.add_argument("--dead-path-mm", type=float, metavar="MM",
+                   help="laser dead path (default: the config's [metrology] dead_path_mm, 0)")
+    p.add_argument("--wavelength-nm", type=float, metavar="NM",
+                   help="the laser's vacuum wavelength (default: the config's [metrology] wavelength_nm, 632.991)")
+    p.add_argument("--config", metavar="C", help="station TOML whose [metrology] gives the defaults")
+
+
+def run(args) -> int:
+    m = load_config(args.config).metrology
+    options = RecorrectOptions(
+        equation=args.equation,
+        wavelength_nm=m.wavelength_nm if args.wavelength_nm is None else args.wavelength_nm,
+        co2_ppm=m.co2_ppm if args.co2_ppm is None else args.co2_ppm,
+        dead_path_mm=m.dead_path_mm if args.dead_path_mm is None else args.dead_path_mm,
+        air_temp_offset_c=args.air_temp_offset_c, air_temp_c=args.air_temp_c,
+        pressure_pa=args.pressure_pa, humidity_pct=args.humidity_pct,
+    )
+    r = recorrect_session(Path(args.session), Path(args.out), options)
+    print(f"instrument's index: {r.n_instrument[0]:.9f} .. {r.n_instrument[1]:.9f}")
+    print(f"station's index ({options.equation}, {options.wavelength_nm:g} nm): {r.n_station[0]:.9f} .. {r.n_station[1]:.9f}")
+    print(f"dead path {options.dead_path_mm:g} mm; error_um changed by {r.change_um[0]:+.4f} .. {r.change_um[1]:+.4f} um")
+    print(f"written: {args.out} (the original {args.session} is unchanged; /meta recorrection says what was done)")
+    return 0
