@@ -2,7 +2,8 @@
 
 Format (shared/data/README.md): one row per measured point, comma separated, header first.
 Required columns: leg, run, direction, target_mm, error_um. Optional: time_s, material_temp_c,
-air_temp_c, air_pressure_hpa, humidity_pct, load_n. A missing optional column, or an empty /
+air_temp_c, air_pressure_hpa, humidity_pct, load_n, co2_ppm (the CO2 content of the air, which the
+session keeps beside /points: procedures/recording/columns.py). A missing optional column, or an empty /
 "nan" cell in one, means "not measured" (NaN), never zero. `error_um` = measured minus
 commanded, micrometres; `direction` +1 = approached while the position increased.
 
@@ -28,6 +29,7 @@ import numpy as np
 
 from procedures.errors import InputError
 from procedures.ranges import LEG_NUMBERS, PointLimits
+from procedures.recording.columns import read_point_column, write_point_column
 from procedures.recording.reader import Session, read_session
 from procedures.recording.schema import FLAG_IMPORTED, POINT_DTYPE
 from procedures.recording.writer import SessionWriter
@@ -35,6 +37,9 @@ from procedures.recording.writer import SessionWriter
 REQUIRED_COLUMNS = ("leg", "run", "direction", "target_mm", "error_um")
 OPTIONAL_COLUMNS = ("time_s", "material_temp_c", "air_temp_c", "air_pressure_hpa", "humidity_pct", "load_n")
 INT_COLUMNS = ("leg", "run", "direction")
+EXTRA_COLUMNS = ("co2_ppm",)
+"""Optional columns that are not fields of /points but per-point datasets beside it."""
+CO2_PPM_RANGE = (0.0, 5000.0)  # outdoor air ~420 ppm, a crowded room a few thousand
 MAX_PROBLEMS_SHOWN = 5
 
 
@@ -83,8 +88,8 @@ def _parse_int(text: str) -> int | None:
     return int(value) if value.is_integer() else None
 
 
-def read_csv_points(csv_path: str | os.PathLike,
-                    limits: PointLimits | None = None) -> tuple[np.ndarray, list[str]]:
+def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = None,
+                    extra: dict[str, np.ndarray] | None = None) -> tuple[np.ndarray, list[str]]:
     """Parse and check an interchange CSV; return (POINT_DTYPE rows, optional columns present).
 
     Rows keep the file order and get `index` 0, 1, ...; commanded_mm = target_mm,
@@ -95,6 +100,8 @@ def read_csv_points(csv_path: str | os.PathLike,
     direction not +1/-1, leg or run < 1, a run mixing directions, duplicate (leg, run, target),
     and a value outside `limits` (default `PointLimits()`: legs 1-6, the built-in drive
     profile's soft limits, the error sanity limit, workshop ranges of the optional columns).
+    The columns of EXTRA_COLUMNS present go to `extra` (name -> one value per row, NaN = not
+    measured) when it is given, and are listed in the returned optional columns.
     """
     limits = limits or PointLimits()
     path = Path(csv_path)
@@ -122,7 +129,7 @@ def read_csv_points(csv_path: str | os.PathLike,
     if header is None:
         raise InputError(f"{path}: the file is empty; expected a header line "
                          f"({','.join(REQUIRED_COLUMNS)}) and one row per point")
-    known = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
+    known = REQUIRED_COLUMNS + OPTIONAL_COLUMNS + EXTRA_COLUMNS
     seen: set[str] = set()
     for name in header:
         if name in seen:
@@ -140,7 +147,8 @@ def read_csv_points(csv_path: str | os.PathLike,
         raise InputError(f"{path}: the file has a header but no data rows; nothing was written")
 
     col = {name: i for i, name in enumerate(header)}
-    optional = [c for c in OPTIONAL_COLUMNS if c in col]
+    optional = [c for c in OPTIONAL_COLUMNS + EXTRA_COLUMNS if c in col]
+    extra_values = {c: np.full(len(rows), np.nan) for c in EXTRA_COLUMNS if c in col}
     out = np.zeros(len(rows), POINT_DTYPE)
     for name in POINT_DTYPE.names:
         if POINT_DTYPE[name].kind == "f":
@@ -196,6 +204,8 @@ def read_csv_points(csv_path: str | os.PathLike,
             continue
         for name, v in values.items():
             reason = limits.problem(name, v)
+            if name == "co2_ppm" and not math.isnan(v) and not CO2_PPM_RANGE[0] <= v <= CO2_PPM_RANGE[1]:
+                reason = f"{v:g} ppm is outside {CO2_PPM_RANGE[0]:g} .. {CO2_PPM_RANGE[1]:g} ppm (CO2 content of the air)"
             if reason:
                 if name == "leg":
                     reason += " of a hexapod" if tuple(limits.legs) == LEG_NUMBERS else " declared for this import"
@@ -220,8 +230,13 @@ def read_csv_points(csv_path: str | os.PathLike,
         r["measured_mm"] = target + float(values["error_um"]) / 1000.0
         r["flags"] = FLAG_IMPORTED
         for name in optional:
-            r[name] = values[name]
+            if name in extra_values:
+                extra_values[name][k] = values[name]
+            else:
+                r[name] = values[name]
     problems.raise_if_any()
+    if extra is not None:
+        extra.update(extra_values)
     return out, optional
 
 
@@ -256,7 +271,8 @@ def import_csv(
     if not csv_path.is_file():
         raise InputError(f"{csv_path}: no such file")
     _check_out(h5_path, overwrite)
-    points, optional = read_csv_points(csv_path, limits)
+    extra: dict[str, np.ndarray] = {}
+    points, optional = read_csv_points(csv_path, limits, extra)
     sha = hashlib.sha256(csv_path.read_bytes()).hexdigest()
     plan = {
         "kind": "import",
@@ -274,6 +290,8 @@ def import_csv(
         ) as writer:
             writer.append_points(points)
             writer.finish("completed")
+        for name, values in extra.items():  # closed, still at its temporary name
+            write_point_column(tmp, name, values)
         os.replace(tmp, h5_path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -304,20 +322,28 @@ def export_csv(h5_path: str | os.PathLike, csv_path: str | os.PathLike, *, overw
     h5_path, csv_path = Path(h5_path), Path(csv_path)
     session = read_session(h5_path)
     _check_out(csv_path, overwrite)
-    pts = session.points[np.argsort(session.points["index"], kind="stable")]
+    order = np.argsort(session.points["index"], kind="stable")
+    pts = session.points[order]
+    extra = {}
+    for name in EXTRA_COLUMNS:
+        values = read_point_column(h5_path, name)
+        if values is not None and len(values) == len(order):
+            extra[name] = values[order]
     known = np.isfinite(pts["error_um"])
     skipped = int(np.count_nonzero(~known))
     pts = pts[known]
+    extra = {name: v[known] for name, v in extra.items() if np.isfinite(v[known]).any()}
     if not len(pts):
         raise InputError(f"{h5_path}: no point with a measured error to export")
-    columns = REQUIRED_COLUMNS + tuple(c for c in OPTIONAL_COLUMNS if np.isfinite(pts[c]).any())
+    columns = REQUIRED_COLUMNS + tuple(c for c in OPTIONAL_COLUMNS if np.isfinite(pts[c]).any()) + tuple(extra)
     tmp = _temp_beside(csv_path, "export")
     try:
         with open(tmp, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh, lineterminator="\n")
             w.writerow(columns)
-            for r in pts:
-                w.writerow([str(int(r[c])) if c in INT_COLUMNS else _fmt_float(r[c]) for c in columns])
+            for i, r in enumerate(pts):
+                w.writerow([str(int(r[c])) if c in INT_COLUMNS else _fmt_float(extra[c][i] if c in extra else r[c])
+                            for c in columns])
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, csv_path)
