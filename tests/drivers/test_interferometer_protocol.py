@@ -95,7 +95,9 @@ def test_the_documented_example_exchange_is_valid():
     assert len(replies) >= 7
     for reply in replies:
         fields = p.split_reply(reply.encode("ascii") + b"\r\n")
-        assert fields[0] in {"IDN", "OK", "AVG", "POS", "ENV", "ERR"}, reply
+        assert fields[0] in {"IDN", "OK", "AVG", "POS", "ENV", "ERR", "COMP"}, reply
+        if fields[0] == "COMP":
+            p.parse_compensation(fields)
     table = re.findall(r"`(ERR,\d,[^`]*\*[0-9A-F]{2})`", text)
     assert len(table) == 4
     for reply in table:
