@@ -26,7 +26,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException
 
 from drivers.clock import SystemClock
-from drivers.errors import CommTimeout, DriveFault, DriverError, SoftLimitError, TableError
+from drivers.errors import CommTimeout, DriveFault, DriverError, FramingError, SoftLimitError, TableError
 from drivers.interfaces import Clock, DriveLimits, DriveStatus, TableBank, TableSpec
 from drivers.modbus.codec import chunks, crc16_modbus, int_range
 from drivers.modbus.profile import MAX_READ_WORDS, MAX_WRITE_WORDS, DriveProfile
@@ -252,6 +252,13 @@ reached" by when that status was asked for, not by when the answer was looked at
 reply or a process busy drawing cannot turn into a timeout."""
 
 
+PLAUSIBLE_LOAD_N = 1e6
+"""|axial load| no leg carries (hexapod legs are rated tens of kN): a status reporting more was
+garbled on the way (Modbus TCP frames carry no checksum of their own), so `status()` refuses it
+as a FramingError and the caller reads again, rather than record a value that makes the session
+file unreadable (its reader refuses loads beyond 10 MN as damage)."""
+
+
 class ModbusServoAxis:
     """One leg's drive on a `ModbusBus` (unit id: `unit_id` if given, else the profile's
     `[protocol] unit_ids`, by default the leg number).
@@ -361,6 +368,11 @@ class ModbusServoAxis:
 
     def _status_from(self, v: dict) -> DriveStatus:
         p = self.profile
+        load = v.get("axial_load", math.nan)
+        if not math.isfinite(v["position_actual"]) or abs(load) > PLAUSIBLE_LOAD_N:
+            raise FramingError(f"leg {self.leg}: the drive at {self.bus.where} unit {self.unit} reported an impossible "
+                               f"status (position {v['position_actual']} mm, axial load {load} N): a reply garbled "
+                               "on the link; read it again.")
         sw = v["statusword"]
         state = p.state_of(sw)
         reached = p.sw_bit(sw, "target_reached")

@@ -157,3 +157,16 @@ def test_an_unplugged_port_vanishes_comes_back_under_its_name_and_the_client_reo
         laser.close()
     finally:
         line.stop()
+
+
+def test_a_status_garbled_into_an_impossible_load_is_refused_as_framing_not_recorded(sim):
+    # found by the link faults: a corrupted status reply held -1.7e7 N, the sweep recorded it and
+    # the reader then refused the whole session file as damaged
+    axis = connect_axes(sim.drive_url, (1,), sim.profile, timeout_s=1.0, clock=sim.clock)[1]
+    try:
+        good = axis._read_block("status")  # noqa: SLF001 - the decoded registers, then garbled
+        assert axis._status_from(good).load_n == pytest.approx(good["axial_load"])  # noqa: SLF001
+        with pytest.raises(FramingError, match="impossible status"):
+            axis._status_from({**good, "axial_load": -1.74483e7})  # noqa: SLF001
+    finally:
+        axis.close()
