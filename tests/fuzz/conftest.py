@@ -11,4 +11,5 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     tr = terminalreporter
     tr.section(f"fuzzed inputs per reader (hypothesis profile {PROFILE})")
     for reader in sorted(INPUTS):
-        tr.write_line(f"{reader:<44} {INPUTS[reader]:>7} inputs, {REFUSED[reader]:>7} refused with its own error")
+        refused = f", {REFUSED[reader]:>7} refused with its own error" if reader in REFUSED else ""
+        tr.write_line(f"{reader:<50} {INPUTS[reader]:>7} inputs{refused}")
