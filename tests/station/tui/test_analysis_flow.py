@@ -188,9 +188,12 @@ async def _push(path, cfg, size, wait_until, notes, connected):
         assert app.sweep.status == "completed"
         from procedures.recording.reader import read_session as rs
 
-        expected = verify(rs(app.sweep.out).points, rs(path).points, [1], after_source=str(app.sweep.out),
-                          before_source=str(path))
-        assert comp.verify_text == format_report(expected)
+        from procedures.verify import error_basis
+
+        # both sessions normalised to 20 degC (the default), the report saying so first
+        after_pts, before_pts, basis, _ = error_basis(rs(app.sweep.out), rs(path), True)
+        expected = verify(after_pts, before_pts, [1], after_source=str(app.sweep.out), before_source=str(path))
+        assert comp.verify_text == "\n".join(basis) + "\n" + format_report(expected)
         assert expected[1].after.rms_um < expected[1].before.rms_um  # the table did reduce the error
         entries, _ = read_entries(audit_path)
         assert (entries[-1].action, entries[-1].outcome, entries[-1].table_sha256) == ("verify", "completed", want_sha)
