@@ -6,7 +6,11 @@ target, arm the drive's compare list (first target, step signed by the direction
 the laser's capture, move at the pass speed to `overrun_mm` beyond the last target, then read
 the samples back. A sample's position is the compare position (the drive's position actual at
 the pulse, by construction), its reading the laser's latched one, its time the instrument's
-time of the pulse, its speed the central difference of positions over those times.
+time of the pulse, its speed the central difference of positions over those times. Then, at
+rest where the pass ended (`overrun_mm` beyond its last target), after the dwell, one averaged
+reading: the pass's anchor (FLAG_ANCHOR), which shares the pass's offset and so tells the
+speed-dependent error from it (procedures/fit/dynamic.py). The
+environment (air, material temperature) is read after every pass and holds for its samples.
 
 A fault during a pass (a sample taken without beam, fewer samples than pulses expected, a drive
 fault) is retried as the stop-and-go sweep retries a point, but for the whole pass (a moving
@@ -27,7 +31,6 @@ from drivers.interfaces import (
     CapturingInterferometer,
     Clock,
     DriverError,
-    Environment,
     Interferometer,
     PositionCompareAxis,
     ServoAxis,
@@ -36,7 +39,7 @@ from procedures import events as ev
 from procedures.adaptive import AdaptiveRule
 from procedures.control import Aborted, RunControl
 from procedures.plans import PlanPoint, SweepPlan
-from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, POINT_DTYPE
+from procedures.recording.schema import FLAG_ANCHOR, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, POINT_DTYPE
 from procedures.recording.writer import point_row
 from procedures.states import FaultKind
 
@@ -95,14 +98,13 @@ def onthefly_passes(
     step = plan.step_mm
     rounds_cycles = 2 * plan.cycles_per_round  # passes per round
     current_leg: int | None = None
-    env: Environment | None = None
-    env_t = -1e18
     stopped: set[int] = set()
     rules: dict[int, AdaptiveRule] = {}
     measured: dict[int, list[np.ndarray]] = {}
     planned_left: dict[int, int] = {}
     for p in points:
         planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
+    prev_temp: tuple[float, float] | None = None
     for pas in _passes(points):
         first = pas[0]
         leg, run, d = first.leg, first.run, first.direction
@@ -125,6 +127,7 @@ def onthefly_passes(
                                  f"preparing leg {leg} (enable, zero at mid-stroke): {exc}", 1, True, clock.now() - t_start)
                 yield fault
                 raise failed(fault) from exc
+            prev_temp = None  # (rig time, material temperature) of the last environment reading
         axis = axes[leg]
         speed = plan.speed_of_run(run)
         seq = all_targets if d > 0 else all_targets[::-1]
@@ -147,10 +150,14 @@ def onthefly_passes(
                     raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
                                        "(trigger wiring, or the move stopped short)")
                 readings = [laser.capture_sample(leg, i) for i in range(n)]  # type: ignore[attr-defined]
-                if env is None or clock.now() - env_t >= retry.env_interval_s:
-                    env = laser.environment()
-                    env_t = clock.now()
-                samples = (readings, status, env)
+                # the anchor: at rest where the pass ended, settled, averaged (same pass offset)
+                clock.sleep(plan.dwell_s)
+                anchor_reading = laser.read(leg)
+                # after every pass: a pass heats the screw by its travel in seconds, so the
+                # material temperature of the pass before would be stale (the readings are
+                # normalised to 20 degC with it)
+                env = laser.environment()
+                samples = (readings, status, env, anchor_reading)
             except Aborted:
                 raise
             except DriverError as exc:
@@ -171,14 +178,28 @@ def onthefly_passes(
                 else:
                     flags |= FLAG_RETRIED_DRIVE
                     recover(axis)
-        readings, status, env = samples
+        readings, status, env, anchor_reading = samples
         t_abs = np.array([r.t_s for r in readings], dtype=float)
         v = speeds_of(seq, t_abs)
         by_target = {round(float(x), 9): i for i, x in enumerate(seq)}
         rows = []
+        anchor_mm = plan.anchor_mm(d)
+        t_after = clock.now() - t_start  # session times, as recorded: a replay computes the same
+        temp_after = env.material_temp_of(leg)
+
+        def temp_c(t_s: float) -> float:
+            """The material temperature at a sample: a pass heats the screw by its travel within
+            seconds, so it is interpolated in time between the reading after the pass before
+            (same leg) and the one after this pass (the first pass of a leg: the one after)."""
+            if prev_temp is None or not (t_after > prev_temp[0]):
+                return temp_after
+            t0, temp0 = prev_temp
+            f = min(max((t_s - t0) / (t_after - t0), 0.0), 1.0)
+            return temp0 + (temp_after - temp0) * f
+
         for p in pas:
-            i = by_target[round(p.target_mm, 9)]
-            r = readings[i]
+            is_anchor = abs(p.target_mm - anchor_mm) < 1e-9
+            r = anchor_reading if is_anchor else readings[by_target[round(p.target_mm, 9)]]
             record = {
                 "index": p.index, "leg": leg, "run": run, "direction": d,
                 "target_mm": p.target_mm, "commanded_mm": p.target_mm,
@@ -187,14 +208,18 @@ def onthefly_passes(
                 "error_um": (r.position_mm - p.target_mm) * 1000.0,
                 "time_s": r.t_s - t_start,
                 "air_temp_c": env.air_temp_c, "air_pressure_hpa": env.air_pressure_hpa,
-                "humidity_pct": env.humidity_pct, "material_temp_c": env.material_temp_of(leg),
+                "humidity_pct": env.humidity_pct, "material_temp_c": temp_c(r.t_s - t_start),
                 "load_n": status.load_n, "signal_pct": r.signal_pct, "flags": flags,
-                "speed_mm_s": float(v[i]),
+                "speed_mm_s": float("nan") if is_anchor else float(v[by_target[round(p.target_mm, 9)]]),
             }
+            if is_anchor:  # read at rest: the drive's own position, time of the reading, no speed
+                record.update(drive_position_mm=status.position_mm, time_s=t_after,
+                              speed_mm_s=float("nan"), flags=flags | FLAG_ANCHOR, material_temp_c=temp_after)
             done += 1
             planned_left[leg] -= 1
             rows.append(record)
             yield ev.PointMeasured(record, done, total)
+        prev_temp = (t_after, temp_after)
         if plan.adaptive:
             measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
             if run % rounds_cycles == 0 and planned_left[leg] > 0:

@@ -13,11 +13,22 @@ from pathlib import Path
 from typing import Literal
 
 from procedures.errors import PlanError
-from procedures.plans import SweepPlan, iso230_plan, paper_plan, targets_from_file
+from procedures.plans import (
+    ONTHEFLY_OVERRUN_MM,
+    PAPER_STEP_MM,
+    SweepPlan,
+    iso230_plan,
+    onthefly_plan,
+    paper_plan,
+    targets_from_file,
+)
 
-PlanKind = Literal["iso230", "paper"]
-PLAN_KINDS: tuple[PlanKind, ...] = ("iso230", "paper")
-DEFAULT_CYCLES: dict[str, int] = {"iso230": 5, "paper": 6}  # ISO 230-2: 5 approaches; the paper: 6 sets
+PlanKind = Literal["iso230", "paper", "onthefly", "onthefly-adaptive"]
+PLAN_KINDS: tuple[PlanKind, ...] = ("iso230", "paper", "onthefly", "onthefly-adaptive")
+DEFAULT_CYCLES: dict[str, int] = {"iso230": 5, "paper": 6, "onthefly": 6, "onthefly-adaptive": 10}
+"""ISO 230-2: 5 approaches; the paper: 6 sets; on the fly: 3 rounds of both speeds; adaptive: at
+most 5 rounds (it stops earlier once the table stops improving: docs/onthefly.md)."""
+ONTHEFLY_KINDS = ("onthefly", "onthefly-adaptive")
 
 
 @dataclass(frozen=True)
@@ -26,7 +37,10 @@ class PlanSpec:
 
     `kind`: "iso230" (the ISO 230-2 test cycle; with `targets_file`, the file's targets) or
     "paper" (361 fixed targets, -90..+90 mm at 0.5 mm). `cycles`: bidirectional cycles, None for
-    the kind's standard (DEFAULT_CYCLES). Spacing of the iso230 targets: `step_mm` (uniform),
+    the kind's standard (DEFAULT_CYCLES). "onthefly" / "onthefly-adaptive": passes at constant
+    speed (10 and 20 mm/s) captured at every `step_mm` (default 0.5 mm) between `min_mm` and
+    `max_mm`, with at least a 4 mm run-up (`overrun_mm`); the adaptive one stops a leg once its
+    table stops improving, `cycles` being the most (docs/onthefly.md). Spacing of the iso230 targets: `step_mm` (uniform),
     `targets_file` (one number in mm per line, or a target_mm column), or neither: `n_targets`
     irregularly spaced targets (None: the ISO 230-2 minimum, at least 11) between `min_mm` and
     `max_mm`. The paper plan ignores the target fields and refuses a step or targets file.
@@ -51,11 +65,18 @@ class PlanSpec:
             raise PlanError("give a uniform step or a targets file, not both")
         if self.kind == "paper" and (self.step_mm is not None or self.targets_file is not None):
             raise PlanError("plan paper has fixed targets (361 at 0.5 mm); drop the step/targets or use plan iso230")
+        if self.kind in ONTHEFLY_KINDS and (self.targets_file is not None or self.n_targets is not None):
+            raise PlanError(f"plan {self.kind} captures at evenly spaced positions: give a step (--step) rather than "
+                            "a targets file or a number of targets")
 
 
 def plan_from_spec(spec: PlanSpec) -> SweepPlan:
     """The sweep plan `spec` asks for (PlanError with what to change when it is not a valid one)."""
     cycles = DEFAULT_CYCLES[spec.kind] if spec.cycles is None else spec.cycles
+    if spec.kind in ONTHEFLY_KINDS:
+        return onthefly_plan(spec.legs, cycles=cycles, step_mm=spec.step_mm or PAPER_STEP_MM, min_mm=spec.min_mm,
+                             max_mm=spec.max_mm, overrun_mm=max(spec.overrun_mm, ONTHEFLY_OVERRUN_MM),
+                             adaptive=spec.kind == "onthefly-adaptive", dwell_s=spec.dwell_s)
     if spec.kind == "paper":
         return paper_plan(spec.legs, cycles=cycles, overrun_mm=spec.overrun_mm, dwell_s=spec.dwell_s,
                           averaging_s=spec.averaging_s)

@@ -115,7 +115,18 @@ class SweepPlan:
     # -- expansion -----------------------------------------------------------------------
     @property
     def points_per_leg(self) -> int:
-        return 2 * self.cycles * len(self.targets_mm)
+        return 2 * self.cycles * self.points_per_pass
+
+    @property
+    def points_per_pass(self) -> int:
+        """Targets of a pass, plus on the fly its anchor (a reading at rest at the pass's end)."""
+        return len(self.targets_mm) + (1 if self.speeds_mm_s else 0)
+
+    def anchor_mm(self, direction: int) -> float:
+        """On the fly: where a pass in `direction` ends, at rest, and reads its anchor: the
+        overrun beyond its last target (docs/onthefly.md)."""
+        last = self.targets_mm[-1] if direction > 0 else self.targets_mm[0]
+        return float(last + direction * self.overrun_mm)
 
     @property
     def total_points(self) -> int:
@@ -133,6 +144,9 @@ class SweepPlan:
                     run += 1
                     for target in seq:
                         out.append(PlanPoint(index, leg, run, direction, float(target)))
+                        index += 1
+                    if self.speeds_mm_s:  # the pass's anchor, read at rest where it ends
+                        out.append(PlanPoint(index, leg, run, direction, self.anchor_mm(direction)))
                         index += 1
         return out
 
@@ -162,7 +176,8 @@ class SweepPlan:
         the fly: each pass at its own speed, and the return to its start)."""
         span = self.targets_mm[-1] - self.targets_mm[0] + 2 * self.overrun_mm
         if self.speeds_mm_s:
-            passes = [span / self.speed_of_run(r) + 1.0 for r in range(1, 2 * self.cycles + 1)]
+            passes = [span / self.speed_of_run(r) + 1.0 + self.dwell_s + self.averaging_s
+                      for r in range(1, 2 * self.cycles + 1)]
             return sum(passes) * len(self.legs)
         per_leg = 2 * self.cycles * (span / max(velocity_mm_s, 1e-9) + len(self.targets_mm) * (self.dwell_s + self.averaging_s))
         return per_leg * len(self.legs)
@@ -284,11 +299,13 @@ ONTHEFLY_OVERRUN_MM = 4.0  # run-up to 20 mm/s: v^2/2a + v*a/(2 jerk) = 2.5 mm a
 def onthefly_plan(legs: Iterable[int] = (1,), cycles: int = 6, speeds_mm_s: tuple[float, ...] = ONTHEFLY_SPEEDS_MM_S,
                   step_mm: float = PAPER_STEP_MM, min_mm: float = -PAPER_HALF_STROKE_MM,
                   max_mm: float = PAPER_HALF_STROKE_MM, overrun_mm: float = ONTHEFLY_OVERRUN_MM,
-                  adaptive: bool = False, dwell_s: float = 1.0) -> SweepPlan:
+                  adaptive: bool = False, dwell_s: float = 1.0, averaging_s: float = 1.0) -> SweepPlan:
     """On-the-fly capture at the paper's 361 positions (0.5 mm), `cycles` bidirectional passes
     cycling through `speeds_mm_s`; `adaptive` stops a leg's passes once the held-out error of
-    its table stops improving (then `cycles` is the most). `dwell_s` is used once per leg (the
-    zeroing at mid-stroke): nothing stops at the targets."""
+    its table stops improving (then `cycles` is the most). Nothing stops at the targets; each
+    pass ends at rest `overrun_mm` beyond its last target and reads an anchor there after
+    `dwell_s` (settling) with `averaging_s` averaging: a static reading sharing the pass's offset,
+    from which the speed-dependent error is found (procedures/fit/dynamic.py)."""
     if len(speeds_mm_s) < 2 or len(set(speeds_mm_s)) < 2:
         raise PlanError("on-the-fly capture needs two different speeds, to separate the speed-dependent error")
     if cycles < len(speeds_mm_s):
@@ -296,7 +313,7 @@ def onthefly_plan(legs: Iterable[int] = (1,), cycles: int = 6, speeds_mm_s: tupl
     targets = uniform_targets(min_mm, max_mm, step_mm)
     kind = "onthefly-adaptive" if adaptive else "onthefly"
     notes = _lead_warning(step_mm, 5.0)
-    return SweepPlan(kind, targets, cycles, tuple(legs), overrun_mm, dwell_s, 0.0, tuple(notes),
+    return SweepPlan(kind, targets, cycles, tuple(legs), overrun_mm, dwell_s, averaging_s, tuple(notes),
                      tuple(float(v) for v in speeds_mm_s), adaptive)
 
 

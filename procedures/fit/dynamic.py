@@ -7,16 +7,26 @@ laser's trigger latency), proportional to the speed and different in each direct
 
     error_um(x, d, v) = static_um(x, d) + k_d * v          (k_d in um per mm/s)
 
-The static part is what a stop-and-go reading sees after the dwell (v = 0). With passes at two
-or more speeds in each direction, `k_d` is the slope of the pass means over their speeds (all
-passes run over the same positions, so the position-dependent part is the same in every mean);
-the pass time enters the regression as well when there are four or more passes, so a slow
-drift of the leg (warm-up, the laser) is not taken for speed. The static estimate of every
+The static part is what a stop-and-go reading sees after the dwell (v = 0). Every pass also
+carries an offset of its own (re-zeroing, the laser, the warm-up of a screw that a fast pass
+heats in seconds), so pass means alone cannot tell speed from offset well: an error of 0.003 um
+per mm/s in `k_d` is 0.045 um at 15 mm/s, as large as the noise floor. Hence the anchor: each
+on-the-fly pass ends at rest beyond its last target and takes one averaged static reading there
+(FLAG_ANCHOR), which shares the pass's offset. For pass j
+
+    anchor_j - mean_i(error_ij) = [static_d(x_end) - mean_i static_d(x_i)] - k_d * v_j
+
+where the bracket is the same for every pass of direction d and the offset has cancelled: `k_d`
+is minus the slope of that difference over the pass speeds (two speeds or more). Without
+anchors (data from elsewhere) the pass means themselves are regressed on speed (and on time with
+four passes or more, so a slow drift is not taken for speed), with the offset's uncertainty.
+The static estimate of every
 reading is then `error_um - k_d * v`: extrapolation to zero speed, one coefficient per leg and
 direction, so it adds hardly any noise (a per-position extrapolation from two speeds would
 multiply the noise by sqrt(5) at 10 and 20 mm/s).
 
-Stop-and-go readings (speed NaN or 0) are left as they are.
+Stop-and-go readings (speed NaN or 0) are left as they are; anchors are dropped once used (they
+lie beyond the stroke of the table).
 """
 
 from __future__ import annotations
@@ -26,12 +36,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from procedures.errors import InputError
+from procedures.recording.schema import FLAG_ANCHOR
 
 
 @dataclass(frozen=True)
 class SpeedCoefficient:
     """The dynamic error per unit speed of one leg and direction, um per mm/s, with its standard
-    error, from `passes` passes at `speeds_mm_s` (distinct |speeds|)."""
+    error, from `passes` passes at `speeds_mm_s` (distinct |speeds|); `anchored`: estimated from
+    the passes' anchors (else from pass means)."""
 
     leg: int
     direction: int
@@ -39,6 +51,7 @@ class SpeedCoefficient:
     stderr_um_per_mm_s: float
     passes: int
     speeds_mm_s: tuple[float, ...]
+    anchored: bool = False
 
 
 def is_onthefly(points: np.ndarray) -> bool:
@@ -55,6 +68,7 @@ def speed_coefficients(points: np.ndarray, source: str = "the session") -> dict[
     InputError naming the leg and direction when its passes do not cover two speeds."""
     v_all = np.asarray(points["speed_mm_s"], dtype=float)
     moving = np.isfinite(v_all) & (v_all != 0) & np.isfinite(np.asarray(points["error_um"], dtype=float))
+    anchors = points[(np.asarray(points["flags"]) & FLAG_ANCHOR) != 0]
     p = points[moving]
     out: dict[tuple[int, int], SpeedCoefficient] = {}
     for leg in sorted({int(x) for x in p["leg"]}):
@@ -70,12 +84,17 @@ def speed_coefficients(points: np.ndarray, source: str = "the session") -> dict[
                 t = set(np.round(q["target_mm"][q["run"] == r], 6).tolist())
                 common = t if common is None else common & t
             keep = np.isin(np.round(q["target_mm"], 6), sorted(common or ()))
+            anchor_of = {int(a["run"]): float(a["error_um"]) for a in anchors
+                         if int(a["leg"]) == leg and int(a["direction"]) == d and np.isfinite(a["error_um"])}
+            anchored = all(int(r) in anchor_of for r in runs)
             m, v, t = [], [], []
             for r in runs:
                 rs = keep & (q["run"] == r)
                 if not np.any(rs):
                     continue
-                m.append(float(np.mean(q["error_um"][rs])))
+                mean = float(np.mean(q["error_um"][rs]))
+                # anchored: minus (anchor - mean) = k v - bracket, the pass offset cancelled
+                m.append(mean - anchor_of[int(r)] if anchored else mean)
                 v.append(float(np.mean(q["speed_mm_s"][rs])))
                 t.append(float(np.nanmean(q["time_s"][rs])) if np.any(np.isfinite(q["time_s"][rs])) else 0.0)
             speeds = tuple(sorted({round(abs(x), 1) for x in v}))
@@ -86,7 +105,7 @@ def speed_coefficients(points: np.ndarray, source: str = "the session") -> dict[
                     "(use plan onthefly, which alternates two)")
             m_a, v_a, t_a = np.array(m), np.array(v), np.array(t)
             cols = [np.ones_like(v_a), v_a]
-            if len(m) >= 4 and np.ptp(t_a) > 0:
+            if not anchored and len(m) >= 4 and np.ptp(t_a) > 0:
                 cols.append((t_a - t_a.mean()) / max(np.ptp(t_a), 1e-9))
             X = np.stack(cols, axis=1)
             coef, *_ = np.linalg.lstsq(X, m_a, rcond=None)
@@ -98,7 +117,7 @@ def speed_coefficients(points: np.ndarray, source: str = "the session") -> dict[
                 se = float(np.sqrt(max(cov[1, 1], 0.0)))
             else:
                 se = float("nan")
-            out[(leg, d)] = SpeedCoefficient(leg, d, float(coef[1]), se, len(m), speeds)
+            out[(leg, d)] = SpeedCoefficient(leg, d, float(coef[1]), se, len(m), speeds, anchored)
     return out
 
 
@@ -110,6 +129,7 @@ def static_points(points: np.ndarray, source: str = "the session",
     out = np.array(points, copy=True)
     if not is_onthefly(points):
         return out
+    out = out[(np.asarray(out["flags"]) & FLAG_ANCHOR) == 0]
     coeffs = coefficients if coefficients is not None else speed_coefficients(points, source)
     v = np.asarray(out["speed_mm_s"], dtype=float)
     moving = np.isfinite(v) & (v != 0)
@@ -124,5 +144,6 @@ def static_points(points: np.ndarray, source: str = "the session",
 def describe(coeffs: dict[tuple[int, int], SpeedCoefficient]) -> list[str]:
     """One line per leg and direction, for reports."""
     return [f"leg {c.leg} direction {c.direction:+d}: dynamic error {c.um_per_mm_s:+.4f} um per mm/s "
-            f"(+/- {c.stderr_um_per_mm_s:.4f}; {c.passes} passes at {', '.join(f'{s:g}' for s in c.speeds_mm_s)} mm/s)"
+            f"(+/- {c.stderr_um_per_mm_s:.4f}; {c.passes} passes at {', '.join(f'{s:g}' for s in c.speeds_mm_s)} mm/s, "
+            f"{'from their anchors' if c.anchored else 'from pass means'})"
             for c in coeffs.values()]

@@ -18,7 +18,7 @@ from station.progress import ConsoleProgress
 from station.wiring import open_rig
 
 NAME = "sweep"
-HELP = "run a calibration sweep (ISO 230-2 or the paper's) and record it to HDF5"
+HELP = "run a calibration sweep (ISO 230-2, the paper's, or on the fly) and record it to HDF5"
 DESCRIPTION = (
     "Run a bidirectional calibration sweep on one or more legs and record every point to an HDF5 "
     "session file. Ctrl-C stops the motion and leaves a valid file; `--resume FILE.h5` finishes it."
@@ -31,11 +31,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     where.add_argument("--config", help="station TOML naming the real drives and interferometer")
     p.add_argument("--out", help="session file to write (FILE.h5)")
     p.add_argument("--resume", metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
-    p.add_argument("--plan", choices=PLAN_KINDS, default="iso230", help="sweep plan (default iso230)")
+    p.add_argument("--plan", choices=PLAN_KINDS, default="iso230",
+                   help="sweep plan (default iso230); onthefly: constant-speed passes captured at every step "
+                        "(0.5 mm), onthefly-adaptive: the same, stopping once the table stops improving")
     p.add_argument("--legs", default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
-    p.add_argument("--cycles", type=int, help="bidirectional cycles (default: 5 iso230, 6 paper)")
+    p.add_argument("--cycles", type=int, help="bidirectional cycles (default: 5 iso230, 6 paper, 6 onthefly, "
+                                               "at most 10 onthefly-adaptive)")
     spacing = p.add_mutually_exclusive_group()
-    spacing.add_argument("--step", type=float, metavar="MM", help="uniform target spacing in mm")
+    spacing.add_argument("--step", type=float, metavar="MM", help="uniform target spacing in mm (on the fly: "
+                                                                   "capture spacing, default 0.5)")
     spacing.add_argument("--targets", metavar="FILE", help="targets in mm, one per line or a target_mm column")
     p.add_argument("--n-targets", type=int, help="number of irregularly spaced ISO 230-2 targets (default 11)")
     p.add_argument("--min-mm", type=float, default=-90.0, help="lowest target, mm (default -90)")

@@ -10,7 +10,7 @@ import numpy as np
 
 from procedures.plans import onthefly_plan
 from procedures.recording.reader import read_session
-from procedures.recording.schema import FLAG_REPLAYED
+from procedures.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
 from station.commands.recordings import open_sample_rig
 from station.commands.replay import compare_sessions, replay_sweep
 from station.config import StationConfig
@@ -27,10 +27,14 @@ def test_onthefly_session_replays_identically(tmp_path: Path):
         result = run_sweep(rig, plan, original, CFG)
     assert result.outcome == "completed"
     live = read_session(original)
-    assert len(live.points) == plan.total_points == 2 * 2 * 2 * 73
-    v = live.points["speed_mm_s"]
+    # 2 legs x 2 cycles x 2 directions x (73 captured targets + the pass's anchor at rest)
+    assert len(live.points) == plan.total_points == 2 * 2 * 2 * (73 + 1)
+    anchors = (live.points["flags"] & FLAG_ANCHOR) != 0
+    assert np.count_nonzero(anchors) == 8 and np.all(np.isnan(live.points["speed_mm_s"][anchors]))
+    assert set(np.abs(live.points["target_mm"][anchors])) == {94.0}
+    v = live.points["speed_mm_s"][~anchors]
     # every sample carries its speed: +/-10 and +/-20 mm/s, signed with the direction
-    assert np.all(np.sign(v) == live.points["direction"])
+    assert np.all(np.sign(v) == live.points["direction"][~anchors])
     assert sorted({round(abs(x)) for x in v}) == [10, 20]
     out = tmp_path / "replayed.h5"
     with open_replay_rig(original, None, CFG) as rig:
