@@ -61,6 +61,7 @@ class SweepState:
     traces: dict[int, LegTrace] = field(default_factory=dict)
     last_record: dict[str, float] = field(default_factory=dict)
     faults: list[ev.Fault] = field(default_factory=list)
+    stops: list[ev.PassesStopped] = field(default_factory=list)  # adaptive stopping: why a leg stopped
     reason: str = ""
     elapsed_s: float = 0.0
     eta_s: float | None = None
@@ -103,6 +104,9 @@ class SweepState:
             self.elapsed_s, self.eta_s = self._eta.update(event.done, event.total)
         elif isinstance(event, ev.Fault):
             self.faults.append(event)
+        elif isinstance(event, ev.PassesStopped):
+            self.stops.append(event)
+            self.total -= event.skipped_points  # planned, no longer needed: the bar ends full
         elif isinstance(event, ev.Paused):
             if self.status != "aborting":
                 self.status = "paused"

@@ -24,7 +24,9 @@ from station.tui.messages import SweepChanged
 from station.tui.screens.common import StationScreen
 from station.tui.widgets import XYPlot, known_sessions
 
-PLANS = [("ISO 230-2", "iso230"), ("Paper (361 × 0.5 mm)", "paper")]
+PLANS = [("ISO 230-2", "iso230"), ("Paper (361 × 0.5 mm)", "paper"), ("On the fly", "onthefly"),
+         ("On the fly, adaptive", "onthefly-adaptive")]
+ONTHEFLY = ("onthefly", "onthefly-adaptive")
 
 
 class SweepScreen(StationScreen):
@@ -111,7 +113,8 @@ class SweepScreen(StationScreen):
         cycles, step_mm, n_targets = num("cycles", int), num("step"), num("n-targets", int)
         min_mm, max_mm, dwell_s = num("min-mm", float, -90.0), num("max-mm", float, 90.0), num("dwell", float, 1.0)
         return PlanSpec(
-            legs=parse_legs(val("legs") or "1"), kind=kind, cycles=cycles, n_targets=n_targets,
+            legs=parse_legs(val("legs") or "1"), kind=kind, cycles=cycles,
+            n_targets=None if kind in ONTHEFLY else n_targets,  # on the fly: evenly spaced, by the step
             step_mm=None if kind == "paper" else step_mm,  # the paper plan has fixed targets; the ISO fields do not apply
             min_mm=min_mm, max_mm=max_mm, dwell_s=dwell_s,
         )
@@ -122,16 +125,25 @@ class SweepScreen(StationScreen):
 
     def _update_summary(self) -> None:
         summary = self.query_one("#plan-summary", Static)
-        paper = self.query_one("#plan", Select).value == "paper"
+        kind = self.query_one("#plan", Select).value
+        paper = kind == "paper"
         for wid in ("n-targets", "step", "min-mm", "max-mm"):
-            self.query_one(f"#{wid}", Input).disabled = paper or self.app.sweep.active
+            self.query_one(f"#{wid}", Input).disabled = (paper or self.app.sweep.active
+                                                         or (wid == "n-targets" and kind in ONTHEFLY))
         try:
             plan = self.build_plan()
         except Exception as exc:
             summary.update(f"[red]{describe(exc)}[/red]")
             return
-        text = (f"{len(plan.targets_mm)} targets × {plan.cycles} cycles × 2 directions × "
-                f"{len(plan.legs)} leg(s) = [b]{plan.total_points}[/b] points")
+        if plan.onthefly:
+            speeds = " and ".join(f"{v:g}" for v in plan.speeds_mm_s)
+            text = (f"{len(plan.targets_mm)} positions every {plan.step_mm:g} mm captured on the fly at {speeds} mm/s, "
+                    f"+1 anchor per pass × {plan.cycles} cycles{' at most' if plan.adaptive else ''} × 2 directions × "
+                    f"{len(plan.legs)} leg(s) = [b]{plan.total_points}[/b] points, about "
+                    f"{fmt_duration(plan.estimated_duration_s(0))} on the rig")
+        else:
+            text = (f"{len(plan.targets_mm)} targets × {plan.cycles} cycles × 2 directions × "
+                    f"{len(plan.legs)} leg(s) = [b]{plan.total_points}[/b] points")
         for note in plan.notes:
             text += f"\n[yellow]note:[/yellow] {note}"
         summary.update(text)
@@ -267,12 +279,11 @@ class SweepScreen(StationScreen):
         else:
             env.update("")
         faults = self.query_one("#sweep-faults", Static)
-        if s.faults:
-            last = s.faults[-3:]
-            faults.update("\n".join(f"[yellow]fault[/yellow] leg {f.leg} run {f.run} {f.target_mm:+.3f} mm: "
-                                    f"{f.kind} (attempt {f.attempt}{', gave up' if f.gave_up else ''})" for f in last))
-        else:
-            faults.update("")
+        lines = [f"[cyan]adaptive[/cyan] leg {e.leg}: stopped after {e.cycles} cycles: {e.reason}"
+                 for e in getattr(s, "stops", [])[-3:]]
+        lines += [f"[yellow]fault[/yellow] leg {f.leg} run {f.run} {f.target_mm:+.3f} mm: "
+                  f"{f.kind} (attempt {f.attempt}{', gave up' if f.gave_up else ''})" for f in s.faults[-3:]]
+        faults.update("\n".join(lines))
 
 
 class ResumeScreen(ModalScreen["Path | None"]):

@@ -1,0 +1,53 @@
+"""The Sweep page offers the on-the-fly plans (the same PlanSpec as `station sweep --plan
+onthefly...`), runs one on the simulated rig with progress, and shows why an adaptive sweep
+stopped a leg."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+from textual.widgets import Input, Select, Static
+
+from procedures.plan_spec import plan_from_spec
+from station.cli import build_parser
+from station.commands.sweep import plan_spec as cli_plan_spec
+from station.tui.app import StationApp
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def test_sweep_page_runs_an_adaptive_onthefly_plan_and_says_why_it_stopped(cfg, size, connected, wait_until):
+    asyncio.run(_run(cfg, size, connected, wait_until))
+
+
+async def _run(cfg, size, connected, wait_until):
+    app = StationApp(cfg, time_scale=0.0)
+    async with app.run_test(size=size) as pilot:
+        await connected(pilot)
+        await pilot.press("f2")
+        await wait_until(pilot, lambda: app.screen.MODE == "sweep", what="the Sweep screen")
+        screen = app.screen
+        screen.query_one("#plan", Select).value = "onthefly-adaptive"
+        await pilot.pause()
+        assert screen.query_one("#cycles", Input).value == "10"  # the plan's most cycles
+        assert screen.query_one("#n-targets", Input).disabled  # positions come from the step
+        screen.query_one("#step", Input).value = "2"
+        screen.query_one("#legs", Input).value = "1"
+        await pilot.pause()
+        cli = cli_plan_spec(build_parser("sweep").parse_args(
+            ["sweep", "--sim", "--plan", "onthefly-adaptive", "--legs", "1", "--cycles", "10", "--step", "2"]))
+        assert screen.plan_spec() == cli
+        plan = screen.build_plan()
+        assert plan == plan_from_spec(cli) and plan.onthefly and plan.adaptive
+        text = str(screen.query_one("#plan-summary", Static).render())
+        assert "on the fly at 10 and 20 mm/s" in text and "at most" in text
+        await pilot.click("#start")
+        await wait_until(pilot, lambda: app.sweep.status == "completed", timeout_s=120, what="the sweep to complete")
+        s = app.sweep
+        assert len(s.stops) == 1 and s.stops[0].leg == 1
+        # progress counted to the end: the planned total shrank by what the stop made unneeded
+        assert s.done == s.total == plan.total_points - s.stops[0].skipped_points
+        await pilot.pause()
+        shown = str(screen.query_one("#sweep-faults", Static).render())
+        assert f"leg 1: stopped after {s.stops[0].cycles} cycles" in shown
