@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from procedures import controllers
 from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
@@ -20,7 +21,8 @@ DESCRIPTION = (
     "columns leg,position_mm,error_fwd_um,error_rev_um: the predicted error (measured minus "
     "commanded) approaching in the + / - direction, which the drive subtracts. The table's point "
     "count and correction range are checked against the drive profile's limits. "
-    "--format linuxcnc writes one COMP_FILE per joint (leg N -> joint N-1). See docs/tables.md."
+    "--format linuxcnc writes one COMP_FILE per joint (leg N -> joint N-1); siemens840d, heidenhain, "
+    "twincat and ecmc one file per leg for those controllers. See docs/tables.md and docs/controllers.md."
 )
 
 
@@ -30,7 +32,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="CSV file; for --format linuxcnc a directory (joint0.comp, ...) or NAME.comp (NAME_joint0.comp, ...)")
     p.add_argument("--step", type=float, metavar="MM", help="table step, mm (default: the recording's spacing, "
                    "coarsened to fit the point limit)")
-    p.add_argument("--format", choices=["csv", "linuxcnc"], default="csv", help="output format (default csv)")
+    p.add_argument("--format", choices=["csv", "linuxcnc", *controllers.FORMATS], default="csv",
+                   help="output format (default csv; controllers: docs/controllers.md)")
+    p.add_argument("--siemens-mode", choices=["cec", "enc_comp"], default="cec",
+                   help="siemens840d: direction-dependent CEC tables (default) or one $AA_ENC_COMP table (mean of both directions)")
+    p.add_argument("--reference-mm", type=float, default=0.0, metavar="MM",
+                   help="siemens840d: the axis reference point, where the table is made zero (default 0, mid-stroke)")
+    p.add_argument("--axis-name", default="X", help="heidenhain: the axis column's name, as in CfgAxes/axisList (default X)")
+    p.add_argument("--ecmc-direction", choices=["mean", "fwd", "rev"], default="mean",
+                   help="ecmc: one table for both directions: their mean (default) or one direction's error")
     p.add_argument("--comp-type", type=int, choices=[0, 1], default=0,
                    help="LinuxCNC COMP_FILE_TYPE: 0 = nominal, actual moving +, actual moving - (default); "
                    "1 = nominal, forward trim, reverse trim")
@@ -45,7 +55,10 @@ def run(args) -> int:
         missing = [x for x in legs if x not in model.legs]
         if missing:
             raise InputError(f"{args.model}: the model has no leg(s) {missing} (it has {list(model.legs)})")
-    if args.format == "linuxcnc":
+    if args.format in controllers.FORMATS:
+        fmt = controllers.module(args.format)
+        limits = fmt.LIMITS
+    elif args.format == "linuxcnc":
         drive = drive_table_spec(args.profile) if args.profile else None
         limits = LINUXCNC_LIMITS if drive is None else replace(
             LINUXCNC_LIMITS, max_points=min(drive.max_points, LINUXCNC_LIMITS.max_points),
@@ -62,6 +75,10 @@ def run(args) -> int:
     table = make_table(model, args.step, limits, legs=legs)
     if args.format == "csv":
         written = [write_table_csv(table, args.out, limits)]
+    elif args.format in controllers.FORMATS:
+        options = {"siemens840d": {"mode": args.siemens_mode, "reference_mm": args.reference_mm},
+                   "heidenhain": {"axis": args.axis_name}, "ecmc": {"direction": args.ecmc_direction}}
+        written = fmt.write(table, args.out, spec=limits, **options.get(args.format, {}))
     else:
         written = write_linuxcnc_comp(table, args.out, args.comp_type, limits)
     print(f"model: {args.model} ({model.method}; from {model.source.get('path') or 'unknown recording'})")
@@ -81,6 +98,8 @@ def run(args) -> int:
         print(f"wrote {path}")
     if args.format == "linuxcnc":
         print(f"LinuxCNC: [JOINT_n] COMP_FILE = <file>  COMP_FILE_TYPE = {args.comp_type}  (machine units mm)")
+    elif args.format in controllers.FORMATS:
+        print(controllers.HINTS[args.format])
     else:
         print(f"next: station push {written[0]} --leg N --sim")
     return 0

@@ -1,0 +1,97 @@
+"""What the controller formats share: file naming, atomic writing, refusing bad files."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from procedures.errors import InputError
+from procedures.table import CompTable, LegTable, validate_table
+
+
+class ControllerFileError(InputError):
+    """A controller file is malformed; the message names file, line and field."""
+
+
+def leg_paths(out: str | os.PathLike, legs: Iterable[int], suffix: str, stem: str = "leg{leg}") -> dict[int, Path]:
+    """One file per leg: `OUT/<stem><suffix>` for a directory OUT, or `<name>_<stem><suffix>` beside
+    OUT when OUT ends in `suffix` (case-insensitive)."""
+    out = Path(out)
+    if out.suffix.lower() == suffix.lower():
+        return {leg: out.with_name(f"{out.stem}_{stem.format(leg=leg)}{out.suffix}") for leg in legs}
+    return {leg: out / f"{stem.format(leg=leg)}{suffix}" for leg in legs}
+
+
+def write_files(out: str | os.PathLike, texts: Mapping[Path, str], suffix: str) -> list[Path]:
+    """Write every file or none (temporary files renamed into place); a directory OUT is created."""
+    out = Path(out)
+    if out.suffix.lower() != suffix.lower():
+        out.mkdir(parents=True, exist_ok=True)
+    temps: list[tuple[str, Path]] = []
+    try:
+        for path, text in texts.items():
+            if not path.parent.is_dir():
+                raise ControllerFileError(f"{path}: directory {path.parent} does not exist")
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            temps.append((tmp, path))
+            with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
+                fh.write(text)
+        for tmp, path in temps:
+            os.replace(tmp, path)
+    finally:
+        for tmp, _ in temps:
+            Path(tmp).unlink(missing_ok=True)
+    return list(texts)
+
+
+def checked(table: CompTable, spec, where) -> CompTable:
+    """Validate against `spec` (points, corrections) before anything is written."""
+    validate_table(table, spec, where=str(where))
+    return table
+
+
+def read_lines(path: str | os.PathLike) -> list[str]:
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8-sig").splitlines()
+    except FileNotFoundError:
+        raise ControllerFileError(f"{path}: no such file") from None
+    except UnicodeDecodeError:
+        raise ControllerFileError(f"{path}: not a text file") from None
+
+
+def number(path, line_no: int, field: str, text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise ControllerFileError(f"{path}, line {line_no}, field {field}: {text!r} is not a number") from None
+    if not np.isfinite(v):
+        raise ControllerFileError(f"{path}, line {line_no}, field {field}: {text!r} is not a finite number")
+    return v
+
+
+def interp_held(x, nodes, values) -> np.ndarray:
+    """Linear between nodes, the first/last value held outside (every controller here does so)."""
+    return np.interp(np.asarray(x, dtype=float), nodes, values)
+
+
+def by_direction(x, direction, fwd, rev) -> tuple[np.ndarray, np.ndarray]:
+    x = np.asarray(x, dtype=float)
+    d = np.broadcast_to(np.asarray(direction), np.broadcast(x, np.asarray(direction)).shape)
+    return np.broadcast_to(x, d.shape), d
+
+
+def strictly_increasing(path, positions: list[float], lines: list[int], field: str) -> None:
+    for i in range(1, len(positions)):
+        if positions[i] <= positions[i - 1]:
+            raise ControllerFileError(f"{path}, line {lines[i]}, field {field}: {positions[i]:g} is not above the "
+                                      f"previous position {positions[i - 1]:g}; positions must increase")
+
+
+def leg_errors_mm(t: LegTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(positions_mm, error_fwd_mm, error_rev_mm) of one leg's table."""
+    return t.positions_mm, np.asarray(t.error_fwd_um) / 1000.0, np.asarray(t.error_rev_um) / 1000.0
