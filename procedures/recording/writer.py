@@ -124,6 +124,51 @@ def point_row(record: Mapping[str, Any] | np.void) -> np.ndarray:
     return np.array([tuple(values)], POINT_DTYPE)
 
 
+class _IndexSet:
+    """The plan indices in a file: one bit each below 2**24 (16 M points), a set above. A set of
+    ints costs about 60 bytes a point, 12 MB over a day-long session of 200 000 points, which a
+    soak sees as the station's memory growing (bench/bench_soak.py); the bitmap holds 25 kB."""
+
+    _BITMAP_LIMIT = 1 << 24
+
+    def __init__(self, indices=()) -> None:
+        self._bits = bytearray()
+        self._large: set[int] = set()
+        self.update(indices)
+
+    def __contains__(self, i: int) -> bool:
+        i = int(i)
+        if 0 <= i < self._BITMAP_LIMIT:
+            return (i >> 3) < len(self._bits) and bool(self._bits[i >> 3] & (1 << (i & 7)))
+        return i in self._large
+
+    def add(self, i: int) -> None:
+        i = int(i)
+        if not 0 <= i < self._BITMAP_LIMIT:
+            self._large.add(i)
+            return
+        byte = i >> 3
+        if byte >= len(self._bits):
+            self._bits.extend(bytes(max(byte + 1 - len(self._bits), len(self._bits))))  # doubling
+        self._bits[byte] |= 1 << (i & 7)
+
+    def update(self, indices) -> None:
+        for i in indices:
+            self.add(i)
+
+    def intersection(self, indices) -> set[int]:
+        return {int(i) for i in indices if int(i) in self}
+
+    def __iter__(self):
+        for byte, value in enumerate(self._bits):
+            if value:
+                yield from (byte * 8 + b for b in range(8) if value & (1 << b))
+        yield from sorted(self._large)
+
+    def __len__(self) -> int:
+        return sum(bin(v).count("1") for v in self._bits) + len(self._large)
+
+
 def _check_point(rows: np.ndarray) -> None:
     """InputError for the first row with index < 0, direction not +1/-1, or leg/run < 1."""
     bad = (rows["index"] < 0) | ((rows["direction"] != 1) & (rows["direction"] != -1)) | (rows["leg"] < 1) | (
@@ -282,11 +327,13 @@ class SessionWriter:
         self.path = path
         self._lock = lock
         self._fsync = fsync
-        self._indices: set[int] = {int(i) for i in points_index}
+        self._indices = _IndexSet(int(i) for i in points_index)
         self._points_written = len(points_index)
         self._faults_written = faults_written
         self._finished_outcome: Outcome | None = None
-        self._f = h5py.File(path, "a", libver=LIBVER)
+        # no chunk cache: every row is flushed at once anyway, and the cache grew the process by
+        # about 10 MB over a long session (bench/bench_soak.py); without it an append is faster
+        self._f = h5py.File(path, "a", libver=LIBVER, rdcc_nbytes=0)
         try:
             self._pds = self._f["points"]
             self._fds = self._f["faults"]
