@@ -13,3 +13,14 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     for reader in sorted(INPUTS):
         refused = f", {REFUSED[reader]:>7} refused with its own error" if reader in REFUSED else ""
         tr.write_line(f"{reader:<50} {INPUTS[reader]:>7} inputs{refused}")
+
+
+def pytest_collection_modifyitems(config, items):
+    """The long profile runs a test for minutes (the Modbus one about ten): past the suite's
+    300 s pytest-timeout, which stays for the CI profile."""
+    if PROFILE != "ci":
+        import pytest
+
+        for item in items:
+            if "tests/fuzz/" in str(item.fspath).replace("\\", "/"):
+                item.add_marker(pytest.mark.timeout(3600))
