@@ -153,6 +153,24 @@ def material_temp_ranges(points: np.ndarray) -> dict[int, tuple[float, float]]:
     return out
 
 
+def _between_readings(temp_c: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+    """The material temperature at each point's time, interpolated linearly between sensor
+    readings. The sweep reads the sensors at most every 10 s and records the last reading with
+    every point; a reading is taken where the recorded value changes (at that point's time), so
+    the value is known exactly there and is interpolated in between (held after the last
+    reading). Without times, or when every point has its own reading, nothing changes."""
+    if len(temp_c) < 3 or not np.all(np.isfinite(time_s)):
+        return temp_c
+    order = np.argsort(time_s, kind="stable")
+    t, v = time_s[order], temp_c[order]
+    knots = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
+    if len(knots) == len(v) or len(knots) < 2 or np.any(np.diff(t[knots]) <= 0):
+        return temp_c
+    out = np.empty_like(temp_c)
+    out[order] = np.interp(t, t[knots], v[knots])
+    return out
+
+
 def normalise_points(points: np.ndarray, materials: Mapping[int, Any], reference_temp_c: float = REFERENCE_TEMP_C,
                      source: str = "") -> Normalisation:
     """Normalise each leg's `error_um` to `reference_temp_c` from its `material_temp_c`.
@@ -188,6 +206,7 @@ def normalise_points(points: np.ndarray, materials: Mapping[int, Any], reference
             temp = np.empty_like(temp)
             temp[order] = t_sorted
             result.filled[leg] = int(np.count_nonzero(~known))
+        temp = _between_readings(temp, np.asarray(points["time_s"][rows], dtype=float))
         corr = nde_correction_um(points["target_mm"][rows], temp, mats[leg], reference_temp_c)
         out["error_um"][rows] = points["error_um"][rows] - corr
         result.temp_range_c[leg] = (float(np.min(temp)), float(np.max(temp)))

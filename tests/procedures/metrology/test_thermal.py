@@ -84,3 +84,20 @@ def test_materials_recorded_by_the_station_config(tmp_path):
     _, pts = _warm_leg(21.0, 21.0)
     n = normalise_session(pts, {})
     assert n.normalised == (1,) and "defaults" in n.lines()[0]
+
+
+def test_temperature_between_sensor_readings_is_interpolated_in_time():
+    """The sweep records the last sensor reading (taken at most every 10 s) with every point: the
+    normalisation interpolates between the readings, so a leg warming steadily is normalised
+    with its temperature at each point's time, not the last reading's."""
+    _, pts = _warm_leg(20.0, 23.0)
+    true_temp = pts["material_temp_c"].copy()
+    held = pts.copy()
+    for start in range(0, len(held), 4):  # a reading every 4th point, held for the next three
+        held["material_temp_c"][start:start + 4] = true_temp[start]
+    mat = {1: Material(11.5, 1.0, -150.0)}
+    exact = normalise_points(pts, mat).points["error_um"]
+    got = normalise_points(held, mat).points["error_um"]
+    stale = held["error_um"] - nde_correction_um(held["target_mm"], held["material_temp_c"], mat[1])
+    last = ((len(held) - 1) // 4) * 4  # the last reading: after it the temperature is held
+    assert np.max(np.abs(got[:last] - exact[:last])) < 0.2 * np.max(np.abs(stale[:last] - exact[:last]))
