@@ -20,8 +20,17 @@ def test_defaults_without_file():
     assert cfg.metrology == MetrologyConfig()
     assert cfg.metrology.reference_temp_c == 20.0 and cfg.metrology.wavelength_nm == 632.991
     assert cfg.metrology.co2_ppm == 450.0 and cfg.metrology.dead_path_mm == 0.0
+    assert cfg.legs == LegMaterial(11.5, 1.0, 0.0)
+    # the built-in config is the simulated rig: without [legs], each leg is the simulated plant's
+    plants = cfg.sim.leg_configs()
     for leg in range(1, 7):
-        assert cfg.material_of(leg) == LegMaterial(11.5, 1.0, 0.0)
+        assert cfg.material_of(leg) == LegMaterial(plants[leg - 1].expansion_ppm_per_k, 1.0, plants[leg - 1].bearing_mm)
+        assert -175.0 < cfg.material_of(leg).fixed_point_mm < -125.0
+
+
+def test_real_rig_defaults_to_steel_fixed_at_mid_stroke(tmp_path):
+    cfg = load_config(_write(tmp_path, '[drive]\nurl = "tcp://127.0.0.1:502"\n[interferometer]\nport = "/dev/ttyUSB1"\n'))
+    assert all(cfg.material_of(leg) == LegMaterial(11.5, 1.0, 0.0) for leg in range(1, 7))
 
 
 def test_values_and_per_leg_override(tmp_path):
