@@ -333,12 +333,6 @@ def verify_procedure(
     yield ev.OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, results)
 
 
-def summary_line(outcome: str, r: LegVerification) -> str:
-    """One line of a leg's verification, as the audit log and the front ends show it."""
-    ratio = r.ratio
-    return (f"verification {outcome}: residual RMS {r.after.rms_um:.4f} um, noise floor "
-            + (f"{r.after.noise_floor_um:.4f} um, verification ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
-               if ratio is not None else "n/a"))
 def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
     """The verification's and the calibration's points as compared: normalised to 20 degC with
     the materials each session recorded (`normalise`), or raw; with the lines saying which."""
@@ -356,3 +350,9 @@ def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray,
     return after.points, before_points, lines, doc
 
 
+def summary_line(outcome: str, r: LegVerification) -> str:
+    """One line of a leg's verification, as the audit log and the front ends show it."""
+    ratio = r.ratio
+    return (f"verification {outcome}: residual RMS {r.after.rms_um:.4f} um, noise floor "
+            + (f"{r.after.noise_floor_um:.4f} um, verification ratio {ratio:.3f} ({'pass' if r.passed else 'above'} {ACCEPT_RATIO:g})"
+               if ratio is not None else "n/a"))
