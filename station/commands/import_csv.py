@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import tempfile
 from pathlib import Path
 
 from procedures.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
@@ -11,13 +12,15 @@ from procedures.ranges import MAX_ERROR_UM, PointLimits
 from station import __version__
 
 NAME = "import"
-HELP = "convert an interchange CSV (leg, run, direction, target_mm, error_um, ...) to a session file"
+HELP = "convert an interchange CSV (leg, run, direction, target_mm, error_um, ...), or another layout through --map, to a session file"
 DESCRIPTION = (
     "Convert measurements in the interchange CSV format to an HDF5 session file. Required columns: "
     f"{', '.join(REQUIRED_COLUMNS)}; optional: {', '.join(OPTIONAL_COLUMNS)} (a missing optional column "
     "means 'not measured'). The whole file is checked first; on any problem nothing is written. "
     "Values are checked against physical ranges: legs (--legs), targets within the drive profile's soft "
-    f"limits, |error_um| <= {MAX_ERROR_UM:g} um, temperatures, pressure, humidity and load a workshop sees."
+    f"limits, |error_um| <= {MAX_ERROR_UM:g} um, temperatures, pressure, humidity and load a workshop sees. "
+    "Other laser software's CSV: --map MAP.toml says which columns hold what, their units, the sign of "
+    "the error, how directions and runs are told (docs/import.md; examples in docs/import-maps/)."
 )
 
 
@@ -28,6 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--legs", default="1-6", help="legs the file holds, e.g. 1-6 or 1,3 (default 1-6); "
                    "a point of another leg is refused")
+    p.add_argument("--map", metavar="MAP.toml", help="mapping file for another software's layout (docs/import.md)")
     p.add_argument("--profile", metavar="PROFILE.toml",
                    help="drive profile whose soft limits bound target_mm (default: the built-in profile)")
 
@@ -42,8 +46,11 @@ def import_limits(legs: str = "1-6", profile: str | None = None) -> PointLimits:
 
 def run(args) -> int:
     limits = import_limits(args.legs, args.profile)
-    session = import_csv(Path(args.csv), Path(args.out), operator=args.operator, software_version=__version__,
-                         overwrite=args.force, limits=limits)
+    if args.map:
+        session = _import_mapped(args, limits)
+    else:
+        session = import_csv(Path(args.csv), Path(args.out), operator=args.operator, software_version=__version__,
+                             overwrite=args.force, limits=limits)
     pts = session.points
     legs = ", ".join(str(leg) for leg in session.legs)
     runs = len({(int(r["leg"]), int(r["run"])) for r in pts[["leg", "run"]]})
@@ -52,3 +59,23 @@ def run(args) -> int:
     print(f"optional columns: {', '.join(optional) if optional else 'none (environment unknown)'}")
     print(f"session written: {args.out} (sha256 {session.sha256[:16]}...)")
     return 0
+
+
+def _import_mapped(args, limits):
+    """Convert through the map, then import the interchange CSV; its problems are reported in
+    terms of the source file (its lines and column names)."""
+    from procedures.errors import InputError
+    from procedures.import_map import convert, load_map, source_message
+
+    mapping = load_map(args.map)
+    converted = convert(args.csv, mapping)
+    with tempfile.TemporaryDirectory(prefix="station-import-") as tmp_dir:
+        tmp = Path(tmp_dir) / f"{Path(args.csv).stem}.mapped.csv"
+        tmp.write_text(converted.csv_text, encoding="utf-8")
+        try:
+            session = import_csv(tmp, Path(args.out), operator=args.operator, software_version=__version__,
+                                 overwrite=args.force, limits=limits)
+        except InputError as exc:
+            raise InputError(source_message(str(exc), tmp, Path(args.csv), converted)) from None
+    print(f"map: {args.map} (" + ", ".join(f"{k} <- {v}" for k, v in converted.columns.items()) + ")")
+    return session
