@@ -95,9 +95,13 @@ def test_the_documented_example_exchange_is_valid():
     assert len(replies) >= 7
     for reply in replies:
         fields = p.split_reply(reply.encode("ascii") + b"\r\n")
-        assert fields[0] in {"IDN", "OK", "AVG", "POS", "ENV", "ERR", "COMP"}, reply
+        assert fields[0] in {"IDN", "OK", "AVG", "POS", "ENV", "ERR", "COMP", "CAPN", "CAP"}, reply
         if fields[0] == "COMP":
             p.parse_compensation(fields)
+        if fields[0] == "CAPN":  # on-the-fly capture (docs/onthefly.md)
+            p.parse_capture_count(fields, int(fields[1]))
+        if fields[0] == "CAP":
+            p.parse_capture_sample(fields, int(fields[1]), int(fields[2]))
     table = re.findall(r"`(ERR,\d,[^`]*\*[0-9A-F]{2})`", text)
     assert len(table) == 4
     for reply in table:
