@@ -63,6 +63,8 @@ class SimInterferometer:
         # displacements, i.e. this compensation taken as exact. `set_compensation` changes what
         # COMP? reports (a misconfigured instrument, for re-correction tests).
         self.compensation = p.CompensationReply("AUTO", "EDLEN", 632.991, math.nan, math.nan, math.nan, 450.0, 0.0)
+        self._air_offset_c = 0.0  # set_air_sensor_offset: a faulty air temperature sensor
+        self._air_index = None
         self.axes = int(axes)
         self.identity = tuple(identity)
         self._rng = np.random.default_rng(seed)
@@ -155,6 +157,16 @@ class SimInterferometer:
     def set_compensation(self, compensation: "p.CompensationReply") -> None:
         """What COMP? reports from now on (the readings themselves do not change)."""
         self.compensation = compensation
+
+    def set_air_sensor_offset(self, temp_offset_c: float, index=None) -> None:
+        """A faulty air temperature sensor reading `temp_offset_c` too high: ENV? reports it, and
+        the AUTO compensation uses it, so every displacement (POS?) is scaled by n_true / n_used.
+        `index(temp_c, pressure_pa, humidity_pct) -> n` computes the index (the composition root
+        passes procedures.metrology.air's; drivers do not import procedures); without one the
+        linearised -0.93 ppm/K of air near 20 degC at 633 nm is used."""
+        with self._faults:
+            self._air_offset_c = float(temp_offset_c)
+            self._air_index = index
 
     @property
     def averaging_s(self) -> float:
@@ -342,11 +354,30 @@ class SimInterferometer:
                 status, signal = "BEAM", 0.0
                 position_mm = self._last_position_mm[axis]  # the last valid count
             else:
-                position_mm = plant.measured_position_mm(t_s, averaging_s) - self._datum_mm[axis]
+                position_mm = (plant.measured_position_mm(t_s, averaging_s) - self._datum_mm[axis]) * self._air_scale(t_s)
                 self._last_position_mm[axis] = position_mm
                 signal = float(np.clip(nominal_pct + self._rng.normal(0.0, 0.3), 0.0, 100.0))
                 status = "LOW" if signal < p.LOW_SIGNAL_PCT else "OK"
         return p.format_position(axis, position_mm, status, signal, t_s)
+
+    def _air_now(self, t_s: float) -> tuple[float, float, float]:
+        """The true air (temperature degC, pressure hPa, humidity %RH) at `t_s`: a slow wander
+        (periods of an hour or two) around `air`."""
+        phase = self._air_phase
+        return (self.air[0] + 0.05 * math.sin(2 * math.pi * t_s / 3600.0 + phase[0]),
+                self.air[1] + 0.3 * math.sin(2 * math.pi * t_s / 7200.0 + phase[1]),
+                self.air[2] + 0.5 * math.sin(2 * math.pi * t_s / 5400.0 + phase[2]))
+
+    def _air_scale(self, t_s: float) -> float:
+        """Reported / true displacement: 1, unless the air sensor is off (set_air_sensor_offset)."""
+        with self._faults:
+            offset, index = self._air_offset_c, self._air_index
+        if not offset:
+            return 1.0
+        t, p_hpa, h = self._air_now(t_s)
+        if index is None:
+            return 1.0 + 0.93e-6 * offset  # n_true / n_used, dn/dT = -0.93 ppm/K
+        return float(index(t, p_hpa * 100.0, h) / index(t + offset, p_hpa * 100.0, h))
 
     def _environment(self) -> bytes:
         with self.lock:
@@ -355,12 +386,11 @@ class SimInterferometer:
                 self.plants[a].material_temp_c(t_s) if a in self.plants else float("nan")
                 for a in range(1, self.axes + 1)
             ]
-        # slow wander (periods of an hour or two) plus sensor noise
-        phase = self._air_phase
+        # slow wander plus sensor noise; a faulty temperature sensor reads its offset too high
         noise = self._rng.normal(0.0, (0.002, 0.01, 0.05))
-        air_c = self.air[0] + 0.05 * math.sin(2 * math.pi * t_s / 3600.0 + phase[0]) + noise[0]
-        pressure_hpa = self.air[1] + 0.3 * math.sin(2 * math.pi * t_s / 7200.0 + phase[1]) + noise[1]
-        humidity_pct = self.air[2] + 0.5 * math.sin(2 * math.pi * t_s / 5400.0 + phase[2]) + noise[2]
+        air_c, pressure_hpa, humidity_pct = (v + n for v, n in zip(self._air_now(t_s), noise))
+        with self._faults:
+            air_c += self._air_offset_c
         return p.format_environment(air_c, pressure_hpa, humidity_pct, temps)
 
 
