@@ -185,10 +185,12 @@ class ModbusFaultProxy:
 
     def stop(self) -> None:
         self._stop.set()
-        for t in self._threads:
-            t.join(2.0)
-        self._threads.clear()
         with self._lock:
+            threads = list(self._threads)
+        for t in threads:
+            t.join(2.0)
+        with self._lock:
+            self._threads.clear()
             for c in list(self._conns):
                 c.close()
             self._conns.clear()
@@ -226,8 +228,8 @@ class ModbusFaultProxy:
                 self.connections += 1
                 # finished connections' threads are dropped, so a day of reconnects holds none
                 self._threads = [t for t in self._threads if t.is_alive()]
-            t = threading.Thread(target=self._serve, args=(conn,), name="fault-proxy-conn", daemon=True)
-            self._threads.append(t)
+                t = threading.Thread(target=self._serve, args=(conn,), name="fault-proxy-conn", daemon=True)
+                self._threads.append(t)
             t.start()
 
     def _serve(self, conn: _Conn) -> None:

@@ -55,6 +55,7 @@ PROFILES = {
     "long": Profile("long", sweep_faults=500, push_faults=300, verify_faults=250, rate=0.02),
 }
 PROFILE = PROFILES[os.environ.get("STATION_LINK_FAULTS", "ci")]
+pytestmark = pytest.mark.timeout(1800 if PROFILE.name == "long" else 300)  # the long profile takes minutes a test
 MAX_RESUMES = 60  # a session that cannot be finished in this many resumes is a finding
 MAX_SESSIONS = 400  # a bound on the loops: faults must come, or the injection is broken
 PLAN_TARGETS = (-80.0, -55.5, -31.0, -12.5, 0.0, 14.0, 33.5, 52.0, 79.0)
