@@ -31,10 +31,11 @@ from procedures.controllers.common import (ControllerFileError, by_direction, ch
 from procedures.table import CompTable
 
 NAME = "twincat"
+# P-COMP-00059 sets the most table entries; 1500 by default (shared docs: real-world.md)
 SUFFIX = ".lis"
 UNIT_MM = 1e-4  # 0.1 um
 RESOLUTION_MM = UNIT_MM
-LIMITS = TableSpec(max_points=10000, max_correction_um=1000.0, entry_resolution_um=0.0, min_step_mm=1e-4,
+LIMITS = TableSpec(max_points=1500, max_correction_um=1000.0, entry_resolution_um=0.0, min_step_mm=1e-4,
                    banks=1, holder="TwinCAT CNC")
 
 

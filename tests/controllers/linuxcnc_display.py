@@ -70,14 +70,18 @@ def run(job: dict) -> dict:
     cmd.mode(linuxcnc.MODE_MDI)
     cmd.wait_complete()
 
+    def pin(name):
+        return float(hal.get_value(name))
+
     def move_to(x):
         words = " ".join(f"{AXES[j]}{x:.6f}" for j in range(joints))
         cmd.mdi(f"G90 G0 {words}")
         cmd.wait_complete(30.0)
-        wait(lambda: stat.state == linuxcnc.RCS_DONE and stat.inpos, f"move to {x}")
-
-    def pin(name):
-        return float(hal.get_value(name))
+        # wait_complete can return before the motion ends (and stat may still show the last
+        # move's end): wait until every joint's command is at the target and at rest
+        wait(lambda: stat.state == linuxcnc.RCS_DONE and stat.inpos and all(
+            abs(pin(f"joint.{j}.pos-cmd") - x) < 1e-9 and pin(f"joint.{j}.vel-cmd") == 0.0 for j in range(joints)),
+             f"move to {x}")
 
     def settled():
         # the trim motmod commands (backlash-filt) ramps to the target trim (backlash-corr)
