@@ -57,14 +57,14 @@ def text(t, mode: str = "cec", reference_mm: float = 0.0) -> str:
     pos, fwd, rev = leg_errors_mm(t)
     shift = reference_shift_mm(t, reference_mm)
     leg, ax = t.leg, f"AX{t.leg}"
-    lines = [
+    about = [  # after the file's %_N_ line, which must come first
         f"; station: leg {leg} -> axis {ax}, {t.point_count} points {t.start_mm:.6f} .. {t.end_mm:.6f} mm",
         "; values: error measured minus commanded, mm; a positive value moves the axis negative",
         f"; shifted by {-shift:+.6f} mm so that the + value at the reference point {reference_mm:g} mm is zero",
     ]
     step, lo, hi = f"{t.step_mm:.6f}", f"{t.start_mm:.6f}", f"{t.end_mm:.6f}"
     if mode == "cec":
-        lines += ["%_N_NC_CEC_INI", "CHANDATA(1)"]
+        lines = ["%_N_NC_CEC_INI", *about, "CHANDATA(1)"]
         for k, (direction, values) in enumerate(((1, fwd), (-1, rev))):
             tab = 2 * (leg - 1) + k
             lines += [f"$AN_CEC[{tab},{i}]={v - shift:.6f}" for i, v in enumerate(values)]
@@ -73,7 +73,7 @@ def text(t, mode: str = "cec", reference_mm: float = 0.0) -> str:
                       f"$AN_CEC_DIRECTION[{tab}]={direction}", f"$AN_CEC_MULT_BY_TABLE[{tab}]=0",
                       f"$AN_CEC_IS_MODULO[{tab}]=0"]
     else:
-        lines += ["%_N_AX_EEC_INI", "CHANDATA(1)"]
+        lines = ["%_N_AX_EEC_INI", *about, "CHANDATA(1)"]
         lines += [f"$AA_ENC_COMP[0,{i},{ax}]={(f + r) / 2 - shift:.6f}" for i, (f, r) in enumerate(zip(fwd, rev))]
         lines += [f"$AA_ENC_COMP_STEP[0,{ax}]={step}", f"$AA_ENC_COMP_MIN[0,{ax}]={lo}",
                   f"$AA_ENC_COMP_MAX[0,{ax}]={hi}", f"$AA_ENC_COMP_IS_MODULO[0,{ax}]=0"]
