@@ -104,7 +104,7 @@ def load_map(path: str | os.PathLike) -> ImportMap:
         for key in body:
             if key not in _SECTIONS[section]:
                 raise _bad(path, f"{section}.{key}", f"unknown key; known: {', '.join(sorted(_SECTIONS[section]))}")
-    f, cols, units = data.get("file", {}), data.get("columns", {}), data.get("units", {})
+    f, cols = data.get("file", {}), data.get("columns", {})
     conv, defaults = data.get("convention", {}), data.get("defaults", {})
 
     def text(section, key, default):

@@ -79,7 +79,8 @@ def interp_held(x, nodes, values) -> np.ndarray:
     return np.interp(np.asarray(x, dtype=float), nodes, values)
 
 
-def by_direction(x, direction, fwd, rev) -> tuple[np.ndarray, np.ndarray]:
+def by_direction(x, direction) -> tuple[np.ndarray, np.ndarray]:
+    """(x, direction) broadcast to one shape."""
     x = np.asarray(x, dtype=float)
     d = np.broadcast_to(np.asarray(direction), np.broadcast(x, np.asarray(direction)).shape)
     return np.broadcast_to(x, d.shape), d

@@ -72,7 +72,7 @@ class HeidenhainComp:
     negative_mm: np.ndarray  # BACKLASH: error approaching in - (the axis column when absent)
 
     def applied_mm(self, position_mm, direction) -> np.ndarray:
-        x, d = by_direction(position_mm, direction, None, None)
+        x, d = by_direction(position_mm, direction)
         value = np.where(d > 0, interp_held(x, self.axispos_mm, self.positive_mm),
                          interp_held(x, self.axispos_mm, self.negative_mm))
         return -value

@@ -21,8 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.table import (LINUXCNC_LIMITS, LINUXCNC_MAX_LINES, CompTable, linuxcnc_paths,  # noqa: F401
-                              read_linuxcnc_comp, write_linuxcnc_comp)
+from procedures.table import (LINUXCNC_LIMITS, LINUXCNC_MAX_LINES, CompTable, linuxcnc_paths, read_linuxcnc_comp,
+                              write_linuxcnc_comp)
+
+__all__ = ["LINUXCNC_LIMITS", "LINUXCNC_MAX_LINES", "LinuxCncComp", "linuxcnc_paths", "load", "write"]
 
 NAME = "linuxcnc"
 RESOLUTION_MM = 1e-6  # the writer's 6 decimals

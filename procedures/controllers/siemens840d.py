@@ -109,7 +109,7 @@ class SiemensComp:
 
     def value_mm(self, position_mm, direction) -> np.ndarray:
         """The summed compensation value of the tables active in `direction`."""
-        x, d = by_direction(position_mm, direction, None, None)
+        x, d = by_direction(position_mm, direction)
         total = np.zeros(x.shape)
         for t in self.tables:
             active = (d == t.direction) | (t.direction == 0)

@@ -74,7 +74,7 @@ class TwinCatComp:
     neg_mm: np.ndarray
 
     def applied_mm(self, position_mm, direction) -> np.ndarray:
-        x, d = by_direction(position_mm, direction, None, None)
+        x, d = by_direction(position_mm, direction)
         value = np.where(d > 0, interp_held(x, self.setpoint_mm, self.pos_mm), interp_held(x, self.setpoint_mm, self.neg_mm))
         return -value
 
