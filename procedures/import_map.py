@@ -178,12 +178,15 @@ class Converted:
     columns: dict[str, str]  # interchange column -> how the source names it (for messages)
 
 
-def _split(line: str, m: ImportMap) -> list[str]:
+def _split(line: str, m: ImportMap, path: Path, no: int) -> list[str]:
     if m.delimiter is None:
         return line.split()
     import csv
 
-    return next(csv.reader(io.StringIO(line), delimiter=m.delimiter), [])
+    try:
+        return next(csv.reader(io.StringIO(line), delimiter=m.delimiter), [])
+    except csv.Error as exc:
+        raise InputError(f"{path}, line {no}: not readable as delimited text ({exc})") from None
 
 
 def convert(data_path: str | os.PathLike, m: ImportMap) -> Converted:
@@ -206,7 +209,7 @@ def convert(data_path: str | os.PathLike, m: ImportMap) -> Converted:
     width = None
     if m.header:
         header_no, header_line = body.pop(0)
-        header = [h.strip() for h in _split(header_line, m)]
+        header = [h.strip() for h in _split(header_line, m, path, header_no)]
         width = len(header)
     for key, ref in m.columns.items():
         if isinstance(ref, int):
@@ -223,7 +226,7 @@ def convert(data_path: str | os.PathLike, m: ImportMap) -> Converted:
         raise InputError(f"{path}: no data rows after the header")
     rows = []
     for no, line in body:
-        cells = [c.strip() for c in _split(line, m)]
+        cells = [c.strip() for c in _split(line, m, path, no)]
         if width is not None and len(cells) != width:
             raise InputError(f"{path}, line {no}: {len(cells)} fields, but the header has {width}")
         need = max(index.values()) + 1

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from procedures.controllers.common import ControllerFileError
 from procedures.table import (LINUXCNC_LIMITS, LINUXCNC_MAX_LINES, CompTable, linuxcnc_paths, read_linuxcnc_comp,
                               write_linuxcnc_comp)
 
@@ -57,7 +58,15 @@ def load(path: str | os.PathLike, comp_type: int = 0) -> LinuxCncComp:
     """Read a COMP_FILE the way usrmotLoadComp does (stops at the first line that is not three
     numbers) and keep only the entries command.c accepts (more than 256 or a nominal not above
     the previous one are refused there with an error; here they end the table likewise)."""
-    nom, fwd, rev = read_linuxcnc_comp(path, comp_type)
+    try:
+        nom, fwd, rev = read_linuxcnc_comp(path, comp_type)
+    except FileNotFoundError:
+        raise ControllerFileError(f"{path}: no such file") from None
+    except UnicodeDecodeError:
+        raise ControllerFileError(f"{path}: not a text file (a COMP_FILE holds three numbers per line)") from None
+    if len(nom) == 0:
+        raise ControllerFileError(f"{path}, line 1: not three numbers (nominal a b); LinuxCNC would stop reading "
+                                  "there and load no compensation")
     keep = len(nom)
     for i in range(1, len(nom)):
         if nom[i] <= nom[i - 1]:

@@ -43,6 +43,7 @@ RESOLUTION_MM = 1e-6  # 6 decimals; the control rounds to its internal resolutio
 LIMITS = TableSpec(max_points=2000, max_correction_um=1000.0, entry_resolution_um=0.0,
                                    min_step_mm=1e-6, banks=1, holder="SINUMERIK (MD18342 / MD38000)")
 MODES = ("cec", "enc_comp")
+MAX_POINTS_READ = 100_000  # far above any NC's table; guards the reader against absurd MIN/MAX/STEP
 
 
 def reference_shift_mm(t, reference_mm: float) -> float:
@@ -208,7 +209,11 @@ def _points(where: str, d: dict) -> np.ndarray:
         raise ControllerFileError(f"{where}: no compensation values")
     if d["_STEP"] <= 0:
         raise ControllerFileError(f"{where}, field STEP: {d['_STEP']:g} is not a positive step")
-    n = int(round((d["_MAX"] - d["_MIN"]) / d["_STEP"])) + 1
+    span = (d["_MAX"] - d["_MIN"]) / d["_STEP"]
+    if not 0 <= span <= MAX_POINTS_READ:
+        raise ControllerFileError(f"{where}: MIN {d['_MIN']:g}, MAX {d['_MAX']:g} and STEP {d['_STEP']:g} give no "
+                                  f"table of 1 .. {MAX_POINTS_READ} points")
+    n = int(round(span)) + 1
     have = sorted(d["values"])
     if have != list(range(n)):
         raise ControllerFileError(f"{where}: MIN/MAX/STEP give {n} points but the values are numbered "
