@@ -127,7 +127,7 @@ def onthefly_passes(
                                  f"preparing leg {leg} (enable, zero at mid-stroke): {exc}", 1, True, clock.now() - t_start)
                 yield fault
                 raise failed(fault) from exc
-            prev_temp = None  # (rig time, material temperature) of the last environment reading
+            prev_temp = None  # (session time, material temperature) of the reading before a pass
         axis = axes[leg]
         speed = plan.speed_of_run(run)
         seq = all_targets if d > 0 else all_targets[::-1]
@@ -141,6 +141,9 @@ def onthefly_passes(
             attempt += 1
             try:
                 axis.move_to(start_mm)
+                if prev_temp is None or prev_temp[0] is None:
+                    # the first pass of the leg: the temperature as it starts (time: its first sample)
+                    prev_temp = (None, laser.environment().material_temp_of(leg))
                 axis.arm_position_compare(float(seq[0]), d * step, n)  # type: ignore[attr-defined]
                 laser.arm_capture(leg, n)  # type: ignore[attr-defined]
                 status = axis.move_to(end_mm, velocity_mm_s=speed)
@@ -186,16 +189,22 @@ def onthefly_passes(
         anchor_mm = plan.anchor_mm(d)
         t_after = clock.now() - t_start  # session times, as recorded: a replay computes the same
         temp_after = env.material_temp_of(leg)
+        t_rel = t_abs - t_start
+        run_up_s = plan.overrun_mm / speed
+        # the screw heats by its travel: from the start of the motion (the first pass of a leg:
+        # from its first sample, when the reading before it is taken as holding) to its end
+        t_heat0 = t_rel[0] if prev_temp is None or prev_temp[0] is None else t_rel[0] - run_up_s
+        t_heat1 = t_rel[-1] + run_up_s
 
         def temp_c(t_s: float) -> float:
-            """The material temperature at a sample: a pass heats the screw by its travel within
-            seconds, so it is interpolated in time between the reading after the pass before
-            (same leg) and the one after this pass (the first pass of a leg: the one after)."""
-            if prev_temp is None or not (t_after > prev_temp[0]):
+            """The material temperature at a sample, interpolated over the pass's motion between
+            the reading before it (after the pass before, or before the first pass of the leg)
+            and the one after it; a pass heats the screw within seconds, and the readings are
+            normalised to 20 degC with it."""
+            if prev_temp is None or not t_heat1 > t_heat0:
                 return temp_after
-            t0, temp0 = prev_temp
-            f = min(max((t_s - t0) / (t_after - t0), 0.0), 1.0)
-            return temp0 + (temp_after - temp0) * f
+            f = min(max((t_s - t_heat0) / (t_heat1 - t_heat0), 0.0), 1.0)
+            return prev_temp[1] + (temp_after - prev_temp[1]) * f
 
         for p in pas:
             is_anchor = abs(p.target_mm - anchor_mm) < 1e-9
