@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.diagnosis import DiagnosisSettings, diagnose, to_json
+from procedures.diagnosis import DiagnosisSettings, to_json
 from procedures.diagnosis.selfcheck import Trial, format_self_check, run_self_check
 from procedures.diagnosis.text_report import text_report
 from procedures.errors import InputError
@@ -86,12 +86,10 @@ def run(args) -> int:
 
     session = read_session(path)
     twin = load_twin(args.twin) if args.twin else None
-    report = diagnose(session.points, twin, settings, recording={"path": str(path), "sha256": session.sha256},
-                      source=str(path))
-    print(text_report(report))
-    from procedures.metrology.thermal import diagnosis_temperature_note
+    from station.diagnosis_jobs import diagnose_session
 
-    temp_lines, report["material_temperature"] = diagnosis_temperature_note(session.points, session.station_config)
+    report, temp_lines = diagnose_session(session, path, twin, settings)  # the same as the UI's Diagnosis page
+    print(text_report(report))
     print("\n" + "\n".join(temp_lines))
     if args.json:
         Path(args.json).write_text(to_json(report))

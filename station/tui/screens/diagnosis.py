@@ -8,6 +8,10 @@ The twin is chosen as `station diagnose --twin` chooses it (station.twins.load_t
 the recording itself (no --twin, the default), the simulated plant (sim:default), or a file typed
 in (MODEL.json, REFERENCE.h5 or sim:CONFIG.toml); and, in the UI only, the model on the Results
 page.
+
+The report is station.diagnosis_jobs.diagnose_session's, as `station diagnose --json` writes it:
+on the raw error, with the material temperature range per leg (`material_temperature`), which
+the status line and the end of the text show.
 """
 
 from __future__ import annotations
@@ -37,11 +41,26 @@ def twin_spec(kind: str, typed: str = "") -> str | None:
     return {"fitted": None, "sim": "sim:default", "file": typed.strip()}.get(kind)
 
 
+def material_summary(doc: dict | None) -> str:
+    """One line for the status: the material temperature range per leg from the report's
+    `material_temperature` (procedures.metrology.thermal.diagnosis_temperature_note); the
+    diagnosis is on the raw error, which the other analyses normalise to the reference."""
+    if not doc:
+        return "[dim]material temperature: not in the report[/dim]"
+    ref = doc.get("reference_temp_c", 20.0)
+    legs = doc.get("legs") or {}
+    if not legs:
+        return f"[dim]raw error; no material temperature recorded (nothing to normalise to {ref:g} °C)[/dim]"
+    ranges = ", ".join(f"leg {k} {v['min_c']:.2f}..{v['max_c']:.2f}" for k, v in legs.items())
+    return f"raw error (not normalised to {ref:g} °C); material °C: {ranges}"
+
+
 class DiagnosisReady(Message):
-    def __init__(self, path: Path, report: dict, request: int = 0) -> None:
+    def __init__(self, path: Path, report: dict, request: int = 0, temp_lines: list[str] | None = None) -> None:
         super().__init__()
         self.path = path
         self.report = report
+        self.temp_lines = temp_lines or []  # the error basis and material temperature, as the CLI prints them
         self.request = request  # the diagnosis request it answers (DiagnosisScreen._request)
 
 
@@ -85,6 +104,7 @@ class DiagnosisScreen(StationScreen):
 
     def on_mount(self) -> None:
         self.report: dict | None = None
+        self.temp_lines: list[str] = []
         self.plot_leg: str | None = None
         self._request = 0  # numbers the diagnosis requests: only the newest one's answer is shown
         self.running = False
@@ -146,8 +166,9 @@ class DiagnosisScreen(StationScreen):
     @work(thread=True, exclusive=True, group="diagnosis", exit_on_error=False)
     def _run(self, path: Path, twin_kind: str, spec: str | None, model, request: int = 0) -> None:
         try:
-            from procedures.diagnosis import DiagnosisSettings, diagnose, twin_from_model
+            from procedures.diagnosis import twin_from_model
             from procedures.recording.reader import read_session
+            from station.diagnosis_jobs import diagnose_session
 
             session = read_session(path)
             twin = None
@@ -157,12 +178,12 @@ class DiagnosisScreen(StationScreen):
                 from station.twins import load_twin
 
                 twin = load_twin(spec)
-            report = diagnose(session.points, twin, DiagnosisSettings(),
-                              recording={"path": str(path), "sha256": session.sha256}, source=str(path))
+            # the report of `station diagnose` (with its material_temperature), by the same function
+            report, temp_lines = diagnose_session(session, path, twin)
         except Exception as exc:
             self.post_message(DiagnosisFailed(describe(exc, f"cannot diagnose {path.name}"), request))
             return
-        self.post_message(DiagnosisReady(path, report, request))
+        self.post_message(DiagnosisReady(path, report, request, temp_lines))
 
     def on_diagnosis_ready(self, message: DiagnosisReady) -> None:
         if message.request != self._request:  # asked for before the last request
@@ -170,6 +191,7 @@ class DiagnosisScreen(StationScreen):
         self.running = False
         self.report = message.report
         self.report_path = message.path
+        self.temp_lines = message.temp_lines
         self.plot_leg = None
         self._show()
 
@@ -204,14 +226,15 @@ class DiagnosisScreen(StationScreen):
         name = self.report_path.name
         n = len(r["findings"])
         status.update(f"[b]{name}[/b]: twin {r['twin']['description']}\n"
-                      f"{n} finding{'s' if n != 1 else ''}" + ("" if n else ": no effect is both significant and above the threshold"))
+                      f"{n} finding{'s' if n != 1 else ''}" + ("" if n else ": no effect is both significant and above the threshold")
+                      + "\n" + material_summary(r.get("material_temperature")))
         for f in r["findings"]:
             params = ", ".join(f"{k} {v:.3g}" + (f" ± {f['uncertainty'][k]:.2g}" if f["uncertainty"].get(k) is not None else "")
                                for k, v in f["parameters"].items())
             table.add_row(str(f["leg"]), f["effect"],
                           f"{f['heldout_rms_before_um']:.3g} → {f['heldout_rms_after_um']:.3g}",
                           f"{f['shrink_pct']:.0f} %", f"{f['p_value']:.2g}", params)
-        report_text = text_report(r)
+        report_text = text_report(r) + ("\n\n" + "\n".join(self.temp_lines) if self.temp_lines else "")
         if self.app.hide_volatile:  # the recording's path and hash vary from run to run
             report_text = "\n".join(line for line in report_text.splitlines() if not line.startswith("recording:"))
         text.update(report_text)
