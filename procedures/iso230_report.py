@@ -115,9 +115,26 @@ def _air_compensation(record: Any) -> str:
         d = json.loads(record)
     except (TypeError, ValueError):
         return str(record)
-    if isinstance(d, dict):
-        return ", ".join(f"{k} {v}" for k, v in sorted(d.items()))
-    return str(d)
+    if not isinstance(d, dict):
+        return str(d)
+    # the instrument's record in words: a sensor value left empty is read live at every reading
+    # (mode AUTO), not missing
+    known = (("mode", "mode {}", ""), ("equation", "equation {}", ""), ("wavelength_nm", "vacuum wavelength {} nm", ""),
+             ("air_temp_c", "air temperature {} degC", "air temperature"), ("air_pressure_hpa", "pressure {} hPa", "pressure"),
+             ("humidity_pct", "humidity {} %RH", "humidity"), ("co2_ppm", "CO2 {} ppm", "CO2"),
+             ("dead_path_mm", "dead path {} mm", "dead path"))
+    said, live = [], []
+    for key, text, live_name in known:
+        if key in d:
+            if d[key] is None:
+                if live_name:
+                    live.append(live_name)
+            else:
+                said.append(text.format(d[key]))
+    said += [f"{k} {v}" for k, v in sorted(d.items()) if k not in {k for k, _, _ in known}]
+    if live:
+        said.append(f"{', '.join(live)} from the instrument's sensors at each reading")
+    return ", ".join(said)
 
 
 def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, legs: list[int]) -> dict[str, Any]:
