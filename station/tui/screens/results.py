@@ -9,6 +9,11 @@ within seconds, in the worker, and said in a notification.
 on show, through the same functions (station.report_jobs, procedures.csv_io.export_csv), beside
 the recording: report/<session>.<method>/ and <session>.csv. Neither replaces what is there.
 
+The error is the one `station fit` and `station iso230` use, chosen by the same function
+(procedures.metrology.thermal.error_basis): normalised to 20 degC material temperature by
+default, raw after `t` (their `--raw`); the status shows its lines as the commands print them,
+and the model carries it (`error_basis`) for the table made from it on the Compensation page.
+
 The status says what the table shows; a failed fit's error line belongs to the method it was
 asked for and goes when another method is chosen. An answer of a fit asked for before the last
 request (another file, another method) is dropped.
@@ -59,6 +64,13 @@ class Analysis:
     iso_note: str = ""
     model_path: Path | None = None
     iso_u: dict[int, dict[str, float | None]] | None = None  # leg -> value name -> U (k = 2), um
+    raw: bool = False  # the raw error (`--raw`), else normalised to 20 degC
+    points: Any = None  # the points analysed: session.points with error_um on the chosen basis
+    basis_lines: tuple[str, ...] = ()  # what error_basis says, as the commands print it
+
+    @property
+    def analysed_points(self) -> Any:
+        return self.session.points if self.points is None else self.points
 
 
 class AnalysisReady(Message):
@@ -69,11 +81,12 @@ class AnalysisReady(Message):
 
 
 class AnalysisFailed(Message):
-    def __init__(self, error: str, method: str = "", request: int = 0) -> None:
+    def __init__(self, error: str, method: str = "", request: int = 0, raw: bool = False) -> None:
         super().__init__()
         self.error = error
         self.method = method
         self.request = request
+        self.raw = raw
 
 
 class FilesWritten(Message):
@@ -118,6 +131,24 @@ def iso_uncertainty(iso: Any, points: Any, station_config: dict) -> dict[int, di
     return out
 
 
+def basis_name(raw: bool) -> str:
+    return "raw" if raw else "20 °C"
+
+
+def basis_text(lines: tuple[str, ...] | list[str], raw: bool) -> str:
+    """The error basis for the status: the first line of procedures.metrology.thermal.error_basis
+    (what `station fit` and `station iso230` print), then the legs' lines joined on one line; the
+    key to switch named."""
+    if not lines:
+        return f"error: {basis_name(raw)}"
+    from rich.markup import escape
+
+    head = lines[0].replace("--raw to use it", "t for raw") if not raw else lines[0].replace("(--raw)", "(t: 20 °C)")
+    head = escape(head)
+    rest = [escape(ln.strip()) for ln in lines[1:]]
+    return head + ("\n[dim]" + "; ".join(rest) + "[/dim]" if rest else "")
+
+
 def _fmt(value: float | None, spec: str = ".3f") -> str:
     return "n/a" if value is None else format(value, spec)
 
@@ -139,6 +170,7 @@ class ResultsScreen(StationScreen):
     BINDINGS = [
         Binding("f", "fit", "Fit"),
         Binding("m", "toggle_method", "Method"),
+        Binding("t", "toggle_basis", "Raw/20 °C"),
         Binding("l", "next_leg", "Next leg"),
         Binding("w", "save_model", "Save model"),
         Binding("r", "write_report", "Report"),
@@ -171,8 +203,9 @@ class ResultsScreen(StationScreen):
     def on_mount(self) -> None:
         self.plot_leg: int | None = None
         self._request = 0  # numbers the fit requests: only the newest one's answer is shown
-        self._fitting: tuple[Path, str] | None = None  # (path, method) of the fit under way
+        self._fitting: tuple[Path, str, bool] | None = None  # (path, method, raw) of the fit under way
         self.failure: tuple[str, str] | None = None  # (method, error) of the last failed fit
+        self.raw = False  # the error basis asked for: False = normalised to 20 degC (the commands' default)
         self.follow_sessions()
         self._show()
 
@@ -180,7 +213,7 @@ class ResultsScreen(StationScreen):
     def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
         # app.last_session follows once the file is read and fitted (on_analysis_ready): a file
         # that cannot be read does not become the session the other pages offer
-        self._start_fit(message.path, self._method())
+        self._start_fit(message.path, self._method(), self.raw)
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "fit":
@@ -214,10 +247,23 @@ class ResultsScreen(StationScreen):
         a = self.app.analysis
         if self._fitting is not None:
             if self._fitting[1] != self._method():  # (not when it is this method's fit already)
-                self._start_fit(self._fitting[0], self._method())
+                self._start_fit(self._fitting[0], self._method(), self.raw)
         elif a is not None and a.method != self._method():
-            self._start_fit(a.path, self._method())
+            self._start_fit(a.path, self._method(), self.raw)
         else:  # the analysis on show is of this method already
+            self._show()
+
+    def action_toggle_basis(self) -> None:
+        """Raw error (`--raw` of station fit and iso230) or normalised to 20 degC (their default):
+        the session on show (or being fitted) is fitted and evaluated again on the other."""
+        self.raw = not self.raw
+        self.failure = None
+        a = self.app.analysis
+        if self._fitting is not None:
+            self._start_fit(self._fitting[0], self._fitting[1], self.raw)
+        elif a is not None and a.raw != self.raw:
+            self._start_fit(a.path, self._method(), self.raw)
+        else:
             self._show()
 
     def action_fit(self) -> None:
@@ -226,25 +272,29 @@ class ResultsScreen(StationScreen):
         if path is None:
             self.notify("Open a session first (a finished sweep opens itself here).", severity="warning")
             return
-        self._start_fit(Path(path), self._method())
+        self._start_fit(Path(path), self._method(), self.raw)
 
-    def _start_fit(self, path: Path, method: str) -> None:
+    def _start_fit(self, path: Path, method: str, raw: bool = False) -> None:
         self._request += 1
-        self._fitting = (path, method)
+        self._fitting = (path, method, raw)
         self.failure = None
-        self.query_one("#results-status", Static).update(f"reading and fitting ({method})…")
-        self._analyse(path, method, self._request)
+        self.query_one("#results-status", Static).update(f"reading and fitting ({method}, {basis_name(raw)})…")
+        self._analyse(path, method, raw, self._request)
 
     @work(thread=True, exclusive=True, group="analysis", exit_on_error=False)
-    def _analyse(self, path: Path, method: str, request: int = 0) -> None:
+    def _analyse(self, path: Path, method: str, raw: bool = False, request: int = 0) -> None:
         try:
             from procedures.fit import fit
+            from procedures.metrology.thermal import error_basis
             from procedures.recording.reader import read_session
 
             session = read_session(path)
-            model = fit(session.points, method, source={"path": str(path), "sha256": session.sha256})
+            # the error `station fit` and `station iso230` use (normalised to 20 degC unless --raw)
+            points, basis_lines, basis = error_basis(session, raw)
+            model = fit(points, method, source={"path": str(path), "sha256": session.sha256})
+            model.options["error_basis"] = basis  # as `station fit` saves it: the table says which error it holds
         except Exception as exc:
-            self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}"), method, request))
+            self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}"), method, request, raw))
             return
         iso, note, iso_u = None, "", None
         try:
@@ -253,20 +303,22 @@ class ResultsScreen(StationScreen):
             note = "ISO 230-2 evaluation not available yet (procedures.iso230 missing)"
         else:
             try:
-                iso = iso230.evaluate(session.points)
+                iso = iso230.evaluate(points)
             except Exception as exc:
                 note = describe(exc, "ISO 230-2")
         if iso:
             try:
-                iso_u = iso_uncertainty(iso, session.points, session.station_config)
+                iso_u = iso_uncertainty(iso, points, session.station_config)
             except Exception as exc:  # the values stand without their U; say why
                 note = describe(exc, "ISO 230-2 uncertainty")
-        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note, iso_u=iso_u), request))
+        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note, iso_u=iso_u, raw=raw,
+                                                 points=points, basis_lines=tuple(basis_lines)), request))
 
     def on_analysis_ready(self, message: AnalysisReady) -> None:
         if message.request != self._request:  # asked for before the last request
             return
         self._fitting = None
+        self.raw = message.analysis.raw
         self.app.analysis = message.analysis
         self.app.last_session = message.analysis.path
         self.plot_leg = None
@@ -403,7 +455,7 @@ class ResultsScreen(StationScreen):
         if a is None:
             fit_columns(table, COLUMNS, [], self.app.size.width - 2)
             if self._fitting is not None:
-                status.update(f"reading and fitting ({self._fitting[1]})…")
+                status.update(f"reading and fitting ({self._fitting[1]}, {basis_name(self._fitting[2])})…")
             else:
                 status.update(failure or NO_SESSION)
             self._show_plots()
@@ -412,6 +464,9 @@ class ResultsScreen(StationScreen):
         name = a.path.name if self.app.hide_volatile else str(a.path)
         text = (f"[b]{name}[/b]  {s.outcome}, {len(s.points)} points, legs {s.legs}   method [b]{a.method}[/b]"
                 "   [dim](figures in µm; ISO 230-2 values over ±U, k = 2)[/dim]")
+        text += "\n" + basis_text(a.basis_lines, a.raw)
+        if self.raw != a.raw:  # asked for the other basis, not fitted yet (press f)
+            text += f"\n[yellow]{basis_name(self.raw)} error chosen: press f to fit on it[/yellow]"
         if a.iso_note:
             text += f"\n[yellow]{a.iso_note}[/yellow]"
         extra = []
@@ -454,7 +509,8 @@ class ResultsScreen(StationScreen):
         legs = list(a.model.legs)
         leg = self.plot_leg if self.plot_leg in legs else legs[0]
         self.plot_leg = leg
-        pts = a.session.points[a.session.points["leg"] == leg]
+        points = a.analysed_points  # the error the model was fitted to
+        pts = points[points["leg"] == leg]
         lf = a.model.leg(leg)
         grid = np.linspace(lf.stroke_mm[0], lf.stroke_mm[1], 200)
         series, resid = [], []

@@ -15,6 +15,7 @@ from textual.widgets import DataTable, Input, Select, Static
 
 from procedures.diagnosis import diagnose
 from procedures.fit import fit
+from procedures.metrology.thermal import error_basis
 from procedures.recording.reader import read_session
 from procedures.table import make_table
 from station.tui import capabilities
@@ -41,7 +42,8 @@ async def _results(path, cfg, size, wait_until, notes):
     async with app.run_test(size=size) as pilot:
         await open_session(pilot, wait_until, "f3", path)
         await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
-        points = read_session(path).points
+        # the error of station fit and station iso230 by default: normalised to 20 degC
+        points = error_basis(read_session(path))[0]
         expected = fit(points, "default")
         table = app.screen.query_one("#results-table", DataTable)
         assert table.row_count == 2

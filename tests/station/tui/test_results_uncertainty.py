@@ -9,6 +9,7 @@ import pytest
 from textual.widgets import DataTable, Input
 
 from procedures import iso230
+from procedures.metrology.thermal import error_basis
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
 from procedures.recording.reader import read_session
 from station.tui.app import StationApp
@@ -29,11 +30,12 @@ async def _shown(path, cfg, wait_until):
         await pilot.click("#session-open")
         await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
         session = read_session(path)
-        iso = iso230.evaluate(session.points)
+        points = error_basis(session)[0]  # the page's default error, as station iso230's: normalised to 20 degC
+        iso = iso230.evaluate(points)
         table = app.screen.query_one("#results-table", DataTable)
         labels = [str(c.label) for c in table.columns.values()]
         for row, leg in enumerate(sorted(iso)):
-            budget = leg_budget(iso[leg], session.points, UncertaintyInputs.from_record(session.station_config, leg))
+            budget = leg_budget(iso[leg], points, UncertaintyInputs.from_record(session.station_config, leg))
             cells = dict(zip(labels, table.get_row_at(row)))
             for name in "AEMBR":
                 value, u = cells[name].split("\n")
