@@ -84,12 +84,13 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path) -> dict:
     if not verified:
         raise SystemExit(f"{kind} seed {seed}: no verification result ({job.finished})")
     ratios = [r.ratio for _, r in sorted(verified[0].results.items())]
-    stops = [e for e in result.events if isinstance(e, ev.PassesStopped)] if hasattr(result, "events") else []
     n_points = int(len(session.points))
     readout_s = n_points * READOUT_BYTES * 10 / BAUD / len(legs) if plan.onthefly else 0.0
-    cycles = sorted({int(r) for r in session.points["run"]})
+    cycles = [int(session.points["run"][session.points["leg"] == leg].max()) / 2 for leg in legs]
+    floors = [r.after.noise_floor_um for _, r in sorted(verified[0].results.items())]
     return {"kind": kind, "seed": seed, "legs": len(legs), "rig_s": rig_s / len(legs), "readout_s": readout_s,
-            "ratios": ratios, "points": n_points / len(legs), "cycles": max(cycles) / 2, "wall_s": time.monotonic() - wall0,
+            "ratios": ratios, "points": n_points / len(legs), "cycles": cycles, "floors": floors,
+            "wall_s": time.monotonic() - wall0,
             "outcome": str(result.outcome)}
 
 
@@ -110,17 +111,19 @@ def main(argv=None) -> int:
                 print(f"  seed {seed} {kind}: done in {r['wall_s']:.0f} s wall", file=sys.stderr, flush=True)
     print("Calibration throughput on the simulated rig (time scale 0, jerk-limited legs), verification sweep "
           "with the pushed tables: 41 irregular targets x 5 cycles, stop-and-go")
-    print(f"{'seed':>4} {'plan':<18} {'legs':>4} {'cycles':>6} {'points/leg':>10} {'rig min/leg':>11} "
-          f"{'+readout':>9} {'ratio mean':>10} {'ratio max':>9} {'pass':>5}")
+    print(f"{'seed':>4} {'plan':<18} {'legs':>4} {'cycles':>7} {'points/leg':>10} {'rig min/leg':>11} "
+          f"{'+readout':>9} {'floor um':>8} {'ratio mean':>10} {'ratio max':>9} {'pass':>5}  ratio per leg")
     for r in rows:
         ratios = np.array(r["ratios"], dtype=float)
         ro = f"{r['readout_s'] / 60:9.2f}" if r["readout_s"] else f"{'-':>9}"
-        print(f"{r['seed']:>4} {r['kind']:<18} {r['legs']:>4} {r['cycles']:>6.1f} {r['points']:>10.0f} "
-              f"{r['rig_s'] / 60:>11.2f} {ro} {np.mean(ratios):>10.3f} {np.max(ratios):>9.3f} "
-              f"{int(np.sum(ratios <= 1.1))}/{len(ratios)}")
+        lo, hi = min(r["cycles"]), max(r["cycles"])
+        cyc = f"{lo:g}" if lo == hi else f"{lo:g}-{hi:g}"
+        print(f"{r['seed']:>4} {r['kind']:<18} {r['legs']:>4} {cyc:>7} {r['points']:>10.0f} "
+              f"{r['rig_s'] / 60:>11.2f} {ro} {np.mean(r['floors']):>8.3f} {np.mean(ratios):>10.3f} {np.max(ratios):>9.3f} "
+              f"{int(np.sum(ratios <= 1.1)):>2}/{len(ratios)}  " + " ".join(f"{x:.2f}" for x in ratios))
     print("rig min/leg: calibration sweep time per leg on the rig clock; +readout: reading the captures back over "
-          "a real 115200 baud line, min/leg (add it to rig time for a real instrument); ratio = verification "
-          "residual RMS / its noise floor (pass <= 1.1)")
+          "a real 115200 baud line, min/leg (add it to rig time for a real instrument); floor: the verification "
+          "sessions' noise floor, mean over legs; ratio = verification residual RMS / its noise floor (pass <= 1.1)")
     for seed in args.seeds:
         by = {r["kind"]: r for r in rows if r["seed"] == seed}
         a, iso = by["onthefly-adaptive"], by["iso230"]

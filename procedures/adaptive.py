@@ -10,11 +10,16 @@ procedures.fit.crossval): what the table would leave on a pass it has not seen.
 The held-out RMS is taken about each held-out pass's mean (`heldout_shape_um`): a pass's offset
 is its zero reference, which no table and no number of passes changes.
 
-Rule: stop when the last round improved the held-out RMS by less than `IMPROVEMENT` (5 %) of
-the round before, i.e. `h_k > (1 - IMPROVEMENT) * h_(k-1)`, or when the held-out RMS is within
-`NEAR_FLOOR` (1.05) times the within-pass scatter of the points so far (the measurement noise:
-more passes can only bring the table nearer to a floor it has reached); else measure another
-round, up to the plan's cycles.
+Rule: stop when both
+- the table's shape has converged: the held-out RMS is within `NEAR_FLOOR` (1.05) times the
+  within-pass scatter (the measurement noise: more passes can only bring the table nearer to a
+  floor it has reached), or the last round improved it by less than `IMPROVEMENT` (5 %) of the
+  round before, `h_k > (1 - IMPROVEMENT) * h_(k-1)`; and
+- its reversal (mean down minus mean up, the constant per direction that pass offsets decide) is
+  known to within `REVERSAL_SE` (0.5) times the noise floor: the standard error of the per-cycle
+  reversals. Half a reversal error shows in every verified point, so 0.5 x the floor as standard
+  error keeps its share of a verification's residual to about a quarter of the floor;
+else measure another round, up to the plan's cycles.
 Why 5 %: the held-out RMS of a model that has converged still wanders by a few percent from
 round to round (it is itself an estimate from a few thousand points); a smaller threshold would
 keep measuring on that wander.
@@ -30,6 +35,7 @@ from procedures.errors import InputError
 
 IMPROVEMENT = 0.05
 NEAR_FLOOR = 1.05
+REVERSAL_SE = 0.5
 MIN_ROUNDS = 2
 
 
@@ -39,6 +45,7 @@ class AdaptiveRule:
 
     improvement: float = IMPROVEMENT
     near_floor: float = NEAR_FLOOR
+    reversal_se: float = REVERSAL_SE
     min_rounds: int = MIN_ROUNDS
     heldout_um: list[float] = field(default_factory=list)
     noise_floor_um: float | None = None
@@ -46,34 +53,51 @@ class AdaptiveRule:
     def after_round(self, points: np.ndarray, leg: int) -> str | None:
         """The reason to stop after this round (None: measure another). `points`: this leg's
         points so far (POINT_DTYPE)."""
-        h, floor = heldout_shape_um(points, leg)
+        f = leg_figures(points, leg)
+        h = f.heldout_shape_um
         self.heldout_um.append(h)
-        self.noise_floor_um = floor
+        self.noise_floor_um = f.noise_floor_um
         k = len(self.heldout_um)
         if not np.isfinite(h):
             return None if k < self.min_rounds else "no held-out figure (fewer than two cycles?); stopping"
         if k < self.min_rounds:
             return None
-        if floor and h <= self.near_floor * floor:
-            return (f"held-out RMS {h:.4f} um is within {self.near_floor:g} x the within-pass scatter {floor:.4f} um "
-                    f"after {k} rounds")
         prev = self.heldout_um[-2]
-        if np.isfinite(prev) and h > (1.0 - self.improvement) * prev:
-            return (f"held-out RMS {h:.4f} um after round {k} improved by less than {100 * self.improvement:g} % "
-                    f"on {prev:.4f} um after round {k - 1}")
-        return None
+        if f.within_pass_um and h <= self.near_floor * f.within_pass_um:
+            shape = f"held-out RMS {h:.4f} um within {self.near_floor:g} x the within-pass scatter {f.within_pass_um:.4f} um"
+        elif np.isfinite(prev) and h > (1.0 - self.improvement) * prev:
+            shape = f"held-out RMS {h:.4f} um improved by less than {100 * self.improvement:g} % on {prev:.4f} um"
+        else:
+            return None
+        if f.reversal_se_um is None or not f.noise_floor_um or f.reversal_se_um > self.reversal_se * f.noise_floor_um:
+            return None
+        return (f"after round {k}: {shape}; reversal known to {f.reversal_se_um:.4f} um (standard error), within "
+                f"{self.reversal_se:g} x the noise floor {f.noise_floor_um:.4f} um")
 
 
-def heldout_shape_um(points: np.ndarray, leg: int) -> tuple[float, float | None]:
-    """(held-out RMS about each pass's mean, within-pass scatter) of `leg`'s points, um.
+@dataclass(frozen=True)
+class LegFigures:
+    """What the rule looks at, um: `heldout_shape_um` (held-out RMS about each held-out pass's
+    mean), `within_pass_um` and `noise_floor_um` (procedures.fit.noise), `reversal_se_um` (the
+    standard error of the leg's reversal: the scatter of the per-cycle reversals / sqrt(cycles))."""
+
+    heldout_shape_um: float
+    within_pass_um: float | None
+    noise_floor_um: float | None
+    reversal_se_um: float | None
+
+
+def leg_figures(points: np.ndarray, leg: int) -> LegFigures:
+    """The rule's figures for `leg`'s points so far (module docstring).
 
     The points are taken as `station fit` takes them: normalised to 20 degC (steel, the
     station's default material: the sweep does not hold the station config), the speed-dependent
     part removed, the default model with its options; each cycle is predicted by the model fitted
     on the others (procedures.fit.crossval). Each held-out pass's mean residual is removed: a
     pass offset (re-zeroing, the warm-up of a leg that a fast pass heats in seconds) is the zero
-    reference of that pass, the same for any table, so more passes cannot reduce it; what they
-    can reduce is the error of the table's shape, which this measures."""
+    reference of that pass, the same for any table; what more passes do for the offsets is
+    measured by the reversal's standard error instead (the table's one constant that the offsets
+    of up and down passes decide)."""
     from procedures.fit.bidirectional import fit_bidirectional_leg
     from procedures.fit.crossval import cycle_folds
     from procedures.fit.data import split_legs
@@ -81,18 +105,27 @@ def heldout_shape_um(points: np.ndarray, leg: int) -> tuple[float, float | None]
     from procedures.fit.noise import estimate_noise_floor
     from procedures.metrology.thermal import Material, normalise_points
 
+    nothing = LegFigures(float("nan"), None, None, None)
     try:
         normalised = normalise_points(points, {leg: Material()}).points
         data = split_legs(static_points(normalised), source=f"leg {leg} so far")[leg]
         folds = cycle_folds(data)
         if folds is None:
-            return float("nan"), None
+            return nothing
         _, resid, _ = fit_bidirectional_leg(data, folds, where=f"leg {leg}")
     except (InputError, KeyError):
-        return float("nan"), None
+        return nothing
     if resid is None:
-        return float("nan"), None
+        return nothing
     runs, ids = np.unique(data.run, return_inverse=True)
     means = np.bincount(ids, weights=resid) / np.bincount(ids)
     shape = resid - means[ids]
-    return float(np.sqrt(np.mean(shape ** 2))), estimate_noise_floor(data).within_pass_um
+    reversals = []
+    for c in np.unique(data.cycle):
+        up = (data.cycle == c) & (data.direction > 0)
+        down = (data.cycle == c) & (data.direction < 0)
+        if np.any(up) and np.any(down):
+            reversals.append(float(np.mean(data.error_um[down]) - np.mean(data.error_um[up])))
+    se = float(np.std(reversals, ddof=1) / np.sqrt(len(reversals))) if len(reversals) >= 2 else None
+    nf = estimate_noise_floor(data)
+    return LegFigures(float(np.sqrt(np.mean(shape ** 2))), nf.within_pass_um, nf.noise_floor_um, se)

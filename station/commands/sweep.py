@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(0.5 mm), onthefly-adaptive: the same, stopping once the table stops improving")
     p.add_argument("--legs", default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
     p.add_argument("--cycles", type=int, help="bidirectional cycles (default: 5 iso230, 6 paper, 6 onthefly, "
-                                               "at most 10 onthefly-adaptive)")
+                                               "at most 8 onthefly-adaptive)")
     spacing = p.add_mutually_exclusive_group()
     spacing.add_argument("--step", type=float, metavar="MM", help="uniform target spacing in mm (on the fly: "
                                                                    "capture spacing, default 0.5)")
