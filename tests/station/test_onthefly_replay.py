@@ -47,3 +47,30 @@ def test_onthefly_session_replays_identically(tmp_path: Path):
         if name != "flags":
             assert live.points[name].tobytes() == rep.points[name].tobytes(), name
     assert np.all(rep.points["flags"] == live.points["flags"] | FLAG_REPLAYED)
+
+
+def test_an_aborted_onthefly_session_resumes_to_every_point_once(tmp_path: Path):
+    from procedures import events as ev
+    from procedures.control import RunControl
+    from procedures.runner import CallbackSink
+    from station.jobs import resumable_plan
+
+    out = tmp_path / "otf.h5"
+    plan = onthefly_plan((1,), cycles=2, step_mm=5.0)
+    control = RunControl()
+
+    def abort_mid_pass(e):
+        if isinstance(e, ev.PointMeasured) and e.done == 50:  # in the second pass
+            control.abort("test")
+
+    with open_sample_rig() as rig:
+        first = run_sweep(rig, plan, out, CFG, sinks=[CallbackSink(abort_mid_pass)], control=control)
+    assert first.outcome == "aborted"
+    partial = read_session(out)
+    assert 0 < len(partial.points) < plan.total_points
+    assert resumable_plan(out) == plan
+    with open_sample_rig() as rig:
+        second = run_sweep(rig, plan, out, CFG, resume=True)
+    assert second.outcome == "completed"
+    done = read_session(out)
+    assert sorted(done.points["index"].tolist()) == list(range(plan.total_points))  # none twice, none missing
