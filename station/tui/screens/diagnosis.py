@@ -42,17 +42,23 @@ def twin_spec(kind: str, typed: str = "") -> str | None:
 
 
 def material_summary(doc: dict | None) -> str:
-    """One line for the status: the material temperature range per leg from the report's
-    `material_temperature` (procedures.metrology.thermal.diagnosis_temperature_note); the
-    diagnosis is on the raw error, which the other analyses normalise to the reference."""
+    """One line for the status: the material temperature range over the legs from the report's
+    `material_temperature` (procedures.metrology.thermal.diagnosis_temperature_note; each leg's
+    range ends the text). The diagnosis is on the raw error, which the other analyses normalise
+    to the reference temperature."""
     if not doc:
         return "[dim]material temperature: not in the report[/dim]"
+    from procedures.ranges import legs_text
+
     ref = doc.get("reference_temp_c", 20.0)
     legs = doc.get("legs") or {}
     if not legs:
-        return f"[dim]raw error; no material temperature recorded (nothing to normalise to {ref:g} °C)[/dim]"
-    ranges = ", ".join(f"leg {k} {v['min_c']:.2f}..{v['max_c']:.2f}" for k, v in legs.items())
-    return f"raw error (not normalised to {ref:g} °C); material °C: {ranges}"
+        return f"raw error; no material temperature recorded (nothing to normalise to {ref:g} °C)"
+    lo = min(v["min_c"] for v in legs.values())
+    hi = max(v["max_c"] for v in legs.values())
+    far = max(v["max_from_reference_k"] for v in legs.values())
+    return (f"raw error (not normalised to {ref:g} °C); material {lo:.2f}..{hi:.2f} °C on legs "
+            f"{legs_text(int(k) for k in legs)}, up to {far:.2f} K from {ref:g} °C")
 
 
 class DiagnosisReady(Message):

@@ -11,8 +11,8 @@ the recording: report/<session>.<method>/ and <session>.csv. Neither replaces wh
 
 The error is the one `station fit` and `station iso230` use, chosen by the same function
 (procedures.metrology.thermal.error_basis): normalised to 20 degC material temperature by
-default, raw after `t` (their `--raw`); the status shows its lines as the commands print them,
-and the model carries it (`error_basis`) for the table made from it on the Compensation page.
+default, raw after `t` (their `--raw`); the status says which in one line (the commands' lines
+in its tooltip), and the model carries it (`error_basis`) for the table made from it on the Compensation page.
 
 The status says what the table shows; a failed fit's error line belongs to the method it was
 asked for and goes when another method is chosen. An answer of a fit asked for before the last
@@ -67,6 +67,7 @@ class Analysis:
     raw: bool = False  # the raw error (`--raw`), else normalised to 20 degC
     points: Any = None  # the points analysed: session.points with error_um on the chosen basis
     basis_lines: tuple[str, ...] = ()  # what error_basis says, as the commands print it
+    basis: dict | None = None  # the same as JSON (the model's options["error_basis"])
 
     @property
     def analysed_points(self) -> Any:
@@ -135,18 +136,32 @@ def basis_name(raw: bool) -> str:
     return "raw" if raw else "20 °C"
 
 
-def basis_text(lines: tuple[str, ...] | list[str], raw: bool) -> str:
-    """The error basis for the status: the first line of procedures.metrology.thermal.error_basis
-    (what `station fit` and `station iso230` print), then the legs' lines joined on one line; the
-    key to switch named."""
-    if not lines:
-        return f"error: {basis_name(raw)}"
+def basis_text(lines: tuple[str, ...] | list[str], basis: dict | None, raw: bool) -> str:
+    """The error basis in one line for the status (the page must fit 80x24): the head of what
+    procedures.metrology.thermal.error_basis says (as `station fit` and `station iso230` print it)
+    with the material temperature and correction ranges over the normalised legs, and the key to
+    switch. The commands' full lines are the status' tooltip."""
     from rich.markup import escape
 
-    head = lines[0].replace("--raw to use it", "t for raw") if not raw else lines[0].replace("(--raw)", "(t: 20 °C)")
-    head = escape(head)
-    rest = [escape(ln.strip()) for ln in lines[1:]]
-    return head + ("\n[dim]" + "; ".join(rest) + "[/dim]" if rest else "")
+    from procedures.ranges import legs_text
+
+    if not lines:
+        return f"error: {basis_name(raw)}"
+    if raw or not basis or not basis.get("normalised"):
+        head = lines[0].replace(" (--raw)", "")
+        return escape(head) + f"  [dim](t: {'normalise to 20 °C' if raw else 'raw'})[/dim]"
+    ref = basis.get("reference_temp_c", 20.0)
+    legs = [str(k) for k in basis.get("normalised_legs", [])]
+    temps = [v for k, v in basis.get("material_temp_range_c", {}).items() if k in legs]
+    corr = [v for k, v in basis.get("correction_range_um", {}).items() if k in legs]
+    text = f"error: normalised to {ref:g} degC material temperature, legs {legs_text(int(k) for k in legs)}"
+    if temps and corr:
+        text += (f": material {min(t[0] for t in temps):.2f}..{max(t[1] for t in temps):.2f} °C, "
+                 f"correction {min(c[0] for c in corr):+.3f}..{max(c[1] for c in corr):+.3f} µm")
+    raw_legs = basis.get("raw_legs") or {}
+    if raw_legs:
+        text += "; raw on " + "; ".join(f"leg {k} ({v})" for k, v in sorted(raw_legs.items()))
+    return escape(text) + "  [dim](t: raw)[/dim]"
 
 
 def _fmt(value: float | None, spec: str = ".3f") -> str:
@@ -170,7 +185,8 @@ class ResultsScreen(StationScreen):
     BINDINGS = [
         Binding("f", "fit", "Fit"),
         Binding("m", "toggle_method", "Method"),
-        Binding("t", "toggle_basis", "Raw/20 °C"),
+        # the footer has no room left at 80 columns (it would push Quit out): the status names the key
+        Binding("t", "toggle_basis", "Error raw / normalised to 20 °C (--raw)", show=False),
         Binding("l", "next_leg", "Next leg"),
         Binding("w", "save_model", "Save model"),
         Binding("r", "write_report", "Report"),
@@ -312,7 +328,7 @@ class ResultsScreen(StationScreen):
             except Exception as exc:  # the values stand without their U; say why
                 note = describe(exc, "ISO 230-2 uncertainty")
         self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note, iso_u=iso_u, raw=raw,
-                                                 points=points, basis_lines=tuple(basis_lines)), request))
+                                                 points=points, basis_lines=tuple(basis_lines), basis=basis), request))
 
     def on_analysis_ready(self, message: AnalysisReady) -> None:
         if message.request != self._request:  # asked for before the last request
@@ -464,7 +480,8 @@ class ResultsScreen(StationScreen):
         name = a.path.name if self.app.hide_volatile else str(a.path)
         text = (f"[b]{name}[/b]  {s.outcome}, {len(s.points)} points, legs {s.legs}   method [b]{a.method}[/b]"
                 "   [dim](figures in µm; ISO 230-2 values over ±U, k = 2)[/dim]")
-        text += "\n" + basis_text(a.basis_lines, a.raw)
+        text += "\n" + basis_text(a.basis_lines, a.basis, a.raw)
+        status.tooltip = "\n".join(a.basis_lines) or None
         if self.raw != a.raw:  # asked for the other basis, not fitted yet (press f)
             text += f"\n[yellow]{basis_name(self.raw)} error chosen: press f to fit on it[/yellow]"
         if a.iso_note:

@@ -96,15 +96,25 @@ async def _basis(path, cfg, wait_until, cli, printed):
         norm = _check_against_cli(app, session, cli[False], raw=False)
         norm_lines = error_basis(session, False)[1]
         assert norm_lines[0] in printed  # the line the commands printed ...
-        assert norm_lines[0].split(" (")[0] in status()  # ... heads the page's basis
-        assert "error: normalised to 20 degC material temperature" in status() and "t for raw" in status()
-        for line in norm_lines[1:]:  # each leg's material range and correction
-            assert line.strip() in status()
+        assert norm_lines[0].split(" (")[0] in status()  # ... heads the page's basis line
+        basis = app.analysis.basis
+        temps = basis["material_temp_range_c"].values()
+        corr = basis["correction_range_um"].values()
+        assert (f"error: normalised to 20 degC material temperature, legs 1, 2: material "
+                f"{min(t[0] for t in temps):.2f}..{max(t[1] for t in temps):.2f} °C, correction "
+                f"{min(c[0] for c in corr):+.3f}..{max(c[1] for c in corr):+.3f} µm  (t: raw)") in status()
+        # the commands' full lines (each leg's range and correction) are the status' tooltip
+        assert str(app.screen.query_one("#results-status", Static).tooltip) == "\n".join(norm_lines)
+        # the key is in the help (the footer has no room for it at 80 columns)
+        from station.tui.screens.help import help_text
+
+        assert "[b]t[/b] Error raw / normalised to 20 °C (--raw)" in help_text(app)
         # 2) t: the raw error, as --raw
         await pilot.press("t")
         await wait_until(pilot, lambda: app.analysis.raw, 60, "the fit on the raw error")
         raw = _check_against_cli(app, session, cli[True], raw=True)
-        assert "error: raw, not normalised to 20 degC" in status() and "error: normalised" not in status()
+        assert "error: raw, not normalised to 20 degC  (t: normalise to 20 °C)" in status()
+        assert "error: normalised" not in status()
         # the two bases give different figures on this session: the comparisons above could fail
         assert any(abs(norm[leg]["E"] - raw[leg]["E"]) > 0.01 for leg in norm)
         # 3) the method keeps the basis; t again goes back to 20 degC
@@ -135,8 +145,13 @@ async def _diagnosis(path, cfg, wait_until, tmp_path):
         await wait_until(pilot, lambda: app.screen.report is not None, 90, "the diagnosis")
         assert app.screen.report["material_temperature"] == doc
         status = str(app.screen.query_one("#diag-status", Static).render())
-        assert "raw error (not normalised to 20 °C)" in status
-        for leg, v in doc["legs"].items():
-            assert f"leg {leg} {v['min_c']:.2f}..{v['max_c']:.2f}" in status
+        lo = min(v["min_c"] for v in doc["legs"].values())
+        hi = max(v["max_c"] for v in doc["legs"].values())
+        far = max(v["max_from_reference_k"] for v in doc["legs"].values())
+        assert hi - lo > 0.05 and far > 0.05  # the legs warmed: the line has something to say
+        assert (f"raw error (not normalised to 20 °C); material {lo:.2f}..{hi:.2f} °C on legs 1, 2, "
+                f"up to {far:.2f} K from 20 °C") in status
+        # each leg's range ends the text, as `station diagnose` prints it
         text = str(app.screen.query_one("#diag-text", Static).render())
-        assert f"leg 1: {doc['legs']['1']['min_c']:.2f} .. {doc['legs']['1']['max_c']:.2f} degC" in text
+        for leg, v in doc["legs"].items():
+            assert f"leg {leg}: {v['min_c']:.2f} .. {v['max_c']:.2f} degC" in text
