@@ -274,7 +274,10 @@ def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationCo
     # what the recorded values went through, so they come back through it bit for bit
     recorded = str((session.station_config.get("drive") or {}).get("profile") or "")
     profile = DriveProfile.load(recorded if recorded and Path(recorded).is_file() else (cfg.drive.profile or None))
-    replay = ReplayRig(script, speed=speed, profile=profile).start()
+    replay = ReplayRig(script, speed=speed, profile=profile)
+    # COMP? answers the recorded air compensation, so the replayed session records the same
+    replay.laser_server.set_recorded_compensation(session.devices.get("laser_air_compensation"), str(path))
+    replay.start()
     try:
         # nothing recorded may depend on the wall clock: no timeout may fire on a request the
         # replay answers, however loaded the machine (drivers/replay/clock.py)

@@ -6,10 +6,17 @@ decimals (9 for positions, 1-3 for the environment), which would round values th
 through this protocol (an import, another instrument) and so change `error_um`. The client
 parses both forms (`float()`), so nothing changes on its side. Other commands (identity,
 averaging, zero) behave as on the simulated instrument.
+
+`COMP?` answers the recording's own air-compensation record (`laser_air_compensation` in the
+session's devices, `set_recorded_compensation`), its numbers exact, so a replayed session records
+what the recorded one did; a recording whose instrument did not report one is answered with ERR 11
+(the recorded refusal, replayed), a recording made before the record existed, or one whose record
+cannot be sent, with ERR 10 naming why: never the simulator's default (docs/replay.md).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import threading
 
@@ -39,6 +46,7 @@ class ReplayInterferometer(SimInterferometer):
         super().__init__(plants, clock, lock=lock, axes=axes, identity=identity)
         self.state = state
         self.timeout_clock = timeout_clock
+        self._comp_reply = recorded_compensation_reply(None)  # until the recording's record is given
 
     def _position(self, axis: int) -> bytes | None:
         # No averaging window on the replay clock: a fresh answer (a reading, a fault) sets the
@@ -89,3 +97,51 @@ class ReplayInterferometer(SimInterferometer):
         with self.lock:
             air_c, pressure_hpa, humidity_pct, temps = self.state.environment(self.plants, self.axes)
         return p.frame_reply("ENV", exact(air_c), exact(pressure_hpa), exact(humidity_pct), *(exact(t) for t in temps))
+
+    # -- COMP?: the recorded air-compensation record -------------------------------------------------
+    def set_recorded_compensation(self, record: str | None, source: str = "the recording") -> None:
+        """What COMP? answers from now on: the session's `laser_air_compensation` (None: the
+        recording has none). See recorded_compensation_reply."""
+        self._comp_reply = recorded_compensation_reply(record, source)
+
+    def _handle(self, line: bytes) -> bytes | None:
+        word, args = p.parse_command(line)
+        if word == p.CMD_COMP and not args:
+            self.commands[word] += 1
+            return self._comp_reply
+        return super()._handle(line)
+
+
+def _err_text(text: str) -> str:
+    return text[:_MAX_ERR_TEXT]
+
+
+def recorded_compensation_reply(record: str | None, source: str = "the recording") -> bytes:
+    """The reply to COMP? of a replay of a session whose `laser_air_compensation` is `record`.
+
+    - the JSON record procedures.sweep wrote from the recorded instrument's COMP? answer: that
+      answer again, numbers exact (`repr`), so the replayed session's record is the same text;
+    - "not reported (...)" (the recorded instrument refused COMP?, or its driver had none): ERR 11,
+      the refusal replayed, the recorded text in it; the replayed session records it as not reported;
+    - None or "" (a recording made before the record existed): ERR 10, saying the recording holds
+      none; never the simulator's default, which would make a record the recording does not hold;
+    - anything else (a record that is not valid JSON or not a valid COMP answer): ERR 10 naming why.
+    """
+    if not record:
+        return p.format_error(ERR_NOT_RECORDED, _err_text(
+            f"replay: {source} holds no air-compensation record (laser_air_compensation; recorded before "
+            "the station asked COMP?)"))
+    if record.startswith("not reported"):
+        return p.format_error(ERR_REPLAYED, _err_text(f"replay: recorded as {record}"))
+    try:
+        doc = json.loads(record)
+        fields = ["COMP", str(doc["mode"]), str(doc["equation"])]
+        for key in ("wavelength_nm", "air_temp_c", "air_pressure_hpa", "humidity_pct", "co2_ppm", "dead_path_mm"):
+            value = doc[key]
+            fields.append("NAN" if value is None else exact(float(value)))
+        p.parse_compensation(fields)  # what the client will check: refuse it here, with the reason
+    except (ValueError, TypeError, KeyError, p.ProtocolError) as exc:
+        why = f"missing key {exc.args[0]}" if isinstance(exc, KeyError) else str(exc)
+        return p.format_error(ERR_NOT_RECORDED, _err_text(
+            f"replay: the air-compensation record of {source} cannot be replayed ({why})"))
+    return p.frame_reply(*fields)
