@@ -129,8 +129,8 @@ def recorded_compensation_reply(record: str | None, source: str = "the recording
     """
     if not record:
         return p.format_error(ERR_NOT_RECORDED, _err_text(
-            f"replay: {source} holds no air-compensation record (laser_air_compensation; recorded before "
-            "the station asked COMP?)"))
+            "replay: no air-compensation record (laser_air_compensation; recorded before the station asked "
+            f"COMP?) in {source}"))  # the reason first: a long path is what the length limit cuts
     if record.startswith("not reported"):
         return p.format_error(ERR_REPLAYED, _err_text(f"replay: recorded as {record}"))
     try:
@@ -143,5 +143,5 @@ def recorded_compensation_reply(record: str | None, source: str = "the recording
     except (ValueError, TypeError, KeyError, p.ProtocolError) as exc:
         why = f"missing key {exc.args[0]}" if isinstance(exc, KeyError) else str(exc)
         return p.format_error(ERR_NOT_RECORDED, _err_text(
-            f"replay: the air-compensation record of {source} cannot be replayed ({why})"))
+            f"replay: the air-compensation record cannot be replayed ({why}) from {source}"))
     return p.frame_reply(*fields)

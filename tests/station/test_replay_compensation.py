@@ -92,11 +92,11 @@ def test_an_old_recording_without_a_record_is_answered_explicitly(recorded, tmp_
         with pytest.raises(p.InstrumentError) as err:
             rig.laser.compensation()
     assert err.value.code == ERR_NOT_RECORDED
-    assert "holds no air-compensation record (laser_air_compensation" in err.value.instrument_text
+    assert err.value.instrument_text.startswith("replay: no air-compensation record (laser_air_compensation")
     assert "old.h5" in err.value.instrument_text
     # a replay still runs; the replayed session says there was nothing to report, not a default
     record = _replay(old, tmp_path / "old-replayed.h5")[KEY]
-    assert record.startswith("not reported (") and "holds no air-compensation record" in record
+    assert record.startswith("not reported (") and "no air-compensation record" in record
 
 
 def test_a_recorded_refusal_is_replayed_as_a_refusal(recorded, tmp_path):
@@ -121,4 +121,5 @@ def test_a_record_that_cannot_be_sent_is_refused_naming_why(record, why):
     fields = p.split_reply(recorded_compensation_reply(record, "x.h5"))
     assert fields[:2] == ["ERR", str(ERR_NOT_RECORDED)]
     text = ",".join(fields[2:])
-    assert "air-compensation record of x.h5 cannot be replayed" in text and why in text
+    assert text.startswith("replay: the air-compensation record cannot be replayed (") and why in text
+    assert text.endswith("from x.h5")
