@@ -73,6 +73,11 @@ def load(path: str | os.PathLike, comp_type: int = 0) -> LinuxCncComp:
             keep = i
             break
     keep = min(keep, LINUXCNC_MAX_LINES)
+    # sscanf reads "nan" and "inf" as numbers: LinuxCNC would load them and apply them
+    bad = np.flatnonzero(~(np.isfinite(nom[:keep]) & np.isfinite(fwd[:keep]) & np.isfinite(rev[:keep])))
+    if bad.size:
+        raise ControllerFileError(f"{path}, line {bad[0] + 1}: a value that is not a finite number (nan or inf); "
+                                  "LinuxCNC would apply it as a correction: write the table again")
     return LinuxCncComp(nom[:keep], fwd[:keep], rev[:keep])
 
 

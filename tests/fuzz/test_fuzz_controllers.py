@@ -18,7 +18,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from procedures.controllers import FORMATS, module
 from procedures.errors import InputError
@@ -86,6 +86,8 @@ def controller_case(draw):
 
 @settings(max_examples=examples(300))
 @given(controller_case())
+@example(("linuxcnc", "joint0.comp", b"nan -40.005 -39.996\n-30 -30.00375 -29.99725\n"))  # found: NaN corrections
+@example(("linuxcnc", "joint0.comp", b"-40 -40.005 -39.996\n-30 inf -29.99725\n"))
 def test_controller_readers_fuzzed(case):
     name, fname, data = case
     with tempfile.TemporaryDirectory() as d:
