@@ -157,9 +157,8 @@ def sweep(
                 except DriverError as exc:  # recorded like a point's fault: the session says where it stopped
                     if control.aborted:
                         raise Aborted(control.reason) from exc
-                    what = "set the averaging, " if last_leg is None else f"disable leg {last_leg}, "
                     fault = ev.Fault(p.index, p.leg, p.run, 0.0, _kind(exc),
-                                     f"preparing leg {p.leg} ({what}enable, zero at mid-stroke): {exc}", 1, True,
+                                     f"preparing leg {p.leg} (enable, zero at mid-stroke): {exc}", 1, True,
                                      clock.now() - t_start)
                     yield fault
                     raise SweepFailed(fault) from exc
