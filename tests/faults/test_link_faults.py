@@ -31,7 +31,7 @@ from drivers.interfaces import TableBank
 from procedures import events as ev
 from procedures.audit import AuditLog
 from procedures.plans import SweepPlan
-from procedures.push import PushFailed, PushRefused, push_table, rollback, table_sha256
+from procedures.push import PushFailed, PushRefused, push_table, rollback
 from procedures.recording.reader import read_session
 from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
 from procedures.runner import CallbackSink
