@@ -104,6 +104,8 @@ def load(path: str | os.PathLike) -> TwinCatComp:
             v = int(value)
         except ValueError:
             raise ControllerFileError(f"{path}, line {no}, field {key}: {value!r} is not an integer") from None
+        if not -2**31 <= v < 2**31:  # the CNC's 32-bit integers (0.1 um): beyond them it is not a table
+            raise ControllerFileError(f"{path}, line {no}, field {key}: {value[:20]!r}... is beyond a 32-bit integer")
         if index is not None:
             table[field][int(index)] = (v, no)
         else:

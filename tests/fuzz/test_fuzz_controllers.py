@@ -88,6 +88,8 @@ def controller_case(draw):
 @given(controller_case())
 @example(("linuxcnc", "joint0.comp", b"nan -40.005 -39.996\n-30 -30.00375 -29.99725\n"))  # found: NaN corrections
 @example(("linuxcnc", "joint0.comp", b"-40 -40.005 -39.996\n-30 inf -29.99725\n"))
+@example(("twincat", "achskw1.lis", b"kw.ssfk.table[0].setpoint " + b"9" * 400 + b"\nkw.ssfk.table[1].setpoint 0\n"
+          b"kw.ssfk.table[0].pos 1\nkw.ssfk.table[1].pos 2\n"))  # found: OverflowError
 def test_controller_readers_fuzzed(case):
     name, fname, data = case
     with tempfile.TemporaryDirectory() as d:
