@@ -33,6 +33,7 @@ import pytest
 
 from drivers.sim.plant import default_leg_configs
 from procedures.audit import read_entries
+from procedures.metrology.thermal import error_basis
 from procedures.recording.reader import read_session
 from station.cli import main
 
@@ -83,7 +84,10 @@ def test_sweep_fit_push_verify_reaches_the_noise_floor_on_every_leg(capsys):
           "--noise-seed", "1", "--json", "ver.json"])
     report, err = capsys.readouterr()
 
-    cal, ver = read_session("cal.h5").points, read_session("ver.h5").points
+    # the figures are on the error normalised to 20 degC, as verify judges by default (its
+    # report says so); the normalisation itself is tested in tests/procedures/metrology
+    cal, ver = (error_basis(read_session(name))[0] for name in ("cal.h5", "ver.h5"))
+    assert "error: normalised to 20 degC material temperature" in report
     figures = json.loads(open("ver.json").read())["legs"]
     plant = default_leg_configs(0)[0]
     white_and_offsets = math.hypot(plant.noise_um, plant.run_offset_um)
@@ -101,7 +105,12 @@ def test_sweep_fit_push_verify_reaches_the_noise_floor_on_every_leg(capsys):
         within, within_cal = f["after"]["within_pass_um"], f["before"]["within_pass_um"]
         assert abs(within / within_cal - 1.0) <= 0.2, f"leg {leg}: within-pass {within:.4f} vs {within_cal:.4f} um"
         assert abs(floor / floor_cal - 1.0) <= 0.35, f"leg {leg}: floor {floor:.4f} vs calibration {floor_cal:.4f} um"
-        assert floor >= white_and_offsets
+        # ... nor far below the plant's noise and pass offsets: the pass offsets are drawn once per
+        # pass (five per direction here), so their sample spread has few degrees of freedom: for
+        # 8 of them chi-square's 5th percentile gives sqrt(2.73 / 8) = 0.58 of the true spread,
+        # hence 0.6 (the seeds are fixed: measured 0.71 on leg 1). The raw error's floor also held
+        # the passes' thermal drift, which the normalisation removes.
+        assert floor >= 0.6 * white_and_offsets
         # the criterion can fail: the uncompensated calibration is far above its floor
         assert rms_about_mean_um(cal, leg) / floor_cal > 2.0
         # the systematic deviation (ISO 230-2 E) is what the table removed
