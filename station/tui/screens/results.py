@@ -385,8 +385,9 @@ class ResultsScreen(StationScreen):
         return path.name if self.app.hide_volatile else str(path)
 
     def action_write_report(self) -> None:
-        """`station report SESSION --out report/<session>.<method>/` with the model on show (the
-        default model is the one `station report` fits; another is as `--model` its saved file)."""
+        """`station report SESSION --out report/<session>.<method>/ --model MODEL.json` with the model
+        on show (as `station fit` makes it: on the error normalised to 20 degC by default; on the raw
+        error, `t`, the default model is the one `station report` without --model fits)."""
         a = self.app.analysis
         if a is None:
             self.notify("Open a session first: the report is of the session and model on show.", title="Report",

@@ -10,6 +10,7 @@ import pytest
 from textual.widgets import DataTable, Input
 
 from procedures.fit import fit
+from procedures.metrology.thermal import error_basis
 from procedures.platform.experiment import RecordedLegErrors, run_measurements
 from procedures.platform.geometry import default_geometry
 from procedures.recording.reader import read_session
@@ -96,7 +97,7 @@ async def _analysis_on_show(path, cfg, size, wait_until, notes):
         screen = app.screen
         # the same experiment, straight from the procedures: the model Results fits, both measurements
         session = read_session(path)
-        model = fit(session.points, "default")
+        model = fit(error_basis(session)[0], "default")  # fitted, as `station fit`, to the error at 20 degC
 
         def errors(measurement):
             return RecordedLegErrors(session.points, predicted_um=model.predict_um, measurement=measurement)

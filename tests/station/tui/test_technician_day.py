@@ -135,17 +135,32 @@ async def _report_and_csv(path, cfg, size, wait_until, notes, cli_dir):
     async with app.run_test(size=size) as pilot:
         await open_on(pilot, wait_until, "f3", path)
         await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
-        # r: the report of `station report FILE --out DIR` (the default model, fitted to the session)
+        # r: the report of the model on show, the default model of `station fit` (normalised to 20 degC
+        # by default): `station report FILE --out DIR --model MODEL.json` with that model
         await pilot.press("r")
         out = path.parent / "report" / "two-legs.default"
         await wait_until(pilot, lambda: any("Report written to" in n for n in notes(app)), 60, "the report")
         note = next(n for n in notes(app) if "Report written to" in n)
         assert str(out) in note and "summary.md" in note
-        assert main(["report", str(path), "--out", str(cli_dir / "report")]) == 0
+        cli_dir.mkdir()
+        assert main(["fit", str(path), "--out", str(cli_dir / "default.model.json")]) == 0
+        assert main(["report", str(path), "--out", str(cli_dir / "report"),
+                     "--model", str(cli_dir / "default.model.json")]) == 0
         for name in ("errors.png", "residuals.png", "histograms.png", "spectrum.png"):
             assert (out / name).stat().st_size > 0
         for name in ("summary.json", "summary.md"):
             assert (out / name).read_text() == (cli_dir / "report" / name).read_text(), name
+        # on the raw error (t) the model on show is the one `station report FILE` fits itself
+        shutil.rmtree(out)
+        await pilot.press("t")
+        await wait_until(pilot, lambda: app.analysis.raw, 60, "the fit on the raw error")
+        app.clear_notifications()
+        await pilot.press("r")
+        await wait_until(pilot, lambda: any("Report written to" in n for n in notes(app)), 60, "the raw report")
+        assert main(["report", str(path), "--out", str(cli_dir / "report-raw")]) == 0
+        for name in ("summary.json", "summary.md"):
+            assert (out / name).read_text() == (cli_dir / "report-raw" / name).read_text(), name
+        assert (out / "summary.json").read_text() != (cli_dir / "report" / "summary.json").read_text()
         # again: refused, nothing replaced
         app.clear_notifications()
         before = (out / "summary.json").stat().st_mtime_ns
