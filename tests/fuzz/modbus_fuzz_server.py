@@ -47,6 +47,7 @@ class FuzzModbusServer:
         self._sock.listen(4)
         self.port = self._sock.getsockname()[1]
         self._stop = threading.Event()
+        self._loops = 0  # rounds of the serving loop (wait_idle)
         self._conns: list[socket.socket] = []
         self._thread = threading.Thread(target=self._serve, name="fuzz-modbus", daemon=True)
         self._thread.start()
@@ -55,6 +56,13 @@ class FuzzModbusServer:
         self.plan = deque(plan)
         self.valid_sent = []
         self._rng.seed(seed)
+
+    def wait_idle(self) -> None:
+        """Return once the serving loop has come round twice: a late reply it was holding back
+        (the thread sleeps for it) has been sent, so the next request is answered at once."""
+        start = self._loops
+        while self._loops < start + 2 and self._thread.is_alive():
+            time.sleep(0.01)
 
     def stop(self) -> None:
         self._stop.set()
@@ -67,6 +75,7 @@ class FuzzModbusServer:
     def _serve(self) -> None:
         bufs: dict[socket.socket, bytes] = {}
         while not self._stop.is_set():
+            self._loops += 1
             ready, _, _ = select.select([self._sock, *bufs], [], [], 0.05)
             for s in ready:
                 if s is self._sock:
