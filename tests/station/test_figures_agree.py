@@ -216,3 +216,67 @@ def test_a_model_file_with_the_old_range_key_still_loads(outputs, tmp_path):
         assert lf.stats.heldout_range_um == outputs["model"].legs[leg].stats.heldout_range_um
     save_model(model, tmp_path / "again.json", str(SAMPLE), doc["source"]["sha256"])
     assert "heldout_range_um" in json.loads((tmp_path / "again.json").read_text())["legs"]["1"]["stats"]
+
+
+def test_the_results_page_shows_the_commands_figures_on_their_basis(outputs, tmp_path):
+    """The terminal UI's Results page on the sample: on the raw error (`t`) every figure it shows
+    is the one `station fit --raw` and `station iso230 --raw` give above; on its default basis
+    (normalised to 20 degC) the one `station fit` and `station iso230` give without --raw."""
+    import asyncio
+    import contextlib
+    import io
+
+    from textual.widgets import DataTable, Input
+
+    from station.config import StationConfig
+    from station.tui.app import StationApp
+
+    normalised = {}
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["fit", str(SAMPLE), "--out", str(tmp_path / "model.json")]) == 0
+        assert main(["iso230", str(SAMPLE), "--json", str(tmp_path / "iso230.json")]) == 0
+    normalised["model"] = load_model(tmp_path / "model.json")
+    normalised["iso230"] = json.loads((tmp_path / "iso230.json").read_text())
+    assert normalised["model"].options["error_basis"]["normalised"]
+    # the bases differ on the sample (its legs warm by about 0.3 K): the page cannot pass both by chance
+    assert all(f"{normalised['iso230']['legs'][k]['E']:.3f}" != f"{outputs['iso230']['legs'][k]['E']:.3f}"
+               for k in normalised["iso230"]["legs"])
+
+    def check(app, cli) -> int:
+        table = app.screen.query_one("#results-table", DataTable)
+        labels = [str(c.label) for c in table.columns.values()]
+        compared = 0
+        for i in range(table.row_count):
+            row = dict(zip(labels, table.get_row_at(i)))
+            leg = int(row["Leg"])
+            s = cli["model"].legs[leg].stats
+            assert row["Noise floor"] == f"{s.noise_floor_um:.3f}" and row["Held-out RMS"] == f"{s.heldout_rms_um:.3f}"
+            assert row["Held-out ratio"] == f"{s.heldout_ratio:.2f}"
+            for name in "AEMBR":
+                assert row[name].split("\n")[0] == f"{cli['iso230']['legs'][str(leg)][name]:.3f}", (leg, name)
+            compared += 1
+        return compared
+
+    async def run() -> None:
+        cfg = StationConfig(operator="test")
+        cfg.recordings_dir = str(tmp_path / "runs")
+        app = StationApp(cfg, autoconnect=False)
+        async with app.run_test(size=(200, 50)) as pilot:
+            await pilot.press("f3")
+            app.screen.query_one("#session-path", Input).value = str(SAMPLE)
+            await pilot.click("#session-open")
+            for _ in range(6000):
+                if app.analysis is not None:
+                    break
+                await pilot.pause(0.05)
+            assert app.analysis is not None and not app.analysis.raw
+            assert check(app, normalised) == 6
+            await pilot.press("t")
+            for _ in range(6000):
+                if app.analysis.raw:
+                    break
+                await pilot.pause(0.05)
+            assert app.analysis.raw
+            assert check(app, outputs) == 6  # the --raw outputs of the fixture
+
+    asyncio.run(run())
