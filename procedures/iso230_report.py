@@ -161,9 +161,15 @@ def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, l
 
 
 def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict, attrs: dict,
-          source: dict) -> dict[str, Any]:
-    """The ISO 230-2 report's content as a JSON-able dict (module docstring)."""
-    pts, basis = _normalised(points, station_config or {})
+          source: dict, raw: bool = False) -> dict[str, Any]:
+    """The ISO 230-2 report's content as a JSON-able dict (module docstring); `raw`: on the raw
+    error (`station report --raw`, or a model fitted to it), not normalised to 20 degC."""
+    if raw:
+        pts, basis = points, {"basis": "raw", "normalised": False,
+                              "statement": "Deviations NOT normalised to 20 degC (raw error asked for: --raw, or a model "
+                                           "fitted to the raw error): the values hold at the recorded temperature."}
+    else:
+        pts, basis = _normalised(points, station_config or {})
     iso = iso230.evaluate(pts)
     legs = sorted(iso)
     metrology = (station_config or {}).get("metrology") or {}
@@ -441,10 +447,10 @@ def _col_widths(rows: list[list[str]], total: float) -> tuple[float, ...]:
 
 
 def write(points: np.ndarray, out_dir: str | os.PathLike, *, plan: dict, devices: dict, station_config: dict,
-          attrs: dict, source: dict) -> tuple[dict[str, Any], list[Path]]:
+          attrs: dict, source: dict, raw: bool = False) -> tuple[dict[str, Any], list[Path]]:
     """Write the four files (module docstring) into `out_dir` (which exists); their content and paths."""
     out = Path(out_dir)
-    d = build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs, source=source)
+    d = build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs, source=source, raw=raw)
     paths = [out / name for name in FILES]
     _atomic_write(paths[0], (json.dumps(d, indent=2, allow_nan=False) + "\n").encode())
     _atomic_write(paths[1], markdown(d).encode())

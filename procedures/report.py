@@ -16,6 +16,13 @@ figures are the "residual range" and "residual RMS" (not the "held-out range" of
 which scores each cycle with a model fitted without it). The model's own held-out figures are
 quoted from the model as "model held-out RMS" and "model held-out ratio". Names and definitions:
 docs/figures.md.
+
+Which error (docs/metrology.md): the fit, plots, summary and ISO 230-2 part all use one basis,
+the same as `station fit`: the error normalised to 20 degC material temperature by default, the
+raw `error_um` with `raw=True` (`--raw`). With a model, the basis the model records
+(`options.error_basis`, written by `station fit`; a model without it was fitted to the raw
+error): a normalised model with `raw=True` is refused (it would be compared with another error
+than it was fitted to). summary.md/json state the basis (`error_basis`).
 """
 
 from __future__ import annotations
@@ -104,13 +111,48 @@ def _json_safe(v: Any) -> Any:
     return v
 
 
+def model_is_normalised(model: LegErrorModel) -> bool:
+    """Whether `model` was fitted to the error normalised to 20 degC (its `options.error_basis`,
+    as `station fit` records it); a model that does not say was fitted to the raw error."""
+    basis = (getattr(model, "options", None) or {}).get("error_basis")
+    return bool(isinstance(basis, dict) and basis.get("normalised"))
+
+
+def report_basis(points: np.ndarray, station_config: dict | None, model: LegErrorModel | None = None,
+                 raw: bool = False, model_name: str = "the model") -> tuple[np.ndarray, bool, dict[str, Any]]:
+    """The points the report analyses, whether they are raw, and the basis as JSON
+    ({"basis": "normalised"|"raw", "lines": [...], ...}, what `station fit` prints): the basis of
+    `model` when given (a normalised model with `raw` is refused, InputError), else normalised to
+    20 degC unless `raw`. `points` hold the raw recorded error_um."""
+    from types import SimpleNamespace
+
+    from procedures.metrology.thermal import error_basis
+
+    if model is not None:
+        if model_is_normalised(model):
+            if raw:
+                raise InputError(f"{model_name} was fitted to the error normalised to 20 degC (its error_basis); "
+                                 "--raw would compare it with the raw error: drop --raw, or fit a raw model with "
+                                 "`station fit --raw` and report with that one")
+        else:
+            raw = True
+    pts, lines, doc = error_basis(SimpleNamespace(points=points, station_config=station_config), raw)
+    if model is not None and not model_is_normalised(model):
+        lines = ["error: raw, not normalised to 20 degC (the model was fitted to the raw error)"]
+    basis = "normalised" if doc.get("normalised") else "raw"
+    return pts, basis == "raw", {"basis": basis, "lines": list(lines), **doc}
+
+
 def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorModel | None = None, *,
                 source_path: str = "", source_sha256: str = "", lead_mm: float | str | None = "auto",
-                title: str = "", session_meta: dict[str, Any] | None = None) -> ReportResult:
+                title: str = "", session_meta: dict[str, Any] | None = None, raw: bool = False,
+                model_name: str = "") -> ReportResult:
     """Write the report files (module docstring) for a session's points into `out_dir`
     (created if missing). Without `model`, the default model is fitted to the points.
     `session_meta` ({"plan", "devices", "station_config", "attrs"} of the session) adds the
-    ISO 230-2 test report (iso230-2.*). Errors are measured minus commanded (um), positions mm."""
+    ISO 230-2 test report (iso230-2.*). `points` hold the recorded (raw) error; the report works
+    on the basis `report_basis` picks (normalised to 20 degC by default, `raw`, or the model's).
+    Errors are measured minus commanded (um), positions mm."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -120,6 +162,10 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a directory; choose another --out")
     src = source_path or "the session"
+    station_config = (session_meta or {}).get("station_config") or None
+    recorded = points
+    points, is_raw, basis = report_basis(recorded, station_config, model, raw,
+                                         model_name=model_name or "the model")
     by_leg = split_legs(points, source=src)
     fitted_here = model is None
     if model is None:
@@ -266,6 +312,7 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
         "source": {"path": source_path, "sha256": source_sha256},
         "model": {"method": model.method, "source": model.source, "fitted_to_this_session": same_source},
         "residuals": "in-sample (model fitted to this session)" if same_source else "out-of-sample (model from another recording)",
+        "error_basis": basis,
         "legs": rows,
     }
     result.summary = _json_safe(summary)
@@ -279,8 +326,9 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
         from procedures import iso230_report
 
         meta = {k: session_meta.get(k) or {} for k in ("plan", "devices", "station_config", "attrs")}
-        result.iso230, paths = iso230_report.write(points, out, source={"path": source_path, "sha256": source_sha256},
-                                                   **meta)
+        # the recorded points: the ISO report normalises them itself (unless raw), on the same basis
+        result.iso230, paths = iso230_report.write(recorded, out, source={"path": source_path, "sha256": source_sha256},
+                                                   raw=is_raw, **meta)
         result.files.extend(paths)
     return result
 
@@ -295,6 +343,12 @@ def _markdown(s: dict[str, Any], title: str) -> str:
     lines.append(f"Recording: `{src['path'] or 'n/a'}` (sha256 `{(src['sha256'] or 'n/a')[:16]}`)  ")
     m = s["model"]
     lines.append(f"Model: {m['method']} (from `{m['source'].get('path') or 'n/a'}`); residuals are {s['residuals']}.")
+    lines.append("")
+    basis = s.get("error_basis") or {}
+    lines.append(f"Error basis: **{basis.get('basis', 'raw')}** (fit, plots, figures and ISO 230-2 alike; "
+                 "docs/metrology.md):")
+    lines.append("")
+    lines += [f"    {line}" for line in basis.get("lines") or []]
     lines.append("")
     lines.append("| leg | points | cycles | range before (um) | residual range (um) | residual range reduction | "
                  "RMS before (um) | residual RMS (um) | reversal (um) | noise floor (um) | model held-out RMS (um) | "

@@ -12,20 +12,24 @@ from procedures.errors import InputError
 from procedures.report import ReportResult, make_report
 
 
-def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: float | str | None = "auto") -> ReportResult:
+def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: float | str | None = "auto",
+                   raw: bool = False, model_name: str = "") -> ReportResult:
     """`station report`: the report files of `session` (procedures.recording.reader.Session)
-    into `out_dir`, before and after `model` (None: the default model fitted to the session)."""
+    into `out_dir`, before and after `model` (None: the default model fitted to the session), on
+    the error basis of `station fit`: normalised to 20 degC unless `raw`; with a model, the
+    model's own basis (a normalised model with `raw` is refused; `model_name` names it)."""
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
     meta = {"plan": session.plan, "devices": session.devices, "station_config": session.station_config,
             "attrs": session.attrs}
     return make_report(session.points, out_dir, model, source_path=str(session.path),
-                       source_sha256=session.sha256, lead_mm=lead_mm, session_meta=meta)
+                       source_sha256=session.sha256, lead_mm=lead_mm, session_meta=meta, raw=raw,
+                       model_name=model_name)
 
 
 def report_lines(result: ReportResult, model=None) -> list[str]:
     """What `station report` prints about `result` (`model`: the one given, None when fitted)."""
-    lines = []
+    lines = list((result.summary.get("error_basis") or {}).get("lines") or [])
     if model is not None and not result.summary["model"]["fitted_to_this_session"]:
         lines.append(f"note: the model was fitted to {model.source.get('path') or 'another recording'}, "
                      "not to this session: the residual figures are a true test of it")

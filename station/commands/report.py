@@ -18,7 +18,9 @@ DESCRIPTION = (
     "ISO 230-2 test report iso230-2.md/.json/.pdf with its graph iso230-2.png: identification, instrument and "
     "calibration date, environment, expansion coefficient and NDE, test parameters, compensation state, every "
     "value with its expanded uncertainty U (k = 2) and budget (docs/uncertainty.md). "
-    "Without --model the default model is fitted to the session."
+    "Without --model the default model is fitted to the session. Like `station fit`, everything uses the "
+    "error normalised to 20 degC material temperature (--raw: the raw error); with --model, the error the "
+    "model was fitted to (its error_basis; --raw with a normalised model is refused). docs/metrology.md."
 )
 
 
@@ -28,12 +30,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", metavar="MODEL.json", help="model to compensate with (default: fit the default model)")
     p.add_argument("--lead-mm", type=_lead, default="auto", metavar="MM|auto|none",
                    help="screw lead to mark (and to fit with, without --model); default auto")
+    p.add_argument("--raw", action="store_true",
+                   help="use the raw error, not normalised to 20 degC (as `station fit --raw`); refused with a "
+                        "--model fitted to the normalised error")
 
 
 def run(args) -> int:
     session = read_session(args.session)
     model = load_model(args.model) if args.model else None
-    result = session_report(session, args.out, model, lead_mm=args.lead_mm)
+    result = session_report(session, args.out, model, lead_mm=args.lead_mm, raw=args.raw, model_name=args.model or "")
     for line in report_lines(result, model):
         print(line)
     return 0

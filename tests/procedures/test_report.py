@@ -62,3 +62,50 @@ def test_report_refuses_a_model_without_common_legs(points, tmp_path):
     model = fit(synth_session({5: cfg}, np.linspace(-90, 90, 31), cycles=2, seed=1), lead_mm=None)
     with pytest.raises(InputError, match="no leg in common"):
         make_report(points, tmp_path / "rep", model)
+
+
+
+def _warm(points):
+    """The points with the leg's material at 25 .. 27 degC over the recording (5-7 K from 20 degC)."""
+    warm = points.copy()
+    warm["material_temp_c"] = 25.0 + 2.0 * np.arange(len(warm)) / len(warm)
+    return warm
+
+
+def test_report_works_on_the_error_normalised_to_20_degc_unless_raw(points, tmp_path):
+    """Like `station fit`: the fit, figures and ISO values are of the normalised error by default,
+    of the raw one with raw=True; the summary says which."""
+    from procedures import iso230
+    from procedures.fit.figures import range_um
+    from procedures.metrology.thermal import normalise_session
+
+    warm = _warm(points)
+    norm = normalise_session(warm, None).points
+    default = make_report(warm, tmp_path / "n").summary
+    raw = make_report(warm, tmp_path / "r", raw=True).summary
+    assert default["error_basis"]["basis"] == "normalised" and raw["error_basis"]["basis"] == "raw"
+    assert default["error_basis"]["lines"][0].startswith("error: normalised to 20 degC")
+    assert raw["error_basis"]["lines"] == ["error: raw, not normalised to 20 degC (--raw)"]
+    for d, r in zip(default["legs"], raw["legs"]):
+        leg = d["leg"]
+        assert d["range_before_um"] == pytest.approx(range_um(norm["error_um"][norm["leg"] == leg]), rel=1e-12)
+        assert r["range_before_um"] == pytest.approx(range_um(warm["error_um"][warm["leg"] == leg]), rel=1e-12)
+        # 5-7 K on steel over +-90 mm tilts the error by ~6-8 um: the two bases differ by far more than noise
+        assert abs(d["range_before_um"] - r["range_before_um"]) > 5.0
+        assert d["iso230_2"]["before"]["E"] == pytest.approx(iso230.evaluate_leg(norm, leg).values["E"], rel=1e-12)
+        assert r["iso230_2"]["before"]["E"] == pytest.approx(iso230.evaluate_leg(warm, leg).values["E"], rel=1e-12)
+    assert "Error basis: **raw**" in (tmp_path / "r" / "summary.md").read_text()
+
+
+def test_report_with_a_model_uses_its_basis_and_refuses_raw_against_a_normalised_one(points, tmp_path):
+    warm = _warm(points)
+    model = fit(warm, source={"path": "cal.h5", "sha256": "e" * 64})  # fit() alone records no basis: raw
+    s = make_report(warm, tmp_path / "a", model).summary
+    assert s["error_basis"]["basis"] == "raw"
+    assert s["error_basis"]["lines"] == ["error: raw, not normalised to 20 degC (the model was fitted to the raw error)"]
+    model.options["error_basis"] = {"normalised": True}  # as `station fit` records it
+    s = make_report(warm, tmp_path / "b", model).summary
+    assert s["error_basis"]["basis"] == "normalised"
+    with pytest.raises(InputError, match=r"cal-model\.json was fitted to the error normalised to 20 degC.*--raw"):
+        make_report(warm, tmp_path / "c", model, raw=True, model_name="cal-model.json")
+    assert not (tmp_path / "c").exists()

@@ -31,12 +31,13 @@ def outputs(tmp_path_factory):
     import io
 
     tmp = tmp_path_factory.mktemp("figures")
-    # fit and iso230 normalise to 20 degC by default, diagnose and report work on the raw error:
-    # the same definitions are compared on the same error (raw)
+    # fit, iso230 and report normalise to 20 degC by default, diagnose works on the raw error:
+    # the same definitions are compared on the same error (raw); the default basis is compared
+    # in test_report_agrees_with_fit_and_iso230_on_the_default_basis
     runs = {
         "fit": ["fit", str(SAMPLE), "--out", str(tmp / "model.json"), "--raw"],
         "diagnose": ["diagnose", str(SAMPLE), "--json", str(tmp / "diagnosis.json")],
-        "report": ["report", str(SAMPLE), "--out", str(tmp / "report")],
+        "report": ["report", str(SAMPLE), "--out", str(tmp / "report"), "--raw"],
         "iso230": ["iso230", str(SAMPLE), "--json", str(tmp / "iso230.json"), "--raw"],
     }
     text = {}
@@ -280,3 +281,85 @@ def test_the_results_page_shows_the_commands_figures_on_their_basis(outputs, tmp
             assert check(app, outputs) == 6  # the --raw outputs of the fixture
 
     asyncio.run(run())
+
+
+def _run(argv) -> str:
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(argv) == 0, argv
+    return buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def default_basis(tmp_path_factory):
+    """fit, iso230 and report on the sample without --raw (normalised to 20 degC)."""
+    tmp = tmp_path_factory.mktemp("default-basis")
+    text = {
+        "fit": _run(["fit", str(SAMPLE), "--out", str(tmp / "model.json")]),
+        "iso230": _run(["iso230", str(SAMPLE), "--json", str(tmp / "iso230.json")]),
+        "report": _run(["report", str(SAMPLE), "--out", str(tmp / "report")]),
+    }
+    return {"tmp": tmp, "text": text, "model": load_model(tmp / "model.json"),
+            "iso230": json.loads((tmp / "iso230.json").read_text()),
+            "report": json.loads((tmp / "report" / "summary.json").read_text()),
+            "report_md": (tmp / "report" / "summary.md").read_text(),
+            "report_iso": json.loads((tmp / "report" / "iso230-2.json").read_text())}
+
+
+def test_report_agrees_with_fit_and_iso230_on_the_default_basis(default_basis, outputs):
+    """`station report` without --model or --raw fits, plots and sums up the error normalised to
+    20 degC, as `station fit` and `station iso230` do: every shared figure has one value, and it
+    differs from the raw one (the sample's legs were not at 20 degC: the comparison can fail)."""
+    d = default_basis
+    rep = d["report"]
+    assert rep["error_basis"]["basis"] == "normalised" and rep["error_basis"]["normalised"] is True
+    assert d["report_iso"]["error_basis"]["basis"] == "normalised"
+    assert "Error basis: **normalised**" in d["report_md"]
+    assert d["text"]["report"].splitlines()[0] == d["text"]["fit"].splitlines()[0]
+    assert d["text"]["report"].splitlines()[0].startswith("error: normalised to 20 degC")
+    raw_rows = {row["leg"]: row for row in outputs["report"]["legs"]}
+    assert outputs["report"]["error_basis"]["basis"] == "raw"
+    differs = 0
+    for row in rep["legs"]:
+        leg = row["leg"]
+        s = d["model"].legs[leg].stats
+        for mine, theirs in (("range_before_um", s.range_before_um), ("noise_floor_um", s.noise_floor_um),
+                             ("model_heldout_rms_um", s.heldout_rms_um), ("model_heldout_ratio", s.heldout_ratio)):
+            assert row[mine] == pytest.approx(theirs, rel=1e-12, abs=1e-12), (leg, mine)
+        iso = d["iso230"]["legs"][str(leg)]
+        for name in VALUE_NAMES:
+            assert row["iso230_2"]["before"][name] == pytest.approx(iso[name], rel=1e-12, abs=1e-12), (leg, name)
+            assert d["report_iso"]["legs"][str(leg)]["values"][name]["value_um"] == pytest.approx(
+                iso[name], rel=1e-12, abs=1e-12), (leg, name)
+        differs += abs(row["range_before_um"] - raw_rows[leg]["range_before_um"]) > 1e-3
+    assert differs >= 1
+
+
+def test_report_with_a_model_uses_the_models_basis(default_basis, outputs, tmp_path, capsys):
+    """--model: the report analyses the error the model was fitted to (its error_basis); --raw with
+    a normalised model is refused, naming the model and what to do, and nothing is written."""
+    d = default_basis
+    out = tmp_path / "norm"
+    _run(["report", str(SAMPLE), "--out", str(out), "--model", str(d["tmp"] / "model.json")])
+    s = json.loads((out / "summary.json").read_text())
+    assert s["error_basis"]["basis"] == "normalised"
+    for row, ref in zip(s["legs"], d["report"]["legs"]):  # the same model, fitted by station fit: the same figures
+        assert row["residual_rms_um"] == pytest.approx(ref["residual_rms_um"], rel=1e-9, abs=1e-9)
+        assert row["range_before_um"] == pytest.approx(ref["range_before_um"], rel=1e-12, abs=1e-12)
+    raw_out = tmp_path / "raw"
+    text = _run(["report", str(SAMPLE), "--out", str(raw_out), "--model", str(outputs["model_path"])])
+    assert text.splitlines()[0] == "error: raw, not normalised to 20 degC (the model was fitted to the raw error)"
+    s = json.loads((raw_out / "summary.json").read_text())
+    assert s["error_basis"]["basis"] == "raw"
+    assert json.loads((raw_out / "iso230-2.json").read_text())["error_basis"]["basis"] == "raw"
+    for row, ref in zip(s["legs"], outputs["report"]["legs"]):
+        assert row["residual_rms_um"] == pytest.approx(ref["residual_rms_um"], rel=1e-9, abs=1e-9)
+    capsys.readouterr()
+    refused = tmp_path / "refused"
+    assert main(["report", str(SAMPLE), "--out", str(refused), "--model", str(d["tmp"] / "model.json"), "--raw"]) != 0
+    err = capsys.readouterr().err
+    assert "model.json" in err and "normalised to 20 degC" in err and "--raw" in err and "Traceback" not in err
+    assert not refused.exists()
