@@ -118,6 +118,20 @@ def model_is_normalised(model: LegErrorModel) -> bool:
     return bool(isinstance(basis, dict) and basis.get("normalised"))
 
 
+def basis_is_raw(model: LegErrorModel | None, raw: bool = False, model_name: str = "the model") -> bool:
+    """Whether an analysis compensating with `model` works on the raw error: the model's own basis
+    (a normalised `model` with `raw` is refused, InputError naming `model_name`), else `raw`."""
+    if model is None:
+        return raw
+    if model_is_normalised(model):
+        if raw:
+            raise InputError(f"{model_name} was fitted to the error normalised to 20 degC (its error_basis); "
+                             "--raw would compare it with the raw error: drop --raw, or fit a raw model with "
+                             "`station fit --raw` and use that one")
+        return False
+    return True
+
+
 def report_basis(points: np.ndarray, station_config: dict | None, model: LegErrorModel | None = None,
                  raw: bool = False, model_name: str = "the model") -> tuple[np.ndarray, bool, dict[str, Any]]:
     """The points the report analyses, whether they are raw, and the basis as JSON
@@ -128,14 +142,7 @@ def report_basis(points: np.ndarray, station_config: dict | None, model: LegErro
 
     from procedures.metrology.thermal import error_basis
 
-    if model is not None:
-        if model_is_normalised(model):
-            if raw:
-                raise InputError(f"{model_name} was fitted to the error normalised to 20 degC (its error_basis); "
-                                 "--raw would compare it with the raw error: drop --raw, or fit a raw model with "
-                                 "`station fit --raw` and report with that one")
-        else:
-            raw = True
+    raw = basis_is_raw(model, raw, model_name)
     pts, lines, doc = error_basis(SimpleNamespace(points=points, station_config=station_config), raw)
     if model is not None and not model_is_normalised(model):
         lines = ["error: raw, not normalised to 20 degC (the model was fitted to the raw error)"]

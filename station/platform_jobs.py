@@ -1,7 +1,14 @@
 """The platform experiment's inputs and report, for both front ends (`station platform`, the
 terminal UI's F7 Platform page): the leg error sources from a session, a model or a table with
 its recording (`load_errors`, `model_errors` for a model held in memory), and the report files
-(`write_report`: Markdown + JSON summary and histograms)."""
+(`write_report`: Markdown + JSON summary and histograms).
+
+Which error (docs/platform.md, docs/metrology.md): the recording's error on the basis of the
+compensation, as `station fit` and `station report` use it: with a model, the basis the model
+records (`options.error_basis`: normalised to 20 degC when the model is, raw for a model fitted
+with --raw or one that does not say); with a table or the session alone, normalised to 20 degC
+by default (a table from `station table` holds what the default model holds), raw with `raw`
+(`--raw`). A normalised model with `raw` is refused. `inputs["error_basis"]` states it."""
 
 from __future__ import annotations
 
@@ -53,17 +60,30 @@ def check_model_legs(model, name) -> None:
         raise InputError(f"{name}: the model has no leg(s) {missing}; the platform needs all six legs modelled.")
 
 
+def recording_error(session, *, model=None, raw: bool = False, model_name: str = "the model") -> tuple[object, dict]:
+    """The recording's points with `error_um` on the compensation's basis (module docstring) and
+    that basis as JSON ({"basis": "normalised"|"raw", "lines": [what the commands print], ...})."""
+    from procedures.report import report_basis
+
+    points, _, basis = report_basis(session.points, getattr(session, "station_config", None), model, raw,
+                                    model_name=model_name)
+    return points, basis
+
+
 def _both_measurements(session, predicted_um, where: str, what: str, inputs: dict,
-                       measured: str | None) -> tuple[object, object, dict]:
+                       measured: str | None, *, model=None, raw: bool = False,
+                       model_name: str = "the model") -> tuple[object, object, dict]:
     """Error sources for the main measurement (`measured`, default 'mean') and the other one,
-    both from the recording's points with `predicted_um` as compensation."""
+    both from the recording's points (on the compensation's basis) with `predicted_um` as
+    compensation."""
     from procedures.platform.experiment import RecordedLegErrors
 
     measured = measured or "mean"
     other = "pass" if measured == "mean" else "mean"
+    points, inputs["error_basis"] = recording_error(session, model=model, raw=raw, model_name=model_name)
 
     def errors(measurement: str):
-        return RecordedLegErrors(session.points, predicted_um=predicted_um, source=where, measurement=measurement,
+        return RecordedLegErrors(points, predicted_um=predicted_um, source=where, measurement=measurement,
                                  compensation=what)
 
     inputs["measured"] = measured
@@ -71,7 +91,7 @@ def _both_measurements(session, predicted_um, where: str, what: str, inputs: dic
 
 
 def model_errors(model, session, recording_path, model_path, *, measured: str | None = None, held_out: bool = False,
-                 model_label: str | None = None) -> tuple[object, object, dict]:
+                 model_label: str | None = None, raw: bool = False) -> tuple[object, object, dict]:
     """Error sources (main measurement, other measurement) and the report's inputs for a fitted
     model (procedures.fit) applied to a read session: what `station platform MODEL.json` runs,
     also for a model held in memory (the terminal UI's; `model_path` None when it is not saved,
@@ -83,10 +103,11 @@ def model_errors(model, session, recording_path, model_path, *, measured: str | 
         "recording_is_the_models_own": not held_out,
     }
     where = f"{recording_path} with model {model_label or model_path} ({model.method})"
-    return _both_measurements(session, model.predict_um, where, "the model's prediction", inputs, measured)
+    return _both_measurements(session, model.predict_um, where, "the model's prediction", inputs, measured,
+                              model=model, raw=raw, model_name=str(model_path or model_label or "the model"))
 
 
-def _table_errors(src: Path, recording, profile, measured: str | None) -> tuple[object, object, dict]:
+def _table_errors(src: Path, recording, profile, measured: str | None, raw: bool = False) -> tuple[object, object, dict]:
     from procedures.recording.reader import file_sha256, read_session
     from procedures.table import read_table_csv
     from station.wiring import drive_table_spec
@@ -108,14 +129,15 @@ def _table_errors(src: Path, recording, profile, measured: str | None) -> tuple[
         "recording": {"path": str(rec_path), "sha256": session.sha256},
     }
     return _both_measurements(session, predicted_um, f"{rec_path} with table {src}",
-                              "the table, interpolated as the drive does,", inputs, measured)
+                              "the table, interpolated as the drive does,", inputs, measured, raw=raw)
 
 
 def load_errors(source, *, recording=None, measured: str | None = None,
-                profile=None) -> tuple[object, object | None, dict]:
+                profile=None, raw: bool = False) -> tuple[object, object | None, dict]:
     """The experiment's error source for the main tables, the one for the other measurement
     (None with FILE.h5 alone) and a description of the inputs for the report, from a session
-    file, a model file or a table (with `recording`), as `station platform` takes them."""
+    file, a model file or a table (with `recording`), as `station platform` takes them; the
+    recording's error on the basis the module docstring states (`raw`: --raw)."""
     from procedures.platform.experiment import RecordedLegErrors
     from procedures.recording.reader import read_session
 
@@ -128,18 +150,22 @@ def load_errors(source, *, recording=None, measured: str | None = None,
 
         model = load_model(src)
         check_model_legs(model, src)
+        from procedures.report import basis_is_raw
+
+        basis_is_raw(model, raw, model_name=str(src))  # refuse a basis mismatch before reading the recording
         session, rec_path, held_out = _recording_for_model(src, model, recording)
-        return model_errors(model, session, rec_path, src, measured=measured, held_out=held_out)
+        return model_errors(model, session, rec_path, src, measured=measured, held_out=held_out, raw=raw)
     if suffix == ".csv":
-        return _table_errors(src, recording, profile, measured)
+        return _table_errors(src, recording, profile, measured, raw)
     if recording:
         raise InputError("--recording goes with MODEL.json or TABLE.csv; with FILE.h5 the session itself gives the errors.")
     if measured == "mean":
         raise InputError("--measured mean needs MODEL.json or TABLE.csv as compensation; with FILE.h5 the table is the mean "
                          "of the other passes.")
     session = read_session(src)
-    return RecordedLegErrors(session.points, source=str(src)), None, {"recording": {"path": str(src), "sha256": session.sha256},
-                                                                     "measured": "pass"}
+    points, basis = recording_error(session, raw=raw)
+    return RecordedLegErrors(points, source=str(src)), None, {"recording": {"path": str(src), "sha256": session.sha256},
+                                                              "measured": "pass", "error_basis": basis}
 
 
 def _hist_figure(orig: np.ndarray, comp: np.ndarray, labels: list[str], unit: str, title: str, path: Path, ylabel: str = "poses") -> None:

@@ -101,6 +101,15 @@ def reduction_lines(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def _basis_lines(summary: dict) -> list[str]:
+    """Which error of the recording was used (station.platform_jobs: the compensation's basis)."""
+    basis = (summary.get("inputs") or {}).get("error_basis")
+    if not basis:
+        return []
+    return [f"- Error basis: {basis['basis']} (the recording's error on the compensation's basis; docs/metrology.md)",
+            *[f"  - `{line.strip()}`" for line in basis.get("lines") or []]]
+
+
 def report_markdown(summary: dict, geometry_text: str = "", home_sensitivity: dict | None = None) -> str:
     """The whole report (Markdown): source and settings, pose and leg tables, the acceptance
     check (pose range reduction against the legs'), dominant legs, FK outcome."""
@@ -109,6 +118,7 @@ def report_markdown(summary: dict, geometry_text: str = "", home_sensitivity: di
         "# Platform pose errors from leg errors, before and after compensation",
         "",
         f"- Error source: {summary['source']}",
+        *_basis_lines(summary),
         *([f"- Geometry: {geometry_text}"] if geometry_text else []),
         f"- Poses: {summary['poses_used']} used of {summary['poses']} (drawn {summary['poses_drawn']} to find "
         f"{summary['poses']} within stroke and recorded range), seed {summary['seed']}",

@@ -25,7 +25,10 @@ DESCRIPTION = (
     "it; give --recording), or with FILE.h5 alone the mean of the other passes. With a model or a "
     "table the measured leg error is the recording's systematic error (mean of its passes, the "
     "paper's setting) and, on the same poses, one recorded pass (repeatability included); both are "
-    "reported. Writes platform_report.md, platform_summary.json and histograms to --out."
+    "reported. The recorded error is taken on the compensation's basis, as `station fit` and `station report` "
+    "use it: with a model, the error it was fitted to (normalised to 20 degC material temperature, or raw for "
+    "a model fitted with --raw); with a table or FILE.h5 alone normalised to 20 degC unless --raw. "
+    "Writes platform_report.md, platform_summary.json and histograms to --out."
 )
 
 
@@ -43,6 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "pose and leg (the only one with FILE.h5 alone); with a model or table the other is reported beside it")
     p.add_argument("--profile", metavar="PROFILE.toml",
                    help="with TABLE.csv: drive profile whose table limits the table is checked against (default: built-in)")
+    p.add_argument("--raw", action="store_true",
+                   help="use the recording's raw error, not normalised to 20 degC (for a table made from a model "
+                        "fitted with `station fit --raw`); refused with a MODEL.json fitted to the normalised error")
     p.add_argument("--geometry", metavar="FILE.toml", help="platform geometry (default: the paper-like positioner, docs/platform.md)")
     p.add_argument("--xy-mm", type=float, default=60.0, help="workspace half-range in x and y about home, mm (default 60)")
     p.add_argument("--z-mm", type=float, default=60.0, help="workspace half-range in z about home, mm (default 60)")
@@ -63,7 +69,7 @@ def run(args) -> int:
             raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
     geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
     errors, other_errors, inputs = load_errors(args.source, recording=args.recording, measured=args.measured,
-                                               profile=args.profile)
+                                               profile=args.profile, raw=args.raw)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} is a file; give a directory.")
@@ -73,6 +79,8 @@ def run(args) -> int:
                                        workspace=workspace)
     summary["measured"] = inputs["measured"]
     written = write_report(out, result, summary, inputs, geometry)
+    for line in inputs["error_basis"]["lines"]:
+        print(line)
     print(f"measured leg error: {MEASUREMENT_LABELS[summary['measured']]}\n")
     print(pose_table_markdown(summary))
     print()

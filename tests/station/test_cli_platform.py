@@ -165,3 +165,45 @@ def test_the_sample_sessions_pose_errors_shrink_at_least_as_much_as_its_legs(tmp
     shortfalls = {k: a["range_reduction_pct"] for k, a in summary["acceptance"].items() if not a["at_least_leg_reduction"]}
     assert not shortfalls, f"legs {legs:.2f} %, pose components below: {shortfalls}"
     assert "6 of 6 components at least as much as the legs" in capsys.readouterr().out
+
+
+def test_platform_applies_a_model_to_the_recordings_error_on_the_models_basis(tmp_path, capsys):
+    """The model `station fit` makes by default is of the error normalised to 20 degC: the
+    platform experiment measures the recording's normalised error against it (and says so); a
+    model fitted with --raw is measured against the raw error; --raw with a normalised model is
+    refused. The figures are those of the experiment run directly on that basis's points, and
+    the two bases give different leg errors (the sample was not recorded at 20 degC)."""
+    from procedures.fit import load_model
+    from procedures.metrology.thermal import normalise_session
+    from procedures.platform.experiment import RecordedLegErrors, Workspace, run_measurements
+    from procedures.platform.geometry import default_geometry
+    from procedures.recording.reader import read_session
+
+    session = read_session(SAMPLE)
+    legs_all = {}
+    for basis, extra in (("normalised", []), ("raw", ["--raw"])):
+        model_path, out = tmp_path / f"{basis}.json", tmp_path / basis
+        assert main(["fit", str(SAMPLE), "--out", str(model_path), *extra]) == 0
+        capsys.readouterr()
+        assert main(["platform", str(model_path), "--poses", "300", "--seed", "3", "--out", str(out)]) == 0
+        first = capsys.readouterr().out.splitlines()[0]
+        summary = json.loads((out / "platform_summary.json").read_text())
+        assert summary["inputs"]["error_basis"]["basis"] == basis
+        assert first == summary["inputs"]["error_basis"]["lines"][0]
+        assert first.startswith("error: normalised to 20 degC" if basis == "normalised" else "error: raw, not normalised")
+        assert f"Error basis: {basis}" in (out / "platform_report.md").read_text()
+        points = normalise_session(session.points, session.station_config).points if basis == "normalised" \
+            else session.points
+        model = load_model(model_path)
+        direct = RecordedLegErrors(points, predicted_um=model.predict_um, source="direct", measurement="mean")
+        _, expected = run_measurements(default_geometry(), direct, poses=300, seed=3, workspace=Workspace())
+        for k in ("range_original", "range_compensated"):
+            assert summary["legs"]["all"][k] == pytest.approx(expected["legs"]["all"][k], rel=1e-12, abs=1e-12), k
+        legs_all[basis] = summary["legs"]["all"]["range_original"]
+    # the sample's legs sat at 19.9 .. 20.3 degC (corrections up to +-0.35 um): the bases still differ by far
+    # more than the 1e-12 above
+    assert abs(legs_all["normalised"] - legs_all["raw"]) > 0.05
+    rc = main(["platform", str(tmp_path / "normalised.json"), "--raw", "--out", str(tmp_path / "refused")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "normalised.json was fitted to the error normalised to 20 degC" in err and "--raw" in err
+    assert not (tmp_path / "refused").exists()
