@@ -20,10 +20,16 @@ Rule: stop when both
   per-cycle reversals. Half a reversal error shows in every verified point; a verification's floor
   is about 1.5 x the within-pass scatter (the pass offsets added), so this keeps the reversal's
   share of its residual to about a quarter of the floor. The within-pass scatter, not the noise
-  floor, is the yardstick because the rule normalises with the default material (the sweep does
-  not hold the station config), whose fixed point may be wrong: that inflates the pass offsets
-  and so the noise floor, not the within-pass scatter;
+  floor, is the yardstick because it does not depend on the material: a wrong expansion
+  coefficient or fixed point (a station config that does not describe the leg) inflates the pass
+  offsets and so the noise floor, not the within-pass scatter;
 else measure another round, up to the plan's cycles.
+
+Material: the leg's own (`AdaptiveRule.material`: its expansion coefficient and fixed point,
+station.config.StationConfig.material_of, which the session records as
+station_config.leg_materials), given by the job that composes the sweep (station/jobs.py
+run_sweep, and the recorded ones on replay); none given = the default material (steel, fixed
+at 0 mm), as `station fit` takes a session that recorded none.
 Why 5 %: the held-out RMS of a model that has converged still wanders by a few percent from
 round to round (it is itself an estimate from a few thousand points); a smaller threshold would
 keep measuring on that wander.
@@ -32,6 +38,7 @@ keep measuring on that wander.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -51,13 +58,16 @@ class AdaptiveRule:
     near_floor: float = NEAR_FLOOR
     reversal_se: float = REVERSAL_SE
     min_rounds: int = MIN_ROUNDS
+    # the leg's material (procedures.metrology.thermal.Material or anything with its fields:
+    # expansion_um_m_k, fixed_point_mm); None = the default (steel, fixed at 0 mm)
+    material: Any = None
     heldout_um: list[float] = field(default_factory=list)
     noise_floor_um: float | None = None
 
     def after_round(self, points: np.ndarray, leg: int) -> str | None:
         """The reason to stop after this round (None: measure another). `points`: this leg's
         points so far (POINT_DTYPE)."""
-        f = leg_figures(points, leg)
+        f = leg_figures(points, leg, self.material)
         h = f.heldout_shape_um
         self.heldout_um.append(h)
         self.noise_floor_um = f.noise_floor_um
@@ -91,11 +101,11 @@ class LegFigures:
     reversal_se_um: float | None
 
 
-def leg_figures(points: np.ndarray, leg: int) -> LegFigures:
+def leg_figures(points: np.ndarray, leg: int, material: Any = None) -> LegFigures:
     """The rule's figures for `leg`'s points so far (module docstring).
 
-    The points are taken as `station fit` takes them: normalised to 20 degC (steel, the
-    station's default material: the sweep does not hold the station config), the speed-dependent
+    The points are taken as `station fit` takes them: normalised to 20 degC with the leg's
+    `material` (None: the default, steel fixed at 0 mm), the speed-dependent
     part removed, the default model with its options; each cycle is predicted by the model fitted
     on the others (procedures.fit.crossval). Each held-out pass's mean residual is removed: a
     pass offset (re-zeroing, the warm-up of a leg that a fast pass heats in seconds) is the zero
@@ -111,7 +121,7 @@ def leg_figures(points: np.ndarray, leg: int) -> LegFigures:
 
     nothing = LegFigures(float("nan"), None, None, None)
     try:
-        normalised = normalise_points(points, {leg: Material()}).points
+        normalised = normalise_points(points, {leg: material if material is not None else Material()}).points
         data = split_legs(static_points(normalised), source=f"leg {leg} so far")[leg]
         folds = cycle_folds(data)
         if folds is None:

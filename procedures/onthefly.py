@@ -22,7 +22,7 @@ with `sweep()`.
 from __future__ import annotations
 
 import logging
-from typing import Callable, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
@@ -82,11 +82,13 @@ def onthefly_passes(
     recover: Callable[[ServoAxis], None],
     kind_of: Callable[[BaseException], FaultKind],
     failed: Callable[[ev.Fault], BaseException],
+    materials: Mapping[int, Any] | None = None,
 ) -> Iterator[ev.Event]:
     """Measure the passes of `points` (the plan's points not yet done) on the fly; yields the
     sweep's events and returns the count of points done. `prepare`, `recover`, `kind_of` and
     `failed` are the sweep's own helpers (enable and zero a leg, recover an axis, name a fault,
-    the exception that ends the sweep when retries run out)."""
+    the exception that ends the sweep when retries run out). `materials`: leg -> material the
+    adaptive rule normalises with (procedures.adaptive; a leg not in it: the default)."""
     if not isinstance(laser, CapturingInterferometer):
         raise DriverError("the interferometer has no capture mode (CAPARM/CAP?), so an on-the-fly plan cannot run; "
                           "use a stop-and-go plan")
@@ -232,7 +234,7 @@ def onthefly_passes(
         if plan.adaptive:
             measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
             if run % rounds_cycles == 0 and planned_left[leg] > 0:
-                rule = rules.setdefault(leg, AdaptiveRule())
+                rule = rules.setdefault(leg, AdaptiveRule(material=(materials or {}).get(leg)))
                 reason = rule.after_round(np.concatenate(measured[leg]).astype(POINT_DTYPE), leg)
                 if reason is not None:
                     stopped.add(leg)
@@ -242,7 +244,7 @@ def onthefly_passes(
                     yield ev.Message(f"leg {leg}: adaptive stop after {run // 2} cycles: {reason}; "
                                      f"{skipped} planned points not needed", "info")
             elif planned_left[leg] == 0:
-                rule = rules.setdefault(leg, AdaptiveRule())
+                rule = rules.setdefault(leg, AdaptiveRule(material=(materials or {}).get(leg)))
                 reason = f"the plan's most cycles ({plan.cycles}) measured before the held-out RMS stopped improving"
                 yield ev.PassesStopped(leg, run // 2, reason, tuple(rule.heldout_um), rule.noise_floor_um, 0)
                 yield ev.Message(f"leg {leg}: {reason}", "info")

@@ -15,7 +15,7 @@ import json
 import logging
 import uuid
 from dataclasses import dataclass
-from typing import Iterator, Mapping
+from typing import Any, Iterator, Mapping
 
 from drivers.interfaces import (
     BeamBreak,
@@ -94,8 +94,13 @@ def sweep(
     retry: RetryPolicy = RetryPolicy(),
     session_id: str | None = None,
     t0_s: float | None = None,
+    materials: Mapping[int, Any] | None = None,
 ) -> Iterator[ev.Event]:
     """Run `plan`, skipping plan indices in `done_indices` (resume). Yields events.
+
+    `materials`: leg -> its material (expansion coefficient, fixed point), which the adaptive
+    stopping rule of an on-the-fly plan normalises with (the composing job gives the station
+    config's, station/jobs.py; None = the default material).
 
     Ends with `SweepFinished(outcome=...)`: COMPLETED, ABORTED or FAILED (retries exhausted;
     the `Fault` event before it names the point). Pauses at the start of each point and of each
@@ -139,7 +144,7 @@ def sweep(
     try:
         if plan.onthefly:  # whole passes at constant speed, captured on the fly (procedures/onthefly.py)
             done = yield from onthefly_passes(plan, points, axes, laser, clock, control, retry, t_start, done, total,
-                                              _prepare_leg, _recover_axis, _kind, SweepFailed)
+                                              _prepare_leg, _recover_axis, _kind, SweepFailed, materials=materials)
             points = []
         for p in points:
             yield from control.checkpoint()

@@ -57,6 +57,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
 from procedures.errors import InputError
 
 
@@ -91,14 +92,19 @@ class SimConfig:
     nv_path: str = ""
     ambient_ramp_k_per_h: float = 0.0  # the simulated hall warms by this (a leg warming during a sweep)
     thermal_tau_s: float = 1800.0  # how fast the simulated legs' material follows the hall
+    # the simulated drives' jerk limit, mm/s^3 (0 = not limited): a real leg's by default, so the
+    # rig time a user sees for any plan is a real leg's (drivers.sim.plant LEG_JERK_MM_S3); the
+    # sample recordings pin 0, the setting they were made with (station/commands/recordings.py)
+    jerk_mm_s3: float = SIM_LEG_JERK_MM_S3
 
     def leg_configs(self) -> list:
-        """The simulated legs' plant configurations (drivers.sim.plant) for this seed, ramp and
-        time constant."""
+        """The simulated legs' plant configurations (drivers.sim.plant) for this seed, ramp, time
+        constant and jerk limit."""
         from drivers.sim.plant import PlantConfig, default_leg_configs
 
         return default_leg_configs(self.seed, base=PlantConfig(ambient_ramp_k_per_h=self.ambient_ramp_k_per_h,
-                                                               tau_s=self.thermal_tau_s))
+                                                               tau_s=self.thermal_tau_s,
+                                                               jerk_mm_s3=float(self.jerk_mm_s3)))
 
 
 @dataclass
@@ -290,6 +296,8 @@ _RANGES = {
     ("interferometer", "baudrate"): (0, True, "the serial line's bits per second"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
     ("sim", "thermal_tau_s"): (0.0, True, "seconds the simulated material takes to follow the hall"),
+    ("sim", "jerk_mm_s3"): (0.0, False, "the simulated drives' jerk limit in mm/s^3, 0 = not limited; "
+                                        f"a real leg's is {SIM_LEG_JERK_MM_S3:g}"),
 }
 
 

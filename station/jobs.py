@@ -11,6 +11,7 @@ from typing import Iterable
 from procedures import events as ev
 from procedures.control import RunControl
 from procedures.errors import InputError
+from procedures.metrology.thermal import recorded_materials
 from procedures.plans import SweepPlan
 from procedures.recording.reader import Session, read_session
 from procedures.recording.schema import FLAG_REPLAYED
@@ -45,8 +46,11 @@ def run_sweep(
         out.parent.mkdir(parents=True, exist_ok=True)
     recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=cfg.to_dict(),
                             software_version=__version__, resume=resume)
+    # the legs' own materials for the adaptive rule (the same the session records as
+    # station_config.leg_materials and `station fit` normalises with)
+    materials = {leg: cfg.material_of(leg) for leg in plan.legs}
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, done_indices=done,
-                      retry=retry, session_id=session_id)
+                      retry=retry, session_id=session_id, materials=materials)
     return run(procedure, [recorder, *sinks], control)
 
 
@@ -154,6 +158,10 @@ def replay_sweep(
     recorder = ReplayRecorderSink(out, operator=cfg.operator, rig="replay", station_config=cfg.to_dict(),
                                   software_version=__version__)
     # t0_s=0: recorded times are seconds since the session start, so `now - 0` is bit-exact
+    # the materials the recorded run's adaptive rule used (its station_config.leg_materials), so
+    # it stops where the recording did; a session that recorded none: this config's
+    recorded = recorded_materials(session.station_config)
+    materials = recorded[1] if recorded else {leg: cfg.material_of(leg) for leg in plan.legs}
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, retry=retry_policy_of(session),
-                      session_id=uuid.uuid4().hex[:12], t0_s=0.0)
+                      session_id=uuid.uuid4().hex[:12], t0_s=0.0, materials=materials)
     return run(procedure, [recorder, *sinks], control)

@@ -134,8 +134,8 @@ def open_drive(cfg: StationConfig, legs: int | tuple[int, ...]) -> DriveHandle:
     if cfg.drive.url == "sim":
         from drivers.sim.rig import SimRig
 
-        sim = SimRig(time_scale=0.0, seed=cfg.sim.seed, nv_path=Path(cfg.sim.nv_path) if cfg.sim.nv_path else None,
-                     profile=profile)
+        sim = SimRig(time_scale=0.0, seed=cfg.sim.seed, configs=cfg.sim.leg_configs(),
+                     nv_path=Path(cfg.sim.nv_path) if cfg.sim.nv_path else None, profile=profile)
         port = sim.drive_server.start_tcp()
         try:
             axes = connect_axes(f"tcp://127.0.0.1:{port}", legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)

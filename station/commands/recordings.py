@@ -30,7 +30,7 @@ from procedures import events as ev
 from procedures.errors import InputError
 from procedures.plans import iso230_plan, paper_plan
 from procedures.runner import CallbackSink
-from station.config import StationConfig
+from station.config import SimConfig, StationConfig
 
 NAME = "recordings"
 HELP = "regenerate the sample sessions of recordings/ on the simulated rig (deterministic)"
@@ -45,6 +45,10 @@ CAL_BEAM_BREAK = (3, 1000)  # (leg, point of that leg after which its beam is in
 CAL_DRIVE_FAULT = (5, 2000)  # (leg, point of that leg after which its drive faults once)
 FAULT_LEG = 2
 FAULT_AFTER_INDEX = 157  # leg 2 run 5 (third upward pass), its 4th target is never measured
+# the drives' jerk limit the samples were made with (0 = not limited): pinned, not the station's
+# sim default (a real leg's, station.config.SimConfig.jerk_mm_s3), so recordings/*.h5 regenerate
+# point for point; recorded in each sample's station_config as sim.jerk_mm_s3
+JERK_MM_S3 = 0.0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,7 +64,7 @@ def plant_configs(seed: int = SEED):
     from drivers.sim.plant import PlantConfig, default_leg_configs
 
     base = replace(PlantConfig(), load_per_pass_n=LOADS_N, ambient_swing_k=AMBIENT_SWING_K,
-                   ambient_period_s=AMBIENT_PERIOD_S)
+                   ambient_period_s=AMBIENT_PERIOD_S, jerk_mm_s3=JERK_MM_S3)
     return default_leg_configs(seed, 6, base)
 
 
@@ -172,7 +176,8 @@ def run(args) -> int:
 
 
 def _make(wanted, targets: dict[str, Path]) -> None:
-    cfg = StationConfig(operator="station recordings")
+    # the config recorded in each sample says how its rig moved (sim.jerk_mm_s3 = JERK_MM_S3)
+    cfg = StationConfig(operator="station recordings", sim=SimConfig(jerk_mm_s3=JERK_MM_S3))
     if "calibration" in wanted:
         with open_sample_rig() as rig:
             res = make_calibration(rig, targets["calibration"], cfg)

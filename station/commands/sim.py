@@ -8,6 +8,7 @@ import threading
 from pathlib import Path
 
 from drivers.sim.rig import SimRig
+from station.config import SimConfig
 
 NAME = "sim"
 HELP = "start the simulated rig (Modbus drives + serial interferometer) and print where to reach it"
@@ -22,8 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    sim_cfg = SimConfig(seed=args.seed)  # the station's simulated legs: a real leg's jerk limit
     rig = SimRig(time_scale=args.time_scale, seed=args.seed, tcp_port=args.port, rtu=args.rtu,
-                 nv_path=Path(args.nv) if args.nv else None)
+                 nv_path=Path(args.nv) if args.nv else None, configs=sim_cfg.leg_configs())
     try:
         rig.start()
     except OSError as exc:
@@ -35,7 +37,8 @@ def run(args) -> int:
     if rig.rtu_port:
         print(f"  drives (Modbus RTU): {rig.rtu_port}")
     print(f"  interferometer (serial): {rig.laser_port}")
-    print(f"  time scale: {args.time_scale:g} real s per simulated s; seed {args.seed}")
+    print(f"  time scale: {args.time_scale:g} real s per simulated s; seed {args.seed}; "
+          f"jerk limit {sim_cfg.jerk_mm_s3:g} mm/s^3")
     addr = prof.address("position_actual") if hasattr(prof, "address") else None
     if addr is not None:
         print(f"  e.g.  mbpoll -m tcp -p {rig.drive_url.rsplit(':', 1)[1]} -a 3 -t 4:int -B -0 -r {addr} -c 1 -1 127.0.0.1")
