@@ -275,3 +275,4 @@ def test_fault_sample_regenerates_identically(tmp_path, capsys):
     assert new.points.tobytes() == committed.points.tobytes()
     assert np.array_equal(new.faults[["index", "kind", "attempt", "time_s"]], committed.faults[["index", "kind", "attempt", "time_s"]])
     assert new.plan == committed.plan
+    assert new.station_config["sim"]["jerk_mm_s3"] == 0.0  # the setting the samples were made with, recorded
