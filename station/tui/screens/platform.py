@@ -170,6 +170,13 @@ POSE_COLUMNS = ("Measure", "x (µm)", "y (µm)", "z (µm)", "rx (arcsec)", "ry (
 NARROW_POSE_COLUMNS = ("Measure", "x µm", "y µm", "z µm", "rx ″", "ry ″", "rz ″")
 
 
+def basis_words(inputs: dict) -> str:
+    """Which error of the recording the run used (station.platform_jobs: the compensation's basis,
+    as `station platform` prints it in its first lines), for the status line."""
+    basis = (inputs.get("error_basis") or {}).get("basis")
+    return {"normalised": "; error normalised to 20 °C", "raw": "; raw error (not normalised to 20 °C)"}.get(basis, "")
+
+
 def _pct(value) -> str:
     return "n/a" if value is None else f"{value:.2f} %"
 
@@ -369,7 +376,7 @@ class PlatformScreen(StationScreen):
 
         s = run.summary
         other = s.get("other_measurement")
-        lines = [f"[b]{run.label}[/b]: {s['poses_used']} of {s['poses']} poses used, seed {s['seed']}"
+        lines = [f"[b]{run.label}[/b]: {s['poses_used']} of {s['poses']} poses used, seed {s['seed']}{basis_words(run.inputs)}"
                  + (f"   [dim]report in platform/{run.recording.stem}/[/dim]" if run.written else "")]
         counts = []
         for measured, acc in [(s.get("measured"), s["acceptance"])] + ([(other["measured"], other["acceptance"])] if other else []):

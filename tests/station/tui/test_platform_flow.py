@@ -97,15 +97,19 @@ async def _analysis_on_show(path, cfg, size, wait_until, notes):
         screen = app.screen
         # the same experiment, straight from the procedures: the model Results fits, both measurements
         session = read_session(path)
-        model = fit(error_basis(session)[0], "default")  # fitted, as `station fit`, to the error at 20 degC
+        at_20_c = error_basis(session)[0]
+        model = fit(at_20_c, "default")  # fitted, as `station fit`, to the error at 20 degC
 
         def errors(measurement):
-            return RecordedLegErrors(session.points, predicted_um=model.predict_um, measurement=measurement)
+            # measured on the model's basis: the recording's error normalised to 20 degC as well
+            return RecordedLegErrors(at_20_c, predicted_um=model.predict_um, measurement=measurement)
 
         result, summary = run_measurements(default_geometry(), errors("mean"), errors("pass"), poses=500, seed=3)
         other = summary["other_measurement"]
         assert summary["measured"] == "mean" and other["measured"] == "pass"
         assert screen.platform_run.summary["poses"] == 500 and screen.platform_run.summary["seed"] == 3
+        assert screen.platform_run.inputs["error_basis"]["basis"] == "normalised"
+        assert "error normalised to 20 °C" in str(screen.query_one("#plat-status").render())
         check_page_against(screen, summary, other)
         # one pass adds the scatter no table removes: less reduction at the legs than the systematic error
         assert other["leg_range_reduction_pct"] < summary["legs"]["all"]["range_reduction_pct"]
@@ -152,6 +156,8 @@ async def _table(path, cfg, size, wait_until, tmp_path, capsys):
         await run_platform(pilot, wait_until, poses=300, seed=1, compensation=table, recording=path)
         screen = app.screen
         assert screen.platform_run.summary["source"] == cli["source"]
+        assert screen.platform_run.inputs["error_basis"] == cli["inputs"]["error_basis"]
+        assert cli["inputs"]["error_basis"]["basis"] == "normalised"
         check_page_against(screen, cli, cli["other_measurement"])
         assert "t.csv" in str(screen.query_one("#plat-status").render())
 
