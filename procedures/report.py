@@ -144,8 +144,10 @@ def report_basis(points: np.ndarray, station_config: dict | None, model: LegErro
 
     raw = basis_is_raw(model, raw, model_name)
     pts, lines, doc = error_basis(SimpleNamespace(points=points, station_config=station_config), raw)
-    if model is not None and not model_is_normalised(model):
-        lines = ["error: raw, not normalised to 20 degC (the model was fitted to the raw error)"]
+    if model is not None and not isinstance((getattr(model, "options", None) or {}).get("error_basis"), dict):
+        # fitted before models recorded their basis (or by fit() alone): raw; a model of
+        # `station fit --raw` keeps error_basis's own "(--raw)" line, as the command printed it
+        lines = ["error: raw, not normalised to 20 degC (the model records no error basis: fitted to the raw error)"]
     basis = "normalised" if doc.get("normalised") else "raw"
     return pts, basis == "raw", {"basis": basis, "lines": list(lines), **doc}
 

@@ -102,7 +102,8 @@ def test_report_with_a_model_uses_its_basis_and_refuses_raw_against_a_normalised
     model = fit(warm, source={"path": "cal.h5", "sha256": "e" * 64})  # fit() alone records no basis: raw
     s = make_report(warm, tmp_path / "a", model).summary
     assert s["error_basis"]["basis"] == "raw"
-    assert s["error_basis"]["lines"] == ["error: raw, not normalised to 20 degC (the model was fitted to the raw error)"]
+    assert s["error_basis"]["lines"] == [
+        "error: raw, not normalised to 20 degC (the model records no error basis: fitted to the raw error)"]
     model.options["error_basis"] = {"normalised": True}  # as `station fit` records it
     s = make_report(warm, tmp_path / "b", model).summary
     assert s["error_basis"]["basis"] == "normalised"

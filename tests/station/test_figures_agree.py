@@ -351,7 +351,7 @@ def test_report_with_a_model_uses_the_models_basis(default_basis, outputs, tmp_p
         assert row["range_before_um"] == pytest.approx(ref["range_before_um"], rel=1e-12, abs=1e-12)
     raw_out = tmp_path / "raw"
     text = _run(["report", str(SAMPLE), "--out", str(raw_out), "--model", str(outputs["model_path"])])
-    assert text.splitlines()[0] == "error: raw, not normalised to 20 degC (the model was fitted to the raw error)"
+    assert text.splitlines()[0] == "error: raw, not normalised to 20 degC (--raw)"  # as station fit --raw said
     s = json.loads((raw_out / "summary.json").read_text())
     assert s["error_basis"]["basis"] == "raw"
     assert json.loads((raw_out / "iso230-2.json").read_text())["error_basis"]["basis"] == "raw"

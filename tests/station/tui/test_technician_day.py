@@ -150,14 +150,14 @@ async def _report_and_csv(path, cfg, size, wait_until, notes, cli_dir):
             assert (out / name).stat().st_size > 0
         for name in ("summary.json", "summary.md"):
             assert (out / name).read_text() == (cli_dir / "report" / name).read_text(), name
-        # on the raw error (t) the model on show is the one `station report FILE` fits itself
+        # on the raw error (t) the model on show is the one `station report FILE --raw` fits itself
         shutil.rmtree(out)
         await pilot.press("t")
         await wait_until(pilot, lambda: app.analysis.raw, 60, "the fit on the raw error")
         app.clear_notifications()
         await pilot.press("r")
         await wait_until(pilot, lambda: any("Report written to" in n for n in notes(app)), 60, "the raw report")
-        assert main(["report", str(path), "--out", str(cli_dir / "report-raw")]) == 0
+        assert main(["report", str(path), "--out", str(cli_dir / "report-raw"), "--raw"]) == 0
         for name in ("summary.json", "summary.md"):
             assert (out / name).read_text() == (cli_dir / "report-raw" / name).read_text(), name
         assert (out / "summary.json").read_text() != (cli_dir / "report" / "summary.json").read_text()
