@@ -14,6 +14,8 @@ Conventions (used everywhere in the project):
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -58,6 +60,19 @@ class DriveStatus:
     @property
     def enabled(self) -> bool:
         return self.state == DriveState.OPERATION_ENABLED
+
+
+def table_sha256(table: "TableBank") -> str:
+    """SHA-256 (hex) of a table's content: start, spacing (1e-6 mm) and both entry lists
+    (1e-4 um), as canonical JSON. Independent of the bank and of the stored checksum: the one
+    identity of a table for the audit log, the session and every table holder (drive or station)."""
+    doc = {
+        "start_mm": round(float(table.start_mm), 6),
+        "spacing_mm": round(float(table.spacing_mm), 6),
+        "error_fwd_um": [round(float(v), 4) for v in table.error_fwd_um],
+        "error_rev_um": [round(float(v), 4) for v in table.error_rev_um],
+    }
+    return hashlib.sha256(json.dumps(doc, separators=(",", ":"), sort_keys=True).encode()).hexdigest()
 
 
 @dataclass(frozen=True)

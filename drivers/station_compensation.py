@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import hashlib
 import json
 import math
 import os
@@ -49,7 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.errors import DriverError, SoftLimitError, TableError
-from drivers.interfaces import DriveLimits, DriveStatus, ServoAxis, TableBank, TableSpec
+from drivers.interfaces import DriveLimits, DriveStatus, ServoAxis, TableBank, TableSpec, table_sha256
 
 STORE_FORMAT = "station-compensation-tables"
 STORE_VERSION = 1
@@ -73,15 +72,7 @@ def station_table_spec(path: str | Path) -> TableSpec:
                      banks=BANKS, holder=f"the station's table store ({path})")
 
 
-def _sha256(table: TableBank) -> str:
-    # the same canonical form as procedures.push.table_sha256 (drivers may not import procedures)
-    doc = {
-        "start_mm": round(float(table.start_mm), 6),
-        "spacing_mm": round(float(table.spacing_mm), 6),
-        "error_fwd_um": [round(float(v), 4) for v in table.error_fwd_um],
-        "error_rev_um": [round(float(v), 4) for v in table.error_rev_um],
-    }
-    return hashlib.sha256(json.dumps(doc, separators=(",", ":"), sort_keys=True).encode()).hexdigest()
+_sha256 = table_sha256  # the same identity as the audit log and the drive path
 
 
 EMPTY = TableBank(0.0, 0.0, (), ())

@@ -33,14 +33,12 @@ same as the one pushed.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterator
 
 from drivers.errors import DriverError, TableError, TableRefused
-from drivers.interfaces import ServoAxis, TableBank, TableSpec
+from drivers.interfaces import ServoAxis, TableBank, TableSpec, table_sha256
 from procedures import events as ev
 from procedures.audit import AuditEntry, AuditLog, AuditSink, AuditStopped, new_id
 from procedures.errors import InputError
@@ -74,18 +72,6 @@ def quantize(table: TableBank, quantum_um: float | TableSpec = QUANTUM_UM) -> Ta
     if not spec.entry_resolution_um > 0:
         raise ValueError(f"quantum_um must be > 0, got {spec.entry_resolution_um}")
     return spec.quantize(table)
-
-
-def table_sha256(table: TableBank) -> str:
-    """SHA-256 (hex) of a table's content: start, spacing (1e-6 mm) and both entry lists
-    (1e-4 um), as canonical JSON. Independent of the bank and of the stored checksum."""
-    doc = {
-        "start_mm": round(float(table.start_mm), 6),
-        "spacing_mm": round(float(table.spacing_mm), 6),
-        "error_fwd_um": [round(float(v), 4) for v in table.error_fwd_um],
-        "error_rev_um": [round(float(v), 4) for v in table.error_rev_um],
-    }
-    return hashlib.sha256(json.dumps(doc, separators=(",", ":"), sort_keys=True).encode()).hexdigest()
 
 
 def table_to_json(table: TableBank, bank: int | None = None) -> dict[str, Any]:

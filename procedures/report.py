@@ -42,6 +42,7 @@ from procedures.fit.data import LegData, split_legs
 from procedures.fit.figures import range_um, reduction_pct, rms_about_mean_um
 from procedures.fit.noise import estimate_noise_floor
 from procedures.iso230 import MEANINGS as ISO_MEANINGS
+from procedures.iso230_report import _json_safe  # JSON with NaN/inf as null, numpy scalars as numbers
 
 UP_COLOR = "tab:blue"
 DOWN_COLOR = "tab:red"
@@ -99,16 +100,6 @@ def _iso_figures(points: np.ndarray, leg: int, residual_points: np.ndarray) -> d
 ISO_ROWS = tuple((k, f"{k}: {ISO_MEANINGS[k]}") for k in ("E", "M", "A", "B", "R"))
 
 
-def _json_safe(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _json_safe(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_json_safe(x) for x in v]
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    return v
 
 
 def model_is_normalised(model: LegErrorModel) -> bool:

@@ -205,13 +205,14 @@ def validate_table(table: CompTable, spec: TableSpec | None = None, expected_leg
 
 # -- writing -----------------------------------------------------------------------------------
 
-def _write_atomic(files: Mapping[Path, str]) -> list[Path]:
-    """Write every file or none: all go to temporary files first, then are renamed."""
+def _write_atomic(files: Mapping[Path, str], error: type[Exception] = TableValidationError) -> list[Path]:
+    """Write every file or none: all go to temporary files first, then are renamed. A missing
+    directory raises `error` (the caller's own InputError subclass) naming it."""
     temps: list[tuple[str, Path]] = []
     try:
         for path, text in files.items():
             if not path.parent.is_dir():
-                raise TableValidationError(f"{path}: directory {path.parent} does not exist")
+                raise error(f"{path}: directory {path.parent} does not exist")
             fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
             temps.append((tmp, path))
             with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:

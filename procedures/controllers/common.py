@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
 
 from procedures.errors import InputError
-from procedures.table import CompTable, LegTable, validate_table
+from procedures.table import CompTable, LegTable, _write_atomic, validate_table
 
 
 class ControllerFileError(InputError):
@@ -31,21 +30,7 @@ def write_files(out: str | os.PathLike, texts: Mapping[Path, str], suffix: str) 
     out = Path(out)
     if out.suffix.lower() != suffix.lower():
         out.mkdir(parents=True, exist_ok=True)
-    temps: list[tuple[str, Path]] = []
-    try:
-        for path, text in texts.items():
-            if not path.parent.is_dir():
-                raise ControllerFileError(f"{path}: directory {path.parent} does not exist")
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-            temps.append((tmp, path))
-            with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
-                fh.write(text)
-        for tmp, path in temps:
-            os.replace(tmp, path)
-    finally:
-        for tmp, _ in temps:
-            Path(tmp).unlink(missing_ok=True)
-    return list(texts)
+    return _write_atomic(texts, ControllerFileError)
 
 
 def checked(table: CompTable, spec, where) -> CompTable:
