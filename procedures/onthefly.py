@@ -169,9 +169,7 @@ def onthefly_passes(
                 if control.aborted:
                     raise Aborted(control.reason) from exc
                 kind = kind_of(exc)
-                limit = {FaultKind.BEAM_BREAK: retry.beam_retries, FaultKind.DRIVE_FAULT: retry.drive_retries}.get(
-                    kind, retry.comm_retries)
-                gave_up = attempt > limit
+                gave_up = attempt > retry.limit_for(kind)
                 fault = ev.Fault(first.index, leg, run, first.target_mm, kind, f"on-the-fly pass: {exc}", attempt,
                                  gave_up, clock.now() - t_start)
                 yield fault

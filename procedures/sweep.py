@@ -49,6 +49,11 @@ class RetryPolicy:
     beam_wait_s: float = 0.5
     env_interval_s: float = 10.0  # environment is read at most this often (it changes slowly)
 
+    def limit_for(self, kind: FaultKind) -> int:
+        """Retries allowed at one point for a fault of `kind` (beam, drive, else communication)."""
+        return {FaultKind.BEAM_BREAK: self.beam_retries, FaultKind.DRIVE_FAULT: self.drive_retries}.get(
+            kind, self.comm_retries)
+
 
 class SweepFailed(Exception):
     """Retries exhausted at a point; the session stops there and can be resumed."""
@@ -202,9 +207,7 @@ def sweep(
                     if control.aborted:
                         raise Aborted(control.reason) from exc
                     kind = _kind(exc)
-                    limit = {FaultKind.BEAM_BREAK: retry.beam_retries, FaultKind.DRIVE_FAULT: retry.drive_retries}.get(
-                        kind, retry.comm_retries)
-                    gave_up = attempt > limit
+                    gave_up = attempt > retry.limit_for(kind)
                     fault = ev.Fault(p.index, p.leg, p.run, p.target_mm, kind, str(exc), attempt, gave_up, clock.now() - t_start)
                     yield fault
                     if gave_up:
