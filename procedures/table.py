@@ -366,7 +366,11 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
         if len(d["x"]) < 2:
             raise TableValidationError(f"{path}, row {d['row'][0]}: leg {leg} has a single point; a table needs at least two")
         x = np.asarray(d["x"])
-        step = float((x[-1] - x[0]) / (x.size - 1))  # the mean step: robust to 1e-6 mm rounding
+        with np.errstate(over="ignore"):
+            step = float((x[-1] - x[0]) / (x.size - 1))  # the mean step: robust to 1e-6 mm rounding
+        if not np.isfinite(step):  # positions near the float limit (found by fuzzing)
+            raise TableValidationError(f"{path}, rows {d['row'][0]}..{d['row'][-1]}, field position_mm: leg {leg}'s "
+                                       f"positions span {x[0]:g} .. {x[-1]:g} mm, beyond any leg")
         legs[leg] = LegTable(leg, float(x[0]), round(step, 9), tuple(d["f"]), tuple(d["r"]), tuple(d["row"]))
         if check:
             spec.check(legs[leg].to_bank(), f"{path}, leg {leg}", point_name=lambda i, rows=d["row"]: f"row {rows[i]}")

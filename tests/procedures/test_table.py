@@ -20,6 +20,7 @@ from procedures.table import (
     make_table,
     read_linuxcnc_comp,
     read_table_csv,
+    TableValidationError,
     write_linuxcnc_comp,
     write_table_csv,
 )
@@ -216,3 +217,12 @@ def test_linuxcnc_refuses_more_than_256_lines_and_writes_nothing(tmp_path):
     with pytest.raises(TableRefused, match="LinuxCNC holds at most 256"):
         write_linuxcnc_comp(CompTable({1: t, 2: t2}), tmp_path / "out.comp", 0)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_positions_near_the_float_limit_are_refused_naming_the_rows(tmp_path):
+    # found by fuzzing: the mean step of such positions overflowed to inf (a RuntimeWarning, then
+    # a table with an infinite step when read unchecked)
+    p = tmp_path / "t.csv"
+    p.write_text("leg,position_mm,error_fwd_um,error_rev_um\n1,-1.7e308,0,0\n1,0,0,0\n1,1.7e308,0,0\n")
+    with pytest.raises(TableValidationError, match=r"rows 2\.\.4, field position_mm: leg 1's positions span"):
+        read_table_csv(p, check=False)
