@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from textual.widgets import DataTable, Input, Select, Static
+from textual.widgets import DataTable, Input, Static
 
 from procedures.diagnosis import diagnose
 from procedures.fit import fit
@@ -20,17 +20,10 @@ from procedures.recording.reader import read_session
 from procedures.table import make_table
 from station.tui import capabilities
 from station.tui.app import StationApp
+from tests.station.tui.steps import open_session
 from station.tui.widgets import XYPlot
 
 pytestmark = pytest.mark.timeout(120)
-
-
-async def open_session(pilot, wait_until, mode_key: str, path) -> None:
-    app = pilot.app
-    await pilot.press(mode_key)
-    await wait_until(pilot, lambda: app.screen.query("#session-path"), what="the session picker")
-    app.screen.query_one("#session-path", Input).value = str(path)
-    await pilot.click("#session-open")
 
 
 def test_results_show_the_fit_iso_and_plots(recorded_session, cfg, size, wait_until, notes):

@@ -11,22 +11,15 @@ import json
 from pathlib import Path
 
 import pytest
-from textual.widgets import DataTable, Input, Static
+from textual.widgets import DataTable, Static
 
 from procedures.audit import read_entries
 from procedures.push import quantize, table_sha256
 from station.tui.app import StationApp
+from tests.station.tui.steps import open_session
 from station.tui.screens.common import ConfirmScreen
 
 pytestmark = pytest.mark.timeout(120)
-
-
-async def open_session(pilot, wait_until, mode_key: str, path) -> None:
-    app = pilot.app
-    await pilot.press(mode_key)
-    await wait_until(pilot, lambda: app.screen.query("#session-path"), what="the session picker")
-    app.screen.query_one("#session-path", Input).value = str(path)
-    await pilot.click("#session-open")
 
 
 def test_station_target_push_and_rollback_on_the_page(recorded_session, cfg, size, wait_until, notes, connected):

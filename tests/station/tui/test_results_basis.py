@@ -21,6 +21,7 @@ from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
 from procedures.recording.reader import read_session
 from station.cli import main
 from station.tui.app import StationApp
+from tests.station.tui.steps import open_session
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -86,10 +87,7 @@ async def _basis(path, cfg, wait_until, cli, printed):
     session = read_session(path)
     app = StationApp(cfg, autoconnect=False)
     async with app.run_test(size=(130, 40)) as pilot:
-        await pilot.press("f3")
-        await wait_until(pilot, lambda: app.screen.query("#session-path"), what="the session picker")
-        app.screen.query_one("#session-path", Input).value = str(path)
-        await pilot.click("#session-open")
+        await open_session(pilot, wait_until, "f3", path)
         await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
         status = lambda: str(app.screen.query_one("#results-status", Static).render())  # noqa: E731
         # 1) the default: normalised to 20 degC, as the commands without --raw

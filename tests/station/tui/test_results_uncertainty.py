@@ -6,13 +6,14 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from textual.widgets import DataTable, Input
+from textual.widgets import DataTable
 
 from procedures import iso230
 from procedures.metrology.thermal import error_basis
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
 from procedures.recording.reader import read_session
 from station.tui.app import StationApp
+from tests.station.tui.steps import open_session
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -24,10 +25,7 @@ def test_results_show_U_beside_each_iso_value(recorded_session, cfg, wait_until)
 async def _shown(path, cfg, wait_until):
     app = StationApp(cfg, autoconnect=False)
     async with app.run_test(size=(130, 40)) as pilot:
-        await pilot.press("f3")
-        await wait_until(pilot, lambda: app.screen.query("#session-path"), what="the session picker")
-        app.screen.query_one("#session-path", Input).value = str(path)
-        await pilot.click("#session-open")
+        await open_session(pilot, wait_until, "f3", path)
         await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
         session = read_session(path)
         points = error_basis(session)[0]  # the page's default error, as station iso230's: normalised to 20 degC
