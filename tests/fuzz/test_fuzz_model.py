@@ -24,6 +24,7 @@ from procedures.fit import fit, load_model
 from procedures.fit.model_io import model_to_json
 from station.synth import synth_session
 from tests.fuzz.budget import examples, fed
+from tests.fuzz.jsondamage import damaged_json, json_value
 
 
 @functools.cache
@@ -33,40 +34,9 @@ def model_doc(method: str) -> dict:
     return json.loads(model_to_json(fit(points, method), "runs/s.h5", "ab" * 32))
 
 
-json_value = st.recursive(
-    st.one_of(st.none(), st.booleans(), st.integers(-10, 10), st.integers(), st.sampled_from([10**400, -(10**30)]),
-              st.floats(allow_nan=False, allow_infinity=False), st.sampled_from([1e308, -1e308, 5e-324, 0.0, -0.0]),
-              st.text(max_size=10)),
-    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
-    max_leaves=8,
-)
-
-
-def _paths(node, prefix=()):
-    yield prefix
-    if isinstance(node, dict):
-        for k, v in node.items():
-            yield from _paths(v, prefix + (k,))
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            yield from _paths(v, prefix + (i,))
-
-
 @st.composite
 def damaged_model(draw) -> bytes:
-    doc = copy.deepcopy(model_doc(draw(st.sampled_from(["default", "paper"]))))
-    for _ in range(draw(st.integers(1, 3))):
-        paths = [p for p in _paths(doc) if p]
-        where = draw(st.sampled_from(paths))
-        parent = doc
-        for k in where[:-1]:
-            parent = parent[k]
-        if draw(st.integers(0, 4)) == 0 and isinstance(parent, dict):
-            del parent[where[-1]]
-        else:
-            parent[where[-1]] = draw(json_value)
-        if not isinstance(doc, dict):
-            break
+    doc = damaged_json(draw, model_doc(draw(st.sampled_from(["default", "paper"]))), 3)
     text = json.dumps(doc).encode()  # Python's json writes NaN/Infinity too: the reader must refuse them
     cut = draw(st.sampled_from([None, None, None, "cut", "flip"]))
     if cut == "cut":

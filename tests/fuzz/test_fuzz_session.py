@@ -11,7 +11,6 @@ exception. An accepted session also exports to CSV, or is refused, leaving no pa
 from __future__ import annotations
 
 import functools
-import json
 import os
 import tempfile
 from pathlib import Path

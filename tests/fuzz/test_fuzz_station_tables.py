@@ -8,7 +8,6 @@ file; never another exception.
 
 from __future__ import annotations
 
-import copy
 import functools
 import json
 import math
@@ -20,7 +19,7 @@ from hypothesis import example, given, settings, strategies as st
 from drivers.interfaces import TableBank
 from drivers.station_compensation import LegTables, StationTableStore, StoreError
 from tests.fuzz.budget import examples, fed
-from tests.fuzz.test_fuzz_model import _paths, json_value
+from tests.fuzz.jsondamage import damaged_json
 
 
 @functools.cache
@@ -35,17 +34,7 @@ def store_doc() -> dict:
 
 @st.composite
 def damaged_store(draw) -> bytes:
-    doc = copy.deepcopy(store_doc())
-    for _ in range(draw(st.integers(1, 2))):
-        paths = [p for p in _paths(doc) if p]
-        where = draw(st.sampled_from(paths))
-        parent = doc
-        for k in where[:-1]:
-            parent = parent[k]
-        if draw(st.integers(0, 4)) == 0 and isinstance(parent, dict):
-            del parent[where[-1]]
-        else:
-            parent[where[-1]] = draw(json_value)
+    doc = damaged_json(draw, store_doc(), 2)
     text = json.dumps(doc).encode()
     if draw(st.integers(0, 5)) == 0:
         i = draw(st.integers(0, len(text) - 1))
