@@ -5,7 +5,6 @@ a session that names the profile, with errors of the size the simulated legs hav
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest

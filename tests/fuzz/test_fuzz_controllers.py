@@ -26,7 +26,7 @@ from procedures.import_map import convert, load_map
 from procedures.table import CompTable, LegTable
 from tests.fuzz import tomlgen
 from tests.fuzz.budget import examples, fed
-from tests.fuzz.test_fuzz_toml import damaged
+from tests.fuzz.tomlgen import damaged
 
 MAPS = Path(__file__).resolve().parents[2] / "docs" / "import-maps"
 CONTROLLERS = FORMATS + ("linuxcnc",)

@@ -9,7 +9,6 @@ naming the file; never another exception.
 
 from __future__ import annotations
 
-import copy
 import math
 import tempfile
 import tomllib
@@ -21,17 +20,8 @@ from drivers.modbus.profile import DEFAULT_PROFILE, DriveProfile, ProfileError
 from procedures.errors import InputError
 from station.config import load_config
 from tests.fuzz import tomlgen
+from tests.fuzz.tomlgen import damaged, toml_value
 from tests.fuzz.budget import examples, fed
-
-scalar = st.one_of(
-    st.none(),  # None: the key is deleted
-    st.booleans(), st.integers(-3, 70000), st.integers(), st.floats(),
-    st.sampled_from([float("inf"), float("-inf"), float("nan"), 1e308, -0.0, 0, -1, 2**64, "", "sim", "tcp://127.0.0.1:502"]),
-    st.text(max_size=12),
-)
-toml_value = st.recursive(scalar.filter(lambda v: v is not None),
-                          lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=5), inner, max_size=3),
-                          max_leaves=6)
 
 CONFIG = {
     "station": {"operator": "jdoe", "recordings_dir": "runs"},
@@ -42,41 +32,6 @@ CONFIG = {
     "legs": {"expansion_um_m_k": 11.5, "3": {"fixed_point_mm": 10.0}},
     "compensation": {"target": "drive", "legs": {"3": "station"}},
 }
-
-
-def _leaves(node, prefix=()):
-    if isinstance(node, dict):
-        if prefix:
-            yield prefix
-        for k, v in node.items():
-            yield from _leaves(v, prefix + (k,))
-    elif isinstance(node, list):
-        yield prefix
-        for i, v in enumerate(node):
-            yield from _leaves(v, prefix + (i,))
-    else:
-        yield prefix
-
-
-@st.composite
-def damaged(draw, doc: dict) -> bytes:
-    doc = copy.deepcopy(doc)
-    for _ in range(draw(st.integers(1, 3))):
-        where = draw(st.sampled_from(list(_leaves(doc))))
-        parent = doc
-        for k in where[:-1]:
-            parent = parent[k]
-        new = draw(st.one_of(scalar, toml_value))
-        if new is None and isinstance(parent, dict):
-            del parent[where[-1]]
-        elif new is not None:
-            parent[where[-1]] = new
-    if draw(st.integers(0, 5)) == 0:  # a key or section nobody knows
-        doc[draw(st.sampled_from(list(doc)))] = {draw(st.text(min_size=1, max_size=6)): draw(scalar.filter(lambda v: v is not None))}
-    text = tomlgen.dumps(doc).encode()
-    if draw(st.integers(0, 6)) == 0:
-        text = text[: draw(st.integers(0, len(text)))]
-    return text
 
 
 def _write(d: str, name: str, data: bytes) -> Path:

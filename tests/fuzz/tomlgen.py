@@ -1,10 +1,14 @@
 """A small TOML writer for the fuzz tests (tomllib reads only): any dict of str keys holding
-str, int, float (inf and nan too), bool, lists and dicts becomes TOML text."""
+str, int, float (inf and nan too), bool, lists and dicts becomes TOML text; and `damaged`, a
+strategy damaging a valid document value by value, key by key, and cutting it short."""
 
 from __future__ import annotations
 
+import copy
 import json
 import math
+
+from hypothesis import strategies as st
 
 
 def _key(k: str) -> str:
@@ -50,3 +54,50 @@ def dumps(doc: dict) -> str:
         lines.append(head)
         lines.extend(f"{_key(k)} = {value(x)}" for k, x in body.items())
     return "\n".join(lines) + "\n"
+
+
+# -- damaging valid documents (the config, profile and import-map fuzz tests) --------------------
+
+scalar = st.one_of(
+    st.none(),  # None: the key is deleted
+    st.booleans(), st.integers(-3, 70000), st.integers(), st.floats(),
+    st.sampled_from([float("inf"), float("-inf"), float("nan"), 1e308, -0.0, 0, -1, 2**64, "", "sim", "tcp://127.0.0.1:502"]),
+    st.text(max_size=12),
+)
+toml_value = st.recursive(scalar.filter(lambda v: v is not None),
+                          lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=5), inner, max_size=3),
+                          max_leaves=6)
+
+def _leaves(node, prefix=()):
+    if isinstance(node, dict):
+        if prefix:
+            yield prefix
+        for k, v in node.items():
+            yield from _leaves(v, prefix + (k,))
+    elif isinstance(node, list):
+        yield prefix
+        for i, v in enumerate(node):
+            yield from _leaves(v, prefix + (i,))
+    else:
+        yield prefix
+
+
+@st.composite
+def damaged(draw, doc: dict) -> bytes:
+    doc = copy.deepcopy(doc)
+    for _ in range(draw(st.integers(1, 3))):
+        where = draw(st.sampled_from(list(_leaves(doc))))
+        parent = doc
+        for k in where[:-1]:
+            parent = parent[k]
+        new = draw(st.one_of(scalar, toml_value))
+        if new is None and isinstance(parent, dict):
+            del parent[where[-1]]
+        elif new is not None:
+            parent[where[-1]] = new
+    if draw(st.integers(0, 5)) == 0:  # a key or section nobody knows
+        doc[draw(st.sampled_from(list(doc)))] = {draw(st.text(min_size=1, max_size=6)): draw(scalar.filter(lambda v: v is not None))}
+    text = dumps(doc).encode()
+    if draw(st.integers(0, 6)) == 0:
+        text = text[: draw(st.integers(0, len(text)))]
+    return text
