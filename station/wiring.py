@@ -67,32 +67,23 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
 
         scale = cfg.sim.time_scale if time_scale is None else time_scale
         nv = Path(cfg.sim.nv_path) if cfg.sim.nv_path else None
-        if noise_seed is None:
-            sim = SimRig(time_scale=scale, seed=cfg.sim.seed, configs=cfg.sim.leg_configs(), nv_path=nv, profile=profile).start()
-        else:
-            sim = SimRig(time_scale=scale, seed=int(noise_seed), configs=cfg.sim.leg_configs(),
-                         nv_path=nv, profile=profile).start()
+        # the plant is always cfg.sim.seed's; only the noise follows noise_seed
+        seed = cfg.sim.seed if noise_seed is None else int(noise_seed)
+        sim = SimRig(time_scale=scale, seed=seed, configs=cfg.sim.leg_configs(), nv_path=nv, profile=profile).start()
         try:
-            axes = connect_axes(sim.drive_url, legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
-            try:
-                axes = compensation_axes(cfg, axes)
-            except BaseException:
-                _close_axes(axes)
-                raise
+            axes = _connect_legs(cfg, sim.drive_url, legs, profile, clock=sim.clock)
             laser = SerialInterferometer(sim.laser_port, timeout_s=cfg.interferometer.timeout_s)
         except Exception:
             sim.stop()
             raise
         desc = f"simulated rig (time scale {scale:g}): drives {sim.drive_url}, interferometer {sim.laser_port}"
         return Rig(axes, laser, sim.clock, "sim", desc, profile, sim, [sim.stop])
-    axes = connect_axes(cfg.drive.url, legs, profile, timeout_s=cfg.drive.timeout_s)
+    axes = _connect_legs(cfg, cfg.drive.url, legs, profile)
     try:
-        axes = compensation_axes(cfg, axes)
         laser = SerialInterferometer(cfg.interferometer.port, baudrate=cfg.interferometer.baudrate,
                                      timeout_s=cfg.interferometer.timeout_s)
     except Exception:
-        for a in axes.values():
-            a.close()
+        _close_axes(axes)
         raise
     desc = f"drives {cfg.drive.url}, interferometer {cfg.interferometer.port}"
     return Rig(axes, laser, SystemClock(), "live", desc, profile)
@@ -127,10 +118,6 @@ def open_drive(cfg: StationConfig, legs: int | tuple[int, ...]) -> DriveHandle:
     legs = (legs,) if isinstance(legs, int) else tuple(legs)
     profile = DriveProfile.load(cfg.drive.profile or None)
 
-    def close_all(axes) -> None:
-        for axis in axes.values():
-            axis.close()
-
     if cfg.drive.url == "sim":
         from drivers.sim.rig import SimRig
 
@@ -138,28 +125,29 @@ def open_drive(cfg: StationConfig, legs: int | tuple[int, ...]) -> DriveHandle:
                      nv_path=Path(cfg.sim.nv_path) if cfg.sim.nv_path else None, profile=profile)
         port = sim.drive_server.start_tcp()
         try:
-            axes = connect_axes(f"tcp://127.0.0.1:{port}", legs, profile, timeout_s=cfg.drive.timeout_s, clock=sim.clock)
-            try:
-                axes = compensation_axes(cfg, axes)
-            except BaseException:
-                _close_axes(axes)
-                raise
+            axes = _connect_legs(cfg, f"tcp://127.0.0.1:{port}", legs, profile, clock=sim.clock)
         except BaseException:
             sim.drive_server.stop()
             raise
 
         def close() -> None:
-            close_all(axes)
+            _close_axes(axes)
             sim.drive_server.stop()
 
         return DriveHandle(dict(axes), f"sim ({cfg.sim.nv_path})" if cfg.sim.nv_path else "sim", close)
-    axes = connect_axes(cfg.drive.url, legs, profile, timeout_s=cfg.drive.timeout_s)
+    axes = _connect_legs(cfg, cfg.drive.url, legs, profile)
+    return DriveHandle(dict(axes), cfg.drive.url, lambda: _close_axes(axes))
+
+
+def _connect_legs(cfg: StationConfig, url: str, legs, profile: DriveProfile, **kwargs) -> dict[int, ServoAxis]:
+    """The drives of `legs` at `url`, each wrapped as its [compensation] target needs
+    (compensation_axes); nothing left open when that fails."""
+    axes = connect_axes(url, legs, profile, timeout_s=cfg.drive.timeout_s, **kwargs)
     try:
-        axes = compensation_axes(cfg, axes)
+        return compensation_axes(cfg, axes)
     except BaseException:
-        close_all(axes)
+        _close_axes(axes)
         raise
-    return DriveHandle(dict(axes), cfg.drive.url, lambda: close_all(axes))
 
 
 def _close_axes(axes) -> None:
