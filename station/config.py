@@ -250,11 +250,6 @@ class StationConfig:
             return replace(self.legs, expansion_um_m_k=plant.expansion_ppm_per_k, fixed_point_mm=plant.bearing_mm)
         return self.legs
 
-    def metrology_record(self) -> dict[str, Any]:
-        """The metrology config and every leg's material, as a session records it."""
-        return {"metrology": asdict(self.metrology),
-                "legs": {str(n): asdict(self.material_of(n)) for n in range(1, LEG_COUNT + 1)}}
-
     @property
     def from_file(self) -> bool:
         return self.source != "built-in defaults"

@@ -59,7 +59,7 @@ expansion_u_um_m_k = 0.5
     assert cfg.material_of(3) == LegMaterial(23.0, 0.5, -150.0)
     rec = json.loads(json.dumps(cfg.to_dict()))
     assert rec["metrology"]["wavelength_nm"] == 632.8 and rec["leg_overrides"]["3"]["expansion_um_m_k"] == 23.0
-    assert cfg.metrology_record()["legs"]["3"]["expansion_u_um_m_k"] == 0.5
+    assert rec["leg_materials"]["3"]["expansion_u_um_m_k"] == 0.5  # every leg's effective material
 
 
 @pytest.mark.parametrize("text, key", [
