@@ -20,6 +20,14 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     time_scale = 0.0            # real seconds per simulated second (0 = no waiting)
     seed = 0
     nv_path = ""                # file for the simulated drive's table memory ("" = none)
+    jerk_mm_s3 = 2000.0         # the simulated drives' jerk limit (a real leg's; 0 = not limited)
+    ambient_ramp_k_per_h = 0.0  # the simulated hall warming (docs/metrology.md)
+    thermal_tau_s = 1800.0      # how fast the simulated legs follow it, s
+
+    [compensation]              # where each leg's table is applied (docs/compensation.md)
+    target = "drive"            # "drive" (its table banks), "station" (the station corrects commands), "controller"
+    legs = {}                   # per-leg override, e.g. { 3 = "station" }
+    tables_path = ""            # the station-side table store ("" = <recordings_dir>/station-tables.json)
 
     [metrology]                 # the measurement chain (docs/metrology.md); all optional
     reference_temp_c = 20.0     # lengths are normalised to this material temperature (ISO 1)
