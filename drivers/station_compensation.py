@@ -364,6 +364,9 @@ class StationCompensatedAxis:
     def identity(self) -> str:
         return self.inner.identity()
 
+    def drive_identity(self) -> dict:
+        return self.inner.drive_identity()
+
     def limits(self) -> DriveLimits:
         return self.inner.limits()
 

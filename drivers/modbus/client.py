@@ -229,6 +229,16 @@ class ModbusBus:
                                 lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit))
             self._check_function(rsp, 16, "write", unit, a, len(vals))
 
+    def read_device_identification(self, unit: int) -> dict[int, str]:
+        """Modbus Read Device Identification (function 43, MEI type 14), the basic objects: object
+        id -> text (0 VendorName, 1 ProductCode, 2 MajorMinorRevision). RequestRefused when the
+        drive answers with an exception (01: it does not implement the function)."""
+        rsp = self._execute("read device identification (43/14) of", unit, 0, 3,
+                            lambda: self._client.read_device_information(read_code=1, object_id=0, device_id=unit))
+        self._check_function(rsp, 0x2B, "read device identification of", unit, 0, 3)
+        return {int(oid): (v if isinstance(v, bytes) else b"".join(v)).decode("ascii", "replace").strip()
+                for oid, v in rsp.information.items()}
+
     def _check_function(self, rsp, expected: int, kind: str, unit: int, address: int, count: int) -> None:
         """pymodbus matches a reply to its request by transaction id only: a reply of another
         function (line noise, a confused gateway) would be taken for the answer. Refused, and the
@@ -339,6 +349,23 @@ class ModbusServoAxis:
             return (f"{ident['vendor']} {ident['product']} unit {self.unit} (identity from profile "
                     f"{self.profile.name}; the drive has no identity registers)")
         return f"{v['vendor']} {v['product']} s/n {v['serial']} fw {v['firmware']}"
+
+    def drive_identity(self) -> dict:
+        """The drive's identity for the session (procedures/recording/identity.py): vendor,
+        product_code, revision from Read Device Identification (43/14) when the profile says the
+        drive answers it (`[protocol] device_identification`), source "modbus-device-id"; else the
+        profile's [identity] vendor and product, source "config". The serial from the drive's
+        identity registers when it has them, else None (the config may give it)."""
+        ident = self.profile.identity
+        out = {"vendor": ident.get("vendor") or None, "product_code": ident.get("product") or None,
+               "revision": None, "serial": None, "source": "config"}
+        if self._proto.device_identification:
+            objects = self.bus.read_device_identification(self.unit)
+            out.update(vendor=objects.get(0) or None, product_code=objects.get(1) or None,
+                       revision=objects.get(2) or None, source="modbus-device-id")
+        if self.profile.has("serial"):
+            out["serial"] = str(self._read_names(["serial"])["serial"]).strip() or None
+        return out
 
     def check_map_version(self) -> None:
         """Refuse a drive whose register map version differs from the profile's. A drive without a

@@ -59,6 +59,7 @@ from drivers.errors import DriverError
 from drivers.interfaces import Clock
 from drivers.modbus.codec import crc16_modbus
 from drivers.modbus.profile import DriveProfile
+from drivers.sim import device_id
 from drivers.sim.motion import SmoothedMove
 from drivers.sim.plant import LegPlant
 from drivers.sim.position_compare import PositionCompare, TriggerLine
@@ -747,6 +748,13 @@ class SimDriveServer:
         devices.append(SimDevice(id=0, simdata=[SimData(address=0, count=size, datatype=DataType.REGISTERS)], action=self._silent))
         return devices
 
+    def _device_identification(self, server) -> None:
+        """Function 43/14 per drive: answered from the profile's [identity] when the profile says
+        the drive answers it, else exception 01 (drivers/sim/device_id.py)."""
+        answers = self.profile.protocol.device_identification
+        objects = device_id.device_objects(self.profile.identity) if answers else None
+        device_id.install(server, {self.profile.protocol.unit_id(leg): objects for leg in self._models})
+
     # -- life cycle ---------------------------------------------------------------------------------
     def _ensure_loop(self) -> asyncio.AbstractEventLoop:
         if self._loop is None:
@@ -783,6 +791,7 @@ class SimDriveServer:
 
         async def start():
             server = ModbusTcpServer(self._devices(), address=(host, port), ignore_missing_devices=True)
+            self._device_identification(server)
             try:
                 await server.serve_forever(background=True)
             except RuntimeError:
@@ -812,6 +821,7 @@ class SimDriveServer:
                 loop.add_reader(src, partial(self._copy, src, dst))
             server = ModbusSerialServer(self._devices(), framer=FramerType.RTU, port=os.ttyname(s_srv),
                                         baudrate=baudrate, ignore_missing_devices=True)
+            self._device_identification(server)
             await server.serve_forever(background=True)
             self._servers.append(server)
             return os.ttyname(s_cli)
