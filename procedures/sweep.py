@@ -15,7 +15,7 @@ import json
 import logging
 import uuid
 from dataclasses import dataclass
-from typing import Any, Iterator, Mapping
+from typing import Any, Iterator, Mapping, Sequence
 
 from drivers.interfaces import (
     BeamBreak,
@@ -100,12 +100,15 @@ def sweep(
     session_id: str | None = None,
     t0_s: float | None = None,
     materials: Mapping[int, Any] | None = None,
+    warnings: Sequence[str] = (),
 ) -> Iterator[ev.Event]:
     """Run `plan`, skipping plan indices in `done_indices` (resume). Yields events.
 
     `materials`: leg -> its material (expansion coefficient, fixed point), which the adaptive
     stopping rule of an on-the-fly plan normalises with (the composing job gives the station
     config's, station/jobs.py; None = the default material).
+    `warnings`: said (Message, level "warning") right after SweepStarted, e.g. a laser past its
+    calibration due date (the session's identity records them too).
 
     Ends with `SweepFinished(outcome=...)`: COMPLETED, ABORTED or FAILED (retries exhausted;
     the `Fault` event before it names the point). Pauses at the start of each point and of each
@@ -133,6 +136,8 @@ def sweep(
     devices.update(applied_tables_devices(axes, plan.legs))  # target, bank, sha256: in the file from its creation
     t_start = clock.now() if t0_s is None else t0_s
     yield ev.SweepStarted(session_id or uuid.uuid4().hex[:12], tuple(plan.legs), total, plan.to_dict(), devices, done)
+    for text in warnings:
+        yield ev.Message(text, level="warning")
     for leg, (active, text) in tables.items():
         if active:
             yield ev.Message(

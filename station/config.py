@@ -5,6 +5,8 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     [station]
     operator = "jdoe"
     recordings_dir = "runs"
+    id = "bench-2"              # the station's id in every session ("" = the host name)
+    serials_file = ""           # CSV leg,serial[,part_number,leg_type,screw_lot] (station/serials.py)
 
     [drive]
     url = "sim"                 # or "tcp://127.0.0.1:5020", "rtu:///dev/ttyUSB0?baud=115200"
@@ -39,6 +41,7 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     model = ""                  # instrument identification
     serial = ""
     calibration_date = ""       # ISO date of its last calibration, YYYY-MM-DD
+    calibration_due = ""        # ISO date its calibration expires; "" = not stated (not traceable)
     air_temp_u_c = 0.1          # STANDARD uncertainties (k = 1) of the sensors
     pressure_u_pa = 50.0
     humidity_u_pct = 3.0
@@ -53,6 +56,11 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     fixed_point_mm = 0.0        # target_mm where the leg is fixed (zero thermal expansion)
     [legs.3]                    # per-leg override, legs 1..6
     fixed_point_mm = -150.0
+    serial = "HX-0042"          # the leg's identity (recorded in every session; push checks it)
+    part_number = "HX-L-300"
+    leg_type = "HX300"
+    screw_lot = "L2026-11"
+    drive_serial = ""           # the drive's serial when the drive cannot say it
 """
 
 from __future__ import annotations
@@ -130,6 +138,7 @@ class MetrologyConfig:
     model: str = ""  # instrument identification: maker and model
     serial: str = ""
     calibration_date: str = ""  # ISO date (YYYY-MM-DD) of the instrument's calibration; "" = not stated
+    calibration_due: str = ""  # ISO date its calibration expires; "" = not stated: results not traceable
     air_temp_u_c: float = 0.1  # standard uncertainty of the air temperature sensor
     pressure_u_pa: float = 50.0  # of the pressure sensor
     humidity_u_pct: float = 3.0  # of the humidity sensor, %RH
@@ -157,6 +166,10 @@ class LegMaterial:
     expansion_um_m_k: float = 11.5
     expansion_u_um_m_k: float = 1.0
     fixed_point_mm: float = 0.0
+
+
+LEG_IDENTITY_KEYS = ("serial", "part_number", "leg_type", "screw_lot", "drive_serial")
+"""[legs.N] keys naming the leg (and its drive), not its material: text, recorded in sessions."""
 
 
 COMPENSATION_TARGETS = ("drive", "station", "controller")
@@ -203,12 +216,15 @@ class CompensationConfig:
 class StationConfig:
     operator: str = field(default_factory=lambda: _whoami())
     recordings_dir: str = "runs"
+    id: str = ""  # [station] id: the station's name in sessions; "" = the host name (station_id)
+    serials_file: str = ""  # [station] serials_file: leg serials CSV read by every sweep
     drive: DriveConfig = field(default_factory=DriveConfig)
     interferometer: LaserConfig = field(default_factory=LaserConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     metrology: MetrologyConfig = field(default_factory=MetrologyConfig)
     legs: LegMaterial = field(default_factory=LegMaterial)  # [legs]: the default of every leg
     leg_overrides: dict[int, LegMaterial] = field(default_factory=dict)  # [legs.N]
+    leg_identity: dict[int, dict[str, str]] = field(default_factory=dict)  # [legs.N] serial, part_number, ...
     legs_from_file: bool = False  # the file has a [legs] section
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
     source: str = "built-in defaults"
@@ -217,6 +233,11 @@ class StationConfig:
     @property
     def is_sim(self) -> bool:
         return self.drive.url == "sim" or self.interferometer.port == "sim"
+
+    @property
+    def station_id(self) -> str:
+        """[station] id, else the host name."""
+        return self.id or _hostname()
 
     @property
     def audit_path(self) -> Path:
@@ -241,6 +262,7 @@ class StationConfig:
         d = asdict(self)
         d.pop("named")
         d["leg_overrides"] = {str(k): v for k, v in d["leg_overrides"].items()}  # JSON keys are strings
+        d["leg_identity"] = {str(k): v for k, v in d["leg_identity"].items()}
         # what the session's normalisation uses: every leg's effective material
         d["leg_materials"] = {str(n): asdict(self.material_of(n)) for n in range(1, LEG_COUNT + 1)}
         d["compensation"]["legs"] = {str(k): v for k, v in d["compensation"]["legs"].items()}
@@ -280,6 +302,12 @@ class StationConfig:
         drive = "SIMULATED drives" if self.drive.url == "sim" else f"drives at {self.drive.url}"
         laser = "SIMULATED interferometer" if self.interferometer.port == "sim" else f"interferometer at {self.interferometer.port}"
         return f"{drive}, {laser} (config: {self.source})"
+
+
+def _hostname() -> str:
+    import socket
+
+    return socket.gethostname() or "unknown"
 
 
 def _whoami() -> str:
@@ -342,10 +370,10 @@ def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, floa
     return v
 
 
-def _iso_date(p: Path, value: Any) -> str:
+def _iso_date(p: Path, value: Any, key: str = "calibration_date") -> str:
     text = str(value) if isinstance(value, _dt.date) else value  # TOML may give a date literal
     if not isinstance(text, str):
-        raise InputError(f"{p}: [metrology] calibration_date: expected an ISO date YYYY-MM-DD, got {value!r}")
+        raise InputError(f"{p}: [metrology] {key}: expected an ISO date YYYY-MM-DD, got {value!r}")
     if text == "":
         return ""
     try:
@@ -353,7 +381,7 @@ def _iso_date(p: Path, value: Any) -> str:
         if len(text) != 10:
             raise ValueError
     except ValueError:
-        raise InputError(f"{p}: [metrology] calibration_date = {value!r}: not an ISO date; write it as "
+        raise InputError(f"{p}: [metrology] {key} = {value!r}: not an ISO date; write it as "
                          "YYYY-MM-DD, e.g. 2026-03-14") from None
     return text
 
@@ -366,8 +394,8 @@ def _load_metrology(p: Path, table: Any) -> MetrologyConfig:
     for key, value in table.items():
         if key not in fields:
             raise InputError(f"{p}: [metrology] {key}: unknown key (known: {', '.join(fields)})")
-        if key == "calibration_date":
-            setattr(m, key, _iso_date(p, value))
+        if key in ("calibration_date", "calibration_due"):
+            setattr(m, key, _iso_date(p, value, key))
         elif isinstance(getattr(m, key), str):
             if not isinstance(value, str):
                 raise InputError(f"{p}: [metrology] {key}: expected text, got {value!r}")
@@ -382,25 +410,40 @@ def _material(p: Path, where: str, table: dict, base: LegMaterial) -> LegMateria
     values = {}
     for key, value in table.items():
         if key not in fields:
-            raise InputError(f"{p}: [{where}] {key}: unknown key (known: {', '.join(fields)}; per-leg "
+            raise InputError(f"{p}: [{where}] {key}: unknown key (known: {', '.join(fields)}; in [legs.N] also "
+                             f"{', '.join(LEG_IDENTITY_KEYS)}; per-leg "
                              "overrides go in [legs.1] .. [legs.6])")
         values[key] = _number(p, where, key, value, _BOUNDS[("legs", key)])
     return replace(base, **values)
 
 
-def _load_legs(p: Path, table: Any) -> tuple[LegMaterial, dict[int, LegMaterial]]:
+def _load_legs(p: Path, table: Any) -> tuple[LegMaterial, dict[int, LegMaterial], dict[int, dict[str, str]]]:
     if not isinstance(table, dict):
         raise InputError(f"{p}: [legs] must be a table of keys")
     own = {k: v for k, v in table.items() if not isinstance(v, dict)}
     default = _material(p, "legs", own, LegMaterial())
     overrides: dict[int, LegMaterial] = {}
+    identity: dict[int, dict[str, str]] = {}
     for key, sub in table.items():
         if not isinstance(sub, dict):
             continue
         if not (key.isdigit() and 1 <= int(key) <= LEG_COUNT):
             raise InputError(f"{p}: [legs.{key}]: not a leg; per-leg sections are [legs.1] .. [legs.{LEG_COUNT}]")
-        overrides[int(key)] = _material(p, f"legs.{key}", sub, default)
-    return default, overrides
+        names = {k: v for k, v in sub.items() if k in LEG_IDENTITY_KEYS}
+        for k, v in names.items():
+            if not isinstance(v, str):
+                raise InputError(f"{p}: [legs.{key}] {k}: expected text (e.g. \"HX-0042\"), got {v!r}")
+        if names:
+            from station.serials import check_serial  # one rule for serials everywhere
+
+            for k in ("serial", "drive_serial"):
+                if names.get(k):
+                    check_serial(names[k], f"{p}: [legs.{key}] {k}")
+            identity[int(key)] = {k: v for k, v in names.items() if v}
+        material = {k: v for k, v in sub.items() if k not in LEG_IDENTITY_KEYS}
+        if material:
+            overrides[int(key)] = _material(p, f"legs.{key}", material, default)
+    return default, overrides, identity
 
 
 def _convert(want: type, value: Any) -> Any:
@@ -434,8 +477,8 @@ def load_config(path: str | Path | None) -> StationConfig:
         if not isinstance(data.get(section, {}), dict):
             raise InputError(f"{p}: {section} must be a section ([{section}] and its keys), got {data[section]!r}")
     for key, value in data.get("station", {}).items():
-        if key not in ("operator", "recordings_dir"):
-            raise InputError(f"{p}: [station] {key}: unknown key (known: operator, recordings_dir)")
+        if key not in ("operator", "recordings_dir", "id", "serials_file"):
+            raise InputError(f"{p}: [station] {key}: unknown key (known: operator, recordings_dir, id, serials_file)")
         setattr(cfg, key, str(value))
     for section, cls in _SECTIONS.items():
         target = getattr(cfg, section)
@@ -458,7 +501,7 @@ def load_config(path: str | Path | None) -> StationConfig:
     if "metrology" in data:
         cfg.metrology = _load_metrology(p, data["metrology"])
     if "legs" in data:
-        cfg.legs, cfg.leg_overrides = _load_legs(p, data["legs"])
+        cfg.legs, cfg.leg_overrides, cfg.leg_identity = _load_legs(p, data["legs"])
         cfg.legs_from_file = True
     cfg.compensation.check(str(p))
     unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs"}

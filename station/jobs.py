@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import uuid
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Mapping
 
 from procedures import events as ev
 from procedures.control import RunControl
@@ -20,6 +20,7 @@ from procedures.runner import RunResult, Sink, run
 from procedures.sweep import RetryPolicy, sweep
 from station import __version__
 from station.config import StationConfig
+from station.identity import session_identity
 from station.wiring import Rig
 
 
@@ -32,8 +33,15 @@ def run_sweep(
     control: RunControl | None = None,
     resume: bool = False,
     retry: RetryPolicy = RetryPolicy(),
+    serials: Mapping[int, Mapping[str, str]] | None = None,
+    serials_file: str | None = None,
 ) -> RunResult:
-    """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`)."""
+    """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`).
+
+    `serials`: leg -> identity fields entered for this session (--serial, the Sweep page), on
+    top of `serials_file` / [station] serials_file and [legs.N] (station/serials.py). The session
+    records the identity (station/identity.py); the laser's calibration warnings are said at the
+    start of every session, a resumed one too."""
     control = control or RunControl()
     out = Path(out)
     done: frozenset[int] = frozenset()
@@ -44,13 +52,14 @@ def run_sweep(
         session_id = str(session.attrs.get("session_id", session_id))
     else:
         out.parent.mkdir(parents=True, exist_ok=True)
+    identity = session_identity(cfg, plan.legs, rig.axes, __version__, serials, serials_file)
     recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=cfg.to_dict(),
-                            software_version=__version__, resume=resume)
+                            software_version=__version__, resume=resume, identity=identity.to_json())
     # the legs' own materials for the adaptive rule (the same the session records as
     # station_config.leg_materials and `station fit` normalises with)
     materials = {leg: cfg.material_of(leg) for leg in plan.legs}
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, done_indices=done,
-                      retry=retry, session_id=session_id, materials=materials)
+                      retry=retry, session_id=session_id, materials=materials, warnings=identity.warnings)
     return run(procedure, [recorder, *sinks], control)
 
 

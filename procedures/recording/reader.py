@@ -42,6 +42,7 @@ import numpy as np
 
 from procedures.errors import InputError, SchemaError
 from procedures.ranges import SESSION_BOUNDS
+from procedures.recording.identity import SessionIdentity, identity_of_meta
 from procedures.recording.schema import (
     ADDED_POINT_FIELDS,
     FAULT_DTYPE,
@@ -79,6 +80,8 @@ class Session:
     outcome: str
     unwritten_rows: int = 0
     resumed_utc: list[str] = field(default_factory=list)
+    identity: SessionIdentity = field(default_factory=SessionIdentity.unknown)
+    """Leg, drive, station, instrument, operator (schema 1.1, /meta/identity); unknown in 1.0 files."""
 
     @property
     def legs(self) -> list[int]:
@@ -479,6 +482,7 @@ def read_session(path: str | os.PathLike) -> Session:
             points = _rows(f, "points", POINT_DTYPE, path)
             faults = _rows(f, "faults", FAULT_DTYPE, path)
             meta = {key: _meta_json(f, key, path) for key in META_ATTRS}
+            identity = identity_of_meta(f["meta"].attrs, str(path))
         except InputError:
             raise
         except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # what h5py raises for HDF5 errors
@@ -509,6 +513,7 @@ def read_session(path: str | os.PathLike) -> Session:
         outcome=str(attrs.get("outcome") or "incomplete"),
         unwritten_rows=unwritten,
         resumed_utc=list(resumed),
+        identity=identity,
     )
 
 

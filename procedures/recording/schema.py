@@ -7,7 +7,8 @@ Layout of a session file (schema version SCHEMA_VERSION, attribute `schema_versi
     /points                compound dataset, one row per measured point (POINT_DTYPE), chunked,
                            resizable; attrs `units_<field>` give each field's unit
     /faults                compound dataset (FAULT_DTYPE), one row per fault event
-    /meta                  group; attrs hold JSON strings: plan, station_config, devices
+    /meta                  group; attrs hold JSON strings: plan, station_config, devices, and
+                           (1.1, optional) identity (procedures/recording/identity.py)
 
 Sign convention: `error_um` = measured minus target (interferometer minus commanded target),
 micrometres; positive = the leg is longer than commanded. `direction` +1 = approached while the
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-SCHEMA_VERSION = "1.0"  # major.minor; readers refuse another major
+SCHEMA_VERSION = "1.1"  # major.minor; readers refuse another major (1.1 added /meta identity)
 
 # (name, numpy type, unit) -- the unit goes into the `units_<name>` attribute
 POINT_FIELDS: list[tuple[str, str, str]] = [
@@ -88,6 +89,9 @@ the session was resumed ("[]" when never)."""
 
 META_ATTRS = ("plan", "station_config", "devices")
 """Attributes of the /meta group: JSON text."""
+
+OPTIONAL_META_ATTRS = ("identity",)
+"""/meta attributes added in 1.1: a file without them (1.0, an import) reads them as unknown."""
 
 # The root `outcome` attribute of a finished session holds an `Outcome.written()` value
 # (procedures/states.py): "completed", "aborted" or "failed"; "" while open or when cut short.

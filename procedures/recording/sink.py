@@ -19,13 +19,14 @@ class RecorderSink:
 
     def __init__(self, path: str | Path, *, operator: str = "", rig: str = "sim",
                  station_config: dict[str, Any] | None = None, software_version: str = "",
-                 resume: bool = False) -> None:
+                 resume: bool = False, identity: dict[str, Any] | None = None) -> None:
         self.path = Path(path)
         self.operator = operator
         self.rig = rig
         self.station_config = station_config or {}
         self.software_version = software_version
         self.resume = resume
+        self.identity = identity  # SessionIdentity.to_json() (procedures/recording/identity.py)
         self.writer: SessionWriter | None = None
 
     def handle(self, event: ev.Event) -> None:
@@ -36,7 +37,7 @@ class RecorderSink:
                 self.writer = SessionWriter.create(
                     self.path, session_id=event.session_id, operator=self.operator, rig=self.rig,
                     plan=event.plan, station_config=self.station_config, devices=event.devices,
-                    software_version=self.software_version,
+                    software_version=self.software_version, identity=self.identity,
                 )
         elif isinstance(event, ev.PointMeasured):
             assert self.writer is not None, "PointMeasured before SweepStarted"

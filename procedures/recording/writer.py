@@ -36,6 +36,7 @@ from procedures.recording.schema import (
     POINTS_CHUNK_ROWS,
     SCHEMA_VERSION,
     UNWRITTEN_INDEX,
+    schema_major,
 )
 from procedures.states import Outcome
 
@@ -366,11 +367,13 @@ class SessionWriter:
         started_utc: str | None = None,
         fsync: bool = False,
         overwrite: bool = False,
+        identity: dict | None = None,
     ) -> "SessionWriter":
         """Create a new session file at `path` and return a writer in SWMR mode.
 
         `rig` is "sim", "live", "replay" or "import". `plan`, `station_config`, `devices` are
-        JSON-able dicts stored as JSON text in /meta. Refuses an existing `path` unless
+        JSON-able dicts stored as JSON text in /meta, and so is `identity` (the
+        `SessionIdentity.to_json()` object, procedures/recording/identity.py) when given. Refuses an existing `path` unless
         `overwrite` (a finished six-hour session must not vanish under a repeated command).
         """
         path = Path(path)
@@ -396,6 +399,8 @@ class SessionWriter:
             "station_config": to_json_text("station_config", station_config),
             "devices": to_json_text("devices", devices),
         }
+        if identity is not None:
+            meta["identity"] = to_json_text("identity", identity)
         lock = SessionLock(path)
         tmp = _temp_path(path, "new")
         try:
@@ -427,7 +432,7 @@ class SessionWriter:
         lock = SessionLock(path)
         try:
             session = read_session(path)  # again: no other writer can append from here on
-            if session.schema_version != SCHEMA_VERSION:
+            if schema_major(session.schema_version) != schema_major(SCHEMA_VERSION):
                 raise SchemaError(
                     f"{path}: schema version {session.schema_version} differs from this station's "
                     f"{SCHEMA_VERSION}; resume it with the station version that recorded it"

@@ -9,6 +9,8 @@ from procedures.errors import InputError
 from procedures.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
 from procedures.plans import parse_legs, SweepPlan
 from station.config import load_config
+from station.identity import leg_fields
+from station.serials import parse_serial_args
 from station.jobs import resumable_plan, run_sweep
 from procedures.control import RunControl
 from procedures.states import Outcome
@@ -50,6 +52,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-scale", type=float, metavar="S",
                    help="simulated rig only: real seconds per simulated second (0 = no waiting; default 0)")
     p.add_argument("--seed", type=int, help="simulated rig only: plant seed")
+    p.add_argument("--serial", action="append", default=[], metavar="LEG=SERIAL",
+                   help="the serial number of a leg, e.g. --serial 3=HX-0042 (repeatable); recorded in the session "
+                        "and checked by push")
+    p.add_argument("--serials", metavar="FILE", help="CSV leg,serial[,part_number,leg_type,screw_lot] with the legs' "
+                                                     "serials (default: [station] serials_file)")
 
 
 def plan_spec(args) -> PlanSpec:
@@ -68,6 +75,8 @@ def build_plan(args) -> SweepPlan:
 def run(args) -> int:
     cfg = load_config(args.config)
     cfg.require_devices()
+    serials = parse_serial_args(args.serial)
+    leg_fields(cfg, serials, args.serials)  # a bad serials file is refused before anything moves
     if args.seed is not None:
         cfg.sim.seed = args.seed
     if args.resume:
@@ -93,7 +102,7 @@ def run(args) -> int:
         with abort_on_sigint(RunControl()) as control:
             try:
                 result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
-                                   resume=bool(args.resume))
+                                   resume=bool(args.resume), serials=serials, serials_file=args.serials)
             except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
                 print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))\n{resume_hint}")
                 return 130

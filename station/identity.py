@@ -1,0 +1,69 @@
+"""The identity a session records (procedures/recording/identity.py), put together from the
+config, the serials entered for this session and what each drive says about itself."""
+
+from __future__ import annotations
+
+import datetime as _dt
+from types import MappingProxyType
+from typing import Any, Iterable, Mapping
+
+from drivers.errors import DriverError
+from procedures.recording.identity import (
+    DriveIdentity,
+    LegIdentity,
+    SessionIdentity,
+    StationIdentity,
+    calibration_warnings,
+    instrument_identity,
+)
+from station.config import StationConfig, _hostname
+from station.serials import merged_leg_identity, read_serials_file
+
+
+def leg_fields(cfg: StationConfig, entered: Mapping[int, Mapping[str, str]] | None = None,
+               serials_file: str | None = None) -> dict[int, dict[str, str]]:
+    """Every leg's identity fields: [legs.N], then the serials file (`serials_file`, else
+    [station] serials_file), then `entered` (--serial, the Sweep page)."""
+    path = serials_file or cfg.serials_file
+    from_file = read_serials_file(path) if path else {}
+    return merged_leg_identity(cfg.leg_identity, from_file, entered or {})
+
+
+def drive_identity(axis: Any, cfg_fields: Mapping[str, str]) -> DriveIdentity:
+    """What the drive says (Modbus 43/14 and its serial register, drivers/modbus/client.py), with
+    `[legs.N] drive_serial` for a drive that cannot tell its serial. A drive that does not answer
+    is named from the config (source "config")."""
+    ask = getattr(axis, "drive_identity", None)
+    got: dict = {}
+    if ask is not None:
+        try:
+            got = dict(ask())
+        except DriverError:
+            got = {}
+    serial = got.get("serial") or cfg_fields.get("drive_serial") or None
+    return DriveIdentity(got.get("vendor"), got.get("product_code"), got.get("revision"), serial,
+                         got.get("source") or "config")
+
+
+def instrument_of(cfg: StationConfig, on: _dt.date | None = None):
+    m = cfg.metrology
+    return instrument_identity(m.model, m.serial, m.calibration_due, m.calibration_date, on)
+
+
+def session_identity(cfg: StationConfig, legs: Iterable[int], axes: Mapping[int, Any], software_version: str,
+                     entered: Mapping[int, Mapping[str, str]] | None = None, serials_file: str | None = None,
+                     on: _dt.date | None = None) -> SessionIdentity:
+    """The identity of a session on `legs` (drives in `axes`), with the laser's calibration
+    warnings for the day `on` (default today)."""
+    fields = leg_fields(cfg, entered, serials_file)
+    leg_ids = {}
+    for leg in legs:
+        f = fields.get(int(leg), {})
+        leg_ids[int(leg)] = LegIdentity(f.get("serial"), f.get("part_number"), f.get("leg_type"), f.get("screw_lot"),
+                                        drive_identity(axes.get(leg), f))
+    instrument = instrument_of(cfg, on)
+    return SessionIdentity(
+        station=StationIdentity(cfg.station_id, _hostname()), operator=cfg.operator,
+        software_version=software_version, instrument=instrument, legs=MappingProxyType(leg_ids),
+        warnings=tuple(calibration_warnings(instrument, on)),
+    )
