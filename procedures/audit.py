@@ -29,6 +29,8 @@ Entry fields (JSON keys; absent values are null):
                    "checksum", "sha256"}
     source        where the table came from, e.g. {"path": "table.csv", "sha256": "..."}
     details       action-specific figures (verify: RMS, noise floor, ISO 230-2 values, session)
+    leg_serial    the serial the leg carries (station config [legs.N] serial); null when not configured
+    station_id    the station that wrote the entry ([station] id, default the host name)
 
 A line that is not a JSON object (e.g. cut short by a crash while being written) is reported by
 `read_entries` as a problem and otherwise skipped; the next append starts on a new line.
@@ -92,6 +94,8 @@ class AuditEntry:
     time_utc: str = ""
     host: str = ""
     v: int = AUDIT_VERSION
+    leg_serial: str | None = None
+    station_id: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -100,7 +104,7 @@ class AuditEntry:
             "drive": self.drive, "drive_url": self.drive_url, "outcome": self.outcome,
             "message": self.message, "table_sha256": self.table_sha256, "bank": self.bank,
             "previous_bank": self.previous_bank, "backup": self.backup, "source": self.source,
-            "details": self.details,
+            "details": self.details, "leg_serial": self.leg_serial, "station_id": self.station_id,
         }
 
     @classmethod
@@ -119,6 +123,8 @@ class AuditEntry:
             source=d.get("source"), details=dict(d.get("details") or {}), op_id=str(d.get("op_id") or ""),
             id=str(d.get("id") or ""), time_utc=str(d.get("time_utc") or ""), host=str(d.get("host") or ""),
             v=int(d.get("v") or AUDIT_VERSION),
+            leg_serial=d.get("leg_serial") if isinstance(d.get("leg_serial"), str) else None,
+            station_id=d.get("station_id") if isinstance(d.get("station_id"), str) else None,
         )
 
 
@@ -133,13 +139,16 @@ class AuditProblem:
 class AuditLog:
     """The append-only audit log at `path` (created with its directory on the first append).
 
-    `operator` fills entries that do not name one. Thread- and process-safe appends (exclusive
+    `operator`, `station_id` and `leg_serials` (leg -> serial) fill entries that do not name them. Thread- and process-safe appends (exclusive
     `flock` around each write).
     """
 
-    def __init__(self, path: str | os.PathLike, operator: str = ""):
+    def __init__(self, path: str | os.PathLike, operator: str = "", station_id: str | None = None,
+                 leg_serials: dict[int, str] | None = None):
         self.path = Path(path)
         self.operator = operator
+        self.station_id = station_id  # fills entries that name none
+        self.leg_serials = dict(leg_serials or {})  # leg -> serial, fills entries that name none
 
     def __repr__(self) -> str:
         return f"AuditLog({str(self.path)!r})"
@@ -156,7 +165,9 @@ class AuditLog:
                              "id": entry.id or new_id(),
                              "time_utc": entry.time_utc or utc_now(),
                              "host": entry.host or socket.gethostname(),
-                             "operator": entry.operator or self.operator})
+                             "operator": entry.operator or self.operator,
+                             "station_id": entry.station_id or self.station_id,
+                             "leg_serial": entry.leg_serial or self.leg_serials.get(entry.leg)})
         line = json.dumps(full.to_json(), sort_keys=True, separators=(",", ":"), allow_nan=False) + "\n"
         data = line.encode("utf-8")
         try:

@@ -25,6 +25,13 @@ in station/wiring.py). `compensation_target(axis)` tells them apart; the plan sh
 audit entry records it in `details["target"]`, and a rollback only restores a push made to the
 same target.
 
+Leg identity: a table made from a session names the serial of the leg it was made for
+(`source["leg_serial"]`, from the table CSV's `# leg_serial:` line). The station knows which leg
+serial each drive's leg carries from its config (`[legs.N] serial`, or its serials file), passed
+as `leg_serial`. When both are known and differ the push is refused first, before the drive is
+even read: the correction of one ball screw applied to another would make that leg worse. When
+either is unknown the push goes on and the plan says the serial was not checked.
+
 Conventions: table entries are predicted errors (measured minus commanded, um) that the drive
 subtracts; positions mm. `table_sha256` is the hash of a table's content as the drive stores it
 (entries quantised to the drive's resolution), so a table read back from a drive hashes the
@@ -192,6 +199,12 @@ class PushPlan:
         ]
         if self.table_sha256 == self.backup_sha256:
             lines.append("  note: the drive's active table already holds exactly this table")
+        made_for, carries = (self.source or {}).get("leg_serial"), self.details.get("leg_serial")
+        if made_for and carries:
+            lines.append(f"  serial:   leg serial {carries}, the table was made for it")
+        elif made_for:
+            lines.append(f"  note: the table was made for leg serial {made_for}; the serial of leg {self.leg} is not "
+                         f"configured ([legs.{self.leg}] serial), so it was not checked")
         if not self.table_enabled:
             lines.append(f"  note: {'the station' if self.target == 'station' else 'the drive'} does not apply this leg's table "
                          "(table compensation off); the table is stored but not applied")
@@ -264,11 +277,24 @@ def drive_table_spec(axis: ServoAxis, what: str = "push") -> TableSpec:
     return spec
 
 
+def check_leg_serial(leg: int, source: dict[str, Any] | None, leg_serial: str | None) -> None:
+    """PushRefused naming both serials when the table (its `source["leg_serial"]`) was made for
+    another leg than the one `leg` carries (`leg_serial`); nothing when either is unknown."""
+    made_for = (source or {}).get("leg_serial")
+    if made_for and leg_serial and made_for != leg_serial:
+        path = (source or {}).get("path")
+        raise PushRefused(f"leg {leg}: the table{f' {path}' if path else ''} was made for leg serial {made_for}, but "
+                          f"leg {leg} carries serial {leg_serial}; push the table made for {leg_serial} (or correct "
+                          f"[legs.{leg}] serial if the leg was exchanged)")
+
+
 def prepare_push(axis: ServoAxis, table: TableBank | LegTable, *, spec: TableSpec | None = None,
-                 drive_url: str = "", source: dict[str, Any] | None = None) -> PushPlan:
-    """Read the drive and check `table` for it; writes nothing. PushRefused if the axis moves
+                 drive_url: str = "", source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushPlan:
+    """Read the drive and check `table` for it; writes nothing. PushRefused if the table was made
+    for another leg serial than `leg_serial` (checked first, `check_leg_serial`), if the axis moves
     or the drive cannot be read; TableRefused if the table does not fit the drive
     (`TableSpec.check`: `spec`, default what the drive says it holds, and its soft limits)."""
+    check_leg_serial(axis.leg, source, leg_serial)
     spec = spec or drive_table_spec(axis)
     bank_table = spec.quantize(_as_bank(table))
     identity, active, current, enabled = _read_state(axis, "push")
@@ -280,8 +306,11 @@ def prepare_push(axis: ServoAxis, table: TableBank | LegTable, *, spec: TableSpe
     if source and source.get("path"):
         where = f"{source['path']}, {where}"
     spec.check(bank_table, where, limits, table.point_name if isinstance(table, LegTable) else None)
+    details = _target_details(axis)
+    if leg_serial:
+        details["leg_serial"] = leg_serial
     return PushPlan(Action.PUSH, axis.leg, identity, drive_url, bank_table, table_sha256(bank_table), active, 1 - active,
-                    current, table_sha256(current), enabled, source, _target_details(axis))
+                    current, table_sha256(current), enabled, source, details)
 
 
 def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -> PushPlan:
@@ -328,7 +357,7 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
 
 def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Confirm | None = None,
                    drive_url: str = "", source: dict[str, Any] | None = None,
-                   spec: TableSpec | None = None) -> Iterator[ev.Event]:
+                   spec: TableSpec | None = None, leg_serial: str | None = None) -> Iterator[ev.Event]:
     """Push `table` to `axis` the safe way (module docstring), as events for the one runner.
 
     Yields `TablePlanned` (what will be written; `confirm(plan)` is then asked, None = confirmed),
@@ -337,7 +366,7 @@ def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Con
     its message says which table is active). On ok a `TablePushed` comes before it.
     """
     try:
-        plan = prepare_push(axis, table, spec=spec, drive_url=drive_url, source=source)
+        plan = prepare_push(axis, table, spec=spec, drive_url=drive_url, source=source, leg_serial=leg_serial)
     except (PushRefused, TableRefused) as exc:
         yield from refused(Action.PUSH, axis.leg, exc, drive=_identity(axis), drive_url=drive_url, source=source,
                            details=_target_details(axis))
@@ -347,7 +376,8 @@ def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Con
 
 def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank | LegTable], *,
                         confirm: Callable[[list[PushPlan]], bool] | None = None, drive_url: str = "",
-                        sources: dict[int, dict[str, Any]] | None = None) -> Iterator[ev.Event]:
+                        sources: dict[int, dict[str, Any]] | None = None,
+                        leg_serials: dict[int, str] | None = None) -> Iterator[ev.Event]:
     """Push several legs' tables with one confirmation (a whole platform after a calibration).
 
     Every leg is read and checked first; if any leg is refused, nothing is written to any leg.
@@ -360,7 +390,8 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
     plans: list[PushPlan] = []
     for leg in sorted(tables):
         try:
-            plans.append(prepare_push(axes[leg], tables[leg], drive_url=drive_url, source=sources.get(leg)))
+            plans.append(prepare_push(axes[leg], tables[leg], drive_url=drive_url, source=sources.get(leg),
+                                      leg_serial=(leg_serials or {}).get(leg)))
         except (PushRefused, TableRefused) as exc:
             yield from refused(Action.PUSH, leg, exc, drive=_identity(axes[leg]), drive_url=drive_url,
                                source=sources.get(leg), details=_target_details(axes[leg]))

@@ -6,7 +6,10 @@ negative (`error_rev_um`) direction. The controller *subtracts* these from the c
 
 Formats
 - CSV (`write_table_csv` / `read_table_csv`): header `leg,position_mm,error_fwd_um,error_rev_um`,
-  rows sorted by leg then position, a fixed step per leg.
+  rows sorted by leg then position, a fixed step per leg. Before the header, optional comment
+  lines (`#`); `# leg_serial: 3=HX-0042` names the serial of the leg the table was made for
+  (from the model's identity), which a push checks (procedures/push.py). Tables without it
+  are read as before.
 - LinuxCNC (`write_linuxcnc_comp`): one `[JOINT_n] COMP_FILE` per leg (leg N -> joint N-1),
   three numbers per line in machine units (mm), no header or comment (LinuxCNC's parser stops
   silently at the first line that is not three numbers), at most 256 lines, strictly
@@ -25,7 +28,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Iterable, Iterator, Mapping
@@ -35,6 +38,7 @@ import numpy as np
 from drivers.errors import TableRefused
 from drivers.interfaces import TableBank, TableSpec
 from procedures.errors import InputError
+from procedures.recording.identity import model_leg_serials
 
 CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
 LINUXCNC_MAX_LINES = 256
@@ -105,9 +109,12 @@ class CompTable:
     """Tables of several legs (`legs`: leg number -> LegTable, ascending)."""
 
     legs: Mapping[int, LegTable]
+    serials: Mapping[int, str] = field(default_factory=dict)  # leg -> serial of the leg the table was made for
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "legs", MappingProxyType({k: self.legs[k] for k in sorted(self.legs)}))
+        object.__setattr__(self, "serials", MappingProxyType({int(k): str(v) for k, v in sorted(self.serials.items())
+                                                              if int(k) in self.legs and v}))
 
     def rows(self) -> Iterator[tuple[int, float, float, float]]:
         """(leg, position_mm, error_fwd_um, error_rev_um), sorted by leg then position."""
@@ -168,7 +175,7 @@ def make_table(model, step_mm: float | None = None, spec: TableSpec | None = Non
         except TableRefused as exc:
             raise TableRefused(f"{exc.args[0]} Check the recording (is the interferometer zeroed?)") from None
         out[leg] = table
-    return CompTable(out)
+    return CompTable(out, model_leg_serials(getattr(model, "identity", None)))
 
 
 # -- validation --------------------------------------------------------------------------------
@@ -225,8 +232,13 @@ def _write_atomic(files: Mapping[Path, str], error: type[Exception] = TableValid
     return list(files)
 
 
+SERIAL_COMMENT = "# leg_serial:"
+"""A comment line before the CSV header: `# leg_serial: LEG=SERIAL`, one per leg that has one."""
+
+
 def table_csv_text(table: CompTable) -> str:
-    lines = [",".join(CSV_HEADER)]
+    lines = [f"{SERIAL_COMMENT} {leg}={serial}" for leg, serial in table.serials.items()]
+    lines.append(",".join(CSV_HEADER))
     for leg, x, f, r in table.rows():
         lines.append(f"{leg},{x:.6f},{f:.4f},{r:.4f}")
     return "\n".join(lines) + "\n"
@@ -305,12 +317,13 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
     except UnicodeDecodeError:
         raise TableValidationError(f"{path}: not a text file (a table is CSV with the header {','.join(CSV_HEADER)})") from None
     lines = text.splitlines()
-    if not lines or [c.strip() for c in lines[0].split(",")] != list(CSV_HEADER):
-        found = lines[0][:80] if lines else "(empty file)"
-        raise TableValidationError(f"{path}, row 1: header is {found!r}, expected {','.join(CSV_HEADER)!r}")
+    serials, head = _comment_lines(lines, path)
+    if head >= len(lines) or [c.strip() for c in lines[head].split(",")] != list(CSV_HEADER):
+        found = lines[head][:80] if head < len(lines) else "(empty file)"
+        raise TableValidationError(f"{path}, row {head + 1}: header is {found!r}, expected {','.join(CSV_HEADER)!r}")
     data: dict[int, dict[str, list]] = {}
     last_leg = None
-    for row, raw in enumerate(lines[1:], start=2):
+    for row, raw in enumerate(lines[head + 1:], start=head + 2):
         if not raw.strip():
             continue
         cells = [c.strip() for c in raw.split(",")]
@@ -374,7 +387,31 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
         legs[leg] = LegTable(leg, float(x[0]), round(step, 9), tuple(d["f"]), tuple(d["r"]), tuple(d["row"]))
         if check:
             spec.check(legs[leg].to_bank(), f"{path}, leg {leg}", point_name=lambda i, rows=d["row"]: f"row {rows[i]}")
-    return CompTable(legs)
+    for leg, (row, _) in serials.items():
+        if leg not in legs:
+            raise TableValidationError(f"{path}, row {row}: names the serial of leg {leg}, which the table has no rows for")
+    return CompTable(legs, {leg: serial for leg, (_, serial) in serials.items()})
+
+
+def _comment_lines(lines: list[str], path: Path) -> tuple[dict[int, tuple[int, str]], int]:
+    """The `# leg_serial: LEG=SERIAL` lines before the header ({leg: (row, serial)}) and the index
+    of the header line. Other comment lines are skipped."""
+    serials: dict[int, tuple[int, str]] = {}
+    head = 0
+    while head < len(lines) and lines[head].lstrip().startswith("#"):
+        line = lines[head].strip()
+        if line.startswith(SERIAL_COMMENT):
+            leg_text, sep, serial = line[len(SERIAL_COMMENT):].strip().partition("=")
+            serial = serial.strip()
+            if not (sep and leg_text.strip().isdigit() and serial and " " not in serial and "," not in serial):
+                raise TableValidationError(f"{path}, row {head + 1}: {line[:80]!r}: write it as "
+                                           f"'{SERIAL_COMMENT} LEG=SERIAL', e.g. '{SERIAL_COMMENT} 3=HX-0042'")
+            leg = int(leg_text)
+            if leg in serials:
+                raise TableValidationError(f"{path}, row {head + 1}: leg {leg}'s serial is given twice")
+            serials[leg] = (head + 1, serial)
+        head += 1
+    return serials, head
 
 
 def read_linuxcnc_comp(path: str | os.PathLike, comp_type: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -8,6 +8,7 @@ from types import MappingProxyType
 from typing import Any, Iterable, Mapping
 
 from drivers.errors import DriverError
+from procedures.audit import AuditLog
 from procedures.recording.identity import (
     DriveIdentity,
     LegIdentity,
@@ -27,6 +28,19 @@ def leg_fields(cfg: StationConfig, entered: Mapping[int, Mapping[str, str]] | No
     path = serials_file or cfg.serials_file
     from_file = read_serials_file(path) if path else {}
     return merged_leg_identity(cfg.leg_identity, from_file, entered or {})
+
+
+def configured_serials(cfg: StationConfig) -> dict[int, str]:
+    """leg -> the serial the leg carries, as configured ([legs.N] serial, [station] serials_file):
+    what a push checks a table's serial against."""
+    return {leg: f["serial"] for leg, f in leg_fields(cfg).items() if f.get("serial")}
+
+
+def station_audit_log(cfg: StationConfig, path: str | None = None) -> AuditLog:
+    """The audit log of this station (`path`, default <recordings_dir>/audit.jsonl): entries carry
+    its operator, station id and each leg's configured serial."""
+    return AuditLog(path or cfg.audit_path, operator=cfg.operator, station_id=cfg.station_id,
+                    leg_serials=configured_serials(cfg))
 
 
 def drive_identity(axis: Any, cfg_fields: Mapping[str, str]) -> DriveIdentity:

@@ -108,20 +108,26 @@ def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]
                          "it was made for a platform with another leg count; make the table from a model of these legs")
     if leg not in table.legs:
         raise InputError(f"{path}: the table has no rows for leg {leg} (it has legs {list(table.legs)})")
-    return table.legs[leg], {"path": str(path), "leg": leg, "sha256": file_sha256(path)}
+    source = {"path": str(path), "leg": leg, "sha256": file_sha256(path)}
+    if table.serials.get(leg):
+        source["leg_serial"] = table.serials[leg]  # checked by the push against the leg's serial
+    return table.legs[leg], source
 
 
 def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: str, source: dict[str, Any] | None,
-             confirm: Confirm | None, sinks: Iterable[Sink] = ()) -> JobOutcome:
-    """Push one leg's table to its drive (procedures.push.push_procedure)."""
-    return run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source), audit, sinks)
+             confirm: Confirm | None, sinks: Iterable[Sink] = (), leg_serial: str | None = None) -> JobOutcome:
+    """Push one leg's table to its drive (procedures.push.push_procedure); `leg_serial`: the
+    serial the leg carries (config), which the table's must match."""
+    return run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source,
+                                        leg_serial=leg_serial), audit, sinks)
 
 
 def push_legs_job(axes: dict[int, ServoAxis], tables: dict[int, LegTable], *, audit: AuditLog, drive_url: str,
-                  sources: dict[int, dict[str, Any]] | None, confirm, sinks: Iterable[Sink] = ()) -> JobOutcome:
+                  sources: dict[int, dict[str, Any]] | None, confirm, sinks: Iterable[Sink] = (),
+                  leg_serials: dict[int, str] | None = None) -> JobOutcome:
     """Push several legs' tables after one confirmation (procedures.push.push_legs_procedure)."""
-    return run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources),
-                         audit, sinks)
+    return run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources,
+                                             leg_serials=leg_serials), audit, sinks)
 
 
 def rollback_job(axis: ServoAxis, *, audit: AuditLog, drive_url: str, confirm: Confirm | None,

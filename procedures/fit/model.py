@@ -128,12 +128,16 @@ class LegErrorModel:
     """
 
     def __init__(self, method: str, legs: Mapping[int, LegFit], source: Mapping[str, str] | None = None,
-                 options: Mapping[str, Any] | None = None, created_utc: str = ""):
+                 options: Mapping[str, Any] | None = None, created_utc: str = "",
+                 identity: Mapping[str, Any] | None = None):
         self.method = method
         self.legs: Mapping[int, LegFit] = MappingProxyType({int(k): legs[k] for k in sorted(legs)})
         self.source = dict(source or {"path": "", "sha256": ""})
         self.options = dict(options or {})
         self.created_utc = created_utc
+        # station, operator, software version, per leg serial/part number/type of the session it
+        # was fitted to (procedures.recording.identity.model_identity); {} in older model files
+        self.identity = dict(identity or {})
 
     def leg(self, leg: int) -> LegFit:
         try:

@@ -2,6 +2,8 @@
 
     {"format": "station-leg-error-model", "version": 1, "method": "default"|"paper",
      "source": {"path": ..., "sha256": ...}, "created_utc": ..., "options": {...},
+     "identity": {"station": {"id", "host"}, "operator", "software_version",
+                  "legs": {"1": {"serial", "part_number", "leg_type"}}},   (optional: older files lack it)
      "legs": {"1": {"stroke_mm": [min, max], "target_spacing_mm": ..., "stats": {...},
                     "model": {... method specific ...}}, ...}}
 
@@ -48,8 +50,9 @@ def _clean(value: Any) -> Any:
 
 
 def model_to_json(model: LegErrorModel, source_path: str | os.PathLike | None = None,
-                  source_sha256: str | None = None, created_utc: str | None = None) -> str:
-    """The model file's text (see the module docstring)."""
+                  source_sha256: str | None = None, created_utc: str | None = None,
+                  identity: dict | None = None) -> str:
+    """The model file's text (see the module docstring); `identity` defaults to the model's."""
     doc = {
         "format": FORMAT,
         "version": VERSION,
@@ -62,14 +65,18 @@ def model_to_json(model: LegErrorModel, source_path: str | os.PathLike | None = 
         "options": model.options,
         "legs": {str(leg): f.to_json() for leg, f in model.legs.items()},
     }
+    identity = identity if identity is not None else model.identity
+    if identity:
+        doc["identity"] = identity
     return json.dumps(_clean(doc), indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def save_model(model: LegErrorModel, path: str | os.PathLike, source_path: str | os.PathLike | None = None,
-               source_sha256: str | None = None) -> Path:
-    """Write `model` as JSON to `path` (atomically: a partial file never replaces a good one)."""
+               source_sha256: str | None = None, identity: dict | None = None) -> Path:
+    """Write `model` as JSON to `path` (atomically: a partial file never replaces a good one);
+    `identity`: the session's (procedures.recording.identity.model_identity), default the model's."""
     path = Path(path)
-    text = model_to_json(model, source_path, source_sha256)
+    text = model_to_json(model, source_path, source_sha256, identity=identity)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent if str(path.parent) else ".")
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
@@ -270,6 +277,12 @@ def load_model(path: str | os.PathLike) -> LegErrorModel:
         except (KeyError, TypeError, ValueError) as exc:
             raise c.fail(f"legs.{key}", f"malformed ({exc})") from None
     options = doc.get("options", {})
+    identity = doc.get("identity", {})
+    if not isinstance(identity, dict) or not isinstance(identity.get("legs", {}), dict):
+        raise c.fail("identity", "expected {\"station\": ..., \"operator\": ..., \"legs\": {...}}")
+    for key, leg in identity.get("legs", {}).items():
+        if not isinstance(leg, dict) or not all(v is None or isinstance(v, str) for v in leg.values()):
+            raise c.fail(f"identity.legs.{key}", "expected {\"serial\": text or null, ...}")
     return LegErrorModel(method, legs, source={"path": source.get("path", ""), "sha256": source.get("sha256", "")},
                          options=options if isinstance(options, dict) else {},
-                         created_utc=str(doc.get("created_utc", "")))
+                         created_utc=str(doc.get("created_utc", "")), identity=identity)

@@ -116,6 +116,27 @@ def _fields(obj: Any, names: tuple[str, ...]) -> dict:
     return {n: getattr(obj, n) for n in names}
 
 
+def model_identity(identity: SessionIdentity, legs) -> dict[str, Any]:
+    """The `identity` key of a model file made from a session with `identity`, for `legs`:
+    station, operator, software version and per leg serial, part number and type (None = not
+    stated; a 1.0 session gives every field None)."""
+    return {
+        "station": _fields(identity.station, ("id", "host")),
+        "operator": identity.operator,
+        "software_version": identity.software_version,
+        "legs": {str(leg): _fields(identity.leg(leg), ("serial", "part_number", "leg_type")) for leg in sorted(legs)},
+    }
+
+
+def model_leg_serials(model_identity_json: Any) -> dict[int, str]:
+    """leg -> serial from a model's `identity` (legs without one left out); {} for a model without."""
+    legs = (model_identity_json or {}).get("legs") if isinstance(model_identity_json, dict) else None
+    if not isinstance(legs, dict):
+        return {}
+    return {int(k): v["serial"] for k, v in legs.items()
+            if str(k).isdigit() and isinstance(v, dict) and isinstance(v.get("serial"), str) and v["serial"]}
+
+
 # -- the laser's calibration state ---------------------------------------------------------------
 
 def instrument_identity(model: str | None, serial: str | None, calibration_due: str | None,

@@ -10,6 +10,7 @@ from procedures.fit import fit, save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
 from procedures.metrology.thermal import error_basis
 from procedures.plans import parse_legs
+from procedures.recording.identity import model_identity
 from procedures.recording.reader import read_session
 from procedures.states import Outcome
 
@@ -70,7 +71,7 @@ def run(args) -> int:
     model = fit(points, args.method, legs=legs, n_params=args.params, lead_mm=args.lead_mm,
                 source={"path": str(session.path), "sha256": session.sha256})
     model.options["error_basis"] = basis  # `station table` says which error its table holds
-    save_model(model, out, str(session.path), session.sha256)
+    save_model(model, out, str(session.path), session.sha256, identity=model_identity(session.identity, model.legs))
     for line in basis_lines:
         print(line)
     if session.outcome != Outcome.COMPLETED:

@@ -17,6 +17,7 @@ from procedures.plans import parse_legs
 from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
 from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
+from station.identity import configured_serials, station_audit_log
 from station.table_jobs import (
     JobOutcome,
     controller_refusal,
@@ -82,7 +83,7 @@ def station_config(args, interferometer: bool = False) -> StationConfig:
 
 
 def audit_log(args, cfg: StationConfig) -> AuditLog:
-    return AuditLog(getattr(args, "audit", None) or cfg.audit_path, operator=cfg.operator)
+    return station_audit_log(cfg, getattr(args, "audit", None))
 
 
 def prompt(yes: bool, stdin=None, stdout=None):
@@ -197,16 +198,17 @@ def run(args) -> int:
         if cfg.compensation.target_of(leg) != "drive":
             print(f"compensation target of leg {leg}: {target_text(cfg, leg)}")
     sha = next(iter(sources.values()))["sha256"]
+    serials = configured_serials(cfg)
     with open_drive(cfg, legs) as drive:
         warn_audit_problems(audit)
         if len(legs) == 1:
             leg = legs[0]
             job = push_job(drive.axis, tables[leg], audit=audit, drive_url=drive.url, source=sources[leg],
-                           confirm=_with_audit_line(prompt(args.yes), audit),
+                           confirm=_with_audit_line(prompt(args.yes), audit), leg_serial=serials.get(leg),
                            sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…), rows of leg {leg}")])
         else:
             job = push_legs_job(drive.axes, tables, audit=audit, drive_url=drive.url, sources=sources,
-                                confirm=_with_audit_line(prompt(args.yes), audit),
+                                confirm=_with_audit_line(prompt(args.yes), audit), leg_serials=serials,
                                 sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…)")])
     for end in job.of(ev.OperationFinished):
         result = end.result

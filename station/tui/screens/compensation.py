@@ -181,8 +181,12 @@ class CompensationScreen(StationScreen):
         a = self.app.analysis
         if a is None:
             return None
-        return {"path": str(a.model_path or a.path), "leg": leg, "recording": str(a.path),
-                "recording_sha256": a.session.sha256, "method": a.method}
+        source = {"path": str(a.model_path or a.path), "leg": leg, "recording": str(a.path),
+                  "recording_sha256": a.session.sha256, "method": a.method}
+        serial = a.session.identity.leg_serial(leg)
+        if serial:
+            source["leg_serial"] = serial  # the push checks it against the leg's configured serial
+        return source
 
     def action_rollback(self) -> None:
         leg = self._selected_leg() or (self.app.legs[0] if self.app.legs else None)

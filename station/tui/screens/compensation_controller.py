@@ -65,7 +65,9 @@ class CompensationController:
 
     def audit(self) -> AuditLog:
         """The audit log `station push/rollback/verify` use: <recordings_dir>/audit.jsonl."""
-        return AuditLog(self.app.cfg.audit_path, operator=self.app.cfg.operator)
+        from station.identity import station_audit_log
+
+        return station_audit_log(self.app.cfg)
 
     def refusal(self, what: str) -> str:
         """Why the rig cannot take `what` now ("" = it can)."""
@@ -110,14 +112,16 @@ class CompensationController:
         from station.table_jobs import push_job
 
         self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
-            axis, table, audit=audit, drive_url=url, source=source, confirm=self.confirm))
+            axis, table, audit=audit, drive_url=url, source=source, confirm=self.confirm,
+            leg_serial=audit.leg_serials.get(leg)))
 
     def push_all(self, tables: dict, sources: dict[int, dict]) -> None:
         """Push every leg's table after one confirmation (procedures.push.push_legs_procedure)."""
         from station.table_jobs import push_legs_job
 
         def start(axes, audit, url):
-            return push_legs_job(axes, tables, audit=audit, drive_url=url, sources=sources, confirm=self.confirm_all)
+            return push_legs_job(axes, tables, audit=audit, drive_url=url, sources=sources, confirm=self.confirm_all,
+                                 leg_serials=audit.leg_serials)
 
         self._table_job(Action.PUSH, None, start, legs=tuple(sorted(tables)))
 

@@ -370,10 +370,12 @@ class ResultsScreen(StationScreen):
             self.notify("Fit a model first (f).", severity="warning")
             return
         from procedures.fit import save_model
+        from procedures.recording.identity import model_identity
 
         out = a.path.with_name(f"{a.path.stem}.{a.method}.model.json")
         try:
-            save_model(a.model, out, source_path=a.path, source_sha256=a.session.sha256)
+            save_model(a.model, out, source_path=a.path, source_sha256=a.session.sha256,
+                       identity=model_identity(a.session.identity, a.model.legs))
         except Exception as exc:
             self.notify(describe(exc, "cannot save the model"), severity="error", timeout=12)
             return
