@@ -633,14 +633,15 @@ def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) 
 
 def push_table(axis: ServoAxis, table: TableBank | LegTable | None = None, *, plan: PushPlan | None = None,
                audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
-               source: dict[str, Any] | None = None) -> PushResult:
+               source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushResult:
     """Push `table` (or an already confirmed `plan` from `prepare_push`) to `axis`:
     `push_procedure` run to its end, every entry appended to `audit` (when given)."""
     if plan is not None:
         return run_operation(_apply(axis, plan), audit)
     if table is None:
         raise ValueError("push_table needs a table or a plan")
-    return run_operation(push_procedure(axis, table, drive_url=drive_url, source=source, spec=spec), audit)
+    return run_operation(push_procedure(axis, table, drive_url=drive_url, source=source, spec=spec,
+                                        leg_serial=leg_serial), audit)
 
 
 def rollback(axis: ServoAxis, audit: AuditLog, *, plan: PushPlan | None = None, drive_url: str = "") -> PushResult:

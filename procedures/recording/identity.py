@@ -180,7 +180,8 @@ def identity_from_json(value: Any, where: str = "identity") -> SessionIdentity:
         return v
 
     def section(obj: dict, key: str, at: str = "") -> dict:
-        v = obj.get(key) or {}
+        v = obj.get(key)
+        v = {} if v is None else v
         if not isinstance(v, dict):
             raise SchemaError(f"{where}: {at}{key} must be an object, got {v!r}")
         return v
@@ -206,7 +207,8 @@ def identity_from_json(value: Any, where: str = "identity") -> SessionIdentity:
             drive=DriveIdentity(*(text(drive, k, at + "drive.") for k in ("vendor", "product_code", "revision",
                                                                             "serial")), source),
         )
-    warnings = value.get("warnings") or []
+    warnings = value.get("warnings")
+    warnings = [] if warnings is None else warnings
     if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
         raise SchemaError(f"{where}: warnings must be a list of text")
     return SessionIdentity(
