@@ -17,6 +17,7 @@ temperatures, else on the raw error, and the report says which.
 
 from __future__ import annotations
 
+import datetime as _dt
 import json
 import math
 import os
@@ -28,6 +29,7 @@ import numpy as np
 
 from procedures import iso230
 from procedures.metrology.uncertainty import K_COVERAGE, UncertaintyInputs, leg_budget, table_budget
+from procedures.recording.identity import SessionIdentity, calibration_warnings, identity_from_json, instrument_identity
 
 VALUE_ORDER = ("E", "E_up", "E_down", "M", "A", "A_up", "A_down", "B", "B_mean", "R", "R_up", "R_down")
 MEANING = {"E": "systematic positional deviation, bidirectional", "E_up": "systematic positional deviation, up",
@@ -137,10 +139,44 @@ def _air_compensation(record: Any) -> str:
     return ", ".join(said)
 
 
-def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, legs: list[int]) -> dict[str, Any]:
+def _session_day(attrs: dict) -> _dt.date | None:
+    try:
+        return _dt.datetime.fromisoformat(str(attrs.get("started_utc") or "")).date()
+    except ValueError:
+        return None
+
+
+def _identity_block(identity: SessionIdentity, attrs: dict, metrology: dict, legs: list[int]) -> dict[str, Any]:
+    """Station, leg serials and the laser's calibration state (due date, traceable, warnings) for
+    the day the session started; a session without identity (schema 1.0) falls back on its
+    recorded [metrology] and says what is not recorded."""
+    ins = identity.instrument
+    if not identity.recorded:
+        ins = instrument_identity(metrology.get("model"), metrology.get("serial"), metrology.get("calibration_due"),
+                                  metrology.get("calibration_date"), _session_day(attrs))
+    elif ins.calibration_due:  # traceability is judged on the day of the measurement, not of the report
+        ins = instrument_identity(ins.model, ins.serial, ins.calibration_due, ins.calibrated_on, _session_day(attrs))
+    warnings = calibration_warnings(ins, _session_day(attrs))
+    return {
+        "station": {"id": identity.station.id or "not recorded", "host": identity.station.host or "not recorded"},
+        "software_version": identity.software_version or attrs.get("software_version", "") or "not recorded",
+        "leg_identity": {str(leg): {"serial": identity.leg(leg).serial or "not recorded",
+                                    "part_number": identity.leg(leg).part_number or "not stated",
+                                    "leg_type": identity.leg(leg).leg_type or "not stated",
+                                    "screw_lot": identity.leg(leg).screw_lot or "not stated"} for leg in legs},
+        "calibration_due": ins.calibration_due or "not stated", "traceable": ins.traceable,
+        "calibration_warnings": warnings,
+    }
+
+
+def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, legs: list[int],
+                    identity: SessionIdentity | None = None) -> dict[str, Any]:
     used = UncertaintyInputs.from_dicts(metrology, {})
     said = "" if metrology else " (station default: the session recorded no [metrology])"
+    who = _identity_block(identity or SessionIdentity.unknown(), attrs, metrology, legs)
     return {
+        "station": who["station"], "software_version": who["software_version"],
+        "leg_identity": who["leg_identity"],
         "session_file": source.get("path", ""), "session_sha256": source.get("sha256", ""),
         "session_id": attrs.get("session_id", ""), "operator": attrs.get("operator", ""),
         "rig": attrs.get("rig", ""), "started_utc": attrs.get("started_utc", ""), "ended_utc": attrs.get("ended_utc", ""),
@@ -151,6 +187,8 @@ def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, l
             "model": metrology.get("model") or "not stated",
             "serial": metrology.get("serial") or "not stated",
             "calibration_date": metrology.get("calibration_date") or "not stated",
+            "calibration_due": who["calibration_due"], "traceable": who["traceable"],
+            "calibration_warnings": who["calibration_warnings"],
             "wavelength_nm": used.wavelength_nm,
             "laser_accuracy_ppm_k2": used.laser_accuracy_ppm,
             "resolution_nm": used.laser_resolution_nm,
@@ -161,9 +199,11 @@ def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, l
 
 
 def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict, attrs: dict,
-          source: dict, raw: bool = False) -> dict[str, Any]:
+          source: dict, raw: bool = False, identity: dict | None = None) -> dict[str, Any]:
     """The ISO 230-2 report's content as a JSON-able dict (module docstring); `raw`: on the raw
-    error (`station report --raw`, or a model fitted to it), not normalised to 20 degC."""
+    error (`station report --raw`, or a model fitted to it), not normalised to 20 degC;
+    `identity`: the session's /meta/identity (procedures.recording.identity), {} or None when it
+    has none."""
     if raw:
         pts, basis = points, {"basis": "raw", "normalised": False,
                               "statement": "Deviations NOT normalised to 20 degC (raw error asked for: --raw, or a model "
@@ -176,10 +216,12 @@ def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict
     out: dict[str, Any] = {
         "standard": "ISO 230-2", "uncertainty": f"ISO/TR 230-9 style budget, GUM, expanded uncertainty U with k = {K_COVERAGE:g}",
         "units": "um", "error_basis": basis,
-        "identification": _identification(attrs or {}, devices or {}, metrology, source, legs),
+        "identification": _identification(attrs or {}, devices or {}, metrology, source, legs,
+                                          identity_from_json(identity) if identity else None),
         "test_parameters": _test_parameters(plan or {}, legs, iso),
         "legs": {},
     }
+    out["warnings"] = list(out["identification"]["instrument"]["calibration_warnings"])
     for leg in legs:
         r = iso[leg]
         inputs = UncertaintyInputs.from_record(station_config or {}, leg)
@@ -248,16 +290,22 @@ def sections(d: dict[str, Any]) -> list[tuple[str, list[str], list[list[str]] | 
     ins = ident["instrument"]
     tp = d["test_parameters"]
     out: list = []
-    out.append(("Identification", [
+    trace = ("in calibration on the day of the test (traceable)" if ins.get("traceable")
+             else "NOT traceable")
+    out.append(("Identification", [f"WARNING: {w}." for w in d.get("warnings", [])] + [
+        f"Station: {ident['station']['id']} (host {ident['station']['host']}), software {ident['software_version']}.",
         f"Session: {ident['session_file'] or 'n/a'} (sha256 {(ident['session_sha256'] or 'n/a')[:16]}), id "
         f"{ident['session_id'] or 'n/a'}, {ident['rig'] or 'n/a'} rig, operator {ident['operator'] or 'n/a'}, "
         f"{ident['started_utc'] or 'n/a'} to {ident['ended_utc'] or 'n/a'}, outcome {ident['outcome']}.",
-        f"Instrument: {ins['model']}, serial {ins['serial']}, calibrated {ins['calibration_date']}; reports itself as "
+        f"Instrument: {ins['model']}, serial {ins['serial']}, calibrated {ins['calibration_date']}, calibration due "
+        f"{ins['calibration_due']}: {trace}; reports itself as "
         f"'{ins['reported_identity']}'; vacuum wavelength {_f(ins['wavelength_nm'], '.3f')} nm, stated accuracy "
         f"{_f(ins['laser_accuracy_ppm_k2'], 'g')} ppm (k = 2), resolution {_f(ins['resolution_nm'], 'g')} nm "
         f"(settings: {ins['settings_source']}).",
         f"Air compensation: {ident['air_compensation']}.",
-    ], [["leg", "drive"]] + [[k, v] for k, v in ident["legs"].items()]))
+    ], [["leg", "serial", "part number", "type", "screw lot", "drive"]]
+        + [[k, li["serial"], li["part_number"], li["leg_type"], li["screw_lot"], ident["legs"][k]]
+           for k, li in ident["leg_identity"].items()]))
     env_rows = [["leg", "air temperature (degC)", "material temperature (degC)", "pressure (hPa)", "humidity (%RH)"]]
     for leg, L in d["legs"].items():
         e = L["environment"]
@@ -447,10 +495,11 @@ def _col_widths(rows: list[list[str]], total: float) -> tuple[float, ...]:
 
 
 def write(points: np.ndarray, out_dir: str | os.PathLike, *, plan: dict, devices: dict, station_config: dict,
-          attrs: dict, source: dict, raw: bool = False) -> tuple[dict[str, Any], list[Path]]:
+          attrs: dict, source: dict, raw: bool = False, identity: dict | None = None) -> tuple[dict[str, Any], list[Path]]:
     """Write the four files (module docstring) into `out_dir` (which exists); their content and paths."""
     out = Path(out_dir)
-    d = build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs, source=source, raw=raw)
+    d = build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs, source=source, raw=raw,
+              identity=identity)
     paths = [out / name for name in FILES]
     _atomic_write(paths[0], (json.dumps(d, indent=2, allow_nan=False) + "\n").encode())
     _atomic_write(paths[1], markdown(d).encode())

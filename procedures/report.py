@@ -149,7 +149,7 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
                 model_name: str = "") -> ReportResult:
     """Write the report files (module docstring) for a session's points into `out_dir`
     (created if missing). Without `model`, the default model is fitted to the points.
-    `session_meta` ({"plan", "devices", "station_config", "attrs"} of the session) adds the
+    `session_meta` ({"plan", "devices", "station_config", "attrs", "identity"} of the session) adds the
     ISO 230-2 test report (iso230-2.*). `points` hold the recorded (raw) error; the report works
     on the basis `report_basis` picks (normalised to 20 degC by default, `raw`, or the model's).
     Errors are measured minus commanded (um), positions mm."""
@@ -325,7 +325,7 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
     if session_meta is not None:
         from procedures import iso230_report
 
-        meta = {k: session_meta.get(k) or {} for k in ("plan", "devices", "station_config", "attrs")}
+        meta = {k: session_meta.get(k) or {} for k in ("plan", "devices", "station_config", "attrs", "identity")}
         # the recorded points: the ISO report normalises them itself (unless raw), on the same basis
         result.iso230, paths = iso230_report.write(recorded, out, source={"path": source_path, "sha256": source_sha256},
                                                    raw=is_raw, **meta)

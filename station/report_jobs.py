@@ -21,7 +21,8 @@ def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: 
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
     meta = {"plan": session.plan, "devices": session.devices, "station_config": session.station_config,
-            "attrs": session.attrs}
+            "attrs": session.attrs,
+            "identity": session.identity.to_json() if session.identity.recorded else {}}
     return make_report(session.points, out_dir, model, source_path=str(session.path),
                        source_sha256=session.sha256, lead_mm=lead_mm, session_meta=meta, raw=raw,
                        model_name=model_name)
@@ -29,7 +30,8 @@ def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: 
 
 def report_lines(result: ReportResult, model=None) -> list[str]:
     """What `station report` prints about `result` (`model`: the one given, None when fitted)."""
-    lines = list((result.summary.get("error_basis") or {}).get("lines") or [])
+    lines = [f"warning: {w}" for w in (result.iso230 or {}).get("warnings", [])]
+    lines += list((result.summary.get("error_basis") or {}).get("lines") or [])
     if model is not None and not result.summary["model"]["fitted_to_this_session"]:
         lines.append(f"note: the model was fitted to {model.source.get('path') or 'another recording'}, "
                      "not to this session: the residual figures are a true test of it")
