@@ -417,13 +417,14 @@ class StationApp(App):
     # -- sweep -----------------------------------------------------------------------------------
     def start_sweep(self, plan: SweepPlan, out: Path, label: str = "sweep",
                     on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None,
-                    resume: bool = False) -> bool:
+                    resume: bool = False, serials: dict | None = None) -> bool:
         """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner), or
         through `job(rig, sinks, control)` (a job of station.table_jobs, e.g. a verification,
         returning a JobOutcome). `label` names the job on screen ("sweep", "verification of leg
         2"); `on_done(state)` is called on the app's thread when it has ended (whatever the
         outcome), with the job's outcome in `state.result`. `resume`: `out` is an unfinished
-        session and `plan` its plan (see `resume_sweep`): the run appends to it."""
+        session and `plan` its plan (see `resume_sweep`): the run appends to it. `serials`: the
+        legs' serials entered on the Sweep page (leg -> {"serial": ...}), recorded in the session."""
         if self.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
             return False
@@ -450,7 +451,7 @@ class StationApp(App):
             _show_recorded_points(state, out)
         run = self._begin_run(state, on_done)
         self._sweep_worker(run, self.rig, self.rig_lock, plan, out, self.sweep_control, self._sweep_idle, job,
-                           resume)
+                           resume, serials)
         return True
 
     def resume_sweep(self, path: Path) -> bool:
@@ -487,7 +488,8 @@ class StationApp(App):
 
     @work(thread=True, group="sweep", exit_on_error=False)
     def _sweep_worker(self, run: int, rig, lock: threading.Lock, plan: SweepPlan, out: Path, control: RunControl,
-                      idle: threading.Event, job: Callable | None = None, resume: bool = False) -> None:
+                      idle: threading.Event, job: Callable | None = None, resume: bool = False,
+                      serials: dict | None = None) -> None:
         from station.jobs import run_sweep
 
         outcome, points, error, ended = "error", 0, "", None
@@ -498,7 +500,7 @@ class StationApp(App):
             try:
                 if job is None:
                     result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self, run)], control=control,
-                                       resume=resume)
+                                       resume=resume, serials=serials)
                 else:
                     ended = job(rig, [TuiBridge(self, run)], control)
                     result = ended.run

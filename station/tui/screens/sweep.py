@@ -64,6 +64,10 @@ class SweepScreen(StationScreen):
                     yield Input("90", id="max-mm", type="number", compact=True)
                     yield Label("Dwell s")
                     yield Input("1", id="dwell", type="number", compact=True, tooltip="settle time per target")
+                    yield Label("Serials")
+                    yield Input("", id="serials", placeholder="3=HX-0042 (blank: config)", compact=True,
+                                tooltip="each selected leg's serial, LEG=SERIAL separated by spaces; recorded in "
+                                        "the session and checked by push (like station sweep --serial)")
                 yield Static("", id="plan-summary")
                 yield Button("Start (s)", id="start", variant="success")
                 with Horizontal(classes="pair"):
@@ -123,6 +127,19 @@ class SweepScreen(StationScreen):
         """The plan from the form, built exactly as `station sweep` builds it."""
         return plan_from_spec(self.plan_spec())
 
+    def serials(self, legs) -> dict[int, dict[str, str]]:
+        """The Serials field as `station sweep --serial` takes it (InputError naming what is
+        wrong); a serial for a leg the plan does not sweep is refused."""
+        from station.identity import leg_fields
+        from station.serials import parse_serial_args
+
+        entered = parse_serial_args(self.query_one("#serials", Input).value.replace(",", " ").split())
+        other = sorted(set(entered) - set(legs))
+        if other:
+            raise ValueError(f"serials: leg(s) {other} are not swept (legs {list(legs)})")
+        leg_fields(self.app.cfg, entered)  # a bad serials file in the config is said before the start
+        return entered
+
     def _update_summary(self) -> None:
         summary = self.query_one("#plan-summary", Static)
         kind = self.query_one("#plan", Select).value
@@ -177,11 +194,12 @@ class SweepScreen(StationScreen):
             return
         try:
             plan = self.build_plan()
+            serials = self.serials(plan.legs)
         except Exception as exc:
             self.notify(describe(exc), title="Plan", severity="error", timeout=10)
             return
         out = default_session_path(self.app.cfg, plan.legs)
-        if self.app.start_sweep(plan, out):
+        if self.app.start_sweep(plan, out, serials=serials):
             self.plot_leg = None
             self.query_one("#abort", Button).focus()
             self._redraw()
@@ -224,7 +242,7 @@ class SweepScreen(StationScreen):
         active = s.active
         if active != getattr(self, "_form_locked", None):  # the form is locked while a sweep runs
             self._form_locked = active
-            for wid in ("legs", "plan", "cycles", "dwell"):
+            for wid in ("legs", "plan", "cycles", "dwell", "serials"):
                 self.query_one(f"#{wid}").disabled = active
             self._update_summary()
         self.query_one("#start", Button).disabled = active
