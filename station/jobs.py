@@ -164,8 +164,10 @@ def replay_sweep(
     out.parent.mkdir(parents=True, exist_ok=True)
     rig.sim.on_end = lambda reason: control.abort(reason)
     control.on_abort(rig.clock.cancel_waits)
+    # the replayed legs are the recorded ones: the new file names them as the recording did
     recorder = ReplayRecorderSink(out, operator=cfg.operator, rig="replay", station_config=cfg.to_dict(),
-                                  software_version=__version__)
+                                  software_version=__version__,
+                                  identity=session.identity.to_json() if session.identity.recorded else None)
     # t0_s=0: recorded times are seconds since the session start, so `now - 0` is bit-exact
     # the materials the recorded run's adaptive rule used (its station_config.leg_materials), so
     # it stops where the recording did; a session that recorded none: this config's
