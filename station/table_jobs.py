@@ -37,6 +37,7 @@ from procedures.table import LegTable, read_table_csv
 from procedures.verify import verify_procedure
 from station import __version__
 from station.config import LEG_COUNT, StationConfig
+from station.identity import session_identity
 from station.wiring import Rig
 
 
@@ -165,10 +166,12 @@ def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *
     if out.exists():
         raise InputError(f"{out}: exists; choose another file (a verification is a new session)")
     out.parent.mkdir(parents=True, exist_ok=True)
+    # a verification is a session too: it records who and what it measured, and warns about the laser
+    identity = session_identity(cfg, plan.legs, rig.axes, __version__)
     recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=cfg.to_dict(),
-                            software_version=__version__)
+                            software_version=__version__, identity=identity.to_json())
     procedure = verify_procedure(rig.axes, rig.laser, rig.clock, plan, out, read_session=read_session, before=before,
                                  expected_sha256=expected_sha256, expected_source=expected_source, drive_url=drive_url,
-                                 control=control, sweep_options={"session_id": uuid.uuid4().hex[:12]},
-                                 normalise=normalise)
+                                 control=control, normalise=normalise,
+                                 sweep_options={"session_id": uuid.uuid4().hex[:12], "warnings": identity.warnings})
     return run_table_job(procedure, audit, [recorder, *sinks], control)
