@@ -83,6 +83,9 @@ def run(args) -> int:
         out = Path(args.resume)
         if args.out and Path(args.out) != out:
             raise InputError("--resume appends to the session it names; drop --out")
+        if args.serial or args.serials:
+            raise InputError("--serial/--serials name the legs of a new session; a resumed session keeps the identity "
+                             "it was created with: drop them")
         plan = resumable_plan(out)
     else:
         if not args.out:

@@ -117,3 +117,8 @@ def test_table_for_another_serial_is_refused_by_push_naming_both(capsys):
     assert rc == 0, err
     assert "serial:   leg serial HX-0042, the table was made for it" in out
     assert read_entries("runs/audit.jsonl")[0][-1].leg_serial == "HX-0042"
+
+
+def test_serials_are_refused_on_a_resume(capsys):
+    rc, _, err = station(capsys, "sweep", "--resume", "any.h5", "--serial", "1=HX-1")
+    assert rc == 2 and "a resumed session keeps the identity it was created with" in err

@@ -104,7 +104,10 @@ class CompensationScreen(StationScreen):
         text = self.query_one("#comp-step", Input).value.strip()
         try:
             step = float(text) if text else None
-            self.table = make_table(a.model, step_mm=step, spec=self._spec())
+            table = make_table(a.model, step_mm=step, spec=self._spec())
+            # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s
+            serials = {leg: s for leg in table.legs if (s := a.session.identity.leg_serial(leg))}
+            self.table = type(table)(table.legs, serials or table.serials)
         except ValueError as exc:
             self.table = None
             self.notify(describe(exc, "cannot make the table"), severity="error", timeout=12)
