@@ -49,7 +49,8 @@ def seed_bytes() -> bytes:
         rows["air_temp_c"] = 20.1
         with SessionWriter.create(path, session_id="fuzz", operator="fuzz", rig="sim",
                                   plan={"kind": "test", "legs": [1, 2]}, station_config={}, devices={},
-                                  software_version="test") as w:
+                                  software_version="test",
+                                  identity={"station": {"id": "s", "host": "h"}, "legs": {"1": {"serial": "HX-1"}}}) as w:
             w.append_points(rows)
             w.append_fault({"index": 3, "leg": 1, "run": 1, "target_mm": 10.0, "time_s": 6.0,
                             "kind": "beam_break", "attempt": 1, "gave_up": 0, "message": "beam"})
@@ -66,7 +67,7 @@ junk = st.one_of(
 )
 ROOT = ["schema_version", "software_version", "session_id", "operator", "rig", "started_utc", "ended_utc",
         "outcome", "resumed_utc"]
-META = ["plan", "station_config", "devices"]
+META = ["plan", "station_config", "devices", "identity"]
 VALUES = {  # impossible point values: what a damaged block of raw data holds
     "leg": [0, 7, -1, 32767], "run": [0, -5, 2**31 - 1], "direction": [0, 2, -128], "index": [-1, -7, 5, 2**62],
     "target_mm": [np.nan, np.inf, -1e300, 5e3], "error_um": [np.inf, 1e300, -1e12, np.nan],
