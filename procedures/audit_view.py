@@ -101,6 +101,7 @@ class Operation:
             "operator": e.operator, "action": e.action, "leg": e.leg, "outcome": self.outcome,
             "interrupted": self.interrupted, "previous_bank": e.previous_bank, "bank": e.bank,
             "table_sha256": e.table_sha256 or None, "drive": e.drive or None, "message": e.message,
+            "leg_serial": e.leg_serial, "station_id": e.station_id,
         }
         if self.action == "verify":
             doc["verdict"] = self.verify_verdict() or None
