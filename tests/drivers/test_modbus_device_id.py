@@ -1,5 +1,5 @@
 """Read Device Identification (Modbus function 43, MEI type 14) on the simulated drive, over real
-TCP: read by the station's client and by an independent master (modbus-tk, which builds the
+TCP (and RTU on a pty): read by the station's client and by an independent master (modbus-tk, which builds the
 request and hands back the raw reply; mbpoll has no function 43). A drive whose profile says it
 does not answer is refused with exception 01, and the station then names the drive from the
 config instead."""
@@ -52,11 +52,12 @@ def _tk_read(url: str, unit: int) -> bytes:
         master.close()
 
 
-def test_client_reads_the_basic_objects_and_the_serial(sim_drives, profile):
-    sd = sim_drives()
+@pytest.mark.parametrize("rtu", [False, True], ids=["tcp", "rtu"])
+def test_client_reads_the_basic_objects_and_the_serial(sim_drives, profile, rtu):
+    sd = sim_drives(rtu=rtu)
     ident = profile.identity
     axis = sd.axis(3)
-    objects = sd.bus().read_device_identification(3)
+    objects = axis.bus.read_device_identification(3)  # one client per line: a pty takes one
     assert objects == {0: ident["vendor"], 1: ident["product"], 2: ident["firmware"]}
     got = axis.drive_identity()
     assert got == {"vendor": ident["vendor"], "product_code": ident["product"], "revision": ident["firmware"],
