@@ -244,6 +244,10 @@ class ProtocolSettings:
     (Modbus exception 03, illegal data value) or "silence" (no reply).
     `mode_of_operation`: value the client writes to modes_of_operation before enabling
     (1 = CiA 402 profile position mode); None = the drive has no such register.
+    `read_write_multiple`: the drive serves function 23 (read/write multiple registers, the
+    write done before the read): a move's write and the status read after it go in one
+    transaction. False (the default) when the manual does not say it does; the simulated drive
+    then refuses function 23 with exception 01, as such a drive would.
     """
 
     max_read_words: int = MAX_READ_WORDS
@@ -255,6 +259,7 @@ class ProtocolSettings:
     set_point_latch: str = "level"
     oversize_reply: str = "exception"
     mode_of_operation: int | None = None
+    read_write_multiple: bool = False
 
     def unit_id(self, leg: int) -> int:
         """Modbus unit id of `leg`; ProfileError if the profile's table has no entry for it."""
@@ -525,7 +530,7 @@ class _Parser:
         if not isinstance(sec, dict):
             raise self.err("protocol", "must be a table")
         known = {"max_read_words", "max_write_words", "min_frame_gap_ms", "address_base", "unit_ids", "move_write",
-                 "set_point_latch", "oversize_reply", "mode_of_operation"}
+                 "set_point_latch", "oversize_reply", "mode_of_operation", "read_write_multiple"}
         unknown = sorted(set(sec) - known)
         if unknown:
             raise self.err("protocol", f"unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})")
@@ -556,6 +561,10 @@ class _Parser:
         mode = g("mode_of_operation", None)
         if mode is not None and (isinstance(mode, bool) or not isinstance(mode, int) or not -128 <= mode <= 127):
             raise self.err("protocol", f"mode_of_operation: must be an integer -128..127 (1 = profile position), got {mode!r}")
+        rw_multiple = g("read_write_multiple", False)
+        if not isinstance(rw_multiple, bool):
+            raise self.err("protocol", f"read_write_multiple: must be true or false (does the drive serve Modbus "
+                                       f"function 23?), got {rw_multiple!r}")
         self.address_base = base
         return ProtocolSettings(
             max_read_words=max_read, max_write_words=max_write, min_frame_gap_ms=float(gap), address_base=base,
@@ -563,7 +572,7 @@ class _Parser:
             move_write=self.choice(sec, "protocol", "move_write", MOVE_WRITES, "single"),
             set_point_latch=self.choice(sec, "protocol", "set_point_latch", SET_POINT_LATCHES, "level"),
             oversize_reply=self.choice(sec, "protocol", "oversize_reply", OVERSIZE_REPLIES, "exception"),
-            mode_of_operation=mode,
+            mode_of_operation=mode, read_write_multiple=rw_multiple,
         )  # fmt: skip
 
     def _int_default(self, sec: dict, name: str, default: int, lo: int, hi: int) -> int:
