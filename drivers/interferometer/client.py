@@ -46,7 +46,8 @@ class SerialInterferometer:
 
     The port is opened with an exclusive (advisory) lock where the platform supports it, so two
     programs cannot talk to one instrument at once. Not thread-safe: one owner at a time.
-    `transactions` counts command/reply exchanges sent (retries included), for benchmarks.
+    `transactions` counts command/reply exchanges sent (retries included), for benchmarks;
+    `bytes_out` / `bytes_in` the bytes of the commands sent and the reply lines received.
     """
 
     def __init__(
@@ -71,6 +72,8 @@ class SerialInterferometer:
         self.axes = int(axes)
         self._clock = clock or SystemClock()
         self.transactions = 0
+        self.bytes_out = 0
+        self.bytes_in = 0
         self.retried = 0  # exchanges that had to be asked again (noise statistics)
         self.reopened = 0  # times the port was opened again after it went away (unplugged)
         self._closed = False  # closed by the owner (a port that went away is reopened instead)
@@ -253,7 +256,9 @@ class SerialInterferometer:
                 # after receiving it (on a replay: a recorded silence moving `clock` on) counts
                 deadline = self._clock.now() + wait_s
                 self._serial.write(command)
+                self.bytes_out += len(command)
                 line = self._read_line(deadline)
+                self.bytes_in += len(line)
             except serial.SerialTimeoutException:
                 timeouts += 1
                 continue
