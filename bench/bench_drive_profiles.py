@@ -92,9 +92,11 @@ def without_function_23(path: Path, tmp: Path) -> Path | None:
     return out
 
 
-def wire_of_sweep(profile_path: Path, plan: SweepPlan, tmp: Path, per_pass: bool) -> tuple[WireTally, float, float, float]:
-    """(Modbus tally, laser exchanges, laser bytes) per point (or per pass), and the points per
-    pass, for `plan` on the simulated rig with the profile."""
+def wire_of_sweep(profile_path: Path, plan: SweepPlan, tmp: Path, per_pass: bool) -> tuple[WireTally, float, float, float, int]:
+    """For `plan` on the simulated rig with the profile: the Modbus tally over the points (or
+    passes) counted, the laser exchanges and bytes per point (or pass), the points per pass,
+    and how many points (or passes) the tally covers (the first one, which carries the leg's
+    preparation, is left out)."""
     cfg = StationConfig()
     cfg.drive.profile = str(profile_path)
     with open_rig(cfg, legs=plan.legs, time_scale=0.0) as rig:
@@ -117,9 +119,7 @@ def wire_of_sweep(profile_path: Path, plan: SweepPlan, tmp: Path, per_pass: bool
     else:
         first, last, n = marks[0], marks[-1], len(marks) - 1
         points_per_pass = 1.0
-    d = last[1] - first[1]
-    mean = WireTally(d.transactions, d.bytes_out, d.bytes_in)
-    return mean, (last[2] - first[2]) / n, (last[3] - first[3]) / n, points_per_pass, n
+    return last[1] - first[1], (last[2] - first[2]) / n, (last[3] - first[3]) / n, points_per_pass, n
 
 
 def wire_rows(path: Path, args, tmp: Path) -> list[str]:
