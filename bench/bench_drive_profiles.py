@@ -15,7 +15,8 @@ sweep's points after the first, approach moves included) and per on-the-fly pass
 passes after the first, the capture read-out included), modelled on an RTU line at `--baud`:
 11 bits per byte, 3.5 characters of silence after each frame, the profile's min_frame_gap_ms
 between transactions (the drive's own reply time is not modelled). The laser line: its
-exchanges and bytes, at `--laser-baud`, 10 bits per byte (8N1), no silences.
+exchanges and bytes, at `--laser-baud`, 10 bits per byte (8N1), no silences; before: the
+capture read back one sample per exchange (`CAP?`), after: in blocks (`CAPB?`).
 
     .venv/bin/python bench/bench_drive_profiles.py [--moves 50] [--targets 11] [--baud 115200]
 """
@@ -92,7 +93,8 @@ def without_function_23(path: Path, tmp: Path) -> Path | None:
     return out
 
 
-def wire_of_sweep(profile_path: Path, plan: SweepPlan, tmp: Path, per_pass: bool) -> tuple[WireTally, float, float, float, int]:
+def wire_of_sweep(profile_path: Path, plan: SweepPlan, tmp: Path, per_pass: bool,
+                  block_reads: bool = True) -> tuple[WireTally, float, float, float, int]:
     """For `plan` on the simulated rig with the profile: the Modbus tally over the points (or
     passes) counted, the laser exchanges and bytes per point (or pass), the points per pass,
     and how many points (or passes) the tally covers (the first one, which carries the leg's
@@ -102,13 +104,15 @@ def wire_of_sweep(profile_path: Path, plan: SweepPlan, tmp: Path, per_pass: bool
     with open_rig(cfg, legs=plan.legs, time_scale=0.0) as rig:
         bus = rig.axes[plan.legs[0]].bus
         laser = rig.laser
+        laser.capture_block = block_reads  # off: the capture read back one sample per exchange (CAP?)
         marks: list[tuple[int, WireTally, int, int]] = []  # (run, modbus, laser exchanges, laser bytes)
 
         def mark(e) -> None:
             if isinstance(e, ev.PointMeasured):
                 marks.append((int(e.record["run"]), bus.wire.copy(), laser.transactions, laser.bytes_out + laser.bytes_in))
 
-        result = run_sweep(rig, plan, tmp / f"{profile_path.stem}-{plan.kind}.h5", cfg, sinks=[CallbackSink(mark)])
+        out = tmp / f"{profile_path.stem}-{plan.kind}-{'blocks' if block_reads else 'single'}.h5"
+        result = run_sweep(rig, plan, out, cfg, sinks=[CallbackSink(mark)])
         assert result.outcome == "completed", result.reason
     if per_pass:
         # a pass's points arrive together after it: its traffic lies between the last point of the
@@ -133,19 +137,19 @@ def wire_rows(path: Path, args, tmp: Path) -> list[str]:
         kinds.append(("on-the-fly pass", otf, True))
     rows = []
     for what, plan, per_pass in kinds:
-        before = wire_of_sweep(off, plan, tmp, per_pass) if off else None
+        before = wire_of_sweep(off or path, plan, tmp, per_pass, block_reads=False)
         after = wire_of_sweep(path, plan, tmp, per_pass)
-        b = before or after
+        b = before
         n_b, n_a = b[4], after[4]
         ms_b = rtu_ms(b[0], args.baud, gap) / n_b
         ms_a = rtu_ms(after[0], args.baud, gap) / n_a
-        laser_ms = after[2] * LASER_BITS_PER_BYTE / args.laser_baud * 1000
+        laser_ms_b, laser_ms = (x[2] * LASER_BITS_PER_BYTE / args.laser_baud * 1000 for x in (b, after))
         saving = f"{(1 - ms_a / ms_b) * 100:5.1f} %" if off else "  (no FC23)"
         per = f" ({after[3]:.0f} samples)" if per_pass else ""
         rows.append(
             f"  {prof.name:14} {what + per:33} {b[0].transactions / n_b:6.2f} -> {after[0].transactions / n_a:6.2f} tx "
             f"{b[0].bytes / n_b:8.1f} -> {after[0].bytes / n_a:8.1f} B {ms_b:8.2f} -> {ms_a:8.2f} ms {saving} | "
-            f"laser {after[1]:7.2f} exch {after[2]:8.1f} B {laser_ms:8.2f} ms")
+            f"laser {b[1]:6.2f} -> {after[1]:6.2f} exch {b[2]:7.1f} -> {after[2]:7.1f} B {laser_ms_b:7.2f} -> {laser_ms:7.2f} ms")
     return rows
 
 
@@ -166,7 +170,8 @@ def main() -> int:
         print(f"{r['profile']:16} {r['per_move']:8g} {r['per_status']:10d} {r['read']:>13} {r['write']:>14} "
               f"{r['oversize']:8d} {r['gap_viol']:6d} {r['gap']:>15} {r['ms_move']:8.2f}")
     print(f"\nwire time, Modbus RTU modelled at {args.baud} baud (11 bits/byte, 3.5-character silences, the profile's "
-          f"gap), function 23 off -> on where the profile serves it; laser line at {args.laser_baud} baud (8N1):")
+          f"gap), function 23 off -> on where the profile serves it; laser line at {args.laser_baud} baud (8N1), "
+          f"capture read one sample per exchange -> in blocks:")
     with tempfile.TemporaryDirectory() as tmp:
         for path in paths:
             for row in wire_rows(path, args, Path(tmp)):
