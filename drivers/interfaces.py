@@ -273,11 +273,13 @@ class PositionCompareAxis(Protocol):
 @runtime_checkable
 class CapturingInterferometer(Protocol):
     """An interferometer that latches a reading at each trigger pulse (`arm_capture`), read
-    back after the pass (`capture_sample`, BeamBreak for a sample taken without beam)."""
+    back after the pass (`capture_sample`, or `capture_samples` for a run of them; BeamBreak for
+    a sample taken without beam)."""
 
     def arm_capture(self, axis: int, count: int) -> None: ...
     def capture_count(self, axis: int) -> tuple[int, int]: ...
     def capture_sample(self, axis: int, index: int) -> Reading: ...
+    def capture_samples(self, axis: int, start: int, count: int) -> list[Reading]: ...
 
 
 @runtime_checkable

@@ -154,7 +154,7 @@ def onthefly_passes(
                 if captured < n:
                     raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
                                        "(trigger wiring, or the move stopped short)")
-                readings = [laser.capture_sample(leg, i) for i in range(n)]  # type: ignore[attr-defined]
+                readings = laser.capture_samples(leg, 0, n)  # type: ignore[attr-defined]
                 # the anchor: at rest where the pass ended, settled, averaged (same pass offset)
                 clock.sleep(plan.dwell_s)
                 anchor_reading = laser.read(leg)

@@ -46,7 +46,8 @@ class SerialInterferometer:
 
     The port is opened with an exclusive (advisory) lock where the platform supports it, so two
     programs cannot talk to one instrument at once. Not thread-safe: one owner at a time.
-    `transactions` counts command/reply exchanges sent (retries included), for benchmarks.
+    `transactions` counts command/reply exchanges sent (retries included), for benchmarks;
+    `bytes_out` / `bytes_in` the bytes of the commands sent and the reply lines received.
     """
 
     def __init__(
@@ -71,10 +72,13 @@ class SerialInterferometer:
         self.axes = int(axes)
         self._clock = clock or SystemClock()
         self.transactions = 0
+        self.bytes_out = 0
+        self.bytes_in = 0
         self.retried = 0  # exchanges that had to be asked again (noise statistics)
         self.reopened = 0  # times the port was opened again after it went away (unplugged)
         self._closed = False  # closed by the owner (a port that went away is reopened instead)
         self._averaging_s: float | None = None  # unknown until set or asked
+        self.capture_block = True  # read captures in blocks (CAPB?) until the instrument says it has none
         try:
             self._serial = serial.Serial(
                 port,
@@ -209,16 +213,46 @@ class SerialInterferometer:
         axis = self._check_axis(axis)
         return self._transact(p.cmd_capture_count(axis), lambda f: p.parse_capture_count(f, axis))
 
+    def capture_samples(self, axis: int, start: int, count: int) -> list[Reading]:
+        """Samples `start` .. `start + count - 1` of `axis`'s capture, as `capture_sample` gives
+        them (BeamBreak at the first one taken without beam), read in blocks (`CAPB?`: as many
+        samples per exchange as fit in one reply line, about five) where the instrument has
+        the command, else one per exchange (`CAP?`; an instrument answering `CAPB?` as an
+        unknown command is asked that way from then on)."""
+        axis = self._check_axis(axis)
+        out: list[Reading] = []
+        i, end = int(start), int(start) + int(count)
+        while i < end:
+            if not self.capture_block:
+                out.append(self.capture_sample(axis, i))
+                i += 1
+                continue
+            try:
+                block = self._transact(p.cmd_capture_block(axis, i, end - i),
+                                       lambda f, i=i: p.parse_capture_block(f, axis, i, end - i))
+            except p.InstrumentError as exc:
+                if exc.code != p.ERR_UNKNOWN_COMMAND:
+                    raise
+                self.capture_block = False
+                continue
+            for s in block:
+                out.append(self._capture_reading(s))
+            i += len(block)
+        return out
+
+    def _capture_reading(self, s: p.CaptureSample) -> Reading:
+        if s.status != "OK":
+            why = "beam interrupted" if s.status == "BEAM" else "signal too weak"
+            raise BeamBreak(f"interferometer axis {s.axis} on {self.port}: {why} at capture sample {s.index} "
+                            f"(status {s.status}, signal {s.signal_pct:.1f} %, at t = {s.t_s:.3f} s).")
+        return Reading(axis=s.axis, position_mm=s.position_mm, beam_ok=True, signal_pct=s.signal_pct, t_s=s.t_s)
+
     def capture_sample(self, axis: int, index: int) -> Reading:
         """Sample `index` (0-based) of `axis`'s capture. `t_s` is the instrument time of the
         trigger pulse. BeamBreak when the beam was interrupted or weak at that pulse."""
         axis = self._check_axis(axis)
         s = self._transact(p.cmd_capture_read(axis, index), lambda f: p.parse_capture_sample(f, axis, int(index)))
-        if s.status != "OK":
-            why = "beam interrupted" if s.status == "BEAM" else "signal too weak"
-            raise BeamBreak(f"interferometer axis {axis} on {self.port}: {why} at capture sample {index} "
-                            f"(status {s.status}, signal {s.signal_pct:.1f} %, at t = {s.t_s:.3f} s).")
-        return Reading(axis=axis, position_mm=s.position_mm, beam_ok=True, signal_pct=s.signal_pct, t_s=s.t_s)
+        return self._capture_reading(s)
 
 
     # -- one exchange ------------------------------------------------------------------------
@@ -253,7 +287,9 @@ class SerialInterferometer:
                 # after receiving it (on a replay: a recorded silence moving `clock` on) counts
                 deadline = self._clock.now() + wait_s
                 self._serial.write(command)
+                self.bytes_out += len(command)
                 line = self._read_line(deadline)
+                self.bytes_in += len(line)
             except serial.SerialTimeoutException:
                 timeouts += 1
                 continue

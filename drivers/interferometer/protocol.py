@@ -290,6 +290,7 @@ def parse_averaging(fields: list[str]) -> float:
 CMD_CAP_ARM = "CAPARM"  # CAPARM <n> <count>: clear axis n's buffer, latch the next <count> pulses
 CMD_CAP_COUNT = "CAPN?"  # CAPN? <n> -> CAPN,<n>,<captured>,<armed>
 CMD_CAP_READ = "CAP?"  # CAP? <n> <i> -> CAP,<n>,<i>,<position_mm>,<status>,<signal_pct>,<t_s>
+CMD_CAP_BLOCK = "CAPB?"  # CAPB? <n> <i> <count> -> CAPB,<n>,<i>,<k>, then k x (position, status, signal, t_s)
 MAX_CAPTURE = 8192  # samples one axis buffers
 
 
@@ -316,6 +317,21 @@ def cmd_capture_count(axis: int) -> bytes:
 
 def cmd_capture_read(axis: int, index: int) -> bytes:
     return f"{CMD_CAP_READ} {int(axis)} {int(index)}\n".encode("ascii")
+
+
+def cmd_capture_block(axis: int, index: int, count: int) -> bytes:
+    return f"{CMD_CAP_BLOCK} {int(axis)} {int(index)} {int(count)}\n".encode("ascii")
+
+
+def format_capture_block(axis: int, index: int, samples: list[tuple[str, str, str, str]]) -> bytes:
+    """A CAPB reply holding as many of `samples` (from sample `index` on, at least one) as fit in
+    one line shorter than MAX_LINE_BYTES."""
+    k = len(samples)
+    while True:
+        line = frame_reply("CAPB", int(axis), int(index), k, *(f for sample in samples[:k] for f in sample))
+        if len(line) < MAX_LINE_BYTES or k == 1:
+            return line
+        k -= 1
 
 
 def format_capture_count(axis: int, captured: int, armed: int) -> bytes:
@@ -350,13 +366,31 @@ def parse_capture_sample(fields: list[str], axis: int, index: int) -> CaptureSam
     _expect(fields, "CAP", 7)
     if _integer(fields, 1, "axis") != axis or _integer(fields, 2, "index") != index:
         raise ProtocolError(f"reply is for axis {fields[1]} sample {fields[2]}, asked for axis {axis} sample {index}")
-    status = fields[4]
+    return _capture_fields(fields, 3, axis, index)
+
+
+def _capture_fields(fields: list[str], at: int, axis: int, index: int) -> CaptureSample:
+    """The sample whose (position, status, signal, t_s) fields start at field `at`."""
+    status = fields[at + 1]
     if status not in STATUSES:
-        raise ProtocolError(f"field 4 (status) is {status!r}, expected one of {', '.join(STATUSES)}")
-    signal = _number(fields, 5, "signal_pct")
+        raise ProtocolError(f"field {at + 1} (status) is {status!r}, expected one of {', '.join(STATUSES)}")
+    signal = _number(fields, at + 2, "signal_pct")
     if not 0.0 <= signal <= 100.0:
-        raise ProtocolError(f"field 5 (signal_pct) is {signal}, outside 0..100")
-    return CaptureSample(axis, index, _number(fields, 3, "position_mm"), status, signal, _number(fields, 6, "t_s"))
+        raise ProtocolError(f"field {at + 2} (signal_pct) is {signal}, outside 0..100")
+    return CaptureSample(axis, index, _number(fields, at, "position_mm"), status, signal, _number(fields, at + 3, "t_s"))
+
+
+def parse_capture_block(fields: list[str], axis: int, index: int, count: int) -> list[CaptureSample]:
+    """The samples of a CAPB reply to `CAPB? axis index count`: between 1 and `count` of them,
+    from sample `index` on (the instrument sends as many as fit in one line)."""
+    if not fields or fields[0] != "CAPB" or len(fields) < 8 or (len(fields) - 4) % 4:
+        raise ProtocolError(f"expected a CAPB reply of 4 + 4 k fields, got {fields[:1]} with {len(fields)} fields")
+    if _integer(fields, 1, "axis") != axis or _integer(fields, 2, "index") != index:
+        raise ProtocolError(f"reply is for axis {fields[1]} sample {fields[2]}, asked for axis {axis} sample {index}")
+    k = _integer(fields, 3, "count")
+    if not 1 <= k <= count or len(fields) != 4 + 4 * k:
+        raise ProtocolError(f"CAPB reply says {k} samples in {len(fields) - 4} fields; asked for at most {count}")
+    return [_capture_fields(fields, 4 + 4 * j, axis, index + j) for j in range(k)]
 
 
 # -- air compensation record (docs/interferometer-protocol.md, "Air compensation") -----------

@@ -30,6 +30,7 @@ from drivers.errors import CommTimeout, DriveFault, DriverError, FramingError, S
 from drivers.interfaces import Clock, DriveLimits, DriveStatus, TableBank, TableSpec
 from drivers.modbus.codec import chunks, crc16_modbus, int_range
 from drivers.modbus.profile import MAX_READ_WORDS, MAX_WRITE_WORDS, DriveProfile
+from drivers.modbus.wire import READ_HOLDING, READ_WRITE_MULTIPLE, WRITE_MULTIPLE, WireTally
 from drivers.states import DriveState
 
 log = logging.getLogger(__name__)
@@ -72,7 +73,8 @@ class ModbusBus:
     sent (each write chunk and each read is one). `on_request(kind, unit, address, count)` is
     called before each request ("read"/"write"), e.g. for tracing. `min_frame_gap_s`: silence
     kept between the end of one exchange (reply or failure) and the next request, in real
-    seconds (`require_gap`: the largest any drive on the line asks for).
+    seconds (`require_gap`: the largest any drive on the line asks for). `wire` tallies the
+    RTU frame bytes of every request and reply (drivers.modbus.wire, for the wire-time model).
     """
 
     def __init__(self, client, where: str, timeout_s: float, retries: int):
@@ -81,6 +83,7 @@ class ModbusBus:
         self.timeout_s = timeout_s
         self.retries = retries
         self.transactions = 0
+        self.wire = WireTally()
         self.on_request: Callable[[str, int, int, int], None] | None = None
         self.min_frame_gap_s = 0.0
         self._last_frame_end = -math.inf  # time.monotonic() when the last exchange ended
@@ -173,7 +176,8 @@ class ModbusBus:
                 time.sleep(wait)
                 wait = self._last_frame_end + self.min_frame_gap_s - time.monotonic()
 
-    def _execute(self, kind: str, unit: int, address: int, count: int, call):
+    def _execute(self, kind: str, unit: int, address: int, count: int, call, frame: tuple[int, int, int]):
+        """One request: `frame` = (function, read words, write words) for the wire tally."""
         with self._lock:
             self._wait_gap()
             if self.on_request:
@@ -198,6 +202,7 @@ class ModbusBus:
                                   f"{kind} register {address} (+{count}).") from None
             finally:
                 self._last_frame_end = time.monotonic()
+            self.wire.add(*frame, refused=rsp.isError())
             if rsp.isError():
                 code = int(getattr(rsp, "exception_code", 0))
                 name = EXCEPTION_NAMES.get(code, "unknown exception")
@@ -212,7 +217,8 @@ class ModbusBus:
         out: list[int] = []
         for a, n in ((address + i, min(max_words, count - i)) for i in range(0, count, max_words)):
             rsp = self._execute("read", unit, a, n,
-                                lambda a=a, n=n: self._client.read_holding_registers(a, count=n, device_id=unit))
+                                lambda a=a, n=n: self._client.read_holding_registers(a, count=n, device_id=unit),
+                                (READ_HOLDING, n, 0))
             self._check_function(rsp, 3, "read", unit, a, n)
             regs = list(rsp.registers)
             if len(regs) != n:
@@ -226,7 +232,8 @@ class ModbusBus:
         max_words = max(1, min(int(max_words), MAX_WRITE_WORDS))
         for a, vals in chunks(address, list(values), max_words):
             rsp = self._execute("write", unit, a, len(vals),
-                                lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit))
+                                lambda a=a, vals=vals: self._client.write_registers(a, vals, device_id=unit),
+                                (WRITE_MULTIPLE, 0, len(vals)))
             self._check_function(rsp, 16, "write", unit, a, len(vals))
 
     def read_device_identification(self, unit: int) -> dict[int, str]:
@@ -238,6 +245,21 @@ class ModbusBus:
         self._check_function(rsp, 0x2B, "read device identification of", unit, 0, 3)
         return {int(oid): (v if isinstance(v, bytes) else b"".join(v)).decode("ascii", "replace").strip()
                 for oid, v in rsp.information.items()}
+    def write_read(self, unit: int, write_address: int, values: Sequence[int], read_address: int, count: int) -> list[int]:
+        """Write `values` and then read `count` registers in one transaction (function 23,
+        read/write multiple registers: the drive does the write first). Only for a drive whose
+        profile says it serves function 23 and for requests within its lengths (the caller's
+        part: nothing is split here)."""
+        rsp = self._execute("write+read", unit, write_address, len(values),
+                            lambda: self._client.readwrite_registers(read_address=read_address, read_count=count,
+                                                                     write_address=write_address, values=list(values),
+                                                                     device_id=unit),
+                            (READ_WRITE_MULTIPLE, count, len(values)))
+        self._check_function(rsp, 23, "write+read", unit, write_address, len(values))
+        regs = list(rsp.registers)
+        if len(regs) != count:
+            raise CommTimeout(f"drive at {self.where}, unit id {unit}: asked for {count} registers at {read_address}, got {len(regs)}.")
+        return regs
 
     def _check_function(self, rsp, expected: int, kind: str, unit: int, address: int, count: int) -> None:
         """pymodbus matches a reply to its request by transaction id only: a reply of another
@@ -314,6 +336,14 @@ class ModbusServoAxis:
             # `move` in [commands] when the drive wants more than new-set-point (Kinco: 0x3F, bit 5
             # "change set immediately" too)
             self._move_cw = p.commands.get("move", p.commands["enable_operation"] | (1 << p.controlword_bits["new_set_point"]))
+        # Function 23 for a move: the move's write and the status read after it in one
+        # transaction, where the profile says the drive serves it, the move is one write and
+        # the status one request (else the usual write, then reads).
+        status_runs = p.runs(p.blocks["status"].names)
+        self._move_and_status = (self._proto.read_write_multiple and not self._pr and self._proto.move_write == "single"
+                                 and self._move_block is not None and len(status_runs) == 1
+                                 and self._move_block.words <= self._proto.max_write_words)
+        self._status_run = status_runs[0]
         bus.require_gap(self._proto.min_frame_gap_ms / 1000.0)
         bus.acquire()
 
@@ -421,6 +451,11 @@ class ModbusServoAxis:
     def status(self) -> DriveStatus:
         """One read of the status block."""
         return self._status_from(self._read_block("status"))
+
+    def _decode_status_run(self, words: list[int]) -> DriveStatus:
+        address, _, names = self._status_run
+        regs = self.profile.registers
+        return self._status_from({n: regs[n].decode(words[regs[n].address - address : regs[n].end - address]) for n in names})
 
     # -- state machine ------------------------------------------------------------------------------
     def _command(self, name: str) -> None:
@@ -532,7 +567,7 @@ class ModbusServoAxis:
             dist = abs(target_mm - self._last_position_mm) if self._last_position_mm is not None else span
             timeout_s = MOVE_TIMEOUT_FACTOR * self._trapezoid_s(dist) + MOVE_TIMEOUT_MARGIN_S
         try:
-            self._write_move(target_mm)
+            first = self._write_move(target_mm)
         except RequestRefused as exc:
             raise DriveFault(f"leg {self.leg}: the drive refused the move to {target_mm:.4f} mm: {exc}", 0) from None
         # Judged on the clock the motion runs on, and only on the drive's time: from the write's
@@ -543,7 +578,7 @@ class ModbusServoAxis:
         t0 = self.clock.now()
         while True:
             asked = self.clock.now()
-            st = self.status()
+            st, first = (first, None) if first is not None else (self.status(), None)
             if st.fault:
                 raise DriveFault(f"leg {self.leg}: drive fault {self.profile.fault_text(st.fault_code)} "
                                  f"on the move to {target_mm:.4f} mm.", st.fault_code)
@@ -560,29 +595,37 @@ class ModbusServoAxis:
                                   hint="Check the mechanics and the drive's motion profile.")
             self.clock.sleep(self.poll_interval_s)
 
-    def _write_move(self, target_mm: float) -> None:
+    def _write_move(self, target_mm: float) -> DriveStatus | None:
         """Command the move: one write of controlword + target where the profile's move_command
         block allows it; else the target first and then the controlword (the drive latches the
         target it holds when the set-point bit arrives). A drive latching on the rising edge
-        gets the bit cleared once the move has been accepted, ready for the next one."""
+        gets the bit cleared once the move has been accepted, ready for the next one.
+        Returns the status read with the move's write (function 23, `_move_and_status`), or
+        None when the status is still to be read."""
         target = self._target_reg.encode(target_mm)
         if self._pr:
             # the path's target first, then the trigger that runs the path
             self._write(self._target_reg.address, target)
             self._set_param("pr_trigger", "run_path")
-            return
+            return None
+        st = None
         if self._proto.move_write == "single":
             b = self._move_block
             words = [0] * b.words
             words[self._cw_addr - b.start] = self._move_cw
             a = self._target_reg.address - b.start
             words[a : a + len(target)] = target
-            self._write(b.start, words)
+            if self._move_and_status:
+                address, count, _ = self._status_run
+                st = self._decode_status_run(self.bus.write_read(self.unit, b.start, words, address, count))
+            else:
+                self._write(b.start, words)
         else:
             self._write(self._target_reg.address, target)
             self._write(self._cw_addr, [self._move_cw])
         if self._proto.set_point_latch == "edge":
             self._command("enable_operation")
+        return st
 
     def _move_at(self, target_mm: float, timeout_s: float | None, velocity_mm_s: float) -> DriveStatus:
         """`move_to` at `velocity_mm_s` (limited to the drive's maximum): the profile velocity

@@ -247,6 +247,10 @@ class ProtocolSettings:
     `device_identification`: the drive answers Modbus Read Device Identification (function 43,
     MEI type 14: vendor, product code, revision); False when its manual does not say so (the
     station then takes the drive's identity from the config).
+    `read_write_multiple`: the drive serves function 23 (read/write multiple registers, the
+    write done before the read): a move's write and the status read after it go in one
+    transaction. False (the default) when the manual does not say it does; the simulated drive
+    then refuses function 23 with exception 01, as such a drive would.
     """
 
     max_read_words: int = MAX_READ_WORDS
@@ -259,6 +263,7 @@ class ProtocolSettings:
     oversize_reply: str = "exception"
     mode_of_operation: int | None = None
     device_identification: bool = False
+    read_write_multiple: bool = False
 
     def unit_id(self, leg: int) -> int:
         """Modbus unit id of `leg`; ProfileError if the profile's table has no entry for it."""
@@ -529,7 +534,8 @@ class _Parser:
         if not isinstance(sec, dict):
             raise self.err("protocol", "must be a table")
         known = {"max_read_words", "max_write_words", "min_frame_gap_ms", "address_base", "unit_ids", "move_write",
-                 "set_point_latch", "oversize_reply", "mode_of_operation", "device_identification"}
+                 "set_point_latch", "oversize_reply", "mode_of_operation", "device_identification",
+                 "read_write_multiple"}
         unknown = sorted(set(sec) - known)
         if unknown:
             raise self.err("protocol", f"unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})")
@@ -564,6 +570,10 @@ class _Parser:
         if not isinstance(device_id, bool):
             raise self.err("protocol", f"device_identification: must be true or false (does the drive answer "
                                        f"Modbus function 43/14?), got {device_id!r}")
+        rw_multiple = g("read_write_multiple", False)
+        if not isinstance(rw_multiple, bool):
+            raise self.err("protocol", f"read_write_multiple: must be true or false (does the drive serve Modbus "
+                                       f"function 23?), got {rw_multiple!r}")
         self.address_base = base
         return ProtocolSettings(
             max_read_words=max_read, max_write_words=max_write, min_frame_gap_ms=float(gap), address_base=base,
@@ -571,7 +581,7 @@ class _Parser:
             move_write=self.choice(sec, "protocol", "move_write", MOVE_WRITES, "single"),
             set_point_latch=self.choice(sec, "protocol", "set_point_latch", SET_POINT_LATCHES, "level"),
             oversize_reply=self.choice(sec, "protocol", "oversize_reply", OVERSIZE_REPLIES, "exception"),
-            mode_of_operation=mode, device_identification=device_id,
+            mode_of_operation=mode, device_identification=device_id, read_write_multiple=rw_multiple,
         )  # fmt: skip
 
     def _int_default(self, sec: dict, name: str, default: int, lo: int, hi: int) -> int:

@@ -595,6 +595,8 @@ class FrameStats:
     oversize: int = 0
     gap_violations: int = 0
     shortest_gap_s: float = math.inf
+    read_write_requests: int = 0  # function 23 requests served
+    refused_functions: int = 0  # requests of a function the profile says the drive does not serve (exception 01)
 
 
 class SimDriveServer:
@@ -710,13 +712,17 @@ class SimDriveServer:
 
     async def _action(self, leg, function_code, start_address, address, count, registers, set_values):
         try:
-            return await self._answer(leg, start_address, address, count, registers, set_values)
+            return await self._answer(leg, function_code, start_address, address, count, registers, set_values)
         finally:
             self._last_reply_t = time.monotonic()
 
-    async def _answer(self, leg, start_address, address, count, registers, set_values):
+    async def _answer(self, leg, function_code, start_address, address, count, registers, set_values):
         with self.lock:
-            refused = self._line_rules(count, set_values is not None)
+            if function_code == 23:
+                # read/write multiple registers: pymodbus asks for its write, then its read
+                refused = self._read_write_rules(count, set_values is not None)
+            else:
+                refused = self._line_rules(count, set_values is not None)
             if refused is not None:
                 return refused
             model = self._models[leg]
@@ -733,6 +739,23 @@ class SimDriveServer:
             if res is None and model.touches_nv(address, count):
                 self._save_nv()
             return res
+
+    def _read_write_rules(self, count: int, write: bool) -> ExcCodes | None:
+        """Function 23: exception 01 (illegal function) from a drive whose profile says it does
+        not serve it; else the line rules once for the request (its write part), and the read
+        part's length against max_read_words."""
+        if not self.profile.protocol.read_write_multiple:
+            self.frames.refused_functions += write
+            return ExcCodes.ILLEGAL_FUNCTION
+        if write:
+            self.frames.read_write_requests += 1
+            return self._line_rules(count, write=True)
+        f = self.frames
+        f.longest_read_words = max(f.longest_read_words, count)
+        if count > self.profile.protocol.max_read_words:
+            f.oversize += 1
+            return ExcCodes.ILLEGAL_VALUE
+        return None
 
     async def _silent(self, *args):
         raise NoSuchIdException("no drive at this unit id")  # an absent drive does not answer

@@ -272,7 +272,7 @@ class SimInterferometer:
                 return p.format_error(p.ERR_OUT_OF_RANGE, f"AVG must be 0..{p.MAX_AVERAGING_S:g} s; got {args[0][:20]}")
             self._averaging_s = value
             return p.frame_reply("OK")
-        if word in (p.CMD_CAP_ARM, p.CMD_CAP_COUNT, p.CMD_CAP_READ):
+        if word in (p.CMD_CAP_ARM, p.CMD_CAP_COUNT, p.CMD_CAP_READ, p.CMD_CAP_BLOCK):
             return self._capture_command(word, args)
         return p.format_error(p.ERR_UNKNOWN_COMMAND, f"unknown command {word[:20]}")
 
@@ -302,18 +302,16 @@ class SimInterferometer:
         return f"{position_mm:+.9f}", status, f"{signal:.1f}", f"{t_s:.6f}"
 
     def _capture_command(self, word: str, args: list[str]) -> bytes:
-        want = 2 if word in (p.CMD_CAP_ARM, p.CMD_CAP_READ) else 1
+        want = {p.CMD_CAP_ARM: 2, p.CMD_CAP_READ: 2, p.CMD_CAP_BLOCK: 3}.get(word, 1)
         if len(args) != want:
             return p.format_error(p.ERR_BAD_ARGUMENT, f"{word} takes {want} argument(s)")
         axis = self._axis(args[:1])
         if isinstance(axis, bytes):
             return axis
-        number = 0
-        if want == 2:
-            try:
-                number = int(args[1])
-            except ValueError:
-                return p.format_error(p.ERR_BAD_ARGUMENT, f"{word} needs an integer; got {args[1][:20]}")
+        try:
+            number, count = (int(a) for a in (args[1:] + ["0", "0"])[:2])
+        except ValueError:
+            return p.format_error(p.ERR_BAD_ARGUMENT, f"{word} needs integers; got {' '.join(args[1:])[:20]}")
         with self.lock:
             cap = self._capture[axis]
             if word == p.CMD_CAP_ARM:
@@ -325,6 +323,10 @@ class SimInterferometer:
                 return p.format_capture_count(axis, len(cap[1]), cap[0])
             if not 0 <= number < len(cap[1]):
                 return p.format_error(p.ERR_OUT_OF_RANGE, f"sample {number} not captured; axis {axis} holds {len(cap[1])}")
+            if word == p.CMD_CAP_BLOCK:
+                if count < 1:
+                    return p.format_error(p.ERR_OUT_OF_RANGE, f"CAPB? count must be >= 1; got {count}")
+                return p.format_capture_block(axis, number, cap[1][number : number + count])
             return p.format_capture_sample(axis, number, *cap[1][number])
 
     def _axis(self, args: list[str]) -> int | bytes:

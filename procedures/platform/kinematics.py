@@ -8,7 +8,9 @@ A platform joint a (platform frame) is at p + R a in the base frame; leg i's len
 |p + R a_i - b_i| (mm). See procedures.platform.geometry for frames and leg numbering.
 
 Forward kinematics is Newton's method on the six leg-length equations with the analytic
-Jacobian, run on all poses at once, with a backtracking step so a poor start does not diverge.
+Jacobian, run on all poses at once (poses along the last axis), with a backtracking step so a
+poor start does not diverge; poses sharing a start take their first step with its one Jacobian,
+and poses within CHORD_MM of the solution keep their last Jacobian's inverse (chord steps).
 It returns the assembly mode reached from the start pose (the home pose unless given), and a
 status per pose instead of a pose it cannot vouch for (see FkStatus).
 """
@@ -25,6 +27,7 @@ from procedures.platform.geometry import Geometry
 POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "rx_rad", "ry_rad", "rz_rad")
 DEFAULT_TOL_MM = 1e-10  # leg-length residual at which FK stops; far below any leg error (um)
 _BLOCK = 4096  # poses per vectorised block (cache-sized)
+CHORD_MM = 0.1  # leg residual below which a pose keeps its Jacobian's inverse (chord steps)
 DEFAULT_SINGULAR_RCOND = 1e-5  # smallest/largest singular value of the scaled Jacobian;
 # below it 1 um of leg error moves the pose by more than 0.1 mm: the pose is not worth reporting
 
@@ -76,55 +79,65 @@ def _as_poses(poses_mm_rad) -> tuple[np.ndarray, bool]:
 
 def rotation_matrices(angles_rad) -> np.ndarray:
     """Rotation matrices (N, 3, 3) for roll-pitch-yaw angles (N, 3): R = Rz(rz) Ry(ry) Rx(rx)."""
-    return _rotations(np.atleast_2d(np.asarray(angles_rad, dtype=float)))[0]
+    return _rotations(np.atleast_2d(np.asarray(angles_rad, dtype=float)))
 
 
 def _rotations(angles: np.ndarray):
-    """R (N, 3, 3) and W (N, 3, 3), whose columns are the base-frame axes of the three angle
-    rates: dR/d(angle k) = [W[:, :, k]]x R, so the angle columns of the Jacobian are cross
-    products (cheaper than differentiating R three times)."""
-    ca, sa = np.cos(angles[:, 0]), np.sin(angles[:, 0])
-    cb, sb = np.cos(angles[:, 1]), np.sin(angles[:, 1])
-    cc, sc = np.cos(angles[:, 2]), np.sin(angles[:, 2])
-    r = np.empty(angles.shape[:1] + (3, 3))
-    r[:, 0, 0] = cc * cb
-    r[:, 0, 1] = cc * sb * sa - sc * ca
-    r[:, 0, 2] = cc * sb * ca + sc * sa
-    r[:, 1, 0] = sc * cb
-    r[:, 1, 1] = sc * sb * sa + cc * ca
-    r[:, 1, 2] = sc * sb * ca - cc * sa
-    r[:, 2, 0] = -sb
-    r[:, 2, 1] = cb * sa
-    r[:, 2, 2] = cb * ca
-    w = np.zeros_like(r)
-    w[:, :, 0] = r[:, :, 0]  # rx turns about Rz Ry e_x, the first column of R
-    w[:, 0, 1] = -sc  # ry turns about Rz e_y
-    w[:, 1, 1] = cc
-    w[:, 2, 2] = 1.0  # rz turns about the fixed z axis
-    return r, w
+    """R (N, 3, 3) for roll-pitch-yaw angles (N, 3)."""
+    return np.moveaxis(np.array(_rotation_parts(angles.T)[0]).reshape(3, 3, -1), -1, 0)
+
+
+def _rotation_parts(angles_t: np.ndarray):
+    """The nine entries of R, row by row, each an (N,) array, for angles (3, N); and the
+    nonzero entries (-sin rz, cos rz) of w_1, the base-frame axis of the ry rate (w_0, the
+    axis of rx, is R's first column, w_2, the axis of rz, is e_z): dR/d(angle k) = [w_k]x R,
+    so the angle columns of the Jacobian are cross products."""
+    ca, sa = np.cos(angles_t[0]), np.sin(angles_t[0])
+    cb, sb = np.cos(angles_t[1]), np.sin(angles_t[1])
+    cc, sc = np.cos(angles_t[2]), np.sin(angles_t[2])
+    sbsa, sbca = sb * sa, sb * ca
+    r = (cc * cb, cc * sbsa - sc * ca, cc * sbca + sc * sa,
+         sc * cb, sc * sbsa + cc * ca, sc * sbca - cc * sa,
+         -sb, cb * sa, cb * ca)
+    return r, (-sc, cc)
+
+
+def _legs_t(geometry: Geometry, poses_t: np.ndarray, jacobian: bool):
+    """Leg lengths (6 legs, N) for poses (6 components, N) and, if asked, the Jacobian
+    dL/dpose as (N, 6 legs, 6 components). Poses along the last axis: every operation is on
+    contiguous (6, N) arrays and no reduction runs over a short axis (2-3x faster than
+    (N, 6) rows)."""
+    (r00, r01, r02, r10, r11, r12, r20, r21, r22), (w10, w11) = _rotation_parts(poses_t[3:])
+    a = geometry.platform_joints_mm[:, :, None]  # (6, 3, 1): broadcasts against (N,)
+    b = geometry.base_joints_mm[:, :, None]
+    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+    rax = r00 * ax + r01 * ay + r02 * az  # R a_i, (6, N) per component
+    ray = r10 * ax + r11 * ay + r12 * az
+    raz = r20 * ax + r21 * ay + r22 * az
+    lx = rax + (poses_t[0] - b[:, 0])
+    ly = ray + (poses_t[1] - b[:, 1])
+    lz = raz + (poses_t[2] - b[:, 2])
+    lengths = np.sqrt(lx * lx + ly * ly + lz * lz)
+    if not jacobian:
+        return lengths, None
+    inv = 1.0 / lengths
+    ux, uy, uz = lx * inv, ly * inv, lz * inv
+    mx = ray * uz - raz * uy  # R a x u, written out: np.cross is slow on small axes
+    my = raz * ux - rax * uz
+    mz = rax * uy - ray * ux
+    jt = np.empty((6, 6, lengths.shape[1]))  # (component, leg, pose)
+    jt[0], jt[1], jt[2] = ux, uy, uz
+    # dL/d(angle k) = u . (w_k x R a) = w_k . (R a x u)
+    jt[3] = mx * r00 + my * r10 + mz * r20
+    jt[4] = mx * w10 + my * w11
+    jt[5] = mz
+    return lengths, jt.transpose(2, 1, 0)
 
 
 def _legs(geometry: Geometry, poses: np.ndarray, jacobian: bool):
     """Leg lengths (N, 6) and, if asked, the Jacobian dL/dpose (N, 6 legs, 6 pose components)."""
-    n = poses.shape[0]
-    r, w = _rotations(poses[:, 3:])
-    # Arrays are (N, 3 components, 6 legs) so the joint transform is one 2-D product
-    # (N*3, 3) @ (3, 6), much faster than N small matmuls.
-    ra = (r.reshape(n * 3, 3) @ geometry.platform_joints_mm.T).reshape(n, 3, 6)  # R a_i
-    legs = ra + (poses[:, :3, None] - geometry.base_joints_mm.T[None])
-    lengths = np.sqrt(np.sum(legs * legs, axis=1))
-    if not jacobian:
-        return lengths, None
-    u = legs / lengths[:, None, :]
-    m = np.empty_like(u)  # R a x u, written out: np.cross is slow on small axes
-    m[:, 0] = ra[:, 1] * u[:, 2] - ra[:, 2] * u[:, 1]
-    m[:, 1] = ra[:, 2] * u[:, 0] - ra[:, 0] * u[:, 2]
-    m[:, 2] = ra[:, 0] * u[:, 1] - ra[:, 1] * u[:, 0]
-    jac = np.empty((n, 6, 6))
-    jac[:, :, :3] = u.transpose(0, 2, 1)
-    # dL/d(angle k) = u . (w_k x R a) = w_k . (R a x u)
-    jac[:, :, 3:] = np.matmul(m.transpose(0, 2, 1), w)
-    return lengths, jac
+    lengths, jac = _legs_t(geometry, poses.T, jacobian)
+    return lengths.T, (None if jac is None else np.ascontiguousarray(jac))
 
 
 def inverse_kinematics(geometry: Geometry, poses_mm_rad) -> np.ndarray:
@@ -166,27 +179,36 @@ def reachable(geometry: Geometry, poses_mm_rad) -> np.ndarray:
     return ok[0] if np.ndim(poses_mm_rad) == 1 else ok
 
 
-def _rcond(geometry: Geometry, jac: np.ndarray) -> np.ndarray:
-    """Reciprocal 1-norm condition number 1 / (|J|_1 |J^-1|_1) of the scaled Jacobian, 0 where
-    J cannot be inverted. Angle columns are divided by the platform radius: a small rotation
-    moves the joints by about radius * angle, so the scaled columns are all lengths."""
-    scaled = jac.copy()
-    scaled[:, :, 3:] /= geometry.platform_radius_mm
-    out = np.zeros(jac.shape[0])
+def _inverses(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """J^-1 per pose (N, 6, 6) and a mask of those that could be inverted (the others NaN)."""
     try:
-        inv = np.linalg.inv(scaled)
-        ok = np.ones(jac.shape[0], dtype=bool)
+        return np.linalg.inv(jac), np.ones(jac.shape[0], dtype=bool)
     except np.linalg.LinAlgError:
-        inv = np.full_like(scaled, np.nan)
+        # one bad matrix spoils the batch: one pose at a time (rare)
+        inv = np.full_like(jac, np.nan)
         ok = np.zeros(jac.shape[0], dtype=bool)
         for i in range(jac.shape[0]):
             try:
-                inv[i] = np.linalg.inv(scaled[i])
+                inv[i] = np.linalg.inv(jac[i])
                 ok[i] = True
             except np.linalg.LinAlgError:
                 pass
-    norm = np.abs(scaled).sum(axis=1).max(axis=1)
-    norm_inv = np.abs(inv).sum(axis=1).max(axis=1)
+        return inv, ok
+
+
+def _rcond(geometry: Geometry, jac: np.ndarray, inv: np.ndarray | None = None, ok: np.ndarray | None = None) -> np.ndarray:
+    """Reciprocal 1-norm condition number 1 / (|J|_1 |J^-1|_1) of the scaled Jacobian, 0 where
+    J cannot be inverted. Angle columns are divided by the platform radius: a small rotation
+    moves the joints by about radius * angle, so the scaled columns are all lengths.
+    `inv`, `ok`: J^-1 of the unscaled Jacobian when already known (_inverses)."""
+    if inv is None:
+        inv, ok = _inverses(jac)
+    radius = geometry.platform_radius_mm
+    # scaled J = J diag(1, 1, 1, 1/r, 1/r, 1/r), so its inverse is diag(1, 1, 1, r, r, r) J^-1
+    norm = np.maximum(np.abs(jac[:, :, :3]).sum(axis=1).max(axis=1), np.abs(jac[:, :, 3:]).sum(axis=1).max(axis=1) / radius)
+    a_inv = np.abs(inv)
+    norm_inv = (a_inv[:, :3].sum(axis=1) + a_inv[:, 3:].sum(axis=1) * radius).max(axis=1)
+    out = np.zeros(jac.shape[0])
     good = ok & np.isfinite(norm_inv) & (norm_inv > 0)
     out[good] = 1.0 / (norm[good] * norm_inv[good])
     return out
@@ -250,24 +272,72 @@ def forward_kinematics(
     return FkResult(*(np.concatenate([getattr(r, f) for r in parts]) for f in ("poses_mm_rad", "status", "iterations", "residual_mm", "rcond")))
 
 
+def _shared_start_inverse(geometry, starts: np.ndarray) -> np.ndarray | None:
+    """J^-1 at the start pose when every pose starts from the same one (the home pose by
+    default), else None: the first Newton step of all of them then needs one 6x6 inverse
+    instead of one solve per pose. None too when that Jacobian is singular or ill-conditioned
+    (the per-pose path then reports it)."""
+    if starts.shape[0] < 2 or starts.strides[0] != 0 and not np.all(starts == starts[0]):
+        return None
+    _, jac = _legs(geometry, starts[:1], jacobian=True)
+    if not np.all(np.isfinite(jac)) or not _rcond(geometry, jac)[0] >= DEFAULT_SINGULAR_RCOND:
+        return None
+    return np.linalg.inv(jac[0])
+
+
 def _fk_block(geometry, lengths, starts, tol_mm, max_iterations, singular_rcond, check_stroke) -> FkResult:
+    # Poses along the last axis (see _legs_t): x (6 components, n), residuals (6 legs, n).
     n = lengths.shape[0]
-    poses = np.array(starts)
+    target = np.ascontiguousarray(lengths.T)
+    x = np.array(starts.T)
     status = np.full(n, FkStatus.NOT_CONVERGED, dtype=np.int8)
     iterations = np.zeros(n, dtype=np.int32)
 
-    residual = _legs(geometry, poses, jacobian=False)[0] - lengths
-    err = np.max(np.abs(residual), axis=1)
-    live = np.all(np.isfinite(lengths), axis=1) & np.all(np.isfinite(poses), axis=1) & ~(err <= tol_mm)
-    for _ in range(max_iterations):
+    residual = _legs_t(geometry, x, jacobian=False)[0] - target
+    err = np.abs(residual).max(axis=0)
+    live = np.isfinite(target).all(axis=0) & np.isfinite(x).all(axis=0) & ~(err <= tol_mm)
+    start_inv = _shared_start_inverse(geometry, starts)
+    # Near the solution the Jacobian hardly changes over the remaining steps: a pose within
+    # CHORD_MM keeps the inverse of its last Jacobian for the steps left (chord steps: one
+    # small product each, no new Jacobian or solve), and the condition number comes from that
+    # inverse (within a Newton step, < CHORD_MM, of the returned pose) instead of a last one.
+    inv_last = np.empty((n, 6, 6))
+    rcond = np.full(n, np.nan)
+    have_inv = np.zeros(n, dtype=bool)
+    for it in range(max_iterations):
         idx = np.flatnonzero(live)
         if idx.size == 0:
             break
-        x0 = poses[idx]
-        r0 = residual[idx]
-        norm0 = np.einsum("ij,ij->i", r0, r0)
-        _, jac = _legs(geometry, x0, jacobian=True)
-        step, singular = _newton_steps(jac, r0)
+        x0 = x[:, idx]
+        r0 = residual[:, idx]
+        norm0 = np.einsum("in,in->n", r0, r0)
+        step = np.empty_like(r0)
+        singular = np.zeros(idx.size, dtype=bool)
+        chord = have_inv[idx]
+        if it == 0 and start_inv is not None:
+            # every pose is at the common start: one Jacobian for all (same step as below)
+            step[:] = -(start_inv @ r0)
+        else:
+            if chord.any():
+                step[:, chord] = -np.einsum("nij,jn->in", inv_last[idx[chord]], r0[:, chord])
+            near = ~chord & (err[idx] < CHORD_MM)
+            if near.any():
+                k = idx[near]
+                _, jac = _legs_t(geometry, x0[:, near], jacobian=True)
+                jac_ok = np.isfinite(jac).all(axis=(1, 2))
+                inv, ok = _inverses(np.where(jac_ok[:, None, None], jac, 0.0))
+                ok &= jac_ok & np.isfinite(inv).all(axis=(1, 2))
+                inv_last[k] = inv
+                rcond[k] = _rcond(geometry, jac, inv, ok)
+                have_inv[k] = ok
+                step[:, near] = -np.einsum("nij,jn->in", inv, r0[:, near])
+                singular[near] = ~ok
+            far = ~chord & ~near
+            if far.any():
+                _, jac = _legs_t(geometry, x0[:, far], jacobian=True)
+                far_step, singular[far] = _newton_steps(jac, r0[:, far].T)
+                step[:, far] = far_step.T
+        step[:, singular] = 0.0
         status[idx[singular]] = FkStatus.SINGULAR
         live[idx[singular]] = False
         iterations[idx] += 1
@@ -276,31 +346,38 @@ def _fk_block(geometry, lengths, starts, tol_mm, max_iterations, singular_rcond,
         # is a descent direction for it); near the solution the full step is always taken.
         t = np.ones(idx.size)
         x1 = x0 + step
-        r1 = _legs(geometry, x1, jacobian=False)[0] - lengths[idx]
-        norm1 = np.einsum("ij,ij->i", r1, r1)
-        worse = ~singular & ~(norm1 < norm0) & ~(np.max(np.abs(r1), axis=1) <= tol_mm)
+        r1 = _legs_t(geometry, x1, jacobian=False)[0] - target[:, idx]
+        norm1 = np.einsum("in,in->n", r1, r1)
+        worse = ~singular & ~(norm1 < norm0) & ~(np.abs(r1).max(axis=0) <= tol_mm)
+        # a chord step that does not help is not halved: the pose takes a fresh Newton step next
+        chord_failed = worse & chord
+        have_inv[idx[chord_failed]] = False
+        worse &= ~chord
         for _half in range(30):
             if not worse.any():
                 break
             w = np.flatnonzero(worse)
             t[w] *= 0.5
-            x1[w] = x0[w] + t[w, None] * step[w]
-            r1[w] = _legs(geometry, x1[w], jacobian=False)[0] - lengths[idx[w]]
-            norm1[w] = np.einsum("ij,ij->i", r1[w], r1[w])
-            worse[w] = ~(norm1[w] < norm0[w]) & ~(np.max(np.abs(r1[w]), axis=1) <= tol_mm)
+            x1[:, w] = x0[:, w] + t[w] * step[:, w]
+            r1[:, w] = _legs_t(geometry, x1[:, w], jacobian=False)[0] - target[:, idx[w]]
+            norm1[w] = np.einsum("in,in->n", r1[:, w], r1[:, w])
+            worse[w] = ~(norm1[w] < norm0[w]) & ~(np.abs(r1[:, w]).max(axis=0) <= tol_mm)
         stalled = worse  # no decrease even with a tiny step: give up on these poses
         live[idx[stalled]] = False
-        moved = ~singular & ~stalled
-        poses[idx[moved]] = x1[moved]
-        residual[idx[moved]] = r1[moved]
-        err[idx[moved]] = np.max(np.abs(r1[moved]), axis=1)
-        live[idx[moved & (err[idx] <= tol_mm)]] = False
+        moved = ~singular & ~stalled & ~chord_failed
+        m = idx[moved]
+        x[:, m] = x1[:, moved]
+        residual[:, m] = r1[:, moved]
+        err[m] = np.abs(r1[:, moved]).max(axis=0)
+        live[m[err[m] <= tol_mm]] = False
 
+    poses = np.ascontiguousarray(x.T)
     solved = (err <= tol_mm) & (status != FkStatus.SINGULAR)
-    rcond = np.full(n, np.nan)
-    if solved.any():
-        _, jac = _legs(geometry, poses[solved], jacobian=True)
-        rcond[solved] = _rcond(geometry, jac)
+    late = solved & ~have_inv  # solved without a Jacobian near the end (or at the start)
+    if late.any():
+        _, jac = _legs(geometry, poses[late], jacobian=True)
+        rcond[late] = _rcond(geometry, jac)
+    rcond[~solved] = np.nan
     status[solved] = FkStatus.CONVERGED
     status[solved & ~(rcond >= singular_rcond)] = FkStatus.SINGULAR
     if check_stroke:

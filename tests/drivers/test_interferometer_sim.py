@@ -296,3 +296,15 @@ def test_stop_joins_the_thread_and_leaks_no_descriptors():
         r.close()
     assert open_fds() == before
     assert threading.active_count() == threads_before
+
+
+def test_client_counts_the_bytes_of_each_exchange_for_the_wire_model(rig):
+    from drivers.interferometer import protocol as proto
+
+    laser = rig.laser
+    out0, in0, tx0 = laser.bytes_out, laser.bytes_in, laser.transactions
+    assert laser.identity() == "StationSim,LI-6,SIM-0001,1.0"
+    reply = proto.frame_reply("IDN", "StationSim", "LI-6", "SIM-0001", "1.0")
+    assert laser.transactions - tx0 == 1
+    assert laser.bytes_out - out0 == len(proto.cmd_identity())
+    assert laser.bytes_in - in0 == len(reply)

@@ -147,3 +147,71 @@ def test_capture_line_protocol_round_trip():
     with pytest.raises(p.ProtocolError):
         p.parse_capture_count(p.split_reply(p.format_capture_count(2, 10, 9)), 2)
     assert LEG_JERK_MM_S3 > 0
+
+
+def test_block_read_gives_the_samples_one_by_one_reads_give_in_fewer_exchanges(rig):
+    r, axes, laser = rig
+    ax = axes[1]
+    ax.enable()
+    ax.move_to(-94.0)
+    ax.arm_position_compare(-90.0, 1.0, 181)
+    laser.arm_capture(1, 181)
+    ax.move_to(94.0, velocity_mm_s=10.0)
+    tx = laser.transactions
+    one_by_one = [laser.capture_sample(1, i) for i in range(181)]
+    tx_single, tx = laser.transactions - tx, laser.transactions
+    blocks = laser.capture_samples(1, 0, 181)
+    tx_block = laser.transactions - tx
+    assert blocks == one_by_one
+    assert tx_single == 181 and tx_block <= 181 // 4  # about five samples per reply line
+    assert laser.capture_samples(1, 179, 2) == one_by_one[179:]
+    # a block stops at the first sample taken without beam, naming it, like one by one
+    ax.move_to(-94.0)
+    ax.arm_position_compare(-90.0, 1.0, 20)
+    laser.arm_capture(1, 20)
+    ax.move_to(-80.5, velocity_mm_s=10.0)  # 10 pulses: -90 .. -81
+    r.laser_server.set_beam_break(1, True)
+    ax.move_to(94.0, velocity_mm_s=10.0)
+    r.laser_server.set_beam_break(1, False)
+    assert laser.capture_count(1) == (20, 20)
+    with pytest.raises(BeamBreak, match="capture sample 10"):
+        laser.capture_samples(1, 0, 20)
+
+
+def test_an_instrument_without_block_reads_is_read_one_sample_per_exchange(rig, monkeypatch):
+    r, axes, laser = rig
+    server = r.laser_server
+    plain = type(server)._handle
+
+    def without_capb(self, line):
+        if line.upper().startswith(b"CAPB?"):
+            return p.format_error(p.ERR_UNKNOWN_COMMAND, "unknown command CAPB?")
+        return plain(self, line)
+
+    monkeypatch.setattr(type(server), "_handle", without_capb)
+    ax = axes[2]
+    ax.enable()
+    ax.move_to(-10.0)
+    ax.arm_position_compare(0.0, 1.0, 8)
+    laser.arm_capture(2, 8)
+    ax.move_to(10.0, velocity_mm_s=5.0)
+    tx = laser.transactions
+    got = laser.capture_samples(2, 0, 8)
+    assert laser.transactions - tx == 1 + 8  # the refused CAPB?, then CAP? per sample
+    assert got == [laser.capture_sample(2, i) for i in range(8)]
+    tx = laser.transactions
+    laser.capture_samples(2, 0, 8)
+    assert laser.transactions - tx == 8  # not asked again
+
+
+def test_capture_block_line_protocol():
+    samples = [(f"{-90.0 + i:+.9f}", "OK", "91.5", f"{12.5 + i / 10:.6f}") for i in range(20)]
+    reply = p.format_capture_block(3, 7, samples)
+    assert len(reply) < p.MAX_LINE_BYTES
+    got = p.parse_capture_block(p.split_reply(reply), 3, 7, 20)
+    assert 4 <= len(got) < 20 and [s.index for s in got] == list(range(7, 7 + len(got)))
+    assert got[1].position_mm == pytest.approx(-89.0) and got[1].t_s == pytest.approx(12.6)
+    with pytest.raises(p.ProtocolError, match="asked for axis 3 sample 8"):
+        p.parse_capture_block(p.split_reply(reply), 3, 8, 20)
+    with pytest.raises(p.ProtocolError, match="asked for at most 2"):
+        p.parse_capture_block(p.split_reply(reply), 3, 7, 2)

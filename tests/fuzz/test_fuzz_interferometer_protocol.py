@@ -53,7 +53,7 @@ PARSERS = {
     "ok": lambda f: p.parse_ok(f),
     "averaging": lambda f: p.parse_averaging(f),
 }
-for _name, _axis_args in (("parse_capture_count", (3,)), ("parse_capture_sample", (3, 0))):
+for _name, _axis_args in (("parse_capture_count", (3,)), ("parse_capture_sample", (3, 0)), ("parse_capture_block", (3, 0, 5))):
     if hasattr(p, _name):  # on-the-fly capture replies, where the protocol has them
         PARSERS[_name.removeprefix("parse_")] = lambda f, fn=getattr(p, _name), a=_axis_args: fn(f, *a)
 

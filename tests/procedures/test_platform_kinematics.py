@@ -209,3 +209,23 @@ def test_wide_workspace_converges_from_home(geo):
     ok = res.status == FkStatus.CONVERGED
     assert ok.mean() > 0.99
     assert np.abs(res.poses_mm_rad[ok] - poses[ok]).max() < 1e-8
+
+
+def test_fk_reports_the_condition_at_the_returned_pose_whichever_start_path(geo):
+    """The common-start first step and the chord steps near the solution (kinematics.CHORD_MM)
+    must give the pose and the condition number a fresh Newton solve from each start gives."""
+    rng = np.random.default_rng(8)
+    poses = random_poses(geo, 300, rng, xyz_mm=60.0, ang_rad=0.05)
+    lengths = inverse_kinematics(geo, poses)
+    shared = forward_kinematics(geo, lengths, check_stroke=False)
+    # per-pose starts (not one common pose): no shared first step
+    starts = geo.home_pose_mm_rad + np.column_stack([rng.uniform(-1, 1, (300, 3)), np.zeros((300, 3))])
+    own = forward_kinematics(geo, lengths, initial_poses_mm_rad=starts, check_stroke=False)
+    assert np.all(shared.status == FkStatus.CONVERGED) and np.all(own.status == FkStatus.CONVERGED)
+    assert np.abs(shared.poses_mm_rad - own.poses_mm_rad).max() < 1e-9
+    # the condition number at the returned pose, computed independently (numpy's cond, 1-norm)
+    jac = length_jacobian(geo, shared.poses_mm_rad)
+    jac[:, :, 3:] /= geo.platform_radius_mm
+    want = 1.0 / np.linalg.cond(jac, p=1)
+    assert np.allclose(shared.rcond, want, rtol=1e-3)
+    assert np.allclose(own.rcond, want, rtol=1e-3)
