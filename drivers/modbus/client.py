@@ -30,7 +30,7 @@ from drivers.errors import CommTimeout, DriveFault, DriverError, FramingError, S
 from drivers.interfaces import Clock, DriveLimits, DriveStatus, TableBank, TableSpec
 from drivers.modbus.codec import chunks, crc16_modbus, int_range
 from drivers.modbus.profile import MAX_READ_WORDS, MAX_WRITE_WORDS, DriveProfile
-from drivers.modbus.wire import READ_HOLDING, READ_WRITE_MULTIPLE, WRITE_MULTIPLE, WireTally
+from drivers.modbus.wire import READ_DEVICE_ID, READ_HOLDING, READ_WRITE_MULTIPLE, WRITE_MULTIPLE, WireTally
 from drivers.states import DriveState
 
 log = logging.getLogger(__name__)
@@ -241,7 +241,8 @@ class ModbusBus:
         id -> text (0 VendorName, 1 ProductCode, 2 MajorMinorRevision). RequestRefused when the
         drive answers with an exception (01: it does not implement the function)."""
         rsp = self._execute("read device identification (43/14) of", unit, 0, 3,
-                            lambda: self._client.read_device_information(read_code=1, object_id=0, device_id=unit))
+                            lambda: self._client.read_device_information(read_code=1, object_id=0, device_id=unit),
+                            (READ_DEVICE_ID, 0, 0))
         self._check_function(rsp, 0x2B, "read device identification of", unit, 0, 3)
         return {int(oid): (v if isinstance(v, bytes) else b"".join(v)).decode("ascii", "replace").strip()
                 for oid, v in rsp.information.items()}

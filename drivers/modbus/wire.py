@@ -21,16 +21,19 @@ RTU_SILENCE_CHARS = 3.5
 READ_HOLDING = 3
 WRITE_MULTIPLE = 16
 READ_WRITE_MULTIPLE = 23
+READ_DEVICE_ID = 43  # MEI type 14, read once per session: its text objects are not counted
 
 
 def rtu_frame_bytes(function: int, read_words: int = 0, write_words: int = 0) -> tuple[int, int]:
-    """(request bytes, reply bytes) of one RTU transaction of `function` (3, 16 or 23)."""
+    """(request bytes, reply bytes) of one RTU transaction of `function` (3, 16, 23 or 43)."""
     if function == READ_HOLDING:  # addr fc start(2) count(2) crc(2); addr fc n data crc
         return 8, 5 + 2 * read_words
     if function == WRITE_MULTIPLE:  # addr fc start count n data crc; addr fc start count crc
         return 9 + 2 * write_words, 8
     if function == READ_WRITE_MULTIPLE:  # addr fc rstart rcount wstart wcount n data crc; as a read
         return 13 + 2 * write_words, 5 + 2 * read_words
+    if function == READ_DEVICE_ID:  # addr fc mei code object crc; addr fc mei code conformity more next n crc
+        return 7, 10
     raise ValueError(f"no RTU frame size for Modbus function {function}")
 
 
