@@ -204,3 +204,15 @@ def catalog_of(cfg) -> Catalog:
     c = cfg.catalog
     return Catalog(local=Path(cfg.recordings_dir) / LOCAL_NAME, url=c.url, station_id=c.station_id or socket.gethostname(),
                    connect_timeout_s=c.connect_timeout_s)
+
+
+def reading_engine(catalog: Catalog, local: bool = False) -> tuple[Engine, str]:
+    """The engine to read from: the shared catalog when one is set and answers (after forwarding
+    this station's backlog), else the local one; and a line saying which."""
+    if catalog.url and not local:
+        result = catalog.forward(force=True)
+        if not result.error:
+            return catalog.remote(), f"catalog: {db.describe(catalog.url)} (shared)"
+        return catalog.engine, (f"catalog: {catalog.local} (local: the shared catalog {db.describe(catalog.url)} "
+                                f"is not reachable: {result.error})")
+    return catalog.engine, f"catalog: {catalog.local}"
