@@ -15,7 +15,10 @@ def text(value: Any) -> str | None:
     if isinstance(value, bool) or value is None:
         return None
     if isinstance(value, (int, float)):
-        value = str(value)
+        try:
+            value = str(value)
+        except ValueError:  # an integer of more digits than Python converts
+            return None
     if isinstance(value, bytes):
         value = value.decode("utf-8", "replace")
     if not isinstance(value, str):
@@ -87,7 +90,7 @@ def table_serials(lines: list[str]) -> tuple[dict[int, str], str | None]:
         if key.strip() != "leg_serial":
             continue
         leg, eq, serial = value.partition("=")
-        if eq and leg.strip().isdigit():
+        if eq and leg.strip().isdecimal() and len(leg.strip()) <= 2:
             if text(serial):
                 per_leg[int(leg.strip())] = text(serial)
         elif text(value):

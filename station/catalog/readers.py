@@ -65,7 +65,10 @@ def _abs(path: str | os.PathLike) -> str:
 def _finite(v: Any) -> float | None:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return None
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:  # a JSON integer beyond any float
+        return None
     return v if math.isfinite(v) else None
 
 
@@ -185,9 +188,8 @@ def model_rec_of(doc: dict, sha: str, path: str, fallback_time: str,
     rec.summary = {"method": ident.text(doc.get("method"))}
     legs = doc.get("legs") if isinstance(doc.get("legs"), dict) else {}
     for key, value in legs.items():
-        try:
-            leg = int(key)
-        except (TypeError, ValueError):
+        leg = _leg_number(key)
+        if leg is None:
             continue
         stats = value.get("stats") if isinstance(value, dict) and isinstance(value.get("stats"), dict) else {}
         rec.legs[leg] = {"figures": {k: _finite(stats.get(k)) for k in
@@ -195,6 +197,15 @@ def model_rec_of(doc: dict, sha: str, path: str, fallback_time: str,
     _fill_from_source(rec, serials_of_source)
     _apply_identity(rec, ident.parse_identity(doc.get("identity")))
     return rec
+
+
+def _leg_number(key: Any) -> int | None:
+    """A leg number 1..99 from a JSON key, else None."""
+    try:
+        leg = int(key)
+    except (TypeError, ValueError):
+        return None
+    return leg if 1 <= leg <= 99 else None
 
 
 def _fill_from_source(rec: Rec, serials_of_source: SerialLookup | None) -> None:
@@ -255,11 +266,8 @@ def report_rec(folder: str | os.PathLike, serials_of_source: SerialLookup | None
     rec = Rec(kind="report", key=sha, time_utc=_mtime_utc(path), path=_abs(folder), sha256=sha,
               source_sha256=ident.text(source.get("sha256")), outcome="ok")
     for key, value in doc["legs"].items():
-        try:
-            leg = int(key)
-        except (TypeError, ValueError):
-            continue
-        if isinstance(value, dict):
+        leg = _leg_number(key)
+        if leg is not None and isinstance(value, dict):
             rec.legs[leg] = iso_figures(value.get("values"))
     _fill_from_source(rec, serials_of_source)
     _apply_identity(rec, ident.parse_identity(doc.get("identity")))
@@ -278,7 +286,7 @@ def audit_rec(d: Any, log_path: str | os.PathLike) -> Rec | None:
 
     try:
         entry = AuditEntry.from_json(d)
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, OverflowError):
         return None
     kind = AUDIT_KINDS.get(entry.action)
     if kind is None or not ident.text(entry.id):
