@@ -14,6 +14,7 @@ from datetime import datetime, timedelta, timezone
 from typing import Any
 
 import sqlalchemy as sa
+import sqlalchemy.orm  # noqa: F401  (sa.orm.aliased)
 from sqlalchemy.engine import Engine
 
 from station.catalog.models import FIGURES, Leg, Record, RecordLeg
@@ -125,38 +126,39 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
     """Every leg with a serial: its last completed calibration (filtered by `since`/`until` on
     that time, `station` that made it, `leg_type`), and its due date; `due_by` (an ISO date)
     keeps the legs due on or before it (or never calibrated)."""
-    cal = sa.and_(RecordLeg.kind == "session", RecordLeg.leg_serial.is_not(None))
-    last = (sa.select(RecordLeg.leg_serial.label("serial"), sa.func.max(RecordLeg.time_utc).label("last"),
-                      sa.func.count().label("n"))
-            .join(Record, Record.uid == RecordLeg.uid).where(cal, Record.outcome == "completed")
-            .group_by(RecordLeg.leg_serial).subquery())
-    latest = (sa.select(RecordLeg.leg_serial, RecordLeg.station_id, RecordLeg.E_um, RecordLeg.B_um, RecordLeg.time_utc)
-              .where(cal).subquery())
-    q = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, last.c.n, last.c.last, latest.c.station_id,
-                   latest.c.E_um, latest.c.B_um)
-         .select_from(Leg)
-         .outerjoin(last, last.c.serial == Leg.serial)
-         .outerjoin(latest, sa.and_(latest.c.leg_serial == Leg.serial, latest.c.time_utc == last.c.last)))
+    # per leg a few index seeks (ix_record_legs_calibrations: serial, kind, outcome, time) for its
+    # last completed calibration and their count; filters on the legs table cut the seeks
+    r = sa.orm.aliased(RecordLeg)
+    is_cal = sa.and_(r.leg_serial == Leg.serial, r.kind == "session", r.outcome == "completed")
+
+    def last_of(column):
+        return sa.select(column).where(is_cal).order_by(r.time_utc.desc()).limit(1).scalar_subquery()
+
+    inner = sa.select(Leg.serial, Leg.leg_type, Leg.part_number,
+                      sa.select(sa.func.count()).select_from(r).where(is_cal).scalar_subquery().label("n"),
+                      sa.select(sa.func.max(r.time_utc)).where(is_cal).scalar_subquery().label("last"),
+                      last_of(r.station_id).label("station_id"), last_of(r.E_um).label("E_um"),
+                      last_of(r.B_um).label("B_um"))
     if leg_type:
-        q = q.where(Leg.leg_type == leg_type)
+        inner = inner.where(Leg.leg_type == leg_type)
+    t = inner.subquery()
+    q = sa.select(t)
     if station:
-        q = q.where(latest.c.station_id == station)
+        q = q.where(t.c.station_id == station)
     if since:
-        q = q.where(last.c.last >= since)
+        q = q.where(t.c.last >= since)
     if until:
-        q = q.where(last.c.last < _next_day(until))
+        q = q.where(t.c.last < _next_day(until))
     if due_by:
         cutoff = (datetime.fromisoformat(due_by) - timedelta(days=interval_days)).date().isoformat()
-        q = q.where(sa.or_(last.c.last.is_(None), last.c.last < _next_day(cutoff)))
-    q = q.order_by(Leg.serial)
+        q = q.where(sa.or_(t.c.last.is_(None), t.c.last < _next_day(cutoff)))
+    q = q.order_by(t.c.serial)
     rows: dict[str, LegRow] = {}
     with engine.connect() as conn:
-        for r in conn.execute(q):
-            if r.serial in rows:
-                continue  # two calibrations at the very same time: the first
-            rows[r.serial] = LegRow(serial=r.serial, leg_type=r.leg_type, part_number=r.part_number,
-                                    calibrations=int(r.n or 0), last_calibration_utc=r.last, station_id=r.station_id,
-                                    due=due_of(r.last, interval_days), E_um=r.E_um, B_um=r.B_um)
+        for x in conn.execute(q):
+            rows[x.serial] = LegRow(serial=x.serial, leg_type=x.leg_type, part_number=x.part_number,
+                                    calibrations=int(x.n or 0), last_calibration_utc=x.last, station_id=x.station_id,
+                                    due=due_of(x.last, interval_days), E_um=x.E_um, B_um=x.B_um)
     return list(rows.values())
 
 

@@ -123,13 +123,15 @@ class RecordLeg(Base):
     M_um: Mapped[float | None] = mapped_column(Float)
     M_U_um: Mapped[float | None] = mapped_column(Float)
     figures: Mapped[dict | None] = mapped_column(JSON)
-    # added by revision 0002 (verification ratio: residual RMS / noise floor of a verification)
+    # added by revision 0002: the verification ratio (residual RMS / noise floor of a
+    # verification) and the record's outcome (leg lists need no join)
     verification_ratio: Mapped[float | None] = mapped_column(Float)
+    outcome: Mapped[str | None] = mapped_column(String(32))
 
 
-# revision 0002: history and leg lists read by serial and time
+# revision 0002: history reads by serial and time; leg lists the last completed calibration per serial
 Index("ix_record_legs_serial_time", RecordLeg.leg_serial, RecordLeg.time_utc)
-Index("ix_record_legs_kind_time", RecordLeg.kind, RecordLeg.time_utc)
+Index("ix_record_legs_calibrations", RecordLeg.leg_serial, RecordLeg.kind, RecordLeg.outcome, RecordLeg.time_utc)
 
 
 class Outbox(Base):

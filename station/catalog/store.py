@@ -63,7 +63,7 @@ def rows_of(rec: Rec, default_station: str | None) -> dict[str, list[dict]]:
     for leg, row in sorted(rec.legs.items()):
         full = {c: None for c in _LEG_COLS}
         full.update({k: v for k, v in row.items() if k in full})
-        full.update(uid=rec.uid, leg=leg, kind=rec.kind, time_utc=rec.time_utc, station_id=station)
+        full.update(uid=rec.uid, leg=leg, kind=rec.kind, time_utc=rec.time_utc, station_id=station, outcome=rec.outcome)
         out["record_legs"].append(full)
         serial = row.get("leg_serial")
         if serial:

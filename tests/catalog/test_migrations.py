@@ -29,7 +29,7 @@ def test_from_empty_to_head(url):
     assert {"stations", "legs", "instruments", "records", "record_legs", "outbox"} <= set(sa.inspect(engine).get_table_names())
     assert "verification_ratio" in _columns(engine, "record_legs")
     indexes = {i["name"] for i in sa.inspect(engine).get_indexes("record_legs")}
-    assert {"ix_record_legs_serial_time", "ix_record_legs_kind_time"} <= indexes
+    assert {"ix_record_legs_serial_time", "ix_record_legs_calibrations"} <= indexes
     engine.dispose()
 
 
@@ -38,15 +38,16 @@ def test_from_previous_revision_keeps_rows(url):
     db.migrate(engine, "0001")
     assert "verification_ratio" not in _columns(engine, "record_legs")
     with engine.begin() as conn:
-        conn.execute(sa.text("INSERT INTO records (uid, kind, time_utc) VALUES ('session:x', 'session', '2026-01-01T00:00:00Z')"))
+        conn.execute(sa.text("INSERT INTO records (uid, kind, time_utc, outcome) "
+                             "VALUES ('session:x', 'session', '2026-01-01T00:00:00Z', 'completed')"))
         conn.execute(sa.text("INSERT INTO record_legs (uid, leg, kind, time_utc, leg_serial, \"E_um\") "
                              "VALUES ('session:x', 1, 'session', '2026-01-01T00:00:00Z', 'HX-1', 2.5)"))
     engine.dispose()
     engine = db.open_engine(url)  # opening migrates to head
     with engine.connect() as conn:
         assert db.current_revision(conn) == "0002"
-        row = conn.execute(sa.text("SELECT leg_serial, \"E_um\", verification_ratio FROM record_legs")).one()
-    assert tuple(row) == ("HX-1", 2.5, None)
+        row = conn.execute(sa.text("SELECT leg_serial, \"E_um\", verification_ratio, outcome FROM record_legs")).one()
+    assert tuple(row) == ("HX-1", 2.5, None, "completed")  # the outcome filled in from the record
     engine.dispose()
 
 
