@@ -9,6 +9,7 @@ ingested per second, `history` of one leg (goal < 50 ms) and `legs` with filters
 from __future__ import annotations
 
 import argparse
+import os
 import random
 import statistics
 import sys
@@ -135,6 +136,7 @@ def main() -> int:
         cells = "".join(f" {f'{ms:.1f} ({rows} legs)':>26}" for ms, rows in r["legs"].values())
         print(f"{r['engine']:<11} {r['rate']:>10.0f} {r['history_ms']:>11.2f}{cells}")
     print("goals: history of one leg < 50 ms, legs with filters < 300 ms (median of repeated queries)")
+    print(f"load average while measuring: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall times grow with it)")
     return 0
 
 

@@ -32,7 +32,7 @@ class Found:
     models: list[Path] = field(default_factory=list)
     tables: list[Path] = field(default_factory=list)
     reports: list[Path] = field(default_factory=list)
-    audit_logs: list[Path] = field(default_factory=list)
+    logs: list[Path] = field(default_factory=list)
 
 
 def scan(folders: Iterable[str | os.PathLike]) -> Found:
@@ -53,7 +53,7 @@ def scan(folders: Iterable[str | os.PathLike]) -> Found:
                 if name.endswith(".h5"):
                     found.sessions.append(p)
                 elif name.endswith(".jsonl"):
-                    found.audit_logs.append(p)
+                    found.logs.append(p)
                 elif name.endswith(".csv"):
                     found.tables.append(p)
                 elif name.endswith(".json") and here not in found.reports:
@@ -81,7 +81,7 @@ def recs_of(found: Found, catalog: Catalog | None, problems: list[str]) -> Itera
         rec = readers.report_rec(folder, lookup)
         if rec is not None:
             yield rec
-    for path in found.audit_logs:
+    for path in found.logs:
         yield from readers.audit_recs(path)
 
 
@@ -93,7 +93,7 @@ def index(catalog: Catalog, folders: Iterable[str | os.PathLike], forward: bool 
     count = 0
     # sessions first, committed, so models and reports can look up their serials
     for group in (Found(sessions=found.sessions), Found(models=found.models, tables=found.tables, reports=found.reports,
-                                                        audit_logs=found.audit_logs)):
+                                                        logs=found.logs)):
         recs = list(recs_of(group, catalog, problems))
         count += len(recs)
         catalog.ingest(recs, forward=False)
@@ -154,7 +154,7 @@ def check(catalog: Catalog, folders: Iterable[str | os.PathLike]) -> CheckResult
     for folder in found.reports:
         if f"report:{readers.sha256_of(folder / readers.REPORT_FILE)}" not in indexed:
             _unregistered(result, folder, "report", lambda: readers.report_rec(folder))
-    for path in found.audit_logs:
+    for path in found.logs:
         for rec in readers.audit_recs(path):
             if rec.uid not in indexed:
                 result.unregistered.append(f"{rec.kind} {path} entry {rec.key}")
