@@ -142,18 +142,12 @@ def check(catalog: Catalog, folders: Iterable[str | os.PathLike]) -> CheckResult
         elif readers.sha256_of(target) != sha:
             result.changed.append(f"{kind} {path} (sha256 {sha[:12]}... indexed, {readers.sha256_of(target)[:12]}... now)")
     found = scan(folders)
-    for path in found.sessions:
-        if f"session:{readers.sha256_of(path)}" not in indexed:
-            _unregistered(result, path, "session", lambda: readers.session_rec(path))
-    for path in found.models:
-        if f"model:{readers.sha256_of(path)}" not in indexed:
-            _unregistered(result, path, "model", lambda: readers.model_rec(path))
-    for path in found.tables:
-        if f"table:{readers.sha256_of(path)}" not in indexed:
-            _unregistered(result, path, "table", lambda: readers.table_rec(path))
-    for folder in found.reports:
-        if f"report:{readers.sha256_of(folder / readers.REPORT_FILE)}" not in indexed:
-            _unregistered(result, folder, "report", lambda: readers.report_rec(folder))
+    for kind, paths, read in (("session", found.sessions, readers.session_rec), ("model", found.models, readers.model_rec),
+                              ("table", found.tables, readers.table_rec), ("report", found.reports, readers.report_rec)):
+        for path in paths:
+            hashed = path / readers.REPORT_FILE if kind == "report" else path
+            if f"{kind}:{readers.sha256_of(hashed)}" not in indexed:
+                _unregistered(result, path, kind, lambda: read(path))
     for path in found.logs:
         for rec in readers.audit_recs(path):
             if rec.uid not in indexed:

@@ -50,6 +50,23 @@ class HistoryRow:
     operator: str | None = None
 
 
+def value_with_u(figures: dict, name: str) -> str:
+    """'2.75±0.31' (um) for figure `name` of a history row, '-' when absent."""
+    v = figures.get(name)
+    if not v or v.get("value_um") is None:
+        return "-"
+    return f"{v['value_um']:.2f}" + (f"±{v['U_um']:.2f}" if v.get("U_um") is not None else "")
+
+
+def row_detail(r: "HistoryRow") -> str:
+    """What a history row adds: a verification's ratio, which table went to which drive, the file."""
+    if r.kind == "verification":
+        return f"ratio {r.verification_ratio:.2f}" if r.verification_ratio is not None else ""
+    if r.kind in ("push", "rollback"):
+        return f"table {(r.table_sha256 or '?')[:12]} -> {r.drive or 'drive ?'}"
+    return r.path or ""
+
+
 @dataclass
 class Drift:
     from_utc: str

@@ -10,7 +10,6 @@ catalog already holds it (`serials_of_source`).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -51,11 +50,9 @@ class Rec:
 
 
 def sha256_of(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    from procedures.recording.reader import file_sha256
+
+    return file_sha256(path)
 
 
 def _abs(path: str | os.PathLike) -> str:

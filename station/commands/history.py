@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from station.catalog.history import history
+from station.catalog.history import history, row_detail, value_with_u
 from station.catalog.store import catalog_of, reading_engine
 from station.config import load_config
 
@@ -26,14 +26,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print JSON")
 
 
-def _vu(f: dict, name: str) -> str:
-    v = f.get(name)
-    if not v or v.get("value_um") is None:
-        return "-"
-    u = v.get("U_um")
-    return f"{v['value_um']:.2f}" + (f"±{u:.2f}" if u is not None else "")
-
-
 def run(args) -> int:
     cfg = load_config(args.config)
     engine, where = reading_engine(catalog_of(cfg), args.local)
@@ -49,14 +41,8 @@ def run(args) -> int:
     print(f"leg {args.serial}" + (f" ({info})" if info else ""))
     print(f"{'time (UTC)':<27} {'kind':<12} {'station':<10} {'outcome':<10} {'E um':>12} {'B um':>12} {'M um':>12}  detail")
     for r in h.rows:
-        if r.kind == "verification":
-            detail = f"ratio {r.verification_ratio:.2f}" if r.verification_ratio is not None else ""
-        elif r.kind in ("push", "rollback"):
-            detail = f"table {(r.table_sha256 or '?')[:12]} -> {r.drive or 'drive ?'}"
-        else:
-            detail = r.path or ""
         print(f"{r.time_utc:<27} {r.kind:<12} {(r.station_id or '-'):<10} {(r.outcome or '-'):<10} "
-              f"{_vu(r.figures, 'E'):>12} {_vu(r.figures, 'B'):>12} {_vu(r.figures, 'M'):>12}  {detail}")
+              f"{value_with_u(r.figures, 'E'):>12} {value_with_u(r.figures, 'B'):>12} {value_with_u(r.figures, 'M'):>12}  {row_detail(r)}")
     for d in h.drift:
         rates = ", ".join(f"{n} {v:+.3f}" if v is not None else f"{n} -" for n, v in d.um_per_month.items())
         print(f"drift {d.from_utc[:10]} -> {d.to_utc[:10]} ({d.months:.1f} months): {rates} um/month")

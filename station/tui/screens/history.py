@@ -13,7 +13,7 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Static
 
-from station.catalog.history import History, history, parse_utc
+from station.catalog.history import History, history, parse_utc, row_detail, value_with_u
 from station.catalog.store import catalog_of, reading_engine
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
@@ -28,13 +28,6 @@ class HistoryLoaded(Message):
         self.result = result
         self.where = where
         self.error = error
-
-
-def _vu(figures: dict, name: str) -> str:
-    v = figures.get(name)
-    if not v or v.get("value_um") is None:
-        return "-"
-    return f"{v['value_um']:.2f}" + (f"±{v['U_um']:.2f}" if v.get("U_um") is not None else "")
 
 
 class HistoryScreen(StationScreen):
@@ -97,14 +90,10 @@ class HistoryScreen(StationScreen):
             return
         h = self.history = message.result
         for r in h.rows:
-            if r.kind == "verification":
-                detail = f"ratio {r.verification_ratio:.2f}" if r.verification_ratio is not None else ""
-            elif r.kind in ("push", "rollback"):
-                detail = f"table {(r.table_sha256 or '?')[:12]} -> {r.drive or '?'}"
-            else:
-                detail = (r.path or "").rsplit("/", 1)[-1]
-            table.add_row(r.time_utc[:19], r.kind, r.station_id or "-", r.outcome or "-", _vu(r.figures, "E"),
-                          _vu(r.figures, "B"), _vu(r.figures, "M"), detail)
+            detail = row_detail(r)
+            table.add_row(r.time_utc[:19], r.kind, r.station_id or "-", r.outcome or "-", value_with_u(r.figures, "E"),
+                          value_with_u(r.figures, "B"), value_with_u(r.figures, "M"),
+                          detail.rsplit("/", 1)[-1] if r.kind not in ("push", "rollback") else detail)
         if not h.rows:
             status.update(f"{message.where}: no records of a leg with serial {h.serial!r}")
         else:
