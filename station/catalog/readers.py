@@ -131,10 +131,29 @@ def session_identity(path: str | os.PathLike) -> dict:
     return ident.parse_identity(raw)
 
 
+def session_iso(session) -> dict[int, dict]:
+    """ISO 230-2 values of each leg with U (k = 2), on the basis of the ISO 230-2 report
+    (normalised to 20 degC where the session allows): {leg: {"E": {"value_um", "U_um"}, ...}}.
+    The leg-level budget only: the report's per-target U is not needed here and costs most."""
+    from procedures import iso230
+    from procedures.iso230_report import VALUE_ORDER, _normalised
+    from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
+
+    pts, _ = _normalised(session.points, session.station_config or {})
+    out: dict[int, dict] = {}
+    for leg, r in iso230.evaluate(pts).items():
+        budget = leg_budget(r, pts, UncertaintyInputs.from_record(session.station_config or {}, leg))
+        values = {}
+        for name in VALUE_ORDER:
+            v, b = r.values.get(name), budget.values.get(name)
+            values[name] = {"value_um": v, "U_um": b.U_um if (b is not None and v is not None) else None}
+        out[int(leg)] = values
+    return out
+
+
 def session_rec(path: str | os.PathLike) -> Rec:
     """A session file's record: identity, times, outcome, ISO 230-2 values with U per leg.
     InputError (naming the file) when it is not a readable session."""
-    from procedures import iso230_report
     from procedures.recording.reader import read_session
 
     session = read_session(path)
@@ -148,13 +167,11 @@ def session_rec(path: str | os.PathLike) -> Rec:
     iso: dict = {}
     if session.points.size:
         try:
-            iso = iso230_report.build(session.points, plan=session.plan, devices=session.devices,
-                                      station_config=session.station_config, attrs=attrs,
-                                      source={"path": str(path), "sha256": session.sha256})["legs"]
+            iso = session_iso(session)
         except Exception as exc:  # a session too short for ISO 230-2 is still a record
             rec.summary["iso230_not_computed"] = str(exc)[:200]
     for leg in session.legs:
-        rec.legs[leg] = {**iso_figures((iso.get(str(leg)) or {}).get("values")),
+        rec.legs[leg] = {**iso_figures(iso.get(leg)),
                          "drive": ident.text(session.devices.get(f"leg{leg}_drive"))}
     _apply_identity(rec, session_identity(path))
     return rec

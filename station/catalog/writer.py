@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,7 @@ class CatalogSink:
         self.session_path = Path(session_path) if session_path else None
         self.audit_sink = audit_sink
         self.uids: list[str] = []
+        self.thread: threading.Thread | None = None
 
     def handle(self, event: ev.Event) -> None:
         pass
@@ -51,17 +53,23 @@ class CatalogSink:
         if self.catalog is None:
             return
         try:
-            recs = []
-            if self.session_path is not None and self.session_path.is_file():
-                recs.append(readers.session_rec(self.session_path))
             if self.audit_sink is not None:
-                for entry in self.audit_sink.written:
-                    rec = readers.audit_rec(entry.to_json(), self.audit_sink.log.path)
-                    if rec is not None:
-                        recs.append(rec)
-            self.uids = self.catalog.ingest(recs)
-        except Exception as exc:  # the files are written; `station catalog sync` indexes them later
+                recs = [readers.audit_rec(e.to_json(), self.audit_sink.log.path) for e in self.audit_sink.written]
+                self.uids += self.catalog.ingest([r for r in recs if r is not None])
+        except Exception as exc:  # the log is written; `station catalog sync` indexes it later
             log.warning("catalog %s: not written (%s); `station catalog sync` indexes it later", self.catalog.local, exc)
+        if self.session_path is not None and self.session_path.is_file():
+            # the session's ISO 230-2 budget takes seconds on a long sweep: not on the run's way
+            # out (a non-daemon thread: the process still finishes it before it exits)
+            self.thread = threading.Thread(target=self._index_session, name="catalog-index", daemon=False)
+            self.thread.start()
+
+    def _index_session(self) -> None:
+        try:
+            self.uids += self.catalog.ingest([readers.session_rec(self.session_path)])
+        except Exception as exc:
+            log.warning("catalog %s: %s not indexed (%s); `station catalog sync` indexes it later",
+                        self.catalog.local, self.session_path, exc)
 
 
 def register(catalog: Catalog | None, path: str | os.PathLike, kind: str) -> list[str]:

@@ -144,3 +144,23 @@ def test_commands_history_legs_check_json(runs, tmp_path, capsys):
     assert main(["catalog", "check", "--config", str(cfg)]) == 1
     assert "missing: session" in capsys.readouterr().out
     assert main(["history", "NOPE", "--config", str(cfg)]) == 1
+
+
+def test_an_unwritable_catalog_never_fails_the_work(runs, tmp_path, caplog):
+    """The sink and `register` log and go on when the catalog cannot be written (here its folder
+    is a file); `catalog sync` indexes the files later."""
+    from station.catalog.writer import CatalogSink, register
+
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    cat = Catalog(local=blocker / "catalog.sqlite", station_id="ST-A")
+    sink = CatalogSink(cat, runs / "cal1.h5")
+    sink.close("completed")
+    sink.thread.join(60)
+    assert register(cat, runs / "cal1.h5", "model") == []
+    assert sink.uids == [] and "not indexed" in caplog.text
+    good = Catalog(local=runs / "catalog.sqlite", station_id="ST-A")
+    sink = CatalogSink(good, runs / "cal1.h5")
+    sink.close("completed")
+    sink.thread.join(60)
+    assert len(sink.uids) == 1 and sink.uids[0].startswith("session:")
