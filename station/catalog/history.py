@@ -97,7 +97,9 @@ def history(engine: Engine, serial: str, interval_days: int = 365) -> History:
     cols = [RecordLeg.time_utc, RecordLeg.kind, RecordLeg.leg, RecordLeg.station_id, Record.outcome, Record.path,
             Record.sha256, RecordLeg.drive, RecordLeg.table_sha256, RecordLeg.verification_ratio, Record.operator]
     cols += [getattr(RecordLeg, f"{n}{s}") for n in FIGURES for s in ("_um", "_U_um")]
-    q = (sa.select(*cols).join(Record, Record.uid == RecordLeg.uid).where(RecordLeg.leg_serial == serial)
+    # a push's or rollback's "started" entry is the same operation as its final one: not a row of its own
+    q = (sa.select(*cols).join(Record, Record.uid == RecordLeg.uid)
+         .where(RecordLeg.leg_serial == serial, sa.or_(Record.outcome.is_(None), Record.outcome != "started"))
          .order_by(RecordLeg.time_utc, RecordLeg.kind))
     out = History(serial=serial)
     with engine.connect() as conn:
