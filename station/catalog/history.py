@@ -146,18 +146,26 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
     that time, `station` that made it, `leg_type`), and its due date; `due_by` (an ISO date)
     keeps the legs due on or before it (or never calibrated)."""
     # per leg a few index seeks (ix_record_legs_calibrations: serial, kind, outcome, time) for its
-    # last completed calibration and their count; filters on the legs table cut the seeks
+    # last completed calibration and their count; filters on the legs table cut the seeks.
+    # PostgreSQL: LATERAL joins (one seek each); SQLite, which has none: scalar subqueries.
     r = sa.orm.aliased(RecordLeg)
     is_cal = sa.and_(r.leg_serial == Leg.serial, r.kind == "session", r.outcome == "completed")
+    count = sa.select(sa.func.count().label("n")).select_from(r).where(is_cal)
+    if engine.dialect.name == "postgresql":
+        latest = (sa.select(r.time_utc.label("last"), r.station_id, r.E_um, r.B_um).where(is_cal)
+                  .order_by(r.time_utc.desc()).limit(1).lateral("latest"))
+        n = count.lateral("n")
+        inner = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, n.c.n, latest.c.last, latest.c.station_id,
+                           latest.c.E_um, latest.c.B_um)
+                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(n, sa.true()))
+    else:
+        def last_of(column):
+            return sa.select(column).where(is_cal).order_by(r.time_utc.desc()).limit(1).scalar_subquery()
 
-    def last_of(column):
-        return sa.select(column).where(is_cal).order_by(r.time_utc.desc()).limit(1).scalar_subquery()
-
-    inner = sa.select(Leg.serial, Leg.leg_type, Leg.part_number,
-                      sa.select(sa.func.count()).select_from(r).where(is_cal).scalar_subquery().label("n"),
-                      sa.select(sa.func.max(r.time_utc)).where(is_cal).scalar_subquery().label("last"),
-                      last_of(r.station_id).label("station_id"), last_of(r.E_um).label("E_um"),
-                      last_of(r.B_um).label("B_um"))
+        inner = sa.select(Leg.serial, Leg.leg_type, Leg.part_number, count.scalar_subquery().label("n"),
+                          sa.select(sa.func.max(r.time_utc)).where(is_cal).scalar_subquery().label("last"),
+                          last_of(r.station_id).label("station_id"), last_of(r.E_um).label("E_um"),
+                          last_of(r.B_um).label("B_um"))
     if leg_type:
         inner = inner.where(Leg.leg_type == leg_type)
     t = inner.subquery()
