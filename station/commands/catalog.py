@@ -53,8 +53,8 @@ def run(args) -> int:
             print(f"skipped: {p}")
         print(f"rebuilt {catalog.local} from {', '.join(map(str, dirs))}: {count} records")
         if catalog.url:
-            print("the backlog is empty after a rebuild: run `station catalog sync` to forward everything again "
-                  "(records the shared catalog holds are skipped)")
+            print(f"every record is queued for the shared catalog again ({catalog.backlog()}); `station catalog sync` "
+                  "forwards them (records it already holds are skipped)")
         return 0
     if args.action == "check":
         result = files.check(catalog, dirs)
