@@ -174,6 +174,13 @@ def session_rec(path: str | os.PathLike) -> Rec:
         rec.legs[leg] = {**iso_figures(iso.get(leg)),
                          "drive": ident.text(session.devices.get(f"leg{leg}_drive"))}
     _apply_identity(rec, session_identity(path))
+    if rec.instrument is None:  # a 1.0 session: the instrument its config named ([metrology])
+        metrology = (session.station_config or {}).get("metrology")
+        metrology = metrology if isinstance(metrology, dict) else {}
+        serial = ident.text(metrology.get("serial"))
+        if serial:
+            rec.instrument = {"serial": serial, "model": ident.text(metrology.get("model")), "calibration_due": None,
+                              "calibrated_on": ident.text(metrology.get("calibration_date"))}
     return rec
 
 

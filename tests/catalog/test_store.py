@@ -164,3 +164,22 @@ def test_an_unwritable_catalog_never_fails_the_work(runs, tmp_path, caplog):
     sink.close("completed")
     sink.thread.join(60)
     assert len(sink.uids) == 1 and sink.uids[0].startswith("session:")
+
+
+def test_instrument_from_identity_or_the_configs_metrology(runs):
+    """A 1.1 session names its instrument in /meta identity; a 1.0 session in its recorded config."""
+    from procedures.recording.writer import SessionWriter
+    from station.catalog import readers
+    from tests.tooling import default_legs_points
+
+    assert readers.session_rec(runs / "cal1.h5").instrument["serial"] == "LZ-1"
+    path = runs / "metrology.h5"
+    with SessionWriter.create(path, session_id="m", operator="t", rig="sim", plan={"kind": "test"},
+                              station_config={"metrology": {"serial": "123", "model": "XL-80",
+                                                            "calibration_date": "2026-03-01"}},
+                              devices={}, software_version="t") as w:
+        w.append_points(default_legs_points([1], 2, 15.0, 0))
+        w.finish("completed")
+    assert readers.session_rec(path).instrument == {"serial": "123", "model": "XL-80", "calibration_due": None,
+                                                    "calibrated_on": "2026-03-01"}
+    assert readers.session_rec(runs / "old.h5").instrument is None
