@@ -10,6 +10,7 @@ do not both create the tables.
 
 from __future__ import annotations
 
+import fcntl
 from pathlib import Path
 
 import sqlalchemy as sa
@@ -113,7 +114,20 @@ def open_engine(url: str, connect_timeout_s: float = 2.0) -> Engine:
     """An engine for `url`, migrated to head. CatalogUnreachable when a server does not answer."""
     engine = make_engine(url, connect_timeout_s)
     try:
-        migrate(engine)
+        database = engine.url.database if engine.dialect.name == "sqlite" else None
+        if database and database != ":memory:":
+            # SQLite runs DDL outside a transaction: two processes creating one new catalog at once
+            # would both create its tables; a lock file beside it lets one migrate at a time
+            try:
+                lock = open(f"{database}.lock", "a")
+            except OSError as exc:
+                raise InputError(f"catalog {database}: cannot create it ({exc.strerror or exc}); check "
+                                 "[station] recordings_dir") from None
+            with lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)
+                migrate(engine)
+        else:
+            migrate(engine)
     except sa.exc.OperationalError as exc:
         engine.dispose()
         if engine.dialect.name == "sqlite":

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import socket
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -108,11 +109,14 @@ class Catalog:
     _remote_failed_at: float = field(default=-1e18, repr=False)
     last_forward: ForwardResult = field(default_factory=ForwardResult, repr=False)
 
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
     @property
     def engine(self) -> Engine:
-        if self._local_engine is None:
-            self._local_engine = db.open_engine(db.sqlite_url(self.local))
-        return self._local_engine
+        with self._lock:  # the backlog thread (writer.catalog_for) and the job may both open it
+            if self._local_engine is None:
+                self._local_engine = db.open_engine(db.sqlite_url(self.local))
+            return self._local_engine
 
     def close(self) -> None:
         for e in (self._local_engine, self._remote_engine):
@@ -143,9 +147,10 @@ class Catalog:
     # -- forwarding -----------------------------------------------------------------------------
     def remote(self) -> Engine:
         """The shared catalog's engine (migrated). db.CatalogUnreachable when it does not answer."""
-        if self._remote_engine is None:
-            self._remote_engine = db.open_engine(self.url, self.connect_timeout_s)
-        return self._remote_engine
+        with self._lock:
+            if self._remote_engine is None:
+                self._remote_engine = db.open_engine(self.url, self.connect_timeout_s)
+            return self._remote_engine
 
     def backlog(self) -> int:
         with self.engine.connect() as conn:

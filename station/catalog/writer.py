@@ -27,8 +27,23 @@ def enabled() -> bool:
 
 
 def catalog_for(cfg: Any) -> Catalog | None:
-    """The catalog of a station config, or None when catalog writes are off."""
-    return catalog_of(cfg) if enabled() else None
+    """The catalog of a station config, or None when catalog writes are off. With a shared
+    catalog, a backlog left by earlier work starts going out now, in a thread (a job starting is
+    the "next write" the backlog waits for; the job does not wait for it)."""
+    if not enabled():
+        return None
+    catalog = catalog_of(cfg)
+    if catalog.url:
+        threading.Thread(target=_forward_quietly, args=(catalog,), name="catalog-forward", daemon=False).start()
+    return catalog
+
+
+def _forward_quietly(catalog: Catalog) -> None:
+    try:
+        if catalog.local.exists() and catalog.backlog():
+            catalog.forward()
+    except Exception as exc:  # never the job's concern: the backlog stays for the next write or sync
+        log.info("catalog %s: backlog not forwarded (%s)", catalog.local, exc)
 
 
 class CatalogSink:
