@@ -13,7 +13,7 @@ import time
 
 import sqlalchemy as sa
 
-from station.catalog import db, files
+from station.catalog import db, files, readers
 from station.catalog.store import Catalog
 
 WRITER = textwrap.dedent("""
@@ -69,5 +69,9 @@ def test_sigkill_during_catalog_writes_then_sync_then_check(tmp_path, pg_url):
     assert files.check(local, [runs]).ok
     shared = db.open_engine(pg_url)
     assert files.records_json(shared) == files.records_json(local.engine)
-    assert sum(r["kind"] == "table" for r in files.records_json(shared)) == len(tables)
+    # the file being written when the kill came may be cut short (not a table at all): every
+    # file that reads as a table is in both catalogs, once
+    readable = sum(readers.table_rec(p) is not None for p in tables)
+    assert readable >= len(tables) - 1
+    assert sum(r["kind"] == "table" for r in files.records_json(shared)) == readable
     shared.dispose()
