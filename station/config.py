@@ -31,6 +31,11 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     legs = {}                   # per-leg override, e.g. { 3 = "station" }
     tables_path = ""            # the station-side table store ("" = <recordings_dir>/station-tables.json)
 
+    [catalog]                   # the index of every record (docs/catalog.md); all optional
+    url = ""                    # shared catalog, e.g. "postgresql://station@dbhost/catalog" ("" = local only)
+    connect_timeout_s = 2.0     # how long a write waits for the shared catalog before keeping it in the backlog
+    calibration_interval_days = 365  # a leg is due this many days after its last calibration
+
     [metrology]                 # the measurement chain (docs/metrology.md); all optional
     reference_temp_c = 20.0     # lengths are normalised to this material temperature (ISO 1)
     wavelength_nm = 632.991     # the laser's VACUUM wavelength, 400..1700 nm
@@ -213,6 +218,17 @@ class CompensationConfig:
 
 
 @dataclass
+class CatalogConfig:
+    """[catalog]: the shared catalog's `url` ("" = the local SQLite catalog only,
+    <recordings_dir>/catalog.sqlite), the connect timeout and the calibration interval due
+    dates are computed from (station/catalog, docs/catalog.md). The station's id is `[station] id`."""
+
+    url: str = ""
+    connect_timeout_s: float = 2.0
+    calibration_interval_days: int = 365
+
+
+@dataclass
 class StationConfig:
     operator: str = field(default_factory=lambda: _whoami())
     recordings_dir: str = "runs"
@@ -227,6 +243,7 @@ class StationConfig:
     leg_identity: dict[int, dict[str, str]] = field(default_factory=dict)  # [legs.N] serial, part_number, ...
     legs_from_file: bool = False  # the file has a [legs] section
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
+    catalog: CatalogConfig = field(default_factory=CatalogConfig)
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -318,13 +335,15 @@ def _whoami() -> str:
 
 
 _SECTIONS = {"drive": DriveConfig, "interferometer": LaserConfig, "sim": SimConfig,
-             "compensation": CompensationConfig}
+             "compensation": CompensationConfig, "catalog": CatalogConfig}
 
 # (section, key) -> (lowest, strictly above it?, what the value is): physical sense of numbers
 _RANGES = {
     ("drive", "timeout_s"): (0.0, True, "seconds to wait for a drive's reply"),
     ("interferometer", "timeout_s"): (0.0, True, "seconds to wait for the interferometer's reply"),
     ("interferometer", "baudrate"): (0, True, "the serial line's bits per second"),
+    ("catalog", "connect_timeout_s"): (0.0, True, "seconds a write waits for the shared catalog"),
+    ("catalog", "calibration_interval_days"): (0, True, "days from a leg's calibration to its next"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
     ("sim", "thermal_tau_s"): (0.0, True, "seconds the simulated material takes to follow the hall"),
     ("sim", "jerk_mm_s3"): (0.0, False, "the simulated drives' jerk limit in mm/s^3, 0 = not limited; "

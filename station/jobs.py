@@ -19,6 +19,7 @@ from procedures.recording.sink import RecorderSink
 from procedures.runner import RunResult, Sink, run
 from procedures.sweep import RetryPolicy, sweep
 from station import __version__
+from station.catalog.writer import CatalogSink, catalog_for
 from station.config import StationConfig
 from station.identity import session_identity
 from station.wiring import Rig
@@ -60,7 +61,8 @@ def run_sweep(
     materials = {leg: cfg.material_of(leg) for leg in plan.legs}
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, done_indices=done,
                       retry=retry, session_id=session_id, materials=materials, warnings=identity.warnings)
-    return run(procedure, [recorder, *sinks], control)
+    # the catalog sink after the recorder: it indexes the session once the recorder closed it
+    return run(procedure, [recorder, CatalogSink(catalog_for(cfg), out), *sinks], control)
 
 
 def plan_of_recording(path: str | Path) -> SweepPlan:

@@ -10,10 +10,11 @@ import os
 from procedures.csv_io import ExportSummary
 from procedures.errors import InputError
 from procedures.report import ReportResult, make_report
+from station.catalog.writer import register
 
 
 def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: float | str | None = "auto",
-                   raw: bool = False, model_name: str = "") -> ReportResult:
+                   raw: bool = False, model_name: str = "", catalog=None) -> ReportResult:
     """`station report`: the report files of `session` (procedures.recording.reader.Session)
     into `out_dir`, before and after `model` (None: the default model fitted to the session), on
     the error basis of `station fit`: normalised to 20 degC unless `raw`; with a model, the
@@ -23,9 +24,11 @@ def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: 
     meta = {"plan": session.plan, "devices": session.devices, "station_config": session.station_config,
             "attrs": session.attrs,
             "identity": session.identity.to_json() if session.identity.recorded else {}}
-    return make_report(session.points, out_dir, model, source_path=str(session.path),
-                       source_sha256=session.sha256, lead_mm=lead_mm, session_meta=meta, raw=raw,
-                       model_name=model_name)
+    result = make_report(session.points, out_dir, model, source_path=str(session.path),
+                         source_sha256=session.sha256, lead_mm=lead_mm, session_meta=meta, raw=raw,
+                         model_name=model_name)
+    register(catalog, out_dir, "report")  # `catalog` (station.catalog.store.Catalog): None = not indexed
+    return result
 
 
 def report_lines(result: ReportResult, model=None) -> list[str]:

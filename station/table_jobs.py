@@ -36,6 +36,8 @@ from procedures.states import Action, AuditOutcome
 from procedures.table import LegTable, read_table_csv
 from procedures.verify import verify_procedure
 from station import __version__
+from station.catalog.store import LOCAL_NAME, Catalog
+from station.catalog.writer import CatalogSink, catalog_for, enabled
 from station.config import LEG_COUNT, StationConfig
 from station.identity import session_identity
 from station.wiring import Rig
@@ -65,12 +67,17 @@ class JobOutcome:
 
 
 def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterable[Sink] = (),
-                  control: RunControl | None = None) -> JobOutcome:
+                  control: RunControl | None = None, catalog: Catalog | None = None,
+                  session_path: str | Path | None = None) -> JobOutcome:
     """Run a table procedure with the audit sink (first: an entry is on disk before any other
-    sink sees the event that follows it) and `sinks`."""
+    sink sees the event that follows it) and `sinks`; the catalog sink indexes the entries (and
+    a verification's session) when it closes. `catalog` None: the local one beside the audit log."""
     events = ListSink()
     audit_sink = AuditSink(audit)
-    result = run(procedure, [audit_sink, events, *sinks], control)
+    if catalog is None and enabled():
+        catalog = Catalog(local=audit.path.parent / LOCAL_NAME)
+    catalog_sink = CatalogSink(catalog, session_path, audit_sink)
+    result = run(procedure, [audit_sink, events, *sinks, catalog_sink], control)
     return JobOutcome(finished(events.events), events.events, audit_sink.problems, result)
 
 
@@ -116,32 +123,36 @@ def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]
 
 
 def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: str, source: dict[str, Any] | None,
-             confirm: Confirm | None, sinks: Iterable[Sink] = (), leg_serial: str | None = None) -> JobOutcome:
+             confirm: Confirm | None, sinks: Iterable[Sink] = (), leg_serial: str | None = None,
+             catalog: Catalog | None = None) -> JobOutcome:
     """Push one leg's table to its drive (procedures.push.push_procedure); `leg_serial`: the
     serial the leg carries (config), which the table's must match."""
     return run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source,
-                                        leg_serial=leg_serial), audit, sinks)
+                                        leg_serial=leg_serial), audit, sinks, catalog=catalog)
 
 
 def push_legs_job(axes: dict[int, ServoAxis], tables: dict[int, LegTable], *, audit: AuditLog, drive_url: str,
                   sources: dict[int, dict[str, Any]] | None, confirm, sinks: Iterable[Sink] = (),
-                  leg_serials: dict[int, str] | None = None) -> JobOutcome:
+                  leg_serials: dict[int, str] | None = None, catalog: Catalog | None = None) -> JobOutcome:
     """Push several legs' tables after one confirmation (procedures.push.push_legs_procedure)."""
     return run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources,
-                                             leg_serials=leg_serials), audit, sinks)
+                                             leg_serials=leg_serials), audit, sinks, catalog=catalog)
 
 
 def rollback_job(axis: ServoAxis, *, audit: AuditLog, drive_url: str, confirm: Confirm | None,
-                 sinks: Iterable[Sink] = ()) -> JobOutcome:
+                 sinks: Iterable[Sink] = (), catalog: Catalog | None = None) -> JobOutcome:
     """Restore what the drive held before the last successful push (procedures.push.rollback_procedure)."""
-    return run_table_job(rollback_procedure(axis, audit, confirm=confirm, drive_url=drive_url), audit, sinks)
+    return run_table_job(rollback_procedure(axis, audit, confirm=confirm, drive_url=drive_url), audit, sinks,
+                         catalog=catalog)
 
 
 def refusal_job(action: Action, leg: int, reason: BaseException | str, *, audit: AuditLog, drive_url: str = "",
-                source: dict[str, Any] | None = None, sinks: Iterable[Sink] = ()) -> JobOutcome:
+                source: dict[str, Any] | None = None, sinks: Iterable[Sink] = (),
+                catalog: Catalog | None = None) -> JobOutcome:
     """A refusal found before a drive is reached (a bad table file, a leg the platform does not
     have), logged and reported like any other."""
-    return run_table_job(refused(action, leg, reason, drive_url=drive_url, source=source), audit, sinks)
+    return run_table_job(refused(action, leg, reason, drive_url=drive_url, source=source), audit, sinks,
+                         catalog=catalog)
 
 
 # -- verify ------------------------------------------------------------------------------------------
@@ -174,4 +185,4 @@ def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *
                                  expected_sha256=expected_sha256, expected_source=expected_source, drive_url=drive_url,
                                  control=control, normalise=normalise,
                                  sweep_options={"session_id": uuid.uuid4().hex[:12], "warnings": identity.warnings})
-    return run_table_job(procedure, audit, [recorder, *sinks], control)
+    return run_table_job(procedure, audit, [recorder, *sinks], control, catalog=catalog_for(cfg), session_path=out)

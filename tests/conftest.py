@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as station.cli does: small solves, 2 cores
+os.environ.setdefault("STATION_CATALOG", "off")  # no catalog under the working folder; tests/catalog turn it on
 
 from pathlib import Path
 

@@ -13,6 +13,8 @@ from procedures.plans import parse_legs
 from procedures.recording.identity import model_identity
 from procedures.recording.reader import read_session
 from procedures.states import Outcome
+from station.catalog.writer import catalog_for, register
+from station.config import load_config
 
 NAME = "fit"
 HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"
@@ -49,6 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lead-mm", type=_lead, default="auto", metavar="MM|auto|none",
                    help="default method: screw lead for the once-per-revolution terms (default auto: look for it in the data)")
     p.add_argument("--legs", help="fit only these legs, e.g. 1-3 or 2,5 (default: all in the session)")
+    p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
+                   "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
     p.add_argument("--raw", action="store_true",
                    help="fit the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
 
@@ -72,6 +76,7 @@ def run(args) -> int:
                 source={"path": str(session.path), "sha256": session.sha256})
     model.options["error_basis"] = basis  # `station table` says which error its table holds
     save_model(model, out, str(session.path), session.sha256, identity=model_identity(session.identity, model.legs))
+    register(catalog_for(load_config(args.config)), out, "model")
     for line in basis_lines:
         print(line)
     if session.outcome != Outcome.COMPLETED:

@@ -16,6 +16,7 @@ from procedures.errors import InputError
 from procedures.plans import parse_legs
 from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
+from station.catalog.writer import catalog_for
 from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
 from station.identity import configured_serials, station_audit_log
 from station.table_jobs import (
@@ -169,7 +170,7 @@ class OperationFailed(DriverError):
 def refuse(args, cfg: StationConfig, audit: AuditLog, action: Action, leg: int, exc: BaseException,
            source: dict | None = None) -> int:
     """A refusal found before the drive is opened: logged through the audit sink, then reported."""
-    job = refusal_job(action, leg, exc, audit=audit, drive_url=drive_url_of(cfg), source=source)
+    job = refusal_job(action, leg, exc, audit=audit, drive_url=drive_url_of(cfg), source=source, catalog=catalog_for(cfg))
     return report(job, audit)
 
 
@@ -205,11 +206,12 @@ def run(args) -> int:
             leg = legs[0]
             job = push_job(drive.axis, tables[leg], audit=audit, drive_url=drive.url, source=sources[leg],
                            confirm=_with_audit_line(prompt(args.yes), audit), leg_serial=serials.get(leg),
-                           sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…), rows of leg {leg}")])
+                           sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…), rows of leg {leg}")],
+                           catalog=catalog_for(cfg))
         else:
             job = push_legs_job(drive.axes, tables, audit=audit, drive_url=drive.url, sources=sources,
                                 confirm=_with_audit_line(prompt(args.yes), audit), leg_serials=serials,
-                                sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…)")])
+                                sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…)")], catalog=catalog_for(cfg))
     for end in job.of(ev.OperationFinished):
         result = end.result
         if end.leg is not None and result is not None:

@@ -7,7 +7,9 @@ import argparse
 
 from procedures.fit import load_model
 from procedures.recording.reader import read_session
+from station.catalog.writer import catalog_for
 from station.commands.fit import _lead
+from station.config import load_config
 from station.report_jobs import report_lines, session_report
 
 NAME = "report"
@@ -33,12 +35,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--raw", action="store_true",
                    help="use the raw error, not normalised to 20 degC (as `station fit --raw`); refused with a "
                         "--model fitted to the normalised error")
+    p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
+                   "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
 
 
 def run(args) -> int:
     session = read_session(args.session)
     model = load_model(args.model) if args.model else None
-    result = session_report(session, args.out, model, lead_mm=args.lead_mm, raw=args.raw, model_name=args.model or "")
+    result = session_report(session, args.out, model, lead_mm=args.lead_mm, raw=args.raw, model_name=args.model or "",
+                            catalog=catalog_for(load_config(args.config)))
     for line in report_lines(result, model):
         print(line)
     return 0

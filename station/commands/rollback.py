@@ -8,6 +8,7 @@ from procedures import events as ev
 from procedures.errors import InputError
 from procedures.push import describe_table
 from procedures.states import Action
+from station.catalog.writer import catalog_for
 from station.commands.push import (
     PlanPrinter,
     add_drive_arguments,
@@ -53,7 +54,7 @@ def run(args) -> int:
         warn_audit_problems(audit)
         ask = prompt(args.yes)
         job = rollback_job(drive.axis, audit=audit, drive_url=drive.url, confirm=lambda plan: ask(plan.question()),
-                           sinks=[PlanPrinter()])
+                           sinks=[PlanPrinter()], catalog=catalog_for(cfg))
     code = report(job, audit)
     if code:
         return code

@@ -12,6 +12,8 @@ from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
 from procedures.table import LINUXCNC_LIMITS, make_table, write_linuxcnc_comp, write_table_csv
+from station.catalog.writer import catalog_for, register
+from station.config import load_config
 from station.wiring import drive_table_spec
 
 NAME = "table"
@@ -46,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "1 = nominal, forward trim, reverse trim")
     p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
     p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
+    p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
+                   "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
 
 
 def run(args) -> int:
@@ -75,6 +79,7 @@ def run(args) -> int:
     table = make_table(model, args.step, limits, legs=legs)
     if args.format == "csv":
         written = [write_table_csv(table, args.out, limits)]
+        register(catalog_for(load_config(args.config)), written[0], "table")
     elif args.format in controllers.FORMATS:
         options = {"siemens840d": {"mode": args.siemens_mode, "reference_mm": args.reference_mm},
                    "heidenhain": {"axis": args.axis_name}, "ecmc": {"direction": args.ecmc_direction}}

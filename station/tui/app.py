@@ -51,6 +51,7 @@ from station.tui.screens.common import ConfirmScreen
 from station.tui.screens.compensation import CompensationScreen
 from station.tui.screens.diagnosis import DiagnosisScreen
 from station.tui.screens.help import HelpScreen
+from station.tui.screens.history import HistoryScreen
 from station.tui.screens.platform import PlatformScreen
 from station.tui.screens.replay import ReplayScreen
 from station.tui.screens.results import ResultsScreen
@@ -127,6 +128,7 @@ class StationApp(App):
         "replay": ReplayScreen,
         "diagnosis": DiagnosisScreen,
         "platform": PlatformScreen,
+        "history": HistoryScreen,
     }
     DEFAULT_MODE = "rig"
     # The screens are told of sweep changes at most this often (s): a fast sweep folds many
@@ -142,6 +144,7 @@ class StationApp(App):
         Binding("f5", "switch_mode('replay')", "Replay", show=False),
         Binding("f6", "switch_mode('diagnosis')", "Diagnosis", show=False),
         Binding("f7", "switch_mode('platform')", "Platform", show=False),
+        Binding("f8", "switch_mode('history')", "History", show=False),
         Binding("question_mark", "station_help", "Help", key_display="?"),
         Binding("f12", "station_help", "Help", show=False),
         Binding("ctrl+q", "quit", "Quit", priority=True),

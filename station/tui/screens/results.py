@@ -406,9 +406,10 @@ class ResultsScreen(StationScreen):
     @work(thread=True, group="results-write", exit_on_error=False)
     def _report_worker(self, session, model, out: Path, hide: bool) -> None:
         try:
+            from station.catalog.writer import catalog_for
             from station.report_jobs import report_lines, session_report
 
-            result = session_report(session, out, model)
+            result = session_report(session, out, model, catalog=catalog_for(self.app.cfg))
         except Exception as exc:
             self.post_message(FilesWritten("Report", "", describe(exc, f"cannot write the report to {out}")))
             return

@@ -1,0 +1,194 @@
+"""Reading the catalog: a leg's history (every calibration, table, push and verification, ISO 230-2
+values with U over time, which table went to which drive, drift of E, B and M per month between
+calibrations) and the list of legs with their last calibration and due date.
+
+A *calibration* is a completed session record of the leg; its due date is the last calibration
+plus `[catalog] calibration_interval_days`. Drift between neighbouring calibrations is
+(value_now - value_before) / months between them (a month = 30.4375 days), um/month.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timedelta, timezone
+from typing import Any
+
+import sqlalchemy as sa
+import sqlalchemy.orm  # noqa: F401  (sa.orm.aliased)
+from sqlalchemy.engine import Engine
+
+from station.catalog.models import FIGURES, Leg, Record, RecordLeg
+
+MONTH_DAYS = 30.4375
+DRIFT_FIGURES = ("E", "B", "M")
+
+
+def parse_utc(text: str) -> datetime:
+    t = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
+def due_of(last_utc: str | None, interval_days: int) -> str | None:
+    if not last_utc:
+        return None
+    return (parse_utc(last_utc) + timedelta(days=interval_days)).date().isoformat()
+
+
+@dataclass
+class HistoryRow:
+    time_utc: str
+    kind: str
+    leg: int
+    station_id: str | None
+    outcome: str | None
+    path: str | None
+    sha256: str | None
+    drive: str | None
+    table_sha256: str | None
+    figures: dict[str, dict[str, float | None]]
+    verification_ratio: float | None = None
+    operator: str | None = None
+
+
+def value_with_u(figures: dict, name: str) -> str:
+    """'2.75±0.31' (um) for figure `name` of a history row, '-' when absent."""
+    v = figures.get(name)
+    if not v or v.get("value_um") is None:
+        return "-"
+    return f"{v['value_um']:.2f}" + (f"±{v['U_um']:.2f}" if v.get("U_um") is not None else "")
+
+
+def row_detail(r: "HistoryRow") -> str:
+    """What a history row adds: a verification's ratio, which table went to which drive, the file."""
+    if r.kind == "verification":
+        return f"ratio {r.verification_ratio:.2f}" if r.verification_ratio is not None else ""
+    if r.kind in ("push", "rollback"):
+        return f"table {(r.table_sha256 or '?')[:12]} -> {r.drive or 'drive ?'}"
+    return r.path or ""
+
+
+@dataclass
+class Drift:
+    from_utc: str
+    to_utc: str
+    months: float
+    um_per_month: dict[str, float | None]
+
+
+@dataclass
+class History:
+    serial: str
+    leg_info: dict[str, Any] = field(default_factory=dict)
+    rows: list[HistoryRow] = field(default_factory=list)
+    drift: list[Drift] = field(default_factory=list)
+    last_calibration_utc: str | None = None
+    due: str | None = None
+
+    @property
+    def calibrations(self) -> list[HistoryRow]:
+        return [r for r in self.rows if r.kind == "session" and r.outcome == "completed"]
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def history(engine: Engine, serial: str, interval_days: int = 365) -> History:
+    """Everything the catalog holds of the leg with serial `serial`, oldest first."""
+    cols = [RecordLeg.time_utc, RecordLeg.kind, RecordLeg.leg, RecordLeg.station_id, Record.outcome, Record.path,
+            Record.sha256, RecordLeg.drive, RecordLeg.table_sha256, RecordLeg.verification_ratio, Record.operator]
+    cols += [getattr(RecordLeg, f"{n}{s}") for n in FIGURES for s in ("_um", "_U_um")]
+    # a push's or rollback's "started" entry is the same operation as its final one: not a row of its own
+    q = (sa.select(*cols).join(Record, Record.uid == RecordLeg.uid)
+         .where(RecordLeg.leg_serial == serial, sa.or_(Record.outcome.is_(None), Record.outcome != "started"))
+         .order_by(RecordLeg.time_utc, RecordLeg.kind))
+    out = History(serial=serial)
+    with engine.connect() as conn:
+        info = conn.execute(sa.select(Leg.part_number, Leg.leg_type, Leg.screw_lot).where(Leg.serial == serial)).first()
+        if info is not None:
+            out.leg_info = dict(info._mapping)
+        for r in conn.execute(q):
+            m = r._mapping
+            figures = {n: {"value_um": m[f"{n}_um"], "U_um": m[f"{n}_U_um"]} for n in FIGURES if m[f"{n}_um"] is not None}
+            out.rows.append(HistoryRow(time_utc=m["time_utc"], kind=m["kind"], leg=m["leg"], station_id=m["station_id"],
+                                       outcome=m["outcome"], path=m["path"], sha256=m["sha256"], drive=m["drive"],
+                                       table_sha256=m["table_sha256"], figures=figures,
+                                       verification_ratio=m["verification_ratio"], operator=m["operator"]))
+    cals = out.calibrations
+    for a, b in zip(cals, cals[1:]):
+        months = (parse_utc(b.time_utc) - parse_utc(a.time_utc)).total_seconds() / 86400.0 / MONTH_DAYS
+        rate: dict[str, float | None] = {}
+        for n in DRIFT_FIGURES:
+            va, vb = (a.figures.get(n) or {}).get("value_um"), (b.figures.get(n) or {}).get("value_um")
+            rate[n] = (vb - va) / months if (va is not None and vb is not None and months > 0) else None
+        out.drift.append(Drift(a.time_utc, b.time_utc, months, rate))
+    if cals:
+        out.last_calibration_utc = cals[-1].time_utc
+        out.due = due_of(out.last_calibration_utc, interval_days)
+    return out
+
+
+@dataclass
+class LegRow:
+    serial: str
+    leg_type: str | None
+    part_number: str | None
+    calibrations: int
+    last_calibration_utc: str | None
+    station_id: str | None
+    due: str | None
+    E_um: float | None = None
+    B_um: float | None = None
+
+
+def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = None, since: str | None = None,
+         until: str | None = None, due_by: str | None = None, interval_days: int = 365) -> list[LegRow]:
+    """Every leg with a serial: its last completed calibration (filtered by `since`/`until` on
+    that time, `station` that made it, `leg_type`), and its due date; `due_by` (an ISO date)
+    keeps the legs due on or before it (or never calibrated)."""
+    # per leg a few index seeks (ix_record_legs_calibrations: serial, kind, outcome, time) for its
+    # last completed calibration and their count; filters on the legs table cut the seeks.
+    # PostgreSQL: LATERAL joins (one seek each); SQLite, which has none: scalar subqueries.
+    r = sa.orm.aliased(RecordLeg)
+    is_cal = sa.and_(r.leg_serial == Leg.serial, r.kind == "session", r.outcome == "completed")
+    count = sa.select(sa.func.count().label("n")).select_from(r).where(is_cal)
+    if engine.dialect.name == "postgresql":
+        latest = (sa.select(r.time_utc.label("last"), r.station_id, r.E_um, r.B_um).where(is_cal)
+                  .order_by(r.time_utc.desc()).limit(1).lateral("latest"))
+        n = count.lateral("n")
+        inner = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, n.c.n, latest.c.last, latest.c.station_id,
+                           latest.c.E_um, latest.c.B_um)
+                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(n, sa.true()))
+    else:
+        def last_of(column):
+            return sa.select(column).where(is_cal).order_by(r.time_utc.desc()).limit(1).scalar_subquery()
+
+        inner = sa.select(Leg.serial, Leg.leg_type, Leg.part_number, count.scalar_subquery().label("n"),
+                          sa.select(sa.func.max(r.time_utc)).where(is_cal).scalar_subquery().label("last"),
+                          last_of(r.station_id).label("station_id"), last_of(r.E_um).label("E_um"),
+                          last_of(r.B_um).label("B_um"))
+    if leg_type:
+        inner = inner.where(Leg.leg_type == leg_type)
+    t = inner.subquery()
+    q = sa.select(t)
+    if station:
+        q = q.where(t.c.station_id == station)
+    if since:
+        q = q.where(t.c.last >= since)
+    if until:
+        q = q.where(t.c.last < _next_day(until))
+    if due_by:
+        cutoff = (datetime.fromisoformat(due_by) - timedelta(days=interval_days)).date().isoformat()
+        q = q.where(sa.or_(t.c.last.is_(None), t.c.last < _next_day(cutoff)))
+    q = q.order_by(t.c.serial)
+    rows: dict[str, LegRow] = {}
+    with engine.connect() as conn:
+        for x in conn.execute(q):
+            rows[x.serial] = LegRow(serial=x.serial, leg_type=x.leg_type, part_number=x.part_number,
+                                    calibrations=int(x.n or 0), last_calibration_utc=x.last, station_id=x.station_id,
+                                    due=due_of(x.last, interval_days), E_um=x.E_um, B_um=x.B_um)
+    return list(rows.values())
+
+
+def _next_day(date_text: str) -> str:
+    """The ISO date after `date_text` (YYYY-MM-DD...): an `until` date includes that whole day."""
+    return (datetime.fromisoformat(date_text[:10]) + timedelta(days=1)).date().isoformat()
