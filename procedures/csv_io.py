@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.errors import InputError
+from procedures.outputs import check_output_file
 from procedures.ranges import LEG_NUMBERS, PointLimits
 from procedures.recording.columns import read_point_column, write_point_column
 from procedures.recording.reader import Session, read_session
@@ -245,10 +246,7 @@ def _temp_beside(path: Path, purpose: str) -> Path:
 
 
 def _check_out(path: Path, overwrite: bool) -> None:
-    if path.exists() and not overwrite:
-        raise InputError(f"{path}: file exists; choose another --out or add --force to replace it")
-    if not path.parent.is_dir():
-        raise InputError(f"{path}: directory {path.parent} does not exist")
+    check_output_file(path, force=overwrite)  # the one overwrite rule (procedures/outputs.py)
 
 
 def import_csv(

@@ -7,6 +7,7 @@ import tempfile
 from pathlib import Path
 
 from procedures.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
+from procedures.outputs import check_output_file
 from procedures.plans import parse_legs
 from procedures.ranges import MAX_ERROR_UM, PointLimits
 from station import __version__
@@ -45,6 +46,7 @@ def import_limits(legs: str = "1-6", profile: str | None = None) -> PointLimits:
 
 
 def run(args) -> int:
+    check_output_file(args.out, force=args.force, suffixes=(".h5",))
     limits = import_limits(args.legs, args.profile)
     if args.map:
         session = _import_mapped(args, limits)

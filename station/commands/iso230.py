@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from procedures.errors import InputError
+from procedures.outputs import check_output_file
 from procedures.iso230 import dumps, evaluate, format_table
 from procedures.metrology.thermal import error_basis
 from procedures.recording.reader import read_session
@@ -23,11 +24,14 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("h5", metavar="FILE.h5", help="session file (import a CSV first with `station import`)")
     p.add_argument("--json", metavar="OUT", help="also write the values as JSON to OUT")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--raw", action="store_true",
                    help="evaluate the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
 
 
 def run(args) -> int:
+    if args.json:
+        check_output_file(args.json, force=args.force, option="--json")
     session = read_session(Path(args.h5))
     if not len(session.points):
         raise InputError(f"{args.h5}: the session holds no points")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -11,7 +12,8 @@ from procedures import controllers
 from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
-from procedures.table import LINUXCNC_LIMITS, make_table, write_linuxcnc_comp, write_table_csv
+from procedures.outputs import check_output_file
+from procedures.table import LINUXCNC_LIMITS, linuxcnc_paths, make_table, write_linuxcnc_comp, write_table_csv
 from station.wiring import drive_table_spec
 
 NAME = "table"
@@ -46,6 +48,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "1 = nominal, forward trim, reverse trim")
     p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
     p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
+    p.add_argument("--force", action="store_true", help="replace the output file(s) if they exist (default: refused)")
+
+
+def output_paths(fmt: str, out: str, legs) -> list[Path]:
+    """The files `--format fmt --out out` writes for `legs`, known before the table is made."""
+    if fmt == "csv":
+        return [Path(out)]
+    if fmt == "linuxcnc":
+        return list(linuxcnc_paths(out, legs).values())
+    from procedures.controllers.common import leg_paths
+
+    module = controllers.module(fmt)
+    return list(leg_paths(out, legs, module.SUFFIX, stem=getattr(module, "STEM", "leg{leg}")).values())
 
 
 def run(args) -> int:
@@ -55,6 +70,8 @@ def run(args) -> int:
         missing = [x for x in legs if x not in model.legs]
         if missing:
             raise InputError(f"{args.model}: the model has no leg(s) {missing} (it has {list(model.legs)})")
+    for path in output_paths(args.format, args.out, legs or list(model.legs)):  # before anything is made
+        check_output_file(path, force=args.force, make_parents=args.format != "csv")
     if args.format in controllers.FORMATS:
         fmt = controllers.module(args.format)
         limits = fmt.LIMITS
