@@ -13,6 +13,7 @@ from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
 from procedures.outputs import check_output_file
+from procedures.plausibility import check_correction, settle
 from procedures.table import LINUXCNC_LIMITS, linuxcnc_paths, make_table, write_linuxcnc_comp, write_table_csv
 from station.wiring import drive_table_spec
 
@@ -49,6 +50,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
     p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
     p.add_argument("--force", action="store_true", help="replace the output file(s) if they exist (default: refused)")
+    p.add_argument("--accept-implausible", action="store_true",
+                   help="write a table whose corrections span more than the recorded error did (refused by default)")
 
 
 def output_paths(fmt: str, out: str, legs) -> list[Path]:
@@ -61,6 +64,20 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
 
     module = controllers.module(fmt)
     return list(leg_paths(out, legs, module.SUFFIX, stem=getattr(module, "STEM", "leg{leg}")).values())
+
+
+def implausible_corrections(model, table) -> list:
+    """The legs of `table` whose corrections span more than the error `model` was fitted to
+    (procedures.plausibility.check_correction)."""
+    source = model.source.get("path") or "the model's recording"
+    found = []
+    for leg, t in table.legs.items():
+        values = np.concatenate([np.asarray(t.error_fwd_um, float), np.asarray(t.error_rev_um, float)])
+        finding = check_correction(leg, float(values.max() - values.min()), float(model.legs[leg].stats.range_before_um),
+                                   source)
+        if finding is not None:
+            found.append(finding)
+    return found
 
 
 def run(args) -> int:
@@ -90,6 +107,7 @@ def run(args) -> int:
                   "station's table store (compensation target station, docs/compensation.md); for the "
                   "controller use --format linuxcnc")
     table = make_table(model, args.step, limits, legs=legs)
+    warnings = settle(implausible_corrections(model, table), args.accept_implausible)
     if args.format == "csv":
         written = [write_table_csv(table, args.out, limits)]
     elif args.format in controllers.FORMATS:
@@ -99,6 +117,8 @@ def run(args) -> int:
     else:
         written = write_linuxcnc_comp(table, args.out, args.comp_type, limits)
     print(f"model: {args.model} ({model.method}; from {model.source.get('path') or 'unknown recording'})")
+    for line in warnings:
+        print(line)
     basis = model.options.get("error_basis")
     if isinstance(basis, dict):  # what `station fit` fitted (docs/metrology.md)
         ref = basis.get("reference_temp_c", 20.0)
