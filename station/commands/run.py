@@ -49,5 +49,14 @@ def run(args) -> int:
     from procedures.iso230 import evaluate, format_table
     from procedures.recording.reader import read_session
 
-    print(format_table(evaluate(read_session(out).points)))
+    from procedures.metrology.thermal import error_basis
+    from station.report_jobs import iso_lines, session_iso230
+
+    session = read_session(out)
+    points, basis_lines, _ = error_basis(session, False)  # as station iso230 / fit: normalised to 20 degC
+    for line in basis_lines:
+        print(line)
+    print(format_table(evaluate(points)))
+    for line in iso_lines(session_iso230(session)):  # each value with its expanded uncertainty U (k = 2)
+        print(line)
     return 0
