@@ -225,12 +225,12 @@ def next_step(r: LegVerification) -> str:
     if b is not None and b.target_spacing_mm is not None and b.target_spacing_mm > SCREW_RESOLVING_SPACING_MM:
         return (f"the calibration's targets are {b.target_spacing_mm:.3g} mm apart, too far apart to resolve the "
                 f"screw's once-per-turn error, so the table cannot correct it: calibrate again with targets every 1 mm "
-                f"(`station sweep --step 1 --legs {r.leg} ...`), {again} (README, calibration)")
+                f"(`station sweep --step 1 --cycles 8 --legs {r.leg} ...`), {again} (README, calibration)")
     if b is not None and b.material_temp_c is not None and a.material_temp_c is not None \
             and abs(a.material_temp_c - b.material_temp_c) >= THERMAL_NOTE_K:
         return "let the leg settle to the calibration's temperature and verify again (see the note above)"
     return (f"`station diagnose` on the calibration names what the table leaves; calibrate again (more "
-            f"--cycles, or targets every 1 mm: `station sweep --step 1 --legs {r.leg} ...`), {again}")
+            f"--cycles, or targets every 1 mm: `station sweep --step 1 --cycles 8 --legs {r.leg} ...`), {again}")
 
 
 # -- the procedure ---------------------------------------------------------------------------------

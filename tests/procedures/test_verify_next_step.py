@@ -30,7 +30,7 @@ def test_above_after_a_coarse_calibration_asks_for_targets_every_mm():
     nxt = [line for line in text.splitlines() if line.strip().startswith("next:")]
     assert nxt == [f"  next: the calibration's targets are {r.before.target_spacing_mm:.3g} mm apart, too far apart "
                    "to resolve the screw's once-per-turn error, so the table cannot correct it: calibrate again with "
-                   "targets every 1 mm (`station sweep --step 1 --legs 2 ...`), fit, make the table (its step follows "
+                   "targets every 1 mm (`station sweep --step 1 --cycles 8 --legs 2 ...`), fit, make the table (its step follows "
                    "the recording), push it and verify again (README, calibration)"]
 
 
