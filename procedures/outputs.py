@@ -49,8 +49,9 @@ def check_output_file(path: str | Path, *, force: bool = False, option: str = "-
     existing ancestor) and writable. InputError (one line) otherwise."""
     p = Path(path)
     if suffixes and p.suffix.lower() not in suffixes:
+        written_as = {".h5": "HDF5, a session file"}.get(suffixes[0], suffixes[0][1:].upper())
         raise InputError(f"{option} {p}: must end in {' or '.join(suffixes)} (the file is written as "
-                         f"{suffixes[0][1:].upper()}); {NOTHING_WRITTEN}")
+                         f"{written_as}); {NOTHING_WRITTEN}")
     if p.is_dir():
         raise InputError(f"{option} {p}: is a folder; give a file name; {NOTHING_WRITTEN}")
     if p.exists() and not force:

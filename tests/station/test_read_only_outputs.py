@@ -146,7 +146,7 @@ def test_an_existing_output_is_refused_unless_force(name, inputs, tmp_path, caps
 def test_a_sweep_into_a_file_that_is_not_hdf5_is_refused(tmp_path, capsys):
     assert main(["sweep", "--sim", "--out", str(tmp_path / "x.txt")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == f"station sweep: error: --out {tmp_path / 'x.txt'}: must end in .h5 (the file is written as H5); nothing was written"
+    assert err == f"station sweep: error: --out {tmp_path / 'x.txt'}: must end in .h5 (the file is written as HDF5, a session file); nothing was written"
     assert list(tmp_path.iterdir()) == []
 
 
