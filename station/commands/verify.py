@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import secrets
 import sys
 from dataclasses import replace
@@ -56,6 +57,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--raw", action="store_true",
                    help="compare the raw errors (default: both sessions normalised to 20 degC material temperature, "
                         "docs/metrology.md)")
+
+
+NOISE_SEED_ENV = "STATION_SIM_NOISE_SEED"
+"""Simulated rig only: the verification's noise seed when --noise-seed is not given (a demo or a
+test that repeats exactly: tests/station/test_readme_calibration.py); unset = a new seed each time."""
+
+
+def default_noise_seed() -> int:
+    """$STATION_SIM_NOISE_SEED when set (InputError unless a whole number), else a new random seed."""
+    text = os.environ.get(NOISE_SEED_ENV, "").strip()
+    if not text:
+        return secrets.randbelow(1 << 31)
+    try:
+        return int(text)
+    except ValueError:
+        raise InputError(f"${NOISE_SEED_ENV} = {text!r}: give a whole number (or unset it for a new seed)") from None
 
 
 def _plan(args, legs: tuple[int, ...], before) -> SweepPlan:
@@ -111,7 +128,7 @@ def run(args) -> int:
             expected.update(expected_tables(args.table, (leg,), leg_table_spec(cfg, leg)))
     noise_seed = None
     if cfg.is_sim:
-        noise_seed = args.noise_seed if args.noise_seed is not None else secrets.randbelow(1 << 31)
+        noise_seed = args.noise_seed if args.noise_seed is not None else default_noise_seed()
         if noise_seed == cfg.sim.seed:
             print(f"note: noise seed {noise_seed} = plant seed: the sweep repeats the noise of a `station sweep --sim` "
                   "of the same plan exactly, so it is not an independent verification")
