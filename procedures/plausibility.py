@@ -87,6 +87,20 @@ def check_points(points: np.ndarray, source: str, lines: Sequence[int] | None = 
     return found
 
 
+def check_table_values(table, source: str) -> Implausible | None:
+    """A table leg (procedures.table.LegTable) whose correction goes beyond 100 um: most likely
+    nm written into the um columns. The first such value, named by file, leg, row (with its
+    position) and column, as the table's other refusals name it; else None."""
+    for field_name in ("error_fwd_um", "error_rev_um"):
+        v = np.asarray(getattr(table, field_name), float)
+        hits = np.flatnonzero(np.isfinite(v) & (np.abs(v) > NM_FROM_UM))
+        if hits.size:
+            i = int(hits[0])
+            return Implausible(f"{source}, leg {table.leg}, {table.point_name(i)}, field {field_name}",
+                               float(v[i]), nm_slip(float(v[i])))
+    return None
+
+
 def check_correction(leg: int, correction_span_um: float, error_span_um: float, source: str) -> Implausible | None:
     """A table for `leg` whose corrections span (max - min, both directions) more than the error
     recorded in `source` spanned: an Implausible naming both, else None."""
@@ -102,10 +116,12 @@ def check_correction(leg: int, correction_span_um: float, error_span_um: float, 
 
 def settle(found: Sequence[Implausible], accept: bool, what: str = "nothing was written") -> list[str]:
     """Refuse `found` (InputError: the first, how many more, how to accept them), or, when the
-    user accepted them, their warning lines. [] when nothing was found."""
+    user accepted them, their warning lines. [] when nothing was found. `what`: what the refusal
+    adds ("" when the caller says it itself)."""
     if not found:
         return []
     if not accept:
         more = f" (and {len(found) - 1} more implausible value(s))" if len(found) > 1 else ""
-        raise InputError(f"{found[0].text()}{more}; correct it, or add {ACCEPT_OPTION} if the values are right; {what}")
+        raise InputError(f"{found[0].text()}{more}; correct it, or add {ACCEPT_OPTION} if the values are right"
+                         + (f"; {what}" if what else ""))
     return [f"warning: {f.text()} (kept: {ACCEPT_OPTION})" for f in found]

@@ -14,6 +14,7 @@ from procedures import events as ev
 from procedures.audit import AuditError, AuditLog
 from procedures.errors import InputError
 from procedures.plans import parse_legs
+from procedures.plausibility import check_table_values, settle
 from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
 from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
@@ -59,6 +60,8 @@ def add_drive_arguments(p: argparse.ArgumentParser, several: bool = False) -> No
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("table", metavar="TABLE.csv", help="table CSV from `station table` (it may hold several legs)")
     add_drive_arguments(p, several=True)
+    p.add_argument("--accept-implausible", action="store_true",
+                   help="push corrections beyond 100 um (refused by default: most likely nm in the um columns)")
 
 
 # -- shared by push / rollback / verify ------------------------------------------------------------
@@ -192,6 +195,13 @@ def run(args) -> int:
     controller = controller_refusal(cfg, legs, Action.PUSH)
     if controller:
         return refuse(args, cfg, audit, Action.PUSH, controller[0], InputError(controller[1]), sources[controller[0]])
+    for leg, t in tables.items():  # a unit slip (nm in the um columns) never reaches a drive unasked
+        found = check_table_values(t, str(args.table))
+        try:
+            for line in settle([found] if found else [], args.accept_implausible, ""):  # refuse() adds it
+                print(line)
+        except InputError as exc:
+            return refuse(args, cfg, audit, Action.PUSH, leg, exc, sources[leg])
     print(f"drive: {drive_text(cfg)}")
     for leg in legs:  # the plan names every leg's target; said first where it is not the drive
         if cfg.compensation.target_of(leg) != "drive":

@@ -90,3 +90,20 @@ def test_a_table_correcting_more_than_the_error_is_refused_unless_accepted(tmp_p
     assert "larger than the error it corrects (0.010 um peak to peak in " in err[0] and not out.exists()
     assert main(["table", str(model), "--out", str(out), "--accept-implausible"]) == 0
     assert "warning: leg 1: correction span (um)" in capsys.readouterr().out and out.exists()
+
+
+def test_a_push_of_corrections_that_look_like_nm_is_refused_before_the_drive(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    table = tmp_path / "table.csv"
+    rows = "".join(f"1,{x:g},{150.0 + x / 100:g},{148.0:g}\n" for x in range(-90, 91, 10))
+    table.write_text("leg,position_mm,error_fwd_um,error_rev_um\n" + rows)
+    assert main(["push", str(table), "--leg", "1", "--sim", "--yes"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"station push: error: {table}, leg 1, row 2 (-90.0000 mm), field error_fwd_um = 149.1: looks like nm in "
+                   "an um field (149.1 nm = 0.1491 um; a ball-screw leg is off by micrometres to tens of micrometres, "
+                   "not 100 um and more); correct it, or add --accept-implausible if the values are right. Nothing "
+                   "was written to the drive."]
+    assert not (tmp_path / "runs" / "sim-drive-nv.json").exists()  # the drive was never opened
+    assert main(["push", str(table), "--leg", "1", "--sim", "--yes", "--accept-implausible"]) == 0
+    out = capsys.readouterr().out
+    assert "warning: " in out and "(kept: --accept-implausible)" in out and "pushed: leg 1" in out
