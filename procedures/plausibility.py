@@ -87,13 +87,14 @@ def check_points(points: np.ndarray, source: str, lines: Sequence[int] | None = 
     return found
 
 
-def check_table_values(table, source: str) -> Implausible | None:
+def check_table_values(table, source: str, limit_um: float = float("inf")) -> Implausible | None:
     """A table leg (procedures.table.LegTable) whose correction goes beyond 100 um: most likely
     nm written into the um columns. The first such value, named by file, leg, row (with its
-    position) and column, as the table's other refusals name it; else None."""
+    position) and column, as the table's other refusals name it; else None. Values beyond
+    `limit_um` (what the drive can hold) are left to that limit's own, firmer refusal."""
     for field_name in ("error_fwd_um", "error_rev_um"):
         v = np.asarray(getattr(table, field_name), float)
-        hits = np.flatnonzero(np.isfinite(v) & (np.abs(v) > NM_FROM_UM))
+        hits = np.flatnonzero(np.isfinite(v) & (np.abs(v) > NM_FROM_UM) & (np.abs(v) <= limit_um))
         if hits.size:
             i = int(hits[0])
             return Implausible(f"{source}, leg {table.leg}, {table.point_name(i)}, field {field_name}",

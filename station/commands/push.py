@@ -27,7 +27,7 @@ from station.table_jobs import (
     refusal_job,
     target_text,
 )
-from station.wiring import drive_url_of, open_drive
+from station.wiring import drive_url_of, leg_table_spec, open_drive
 
 NAME = "push"
 HELP = "write a leg's compensation table to its drive (inactive bank, read back, switch), with an audit entry"
@@ -196,7 +196,11 @@ def run(args) -> int:
     if controller:
         return refuse(args, cfg, audit, Action.PUSH, controller[0], InputError(controller[1]), sources[controller[0]])
     for leg, t in tables.items():  # a unit slip (nm in the um columns) never reaches a drive unasked
-        found = check_table_values(t, str(args.table))
+        try:
+            limit_um = leg_table_spec(cfg, leg).max_correction_um  # what its holder takes, without connecting
+        except InputError:
+            limit_um = float("inf")
+        found = check_table_values(t, str(args.table), limit_um)
         try:
             for line in settle([found] if found else [], args.accept_implausible, ""):  # refuse() adds it
                 print(line)
