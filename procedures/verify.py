@@ -37,6 +37,7 @@ from procedures.audit import AuditEntry
 from procedures.control import RunControl
 from procedures.errors import InputError
 from procedures.fit.data import split_legs
+from procedures.fit.dynamic import is_onthefly, static_points
 from procedures.fit.noise import estimate_noise_floor
 from procedures.iso230 import LegIso230, evaluate_leg
 from procedures.metrology.thermal import normalise_session
@@ -159,6 +160,12 @@ def verify(after_points: np.ndarray, before_points: np.ndarray | None = None, le
            ) -> dict[int, LegVerification]:
     """Per-leg verification figures (see the module docstring) for `legs` (default: every leg
     of the verification). InputError when a leg has no points in either session."""
+    # on-the-fly readings: their static part, as `station fit` takes it (procedures/fit/dynamic.py),
+    # so the noise floor and residual are those of the error the table corrects, not of two speeds
+    if len(after_points) and is_onthefly(after_points):
+        after_points = static_points(after_points, after_source)
+    if before_points is not None and len(before_points) and is_onthefly(before_points):
+        before_points = static_points(before_points, before_source)
     after_legs = sorted({int(v) for v in np.asarray(after_points)["leg"]}) if len(after_points) else []
     chosen = sorted({int(x) for x in legs}) if legs is not None else after_legs
     if not chosen:
