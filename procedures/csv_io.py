@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from procedures.errors import InputError
+from procedures.outputs import check_output_file
+from procedures.plausibility import check_points, settle
 from procedures.ranges import LEG_NUMBERS, PointLimits
 from procedures.recording.columns import read_point_column, write_point_column
 from procedures.recording.reader import Session, read_session
@@ -89,7 +91,8 @@ def _parse_int(text: str) -> int | None:
 
 
 def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = None,
-                    extra: dict[str, np.ndarray] | None = None) -> tuple[np.ndarray, list[str]]:
+                    extra: dict[str, np.ndarray] | None = None,
+                    lines: list[int] | None = None) -> tuple[np.ndarray, list[str]]:
     """Parse and check an interchange CSV; return (POINT_DTYPE rows, optional columns present).
 
     Rows keep the file order and get `index` 0, 1, ...; commanded_mm = target_mm,
@@ -101,7 +104,8 @@ def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = No
     and a value outside `limits` (default `PointLimits()`: legs 1-6, the built-in drive
     profile's soft limits, the error sanity limit, workshop ranges of the optional columns).
     The columns of EXTRA_COLUMNS present go to `extra` (name -> one value per row, NaN = not
-    measured) when it is given, and are listed in the returned optional columns.
+    measured) when it is given, and are listed in the returned optional columns. `lines`, when
+    given, gets each row's line number in the file.
     """
     limits = limits or PointLimits()
     path = Path(csv_path)
@@ -129,6 +133,11 @@ def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = No
     if header is None:
         raise InputError(f"{path}: the file is empty; expected a header line "
                          f"({','.join(REQUIRED_COLUMNS)}) and one row per point")
+    if len(header) == 1 and header[0].count(";") >= 2:  # one field holding a whole header: not this layout
+        raise InputError(f"{path}: line {header_line}: the file is semicolon-separated (header {header[0][:60]!r}); "
+                         "the interchange CSV is comma-separated: import it with a map, `station import "
+                         f"{path.name} --map MAP.toml` with [file] delimiter = \";\" (and decimal = \",\" for decimal "
+                         "commas; docs/import.md, docs/import-maps/), or save it with commas; nothing was written")
     known = REQUIRED_COLUMNS + OPTIONAL_COLUMNS + EXTRA_COLUMNS
     seen: set[str] = set()
     for name in header:
@@ -237,6 +246,8 @@ def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = No
     problems.raise_if_any()
     if extra is not None:
         extra.update(extra_values)
+    if lines is not None:
+        lines.extend(line for line, _ in rows)
     return out, optional
 
 
@@ -245,10 +256,7 @@ def _temp_beside(path: Path, purpose: str) -> Path:
 
 
 def _check_out(path: Path, overwrite: bool) -> None:
-    if path.exists() and not overwrite:
-        raise InputError(f"{path}: file exists; choose another --out or add --force to replace it")
-    if not path.parent.is_dir():
-        raise InputError(f"{path}: directory {path.parent} does not exist")
+    check_output_file(path, force=overwrite)  # the one overwrite rule (procedures/outputs.py)
 
 
 def import_csv(
@@ -260,19 +268,27 @@ def import_csv(
     software_version: str | None = None,
     overwrite: bool = False,
     limits: PointLimits | None = None,
+    accept_implausible: bool = False,
+    warnings: list[str] | None = None,
 ) -> Session:
     """Convert an interchange CSV into a session file (rig "import"); return it as read back.
 
     The whole CSV is checked first (see read_csv_points; `limits`: the physical ranges); on any
     problem InputError is raised and no file is created. The plan metadata names the source
-    file and its SHA-256, and the legs the points hold.
+    file and its SHA-256, and the legs the points hold. Values that look like a unit slip (degF
+    in a degC column, nm in the um column: procedures.plausibility) are refused the same way
+    unless `accept_implausible`; then their warning lines go to `warnings`.
     """
     csv_path, h5_path = Path(csv_path), Path(h5_path)
     if not csv_path.is_file():
         raise InputError(f"{csv_path}: no such file")
     _check_out(h5_path, overwrite)
     extra: dict[str, np.ndarray] = {}
-    points, optional = read_csv_points(csv_path, limits, extra)
+    lines: list[int] = []
+    points, optional = read_csv_points(csv_path, limits, extra, lines)
+    notes = settle(check_points(points, str(csv_path), lines), accept_implausible)
+    if warnings is not None:
+        warnings.extend(notes)
     sha = hashlib.sha256(csv_path.read_bytes()).hexdigest()
     plan = {
         "kind": "import",

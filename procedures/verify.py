@@ -37,6 +37,7 @@ from procedures.audit import AuditEntry
 from procedures.control import RunControl
 from procedures.errors import InputError
 from procedures.fit.data import split_legs
+from procedures.fit.dynamic import is_onthefly, static_points
 from procedures.fit.noise import estimate_noise_floor
 from procedures.iso230 import LegIso230, evaluate_leg
 from procedures.metrology.thermal import normalise_session
@@ -50,6 +51,10 @@ ACCEPT_RATIO = 1.1
 
 ISO_SHOWN = ("E", "M", "A", "R", "B")
 THERMAL_NOTE_K = 0.1  # a material temperature difference worth pointing out (about 0.2 um over 180 mm)
+SCREW_RESOLVING_SPACING_MM = 1.25
+"""Calibration targets further apart than this cannot resolve a ball screw's once-per-turn error
+(leads of 4..10 mm, a quarter of the shortest), so neither can a table made from them: the
+ISO 230-2 plan's 11 targets over 180 mm are 16 mm apart. README, calibration: `--step 1`."""
 
 
 @dataclass(frozen=True)
@@ -70,12 +75,14 @@ class ErrorSummary:
     within_pass_um: float | None
     iso: LegIso230
     material_temp_c: float | None = None  # mean over the leg's points; None when not recorded
+    target_spacing_mm: float | None = None  # median spacing of the leg's distinct targets; None for one target
 
     def to_json(self) -> dict[str, Any]:
         return {
             "n_points": self.n_points, "n_cycles": self.n_cycles, "mean_um": self.mean_um, "rms_um": self.rms_um,
             "rms_raw_um": self.rms_raw_um, "range_um": self.range_um, "noise_floor_um": self.noise_floor_um,
             "within_pass_um": self.within_pass_um, "material_temp_c": self.material_temp_c,
+            "target_spacing_mm": self.target_spacing_mm,
             "iso230": {k: self.iso.values.get(k) for k in self.iso.values},
             "iso230_not_computed": dict(self.iso.reasons),
         }
@@ -132,6 +139,7 @@ def summarize(points: np.ndarray, leg: int, source: str = "the session") -> Erro
     pts = np.asarray(points)
     temps = pts["material_temp_c"][pts["leg"] == int(leg)]
     temps = temps[np.isfinite(temps)]
+    targets = np.unique(np.round(pts["target_mm"][pts["leg"] == int(leg)], 6))
     return ErrorSummary(
         n_points=data.n_points,
         n_cycles=data.n_cycles,
@@ -143,6 +151,7 @@ def summarize(points: np.ndarray, leg: int, source: str = "the session") -> Erro
         within_pass_um=nf.within_pass_um,
         iso=evaluate_leg(np.asarray(points), int(leg)),
         material_temp_c=float(np.mean(temps)) if temps.size else None,
+        target_spacing_mm=float(np.median(np.diff(targets))) if targets.size > 1 else None,
     )
 
 
@@ -151,6 +160,12 @@ def verify(after_points: np.ndarray, before_points: np.ndarray | None = None, le
            ) -> dict[int, LegVerification]:
     """Per-leg verification figures (see the module docstring) for `legs` (default: every leg
     of the verification). InputError when a leg has no points in either session."""
+    # on-the-fly readings: their static part, as `station fit` takes it (procedures/fit/dynamic.py),
+    # so the noise floor and residual are those of the error the table corrects, not of two speeds
+    if len(after_points) and is_onthefly(after_points):
+        after_points = static_points(after_points, after_source)
+    if before_points is not None and len(before_points) and is_onthefly(before_points):
+        before_points = static_points(before_points, before_source)
     after_legs = sorted({int(v) for v in np.asarray(after_points)["leg"]}) if len(after_points) else []
     chosen = sorted({int(x) for x in legs}) if legs is not None else after_legs
     if not chosen:
@@ -204,8 +219,25 @@ def format_report(results: dict[int, LegVerification]) -> str:
                     "calibration temperature, or see `station diagnose`")
         for note in a.iso.notes:
             lines.append(f"  note (after): {note}")
+        if r.passed is False:
+            lines.append(f"  next: {next_step(r)}")
         lines.append("")
     return "\n".join(lines)
+
+
+def next_step(r: LegVerification) -> str:
+    """What a technician does after an ABOVE verdict for leg `r.leg`: the likeliest cause first."""
+    b, a = r.before, r.after
+    again = "fit, make the table (its step follows the recording), push it and verify again"
+    if b is not None and b.target_spacing_mm is not None and b.target_spacing_mm > SCREW_RESOLVING_SPACING_MM:
+        return (f"the calibration's targets are {b.target_spacing_mm:.3g} mm apart, too far apart to resolve the "
+                f"screw's once-per-turn error, so the table cannot correct it: calibrate again with targets every 1 mm "
+                f"(`station sweep --step 1 --cycles 8 --legs {r.leg} ...`), {again} (README, calibration)")
+    if b is not None and b.material_temp_c is not None and a.material_temp_c is not None \
+            and abs(a.material_temp_c - b.material_temp_c) >= THERMAL_NOTE_K:
+        return "let the leg settle to the calibration's temperature and verify again (see the note above)"
+    return (f"`station diagnose` on the calibration names what the table leaves; calibrate again (more "
+            f"--cycles, or targets every 1 mm: `station sweep --step 1 --cycles 8 --legs {r.leg} ...`), {again}")
 
 
 # -- the procedure ---------------------------------------------------------------------------------

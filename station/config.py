@@ -249,7 +249,20 @@ class StationConfig:
 
     @property
     def is_sim(self) -> bool:
+        """The simulated rig. Only meaningful for a config check_devices() accepts: a mixed one
+        (one device simulated, the other real) is refused before anything connects."""
         return self.drive.url == "sim" or self.interferometer.port == "sim"
+
+    def check_devices(self) -> None:
+        """Refuse a config that mixes a simulated and a real device (`[drive] url = "tcp://..."`
+        with `[interferometer] port = "sim"`, or the reverse): the station cannot drive a real leg
+        and measure it with the simulator, and silently falling back on either would record,
+        verify or push something else than the file names. Both keys are named."""
+        drive_sim, laser_sim = self.drive.url == "sim", self.interferometer.port == "sim"
+        if drive_sim != laser_sim:
+            raise InputError(f"{self.source}: [drive] url = {self.drive.url!r} and [interferometer] port = "
+                             f"{self.interferometer.port!r} mix a simulated and a real device; name both real "
+                             "devices, or \"sim\" for both (the simulated rig); nothing was connected")
 
     @property
     def station_id(self) -> str:
@@ -307,6 +320,8 @@ class StationConfig:
         the real drive would not be told. `url = "sim"` / `port = "sim"` name the simulator."""
         if not self.from_file:
             return
+        if interferometer or "interferometer.port" in self.named:  # a drive-only file (push) names no port
+            self.check_devices()
         missing = [f"[{key.split('.')[0]}] {key.split('.')[1]}" for key, wanted in
                    (("drive.url", drive), ("interferometer.port", interferometer)) if wanted and key not in self.named]
         if missing:

@@ -50,6 +50,16 @@ def report_lines(result: ReportResult, model=None) -> list[str]:
     return lines
 
 
+def session_iso230(session, raw: bool = False) -> dict:
+    """The ISO 230-2 values of `session` with the expanded uncertainty U (k = 2) of each, on the
+    basis of `station fit` (normalised to 20 degC unless `raw`): the content of the report's
+    iso230-2.json (procedures.iso230_report.build), for the commands that print ISO values."""
+    from procedures.iso230_report import build
+
+    return build(session.points, plan=session.plan, devices=session.devices, station_config=session.station_config,
+                 attrs=session.attrs, source={"path": str(session.path), "sha256": session.sha256}, raw=raw)
+
+
 def iso_lines(iso: dict | None) -> list[str]:
     """One line per leg: the ISO 230-2 values with their expanded uncertainty (k = 2)."""
     if not iso:

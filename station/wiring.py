@@ -61,6 +61,7 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
     `noise_seed` (simulated rig only): seed of the measurement noise and pass offsets, so a
     later session (a verification) sees new noise on the same plant (`cfg.sim.seed`); None =
     the plant seed, which repeats a session's noise exactly."""
+    cfg.check_devices()  # a mixed config (one device simulated) is never opened, whichever front end asks
     profile = DriveProfile.load(cfg.drive.profile or None)
     if cfg.is_sim:
         from drivers.sim.rig import SimRig

@@ -33,6 +33,7 @@ from procedures.table import CompTable
 NAME = "twincat"
 # P-COMP-00059 sets the most table entries; 1500 by default (shared docs: real-world.md)
 SUFFIX = ".lis"
+STEM = "achskw{leg}"  # the file name TwinCAT NC expects per axis
 UNIT_MM = 1e-4  # 0.1 um
 RESOLUTION_MM = UNIT_MM
 LIMITS = TableSpec(max_points=1500, max_correction_um=1000.0, entry_resolution_um=0.0, min_step_mm=1e-4,
@@ -63,7 +64,7 @@ def text(t) -> str:
 def write(table: CompTable, out: str | os.PathLike, spec=None) -> list[Path]:
     """One compensation value list per leg (`OUT/achskw<N>.lis`, or `<name>_achskw<N>.lis`)."""
     checked(table, spec or LIMITS, out)
-    paths = leg_paths(out, table.legs, SUFFIX, stem="achskw{leg}")
+    paths = leg_paths(out, table.legs, SUFFIX, stem=STEM)
     return write_files(out, {paths[leg]: text(t) for leg, t in table.legs.items()}, SUFFIX)
 
 

@@ -63,8 +63,10 @@ def text_report(report: dict) -> str:
             lines.append(f"  twin: {tw.get('kind')}; zero offset of the recording against it {_um(tw.get('offset_um', 0), True)} um")
         g = leg["gap"]
         lines.append(f"  gap: RMS {_um(g['rms_um'])} um, peak to peak {_um(g['p2p_um'])} um, mean {_um(g['mean_um'], True)} um")
-        # the noise floor to 3 decimals, as station fit and station report print it
-        lines.append(f"  noise floor {_f(leg.get('noise_floor_um'), '.3f')} um (as station fit); repeat scatter after effects "
+        # the noise floor to 3 decimals, as station fit and station report print it; of the RAW error
+        # (the diagnosis keeps thermal expansion as an effect), so it is station fit --raw's figure
+        lines.append(f"  noise floor {_f(leg.get('noise_floor_um'), '.3f')} um (raw error, as station fit --raw); "
+                     "repeat scatter after effects "
                      f"{_f(leg.get('repeat_scatter_after_effects_um'))} um")
         lines.append(f"  where: {leg['dominant']}")
         vs = leg["variance_share_pct"]

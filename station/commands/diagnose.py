@@ -22,6 +22,7 @@ from procedures.diagnosis import DiagnosisSettings, to_json
 from procedures.diagnosis.selfcheck import Trial, format_self_check, run_self_check
 from procedures.diagnosis.text_report import text_report
 from procedures.errors import InputError
+from procedures.outputs import check_output_file
 from station.twins import load_twin, plant_twin
 
 NAME = "diagnose"
@@ -42,6 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="MODEL.json (station fit), REFERENCE.h5 (a twin fitted on another recording), or "
                         "sim:CONFIG.toml / sim:default (the simulated plant's systematic error)")
     p.add_argument("--json", metavar="OUT", help="write the report (or the self-check results) as JSON")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--threshold-um", type=float, default=0.1,
                    help="name an effect only if it explains more than this on held-out passes, um (default 0.1)")
     p.add_argument("--alpha", type=float, default=1e-3, help="significance level against pass scatter (default 0.001)")
@@ -70,6 +72,8 @@ def _settings(args) -> DiagnosisSettings:
 
 def run(args) -> int:
     settings = _settings(args)
+    if args.json:  # before the (long) diagnosis or self-check
+        check_output_file(args.json, force=args.force, option="--json")
     if args.self_check:
         if args.file:
             raise InputError("--self-check makes its own sessions; drop FILE.h5")

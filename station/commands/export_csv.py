@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from procedures.csv_io import export_csv
+from procedures.outputs import check_output_file
 from station.report_jobs import export_lines
 
 NAME = "export"
@@ -23,6 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    check_output_file(args.out, force=args.force)
     summary = export_csv(Path(args.h5), Path(args.out), overwrite=args.force)
     for line in export_lines(summary):
         print(line)

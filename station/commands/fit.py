@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from procedures.errors import InputError
+from procedures.outputs import check_output_file
 from procedures.fit import fit, save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
 from procedures.metrology.thermal import error_basis
@@ -44,6 +45,7 @@ def _lead(text: str) -> float | str | None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("session", metavar="FILE.h5", help="recorded session")
     p.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--method", choices=["default", "paper"], default="default",
                    help="default: bidirectional, size by cross-validation; paper: Algorithm 1 of the seed paper")
     p.add_argument("--params", type=int, default=DEFAULT_N_PARAMS, metavar="N",
@@ -64,9 +66,7 @@ def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
 def run(args) -> int:
     if args.params < 1:
         raise InputError(f"--params must be >= 1, got {args.params}")
-    out = Path(args.out)
-    if out.parent and not out.parent.is_dir():
-        raise InputError(f"{out}: directory {out.parent} does not exist")
+    out = check_output_file(args.out, force=args.force)  # before the fit (procedures/outputs.py)
     session = read_session(args.session)
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")

@@ -7,6 +7,7 @@ import tempfile
 from pathlib import Path
 
 from procedures.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
+from procedures.outputs import check_output_file
 from procedures.plans import parse_legs
 from procedures.ranges import MAX_ERROR_UM, PointLimits
 from station import __version__
@@ -32,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--legs", default="1-6", help="legs the file holds, e.g. 1-6 or 1,3 (default 1-6); "
                    "a point of another leg is refused")
     p.add_argument("--map", metavar="MAP.toml", help="mapping file for another software's layout (docs/import.md)")
+    p.add_argument("--accept-implausible", action="store_true",
+                   help="keep values that look like a unit slip (a degC value that looks like degF, an um value that "
+                        "looks like nm): refused by default, naming line and field")
     p.add_argument("--profile", metavar="PROFILE.toml",
                    help="drive profile whose soft limits bound target_mm (default: the built-in profile)")
 
@@ -45,23 +49,28 @@ def import_limits(legs: str = "1-6", profile: str | None = None) -> PointLimits:
 
 
 def run(args) -> int:
+    check_output_file(args.out, force=args.force, suffixes=(".h5",))
     limits = import_limits(args.legs, args.profile)
+    warnings: list[str] = []
     if args.map:
-        session = _import_mapped(args, limits)
+        session = _import_mapped(args, limits, warnings)
     else:
         session = import_csv(Path(args.csv), Path(args.out), operator=args.operator, software_version=__version__,
-                             overwrite=args.force, limits=limits)
+                             overwrite=args.force, limits=limits,
+                             accept_implausible=args.accept_implausible, warnings=warnings)
     pts = session.points
     legs = ", ".join(str(leg) for leg in session.legs)
     runs = len({(int(r["leg"]), int(r["run"])) for r in pts[["leg", "run"]]})
     optional = session.plan.get("optional_columns") or []
+    for line in warnings:
+        print(line)
     print(f"imported {len(pts)} points (legs {legs}; {runs} runs) from {args.csv}")
     print(f"optional columns: {', '.join(optional) if optional else 'none (environment unknown)'}")
     print(f"session written: {args.out} (sha256 {session.sha256[:16]}...)")
     return 0
 
 
-def _import_mapped(args, limits):
+def _import_mapped(args, limits, warnings):
     """Convert through the map, then import the interchange CSV; its problems are reported in
     terms of the source file (its lines and column names)."""
     from procedures.errors import InputError
@@ -74,7 +83,8 @@ def _import_mapped(args, limits):
         tmp.write_text(converted.csv_text, encoding="utf-8")
         try:
             session = import_csv(tmp, Path(args.out), operator=args.operator, software_version=__version__,
-                                 overwrite=args.force, limits=limits)
+                                 overwrite=args.force, limits=limits,
+                             accept_implausible=args.accept_implausible, warnings=warnings)
         except InputError as exc:
             raise InputError(source_message(str(exc), tmp, Path(args.csv), converted)) from None
     print(f"map: {args.map} (" + ", ".join(f"{k} <- {v}" for k, v in converted.columns.items()) + ")")

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 
 from procedures.errors import InputError
+from procedures.outputs import check_output_file
 from procedures.iso230 import dumps, evaluate, format_table
 from procedures.metrology.thermal import error_basis
 from procedures.recording.reader import read_session
+from station.report_jobs import iso_lines, session_iso230
 
 NAME = "iso230"
 HELP = "ISO 230-2 values (E, M, A, B, R; up, down, both) of each leg in a session file"
@@ -23,11 +26,14 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("h5", metavar="FILE.h5", help="session file (import a CSV first with `station import`)")
     p.add_argument("--json", metavar="OUT", help="also write the values as JSON to OUT")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--raw", action="store_true",
                    help="evaluate the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
 
 
 def run(args) -> int:
+    if args.json:
+        check_output_file(args.json, force=args.force, option="--json")
     session = read_session(Path(args.h5))
     if not len(session.points):
         raise InputError(f"{args.h5}: the session holds no points")
@@ -37,9 +43,15 @@ def run(args) -> int:
     for line in basis_lines:
         print(line)
     print(format_table(results), end="")
+    iso = session_iso230(session, args.raw)  # the same values, each with its U (as station report)
+    for line in iso_lines(iso):
+        print(line)
     if args.json:
         out = Path(args.json)
-        text = dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis})
+        doc = json.loads(dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis}))
+        doc["expanded_uncertainty_um"] = {  # U (k = 2) beside every value, as the ISO 230-2 report gives it
+            leg: {name: v["U_um"] for name, v in entry["values"].items()} for leg, entry in iso["legs"].items()}
+        text = json.dumps(doc, indent=2, allow_nan=False)
         tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
         try:
             tmp.write_text(text + "\n")

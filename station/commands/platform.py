@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 from procedures.errors import InputError
+from procedures.outputs import check_output_folder
 from station.platform_jobs import load_errors, write_report
 
 NAME = "platform"
@@ -36,6 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", metavar="FILE.h5|MODEL.json|TABLE.csv",
                    help="a session file, a model file from `station fit`, or a table from `station table`")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the report and figures (created)")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--poses", type=int, default=2000, metavar="N", help="random poses (default 2000)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
     p.add_argument("--recording", metavar="FILE.h5", help="the session giving the measured errors (needed with "
@@ -67,12 +68,10 @@ def run(args) -> int:
         value = getattr(args, name)
         if not (math.isfinite(value) and value >= 0):
             raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
+    out = check_output_folder(args.out, force=args.force)  # before the poses are computed
     geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
     errors, other_errors, inputs = load_errors(args.source, recording=args.recording, measured=args.measured,
                                                profile=args.profile, raw=args.raw)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} is a file; give a directory.")
     workspace = Workspace(args.xy_mm, args.z_mm, math.radians(args.tilt_deg), math.radians(args.yaw_deg))
     # same seed for the other measurement, so the same poses and directions: only the measurement differs
     result, summary = run_measurements(geometry, errors, other_errors, poses=args.poses, seed=args.seed,

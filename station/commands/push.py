@@ -14,6 +14,7 @@ from procedures import events as ev
 from procedures.audit import AuditError, AuditLog
 from procedures.errors import InputError
 from procedures.plans import parse_legs
+from procedures.plausibility import check_table_values, settle
 from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
 from station.catalog.writer import catalog_for
@@ -28,7 +29,7 @@ from station.table_jobs import (
     refusal_job,
     target_text,
 )
-from station.wiring import drive_url_of, open_drive
+from station.wiring import drive_url_of, leg_table_spec, open_drive
 
 NAME = "push"
 HELP = "write a leg's compensation table to its drive (inactive bank, read back, switch), with an audit entry"
@@ -61,6 +62,8 @@ def add_drive_arguments(p: argparse.ArgumentParser, several: bool = False) -> No
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("table", metavar="TABLE.csv", help="table CSV from `station table` (it may hold several legs)")
     add_drive_arguments(p, several=True)
+    p.add_argument("--accept-implausible", action="store_true",
+                   help="push corrections beyond 100 um (refused by default: most likely nm in the um columns)")
 
 
 # -- shared by push / rollback / verify ------------------------------------------------------------
@@ -194,6 +197,17 @@ def run(args) -> int:
     controller = controller_refusal(cfg, legs, Action.PUSH)
     if controller:
         return refuse(args, cfg, audit, Action.PUSH, controller[0], InputError(controller[1]), sources[controller[0]])
+    for leg, t in tables.items():  # a unit slip (nm in the um columns) never reaches a drive unasked
+        try:
+            limit_um = leg_table_spec(cfg, leg).max_correction_um  # what its holder takes, without connecting
+        except InputError:
+            limit_um = float("inf")
+        found = check_table_values(t, str(args.table), limit_um)
+        try:
+            for line in settle([found] if found else [], args.accept_implausible, ""):  # refuse() adds it
+                print(line)
+        except InputError as exc:
+            return refuse(args, cfg, audit, Action.PUSH, leg, exc, sources[leg])
     print(f"drive: {drive_text(cfg)}")
     for leg in legs:  # the plan names every leg's target; said first where it is not the drive
         if cfg.compensation.target_of(leg) != "drive":

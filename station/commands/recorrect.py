@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from procedures.outputs import check_output_file
+
 from procedures.metrology.air import EQUATIONS
 from procedures.metrology.recorrect import RecorrectOptions, recorrect_session
 from station.config import load_config
@@ -24,6 +26,7 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("session", metavar="SESSION.h5", help="recorded session (not changed)")
     p.add_argument("--out", required=True, metavar="NEW.h5", help="the re-corrected session file to write")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")
     p.add_argument("--equation", choices=EQUATIONS, default="ciddor", help="refractive-index equation (default ciddor)")
     air = p.add_mutually_exclusive_group()
     air.add_argument("--air-temp-offset-c", type=float, default=0.0, metavar="K",
@@ -41,6 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
+    if args.force and out.exists() and out.resolve() != Path(args.session).resolve():
+        out.unlink()  # --force: the re-corrected session replaces it
     m = load_config(args.config).metrology
     options = RecorrectOptions(
         equation=args.equation,

@@ -41,11 +41,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=parse_speed, default=None, metavar="1|N|max",
                    help="1 = real time, N = N times faster, max = as fast as possible (default max)")
     p.add_argument("--out", metavar="NEW.h5", help="session file to record (default FILE.replay.h5 beside FILE)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")
 
 
 # -- the command -----------------------------------------------------------------------------------
 
 def run(args) -> int:
+    from procedures.outputs import check_output_file
     from station.config import load_config
     from station.progress import ConsoleProgress
     from station.wiring import open_replay_rig
@@ -55,13 +57,14 @@ def run(args) -> int:
     out = Path(args.out) if args.out else source.with_name(source.stem + ".replay.h5")
     if out.resolve() == source.resolve():
         raise InputError(f"--out {out} is the recording being replayed; choose another file")
-    if out.exists():
-        raise InputError(f"{out} exists; choose another --out (a replay never overwrites a session)")
+    check_output_file(out, force=args.force, suffixes=(".h5",))
     if not session.plan:
         raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
     cfg = load_config(None)
     pace = "as fast as possible" if args.speed is None else ("real time" if args.speed == 1 else f"{args.speed:g}x real time")
     print(f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) {pace}")
+    if args.force and out.exists():
+        out.unlink()  # --force: the new replay session replaces it
     with open_replay_rig(source, args.speed, cfg) as rig:
         result = replay_sweep(rig, session, out, cfg, sinks=[ConsoleProgress()])
         mismatch = rig.sim.mismatch

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from procedures.fit import load_model
+from procedures.outputs import check_output_folder
 from procedures.recording.reader import read_session
 from station.catalog.writer import catalog_for
 from station.commands.fit import _lead
@@ -29,6 +30,7 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("session", metavar="FILE.h5", help="recorded session")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the report files (created)")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--model", metavar="MODEL.json", help="model to compensate with (default: fit the default model)")
     p.add_argument("--lead-mm", type=_lead, default="auto", metavar="MM|auto|none",
                    help="screw lead to mark (and to fit with, without --model); default auto")
@@ -40,6 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    check_output_folder(args.out, force=args.force)  # before reading and fitting (procedures/outputs.py)
     session = read_session(args.session)
     model = load_model(args.model) if args.model else None
     result = session_report(session, args.out, model, lead_mm=args.lead_mm, raw=args.raw, model_name=args.model or "",

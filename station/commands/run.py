@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from procedures.plan_spec import PlanSpec, plan_from_spec
+from procedures.outputs import check_output_file
 from procedures.plans import parse_legs
+from station.commands.sweep import check_time_scale
 from station.config import load_config
 from station.jobs import run_sweep
 from procedures.control import RunControl
@@ -35,7 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     cfg = load_config(None)
     plan = plan_from_spec(PlanSpec(legs=parse_legs(args.legs), kind="iso230", cycles=args.cycles))
-    out = Path(args.out or f"{cfg.recordings_dir}/run-{time.strftime('%Y%m%d-%H%M%S')}.h5")
+    check_time_scale(args.time_scale)
+    out = check_output_file(args.out or f"{cfg.recordings_dir}/run-{time.strftime('%Y%m%d-%H%M%S')}.h5",
+                            suffixes=(".h5",), make_parents=True)
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:
@@ -46,5 +49,14 @@ def run(args) -> int:
     from procedures.iso230 import evaluate, format_table
     from procedures.recording.reader import read_session
 
-    print(format_table(evaluate(read_session(out).points)))
+    from procedures.metrology.thermal import error_basis
+    from station.report_jobs import iso_lines, session_iso230
+
+    session = read_session(out)
+    points, basis_lines, _ = error_basis(session, False)  # as station iso230 / fit: normalised to 20 degC
+    for line in basis_lines:
+        print(line)
+    print(format_table(evaluate(points)))
+    for line in iso_lines(session_iso230(session)):  # each value with its expanded uncertainty U (k = 2)
+        print(line)
     return 0

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import math
+import shlex
 from pathlib import Path
 
 from procedures.errors import InputError
+from procedures.outputs import check_appendable, check_output_file
 from procedures.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
 from procedures.plans import parse_legs, SweepPlan
 from station.config import load_config
@@ -32,6 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     where.add_argument("--sim", action="store_true", help="use the simulated rig (default without --config)")
     where.add_argument("--config", help="station TOML naming the real drives and interferometer")
     p.add_argument("--out", help="session file to write (FILE.h5)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")
     p.add_argument("--resume", metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
     p.add_argument("--plan", choices=PLAN_KINDS, default="iso230",
                    help="sweep plan (default iso230); onthefly: constant-speed passes captured at every step "
@@ -72,15 +76,30 @@ def build_plan(args) -> SweepPlan:
     return plan_from_spec(plan_spec(args))
 
 
+def check_time_scale(time_scale: float | None) -> None:
+    """--time-scale: real seconds per simulated second, a finite number >= 0 (or not given)."""
+    if time_scale is not None and not (math.isfinite(time_scale) and time_scale >= 0):
+        raise InputError(f"--time-scale must be a number >= 0 (real seconds per simulated second; 0 = no "
+                         f"waiting), got {time_scale:g}")
+
+
+def resume_command(out: Path, cfg, config: str | None) -> str:
+    """The line that finishes `out`, its paths quoted for the shell (a space in a folder name)."""
+    where = "--sim" if config is None else f"--config {shlex.quote(str(config))}"
+    return f"resume with: station sweep --resume {shlex.quote(str(out))} {where}"
+
+
 def run(args) -> int:
     cfg = load_config(args.config)
     cfg.require_devices()
     serials = parse_serial_args(args.serial)
     leg_fields(cfg, serials, args.serials)  # a bad serials file is refused before anything moves
+    check_time_scale(args.time_scale)
     if args.seed is not None:
         cfg.sim.seed = args.seed
+    # every output is checked before anything connects or moves (procedures/outputs.py)
     if args.resume:
-        out = Path(args.resume)
+        out = check_appendable(args.resume)
         if args.out and Path(args.out) != out:
             raise InputError("--resume appends to the session it names; drop --out")
         if args.serial or args.serials:
@@ -90,16 +109,16 @@ def run(args) -> int:
     else:
         if not args.out:
             raise InputError("--out FILE.h5 is required (where to record the session)")
-        out = Path(args.out)
-        if out.exists():
-            raise InputError(f"{out} exists; choose another --out, or --resume {out} to finish it")
-        if not out.parent.is_dir():
-            raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first or choose "
-                             "another --out (nothing is created behind your back)")
+        if Path(args.out).exists() and not args.force and Path(args.out).suffix.lower() == ".h5":
+            raise InputError(f"--out {args.out}: exists; add --force to replace it, choose another --out, or "
+                             f"--resume {args.out} to finish it; nothing was written")
+        out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
         plan = build_plan(args)
+        if args.force and out.exists():
+            out.unlink()  # --force: the new session replaces it (after the plan was accepted)
     for note in plan.notes:
         print(f"note: {note}")
-    resume_hint = f"resume with: station sweep --resume {out}" + (" --sim" if cfg.is_sim else f" --config {args.config}")
+    resume_hint = resume_command(out, cfg, args.config)
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:

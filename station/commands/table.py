@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -11,7 +12,9 @@ from procedures import controllers
 from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
-from procedures.table import LINUXCNC_LIMITS, make_table, write_linuxcnc_comp, write_table_csv
+from procedures.outputs import check_output_file
+from procedures.plausibility import check_correction, settle
+from procedures.table import LINUXCNC_LIMITS, linuxcnc_paths, make_table, write_linuxcnc_comp, write_table_csv
 from station.catalog.writer import catalog_for, register
 from station.config import load_config
 from station.wiring import drive_table_spec
@@ -50,6 +53,35 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
     p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
                    "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
+    p.add_argument("--force", action="store_true", help="replace the output file(s) if they exist (default: refused)")
+    p.add_argument("--accept-implausible", action="store_true",
+                   help="write a table whose corrections span more than the recorded error did (refused by default)")
+
+
+def output_paths(fmt: str, out: str, legs) -> list[Path]:
+    """The files `--format fmt --out out` writes for `legs`, known before the table is made."""
+    if fmt == "csv":
+        return [Path(out)]
+    if fmt == "linuxcnc":
+        return list(linuxcnc_paths(out, legs).values())
+    from procedures.controllers.common import leg_paths
+
+    module = controllers.module(fmt)
+    return list(leg_paths(out, legs, module.SUFFIX, stem=getattr(module, "STEM", "leg{leg}")).values())
+
+
+def implausible_corrections(model, table) -> list:
+    """The legs of `table` whose corrections span more than the error `model` was fitted to
+    (procedures.plausibility.check_correction)."""
+    source = model.source.get("path") or "the model's recording"
+    found = []
+    for leg, t in table.legs.items():
+        values = np.concatenate([np.asarray(t.error_fwd_um, float), np.asarray(t.error_rev_um, float)])
+        finding = check_correction(leg, float(values.max() - values.min()), float(model.legs[leg].stats.range_before_um),
+                                   source)
+        if finding is not None:
+            found.append(finding)
+    return found
 
 
 def run(args) -> int:
@@ -59,6 +91,8 @@ def run(args) -> int:
         missing = [x for x in legs if x not in model.legs]
         if missing:
             raise InputError(f"{args.model}: the model has no leg(s) {missing} (it has {list(model.legs)})")
+    for path in output_paths(args.format, args.out, legs or list(model.legs)):  # before anything is made
+        check_output_file(path, force=args.force, make_parents=args.format != "csv")
     if args.format in controllers.FORMATS:
         fmt = controllers.module(args.format)
         limits = fmt.LIMITS
@@ -77,6 +111,7 @@ def run(args) -> int:
                   "station's table store (compensation target station, docs/compensation.md); for the "
                   "controller use --format linuxcnc")
     table = make_table(model, args.step, limits, legs=legs)
+    warnings = settle(implausible_corrections(model, table), args.accept_implausible)
     if args.format == "csv":
         written = [write_table_csv(table, args.out, limits)]
         register(catalog_for(load_config(args.config)), written[0], "table")
@@ -87,6 +122,8 @@ def run(args) -> int:
     else:
         written = write_linuxcnc_comp(table, args.out, args.comp_type, limits)
     print(f"model: {args.model} ({model.method}; from {model.source.get('path') or 'unknown recording'})")
+    for line in warnings:
+        print(line)
     basis = model.options.get("error_basis")
     if isinstance(basis, dict):  # what `station fit` fitted (docs/metrology.md)
         ref = basis.get("reference_temp_c", 20.0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import secrets
 import sys
 from dataclasses import replace
@@ -11,11 +12,13 @@ from pathlib import Path
 
 from procedures import events as ev
 from procedures.errors import InputError
+from procedures.outputs import check_output_file
 from procedures.plans import SweepPlan, iso230_plan
 from procedures.recording.reader import read_session
 from procedures.states import Action, AuditOutcome
 from procedures.verify import ACCEPT_RATIO
 from station.commands.push import audit_log, parse_leg_choice, station_config
+from station.commands.sweep import check_time_scale
 from station.progress import ConsoleProgress
 from station.table_jobs import controller_refusal, expected_tables, refusal_job, target_text, verify_job
 from station.wiring import drive_url_of, leg_table_spec, open_rig
@@ -44,6 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cycles", type=int, help="without --before: ISO 230-2 cycles (default 5)")
     p.add_argument("--audit", metavar="FILE", help="audit log (default <recordings_dir>/audit.jsonl)")
     p.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    p.add_argument("--force", action="store_true", help="replace --out / --json if they exist (default: refused)")
     p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile (default: the config's, or the built-in one)")
     p.add_argument("--time-scale", type=float, metavar="S", help="simulated rig only: real seconds per simulated second")
     p.add_argument("--seed", type=int, help="simulated rig only: plant seed (as for `station sweep`)")
@@ -53,6 +57,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--raw", action="store_true",
                    help="compare the raw errors (default: both sessions normalised to 20 degC material temperature, "
                         "docs/metrology.md)")
+
+
+NOISE_SEED_ENV = "STATION_SIM_NOISE_SEED"
+"""Simulated rig only: the verification's noise seed when --noise-seed is not given (a demo or a
+test that repeats exactly: tests/station/test_readme_calibration.py); unset = a new seed each time."""
+
+
+def default_noise_seed() -> int:
+    """$STATION_SIM_NOISE_SEED when set (InputError unless a whole number), else a new random seed."""
+    text = os.environ.get(NOISE_SEED_ENV, "").strip()
+    if not text:
+        return secrets.randbelow(1 << 31)
+    try:
+        return int(text)
+    except ValueError:
+        raise InputError(f"${NOISE_SEED_ENV} = {text!r}: give a whole number (or unset it for a new seed)") from None
 
 
 def _plan(args, legs: tuple[int, ...], before) -> SweepPlan:
@@ -95,9 +115,11 @@ def run(args) -> int:
     if controller:
         job = refusal_job(Action.VERIFY, controller[0], controller[1], audit=audit, drive_url=drive_url_of(cfg))
         raise InputError(job.finished.message)
-    out = Path(args.out)
-    if out.exists():
-        raise InputError(f"{out}: exists; choose another --out (a verification is a new session)")
+    check_time_scale(args.time_scale)
+    # every output checked before anything connects or moves (procedures/outputs.py)
+    out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
+    if args.json:
+        check_output_file(args.json, force=args.force, option="--json")
     before = read_session(args.before) if args.before else None
     plan = _plan(args, legs, before)
     expected: dict[int, str] = {}
@@ -106,10 +128,12 @@ def run(args) -> int:
             expected.update(expected_tables(args.table, (leg,), leg_table_spec(cfg, leg)))
     noise_seed = None
     if cfg.is_sim:
-        noise_seed = args.noise_seed if args.noise_seed is not None else secrets.randbelow(1 << 31)
+        noise_seed = args.noise_seed if args.noise_seed is not None else default_noise_seed()
         if noise_seed == cfg.sim.seed:
             print(f"note: noise seed {noise_seed} = plant seed: the sweep repeats the noise of a `station sweep --sim` "
                   "of the same plan exactly, so it is not an independent verification")
+    if args.force and out.exists():
+        out.unlink()  # --force: the new verification session replaces it
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale, noise_seed=noise_seed) as rig:
         print(f"rig: {rig.description}" + (f"; plant seed {cfg.sim.seed}, noise seed {noise_seed}" if cfg.is_sim else ""))
         for leg in plan.legs:

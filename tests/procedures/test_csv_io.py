@@ -140,7 +140,7 @@ def test_existing_output_is_not_replaced_without_overwrite(shared_data, tmp_path
     src = shared_data / "real" / "ecmccomgui_report_7.csv"
     out = tmp_path / "s.h5"
     out.write_bytes(b"precious")
-    with pytest.raises(InputError, match="file exists"):
+    with pytest.raises(InputError, match="exists; add --force"):
         import_csv(src, out)
     assert out.read_bytes() == b"precious"
     assert len(import_csv(src, out, overwrite=True).points) == 50

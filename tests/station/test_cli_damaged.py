@@ -118,7 +118,10 @@ def test_import_accepts_values_at_the_edges_of_the_ranges(tmp_path, capsys):
     text = HEADER + "".join(r + "\n" for r in GOOD)
     text += "6,3,1,-95,-1000,0,-10,-10,500,0,-100000\n6,3,1,95,1000,2678400,80,50,1100,100,100000\n"
     src.write_text(text)
-    assert main(["import", str(src), "--out", str(tmp_path / "s.h5")]) == 0, capsys.readouterr().err
+    # possible, but at 80 degC, 50 degC and 1000 um more likely degF and nm: kept only when the user says so
+    assert main(["import", str(src), "--out", str(tmp_path / "s.h5")]) == 2
+    assert "--accept-implausible" in capsys.readouterr().err
+    assert main(["import", str(src), "--out", str(tmp_path / "s.h5"), "--accept-implausible"]) == 0, capsys.readouterr().err
 
 
 def test_import_refuses_a_leg_outside_the_legs_declared(tmp_path, capsys):

@@ -66,7 +66,7 @@ def test_existing_outputs_need_force(shared_data, tmp_path, capsys):
     h5, back = tmp_path / "s.h5", tmp_path / "b.csv"
     assert main(["import", str(src), "--out", str(h5)]) == 0
     assert main(["import", str(src), "--out", str(h5)]) == 2
-    assert "file exists" in capsys.readouterr().err
+    assert "exists; add --force to replace it" in capsys.readouterr().err
     assert main(["import", str(src), "--out", str(h5), "--force"]) == 0
     back.write_text("keep me")
     assert main(["export", str(h5), "--out", str(back)]) == 2
