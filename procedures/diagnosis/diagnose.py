@@ -98,7 +98,8 @@ def prepare_leg(leg: LegData, twin: Twin | None, settings: DiagnosisSettings,
         else:
             info = {"kind": "fitted", "form": "trend + sinusoids", "trend": pfit.basis.trend,
                     "sinusoids": len(pfit.basis.freqs_per_mm),
-                    "wavelengths_mm": [1.0 / f for f in pfit.basis.freqs_per_mm], "heldout_rms_um": pfit.cv_rms_um}
+                    "wavelengths_mm": [1.0 / f for f in pfit.basis.freqs_per_mm], "heldout_rms_um": pfit.cv_rms_um,
+                    "condition_number": pfit.condition_number}
         if pfit.cv_rms_um is None:
             info["heldout_rms_note"] = pfit.note
     else:
