@@ -159,8 +159,8 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
            "noise_floor_um": noise_floor(leg.x_mm, leg.direction, leg.run, leg.error_um).noise_floor_um}
     cannot = _cannot_conclude(leg, s, twin is not None)
 
-    def where(scatter_um):
-        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, scatter_um))
+    def where(scatter_um, explained_um=None):
+        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, scatter_um, explained_um))
         for p in rep.get("outlier_passes", []):
             cannot.append(f"run {p['run']} is {p['offset_um']:+.3g} um off the other passes: it dominates the pass "
                           "scatter against which effects are tested")
@@ -212,7 +212,7 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
         "offsets included" + (f"; {int(outliers.sum())} outlier point(s) left out)" if outliers.any() else ")"))
     rep["within_pass_scatter_after_effects_um"] = final.gls.sigma_e_um
     rep["pass_offset_scatter_after_effects_um"] = final.gls.sigma_u_um
-    where(rep["repeat_scatter_after_effects_um"])
+    where(rep["repeat_scatter_after_effects_um"], problem.effect_part_um(final) if chosen else None)
     # before/after in the order the effects were chosen, each on top of the ones before it; two
     # effects that only help together (chosen as a pair) share their before/after
     steps, i = [], 0

@@ -100,6 +100,9 @@ def text_report(report: dict) -> str:
             lines.append(f"  lead: {sp['lead_note']}")
         for p in leg.get("outlier_passes", []):
             lines.append(f"  outlier pass: run {p['run']} is {p['offset_um']:+.3g} um off the other passes of its direction")
+        for p in leg.get("passes_explained_by_temperature", []):
+            lines.append(f"  run {p['run']} is {p['offset_um']:+.3g} um off the other passes, explained by its material "
+                         f"temperature ({p['temp_c']:.2f} C, {p['um_per_k']:+.3g} um/K): not an outlier")
         op = leg.get("outlier_points") or {}
         if op.get("count"):
             w = op["worst"][0]

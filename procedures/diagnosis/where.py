@@ -131,11 +131,49 @@ def by_target(leg: LegData, gap_um: np.ndarray) -> dict:
     return out
 
 
+def outlier_passes(leg: LegData, threshold_um: float, explained_um: np.ndarray | None = None):
+    """(outlier passes, passes explained by temperature). How far each pass lies from the median
+    of its repeats (same target and direction), on the errors themselves so the twin cannot blur
+    it, with the named effects (`explained_um`, um per point) taken out; robust scale over
+    passes. A pass off the others only because the leg was colder or warmer then (the cold first
+    pass of a warm-up) is not an outlier: when the material temperature is recorded, a line of
+    pass offset against pass temperature fitted on the other passes that predicts it within the
+    outlier limit explains it."""
+    if leg.n_passes < 4:
+        return [], []
+    counts = np.bincount(leg.pass_id).astype(float)
+    err = leg.error_um if explained_um is None else leg.error_um - explained_um
+    _, cinv = np.unique(leg.target_id * 2 + (leg.direction > 0), return_inverse=True)
+    from_repeats = err - group_median(err, cinv)[cinv]
+    dev = np.bincount(leg.pass_id, from_repeats) / counts
+    dev = dev - np.median(dev)
+    scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
+    limit = max(5 * scale, threshold_um)
+    temp = np.bincount(leg.pass_id, leg.temp_c) / counts if leg.has_temp else None
+    outliers, explained = [], []
+    for p in range(leg.n_passes):
+        if abs(dev[p]) <= limit:
+            continue
+        entry = {"run": int(leg.run[leg.pass_id == p][0]), "offset_um": float(dev[p])}
+        if temp is not None:
+            others = np.arange(leg.n_passes) != p
+            line = _line(temp[others], dev[others])
+            if line is not None:
+                pred = float(np.mean(dev[others]) + line[0] * (temp[p] - np.mean(temp[others])))
+                if abs(dev[p] - pred) <= limit:
+                    explained.append({**entry, "temp_c": float(temp[p]), "predicted_um": pred, "um_per_k": line[0]})
+                    continue
+        outliers.append(entry)
+    return outliers, explained
+
+
 def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: float | None = 5.0,
-              regions: int = 4, threshold_um: float = 0.1, scatter_um: float | None = None) -> dict:
+              regions: int = 4, threshold_um: float = 0.1, scatter_um: float | None = None,
+              explained_um: np.ndarray | None = None) -> dict:
     """The where-report of one leg (JSON-able dict; units in the keys). `scatter_um` (the
     repeat scatter after effects), when known, lets the words say that a gap is no larger than
-    the scatter of repeat passes."""
+    the scatter of repeat passes; `explained_um` (the named effects at every point, um) is taken
+    out before passes are called outliers."""
     g = gap_um
     n = g.size
     counts = np.bincount(leg.pass_id).astype(float)
@@ -184,19 +222,9 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
         if line:
             trend = {"um_per_pass": line[0], "r": line[1], "note": "no time recorded: trend against pass order"}
     out["pass_trend"] = trend or None
-    # outlier passes: how far each pass lies from the median of its repeats (same target and
-    # direction), on the errors themselves so the twin cannot blur it; robust scale over passes
-    out["outlier_passes"] = []
-    if leg.n_passes >= 4:
-        _, cinv = np.unique(leg.target_id * 2 + (leg.direction > 0), return_inverse=True)
-        from_repeats = leg.error_um - group_median(leg.error_um, cinv)[cinv]
-        dev = np.bincount(leg.pass_id, from_repeats) / counts
-        dev = dev - np.median(dev)
-        scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
-        out["outlier_passes"] = [
-            {"run": int(leg.run[leg.pass_id == p][0]), "offset_um": float(dev[p])}
-            for p in range(leg.n_passes) if abs(dev[p]) > 5 * scale and abs(dev[p]) > threshold_um
-        ]
+    out["outlier_passes"], explained = outlier_passes(leg, threshold_um, explained_um)
+    if explained:
+        out["passes_explained_by_temperature"] = explained
     dev = point_deviations(leg, g)
     bad = np.flatnonzero(outlier_mask(leg, g, threshold_um))
     worst = bad[np.argsort(-np.abs(dev[bad]))][:5]
