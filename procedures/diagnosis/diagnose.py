@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from procedures.diagnosis.aliasing import sampling_warning
 from procedures.diagnosis.blas import single_threaded_blas
 from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
 from procedures.diagnosis.legdata import LegData, split_legs
@@ -55,6 +56,7 @@ class DiagnosisSettings:
     regions: int = 4
     effects: tuple[str, ...] = tuple(EFFECTS)
     holdout: str = "cycle"
+    motor_turn_mm: float | None = None  # travel per motor turn (lead / gear ratio): checked as an alias source
 
     def __post_init__(self):
         unknown = [e for e in self.effects if e not in EFFECTS]
@@ -66,6 +68,8 @@ class DiagnosisSettings:
             raise InputError(f"alpha must be between 0 and 1, got {self.alpha}")
         if self.lead_mm is not None and not self.lead_mm > 0:
             raise InputError(f"lead_mm must be positive, got {self.lead_mm}")
+        if self.motor_turn_mm is not None and not self.motor_turn_mm > 0:
+            raise InputError(f"motor_turn_mm must be positive, got {self.motor_turn_mm}")
         if self.holdout not in ("cycle", "pass"):
             raise InputError(f"holdout must be 'cycle' or 'pass', got {self.holdout!r}")
         if self.regions < 1 or self.max_folds < 2:
@@ -160,7 +164,8 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     cannot = _cannot_conclude(leg, s, twin is not None)
 
     def where(scatter_um, explained_um=None):
-        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, scatter_um, explained_um))
+        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, scatter_um, explained_um,
+                             s.motor_turn_mm))
         for p in rep.get("outlier_passes", []):
             cannot.append(f"run {p['run']} is {p['offset_um']:+.3g} um off the other passes: it dominates the pass "
                           "scatter against which effects are tested")
@@ -239,6 +244,11 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
                 "heldout_rms_alone_after_um": problem.cv_rms((e,)),
                 "p_value": p, "f_stat": f, "df_denominator": df2,
             })
+            if e.name == "cyclic":
+                warn = sampling_warning(params["wavelength_mm"], leg.spacing_mm, float(np.ptp(leg.x_mm)), s.lead_mm,
+                                        s.motor_turn_mm)
+                if warn:
+                    findings[-1]["sampling"] = warn
     after_all = problem.cv_rms(chosen)
     rep["combined"] = {"effects": [e.name for e in chosen], "heldout_rms_before_um": baseline,
                        "heldout_rms_after_um": after_all,

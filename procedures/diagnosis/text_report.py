@@ -46,6 +46,9 @@ def text_report(report: dict) -> str:
                 how = f" (on top of {', '.join(f['added_to'])})"
             lines.append(f"      held-out gap {f['heldout_rms_before_um']:.3g} -> {f['heldout_rms_after_um']:.3g} um RMS{how} "
                          f"({f['shrink_pct']:.0f} % smaller), p = {f['p_value']:.2g}")
+            for extra in ("sampling", "temperature_difference"):
+                if (f.get(extra) or {}).get("note"):
+                    lines.append(f"      NOTE: {f[extra]['note']}")
     else:
         lines.append("FINDINGS: none (no candidate effect is both significant and above the threshold)")
     for key, leg in report["legs"].items():
@@ -93,6 +96,7 @@ def text_report(report: dict) -> str:
         if sp.get("peaks"):
             lines.append("  spectrum peaks: " + ", ".join(f"{p['wavelength_mm']:.3g} mm {p['amplitude_um']:.3g} um"
                                                           for p in sp["peaks"]))
+            lines += [f"    NOTE: {p['sampling']['note']}" for p in sp["peaks"] if p.get("sampling")][:1]
         if sp.get("lead_amplitude_um") is not None:
             lines.append(f"  at the {sp['lead_mm']:g} mm lead: {_um(sp['lead_amplitude_um'])} um"
                          + (" (a peak)" if sp.get("lead_is_peak") else ""))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from procedures.diagnosis.aliasing import sampling_warning
 from procedures.diagnosis.effects import cyclic_grid
 from procedures.diagnosis.legdata import LegData
 from procedures.diagnosis.twin import sinusoid_scan
@@ -42,9 +43,11 @@ def _region_name(i: int, n: int) -> str:
     return f"region {i + 1} of {n}"
 
 
-def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means: np.ndarray) -> dict:
+def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means: np.ndarray,
+             motor_turn_mm: float | None = None) -> dict:
     """Peaks of the least-squares sinusoid scan of the per-position mean gap (pass offsets
-    removed), and the amplitude at the screw lead."""
+    removed), each with a sampling warning when it may be an alias (aliasing.py), and the
+    amplitude at the screw lead."""
     lo, hi = leg.span_mm
     out: dict = {"peaks": [], "lead_mm": lead_mm}
     r = gap_um - pass_means[leg.pass_id]
@@ -61,6 +64,10 @@ def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means
     floor = float(np.median(amp))
     peaks = sorted((i for i in peaks if amp[i] > 3 * floor), key=lambda i: -amp[i])[:3]
     out["peaks"] = [{"wavelength_mm": float(1 / grid[i]), "amplitude_um": float(amp[i])} for i in peaks]
+    for p in out["peaks"]:
+        warn = sampling_warning(p["wavelength_mm"], leg.spacing_mm, hi - lo, lead_mm, motor_turn_mm)
+        if warn:
+            p["sampling"] = warn
     out["median_amplitude_um"] = floor
     if lead_mm:
         if lead_mm < 2 * leg.spacing_mm:
@@ -169,7 +176,7 @@ def outlier_passes(leg: LegData, threshold_um: float, explained_um: np.ndarray |
 
 def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: float | None = 5.0,
               regions: int = 4, threshold_um: float = 0.1, scatter_um: float | None = None,
-              explained_um: np.ndarray | None = None) -> dict:
+              explained_um: np.ndarray | None = None, motor_turn_mm: float | None = None) -> dict:
     """The where-report of one leg (JSON-able dict; units in the keys). `scatter_um` (the
     repeat scatter after effects), when known, lets the words say that a gap is no larger than
     the scatter of repeat passes; `explained_um` (the named effects at every point, um) is taken
@@ -258,7 +265,7 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
         cond["load"] = None
         cond["load_note"] = "not recorded"
     out["by_condition"] = cond
-    out["spectrum"] = spectrum(leg, g, lead_mm, pass_means)
+    out["spectrum"] = spectrum(leg, g, lead_mm, pass_means, motor_turn_mm)
     # variance shares (mean squares about zero, sequential: offset, direction, pass, position, rest)
     total = float(np.mean(g**2))
     mean = float(g.mean())

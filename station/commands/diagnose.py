@@ -46,6 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="name an effect only if it explains more than this on held-out passes, um (default 0.1)")
     p.add_argument("--alpha", type=float, default=1e-3, help="significance level against pass scatter (default 0.001)")
     p.add_argument("--lead-mm", type=float, default=5.0, help="screw lead marked in the spectrum, mm (default 5)")
+    p.add_argument("--motor-turn-mm", type=float, default=None,
+                   help="travel per motor turn, mm (lead / gear ratio): a periodic finding that may be its alias at "
+                        "the plan's step is flagged, as the lead and its harmonics always are")
     p.add_argument("--effects", help="candidate effects to try, comma separated (default all)")
     p.add_argument("--holdout", choices=["cycle", "pass"], default="cycle",
                    help="unit held out in cross-validation (default cycle: an upward and a downward pass)")
@@ -62,7 +65,8 @@ def _settings(args) -> DiagnosisSettings:
     effects = None
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    kw = {"threshold_um": args.threshold_um, "alpha": args.alpha, "lead_mm": args.lead_mm, "holdout": args.holdout}
+    kw = {"threshold_um": args.threshold_um, "alpha": args.alpha, "lead_mm": args.lead_mm, "holdout": args.holdout,
+          "motor_turn_mm": args.motor_turn_mm}
     if effects:
         kw["effects"] = effects
     return DiagnosisSettings(**kw)

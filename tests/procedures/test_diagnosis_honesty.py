@@ -44,3 +44,36 @@ def test_a_pass_off_for_no_recorded_reason_stays_an_outlier():
     pts["error_um"][pts["run"] == 4] += 3.0  # a bumped reflector: no temperature change explains it
     leg = diagnose(pts)["legs"]["1"]
     assert [p["run"] for p in leg["outlier_passes"]] == [4]
+
+
+def _gearbox_session(step_mm=1.25):
+    from station.twins import plant_twin
+
+    base = _leg()
+    real = replace(base, longwave=base.longwave + ((1.5625, 0.5, 0.3),))  # a gearbox term: 5 mm lead / 3.2
+    pts = synth_session({1: real}, np.arange(-90, 90.001, step_mm), 5, seed=5, dwell_s=4.0)
+    return pts, plant_twin({1: base}, "the plant without the gearbox term")
+
+
+def test_a_gearbox_term_sampled_coarsely_is_flagged_as_a_possible_alias():
+    from procedures.diagnosis.aliasing import alias_of
+
+    assert abs(alias_of(1.5625, 1.25) - 6.25) < 1e-9 and abs(alias_of(5 / 3, 1.25) - 5.0) < 1e-9
+    pts, twin = _gearbox_session()
+    f = diagnose(pts, twin)["findings"][0]
+    assert f["effect"] == "cyclic" and abs(f["parameters"]["wavelength_mm"] - 6.25) < 0.05
+    w = f["sampling"]
+    assert w["step_mm"] == 1.25 and 0.5 < w["step_to_tell_apart_mm"] <= 0.78  # below half of 1.5625 mm
+    assert any(abs(p - 1.5625) < 0.01 for p in w["aliasing_periods_mm"])
+    # told the motor turn, it names it
+    rep = diagnose(pts, twin, DiagnosisSettings(motor_turn_mm=1.5625))
+    w = rep["findings"][0]["sampling"]
+    assert w["may_be_alias_of"][0]["period_mm"] == 1.5625 and "motor turn" in w["note"]
+    assert "may be an alias" in text_report(rep)
+
+
+def test_the_same_term_sampled_finely_is_found_at_its_own_wavelength_without_a_warning():
+    pts, twin = _gearbox_session(0.5)
+    f = diagnose(pts, twin, DiagnosisSettings(motor_turn_mm=1.5625))["findings"][0]
+    assert abs(f["parameters"]["wavelength_mm"] - 1.5625) < 0.01
+    assert "sampling" not in f
