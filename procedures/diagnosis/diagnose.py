@@ -145,6 +145,33 @@ def _cannot_conclude(leg: LegData, settings: DiagnosisSettings, external: bool) 
     return out
 
 
+STEEL_PPM_PER_K = 11.5  # the default leg material (procedures/metrology/thermal.py Material)
+
+
+def scale_and_temperature(scale_ppm: float, leg: LegData, twin: Twin) -> dict | None:
+    """A scale found against a reference recording made at another material temperature, tied
+    to the recorded difference: how many ppm per kelvin of it, against steel's expansion. None
+    when either side carries no material temperature or they differ by less than 0.1 K."""
+    ref_c = ((getattr(twin, "info", None) or {}).get(str(leg.leg)) or {}).get("material_temp_c")
+    if ref_c is None or not leg.has_temp:
+        return None
+    here_c = float(np.mean(leg.temp_c))
+    dt = here_c - ref_c
+    if abs(dt) < 0.1:
+        return None
+    per_k = scale_ppm / dt
+    steel = STEEL_PPM_PER_K * dt
+    words = "warmer" if dt < 0 else "colder"
+    note = (f"the reference was recorded {abs(dt):.2f} K {words} ({ref_c:.2f} C against {here_c:.2f} C, mean material "
+            f"temperature): a steel leg ({STEEL_PPM_PER_K:g} ppm/K) shows a scale of {steel:+.1f} ppm against a "
+            f"reference that much {words}; the scale found, {scale_ppm:+.1f} ppm, is {per_k:+.1f} ppm per K of the "
+            "difference")
+    if 0.5 * STEEL_PPM_PER_K <= per_k <= 2 * STEEL_PPM_PER_K:
+        note += ": most likely the temperature difference, not a scale error (compare both normalised to 20 C)"
+    return {"reference_temp_c": ref_c, "session_temp_c": here_c, "difference_k": dt, "scale_ppm_per_k": per_k,
+            "steel_expansion_ppm": steel, "note": note}
+
+
 def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tuple[dict, list[dict]]:
     ctx = prepare_leg(leg, twin, s)
     problem = ctx.problem
@@ -244,6 +271,10 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
                 "heldout_rms_alone_after_um": problem.cv_rms((e,)),
                 "p_value": p, "f_stat": f, "df_denominator": df2,
             })
+            if e.name == "scale" and twin is not None:
+                tied = scale_and_temperature(params["scale_ppm"], leg, twin)
+                if tied:
+                    findings[-1]["temperature_difference"] = tied
             if e.name == "cyclic":
                 warn = sampling_warning(params["wavelength_mm"], leg.spacing_mm, float(np.ptp(leg.x_mm)), s.lead_mm,
                                         s.motor_turn_mm)

@@ -299,14 +299,19 @@ class ExternalTwin(Twin):
 def twin_from_recording(points: np.ndarray, source: str = "the reference recording") -> ExternalTwin:
     """A fixed twin: the position-only twin fitted on every pass of another recording."""
     fits = {}
-    for leg, data in split_legs(points, source).items():
+    legs = split_legs(points, source)
+    for leg, data in legs.items():
         fits[leg] = fit_position_twin(data, data.folds())
     return ExternalTwin(
         predict=lambda leg, x, d: fits[leg].predict_um(x),
         kind="reference",
         description=f"position-only twin fitted on {source}",
         legs=frozenset(fits),
-        info={str(k): {"columns": v.basis.n_columns} for k, v in fits.items()},
+        info={str(k): {"columns": v.basis.n_columns,
+                       # the mean material temperature of the reference, so a scale found against it can be
+                       # tied to the temperature difference (diagnose.py)
+                       "material_temp_c": float(np.mean(data.temp_c)) if data.has_temp else None}
+              for (k, v), data in zip(fits.items(), legs.values())},
     )
 
 

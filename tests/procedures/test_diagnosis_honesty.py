@@ -77,3 +77,21 @@ def test_the_same_term_sampled_finely_is_found_at_its_own_wavelength_without_a_w
     f = diagnose(pts, twin, DiagnosisSettings(motor_turn_mm=1.5625))["findings"][0]
     assert abs(f["parameters"]["wavelength_mm"] - 1.5625) < 0.01
     assert "sampling" not in f
+
+
+def test_a_reference_recorded_3_k_warmer_ties_the_scale_to_the_temperature_difference():
+    from procedures.diagnosis.twin import twin_from_recording
+
+    cfg = _leg(add={"thermal"}, heating_k_per_m=0.0)
+    targets = np.linspace(-90, 90, 91)
+    ref = synth_session({1: replace(cfg, initial_temp_c=23.0, ambient_temp_c=23.0)}, targets, 5, seed=6, dwell_s=4.0)
+    pts = synth_session({1: replace(cfg, initial_temp_c=20.0, ambient_temp_c=20.0)}, targets, 5, seed=5, dwell_s=4.0)
+    rep = diagnose(pts, twin_from_recording(ref, "ref.h5"))
+    (f,) = [f for f in rep["findings"] if f["effect"] == "scale"]
+    td = f["temperature_difference"]
+    assert abs(td["difference_k"] + 3.0) < 0.05
+    expected = -cfg.expansion_ppm_per_k * 3.0
+    assert abs(f["parameters"]["scale_ppm"] - expected) < 0.05 * abs(expected)
+    assert abs(td["scale_ppm_per_k"] - cfg.expansion_ppm_per_k) < 0.05 * cfg.expansion_ppm_per_k
+    assert "3.00 K warmer" in td["note"] and "most likely the temperature difference" in td["note"]
+    assert "3.00 K warmer" in text_report(rep)
