@@ -31,7 +31,9 @@ from procedures.diagnosis.aliasing import sampling_warning
 from procedures.diagnosis.blas import single_threaded_blas
 from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
 from procedures.diagnosis.legdata import LegData, split_legs
-from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate, select_effects
+from procedures.diagnosis.selection import (LegProblem, contribution_um, evaluate, prune, refine_variants,
+                                            select_effects)
+from procedures.diagnosis.variants import VARIANTS
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.errors import InputError
@@ -145,6 +147,11 @@ def _cannot_conclude(leg: LegData, settings: DiagnosisSettings, external: bool) 
     return out
 
 
+def _name(e: Effect) -> str:
+    """The effect's name in the report (a variant carries its effect's name and says which variant)."""
+    return getattr(e, "base", e).name
+
+
 STEEL_PPM_PER_K = 11.5  # the default leg material (procedures/metrology/thermal.py Material)
 
 
@@ -220,7 +227,22 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
         rep["candidates"] = cands
         rep["cannot_conclude"] = cannot
         return rep, findings
-    chosen, log = select_effects(problem, applicable, s.threshold_um, s.alpha, bonf)
+    # the variants compete in the forward selection (a reversal that changes with temperature may
+    # not qualify as a constant one), then each named effect is kept plain or as its variant
+    with_variants = applicable + [v for e in applicable for v in VARIANTS.get(e.name, ())
+                                  if v.applicable(leg, twin is not None) is None]
+
+    def select(problem):
+        chosen, log = select_effects(problem, with_variants, s.threshold_um, s.alpha, bonf)
+        if chosen:  # an effect that changes with conditions or position: named as its variant when that earns it
+            chosen, vlog = refine_variants(problem, chosen, VARIANTS, s.threshold_um, s.alpha, bonf, twin is not None)
+            if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
+                chosen, plog = prune(problem, chosen, s.threshold_um, s.alpha, bonf)
+                vlog += plog
+            log += vlog
+        return chosen, log
+
+    chosen, log = select(problem)
     if twin is None and chosen:
         # the twin's size was chosen with the effects still in the data, where they act as noise
         # and can hide fine position structure (e.g. the wobble): choose it again without them
@@ -229,9 +251,9 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
         ctx2 = prepare_leg(leg, None, s, leg.error_um - part)
         if ctx2.twin_info.get("wavelengths_mm") != ctx.twin_info.get("wavelengths_mm"):
             ctx, problem = ctx2, ctx2.problem
-            ctx.twin_info["fitted_without"] = [e.name for e in chosen]
+            ctx.twin_info["fitted_without"] = [_name(e) for e in chosen]
             rep["twin"] = ctx.twin_info
-            chosen, log2 = select_effects(problem, applicable, s.threshold_um, s.alpha, bonf)
+            chosen, log2 = select(problem)
             log += ["twin refitted without the effects: "
                     f"{ctx.twin_info.get('sinusoids')} sinusoids"] + log2
             gap = problem.heldout_residuals(())
@@ -261,16 +283,22 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
             params, se = e.parameters(final.gls.coef[sl], final.gls.cov[sl, sl], final.specs.get(e.name), leg,
                                       final.resid_um)
             f, p, df2 = final.tests[e.name]
+            base_e = getattr(e, "base", e)
             findings.append({
-                "leg": leg.leg, "effect": e.name, "parameters": params, "uncertainty": se,
+                "leg": leg.leg, "effect": base_e.name, "parameters": params, "uncertainty": se,
                 "heldout_rms_before_um": before, "heldout_rms_after_um": after,
                 "shrink_pct": 100.0 * (1 - after / before) if before > 0 else 0.0,
                 "heldout_contribution_um": contribution_um(before, after),
-                "added_to": [c.name for c in chosen[:i]],
-                "added_with": [c.name for c in chosen[i:j] if c is not e],
+                "added_to": [_name(c) for c in chosen[:i]],
+                "added_with": [_name(c) for c in chosen[i:j] if c is not e],
                 "heldout_rms_alone_after_um": problem.cv_rms((e,)),
                 "p_value": p, "f_stat": f, "df_denominator": df2,
             })
+            if base_e is not e:
+                findings[-1]["variant"] = e.variant
+                findings[-1]["variant_p_value"] = final.tests[e.name + "+"][1]
+                findings[-1]["heldout_rms_plain_after_um"] = problem.cv_rms(
+                    tuple(base_e if c is e else c for c in chosen[:j]))
             if e.name == "scale" and twin is not None:
                 tied = scale_and_temperature(params["scale_ppm"], leg, twin)
                 if tied:
@@ -281,11 +309,12 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
                 if warn:
                     findings[-1]["sampling"] = warn
     after_all = problem.cv_rms(chosen)
-    rep["combined"] = {"effects": [e.name for e in chosen], "heldout_rms_before_um": baseline,
+    rep["combined"] = {"effects": [_name(e) for e in chosen], "heldout_rms_before_um": baseline,
                        "heldout_rms_after_um": after_all,
                        "shrink_pct": 100.0 * (1 - after_all / baseline) if baseline > 0 else 0.0}
+    chosen_base = tuple(getattr(c, "base", c) for c in chosen)
     for e in applicable:
-        if e in chosen:
+        if e in chosen_base:
             fnd = next(f for f in findings if f["effect"] == e.name)
             cands.append({"effect": e.name, "status": "named", "p_value": fnd["p_value"],
                           "heldout_contribution_um": fnd["heldout_contribution_um"]})
@@ -306,7 +335,7 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
             if alone.qualifies(s.threshold_um, s.alpha):
                 entry["status"] = "explained by others"
                 entry["reason"] = (f"alone it would explain {alone.contribution_um:.3g} um, but once "
-                                   f"{', '.join(c.name for c in chosen)} {'is' if len(chosen) == 1 else 'are'} in it adds "
+                                   f"{', '.join(_name(c) for c in chosen)} {'is' if len(chosen) == 1 else 'are'} in it adds "
                                    f"only {ev.contribution_um:.3g} um: confounded, not named")
         cands.append(entry)
     order = {n: i for i, n in enumerate(s.effects)}

@@ -156,3 +156,22 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
     if not out:
         raise InputError(f"{source}: no point has a finite target_mm and error_um; nothing to diagnose")
     return out
+
+
+def per_pass_line_removed(leg: LegData, v: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """`v` on `rows` minus a least-squares line in position fitted per pass: removes pass
+    offsets and slopes, i.e. everything backlash, drift, load, thermal and scale can do."""
+    pid, x = leg.pass_id[rows], leg.x_mm[rows]
+    n = np.bincount(pid, minlength=leg.n_passes).astype(float)
+    sx, sxx = np.bincount(pid, x, leg.n_passes), np.bincount(pid, x * x, leg.n_passes)
+    den = np.where(n > 0, n * sxx - sx**2, 1.0)
+    den = np.where(np.abs(den) > 1e-12, den, 1.0)
+    cols = v if v.ndim == 2 else v[:, None]
+    out = np.empty_like(cols)
+    for j in range(cols.shape[1]):
+        c = cols[:, j]
+        sv, sxv = np.bincount(pid, c, leg.n_passes), np.bincount(pid, x * c, leg.n_passes)
+        slope = (n * sxv - sx * sv) / den
+        icpt = np.divide(sv - slope * sx, n, out=np.zeros_like(n), where=n > 0)
+        out[:, j] = c - icpt[pid] - slope[pid] * x
+    return out if v.ndim == 2 else out[:, 0]
