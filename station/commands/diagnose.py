@@ -22,6 +22,7 @@ from procedures.diagnosis import DiagnosisSettings, to_json
 from procedures.diagnosis.selfcheck import Trial, format_self_check, run_self_check
 from procedures.diagnosis.text_report import text_report
 from procedures.errors import InputError
+from station.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
 from station.twins import load_twin, plant_twin
 
 NAME = "diagnose"
@@ -53,7 +54,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--holdout", choices=["cycle", "pass"], default="cycle",
                    help="unit held out in cross-validation (default cycle: an upward and a downward pass)")
     p.add_argument("--self-check", action="store_true", help="check the diagnosis on simulated withheld effects")
-    p.add_argument("--seeds", type=int, default=20, help="self-check: number of sessions (default 20)")
+    p.add_argument("--seeds", type=int, default=20,
+                   help="self-check: number of sessions (default 20; with --variants: per physics)")
+    p.add_argument("--variants", nargs="?", const=",".join(VARIANT_PHYSICS), metavar="PHYSICS",
+                   help="self-check the effect variants instead: sessions with physics outside the plain library "
+                        f"(comma separated, default all: {', '.join(VARIANT_PHYSICS)})")
     p.add_argument("--first-seed", type=int, default=0, help="self-check: first seed (default 0)")
     p.add_argument("--magnitude-um", type=float, nargs=2, metavar=("MIN", "MAX"),
                    default=SELF_CHECK_CONTRIBUTION_UM,
@@ -236,6 +241,8 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
 
 def _self_check(args, settings: DiagnosisSettings) -> int:
     seeds = range(args.first_seed, args.first_seed + args.seeds)
+    if args.variants:
+        return _variant_check(args, settings, seeds)
 
     def progress(r):
         mark = "ok " if r["ok"] else "BAD"
@@ -246,6 +253,36 @@ def _self_check(args, settings: DiagnosisSettings) -> int:
         raise InputError(f"--magnitude-um {lo:g} {hi:g}: need 0 < MIN <= MAX (um)")
     result = run_self_check((selfcheck_trial(s, contribution_um=(lo, hi)) for s in seeds), settings, progress)
     print(format_self_check(result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1, allow_nan=False, default=float))
+    return 0 if result["summary"]["trials_ok"] == result["summary"]["trials"] else 1
+
+
+def _variant_check(args, settings: DiagnosisSettings, seeds) -> int:
+    """The variants' self-check: --seeds sessions per physics (station/selfcheck_variants.py),
+    parameters within 15 %, gap within 25 % of the oracle's."""
+    from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, format_by_physics,
+                                                summarise_by_physics)
+    from station.selfcheck_variants import variant_trial
+
+    physics = [p.strip() for p in args.variants.split(",") if p.strip()]
+    unknown = sorted(set(physics) - set(VARIANT_PHYSICS))
+    if unknown:
+        raise InputError(f"--variants {args.variants}: unknown physics {', '.join(unknown)}; known: "
+                         f"{', '.join(VARIANT_PHYSICS)}")
+
+    def progress(r):
+        if not r["ok"]:
+            print(f"  BAD seed {r['seed']:>4} ({r['twin']} twin): {r['label']}", file=sys.stderr, flush=True)
+
+    result = run_self_check((variant_trial(s, p) for p in physics for s in seeds), settings, progress,
+                            VARIANT_PARAM_TOLERANCE, VARIANT_GAP_TOLERANCE)
+    result["by_physics"] = summarise_by_physics(result["trials"])
+    print(f"variant self-check: {len(seeds)} sessions per physics, {result['summary']['trials_ok']} of "
+          f"{result['summary']['trials']} fully right")
+    print(format_by_physics(result["by_physics"], VARIANT_PARAM_TOLERANCE, VARIANT_GAP_TOLERANCE))
+    bad = [line for line in format_self_check(result).splitlines() if line.startswith("  seed")]
+    print("\n".join(bad))
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1, allow_nan=False, default=float))
     return 0 if result["summary"]["trials_ok"] == result["summary"]["trials"] else 1
