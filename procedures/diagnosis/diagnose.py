@@ -34,6 +34,7 @@ from procedures.diagnosis.legdata import LegData, split_legs
 from procedures.diagnosis.selection import (LegProblem, contribution_um, evaluate, prune, refine_variants,
                                             select_effects)
 from procedures.diagnosis.variants import VARIANTS
+from procedures.diagnosis.unexplained import unexplained
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.errors import InputError
@@ -264,6 +265,10 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     rep["repeat_scatter_after_effects_note"] = (
         "scatter of repeat passes at the same target and direction, after the twin and the named effects (pass "
         "offsets included" + (f"; {int(outliers.sum())} outlier point(s) left out)" if outliers.any() else ")"))
+    rep["unexplained"] = unexplained(leg, final.resid_um, rep["repeat_scatter_after_effects_um"], s.threshold_um,
+                                     s.alpha, outliers)
+    if rep["unexplained"] is None:
+        rep["unexplained_note"] = "nothing systematic above the repeat scatter is left after the twin and the named effects"
     rep["within_pass_scatter_after_effects_um"] = final.gls.sigma_e_um
     rep["pass_offset_scatter_after_effects_um"] = final.gls.sigma_u_um
     where(rep["repeat_scatter_after_effects_um"], problem.effect_part_um(final) if chosen else None)

@@ -102,6 +102,8 @@ def text_report(report: dict) -> str:
                          + (" (a peak)" if sp.get("lead_is_peak") else ""))
         elif sp.get("lead_note"):
             lines.append(f"  lead: {sp['lead_note']}")
+        if (leg.get("unexplained") or {}).get("note"):
+            lines.append(f"  UNEXPLAINED: {leg['unexplained']['note']}")
         for p in leg.get("outlier_passes", []):
             lines.append(f"  outlier pass: run {p['run']} is {p['offset_um']:+.3g} um off the other passes of its direction")
         for p in leg.get("passes_explained_by_temperature", []):

@@ -95,3 +95,38 @@ def test_a_reference_recorded_3_k_warmer_ties_the_scale_to_the_temperature_diffe
     assert abs(td["scale_ppm_per_k"] - cfg.expansion_ppm_per_k) < 0.05 * cfg.expansion_ppm_per_k
     assert "3.00 K warmer" in td["note"] and "most likely the temperature difference" in td["note"]
     assert "3.00 K warmer" in text_report(rep)
+
+
+def _clean_session():
+    from station.twins import plant_twin
+
+    base = _leg()
+    pts = synth_session({1: base}, np.linspace(-90, 90, 91), 5, seed=5, dwell_s=4.0)
+    return pts, plant_twin({1: base}, "the plant")
+
+
+def test_structure_outside_the_library_is_described_not_mapped_silently():
+    pts, twin = _clean_session()
+    assert diagnose(pts, twin)["legs"]["1"]["unexplained"] is None
+    x, d = pts["target_mm"], pts["direction"]
+    bump = pts.copy()
+    bump["error_um"] += 0.8 * np.exp(-(((x + 40) / 6) ** 2))  # a local bump at -40 mm
+    u = diagnose(bump, twin)["legs"]["1"]["unexplained"]
+    assert u["shape"] == "local bump" and u["kind"] == "direction-independent"
+    assert u["from_mm"] <= -40 <= u["to_mm"] and u["to_mm"] - u["from_mm"] <= 20
+    assert 0.6 < u["peak_um"] < 1.0 and "outside the library" in u["note"]
+    end = pts.copy()
+    end["error_um"] += np.exp(-(90 - x) / 4) * (d > 0)  # upward passes only, at the top end
+    u = diagnose(end, twin)["legs"]["1"]["unexplained"]
+    assert u["shape"] == "end of stroke" and u["kind"] == "direction-dependent" and u["peak_at_mm"] == 90
+    rep = diagnose(end, twin)
+    assert "UNEXPLAINED" in text_report(rep)
+
+
+def test_a_narrow_worn_patch_is_a_direction_dependent_bump_against_the_fitted_twin():
+    pts, _ = _clean_session()
+    x, d = pts["target_mm"], pts["direction"]
+    pts["error_um"] += -0.5 * d * 0.8 * np.exp(-(((x - 20) / 8) ** 2))  # a reversal 0.8 um larger near 20 mm
+    u = diagnose(pts)["legs"]["1"]["unexplained"]
+    assert u["kind"] == "direction-dependent" and u["shape"] == "local bump"
+    assert u["from_mm"] <= 20 <= u["to_mm"] and abs(u["peak_um"] - 0.8) < 0.15
