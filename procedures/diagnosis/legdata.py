@@ -44,6 +44,7 @@ class LegData:
     temp_c: np.ndarray
     load_kn: np.ndarray
     dropped: int = 0
+    speed_mm_s: np.ndarray | None = None  # signed axis speed at the reading (on-the-fly), NaN/None = at rest
 
     @property
     def n_points(self) -> int:
@@ -68,6 +69,10 @@ class LegData:
     @property
     def has_temp(self) -> bool:
         return bool(np.all(np.isfinite(self.temp_c)))
+
+    @property
+    def has_speed(self) -> bool:
+        return self.speed_mm_s is not None and bool(np.all(np.isfinite(self.speed_mm_s)))
 
     @property
     def has_load(self) -> bool:
@@ -132,6 +137,7 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
     time_all = _field(points, "time_s")
     temp_all = _field(points, "material_temp_c")
     load_all = _field(points, "load_n")
+    speed_all = _field(points, "speed_mm_s")
     out: dict[int, LegData] = {}
     for leg, (rows, dropped) in usable_rows_by_leg(points).items():
         run = np.asarray(points["run"][rows]).astype(np.int64)
@@ -151,7 +157,7 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
             leg=leg, rows=rows, x_mm=x, error_um=error_all[rows], direction=direction, run=run,
             pass_id=pass_id.astype(np.int64), cycle=pass_cycle[pass_id], target_id=target_id,
             targets_mm=centres, time_h=t_h, temp_c=temp_all[rows], load_kn=load_all[rows] / 1000.0,
-            dropped=dropped,
+            dropped=dropped, speed_mm_s=speed_all[rows],
         )
     if not out:
         raise InputError(f"{source}: no point has a finite target_mm and error_um; nothing to diagnose")
