@@ -27,6 +27,7 @@ CHECKED = {
     "drift": ("drift_um_per_h",),
     "scale": ("scale_ppm",),
     "cyclic": ("wavelength_mm", "amplitude_um"),
+    "speed": ("lag_up_ms", "lag_down_ms"),
 }
 PARAM_TOLERANCE = 0.10  # relative
 GAP_TOLERANCE = 0.20  # held-out RMS after may exceed the oracle's by at most this (relative)
@@ -195,6 +196,8 @@ def format_self_check(result: dict) -> str:
         return "-" if v is None else f"{100 * v:.0f}%"
 
     for name, d in s["effects"].items():
+        if not d["present"] and not d["named_wrongly"]:
+            continue  # not in these sessions (the speed effect needs on-the-fly sessions)
         pe = ("-" if d["param_error_median_pct"] is None
               else f"{d['param_error_median_pct']:.1f}/{d['param_error_max_pct']:.1f}")
         lines.append(f"{name:<9} {d['present']:>7} {d['named_right']:>6} {d['missed']:>6} {d['named_wrongly']:>6} "

@@ -30,7 +30,8 @@ HELP = "diagnose the gap between the twin and a recording (where, which effect, 
 DESCRIPTION = (
     "Measure the gap between a recording and the digital twin, break it down (direction, stroke "
     "region, pass/time, spectrum, temperature, load), name the unmodelled effects that explain it "
-    "(backlash, thermal, load, drift, scale, cyclic) with parameters and uncertainties, and say how far "
+    "(backlash, thermal, load, drift, scale, cyclic, speed; backlash and thermal also as variants that change with "
+    "temperature or position) with parameters and uncertainties, say what no candidate explains, and say how far "
     "the held-out gap shrinks with them. Without --twin the twin is a position-only error model fitted "
     "on the same recording. --self-check runs the diagnosis on simulated sessions with known effects "
     "withheld from the twin and prints how often it names them rightly."
