@@ -148,6 +148,9 @@ def _cannot_conclude(leg: LegData, settings: DiagnosisSettings, external: bool) 
     return out
 
 
+TWIN_REFITS = 3  # rounds of choosing the twin again without the named effects (until it stops changing)
+
+
 def _name(e: Effect) -> str:
     """The effect's name in the report (a variant carries its effect's name and says which variant)."""
     return getattr(e, "base", e).name
@@ -244,20 +247,23 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
         return chosen, log
 
     chosen, log = select(problem)
-    if twin is None and chosen:
+    for _round in range(TWIN_REFITS):
+        if twin is not None or not chosen:
+            break
         # the twin's size was chosen with the effects still in the data, where they act as noise
         # and can hide fine position structure (e.g. the wobble): choose it again without them
-        # and repeat the selection once with that twin
+        # and repeat the selection with that twin; again while the twin changes (a large effect
+        # estimated with a coarse twin leaves a remainder that keeps the next twin coarse too)
         part = problem.effect_part_um(problem.full_fit(chosen, bonf))
         ctx2 = prepare_leg(leg, None, s, leg.error_um - part)
-        if ctx2.twin_info.get("wavelengths_mm") != ctx.twin_info.get("wavelengths_mm"):
-            ctx, problem = ctx2, ctx2.problem
-            ctx.twin_info["fitted_without"] = [_name(e) for e in chosen]
-            rep["twin"] = ctx.twin_info
-            chosen, log2 = select(problem)
-            log += ["twin refitted without the effects: "
-                    f"{ctx.twin_info.get('sinusoids')} sinusoids"] + log2
-            gap = problem.heldout_residuals(())
+        if ctx2.twin_info.get("wavelengths_mm") == ctx.twin_info.get("wavelengths_mm"):
+            break
+        ctx, problem = ctx2, ctx2.problem
+        ctx.twin_info["fitted_without"] = [_name(e) for e in chosen]
+        rep["twin"] = ctx.twin_info
+        chosen, log2 = select(problem)
+        log += ["twin refitted without the effects: " f"{ctx.twin_info.get('sinusoids')} sinusoids"] + log2
+        gap = problem.heldout_residuals(())
     baseline = problem.cv_rms(())
     final = problem.full_fit(chosen, bonf)
     outliers = outlier_mask(leg, gap, s.threshold_um)
