@@ -24,6 +24,10 @@ def _param_line(f: dict) -> str:
     return ", ".join(parts)
 
 
+VARIANT_WORDS = {"temperature": "changes with the material temperature", "position": "changes along the stroke",
+                 "windup": "winds up after each reversal", "gradient": "with a gradient along the screw"}
+
+
 def text_report(report: dict) -> str:
     """Findings first, then per leg: where the gap lies, candidates, what cannot be concluded."""
     lines = []
@@ -38,7 +42,8 @@ def text_report(report: dict) -> str:
     if report["findings"]:
         lines.append("FINDINGS")
         for f in report["findings"]:
-            lines.append(f"  leg {f['leg']}: {f['effect']}: {_param_line(f)}")
+            variant = f" ({VARIANT_WORDS.get(f['variant'], f['variant'])})" if f.get("variant") else ""
+            lines.append(f"  leg {f['leg']}: {f['effect']}{variant}: {_param_line(f)}")
             how = ""
             if f.get("added_with"):
                 how = f" (together with {', '.join(f['added_with'])})"
