@@ -272,7 +272,7 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
         "scatter of repeat passes at the same target and direction, after the twin and the named effects (pass "
         "offsets included" + (f"; {int(outliers.sum())} outlier point(s) left out)" if outliers.any() else ")"))
     rep["unexplained"] = unexplained(leg, final.resid_um, rep["repeat_scatter_after_effects_um"], s.threshold_um,
-                                     s.alpha, outliers)
+                                     s.alpha, outliers, twin is None)
     if rep["unexplained"] is None:
         rep["unexplained_note"] = "nothing systematic above the repeat scatter is left after the twin and the named effects"
     rep["within_pass_scatter_after_effects_um"] = final.gls.sigma_e_um

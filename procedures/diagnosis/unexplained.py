@@ -76,7 +76,7 @@ def _shape(x: np.ndarray, v: np.ndarray, leg: LegData) -> dict:
 
 
 def unexplained(leg: LegData, resid_um: np.ndarray, scatter_um: float | None, threshold_um: float, alpha: float,
-                exclude: np.ndarray | None = None) -> dict | None:
+                exclude: np.ndarray | None = None, fitted_twin: bool = False) -> dict | None:
     """Structure above the repeat scatter that the twin and the named effects leave (`resid_um`,
     um per point; `exclude`: outlier points left out). None when there is none to report (no
     repeats, or the cell means are at the repeat scatter or below the threshold)."""
@@ -107,7 +107,9 @@ def unexplained(leg: LegData, resid_um: np.ndarray, scatter_um: float | None, th
         return None
     shape = _shape(x, profiles[kind], leg)
     what = "the mean of both directions" if kind == "direction-independent" else "negative minus positive passes"
+    where = ("a position shape finer than the twin fitted on this recording follows (its size is limited by "
+             "cross-validation and conditioning), or outside the library of candidate effects"
+             if fitted_twin and kind == "direction-independent" else "it lies outside the library of candidate effects")
     note = (f"structure no candidate explains: {rms:.3g} um RMS per target and direction above the {scatter_um:.3g} um "
-            f"repeat scatter (p = {p:.2g}); mostly {kind} ({what}), {shape['words']}; it lies outside the library of "
-            "candidate effects")
+            f"repeat scatter (p = {p:.2g}); mostly {kind} ({what}), {shape['words']}; {where}")
     return {"rms_um": rms, "repeat_scatter_um": scatter_um, "p_value": p, "kind": kind, **shape, "note": note}
