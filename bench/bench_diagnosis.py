@@ -1,6 +1,6 @@
 """Bench: diagnosis of a six-leg, 361-target, six-cycle session (the paper's sweep).
 
-Target: <= 2 s per diagnosis (default twin fitted on the recording). Also timed: the same
+Target: <= 1 s of CPU time per diagnosis (default twin fitted on the recording). Also timed: the same
 session against the simulated plant as twin (where scale and cyclic are tried too).
 Prints figures; not a timed test.
 """
@@ -21,7 +21,7 @@ from station.synth import synth_session  # noqa: E402
 from procedures.diagnosis import diagnose  # noqa: E402
 from station.commands.diagnose import plant_twin  # noqa: E402
 
-TARGET_S = 2.0
+TARGET_S = 1.0  # CPU seconds (issue 25: at most 1 s with the variants tried)
 
 
 def main() -> int:
@@ -44,8 +44,7 @@ def main() -> int:
         # CPU time too: on a shared machine the wall clock also measures the other processes
         print(f"{label}: wall best {min(times):.2f} s, median {np.median(times):.2f} s; CPU best {min(cpu):.2f} s "
               f"(target <= {TARGET_S} s); named: {named}")
-        if twin is None:
-            worst = float(np.median(times))
+        worst = max(worst, min(cpu))
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     print("OK" if worst <= TARGET_S else "SLOWER THAN TARGET")
     return 0

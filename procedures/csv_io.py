@@ -2,7 +2,8 @@
 
 Format (shared/data/README.md): one row per measured point, comma separated, header first.
 Required columns: leg, run, direction, target_mm, error_um. Optional: time_s, material_temp_c,
-air_temp_c, air_pressure_hpa, humidity_pct, load_n, co2_ppm (the CO2 content of the air, which the
+air_temp_c, air_pressure_hpa, humidity_pct, load_n, speed_mm_s (the signed speed of the axis at an
+on-the-fly reading, mm/s, + while the position increases), co2_ppm (the CO2 content of the air, which the
 session keeps beside /points: procedures/recording/columns.py). A missing optional column, or an empty /
 "nan" cell in one, means "not measured" (NaN), never zero. `error_um` = measured minus
 commanded, micrometres; `direction` +1 = approached while the position increased.
@@ -37,7 +38,8 @@ from procedures.recording.schema import FLAG_IMPORTED, POINT_DTYPE
 from procedures.recording.writer import SessionWriter
 
 REQUIRED_COLUMNS = ("leg", "run", "direction", "target_mm", "error_um")
-OPTIONAL_COLUMNS = ("time_s", "material_temp_c", "air_temp_c", "air_pressure_hpa", "humidity_pct", "load_n")
+OPTIONAL_COLUMNS = ("time_s", "material_temp_c", "air_temp_c", "air_pressure_hpa", "humidity_pct", "load_n",
+                    "speed_mm_s")  # speed: signed axis speed at an on-the-fly reading (empty/absent: at rest)
 INT_COLUMNS = ("leg", "run", "direction")
 EXTRA_COLUMNS = ("co2_ppm",)
 """Optional columns that are not fields of /points but per-point datasets beside it."""

@@ -16,7 +16,7 @@ A map says where each quantity is in the foreign file and how to read it (docs/i
     run = "Run"              # optional: else every pass is a run
     leg = "Axis"             # optional: else [defaults] leg
     air_temp_c = "Air"       # optional: any of time_s, material_temp_c, air_temp_c,
-                             # air_pressure_hpa, humidity_pct, load_n, co2_ppm
+                             # air_pressure_hpa, humidity_pct, load_n, speed_mm_s, co2_ppm
 
     [units]
     target = "mm"            # mm, um, nm or inch

@@ -35,7 +35,7 @@ a millimetre is a unit mix-up (nm for um) or a broken measurement, never a leg t
 (a drive table corrects at most a few hundred micrometres)."""
 
 _UNITS = {"target_mm": "mm", "error_um": "um", "time_s": "s", "air_temp_c": "degC", "material_temp_c": "degC",
-          "air_pressure_hpa": "hPa", "humidity_pct": "%RH", "load_n": "N"}
+          "air_pressure_hpa": "hPa", "humidity_pct": "%RH", "load_n": "N", "speed_mm_s": "mm/s"}
 _HINTS = {
     "target_mm": "the drive's soft limits: a target beyond them was never reached; positions are mm from mid-stroke",
     "time_s": "seconds since the session start",
@@ -44,6 +44,7 @@ _HINTS = {
     "air_pressure_hpa": "hPa; about 1013 at sea level",
     "humidity_pct": "relative humidity in percent",
     "load_n": "axial load in newtons",
+    "speed_mm_s": "signed axis speed at an on-the-fly reading, mm/s; leave it empty for readings at rest",
 }
 
 
@@ -79,6 +80,7 @@ class PointLimits:
     air_pressure_hpa: tuple[float, float] = (500.0, 1100.0)  # 5 500 m altitude .. a deep mine
     humidity_pct: tuple[float, float] = (0.0, 100.0)
     load_n: tuple[float, float] = (-100_000.0, 100_000.0)  # 100 kN either way, compression positive
+    speed_mm_s: tuple[float, float] = (-1000.0, 1000.0)  # a leg moves at tens of mm/s; 1 m/s is a unit error
 
     def bounds(self, name: str) -> tuple[float, float] | None:
         """(lo, hi) of a float field, None for fields without a range here."""

@@ -15,6 +15,14 @@ shared/docs/domain.md section 4:
 - ``wobble``: once-per-revolution error at the screw lead `lead_mm`.
 - ``backlash``: reversal; `reversal_um` = mean error approaching in -1 minus in +1, so the
   error is -reversal/2 approaching upwards and +reversal/2 approaching downwards.
+  Variants (all 0 by default, so sessions and committed samples stay identical; issue 25):
+  `reversal_um_per_k` makes the reversal change with the material temperature (the nut preload
+  changes as the leg warms: reversal + reversal_um_per_k * (T - temp_ref_c)); `reversal_wear_um`
+  makes it larger over the most-used part of the stroke (nut wear: + reversal_wear_um *
+  max(0, 1 - ((x - reversal_wear_centre_mm) / reversal_wear_half_width_mm)^2)); `windup_mm` makes
+  the reversal wind up over that length after each reversal (lost motion: the error starts at
+  the old direction's value and approaches the new one as exp(-s / windup_mm), s = travel since
+  the reversal).
 - ``thermal``: the screw expands between its fixed bearing (at `bearing_mm`) and the nut:
   `expansion_ppm_per_k * (x - bearing_mm)/1000 * (T - temp_ref_c)` um, with the material
   temperature T following a first-order model heated by travel (`heating_k_per_m`, `tau_s`)
@@ -22,6 +30,10 @@ shared/docs/domain.md section 4:
   A leg warm by dT is longer by expansion_ppm_per_k * dT * (x - bearing_mm) / 1000 um: the
   station's normalisation to 20 degC (procedures/metrology/thermal.py) removes exactly this
   when the leg's material is configured as the plant's (fixed point = bearing_mm).
+  Variant (0 by default): `expansion_gradient_ppm_per_k_per_m`, a temperature rise that grows
+  along the screw from the bearing (the nut end runs warmer): the local expansion per K is
+  expansion_ppm_per_k + gradient * (u - bearing_mm)/1000, so the error gains
+  gradient * (x - bearing_mm)^2 / 2e6 * (T - temp_ref_c) um, growing with the square of position.
 - ``load``: elastic compliance under axial load (compression positive shortens the leg):
   `-(bearing_compliance_um_per_kn + screw_compliance_um_per_kn_per_m*(x - bearing_mm)/1000) * load_kn`.
 - ``drift``: setup/laser drift growing with time, `drift_um_per_h`, independent of position.
@@ -71,7 +83,13 @@ class PlantConfig:
     wobble_amplitude_um: float = 0.2
     wobble_phase_rad: float = 0.7
     reversal_um: float = 1.0
+    reversal_um_per_k: float = 0.0  # variant: the reversal changes with material temperature
+    reversal_wear_um: float = 0.0  # variant: extra reversal over the most-used part of the stroke (nut wear)
+    reversal_wear_centre_mm: float = 0.0
+    reversal_wear_half_width_mm: float = 90.0
+    windup_mm: float = 0.0  # variant: lost motion winding up over this travel after each reversal (0 = at once)
     expansion_ppm_per_k: float = 11.5  # steel
+    expansion_gradient_ppm_per_k_per_m: float = 0.0  # variant: thermal expansion growing along the screw
     bearing_mm: float = -150.0  # fixed bearing, below the stroke
     temp_ref_c: float = 20.0  # error-free temperature (lengths are normalised to 20 C)
     ambient_temp_c: float = 20.0
@@ -112,6 +130,8 @@ class PlantConfig:
             raise ValueError("tau_s, lead_mm and stroke_half_mm must be positive")
         if self.ambient_period_s <= 0:
             raise ValueError("ambient_period_s must be positive")
+        if self.windup_mm < 0 or self.reversal_wear_half_width_mm <= 0:
+            raise ValueError("windup_mm must be >= 0 and reversal_wear_half_width_mm positive")
         if self.jerk_mm_s3 < 0 or self.settling_tau_s < 0 or min(
                 self.following_lag_up_s, self.following_lag_down_s, self.dynamic_lag_up_s, self.dynamic_lag_down_s) < 0:
             raise ValueError("jerk_mm_s3 (0 = not limited), the lags and settling_tau_s must be >= 0")
@@ -164,21 +184,40 @@ def screw_error_um(cfg: PlantConfig, x_mm):
     return e
 
 
-def systematic_error_um(cfg: PlantConfig, x_mm, direction, temp_c, load_n, t_s):
+def reversal_um(cfg: PlantConfig, x_mm, temp_c):
+    """The reversal (mean error approaching in -1 minus in +1, um) at position `x_mm` and
+    material temperature `temp_c`, with the temperature and wear variants. Vectorised."""
+    x = np.asarray(x_mm, dtype=float)
+    r = cfg.reversal_um + cfg.reversal_um_per_k * (np.asarray(temp_c, dtype=float) - cfg.temp_ref_c)
+    if cfg.reversal_wear_um:
+        u = (x - cfg.reversal_wear_centre_mm) / cfg.reversal_wear_half_width_mm
+        r = r + cfg.reversal_wear_um * np.maximum(0.0, 1.0 - u * u)
+    return r + 0.0 * x
+
+
+def systematic_error_um(cfg: PlantConfig, x_mm, direction, temp_c, load_n, t_s, since_reversal_mm=np.inf):
     """Deterministic error (true minus commanded), um, excluding noise and run offsets.
 
     All arguments broadcast: `x_mm` position, `direction` +1/-1 of the last motion,
     `temp_c` material temperature, `load_n` axial load (compression positive), `t_s` time since
-    the start of the session (for drift).
+    the start of the session (for drift), `since_reversal_mm` travel since the last reversal
+    (for the lost-motion wind-up; inf = wound up).
     """
     x = np.asarray(x_mm, dtype=float)
     on = cfg.enabled
     e = screw_error_um(cfg, x)
     if "backlash" in on:
-        e = e - 0.5 * cfg.reversal_um * np.sign(np.asarray(direction, dtype=float))
+        d = np.sign(np.asarray(direction, dtype=float))
+        r = reversal_um(cfg, x, temp_c)
+        e = e - 0.5 * r * d
+        if cfg.windup_mm > 0:
+            # the error starts at the old direction's value and winds up to the new one
+            e = e + r * d * np.exp(-np.asarray(since_reversal_mm, dtype=float) / cfg.windup_mm)
     if "thermal" in on:
         dt_k = np.asarray(temp_c, dtype=float) - cfg.temp_ref_c
         e = e + cfg.expansion_ppm_per_k * (x - cfg.bearing_mm) / 1000.0 * dt_k
+        if cfg.expansion_gradient_ppm_per_k_per_m:
+            e = e + cfg.expansion_gradient_ppm_per_k_per_m * (x - cfg.bearing_mm) ** 2 / 2e6 * dt_k
     if "load" in on:
         load_kn = np.asarray(load_n, dtype=float) / 1000.0
         c = cfg.bearing_compliance_um_per_kn + cfg.screw_compliance_um_per_kn_per_m * (x - cfg.bearing_mm) / 1000.0
@@ -207,6 +246,7 @@ class LegPlant:
         self.pass_index = 0
         self._pass_offset_um = self._draw_offset()
         self.load_n = cfg.load_per_pass_n[0] if cfg.load_per_pass_n else 0.0
+        self._reversal_x_mm = -math.inf  # where the last reversal happened (lost-motion wind-up)
         self._zero_um = 0.0
         # motion dynamics: speed now (mm/s, signed) and the ring-out of the last stop
         self.velocity_mm_s = 0.0
@@ -244,6 +284,7 @@ class LegPlant:
         if travel != 0.0:
             new_dir = 1 if travel > 0 else -1
             if new_dir != self.direction:
+                self._reversal_x_mm = self.x_mm
                 self._new_pass(new_dir)
         self._advance_thermal(t_end_s, travel)
         self.x_mm = float(to_mm)
@@ -284,8 +325,14 @@ class LegPlant:
         (`dynamic_error_um`) on top."""
         self._advance_thermal(t_s)
         return float(
-            systematic_error_um(self.cfg, self.x_mm, self.direction, self.temp_c, self.load_n, t_s - self.t0_s)
+            systematic_error_um(self.cfg, self.x_mm, self.direction, self.temp_c, self.load_n, t_s - self.t0_s,
+                                self.since_reversal_mm)
         ) + self.dynamic_error_um(t_s)
+
+    @property
+    def since_reversal_mm(self) -> float:
+        """Travel since the last reversal, mm (inf before the first one)."""
+        return abs(self.x_mm - self._reversal_x_mm)
 
     def true_position_mm(self, t_s: float) -> float:
         return self.x_mm + self.error_um(t_s) / 1000.0

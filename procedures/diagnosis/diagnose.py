@@ -27,10 +27,14 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from procedures.diagnosis.aliasing import sampling_warning
 from procedures.diagnosis.blas import single_threaded_blas
 from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
 from procedures.diagnosis.legdata import LegData, split_legs
-from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate, select_effects
+from procedures.diagnosis.selection import (LegProblem, contribution_um, evaluate, prune, refine_variants,
+                                            select_effects)
+from procedures.diagnosis.variants import VARIANTS
+from procedures.diagnosis.unexplained import unexplained
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.errors import InputError
@@ -55,6 +59,7 @@ class DiagnosisSettings:
     regions: int = 4
     effects: tuple[str, ...] = tuple(EFFECTS)
     holdout: str = "cycle"
+    motor_turn_mm: float | None = None  # travel per motor turn (lead / gear ratio): checked as an alias source
 
     def __post_init__(self):
         unknown = [e for e in self.effects if e not in EFFECTS]
@@ -66,6 +71,8 @@ class DiagnosisSettings:
             raise InputError(f"alpha must be between 0 and 1, got {self.alpha}")
         if self.lead_mm is not None and not self.lead_mm > 0:
             raise InputError(f"lead_mm must be positive, got {self.lead_mm}")
+        if self.motor_turn_mm is not None and not self.motor_turn_mm > 0:
+            raise InputError(f"motor_turn_mm must be positive, got {self.motor_turn_mm}")
         if self.holdout not in ("cycle", "pass"):
             raise InputError(f"holdout must be 'cycle' or 'pass', got {self.holdout!r}")
         if self.regions < 1 or self.max_folds < 2:
@@ -98,7 +105,8 @@ def prepare_leg(leg: LegData, twin: Twin | None, settings: DiagnosisSettings,
         else:
             info = {"kind": "fitted", "form": "trend + sinusoids", "trend": pfit.basis.trend,
                     "sinusoids": len(pfit.basis.freqs_per_mm),
-                    "wavelengths_mm": [1.0 / f for f in pfit.basis.freqs_per_mm], "heldout_rms_um": pfit.cv_rms_um}
+                    "wavelengths_mm": [1.0 / f for f in pfit.basis.freqs_per_mm], "heldout_rms_um": pfit.cv_rms_um,
+                    "condition_number": pfit.condition_number}
         if pfit.cv_rms_um is None:
             info["heldout_rms_note"] = pfit.note
     else:
@@ -140,6 +148,41 @@ def _cannot_conclude(leg: LegData, settings: DiagnosisSettings, external: bool) 
     return out
 
 
+TWIN_REFITS = 3  # rounds of choosing the twin again without the named effects (until it stops changing)
+
+
+def _name(e: Effect) -> str:
+    """The effect's name in the report (a variant carries its effect's name and says which variant)."""
+    return getattr(e, "base", e).name
+
+
+STEEL_PPM_PER_K = 11.5  # the default leg material (procedures/metrology/thermal.py Material)
+
+
+def scale_and_temperature(scale_ppm: float, leg: LegData, twin: Twin) -> dict | None:
+    """A scale found against a reference recording made at another material temperature, tied
+    to the recorded difference: how many ppm per kelvin of it, against steel's expansion. None
+    when either side carries no material temperature or they differ by less than 0.1 K."""
+    ref_c = ((getattr(twin, "info", None) or {}).get(str(leg.leg)) or {}).get("material_temp_c")
+    if ref_c is None or not leg.has_temp:
+        return None
+    here_c = float(np.mean(leg.temp_c))
+    dt = here_c - ref_c
+    if abs(dt) < 0.1:
+        return None
+    per_k = scale_ppm / dt
+    steel = STEEL_PPM_PER_K * dt
+    words = "warmer" if dt < 0 else "colder"
+    note = (f"the reference was recorded {abs(dt):.2f} K {words} ({ref_c:.2f} C against {here_c:.2f} C, mean material "
+            f"temperature): a steel leg ({STEEL_PPM_PER_K:g} ppm/K) shows a scale of {steel:+.1f} ppm against a "
+            f"reference that much {words}; the scale found, {scale_ppm:+.1f} ppm, is {per_k:+.1f} ppm per K of the "
+            "difference")
+    if 0.5 * STEEL_PPM_PER_K <= per_k <= 2 * STEEL_PPM_PER_K:
+        note += ": most likely the temperature difference, not a scale error (compare both normalised to 20 C)"
+    return {"reference_temp_c": ref_c, "session_temp_c": here_c, "difference_k": dt, "scale_ppm_per_k": per_k,
+            "steel_expansion_ppm": steel, "note": note}
+
+
 def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tuple[dict, list[dict]]:
     ctx = prepare_leg(leg, twin, s)
     problem = ctx.problem
@@ -158,8 +201,9 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
            "noise_floor_um": noise_floor(leg.x_mm, leg.direction, leg.run, leg.error_um).noise_floor_um}
     cannot = _cannot_conclude(leg, s, twin is not None)
 
-    def where(scatter_um):
-        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, scatter_um))
+    def where(scatter_um, explained_um=None):
+        rep.update(breakdown(leg, gap, twin is not None, s.lead_mm, s.regions, s.threshold_um, scatter_um, explained_um,
+                             s.motor_turn_mm))
         for p in rep.get("outlier_passes", []):
             cannot.append(f"run {p['run']} is {p['offset_um']:+.3g} um off the other passes: it dominates the pass "
                           "scatter against which effects are tested")
@@ -187,21 +231,39 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
         rep["candidates"] = cands
         rep["cannot_conclude"] = cannot
         return rep, findings
-    chosen, log = select_effects(problem, applicable, s.threshold_um, s.alpha, bonf)
-    if twin is None and chosen:
+    # the variants compete in the forward selection (a reversal that changes with temperature may
+    # not qualify as a constant one), then each named effect is kept plain or as its variant
+    with_variants = applicable + [v for e in applicable for v in VARIANTS.get(e.name, ())
+                                  if v.applicable(leg, twin is not None) is None]
+
+    def select(problem):
+        chosen, log = select_effects(problem, with_variants, s.threshold_um, s.alpha, bonf)
+        if chosen:  # an effect that changes with conditions or position: named as its variant when that earns it
+            chosen, vlog = refine_variants(problem, chosen, VARIANTS, s.threshold_um, s.alpha, bonf, twin is not None)
+            if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
+                chosen, plog = prune(problem, chosen, s.threshold_um, s.alpha, bonf)
+                vlog += plog
+            log += vlog
+        return chosen, log
+
+    chosen, log = select(problem)
+    for _round in range(TWIN_REFITS):
+        if twin is not None or not chosen:
+            break
         # the twin's size was chosen with the effects still in the data, where they act as noise
         # and can hide fine position structure (e.g. the wobble): choose it again without them
-        # and repeat the selection once with that twin
+        # and repeat the selection with that twin; again while the twin changes (a large effect
+        # estimated with a coarse twin leaves a remainder that keeps the next twin coarse too)
         part = problem.effect_part_um(problem.full_fit(chosen, bonf))
         ctx2 = prepare_leg(leg, None, s, leg.error_um - part)
-        if ctx2.twin_info.get("wavelengths_mm") != ctx.twin_info.get("wavelengths_mm"):
-            ctx, problem = ctx2, ctx2.problem
-            ctx.twin_info["fitted_without"] = [e.name for e in chosen]
-            rep["twin"] = ctx.twin_info
-            chosen, log2 = select_effects(problem, applicable, s.threshold_um, s.alpha, bonf)
-            log += ["twin refitted without the effects: "
-                    f"{ctx.twin_info.get('sinusoids')} sinusoids"] + log2
-            gap = problem.heldout_residuals(())
+        if ctx2.twin_info.get("wavelengths_mm") == ctx.twin_info.get("wavelengths_mm"):
+            break
+        ctx, problem = ctx2, ctx2.problem
+        ctx.twin_info["fitted_without"] = [_name(e) for e in chosen]
+        rep["twin"] = ctx.twin_info
+        chosen, log2 = select(problem)
+        log += ["twin refitted without the effects: " f"{ctx.twin_info.get('sinusoids')} sinusoids"] + log2
+        gap = problem.heldout_residuals(())
     baseline = problem.cv_rms(())
     final = problem.full_fit(chosen, bonf)
     outliers = outlier_mask(leg, gap, s.threshold_um)
@@ -209,9 +271,13 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     rep["repeat_scatter_after_effects_note"] = (
         "scatter of repeat passes at the same target and direction, after the twin and the named effects (pass "
         "offsets included" + (f"; {int(outliers.sum())} outlier point(s) left out)" if outliers.any() else ")"))
+    rep["unexplained"] = unexplained(leg, final.resid_um, rep["repeat_scatter_after_effects_um"], s.threshold_um,
+                                     s.alpha, outliers, twin is None)
+    if rep["unexplained"] is None:
+        rep["unexplained_note"] = "nothing systematic above the repeat scatter is left after the twin and the named effects"
     rep["within_pass_scatter_after_effects_um"] = final.gls.sigma_e_um
     rep["pass_offset_scatter_after_effects_um"] = final.gls.sigma_u_um
-    where(rep["repeat_scatter_after_effects_um"])
+    where(rep["repeat_scatter_after_effects_um"], problem.effect_part_um(final) if chosen else None)
     # before/after in the order the effects were chosen, each on top of the ones before it; two
     # effects that only help together (chosen as a pair) share their before/after
     steps, i = [], 0
@@ -228,22 +294,38 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
             params, se = e.parameters(final.gls.coef[sl], final.gls.cov[sl, sl], final.specs.get(e.name), leg,
                                       final.resid_um)
             f, p, df2 = final.tests[e.name]
+            base_e = getattr(e, "base", e)
             findings.append({
-                "leg": leg.leg, "effect": e.name, "parameters": params, "uncertainty": se,
+                "leg": leg.leg, "effect": base_e.name, "parameters": params, "uncertainty": se,
                 "heldout_rms_before_um": before, "heldout_rms_after_um": after,
                 "shrink_pct": 100.0 * (1 - after / before) if before > 0 else 0.0,
                 "heldout_contribution_um": contribution_um(before, after),
-                "added_to": [c.name for c in chosen[:i]],
-                "added_with": [c.name for c in chosen[i:j] if c is not e],
+                "added_to": [_name(c) for c in chosen[:i]],
+                "added_with": [_name(c) for c in chosen[i:j] if c is not e],
                 "heldout_rms_alone_after_um": problem.cv_rms((e,)),
                 "p_value": p, "f_stat": f, "df_denominator": df2,
             })
+            if base_e is not e:
+                findings[-1]["variant"] = e.variant
+                findings[-1]["variant_p_value"] = final.tests[e.name + "+"][1]
+                findings[-1]["heldout_rms_plain_after_um"] = problem.cv_rms(
+                    tuple(base_e if c is e else c for c in chosen[:j]))
+            if e.name == "scale" and twin is not None:
+                tied = scale_and_temperature(params["scale_ppm"], leg, twin)
+                if tied:
+                    findings[-1]["temperature_difference"] = tied
+            if e.name == "cyclic":
+                warn = sampling_warning(params["wavelength_mm"], leg.spacing_mm, float(np.ptp(leg.x_mm)), s.lead_mm,
+                                        s.motor_turn_mm)
+                if warn:
+                    findings[-1]["sampling"] = warn
     after_all = problem.cv_rms(chosen)
-    rep["combined"] = {"effects": [e.name for e in chosen], "heldout_rms_before_um": baseline,
+    rep["combined"] = {"effects": [_name(e) for e in chosen], "heldout_rms_before_um": baseline,
                        "heldout_rms_after_um": after_all,
                        "shrink_pct": 100.0 * (1 - after_all / baseline) if baseline > 0 else 0.0}
+    chosen_base = tuple(getattr(c, "base", c) for c in chosen)
     for e in applicable:
-        if e in chosen:
+        if e in chosen_base:
             fnd = next(f for f in findings if f["effect"] == e.name)
             cands.append({"effect": e.name, "status": "named", "p_value": fnd["p_value"],
                           "heldout_contribution_um": fnd["heldout_contribution_um"]})
@@ -264,7 +346,7 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
             if alone.qualifies(s.threshold_um, s.alpha):
                 entry["status"] = "explained by others"
                 entry["reason"] = (f"alone it would explain {alone.contribution_um:.3g} um, but once "
-                                   f"{', '.join(c.name for c in chosen)} {'is' if len(chosen) == 1 else 'are'} in it adds "
+                                   f"{', '.join(_name(c) for c in chosen)} {'is' if len(chosen) == 1 else 'are'} in it adds "
                                    f"only {ev.contribution_um:.3g} um: confounded, not named")
         cands.append(entry)
     order = {n: i for i, n in enumerate(s.effects)}

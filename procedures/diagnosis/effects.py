@@ -16,6 +16,8 @@ and meanings (shared/docs/domain.md section 4; the JSON report uses exactly thes
 - drift     `drift_um_per_h`: error growing with time, independent of position. Column t in h
             (without recorded time: pass order, `drift_um_per_pass`).
 - scale     `scale_ppm`: slope against the twin, um per metre of position. Column x/1000.
+- speed     `lag_up_ms`, `lag_down_ms`: on-the-fly readings lag by lag x speed (error = -lag x
+            speed, um = ms x mm/s). Columns speed x (direction > 0), speed x (direction < 0).
 - cyclic    `wavelength_mm`, `amplitude_um` (and `phase_rad`: error = A sin(2 pi x/wavelength +
             phase), x in mm from mid-stroke). Columns sin, cos at a wavelength found by a
             least-squares sinusoid scan of the remaining gap.
@@ -157,6 +159,35 @@ class Scale(Effect):
         return {"scale_ppm": float(coef[0])}, {"scale_ppm": _se(cov, 0)}
 
 
+MIN_SPEED_RANGE_MM_S = 0.5
+
+
+class Speed(Effect):
+    """The error of on-the-fly readings that grows with the speed (the leg end lagging the
+    encoder): columns speed x (direction > 0) and speed x (direction < 0), mm/s, so the lag may
+    differ by direction. Separable from backlash only when the speed changes between passes of a
+    direction (at one speed per direction it is a constant per direction: a reversal)."""
+
+    def applicable(self, leg, external_twin):
+        if not leg.has_speed:
+            return "no speed recorded (readings at rest, or not an on-the-fly session)"
+        for d in (1.0, -1.0):
+            sel = leg.direction == d
+            if sel.any() and float(np.ptp(np.abs(leg.speed_mm_s[sel]))) >= MIN_SPEED_RANGE_MM_S:
+                return None
+        return ("the speed did not change between passes: a speed-dependent error cannot be told from a reversal "
+                "(record passes at two or more speeds)")
+
+    def columns(self, leg, spec=None):
+        v = leg.speed_mm_s
+        return np.column_stack([v * (leg.direction > 0), v * (leg.direction < 0)])
+
+    def parameters(self, coef, cov, spec=None, leg=None, resid_um=None):
+        # error = -lag * speed: um = -(ms) * (mm/s)
+        return ({"lag_up_ms": -float(coef[0]), "lag_down_ms": -float(coef[1])},
+                {"lag_up_ms": _se(cov, 0), "lag_down_ms": _se(cov, 1)})
+
+
 def cyclic_grid(leg: LegData, oversample: int = 4) -> np.ndarray:
     """Frequencies (cycles/mm) scanned for a cyclic error: from one wavelength over the stroke
     to the Nyquist frequency of the target spacing, `oversample` points per 1/span."""
@@ -214,5 +245,6 @@ EFFECTS: dict[str, Effect] = {
     "drift": Drift("drift", 1),
     "scale": Scale("scale", 1, position_only=True),
     "cyclic": Cyclic("cyclic", 3, position_only=True),
+    "speed": Speed("speed", 2),
 }
 """The candidate library, by name. `n_params` counts free parameters (cyclic: wavelength too)."""

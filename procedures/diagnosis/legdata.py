@@ -44,6 +44,7 @@ class LegData:
     temp_c: np.ndarray
     load_kn: np.ndarray
     dropped: int = 0
+    speed_mm_s: np.ndarray | None = None  # signed axis speed at the reading (on-the-fly), NaN/None = at rest
 
     @property
     def n_points(self) -> int:
@@ -68,6 +69,10 @@ class LegData:
     @property
     def has_temp(self) -> bool:
         return bool(np.all(np.isfinite(self.temp_c)))
+
+    @property
+    def has_speed(self) -> bool:
+        return self.speed_mm_s is not None and bool(np.all(np.isfinite(self.speed_mm_s)))
 
     @property
     def has_load(self) -> bool:
@@ -132,6 +137,7 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
     time_all = _field(points, "time_s")
     temp_all = _field(points, "material_temp_c")
     load_all = _field(points, "load_n")
+    speed_all = _field(points, "speed_mm_s")
     out: dict[int, LegData] = {}
     for leg, (rows, dropped) in usable_rows_by_leg(points).items():
         run = np.asarray(points["run"][rows]).astype(np.int64)
@@ -151,8 +157,27 @@ def split_legs(points: np.ndarray, source: str = "the session") -> dict[int, Leg
             leg=leg, rows=rows, x_mm=x, error_um=error_all[rows], direction=direction, run=run,
             pass_id=pass_id.astype(np.int64), cycle=pass_cycle[pass_id], target_id=target_id,
             targets_mm=centres, time_h=t_h, temp_c=temp_all[rows], load_kn=load_all[rows] / 1000.0,
-            dropped=dropped,
+            dropped=dropped, speed_mm_s=speed_all[rows],
         )
     if not out:
         raise InputError(f"{source}: no point has a finite target_mm and error_um; nothing to diagnose")
     return out
+
+
+def per_pass_line_removed(leg: LegData, v: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """`v` on `rows` minus a least-squares line in position fitted per pass: removes pass
+    offsets and slopes, i.e. everything backlash, drift, load, thermal and scale can do."""
+    pid, x = leg.pass_id[rows], leg.x_mm[rows]
+    n = np.bincount(pid, minlength=leg.n_passes).astype(float)
+    sx, sxx = np.bincount(pid, x, leg.n_passes), np.bincount(pid, x * x, leg.n_passes)
+    den = np.where(n > 0, n * sxx - sx**2, 1.0)
+    den = np.where(np.abs(den) > 1e-12, den, 1.0)
+    cols = v if v.ndim == 2 else v[:, None]
+    out = np.empty_like(cols)
+    for j in range(cols.shape[1]):
+        c = cols[:, j]
+        sv, sxv = np.bincount(pid, c, leg.n_passes), np.bincount(pid, x * c, leg.n_passes)
+        slope = (n * sxv - sx * sv) / den
+        icpt = np.divide(sv - slope * sx, n, out=np.zeros_like(n), where=n > 0)
+        out[:, j] = c - icpt[pid] - slope[pid] * x
+    return out if v.ndim == 2 else out[:, 0]

@@ -19,13 +19,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from procedures.diagnosis.effects import Effect, cyclic_grid
-from procedures.diagnosis.legdata import LegData
+from procedures.diagnosis.legdata import LegData, per_pass_line_removed
 from procedures.diagnosis.significance import (Gram, GlsFit, between_pass_share, random_intercept_gls, replicate_variance,
                                                solve_gram, wald_test)
 from procedures.diagnosis.twin import _Scan
 
 PARSIMONY = 0.03  # a simpler effect wins when it explains at least 97 % of what the best explains (held-out
 # scoring already penalises a useless extra parameter, so the margin can be small)
+
+
+def family(e: Effect) -> str:
+    """The effect a candidate belongs to (a variant's plain effect)."""
+    return getattr(e, "base", e).name
 
 
 def contribution_um(rms_before_um: float, rms_after_um: float) -> float:
@@ -142,22 +147,7 @@ class LegProblem:
 
     # -- the cyclic wavelength ----------------------------------------------------------------
     def _per_pass_line_removed(self, v: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """`v` on `rows` minus a least-squares line in position fitted per pass: removes pass
-        offsets and slopes, i.e. everything backlash, drift, load, thermal and scale can do."""
-        pid, x, v = self.leg.pass_id[rows], self.leg.x_mm[rows], v
-        n = np.bincount(pid, minlength=self.leg.n_passes).astype(float)
-        sx, sxx = np.bincount(pid, x, self.leg.n_passes), np.bincount(pid, x * x, self.leg.n_passes)
-        den = np.where(n > 0, n * sxx - sx**2, 1.0)
-        den = np.where(np.abs(den) > 1e-12, den, 1.0)
-        cols = v if v.ndim == 2 else v[:, None]
-        out = np.empty_like(cols)
-        for j in range(cols.shape[1]):
-            c = cols[:, j]
-            sv, sxv = np.bincount(pid, c, self.leg.n_passes), np.bincount(pid, x * c, self.leg.n_passes)
-            slope = (n * sxv - sx * sv) / den
-            icpt = np.divide(sv - slope * sx, n, out=np.zeros_like(n), where=n > 0)
-            out[:, j] = c - icpt[pid] - slope[pid] * x
-        return out if v.ndim == 2 else out[:, 0]
+        return per_pass_line_removed(self.leg, v, rows)
 
     def _search_cyclic(self, train_groups: list[int]) -> float | None:
         """Wavelength (mm) of the strongest sinusoid of position on the training rows, after a
@@ -201,7 +191,17 @@ class LegProblem:
         return 1.0 / f
 
     def _specs(self, effects, train_groups: list[int]) -> dict[str, object]:
-        return {"cyclic": self._search_cyclic(train_groups)} if any(e.name == "cyclic" for e in effects) else {}
+        specs: dict[str, object] = {}
+        for e in effects:
+            if e.name == "cyclic":
+                specs["cyclic"] = self._search_cyclic(train_groups)
+            elif getattr(e, "searched", False):  # a variant with a scanned parameter (the wind-up length)
+                key = (e.name, tuple(train_groups))
+                if key not in self._cache:
+                    groups = self.folds if self.folds is not None else np.zeros(self.leg.n_points, int)
+                    self._cache[key] = e.search(self.leg, self.y, np.flatnonzero(np.isin(groups, train_groups)))
+                specs[e.name] = self._cache[key]
+        return specs
 
     # -- held-out scoring ---------------------------------------------------------------------
     def heldout_residuals(self, effects: tuple[Effect, ...]) -> np.ndarray:
@@ -213,7 +213,7 @@ class LegProblem:
             return self._cv[key]
         out = np.empty(self.leg.n_points)
         all_groups = list(range(self.n_groups))
-        searched = any(e.name == "cyclic" for e in effects)
+        searched = any(e.name == "cyclic" or getattr(e, "searched", False) for e in effects)
         if not searched:
             e, _ = self._matrix(effects, {})
             gs, hs = self._gls_blocks(e, *self._blocks(e))
@@ -271,6 +271,10 @@ class LegProblem:
             if bonferroni and e.name in bonferroni:
                 p = min(1.0, p * bonferroni[e.name])  # a scanned wavelength: look-elsewhere effect
             fit.tests[e.name] = (f, p, df2)
+            n_extra = getattr(e, "n_extra", 0)
+            if n_extra:  # a variant: its extra columns alone
+                idx = idx[-n_extra:]
+                fit.tests[e.name + "+"] = wald_test(gls, idx, between_pass_share(stats, idx), n_eff)
         return fit
 
 
@@ -305,6 +309,7 @@ def _best_pair(problem: LegProblem, chosen, rest, threshold_um, alpha, bonferron
     None when no pair qualifies."""
     after_chosen = problem.cv_rms(chosen)
     best, best_rms = None, None
+    rest = [c for c in rest if family(c) == c.name]  # pairs of plain effects only
     for i, a in enumerate(rest):
         for b in rest[i + 1:]:
             if a.name not in significant and b.name not in significant:
@@ -331,7 +336,8 @@ def select_effects(problem: LegProblem, candidates: list[Effect], threshold_um: 
     chosen: tuple[Effect, ...] = ()
     log: list[str] = []
     while True:
-        rest = [c for c in candidates if c not in chosen]
+        taken = {family(c) for c in chosen}  # an effect and its variants exclude each other
+        rest = [c for c in candidates if family(c) not in taken]
         if not rest:
             break
         evals = [(c, evaluate(problem, chosen, c, bonferroni)) for c in rest]
@@ -350,7 +356,15 @@ def select_effects(problem: LegProblem, candidates: list[Effect], threshold_um: 
         c, ev = min(near, key=lambda t: (t[0].n_params, -t[1].contribution_um))
         log.append(f"add {c.name}: held-out {ev.rms_before_um:.4f} -> {ev.rms_after_um:.4f} um, p={ev.p_value:.2g}")
         chosen = chosen + (c,)
-    # backward: drop the weakest effect while any no longer earns its place
+    chosen, plog = prune(problem, chosen, threshold_um, alpha, bonferroni)
+    return chosen, log + plog
+
+
+def prune(problem: LegProblem, chosen: tuple[Effect, ...], threshold_um: float, alpha: float,
+          bonferroni: dict[str, int] | None = None) -> tuple[tuple[Effect, ...], list[str]]:
+    """Backward pruning: drop the weakest effect while any no longer earns its place (not
+    significant, or adding no more than the threshold on held-out passes once the others are in)."""
+    log: list[str] = []
     while len(chosen) > 1:
         fit = problem.full_fit(chosen, bonferroni)
         after = problem.cv_rms(chosen)
@@ -367,3 +381,30 @@ def select_effects(problem: LegProblem, candidates: list[Effect], threshold_um: 
         log.append(f"drop {weakest.name}: adds only {worst:.4f} um once the others are in")
         chosen = tuple(e for e in chosen if e is not weakest)
     return chosen, log
+
+
+def refine_variants(problem: LegProblem, chosen: tuple[Effect, ...], variants: dict, threshold_um: float, alpha: float,
+                    bonferroni: dict[str, int] | None = None, external: bool = False) -> tuple[tuple[Effect, ...], list[str]]:
+    """Each named effect as the variant (variants.py) that earns it, else plain: a variant stays
+    only when its extra columns are significant on their own and add more than the threshold
+    on held-out passes over the plain effect; the best such variant wins. Returns (effects, log)."""
+    log: list[str] = []
+    out = list(chosen)
+    for i, e in enumerate(chosen):
+        plain = getattr(e, "base", e)
+        with_plain = tuple(out[:i] + [plain] + out[i + 1:])
+        rms_plain = problem.cv_rms(with_plain)
+        best, best_rms = plain, rms_plain
+        for v in variants.get(plain.name, ()):
+            if v.applicable(problem.leg, external) is not None:
+                continue
+            trial = tuple(out[:i] + [v] + out[i + 1:])
+            after = problem.cv_rms(trial)
+            p = problem.full_fit(trial, bonferroni).tests[v.name + "+"][1]
+            if p < alpha and contribution_um(rms_plain, after) > threshold_um and after < best_rms:
+                best, best_rms = v, after
+        if best is not e:
+            log.append(f"{plain.name} is {'plain' if best is plain else 'the ' + best.variant + ' variant'}: held-out "
+                       f"{problem.cv_rms(tuple(out)):.4f} -> {best_rms:.4f} um")
+        out[i] = best
+    return tuple(out), log

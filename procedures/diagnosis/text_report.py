@@ -24,6 +24,10 @@ def _param_line(f: dict) -> str:
     return ", ".join(parts)
 
 
+VARIANT_WORDS = {"temperature": "changes with the material temperature", "position": "changes along the stroke",
+                 "windup": "winds up after each reversal", "gradient": "with a gradient along the screw"}
+
+
 def text_report(report: dict) -> str:
     """Findings first, then per leg: where the gap lies, candidates, what cannot be concluded."""
     lines = []
@@ -38,7 +42,8 @@ def text_report(report: dict) -> str:
     if report["findings"]:
         lines.append("FINDINGS")
         for f in report["findings"]:
-            lines.append(f"  leg {f['leg']}: {f['effect']}: {_param_line(f)}")
+            variant = f" ({VARIANT_WORDS.get(f['variant'], f['variant'])})" if f.get("variant") else ""
+            lines.append(f"  leg {f['leg']}: {f['effect']}{variant}: {_param_line(f)}")
             how = ""
             if f.get("added_with"):
                 how = f" (together with {', '.join(f['added_with'])})"
@@ -46,6 +51,9 @@ def text_report(report: dict) -> str:
                 how = f" (on top of {', '.join(f['added_to'])})"
             lines.append(f"      held-out gap {f['heldout_rms_before_um']:.3g} -> {f['heldout_rms_after_um']:.3g} um RMS{how} "
                          f"({f['shrink_pct']:.0f} % smaller), p = {f['p_value']:.2g}")
+            for extra in ("sampling", "temperature_difference"):
+                if (f.get(extra) or {}).get("note"):
+                    lines.append(f"      NOTE: {f[extra]['note']}")
     else:
         lines.append("FINDINGS: none (no candidate effect is both significant and above the threshold)")
     for key, leg in report["legs"].items():
@@ -95,13 +103,19 @@ def text_report(report: dict) -> str:
         if sp.get("peaks"):
             lines.append("  spectrum peaks: " + ", ".join(f"{p['wavelength_mm']:.3g} mm {p['amplitude_um']:.3g} um"
                                                           for p in sp["peaks"]))
+            lines += [f"    NOTE: {p['sampling']['note']}" for p in sp["peaks"] if p.get("sampling")][:1]
         if sp.get("lead_amplitude_um") is not None:
             lines.append(f"  at the {sp['lead_mm']:g} mm lead: {_um(sp['lead_amplitude_um'])} um"
                          + (" (a peak)" if sp.get("lead_is_peak") else ""))
         elif sp.get("lead_note"):
             lines.append(f"  lead: {sp['lead_note']}")
+        if (leg.get("unexplained") or {}).get("note"):
+            lines.append(f"  UNEXPLAINED: {leg['unexplained']['note']}")
         for p in leg.get("outlier_passes", []):
             lines.append(f"  outlier pass: run {p['run']} is {p['offset_um']:+.3g} um off the other passes of its direction")
+        for p in leg.get("passes_explained_by_temperature", []):
+            lines.append(f"  run {p['run']} is {p['offset_um']:+.3g} um off the other passes, explained by its material "
+                         f"temperature ({p['temp_c']:.2f} C, {p['um_per_k']:+.3g} um/K): not an outlier")
         op = leg.get("outlier_points") or {}
         if op.get("count"):
             w = op["worst"][0]

@@ -20,11 +20,14 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from procedures.diagnosis.legdata import LegData, split_legs
+from procedures.diagnosis.significance import condition_number, solve_gram
 from procedures.errors import InputError
 
 MAX_SINUSOIDS = 40  # per leg; the paper keeps up to 100 numbers = 33 amplitude/frequency/phase triples
 CV_TOLERANCE = 0.005  # take the smallest twin whose held-out MSE is within 0.5 % of the best
 MIN_TARGETS_SMOOTH = 8  # below this a smooth twin cannot be told from the target means
+NESTED_RTOL = 1e-6  # a sinusoid less than this share independent of the ones before it ends the twin: more would
+# make the twin (and every fold fit of it with effects) ill-conditioned, its coefficients large and cancelling
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,7 @@ class PositionFit:
     coef: np.ndarray
     cv_rms_um: float | None  # held-out RMS of measured minus twin (all terms of the gap), um
     note: str = ""
+    condition_number: float | None = None  # of the weighted design at the targets (columns scaled to unit norm)
 
     def predict_um(self, x_mm) -> np.ndarray:
         return self.basis.design(x_mm) @ self.coef
@@ -179,7 +183,7 @@ def _nested_predictions(b: np.ndarray, n0: int, m, w) -> np.ndarray:
     sw = np.sqrt(w)
     q, r = np.linalg.qr(b * sw[:, None])
     d = np.abs(np.diag(r))
-    ok = d > 1e-9 * max(d.max(), 1e-300)
+    ok = d > NESTED_RTOL * max(d.max(), 1e-300)
     k_ok = int(np.argmin(ok)) if not ok.all() else ok.size
     k_ok = n0 + 2 * ((k_ok - n0) // 2) if k_ok >= n0 else 0
     if k_ok == 0:
@@ -231,9 +235,10 @@ def fit_position_twin(leg: LegData, folds: np.ndarray | None, max_sinusoids: int
     idx = idx[:n_sin]
     b = _design_at(ux, centre, half, trend, scan, idx)
     sw = np.sqrt(w_all)
-    coef = np.linalg.lstsq(b * sw[:, None], m * sw, rcond=None)[0]
+    bw = b * sw[:, None]
+    coef = solve_gram(bw.T @ bw, bw.T @ (m * sw))
     basis = PositionBasis(centre, half, tuple(float(f) for f in grid[idx]), trend)
-    return PositionFit(basis, coef, cv_rms, note)
+    return PositionFit(basis, coef, cv_rms, note, condition_number(bw.T @ bw))
 
 
 def _fit_target_twin(leg: LegData, folds: np.ndarray | None, y: np.ndarray) -> PositionFit:
@@ -294,14 +299,19 @@ class ExternalTwin(Twin):
 def twin_from_recording(points: np.ndarray, source: str = "the reference recording") -> ExternalTwin:
     """A fixed twin: the position-only twin fitted on every pass of another recording."""
     fits = {}
-    for leg, data in split_legs(points, source).items():
+    legs = split_legs(points, source)
+    for leg, data in legs.items():
         fits[leg] = fit_position_twin(data, data.folds())
     return ExternalTwin(
         predict=lambda leg, x, d: fits[leg].predict_um(x),
         kind="reference",
         description=f"position-only twin fitted on {source}",
         legs=frozenset(fits),
-        info={str(k): {"columns": v.basis.n_columns} for k, v in fits.items()},
+        info={str(k): {"columns": v.basis.n_columns,
+                       # the mean material temperature of the reference, so a scale found against it can be
+                       # tied to the temperature difference (diagnose.py)
+                       "material_temp_c": float(np.mean(data.temp_c)) if data.has_temp else None}
+              for (k, v), data in zip(fits.items(), legs.values())},
     )
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from procedures.diagnosis.aliasing import sampling_warning
 from procedures.diagnosis.effects import cyclic_grid
 from procedures.diagnosis.legdata import LegData
 from procedures.diagnosis.twin import sinusoid_scan
@@ -42,9 +43,11 @@ def _region_name(i: int, n: int) -> str:
     return f"region {i + 1} of {n}"
 
 
-def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means: np.ndarray) -> dict:
+def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means: np.ndarray,
+             motor_turn_mm: float | None = None) -> dict:
     """Peaks of the least-squares sinusoid scan of the per-position mean gap (pass offsets
-    removed), and the amplitude at the screw lead."""
+    removed), each with a sampling warning when it may be an alias (aliasing.py), and the
+    amplitude at the screw lead."""
     lo, hi = leg.span_mm
     out: dict = {"peaks": [], "lead_mm": lead_mm}
     r = gap_um - pass_means[leg.pass_id]
@@ -61,6 +64,10 @@ def spectrum(leg: LegData, gap_um: np.ndarray, lead_mm: float | None, pass_means
     floor = float(np.median(amp))
     peaks = sorted((i for i in peaks if amp[i] > 3 * floor), key=lambda i: -amp[i])[:3]
     out["peaks"] = [{"wavelength_mm": float(1 / grid[i]), "amplitude_um": float(amp[i])} for i in peaks]
+    for p in out["peaks"]:
+        warn = sampling_warning(p["wavelength_mm"], leg.spacing_mm, hi - lo, lead_mm, motor_turn_mm)
+        if warn:
+            p["sampling"] = warn
     out["median_amplitude_um"] = floor
     if lead_mm:
         if lead_mm < 2 * leg.spacing_mm:
@@ -131,11 +138,49 @@ def by_target(leg: LegData, gap_um: np.ndarray) -> dict:
     return out
 
 
+def outlier_passes(leg: LegData, threshold_um: float, explained_um: np.ndarray | None = None):
+    """(outlier passes, passes explained by temperature). How far each pass lies from the median
+    of its repeats (same target and direction), on the errors themselves so the twin cannot blur
+    it, with the named effects (`explained_um`, um per point) taken out; robust scale over
+    passes. A pass off the others only because the leg was colder or warmer then (the cold first
+    pass of a warm-up) is not an outlier: when the material temperature is recorded, a line of
+    pass offset against pass temperature fitted on the other passes that predicts it within the
+    outlier limit explains it."""
+    if leg.n_passes < 4:
+        return [], []
+    counts = np.bincount(leg.pass_id).astype(float)
+    err = leg.error_um if explained_um is None else leg.error_um - explained_um
+    _, cinv = np.unique(leg.target_id * 2 + (leg.direction > 0), return_inverse=True)
+    from_repeats = err - group_median(err, cinv)[cinv]
+    dev = np.bincount(leg.pass_id, from_repeats) / counts
+    dev = dev - np.median(dev)
+    scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
+    limit = max(5 * scale, threshold_um)
+    temp = np.bincount(leg.pass_id, leg.temp_c) / counts if leg.has_temp else None
+    outliers, explained = [], []
+    for p in range(leg.n_passes):
+        if abs(dev[p]) <= limit:
+            continue
+        entry = {"run": int(leg.run[leg.pass_id == p][0]), "offset_um": float(dev[p])}
+        if temp is not None:
+            others = np.arange(leg.n_passes) != p
+            line = _line(temp[others], dev[others])
+            if line is not None:
+                pred = float(np.mean(dev[others]) + line[0] * (temp[p] - np.mean(temp[others])))
+                if abs(dev[p] - pred) <= limit:
+                    explained.append({**entry, "temp_c": float(temp[p]), "predicted_um": pred, "um_per_k": line[0]})
+                    continue
+        outliers.append(entry)
+    return outliers, explained
+
+
 def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: float | None = 5.0,
-              regions: int = 4, threshold_um: float = 0.1, scatter_um: float | None = None) -> dict:
+              regions: int = 4, threshold_um: float = 0.1, scatter_um: float | None = None,
+              explained_um: np.ndarray | None = None, motor_turn_mm: float | None = None) -> dict:
     """The where-report of one leg (JSON-able dict; units in the keys). `scatter_um` (the
     repeat scatter after effects), when known, lets the words say that a gap is no larger than
-    the scatter of repeat passes."""
+    the scatter of repeat passes; `explained_um` (the named effects at every point, um) is taken
+    out before passes are called outliers."""
     g = gap_um
     n = g.size
     counts = np.bincount(leg.pass_id).astype(float)
@@ -184,19 +229,9 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
         if line:
             trend = {"um_per_pass": line[0], "r": line[1], "note": "no time recorded: trend against pass order"}
     out["pass_trend"] = trend or None
-    # outlier passes: how far each pass lies from the median of its repeats (same target and
-    # direction), on the errors themselves so the twin cannot blur it; robust scale over passes
-    out["outlier_passes"] = []
-    if leg.n_passes >= 4:
-        _, cinv = np.unique(leg.target_id * 2 + (leg.direction > 0), return_inverse=True)
-        from_repeats = leg.error_um - group_median(leg.error_um, cinv)[cinv]
-        dev = np.bincount(leg.pass_id, from_repeats) / counts
-        dev = dev - np.median(dev)
-        scale = max(1.4826 * float(np.median(np.abs(dev))), 1e-3)
-        out["outlier_passes"] = [
-            {"run": int(leg.run[leg.pass_id == p][0]), "offset_um": float(dev[p])}
-            for p in range(leg.n_passes) if abs(dev[p]) > 5 * scale and abs(dev[p]) > threshold_um
-        ]
+    out["outlier_passes"], explained = outlier_passes(leg, threshold_um, explained_um)
+    if explained:
+        out["passes_explained_by_temperature"] = explained
     dev = point_deviations(leg, g)
     bad = np.flatnonzero(outlier_mask(leg, g, threshold_um))
     worst = bad[np.argsort(-np.abs(dev[bad]))][:5]
@@ -230,7 +265,7 @@ def breakdown(leg: LegData, gap_um: np.ndarray, external_twin: bool, lead_mm: fl
         cond["load"] = None
         cond["load_note"] = "not recorded"
     out["by_condition"] = cond
-    out["spectrum"] = spectrum(leg, g, lead_mm, pass_means)
+    out["spectrum"] = spectrum(leg, g, lead_mm, pass_means, motor_turn_mm)
     # variance shares (mean squares about zero, sequential: offset, direction, pass, position, rest)
     total = float(np.mean(g**2))
     mean = float(g.mean())

@@ -23,6 +23,7 @@ from procedures.diagnosis.selfcheck import Trial, format_self_check, run_self_ch
 from procedures.diagnosis.text_report import text_report
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
+from station.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
 from station.twins import load_twin, plant_twin
 
 NAME = "diagnose"
@@ -30,7 +31,8 @@ HELP = "diagnose the gap between the twin and a recording (where, which effect, 
 DESCRIPTION = (
     "Measure the gap between a recording and the digital twin, break it down (direction, stroke "
     "region, pass/time, spectrum, temperature, load), name the unmodelled effects that explain it "
-    "(backlash, thermal, load, drift, scale, cyclic) with parameters and uncertainties, and say how far "
+    "(backlash, thermal, load, drift, scale, cyclic, speed; backlash and thermal also as variants that change with "
+    "temperature or position) with parameters and uncertainties, say what no candidate explains, and say how far "
     "the held-out gap shrinks with them. Without --twin the twin is a position-only error model fitted "
     "on the same recording. --self-check runs the diagnosis on simulated sessions with known effects "
     "withheld from the twin and prints how often it names them rightly."
@@ -48,11 +50,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="name an effect only if it explains more than this on held-out passes, um (default 0.1)")
     p.add_argument("--alpha", type=float, default=1e-3, help="significance level against pass scatter (default 0.001)")
     p.add_argument("--lead-mm", type=float, default=5.0, help="screw lead marked in the spectrum, mm (default 5)")
+    p.add_argument("--motor-turn-mm", type=float, default=None,
+                   help="travel per motor turn, mm (lead / gear ratio): a periodic finding that may be its alias at "
+                        "the plan's step is flagged, as the lead and its harmonics always are")
     p.add_argument("--effects", help="candidate effects to try, comma separated (default all)")
     p.add_argument("--holdout", choices=["cycle", "pass"], default="cycle",
                    help="unit held out in cross-validation (default cycle: an upward and a downward pass)")
     p.add_argument("--self-check", action="store_true", help="check the diagnosis on simulated withheld effects")
-    p.add_argument("--seeds", type=int, default=20, help="self-check: number of sessions (default 20)")
+    p.add_argument("--seeds", type=int, default=20,
+                   help="self-check: number of sessions (default 20; with --variants: per physics)")
+    p.add_argument("--variants", nargs="?", const=",".join(VARIANT_PHYSICS), metavar="PHYSICS",
+                   help="self-check the effect variants instead: sessions with physics outside the plain library "
+                        f"(comma separated, default all: {', '.join(VARIANT_PHYSICS)})")
     p.add_argument("--first-seed", type=int, default=0, help="self-check: first seed (default 0)")
     p.add_argument("--magnitude-um", type=float, nargs=2, metavar=("MIN", "MAX"),
                    default=SELF_CHECK_CONTRIBUTION_UM,
@@ -64,7 +73,8 @@ def _settings(args) -> DiagnosisSettings:
     effects = None
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    kw = {"threshold_um": args.threshold_um, "alpha": args.alpha, "lead_mm": args.lead_mm, "holdout": args.holdout}
+    kw = {"threshold_um": args.threshold_um, "alpha": args.alpha, "lead_mm": args.lead_mm, "holdout": args.holdout,
+          "motor_turn_mm": args.motor_turn_mm}
     if effects:
         kw["effects"] = effects
     return DiagnosisSettings(**kw)
@@ -236,6 +246,8 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
 
 def _self_check(args, settings: DiagnosisSettings) -> int:
     seeds = range(args.first_seed, args.first_seed + args.seeds)
+    if args.variants:
+        return _variant_check(args, settings, seeds)
 
     def progress(r):
         mark = "ok " if r["ok"] else "BAD"
@@ -246,6 +258,36 @@ def _self_check(args, settings: DiagnosisSettings) -> int:
         raise InputError(f"--magnitude-um {lo:g} {hi:g}: need 0 < MIN <= MAX (um)")
     result = run_self_check((selfcheck_trial(s, contribution_um=(lo, hi)) for s in seeds), settings, progress)
     print(format_self_check(result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1, allow_nan=False, default=float))
+    return 0 if result["summary"]["trials_ok"] == result["summary"]["trials"] else 1
+
+
+def _variant_check(args, settings: DiagnosisSettings, seeds) -> int:
+    """The variants' self-check: --seeds sessions per physics (station/selfcheck_variants.py),
+    parameters within 15 %, gap within 25 % of the oracle's."""
+    from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, format_by_physics,
+                                                summarise_by_physics)
+    from station.selfcheck_variants import variant_trial
+
+    physics = [p.strip() for p in args.variants.split(",") if p.strip()]
+    unknown = sorted(set(physics) - set(VARIANT_PHYSICS))
+    if unknown:
+        raise InputError(f"--variants {args.variants}: unknown physics {', '.join(unknown)}; known: "
+                         f"{', '.join(VARIANT_PHYSICS)}")
+
+    def progress(r):
+        if not r["ok"]:
+            print(f"  BAD seed {r['seed']:>4} ({r['twin']} twin): {r['label']}", file=sys.stderr, flush=True)
+
+    result = run_self_check((variant_trial(s, p) for p in physics for s in seeds), settings, progress,
+                            VARIANT_PARAM_TOLERANCE, VARIANT_GAP_TOLERANCE)
+    result["by_physics"] = summarise_by_physics(result["trials"])
+    print(f"variant self-check: {len(seeds)} sessions per physics, {result['summary']['trials_ok']} of "
+          f"{result['summary']['trials']} fully right")
+    print(format_by_physics(result["by_physics"], VARIANT_PARAM_TOLERANCE, VARIANT_GAP_TOLERANCE))
+    bad = [line for line in format_self_check(result).splitlines() if line.startswith("  seed")]
+    print("\n".join(bad))
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1, allow_nan=False, default=float))
     return 0 if result["summary"]["trials_ok"] == result["summary"]["trials"] else 1

@@ -118,3 +118,21 @@ def test_self_check_magnitude_range_is_checked(capsys):
 
     assert main(["diagnose", "--self-check", "--seeds", "1", "--magnitude-um", "1", "0.5"]) == 2
     assert "need 0 < MIN <= MAX" in capsys.readouterr().err
+
+
+def test_self_check_of_the_variants_prints_a_row_per_physics_and_writes_json(tmp_path, capsys):
+    out = tmp_path / "v.json"
+    assert main(["diagnose", "--self-check", "--variants", "windup,clean", "--seeds", "1", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "variant self-check: 1 sessions per physics, 2 of 2 fully right" in text
+    assert "windup_mm" in text and "named on clean legs: 0" in text
+    data = json.loads(out.read_text())
+    assert set(data["by_physics"]) == {"windup", "clean"}
+    assert main(["diagnose", "--self-check", "--variants", "wobble", "--seeds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown physics wobble" in err and "backlash_temperature" in err
+
+
+def test_motor_turn_must_be_positive(backlash_session, capsys):
+    assert main(["diagnose", str(backlash_session), "--motor-turn-mm", "0"]) == 2
+    assert "motor_turn_mm must be positive" in capsys.readouterr().err

@@ -237,7 +237,7 @@ class DiagnosisScreen(StationScreen):
         for f in r["findings"]:
             params = ", ".join(f"{k} {v:.3g}" + (f" ± {f['uncertainty'][k]:.2g}" if f["uncertainty"].get(k) is not None else "")
                                for k, v in f["parameters"].items())
-            table.add_row(str(f["leg"]), f["effect"],
+            table.add_row(str(f["leg"]), f["effect"] + (f" ({f['variant']})" if f.get("variant") else ""),
                           f"{f['heldout_rms_before_um']:.3g} → {f['heldout_rms_after_um']:.3g}",
                           f"{f['shrink_pct']:.0f} %", f"{f['p_value']:.2g}", params)
         report_text = text_report(r) + ("\n\n" + "\n".join(self.temp_lines) if self.temp_lines else "")
