@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
@@ -34,6 +33,7 @@ import numpy as np
 
 from drivers.errors import TableRefused
 from drivers.interfaces import TableBank, TableSpec
+from procedures.atomic import write_files_atomic
 from procedures.errors import InputError
 
 CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
@@ -205,24 +205,13 @@ def validate_table(table: CompTable, spec: TableSpec | None = None, expected_leg
 
 # -- writing -----------------------------------------------------------------------------------
 
-def _write_atomic(files: Mapping[Path, str], error: type[Exception] = TableValidationError) -> list[Path]:
-    """Write every file or none: all go to temporary files first, then are renamed. A missing
-    directory raises `error` (the caller's own InputError subclass) naming it."""
-    temps: list[tuple[str, Path]] = []
-    try:
-        for path, text in files.items():
-            if not path.parent.is_dir():
-                raise error(f"{path}: directory {path.parent} does not exist")
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-            temps.append((tmp, path))
-            with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
-                fh.write(text)
-        for tmp, path in temps:
-            os.replace(tmp, path)
-    finally:
-        for tmp, _ in temps:
-            Path(tmp).unlink(missing_ok=True)
-    return list(files)
+def write_table_files(files: Mapping[Path, str], error: type[Exception] = TableValidationError) -> list[Path]:
+    """Write every file or none (procedures.atomic). A missing directory raises `error` (the
+    caller's own InputError subclass) naming it."""
+    for path in files:
+        if not path.parent.is_dir():
+            raise error(f"{path}: directory {path.parent} does not exist")
+    return write_files_atomic(files, encoding="ascii")
 
 
 def table_csv_text(table: CompTable) -> str:
@@ -238,7 +227,7 @@ def write_table_csv(table: CompTable, path: str | os.PathLike, spec: TableSpec |
     Positions to 1e-6 mm, errors to 1e-4 um. Nothing is written when validation fails."""
     path = Path(path)
     validate_table(table, spec, expected_legs, where=str(path))
-    _write_atomic({path: table_csv_text(table)})
+    write_table_files({path: table_csv_text(table)})
     return path
 
 
@@ -281,7 +270,7 @@ def write_linuxcnc_comp(table: CompTable, out: str | os.PathLike, comp_type: int
     out = Path(out)
     if out.suffix != ".comp":
         out.mkdir(parents=True, exist_ok=True)
-    return _write_atomic(texts)
+    return write_table_files(texts)
 
 
 # -- reading -----------------------------------------------------------------------------------

@@ -9,7 +9,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from procedures.errors import InputError
-from procedures.table import CompTable, LegTable, _write_atomic, validate_table
+from procedures.table import CompTable, LegTable, write_table_files, validate_table
 
 
 class ControllerFileError(InputError):
@@ -30,7 +30,7 @@ def write_files(out: str | os.PathLike, texts: Mapping[Path, str], suffix: str) 
     out = Path(out)
     if out.suffix.lower() != suffix.lower():
         out.mkdir(parents=True, exist_ok=True)
-    return _write_atomic(texts, ControllerFileError)
+    return write_table_files(texts, ControllerFileError)
 
 
 def checked(table: CompTable, spec, where) -> CompTable:

@@ -39,6 +39,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from procedures.atomic import atomic_path
 from procedures.errors import InputError
 from procedures.metrology.air import EQUATIONS, refractive_index
 from procedures.recording.columns import read_point_column, write_point_column
@@ -249,8 +250,7 @@ def recorrect_session(src: str | os.PathLike, out: str | os.PathLike, options: R
         "error_change_um": list(result.change_um),
         "formula": "C = (n_i*L_rep - D_i*(n0_i - n_i))*lambda/lambda_i; L_new = C/n + D*(n0 - n)/n (docs/metrology.md)",
     }
-    tmp = out.with_name(f".{out.name}.recorrect-{os.getpid()}.tmp")
-    try:
+    with atomic_path(out) as tmp:
         with h5py.File(src, "r", swmr=True) as f:
             root = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
             meta = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f["meta"].attrs.items()}
@@ -259,7 +259,4 @@ def recorrect_session(src: str | os.PathLike, out: str | os.PathLike, options: R
             meta["recorrection"] = to_json_text("recorrection", what)
             build_session_file(tmp, root, meta, result.points, session.faults, copy_from=f)
         write_point_column(tmp, "co2_ppm", result.co2_ppm)
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
     return result

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
+from procedures.atomic import write_text_atomic
 from procedures.errors import InputError
 from procedures.iso230 import dumps, evaluate, format_table
 from procedures.metrology.thermal import error_basis
@@ -40,11 +40,6 @@ def run(args) -> int:
     if args.json:
         out = Path(args.json)
         text = dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis})
-        tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
-        try:
-            tmp.write_text(text + "\n")
-            os.replace(tmp, out)
-        finally:
-            tmp.unlink(missing_ok=True)
+        write_text_atomic(out, text + "\n")
         print(f"values written to {out}")
     return 0
