@@ -29,6 +29,7 @@ import numpy as np
 
 from procedures.atomic import atomic_path
 from procedures.errors import InputError
+from procedures.numbers import NotANumber, finite_float
 from procedures.ranges import LEG_NUMBERS, PointLimits
 from procedures.recording.columns import read_point_column, write_point_column
 from procedures.recording.reader import Session, read_session
@@ -180,14 +181,13 @@ def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = No
                     continue
             else:
                 try:
-                    value = float(text)
-                except ValueError:
-                    problems.add(line, name, f"{text!r} is not a number")
-                    ok = False
-                    continue
-                if not math.isfinite(value):
-                    what = "NaN (leave optional cells empty for 'not measured')" if math.isnan(value) else "infinite"
-                    problems.add(line, name, f"{text!r}: the value is {what}; a finite number is required")
+                    value = finite_float(text)
+                except NotANumber as exc:
+                    if exc.parsed is None:
+                        problems.add(line, name, str(exc))
+                    else:
+                        what = "NaN (leave optional cells empty for 'not measured')" if math.isnan(exc.parsed) else "infinite"
+                        problems.add(line, name, f"{text!r}: the value is {what}; a finite number is required")
                     ok = False
                     continue
             values[name] = value

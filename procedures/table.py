@@ -35,6 +35,7 @@ from drivers.errors import TableRefused
 from drivers.interfaces import TableBank, TableSpec
 from procedures.atomic import write_files_atomic
 from procedures.errors import InputError
+from procedures.numbers import parse_finite
 
 CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
 LINUXCNC_MAX_LINES = 256
@@ -313,13 +314,7 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
             raise TableValidationError(f"{path}, row {row}, field leg: {leg} is not a leg number (legs count from 1)")
         values = []
         for name, cell in zip(CSV_HEADER[1:], cells[1:]):
-            try:
-                v = float(cell)
-            except ValueError:
-                raise TableValidationError(f"{path}, row {row}, field {name}: {cell!r} is not a number") from None
-            if not math.isfinite(v):
-                raise TableValidationError(f"{path}, row {row}, field {name}: {cell!r} is not a finite number")
-            values.append(v)
+            values.append(parse_finite(cell, f"{path}, row {row}, field {name}", TableValidationError))
         x, f, r = values
         if leg != last_leg:
             if leg in data:

@@ -67,6 +67,7 @@ from typing import Any
 
 from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
 from procedures.errors import InputError
+from procedures.numbers import NotANumber, finite_float
 from procedures.metrology import defaults as MD
 from procedures.metrology.thermal import Material
 
@@ -324,11 +325,12 @@ _BOUNDS = {
 
 def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, float, str] | None) -> float:
     """`value` as a finite float within `bounds`, else InputError naming file, section and key."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{p}: [{where}] {key}: expected a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise InputError(f"{p}: [{where}] {key} = {value!r}: must be a finite number")
+    try:
+        v = finite_float(value, text_ok=False)
+    except NotANumber as exc:
+        if exc.parsed is None:
+            raise InputError(f"{p}: [{where}] {key}: expected a number, got {value!r}") from None
+        raise InputError(f"{p}: [{where}] {key} = {value!r}: must be a finite number") from None
     if bounds is not None:
         low, high, what = bounds
         if not low <= v <= high:

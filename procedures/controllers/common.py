@@ -9,6 +9,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from procedures.errors import InputError
+from procedures.numbers import parse_finite
 from procedures.table import CompTable, LegTable, write_table_files, validate_table
 
 
@@ -50,13 +51,7 @@ def read_lines(path: str | os.PathLike) -> list[str]:
 
 
 def number(path, line_no: int, field: str, text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise ControllerFileError(f"{path}, line {line_no}, field {field}: {text!r} is not a number") from None
-    if not np.isfinite(v):
-        raise ControllerFileError(f"{path}, line {line_no}, field {field}: {text!r} is not a finite number")
-    return v
+    return parse_finite(text, f"{path}, line {line_no}, field {field}", ControllerFileError)
 
 
 def interp_held(x, nodes, values) -> np.ndarray:
