@@ -43,11 +43,13 @@ class TargetError(OSError):
 
 
 @contextmanager
-def atomic_paths(paths: Iterable[str | os.PathLike], suffix: str = "") -> Iterator[dict[Path, Path]]:
+def atomic_paths(paths: Iterable[str | os.PathLike], suffix: str = "", exists: bool = True) -> Iterator[dict[Path, Path]]:
     """Temporary paths beside each target, `{target: temporary}`, for files written by libraries
     (matplotlib, fpdf, a CSV writer, h5py...). When the block ends without an exception all are
     renamed into place together, else all are removed. `suffix` ends the temporary names (for
-    writers that pick the format from the name, e.g. ".png"). An OSError of ours is a TargetError."""
+    writers that pick the format from the name, e.g. ".png"). `exists=False`: the temporary names
+    are reserved, then freed, for writers that refuse an existing file (a session writer). An
+    OSError of ours is a TargetError."""
     temps: dict[Path, Path] = {}
     try:
         for path in map(Path, paths):
@@ -57,6 +59,8 @@ def atomic_paths(paths: Iterable[str | os.PathLike], suffix: str = "") -> Iterat
                 raise TargetError(path, err) from err
             os.close(fd)
             temps[path] = Path(tmp)
+            if not exists:
+                os.unlink(tmp)
         yield dict(temps)
         mode = file_mode()
         for path, tmp in temps.items():

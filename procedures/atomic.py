@@ -44,12 +44,12 @@ def write_error(path: str | os.PathLike, err: OSError) -> WriteError:
 
 
 @contextmanager
-def atomic_paths(paths: Iterable[str | os.PathLike], suffix: str = "") -> Iterator[dict[Path, Path]]:
+def atomic_paths(paths: Iterable[str | os.PathLike], suffix: str = "", exists: bool = True) -> Iterator[dict[Path, Path]]:
     """drivers.atomic.atomic_paths (temporary paths for files written by libraries, renamed into
     place together when the block ends without an exception), failures as WriteError."""
     paths = [Path(p) for p in paths]
     try:
-        with _raw.atomic_paths(paths, suffix) as temps:
+        with _raw.atomic_paths(paths, suffix, exists) as temps:
             try:
                 yield temps
             except OSError as err:  # the library's write to a temporary: disk full, quota
@@ -62,9 +62,9 @@ def atomic_paths(paths: Iterable[str | os.PathLike], suffix: str = "") -> Iterat
 
 
 @contextmanager
-def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, suffix: str = "", exists: bool = True) -> Iterator[Path]:
     """One file of `atomic_paths`: yields the temporary path to write."""
-    with atomic_paths([path], suffix) as temps:
+    with atomic_paths([path], suffix, exists) as temps:
         yield next(iter(temps.values()))
 
 

@@ -163,7 +163,7 @@ def run(args) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     final = {name: out_dir / FILES[name] for name in wanted}
     # made under temporary names and renamed at the end: a failed run leaves the old samples
-    with atomic_paths(final.values(), suffix=".h5") as temps:
+    with atomic_paths(final.values(), suffix=".h5", exists=False) as temps:  # the sweep creates them
         _make(wanted, {name: temps[path] for name, path in final.items()})
     for path in final.values():
         print(f"  {path}: {path.stat().st_size / 1e6:.2f} MB")
