@@ -11,7 +11,8 @@ from procedures import controllers
 from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
-from procedures.table import LINUXCNC_LIMITS, make_table, write_linuxcnc_comp, write_table_csv
+from procedures.controllers.linuxcnc import LINUXCNC_LIMITS, write_linuxcnc_comp
+from procedures.table import make_table, write_table_csv
 from station.wiring import drive_table_spec
 
 NAME = "table"
