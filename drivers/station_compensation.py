@@ -40,13 +40,13 @@ import fcntl
 import json
 import math
 import os
-import tempfile
 import threading
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from drivers.atomic import write_files_atomic
 from drivers.errors import DriverError, SoftLimitError, TableError
 from drivers.interfaces import DriveLimits, DriveStatus, ServoAxis, TableBank, TableSpec, table_sha256
 
@@ -220,22 +220,7 @@ class StationTableStore:
             doc_legs[str(n)] = entry
         doc = {"format": STORE_FORMAT, "version": STORE_VERSION, "legs": doc_legs}
         data = (json.dumps(doc, indent=1) + "\n").encode()
-        fd, tmp = tempfile.mkstemp(prefix=self.path.name + ".", suffix=".tmp", dir=self.path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
-        dfd = os.open(self.path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)  # the rename itself survives a power cut
-        finally:
-            os.close(dfd)
+        write_files_atomic({self.path: data})  # the rename itself survives a power cut
 
     def _raw_legs(self) -> dict[str, Any]:
         try:

@@ -28,9 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+from procedures.atomic import atomic_path
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
 from procedures.plausibility import check_points, settle
+from procedures.numbers import NotANumber, finite_float
 from procedures.ranges import LEG_NUMBERS, PointLimits
 from procedures.recording.columns import read_point_column, write_point_column
 from procedures.recording.reader import Session, read_session
@@ -190,14 +192,13 @@ def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = No
                     continue
             else:
                 try:
-                    value = float(text)
-                except ValueError:
-                    problems.add(line, name, f"{text!r} is not a number")
-                    ok = False
-                    continue
-                if not math.isfinite(value):
-                    what = "NaN (leave optional cells empty for 'not measured')" if math.isnan(value) else "infinite"
-                    problems.add(line, name, f"{text!r}: the value is {what}; a finite number is required")
+                    value = finite_float(text)
+                except NotANumber as exc:
+                    if exc.parsed is None:
+                        problems.add(line, name, str(exc))
+                    else:
+                        what = "NaN (leave optional cells empty for 'not measured')" if math.isnan(exc.parsed) else "infinite"
+                        problems.add(line, name, f"{text!r}: the value is {what}; a finite number is required")
                     ok = False
                     continue
             values[name] = value
@@ -253,10 +254,6 @@ def read_csv_points(csv_path: str | os.PathLike, limits: PointLimits | None = No
     return out, optional
 
 
-def _temp_beside(path: Path, purpose: str) -> Path:
-    return path.with_name(f".{path.name}.{purpose}-{os.getpid()}.tmp")
-
-
 def _check_out(path: Path, overwrite: bool) -> None:
     check_output_file(path, force=overwrite)  # the one overwrite rule (procedures/outputs.py)
 
@@ -299,8 +296,7 @@ def import_csv(
         "optional_columns": optional,
         "legs": sorted({int(v) for v in points["leg"]}),
     }
-    tmp = _temp_beside(h5_path, "import")
-    try:
+    with atomic_path(h5_path) as tmp:
         with SessionWriter.create(
             tmp, session_id=session_id or f"import-{sha[:12]}", operator=operator, rig="import", plan=plan,
             station_config={}, devices={"source": f"CSV file {csv_path.name}"},
@@ -310,9 +306,6 @@ def import_csv(
             writer.finish("completed")
         for name, values in extra.items():  # closed, still at its temporary name
             write_point_column(tmp, name, values)
-        os.replace(tmp, h5_path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return read_session(h5_path)
 
 
@@ -354,8 +347,7 @@ def export_csv(h5_path: str | os.PathLike, csv_path: str | os.PathLike, *, overw
     if not len(pts):
         raise InputError(f"{h5_path}: no point with a measured error to export")
     columns = REQUIRED_COLUMNS + tuple(c for c in OPTIONAL_COLUMNS if np.isfinite(pts[c]).any()) + tuple(extra)
-    tmp = _temp_beside(csv_path, "export")
-    try:
+    with atomic_path(csv_path) as tmp:
         with open(tmp, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh, lineterminator="\n")
             w.writerow(columns)
@@ -364,7 +356,4 @@ def export_csv(h5_path: str | os.PathLike, csv_path: str | os.PathLike, *, overw
                             for c in columns])
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, csv_path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return ExportSummary(path=csv_path, rows=len(pts), columns=columns, skipped_no_error=skipped)

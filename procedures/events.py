@@ -6,9 +6,14 @@ Units are in the field names; `t_s` is on the rig clock (virtual on the simulate
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from procedures.states import FaultKind, Outcome
+
+if TYPE_CHECKING:  # the payload types import this module (their procedures yield these events)
+    from procedures.audit import AuditEntry
+    from procedures.push import PushPlan, PushResult
+    from procedures.verify import LegVerification
 
 
 @dataclass(frozen=True)
@@ -38,21 +43,6 @@ class PointMeasured(Event):
     record: dict[str, float]
     done: int  # points done including this one
     total: int
-
-
-@dataclass(frozen=True)
-class PointRecorded(Event):
-    """Emitted after a recording sink has the point on disk (flushed)."""
-
-    index: int
-
-
-@dataclass(frozen=True)
-class Progress(Event):
-    done: int
-    total: int
-    elapsed_s: float
-    eta_s: float | None
 
 
 @dataclass(frozen=True)
@@ -113,7 +103,7 @@ class AuditRecord(Event):
     """An entry for the audit log (a procedures.audit.AuditEntry). Procedures yield these; the
     audit sink (procedures.audit.AuditSink) is the only writer of the log."""
 
-    entry: Any
+    entry: AuditEntry
 
 
 @dataclass(frozen=True)
@@ -122,7 +112,7 @@ class TablePlanned(Event):
     what will be written and what it replaces. Nothing is written yet; the procedure asks for
     confirmation next."""
 
-    plan: Any
+    plan: PushPlan
 
 
 @dataclass(frozen=True)
@@ -141,7 +131,7 @@ class LegChecked(Event):
 class Verified(Event):
     """A verification's figures (procedures.verify.LegVerification per leg), after its sweep."""
 
-    results: dict[int, Any]
+    results: dict[int, LegVerification]
     report: str
     session: dict[str, Any]
 
@@ -157,7 +147,7 @@ class OperationFinished(Event):
     leg: int | None
     outcome: str
     message: str
-    result: Any = None
+    result: PushResult | None = None
 
 
 @dataclass(frozen=True)

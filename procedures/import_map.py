@@ -41,7 +41,6 @@ Every problem is an InputError naming the map file and key, or the data file, li
 from __future__ import annotations
 
 import io
-import math
 import os
 import tomllib
 from dataclasses import dataclass, field
@@ -49,6 +48,7 @@ from pathlib import Path
 
 from procedures.csv_io import EXTRA_COLUMNS, OPTIONAL_COLUMNS
 from procedures.errors import InputError
+from procedures.numbers import parse_finite
 
 UNITS_TO_MM = {"mm": 1.0, "um": 1e-3, "nm": 1e-6, "inch": 25.4}
 DELIMITERS = {",": ",", ";": ";", "\t": "\t", "\\t": "\t", "tab": "\t", "|": "|", "whitespace": None}
@@ -235,15 +235,9 @@ def convert(data_path: str | os.PathLike, m: ImportMap) -> Converted:
 
         def num(key):
             cell = cells[index[key]]
-            t = cell.replace(",", ".") if m.decimal == "," else cell
-            try:
-                v = float(t)
-            except ValueError:
-                raise InputError(f"{path}, line {no}, {names[key]} (map key columns.{key}): {cell!r} is not a number"
-                                 + (" (decimal comma? set file.decimal = \",\")" if m.decimal == "." and "," in cell else "")) from None
-            if not math.isfinite(v):
-                raise InputError(f"{path}, line {no}, {names[key]} (map key columns.{key}): {cell!r} is not finite")
-            return v
+            hint = " (decimal comma? set file.decimal = \",\")" if m.decimal == "." and "," in cell else ""
+            return parse_finite(cell, f"{path}, line {no}, {names[key]} (map key columns.{key})", hint=hint,
+                                decimal_comma=m.decimal == ",")
 
         def whole(key):
             v = num(key)

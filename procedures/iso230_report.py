@@ -2,7 +2,7 @@
 uncertainty (k = 2) of every value (procedures.metrology.uncertainty). Part of `station report`
 (procedures.report.make_report writes it beside the other report files); docs/uncertainty.md.
 
-Files, written atomically (temp + os.replace) into the report folder:
+Files, written atomically (procedures.atomic) into the report folder:
 - iso230-2.json   every figure: identification, environment, materials and NDE, test parameters,
                   compensation state, per leg and value {value_um, U_um} and the full budget,
                   U of each target's mean deviation (what a compensation table entry is made of)
@@ -21,13 +21,13 @@ import datetime as _dt
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from procedures import iso230
+from procedures.atomic import atomic_path, write_bytes_atomic
 from procedures.metrology.uncertainty import K_COVERAGE, UncertaintyInputs, leg_budget, table_budget
 from procedures.recording.identity import SessionIdentity, calibration_warnings, identity_from_json, instrument_identity
 
@@ -38,17 +38,6 @@ MEANING = {"E": "systematic positional deviation, bidirectional", "E_up": "syste
            "B": "reversal value (max |B_i|)", "B_mean": "mean reversal value", "R": "repeatability, bidirectional",
            "R_up": "repeatability, up", "R_down": "repeatability, down"}
 FILES = ("iso230-2.json", "iso230-2.md", "iso230-2.png", "iso230-2.pdf")
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _range(v: np.ndarray) -> list[float] | None:
@@ -429,14 +418,9 @@ def graph(d: dict[str, Any], path: Path) -> None:
     fig.suptitle(f"ISO 230-2: mean positional deviation with +/-2s bands ({d['error_basis']['basis']} error)",
                  fontsize=10)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".png")
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=120)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        with atomic_path(path, ".png") as tmp:
+            fig.savefig(tmp, dpi=120)
     finally:
         plt.close(fig)
 
@@ -485,7 +469,7 @@ def pdf(d: dict[str, Any], graph_png: Path, path: Path) -> None:
     doc.set_font("helvetica", "B", 11)
     doc.multi_cell(0, 6, "Graph: mean positional deviation up and down, +/-2s bands", new_x="LMARGIN", new_y="NEXT")
     doc.image(str(graph_png), w=doc.epw)
-    _atomic_write(path, bytes(doc.output()))
+    write_bytes_atomic(path, bytes(doc.output()))
 
 
 def _col_widths(rows: list[list[str]], total: float) -> tuple[float, ...]:
@@ -501,8 +485,8 @@ def write(points: np.ndarray, out_dir: str | os.PathLike, *, plan: dict, devices
     d = build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs, source=source, raw=raw,
               identity=identity)
     paths = [out / name for name in FILES]
-    _atomic_write(paths[0], (json.dumps(d, indent=2, allow_nan=False) + "\n").encode())
-    _atomic_write(paths[1], markdown(d).encode())
+    write_bytes_atomic(paths[0], (json.dumps(d, indent=2, allow_nan=False) + "\n").encode())
+    write_bytes_atomic(paths[1], markdown(d).encode())
     graph(d, paths[2])
     pdf(d, paths[2], paths[3])
     return d, paths

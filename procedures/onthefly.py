@@ -13,21 +13,19 @@ speed-dependent error from it (procedures/fit/dynamic.py). The
 environment (air, material temperature) is read after every pass and holds for its samples.
 
 A fault during a pass (a sample taken without beam, fewer samples than pulses expected, a drive
-fault) is retried as the stop-and-go sweep retries a point, but for the whole pass (a moving
-axis cannot go back for one sample). `sweep()` calls `onthefly_passes` in place of its loop
-over points; safety (limits checked before any motion, stop and disable on every exit) stays
-with `sweep()`.
+fault) is retried as the stop-and-go sweep retries a point (procedures/passes.py), but for the
+whole pass (a moving axis cannot go back for one sample). `sweep()` calls `onthefly_passes` in
+place of its loop over points; safety (limits checked before any motion, stop and disable on
+every exit) stays with `sweep()`.
 """
 
 from __future__ import annotations
 
-import logging
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any, Iterator, Mapping
 
 import numpy as np
 
 from drivers.interfaces import (
-    BeamBreak,
     CapturingInterferometer,
     Clock,
     DriverError,
@@ -38,12 +36,10 @@ from drivers.interfaces import (
 from procedures import events as ev
 from procedures.adaptive import AdaptiveRule
 from procedures.control import Aborted, RunControl
+from procedures.passes import RetryPolicy, point_record, retry_after, start_leg
 from procedures.plans import PlanPoint, SweepPlan
-from procedures.recording.schema import FLAG_ANCHOR, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, POINT_DTYPE
+from procedures.recording.schema import FLAG_ANCHOR, POINT_DTYPE
 from procedures.recording.writer import point_row
-from procedures.states import FaultKind
-
-log = logging.getLogger(__name__)
 
 
 class CaptureShort(DriverError):
@@ -74,21 +70,16 @@ def onthefly_passes(
     laser: Interferometer,
     clock: Clock,
     control: RunControl,
-    retry,
+    retry: RetryPolicy,
     t_start: float,
     done: int,
     total: int,
-    prepare: Callable[[ServoAxis, Interferometer, int, Clock, SweepPlan], None],
-    recover: Callable[[ServoAxis], None],
-    kind_of: Callable[[BaseException], FaultKind],
-    failed: Callable[[ev.Fault], BaseException],
     materials: Mapping[int, Any] | None = None,
 ) -> Iterator[ev.Event]:
     """Measure the passes of `points` (the plan's points not yet done) on the fly; yields the
-    sweep's events and returns the count of points done. `prepare`, `recover`, `kind_of` and
-    `failed` are the sweep's own helpers (enable and zero a leg, recover an axis, name a fault,
-    the exception that ends the sweep when retries run out). `materials`: leg -> material the
-    adaptive rule normalises with (procedures.adaptive; a leg not in it: the default)."""
+    sweep's events and returns the count of points done. Leg changes, faults and retries as the
+    stop-and-go sweep (procedures/passes.py; retries run out: SweepFailed). `materials`: leg ->
+    material the adaptive rule normalises with (procedures.adaptive; a leg not in it: the default)."""
     if not isinstance(laser, CapturingInterferometer):
         raise DriverError("the interferometer has no capture mode (CAPARM/CAP?), so an on-the-fly plan cannot run; "
                           "use a stop-and-go plan")
@@ -115,20 +106,7 @@ def onthefly_passes(
         yield from control.checkpoint()
         if leg != current_leg:
             last_leg, current_leg = current_leg, leg
-            yield ev.LegStarted(leg)
-            try:
-                if last_leg is None:
-                    laser.set_averaging(plan.averaging_s)
-                else:
-                    axes[last_leg].disable()
-                prepare(axes[leg], laser, leg, clock, plan)
-            except DriverError as exc:
-                if control.aborted:
-                    raise Aborted(control.reason) from exc
-                fault = ev.Fault(first.index, leg, run, 0.0, kind_of(exc),
-                                 f"preparing leg {leg} (enable, zero at mid-stroke): {exc}", 1, True, clock.now() - t_start)
-                yield fault
-                raise failed(fault) from exc
+            yield from start_leg(plan, axes, laser, clock, control, first, last_leg, t_start)
             prev_temp = None  # (session time, material temperature) of the reading before a pass
         axis = axes[leg]
         speed = plan.speed_of_run(run)
@@ -166,21 +144,8 @@ def onthefly_passes(
             except Aborted:
                 raise
             except DriverError as exc:
-                if control.aborted:
-                    raise Aborted(control.reason) from exc
-                kind = kind_of(exc)
-                gave_up = attempt > retry.limit_for(kind)
-                fault = ev.Fault(first.index, leg, run, first.target_mm, kind, f"on-the-fly pass: {exc}", attempt,
-                                 gave_up, clock.now() - t_start)
-                yield fault
-                if gave_up:
-                    raise failed(fault) from exc
-                if isinstance(exc, BeamBreak):
-                    flags |= FLAG_RETRIED_BEAM
-                    clock.sleep(retry.beam_wait_s)
-                else:
-                    flags |= FLAG_RETRIED_DRIVE
-                    recover(axis)
+                flags |= yield from retry_after(exc, attempt, retry, control, clock, axis, first, t_start,
+                                                "on-the-fly pass: ")
         readings, status, env, anchor_reading = samples
         t_abs = np.array([r.t_s for r in readings], dtype=float)
         v = speeds_of(seq, t_abs)
@@ -209,21 +174,14 @@ def onthefly_passes(
         for p in pas:
             is_anchor = abs(p.target_mm - anchor_mm) < 1e-9
             r = anchor_reading if is_anchor else readings[by_target[round(p.target_mm, 9)]]
-            record = {
-                "index": p.index, "leg": leg, "run": run, "direction": d,
-                "target_mm": p.target_mm, "commanded_mm": p.target_mm,
-                # the compare fires when position actual passes the target: that is the drive's position
-                "drive_position_mm": p.target_mm, "measured_mm": r.position_mm,
-                "error_um": (r.position_mm - p.target_mm) * 1000.0,
-                "time_s": r.t_s - t_start,
-                "air_temp_c": env.air_temp_c, "air_pressure_hpa": env.air_pressure_hpa,
-                "humidity_pct": env.humidity_pct, "material_temp_c": temp_c(r.t_s - t_start),
-                "load_n": status.load_n, "signal_pct": r.signal_pct, "flags": flags,
-                "speed_mm_s": float("nan") if is_anchor else float(v[by_target[round(p.target_mm, 9)]]),
-            }
             if is_anchor:  # read at rest: the drive's own position, time of the reading, no speed
-                record.update(drive_position_mm=status.position_mm, time_s=t_after,
-                              speed_mm_s=float("nan"), flags=flags | FLAG_ANCHOR, material_temp_c=temp_after)
+                record = point_record(p, r, env, drive_position_mm=status.position_mm, time_s=t_after,
+                                      material_temp_c=temp_after, load_n=status.load_n, flags=flags | FLAG_ANCHOR,
+                                      speed_mm_s=float("nan"))
+            else:  # the compare fires when position actual passes the target: that is the drive's position
+                record = point_record(p, r, env, drive_position_mm=p.target_mm, time_s=r.t_s - t_start,
+                                      material_temp_c=temp_c(r.t_s - t_start), load_n=status.load_n, flags=flags,
+                                      speed_mm_s=float(v[by_target[round(p.target_mm, 9)]]))
             done += 1
             planned_left[leg] -= 1
             rows.append(record)

@@ -19,6 +19,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from procedures.errors import PlanError
+from procedures.numbers import parse_finite
 
 PAPER_STEP_MM = 0.5
 PAPER_HALF_STROKE_MM = 90.0
@@ -335,10 +336,7 @@ def targets_from_file(path) -> tuple[float, ...]:
             col = cells.index("target_mm")
             continue
         cell = cells[col if col is not None else 0]
-        try:
-            values.append(float(cell))
-        except ValueError:
-            raise PlanError(f"{p}: line {lineno}: target {cell!r} is not a number (mm expected)") from None
+        values.append(parse_finite(cell, f"{p}: line {lineno}: target", PlanError, hint=" (mm expected)", sep=" "))
     if not values:
         raise PlanError(f"{p}: no targets found (one number in mm per line, or a target_mm column)")
     s = sorted(values)

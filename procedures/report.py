@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from procedures.atomic import atomic_folder, write_text_atomic
 from procedures.errors import InputError
 from procedures.fit import LegErrorModel, fit
 from procedures.fit.bidirectional import MIN_POINTS_PER_WAVE, pair_amplitudes
@@ -174,162 +175,160 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
     if not legs:
         raise InputError(f"{src}: the model has legs {list(model.legs)}, the session has legs {list(by_leg)}: "
                          "no leg in common; use the model fitted to this leg's recording")
-    out.mkdir(parents=True, exist_ok=True)
-    same_source = fitted_here or (bool(source_sha256) and model.source.get("sha256") == source_sha256)
+    # built in a temporary folder, put into place when complete: Ctrl-C leaves no half report
+    with atomic_folder(out) as work:
+        same_source = fitted_here or (bool(source_sha256) and model.source.get("sha256") == source_sha256)
 
-    resid: dict[int, np.ndarray] = {}
-    for leg in legs:
-        d = by_leg[leg]
-        resid[leg] = d.error_um - model.predict_um(leg, d.position_mm, d.direction)
+        resid: dict[int, np.ndarray] = {}
+        for leg in legs:
+            d = by_leg[leg]
+            resid[leg] = d.error_um - model.predict_um(leg, d.position_mm, d.direction)
 
-    n = len(legs)
-    ncols = min(3, n)
-    nrows = int(np.ceil(n / ncols))
-    result = ReportResult(out)
+        n = len(legs)
+        ncols = min(3, n)
+        nrows = int(np.ceil(n / ncols))
+        result = ReportResult(out)
 
-    def grid(name: str, rows: int = nrows, cols: int = ncols, size=(5.0, 3.4)):
-        fig, axes = plt.subplots(rows, cols, figsize=(size[0] * cols, size[1] * rows), squeeze=False)
-        return fig, axes
+        def grid(name: str, rows: int = nrows, cols: int = ncols, size=(5.0, 3.4)):
+            fig, axes = plt.subplots(rows, cols, figsize=(size[0] * cols, size[1] * rows), squeeze=False)
+            return fig, axes
 
-    def save(fig, name: str) -> None:
-        fig.tight_layout()
-        path = out / name
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        result.files.append(path)
+        def save(fig, name: str) -> None:
+            fig.tight_layout()
+            fig.savefig(work / name, dpi=110)
+            plt.close(fig)
+            result.files.append(out / name)
 
-    # errors with the model
-    fig, axes = grid("errors")
-    for ax, leg in zip(axes.flat, legs):
-        d = by_leg[leg]
-        lo, hi = model.legs[leg].stroke_mm
-        xs = np.linspace(lo, hi, 1000)
-        for sign, color, label in ((1, UP_COLOR, "approach +"), (-1, DOWN_COLOR, "approach -")):
-            m = d.direction == sign
-            ax.plot(d.position_mm[m], d.error_um[m], ".", ms=2, color=color, alpha=0.35, label=f"measured {label}")
-            ax.plot(xs, model.predict_um(leg, xs, sign), "-", lw=1.2, color=color, label=f"model {label}")
-        ax.set_title(f"leg {leg}: error and {model.method} model")
-        ax.set_xlabel("position (mm)")
-        ax.set_ylabel("error (um)")
-        ax.grid(alpha=0.3)
-    axes.flat[0].legend(fontsize=7)
-    for ax in list(axes.flat)[n:]:
-        ax.axis("off")
-    save(fig, "errors.png")
+        # errors with the model
+        fig, axes = grid("errors")
+        for ax, leg in zip(axes.flat, legs):
+            d = by_leg[leg]
+            lo, hi = model.legs[leg].stroke_mm
+            xs = np.linspace(lo, hi, 1000)
+            for sign, color, label in ((1, UP_COLOR, "approach +"), (-1, DOWN_COLOR, "approach -")):
+                m = d.direction == sign
+                ax.plot(d.position_mm[m], d.error_um[m], ".", ms=2, color=color, alpha=0.35, label=f"measured {label}")
+                ax.plot(xs, model.predict_um(leg, xs, sign), "-", lw=1.2, color=color, label=f"model {label}")
+            ax.set_title(f"leg {leg}: error and {model.method} model")
+            ax.set_xlabel("position (mm)")
+            ax.set_ylabel("error (um)")
+            ax.grid(alpha=0.3)
+        axes.flat[0].legend(fontsize=7)
+        for ax in list(axes.flat)[n:]:
+            ax.axis("off")
+        save(fig, "errors.png")
 
-    # residuals
-    fig, axes = grid("residuals")
-    for ax, leg in zip(axes.flat, legs):
-        d = by_leg[leg]
-        for sign, color in ((1, UP_COLOR), (-1, DOWN_COLOR)):
-            m = d.direction == sign
-            ax.plot(d.position_mm[m], resid[leg][m], ".", ms=2, color=color, alpha=0.4)
-        ax.axhline(0.0, color="k", lw=0.8)
-        ax.set_title(f"leg {leg}: residual (residual RMS {rms_about_mean_um(resid[leg]):.3f} um)")
-        ax.set_xlabel("position (mm)")
-        ax.set_ylabel("error - model (um)")
-        ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[n:]:
-        ax.axis("off")
-    save(fig, "residuals.png")
+        # residuals
+        fig, axes = grid("residuals")
+        for ax, leg in zip(axes.flat, legs):
+            d = by_leg[leg]
+            for sign, color in ((1, UP_COLOR), (-1, DOWN_COLOR)):
+                m = d.direction == sign
+                ax.plot(d.position_mm[m], resid[leg][m], ".", ms=2, color=color, alpha=0.4)
+            ax.axhline(0.0, color="k", lw=0.8)
+            ax.set_title(f"leg {leg}: residual (residual RMS {rms_about_mean_um(resid[leg]):.3f} um)")
+            ax.set_xlabel("position (mm)")
+            ax.set_ylabel("error - model (um)")
+            ax.grid(alpha=0.3)
+        for ax in list(axes.flat)[n:]:
+            ax.axis("off")
+        save(fig, "residuals.png")
 
-    # histograms before / after (paper Figs. 7-8)
-    fig, axes = plt.subplots(n, 2, figsize=(9.0, 2.6 * n), squeeze=False)
-    for row, leg in enumerate(legs):
-        d = by_leg[leg]
-        # one x range per leg, so the narrowing is seen at a glance
-        lo = min(float(d.error_um.min()), float(resid[leg].min()))
-        hi = max(float(d.error_um.max()), float(resid[leg].max()))
-        bins = np.linspace(lo, hi, 61) if hi > lo else 10
-        for col, (values, what) in enumerate(((d.error_um, "error"), (resid[leg], "compensated error"))):
-            ax = axes[row, col]
-            ax.hist(values, bins=bins, color="0.55" if col == 0 else "tab:green", edgecolor="white", linewidth=0.3)
-            ax.set_title(f"Histogram, {what} of leg {leg}", fontsize=9)
-            ax.set_xlabel("error (um)")
-            ax.set_ylabel("frequency")
-    save(fig, "histograms.png")
+        # histograms before / after (paper Figs. 7-8)
+        fig, axes = plt.subplots(n, 2, figsize=(9.0, 2.6 * n), squeeze=False)
+        for row, leg in enumerate(legs):
+            d = by_leg[leg]
+            # one x range per leg, so the narrowing is seen at a glance
+            lo = min(float(d.error_um.min()), float(resid[leg].min()))
+            hi = max(float(d.error_um.max()), float(resid[leg].max()))
+            bins = np.linspace(lo, hi, 61) if hi > lo else 10
+            for col, (values, what) in enumerate(((d.error_um, "error"), (resid[leg], "compensated error"))):
+                ax = axes[row, col]
+                ax.hist(values, bins=bins, color="0.55" if col == 0 else "tab:green", edgecolor="white", linewidth=0.3)
+                ax.set_title(f"Histogram, {what} of leg {leg}", fontsize=9)
+                ax.set_xlabel("error (um)")
+                ax.set_ylabel("frequency")
+        save(fig, "histograms.png")
 
-    # residual spectrum
-    fig, axes = grid("spectrum")
-    for ax, leg in zip(axes.flat, legs):
-        d = by_leg[leg]
-        wl, amp = residual_spectrum(d, resid[leg])
-        if wl.size:
-            ax.semilogx(wl, amp, "-", lw=0.9, color="k")
-        lead = lead_mm if isinstance(lead_mm, (int, float)) and lead_mm else _lead_of(model, leg)
-        if lead:
-            shortest = float(wl.min()) if wl.size else 0.0
-            for h in (1, 2, 3):
-                if lead / h >= shortest:
-                    ax.axvline(lead / h, color="tab:orange", ls="--", lw=0.9,
-                               label=f"screw lead {lead:g} mm and harmonics" if h == 1 else None)
-            ax.legend(fontsize=7)
-        ax.set_title(f"leg {leg}: residual spectrum")
-        ax.set_xlabel("wavelength (mm)")
-        ax.set_ylabel("amplitude (um)")
-        ax.grid(alpha=0.3, which="both")
-    for ax in list(axes.flat)[n:]:
-        ax.axis("off")
-    save(fig, "spectrum.png")
+        # residual spectrum
+        fig, axes = grid("spectrum")
+        for ax, leg in zip(axes.flat, legs):
+            d = by_leg[leg]
+            wl, amp = residual_spectrum(d, resid[leg])
+            if wl.size:
+                ax.semilogx(wl, amp, "-", lw=0.9, color="k")
+            lead = lead_mm if isinstance(lead_mm, (int, float)) and lead_mm else _lead_of(model, leg)
+            if lead:
+                shortest = float(wl.min()) if wl.size else 0.0
+                for h in (1, 2, 3):
+                    if lead / h >= shortest:
+                        ax.axvline(lead / h, color="tab:orange", ls="--", lw=0.9,
+                                   label=f"screw lead {lead:g} mm and harmonics" if h == 1 else None)
+                ax.legend(fontsize=7)
+            ax.set_title(f"leg {leg}: residual spectrum")
+            ax.set_xlabel("wavelength (mm)")
+            ax.set_ylabel("amplitude (um)")
+            ax.grid(alpha=0.3, which="both")
+        for ax in list(axes.flat)[n:]:
+            ax.axis("off")
+        save(fig, "spectrum.png")
 
-    # summary
-    rows = []
-    for leg in legs:
-        d = by_leg[leg]
-        f = model.legs[leg]
-        noise = estimate_noise_floor(d)
-        up = d.error_um[d.direction == 1]
-        down = d.error_um[d.direction == -1]
-        before_range = range_um(d.error_um)
-        residual_range = range_um(resid[leg])
-        residual_points = points[points["leg"] == leg].copy()
-        # the same rows split_legs kept (finite target and error), in the same order
-        residual_points = residual_points[np.isfinite(residual_points["target_mm"]) & np.isfinite(residual_points["error_um"])]
-        residual_points["error_um"] = resid[leg]
-        row = {
-            "leg": leg,
-            "points": d.n_points,
-            "passes": d.n_passes,
-            "cycles": d.n_cycles,
-            "stroke_mm": list(f.stroke_mm),
-            "range_before_um": before_range,
-            "residual_range_um": residual_range,
-            "residual_range_reduction_pct": reduction_pct(before_range, residual_range),
-            "rms_before_um": rms_about_mean_um(d.error_um),
-            "residual_rms_um": rms_about_mean_um(resid[leg]),
-            "mean_abs_before_um": float(np.mean(np.abs(d.error_um))),
-            "residual_mean_abs_um": float(np.mean(np.abs(resid[leg]))),
-            "reversal_um": float(down.mean() - up.mean()) if up.size and down.size else None,
-            "noise_floor_um": noise.noise_floor_um,
-            "model_terms": f.describe(),
-            "model_heldout_rms_um": f.stats.heldout_rms_um,
-            "model_noise_floor_um": f.stats.noise_floor_um,
-            "model_heldout_ratio": f.stats.heldout_ratio,
-            "iso230_2": _iso_figures(points, leg, residual_points),
+        # summary
+        rows = []
+        for leg in legs:
+            d = by_leg[leg]
+            f = model.legs[leg]
+            noise = estimate_noise_floor(d)
+            up = d.error_um[d.direction == 1]
+            down = d.error_um[d.direction == -1]
+            before_range = range_um(d.error_um)
+            residual_range = range_um(resid[leg])
+            residual_points = points[points["leg"] == leg].copy()
+            # the same rows split_legs kept (finite target and error), in the same order
+            residual_points = residual_points[np.isfinite(residual_points["target_mm"]) & np.isfinite(residual_points["error_um"])]
+            residual_points["error_um"] = resid[leg]
+            row = {
+                "leg": leg,
+                "points": d.n_points,
+                "passes": d.n_passes,
+                "cycles": d.n_cycles,
+                "stroke_mm": list(f.stroke_mm),
+                "range_before_um": before_range,
+                "residual_range_um": residual_range,
+                "residual_range_reduction_pct": reduction_pct(before_range, residual_range),
+                "rms_before_um": rms_about_mean_um(d.error_um),
+                "residual_rms_um": rms_about_mean_um(resid[leg]),
+                "mean_abs_before_um": float(np.mean(np.abs(d.error_um))),
+                "residual_mean_abs_um": float(np.mean(np.abs(resid[leg]))),
+                "reversal_um": float(down.mean() - up.mean()) if up.size and down.size else None,
+                "noise_floor_um": noise.noise_floor_um,
+                "model_terms": f.describe(),
+                "model_heldout_rms_um": f.stats.heldout_rms_um,
+                "model_noise_floor_um": f.stats.noise_floor_um,
+                "model_heldout_ratio": f.stats.heldout_ratio,
+                "iso230_2": _iso_figures(points, leg, residual_points),
+            }
+            rows.append(row)
+        summary = {
+            "source": {"path": source_path, "sha256": source_sha256},
+            "model": {"method": model.method, "source": model.source, "fitted_to_this_session": same_source},
+            "residuals": "in-sample (model fitted to this session)" if same_source else "out-of-sample (model from another recording)",
+            "error_basis": basis,
+            "legs": rows,
         }
-        rows.append(row)
-    summary = {
-        "source": {"path": source_path, "sha256": source_sha256},
-        "model": {"method": model.method, "source": model.source, "fitted_to_this_session": same_source},
-        "residuals": "in-sample (model fitted to this session)" if same_source else "out-of-sample (model from another recording)",
-        "error_basis": basis,
-        "legs": rows,
-    }
-    result.summary = _json_safe(summary)
-    from procedures.iso230_report import _atomic_write  # temp + os.replace: never half a file
+        result.summary = _json_safe(summary)
+        write_text_atomic(work / "summary.json", json.dumps(result.summary, indent=2, sort_keys=True) + "\n")
+        result.files.append(out / "summary.json")
+        write_text_atomic(work / "summary.md", _markdown(result.summary, title or f"Report: {source_path or 'session'}"))
+        result.files.append(out / "summary.md")
+        if session_meta is not None:
+            from procedures import iso230_report
 
-    _atomic_write(out / "summary.json", (json.dumps(result.summary, indent=2, sort_keys=True) + "\n").encode())
-    result.files.append(out / "summary.json")
-    _atomic_write(out / "summary.md", _markdown(result.summary, title or f"Report: {source_path or 'session'}").encode())
-    result.files.append(out / "summary.md")
-    if session_meta is not None:
-        from procedures import iso230_report
-
-        meta = {k: session_meta.get(k) or {} for k in ("plan", "devices", "station_config", "attrs", "identity")}
-        # the recorded points: the ISO report normalises them itself (unless raw), on the same basis
-        result.iso230, paths = iso230_report.write(recorded, out, source={"path": source_path, "sha256": source_sha256},
-                                                   raw=is_raw, **meta)
-        result.files.extend(paths)
+            meta = {k: session_meta.get(k) or {} for k in ("plan", "devices", "station_config", "attrs", "identity")}
+            # the recorded points: the ISO report normalises them itself (unless raw), on the same basis
+            result.iso230, paths = iso230_report.write(recorded, work, source={"path": source_path, "sha256": source_sha256},
+                                                       raw=is_raw, **meta)
+            result.files.extend(out / p.name for p in paths)
     return result
 
 

@@ -1,4 +1,4 @@
-"""Compensation tables: a model resampled on a fixed step, written for a drive or LinuxCNC.
+"""Compensation tables: a model resampled on a fixed step, written for a drive (CSV).
 
 A table holds, per leg, the predicted error (measured minus commanded, um) at
 `start_mm + i * step_mm` when the target is approached in the positive (`error_fwd_um`) and the
@@ -10,14 +10,8 @@ Formats
   lines (`#`); `# leg_serial: 3=HX-0042` names the serial of the leg the table was made for
   (from the model's identity), which a push checks (procedures/push.py). Tables without it
   are read as before.
-- LinuxCNC (`write_linuxcnc_comp`): one `[JOINT_n] COMP_FILE` per leg (leg N -> joint N-1),
-  three numbers per line in machine units (mm), no header or comment (LinuxCNC's parser stops
-  silently at the first line that is not three numbers), at most 256 lines, strictly
-  increasing nominal positions.
-  COMP_FILE_TYPE 0: `nominal  actual_moving_+  actual_moving_-`, where actual = nominal + error;
-  COMP_FILE_TYPE 1: `nominal  forward_trim  reverse_trim`, where trim = -error.
-  (LinuxCNC converts type 0 to trims as nominal - actual and commands the motor at
-  position + trim, so both cancel the error; see docs/tables.md.)
+- LinuxCNC COMP_FILEs and the other controllers' formats: procedures/controllers/ (one module
+  each, LinuxCNC's in linuxcnc.py).
 
 Every writer validates first and writes through a temporary file renamed into place, so on
 any error nothing is written. Readers name the file, row and field of the first problem.
@@ -27,8 +21,7 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Iterable, Iterator, Mapping
@@ -37,11 +30,12 @@ import numpy as np
 
 from drivers.errors import TableRefused
 from drivers.interfaces import TableBank, TableSpec
+from procedures.atomic import write_files_atomic
 from procedures.errors import InputError
 from procedures.recording.identity import model_leg_serials
+from procedures.numbers import parse_finite
 
 CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
-LINUXCNC_MAX_LINES = 256
 SPACING_TOL_MM = 1e-5  # positions are written to 1e-6 mm: steps may differ by rounding only
 _STEP_QUANTUM_MM = 1e-3  # suggested steps in messages are rounded up to whole micrometres
 _AUTO_STEP_QUANTUM_MM = 1e-6  # automatic steps: whole nanometres, the drive's spacing unit
@@ -55,9 +49,6 @@ class TableValidationError(InputError):
 DEFAULT_SPEC = TableSpec()
 """The built-in drive profile's table (drivers/modbus/profiles/default.toml [table])."""
 
-LINUXCNC_LIMITS = TableSpec(max_points=LINUXCNC_MAX_LINES, max_correction_um=1000.0, entry_resolution_um=0.0,
-                            min_step_mm=1e-6, banks=1, holder="LinuxCNC")
-"""LinuxCNC: at most 256 lines per COMP_FILE; no documented correction limit (1 mm here)."""
 
 
 @dataclass(frozen=True)
@@ -212,24 +203,13 @@ def validate_table(table: CompTable, spec: TableSpec | None = None, expected_leg
 
 # -- writing -----------------------------------------------------------------------------------
 
-def _write_atomic(files: Mapping[Path, str], error: type[Exception] = TableValidationError) -> list[Path]:
-    """Write every file or none: all go to temporary files first, then are renamed. A missing
-    directory raises `error` (the caller's own InputError subclass) naming it."""
-    temps: list[tuple[str, Path]] = []
-    try:
-        for path, text in files.items():
-            if not path.parent.is_dir():
-                raise error(f"{path}: directory {path.parent} does not exist")
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-            temps.append((tmp, path))
-            with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
-                fh.write(text)
-        for tmp, path in temps:
-            os.replace(tmp, path)
-    finally:
-        for tmp, _ in temps:
-            Path(tmp).unlink(missing_ok=True)
-    return list(files)
+def write_table_files(files: Mapping[Path, str], error: type[Exception] = TableValidationError) -> list[Path]:
+    """Write every file or none (procedures.atomic). A missing directory raises `error` (the
+    caller's own InputError subclass) naming it."""
+    for path in files:
+        if not path.parent.is_dir():
+            raise error(f"{path}: directory {path.parent} does not exist")
+    return write_files_atomic(files, encoding="ascii")
 
 
 SERIAL_COMMENT = "# leg_serial:"
@@ -250,50 +230,8 @@ def write_table_csv(table: CompTable, path: str | os.PathLike, spec: TableSpec |
     Positions to 1e-6 mm, errors to 1e-4 um. Nothing is written when validation fails."""
     path = Path(path)
     validate_table(table, spec, expected_legs, where=str(path))
-    _write_atomic({path: table_csv_text(table)})
+    write_table_files({path: table_csv_text(table)})
     return path
-
-
-def linuxcnc_paths(out: str | os.PathLike, legs: Iterable[int]) -> dict[int, Path]:
-    """COMP_FILE path per leg: `OUT/joint<N-1>.comp` for a directory OUT, or
-    `<stem>_joint<N-1>.comp` beside OUT when OUT ends in `.comp`."""
-    out = Path(out)
-    if out.suffix == ".comp":
-        return {leg: out.with_name(f"{out.stem}_joint{leg - 1}.comp") for leg in legs}
-    return {leg: out / f"joint{leg - 1}.comp" for leg in legs}
-
-
-def linuxcnc_text(t: LegTable, comp_type: int = 0) -> str:
-    """One COMP_FILE: `nominal a b` per line in mm (see the module docstring for a, b)."""
-    if comp_type not in (0, 1):
-        raise TableValidationError(f"LinuxCNC COMP_FILE_TYPE must be 0 or 1, got {comp_type}")
-    lines = []
-    for x, f, r in zip(t.positions_mm, t.error_fwd_um, t.error_rev_um):
-        if comp_type == 0:
-            a, b = x + f / 1000.0, x + r / 1000.0  # where the joint actually is, moving + / -
-        else:
-            a, b = -f / 1000.0, -r / 1000.0  # trims LinuxCNC adds to the command
-        lines.append(f"{x:.6f} {a:.6f} {b:.6f}")
-    return "\n".join(lines) + "\n"
-
-
-def write_linuxcnc_comp(table: CompTable, out: str | os.PathLike, comp_type: int = 0,
-                        spec: TableSpec | None = None) -> list[Path]:
-    """Write one LinuxCNC COMP_FILE per leg (paths: `linuxcnc_paths`). A directory OUT is
-    created if missing. Nothing is written when any leg fails validation (more than 256
-    lines, beyond `spec`)."""
-    spec = spec or LINUXCNC_LIMITS
-    if spec.max_points > LINUXCNC_MAX_LINES or spec.holder != "LinuxCNC":
-        spec = replace(spec, max_points=min(spec.max_points, LINUXCNC_MAX_LINES), holder="LinuxCNC")
-    validate_table(table, spec, where=str(out))
-    if comp_type not in (0, 1):
-        raise TableValidationError(f"LinuxCNC COMP_FILE_TYPE must be 0 or 1, got {comp_type}")
-    paths = linuxcnc_paths(out, table.legs)
-    texts = {paths[leg]: linuxcnc_text(t, comp_type) for leg, t in table.legs.items()}
-    out = Path(out)
-    if out.suffix != ".comp":
-        out.mkdir(parents=True, exist_ok=True)
-    return _write_atomic(texts)
 
 
 # -- reading -----------------------------------------------------------------------------------
@@ -337,13 +275,7 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
             raise TableValidationError(f"{path}, row {row}, field leg: {leg} is not a leg number (legs count from 1)")
         values = []
         for name, cell in zip(CSV_HEADER[1:], cells[1:]):
-            try:
-                v = float(cell)
-            except ValueError:
-                raise TableValidationError(f"{path}, row {row}, field {name}: {cell!r} is not a number") from None
-            if not math.isfinite(v):
-                raise TableValidationError(f"{path}, row {row}, field {name}: {cell!r} is not a finite number")
-            values.append(v)
+            values.append(parse_finite(cell, f"{path}, row {row}, field {name}", TableValidationError))
         x, f, r = values
         if leg != last_leg:
             if leg in data:
@@ -413,24 +345,3 @@ def _comment_lines(lines: list[str], path: Path) -> tuple[dict[int, tuple[int, s
         head += 1
     return serials, head
 
-
-def read_linuxcnc_comp(path: str | os.PathLike, comp_type: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A COMP_FILE as LinuxCNC loads it: (nominal_mm, forward_trim_mm, reverse_trim_mm).
-    Type 0 lines are converted as LinuxCNC does (trim = nominal - actual). Reading stops at the
-    first line that is not three numbers, as LinuxCNC's does (a line that is not text, too)."""
-    nom, fwd, rev = [], [], []
-    # bytes that are not UTF-8 become U+FFFD, which no number parses: reading stops there
-    for line in Path(path).read_text(encoding="utf-8", errors="replace").splitlines():
-        parts = line.split()
-        if len(parts) < 3:
-            break
-        try:
-            n, a, b = (float(p) for p in parts[:3])
-        except ValueError:
-            break
-        if comp_type == 0:
-            a, b = n - a, n - b
-        nom.append(n)
-        fwd.append(a)
-        rev.append(b)
-    return np.array(nom), np.array(fwd), np.array(rev)

@@ -72,7 +72,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import getpass
-import math
 import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -80,6 +79,9 @@ from typing import Any
 
 from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
 from procedures.errors import InputError
+from procedures.numbers import NotANumber, finite_float
+from procedures.metrology import defaults as MD
+from procedures.metrology.thermal import Material
 
 
 LEG_COUNT = 6
@@ -134,23 +136,23 @@ class MetrologyConfig:
     standard uncertainties (k = 1); `laser_accuracy_ppm` is the instrument's stated accuracy,
     an expanded uncertainty (k = 2), as laser makers state it."""
 
-    reference_temp_c: float = 20.0  # ISO 1 reference temperature of lengths
-    wavelength_nm: float = 632.991  # vacuum wavelength of the laser (HeNe)
-    co2_ppm: float = 450.0  # CO2 mole fraction used when the session has no CO2 reading
-    dead_path_mm: float = 0.0  # beam path between the laser and the interferometer's zero
-    laser_accuracy_ppm: float = 0.5  # stated accuracy, k = 2
-    laser_resolution_nm: float = 1.0  # display/count resolution
+    reference_temp_c: float = MD.REFERENCE_TEMP_C  # defaults and meanings: procedures.metrology.defaults
+    wavelength_nm: float = MD.WAVELENGTH_NM
+    co2_ppm: float = MD.CO2_PPM
+    dead_path_mm: float = MD.DEAD_PATH_MM
+    laser_accuracy_ppm: float = MD.LASER_ACCURACY_PPM
+    laser_resolution_nm: float = MD.LASER_RESOLUTION_NM
     model: str = ""  # instrument identification: maker and model
     serial: str = ""
     calibration_date: str = ""  # ISO date (YYYY-MM-DD) of the instrument's calibration; "" = not stated
     calibration_due: str = ""  # ISO date its calibration expires; "" = not stated: results not traceable
-    air_temp_u_c: float = 0.1  # standard uncertainty of the air temperature sensor
-    pressure_u_pa: float = 50.0  # of the pressure sensor
-    humidity_u_pct: float = 3.0  # of the humidity sensor, %RH
-    material_temp_u_c: float = 0.1  # of the material temperature sensor
-    misalignment_mm: float = 0.0  # lateral beam offset over the whole stroke (cosine error)
-    abbe_offset_mm: float = 0.0  # distance between the beam and the leg's axis
-    abbe_angle_u_urad: float = 0.0  # standard uncertainty of the pitch/yaw angle over the stroke
+    air_temp_u_c: float = MD.AIR_TEMP_U_C
+    pressure_u_pa: float = MD.PRESSURE_U_PA
+    humidity_u_pct: float = MD.HUMIDITY_U_PCT
+    material_temp_u_c: float = MD.MATERIAL_TEMP_U_C
+    misalignment_mm: float = MD.MISALIGNMENT_MM
+    abbe_offset_mm: float = MD.ABBE_OFFSET_MM
+    abbe_angle_u_urad: float = MD.ABBE_ANGLE_U_URAD
 
     @property
     def instrument_model(self) -> str:
@@ -161,16 +163,8 @@ class MetrologyConfig:
         return self.serial
 
 
-@dataclass(frozen=True)
-class LegMaterial:
-    """A leg's thermal expansion: `expansion_um_m_k` (um per metre per kelvin, steel 11.5) with
-    its standard uncertainty `expansion_u_um_m_k`, and `fixed_point_mm`, the position in the
-    station's target_mm coordinate where the leg is fixed, so that its thermal expansion is
-    zero there (docs/metrology.md)."""
-
-    expansion_um_m_k: float = 11.5
-    expansion_u_um_m_k: float = 1.0
-    fixed_point_mm: float = 0.0
+LegMaterial = Material
+"""A leg's [legs] material: procedures.metrology.thermal.Material (one class, one set of defaults)."""
 
 
 LEG_IDENTITY_KEYS = ("serial", "part_number", "leg_type", "screw_lot", "drive_serial")
@@ -392,11 +386,12 @@ _BOUNDS = {
 
 def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, float, str] | None) -> float:
     """`value` as a finite float within `bounds`, else InputError naming file, section and key."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{p}: [{where}] {key}: expected a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise InputError(f"{p}: [{where}] {key} = {value!r}: must be a finite number")
+    try:
+        v = finite_float(value, text_ok=False)
+    except NotANumber as exc:
+        if exc.parsed is None:
+            raise InputError(f"{p}: [{where}] {key}: expected a number, got {value!r}") from None
+        raise InputError(f"{p}: [{where}] {key} = {value!r}: must be a finite number") from None
     if bounds is not None:
         low, high, what = bounds
         if not low <= v <= high:

@@ -11,6 +11,7 @@ from typing import Iterable, Mapping
 from procedures import events as ev
 from procedures.control import RunControl
 from procedures.errors import InputError
+from procedures.numbers import NotANumber, finite_float
 from procedures.metrology.thermal import recorded_materials
 from procedures.plans import SweepPlan
 from procedures.recording.reader import Session, read_session
@@ -101,9 +102,11 @@ def parse_speed(text: str) -> float | None:
     if t in ("max", "inf", "fastest"):
         return None
     try:
-        value = float(t)
-    except ValueError:
-        raise InputError(f"{text!r}: give a speed factor (1 = real time, 10 = ten times faster) or 'max'") from None
+        value = finite_float(t)
+    except NotANumber as exc:
+        if exc.parsed is None:
+            raise InputError(f"{text!r}: give a speed factor (1 = real time, 10 = ten times faster) or 'max'") from None
+        value = exc.parsed  # NaN or inf: refused below
     if not (math.isfinite(value) and value > 0):
         raise InputError(f"{text!r}: the speed factor must be > 0 (or 'max')")
     return value

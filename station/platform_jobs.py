@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from procedures.atomic import atomic_folder, write_text_atomic
 from procedures.errors import InputError
 
 REPORT_MD = "platform_report.md"
@@ -212,13 +213,6 @@ def _write_figures(result, out: Path) -> list[Path]:
     return paths
 
 
-def _write_text(path: Path, text: str) -> None:
-    """Write through a temporary file renamed into place: a crash never leaves half a report."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
-
-
 def write_report(out: Path, result, summary: dict, inputs: dict, geometry) -> list[Path]:
     """Complete `summary` (from `run_measurements`) with the inputs, geometry, home sensitivity
     and conventions, and write platform_report.md, platform_summary.json and the histograms into
@@ -243,8 +237,8 @@ def write_report(out: Path, result, summary: dict, inputs: dict, geometry) -> li
         "direction": "poses visited in the order drawn from home; a leg's direction is the sign of its last motion",
     }
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    _write_text(out / REPORT_MD, report_markdown(summary, describe(geometry), home))
-    _write_text(out / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    figures = _write_figures(result, out)
-    return [out / REPORT_MD, out / SUMMARY_JSON, *figures]
+    with atomic_folder(out) as work:  # put into place when complete: Ctrl-C leaves no half folder
+        write_text_atomic(work / REPORT_MD, report_markdown(summary, describe(geometry), home))
+        write_text_atomic(work / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        figures = _write_figures(result, work)
+    return [out / REPORT_MD, out / SUMMARY_JSON, *(out / f.name for f in figures)]

@@ -40,7 +40,6 @@ import math
 import os
 import signal
 import sys
-import tempfile
 import threading
 import time
 import tty
@@ -55,6 +54,7 @@ from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from drivers.atomic import write_files_atomic
 from drivers.errors import DriverError
 from drivers.interfaces import Clock
 from drivers.modbus.codec import crc16_modbus
@@ -661,28 +661,7 @@ class SimDriveServer:
         data = {"format": NV_FORMAT, "version": NV_VERSION,
                 "legs": {str(leg): m.nv_state() for leg, m in self._models.items()}}
         text = json.dumps(data, separators=(",", ":"))
-        d = self.nv_path.parent
-        fd, tmp = tempfile.mkstemp(prefix=self.nv_path.name + ".", suffix=".tmp", dir=d)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.nv_path)
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise
-        try:
-            dfd = os.open(d, os.O_RDONLY)
-            try:
-                os.fsync(dfd)
-            finally:
-                os.close(dfd)
-        except OSError:
-            pass
+        write_files_atomic({self.nv_path: text})
 
     # -- request handling (runs in the server thread) ------------------------------------------------
     def _line_rules(self, count: int, write: bool) -> ExcCodes | None:

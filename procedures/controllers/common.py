@@ -9,7 +9,8 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from procedures.errors import InputError
-from procedures.table import CompTable, LegTable, _write_atomic, validate_table
+from procedures.numbers import parse_finite
+from procedures.table import CompTable, LegTable, write_table_files, validate_table
 
 
 class ControllerFileError(InputError):
@@ -30,7 +31,7 @@ def write_files(out: str | os.PathLike, texts: Mapping[Path, str], suffix: str) 
     out = Path(out)
     if out.suffix.lower() != suffix.lower():
         out.mkdir(parents=True, exist_ok=True)
-    return _write_atomic(texts, ControllerFileError)
+    return write_table_files(texts, ControllerFileError)
 
 
 def checked(table: CompTable, spec, where) -> CompTable:
@@ -50,13 +51,7 @@ def read_lines(path: str | os.PathLike) -> list[str]:
 
 
 def number(path, line_no: int, field: str, text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise ControllerFileError(f"{path}, line {line_no}, field {field}: {text!r} is not a number") from None
-    if not np.isfinite(v):
-        raise ControllerFileError(f"{path}, line {line_no}, field {field}: {text!r} is not a finite number")
-    return v
+    return parse_finite(text, f"{path}, line {line_no}, field {field}", ControllerFileError)
 
 
 def interp_held(x, nodes, values) -> np.ndarray:

@@ -20,11 +20,11 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from procedures.atomic import write_text_atomic
 from procedures.errors import SchemaError
 from procedures.fit.bidirectional import bidirectional_from_json
 from procedures.fit.model import FORMAT, METHODS, VERSION, FitStats, LegErrorModel, LegFit
@@ -77,15 +77,7 @@ def save_model(model: LegErrorModel, path: str | os.PathLike, source_path: str |
     `identity`: the session's (procedures.recording.identity.model_identity), default the model's."""
     path = Path(path)
     text = model_to_json(model, source_path, source_sha256, identity=identity)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent if str(path.parent) else ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_text_atomic(path, text)
 
 
 # -- reading ---------------------------------------------------------------------------------

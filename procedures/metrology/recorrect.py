@@ -39,7 +39,9 @@ from typing import Any
 import h5py
 import numpy as np
 
+from procedures.atomic import atomic_path
 from procedures.errors import InputError
+from procedures.metrology import defaults as D
 from procedures.metrology.air import EQUATIONS, refractive_index
 from procedures.recording.columns import read_point_column, write_point_column
 from procedures.recording.reader import read_session
@@ -68,9 +70,9 @@ class RecorrectOptions:
     """What the station's index is computed from. None = as recorded (air) / the default."""
 
     equation: str = "ciddor"
-    wavelength_nm: float = 632.991  # the laser's vacuum wavelength ([metrology] wavelength_nm)
-    co2_ppm: float = 450.0  # used where the session has no CO2 reading ([metrology] co2_ppm)
-    dead_path_mm: float = 0.0  # [metrology] dead_path_mm
+    wavelength_nm: float = D.WAVELENGTH_NM  # the laser's vacuum wavelength ([metrology] wavelength_nm)
+    co2_ppm: float = D.CO2_PPM  # used where the session has no CO2 reading ([metrology] co2_ppm)
+    dead_path_mm: float = D.DEAD_PATH_MM  # [metrology] dead_path_mm
     air_temp_offset_c: float = 0.0  # added to every recorded air temperature (a sensor found off)
     air_temp_c: float | None = None  # replaces the recorded air temperature
     pressure_pa: float | None = None  # replaces the recorded pressure
@@ -169,12 +171,12 @@ def recorrect_points(points: np.ndarray, record: dict[str, Any], options: Recorr
         n_i = np.ones(len(points))
     else:
         eq_i = str(record["equation"]).lower()
-        co2_i = np.where(np.isfinite(co2_rec), co2_rec, _num(record, "co2_ppm", 450.0)) if mode == "STATION" \
-            else _num(record, "co2_ppm", 450.0)
+        co2_i = np.where(np.isfinite(co2_rec), co2_rec, _num(record, "co2_ppm", D.CO2_PPM)) if mode == "STATION" \
+            else _num(record, "co2_ppm", D.CO2_PPM)
         if mode == "MANUAL":
             n_i = np.full(len(points), float(refractive_index(
                 eq_i, lam_i, float(record["air_temp_c"]), float(record["air_pressure_hpa"]) * 100.0,
-                float(record["humidity_pct"]), _num(record, "co2_ppm", 450.0))))
+                float(record["humidity_pct"]), _num(record, "co2_ppm", D.CO2_PPM))))
         else:
             n_i = np.asarray(refractive_index(eq_i, lam_i, t_rec, p_rec, h_rec, co2_i), dtype=float)
     # the station's index, from the recorded air as corrected or replaced by the options
@@ -249,8 +251,7 @@ def recorrect_session(src: str | os.PathLike, out: str | os.PathLike, options: R
         "error_change_um": list(result.change_um),
         "formula": "C = (n_i*L_rep - D_i*(n0_i - n_i))*lambda/lambda_i; L_new = C/n + D*(n0 - n)/n (docs/metrology.md)",
     }
-    tmp = out.with_name(f".{out.name}.recorrect-{os.getpid()}.tmp")
-    try:
+    with atomic_path(out) as tmp:
         with h5py.File(src, "r", swmr=True) as f:
             root = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
             meta = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f["meta"].attrs.items()}
@@ -259,7 +260,4 @@ def recorrect_session(src: str | os.PathLike, out: str | os.PathLike, options: R
             meta["recorrection"] = to_json_text("recorrection", what)
             build_session_file(tmp, root, meta, result.points, session.faults, copy_from=f)
         write_point_column(tmp, "co2_ppm", result.co2_ppm)
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
     return result

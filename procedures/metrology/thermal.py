@@ -32,17 +32,23 @@ from typing import Any, Mapping
 
 import numpy as np
 
-REFERENCE_TEMP_C = 20.0  # ISO 1
+from procedures.metrology import defaults as D
+from procedures.metrology.defaults import REFERENCE_TEMP_C  # noqa: F401  (re-exported)
+
 LEG_NUMBERS = (1, 2, 3, 4, 5, 6)
 
 
 @dataclass(frozen=True)
 class Material:
-    """A leg's expansion (see station.config.LegMaterial, which a session records)."""
+    """A leg's thermal expansion: `expansion_um_m_k` (um per metre per kelvin, steel 11.5) with
+    its standard uncertainty `expansion_u_um_m_k`, and `fixed_point_mm`, the position in the
+    station's target_mm coordinate where the leg is fixed, so that its thermal expansion is
+    zero there (docs/metrology.md). The station config's [legs] (station.config.LegMaterial is
+    this class); a session records every leg's."""
 
-    expansion_um_m_k: float = 11.5
-    expansion_u_um_m_k: float = 1.0
-    fixed_point_mm: float = 0.0
+    expansion_um_m_k: float = D.EXPANSION_UM_M_K
+    expansion_u_um_m_k: float = D.EXPANSION_U_UM_M_K
+    fixed_point_mm: float = D.FIXED_POINT_MM
 
 
 def nde_correction_um(target_mm, material_temp_c, material: Any, reference_temp_c: float = REFERENCE_TEMP_C):
@@ -62,8 +68,9 @@ def _material(d: Any) -> Material | None:
     if not isinstance(d, Mapping):
         return None
     try:
-        m = Material(float(d.get("expansion_um_m_k", 11.5)), float(d.get("expansion_u_um_m_k", 1.0)),
-                     float(d.get("fixed_point_mm", 0.0)))
+        m = Material(float(d.get("expansion_um_m_k", D.EXPANSION_UM_M_K)),
+                     float(d.get("expansion_u_um_m_k", D.EXPANSION_U_UM_M_K)),
+                     float(d.get("fixed_point_mm", D.FIXED_POINT_MM)))
     except (TypeError, ValueError):
         return None
     return m if all(math.isfinite(v) for v in (m.expansion_um_m_k, m.expansion_u_um_m_k, m.fixed_point_mm)) else None

@@ -39,6 +39,8 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from procedures.metrology import defaults as D
+
 K_COVERAGE = 2.0
 SQRT3 = math.sqrt(3.0)
 SQRT12 = math.sqrt(12.0)
@@ -56,22 +58,22 @@ class UncertaintyInputs:
     [legs]). `*_u_*` are standard uncertainties (k = 1); `laser_accuracy_ppm` is the laser's
     stated accuracy, expanded (k = 2). Defaults: the station's config defaults."""
 
-    laser_accuracy_ppm: float = 0.5
-    laser_resolution_nm: float = 1.0
-    wavelength_nm: float = 632.991
-    co2_ppm: float = 450.0
-    reference_temp_c: float = 20.0
-    dead_path_mm: float = 0.0
-    air_temp_u_c: float = 0.1
-    pressure_u_pa: float = 50.0
-    humidity_u_pct: float = 3.0
-    material_temp_u_c: float = 0.1
-    misalignment_mm: float = 0.0  # lateral beam walk-off observed over the stroke
-    abbe_offset_mm: float = 0.0
-    abbe_angle_u_urad: float = 0.0
-    expansion_um_m_k: float = 11.5
-    expansion_u_um_m_k: float = 1.0
-    fixed_point_mm: float = 0.0
+    laser_accuracy_ppm: float = D.LASER_ACCURACY_PPM
+    laser_resolution_nm: float = D.LASER_RESOLUTION_NM
+    wavelength_nm: float = D.WAVELENGTH_NM
+    co2_ppm: float = D.CO2_PPM
+    reference_temp_c: float = D.REFERENCE_TEMP_C
+    dead_path_mm: float = D.DEAD_PATH_MM
+    air_temp_u_c: float = D.AIR_TEMP_U_C
+    pressure_u_pa: float = D.PRESSURE_U_PA
+    humidity_u_pct: float = D.HUMIDITY_U_PCT
+    material_temp_u_c: float = D.MATERIAL_TEMP_U_C
+    misalignment_mm: float = D.MISALIGNMENT_MM  # lateral beam walk-off observed over the stroke
+    abbe_offset_mm: float = D.ABBE_OFFSET_MM
+    abbe_angle_u_urad: float = D.ABBE_ANGLE_U_URAD
+    expansion_um_m_k: float = D.EXPANSION_UM_M_K
+    expansion_u_um_m_k: float = D.EXPANSION_U_UM_M_K
+    fixed_point_mm: float = D.FIXED_POINT_MM
 
     @classmethod
     def from_config(cls, cfg: Any, leg: int) -> "UncertaintyInputs":

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
+from procedures.numbers import NotANumber, finite_float
 from procedures.fit import fit, save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
 from procedures.metrology.thermal import error_basis
@@ -34,8 +35,8 @@ def _lead(text: str) -> float | str | None:
     if t in ("none", "off", "0"):
         return None
     try:
-        value = float(t)
-    except ValueError:
+        value = finite_float(t)
+    except NotANumber:
         raise argparse.ArgumentTypeError(f"{text!r}: give the screw lead in mm, 'auto' or 'none'") from None
     if not value > 0:
         raise argparse.ArgumentTypeError(f"{text!r}: the screw lead must be > 0 mm")

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
+from procedures.atomic import write_text_atomic
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
 from procedures.iso230 import dumps, evaluate, format_table
@@ -51,12 +51,6 @@ def run(args) -> int:
         doc = json.loads(dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis}))
         doc["expanded_uncertainty_um"] = {  # U (k = 2) beside every value, as the ISO 230-2 report gives it
             leg: {name: v["U_um"] for name, v in entry["values"].items()} for leg, entry in iso["legs"].items()}
-        text = json.dumps(doc, indent=2, allow_nan=False)
-        tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
-        try:
-            tmp.write_text(text + "\n")
-            os.replace(tmp, out)
-        finally:
-            tmp.unlink(missing_ok=True)
+        write_text_atomic(out, json.dumps(doc, indent=2, allow_nan=False) + "\n")
         print(f"values written to {out}")
     return 0

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Callable
 
 from procedures import events as ev
+from procedures.atomic import atomic_paths
 from procedures.errors import InputError
 from procedures.plans import iso230_plan, paper_plan
 from procedures.runner import CallbackSink
@@ -162,14 +163,8 @@ def run(args) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     final = {name: out_dir / FILES[name] for name in wanted}
     # made under temporary names and renamed at the end: a failed run leaves the old samples
-    targets = {name: path.with_name(f".{path.name}.{os.getpid()}.tmp.h5") for name, path in final.items()}
-    try:
-        _make(wanted, targets)
-        for name, tmp in targets.items():
-            os.replace(tmp, final[name])
-    finally:
-        for tmp in targets.values():
-            tmp.unlink(missing_ok=True)
+    with atomic_paths(final.values(), suffix=".h5", exists=False) as temps:  # the sweep creates them
+        _make(wanted, {name: temps[path] for name, path in final.items()})
     for path in final.values():
         print(f"  {path}: {path.stat().st_size / 1e6:.2f} MB")
     return 0

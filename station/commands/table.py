@@ -12,9 +12,10 @@ from procedures import controllers
 from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
+from procedures.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
 from procedures.outputs import check_output_file
 from procedures.plausibility import check_correction, settle
-from procedures.table import LINUXCNC_LIMITS, linuxcnc_paths, make_table, write_linuxcnc_comp, write_table_csv
+from procedures.table import make_table, write_table_csv
 from station.catalog.writer import catalog_for, register
 from station.config import load_config
 from station.wiring import drive_table_spec

@@ -31,7 +31,8 @@ import pytest
 from drivers.sim.plant import PlantConfig
 from procedures.controllers import linuxcnc
 from procedures.fit import fit
-from procedures.table import LINUXCNC_LIMITS, make_table
+from procedures.controllers.linuxcnc import LINUXCNC_LIMITS
+from procedures.table import make_table
 from station.synth import synth_session
 
 HERE = Path(__file__).resolve().parent

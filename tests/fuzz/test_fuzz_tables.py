@@ -16,15 +16,14 @@ from hypothesis import example, given, settings, strategies as st
 
 from drivers.errors import TableRefused
 from procedures.errors import InputError
+from procedures.controllers.linuxcnc import read_linuxcnc_comp, write_linuxcnc_comp
 from procedures.table import (
     CSV_HEADER,
     DEFAULT_SPEC,
     CompTable,
     LegTable,
     TableValidationError,
-    read_linuxcnc_comp,
     read_table_csv,
-    write_linuxcnc_comp,
 )
 from tests.fuzz.budget import examples, fed
 

@@ -11,17 +11,15 @@ from drivers.sim.plant import PlantConfig
 from station.synth import synth_session
 from procedures.errors import InputError
 from procedures.fit import fit
+from procedures.controllers.linuxcnc import LINUXCNC_LIMITS, read_linuxcnc_comp, write_linuxcnc_comp
 from procedures.table import (
     CSV_HEADER,
-    LINUXCNC_LIMITS,
     CompTable,
     LegTable,
     TableSpec,
     make_table,
-    read_linuxcnc_comp,
     read_table_csv,
     TableValidationError,
-    write_linuxcnc_comp,
     write_table_csv,
 )
 
