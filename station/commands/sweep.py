@@ -99,12 +99,12 @@ def run(args) -> int:
         cfg.sim.seed = args.seed
     # every output is checked before anything connects or moves (procedures/outputs.py)
     if args.resume:
-        out = check_appendable(args.resume)
-        if args.out and Path(args.out) != out:
-            raise InputError("--resume appends to the session it names; drop --out")
         if args.serial or args.serials:
             raise InputError("--serial/--serials name the legs of a new session; a resumed session keeps the identity "
                              "it was created with: drop them")
+        out = check_appendable(args.resume)
+        if args.out and Path(args.out) != out:
+            raise InputError("--resume appends to the session it names; drop --out")
         plan = resumable_plan(out)
     else:
         if not args.out:
