@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 import numpy as np
 
@@ -133,8 +133,11 @@ class SweepPlan:
         return self.points_per_leg * len(self.legs)
 
     def points(self) -> list[PlanPoint]:
-        out: list[PlanPoint] = []
-        up = list(self.targets_mm)
+        return list(self.iter_points())
+
+    def iter_points(self) -> Iterator[PlanPoint]:
+        """The plan's points in order, one at a time (a huge plan is never a list in memory)."""
+        up = self.targets_mm
         down = up[::-1]
         index = 0
         for leg in self.legs:
@@ -143,12 +146,11 @@ class SweepPlan:
                 for direction, seq in ((1, up), (-1, down)):
                     run += 1
                     for target in seq:
-                        out.append(PlanPoint(index, leg, run, direction, float(target)))
+                        yield PlanPoint(index, leg, run, direction, float(target))
                         index += 1
                     if self.speeds_mm_s:  # the pass's anchor, read at rest where it ends
-                        out.append(PlanPoint(index, leg, run, direction, self.anchor_mm(direction)))
+                        yield PlanPoint(index, leg, run, direction, self.anchor_mm(direction))
                         index += 1
-        return out
 
     def travel_range_mm(self) -> tuple[float, float]:
         return (self.targets_mm[0] - self.overrun_mm, self.targets_mm[-1] + self.overrun_mm)
@@ -175,12 +177,8 @@ class SweepPlan:
         """Rough duration: travel at `velocity_mm_s` plus dwell and averaging at each point (on
         the fly: each pass at its own speed, and the return to its start)."""
         span = self.targets_mm[-1] - self.targets_mm[0] + 2 * self.overrun_mm
-        if self.speeds_mm_s:
-            passes = [span / self.speed_of_run(r) + 1.0 + self.dwell_s + self.averaging_s
-                      for r in range(1, 2 * self.cycles + 1)]
-            return sum(passes) * len(self.legs)
-        per_leg = 2 * self.cycles * (span / max(velocity_mm_s, 1e-9) + len(self.targets_mm) * (self.dwell_s + self.averaging_s))
-        return per_leg * len(self.legs)
+        return estimate_duration_s(span, len(self.targets_mm), self.cycles, len(self.legs), self.dwell_s,
+                                   self.averaging_s, self.speeds_mm_s, velocity_mm_s)
 
     # -- serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -211,6 +209,24 @@ class SweepPlan:
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise PlanError(f"the stored sweep plan is incomplete or malformed ({exc!r})") from exc
+
+
+def estimate_duration_s(travel_mm: float, n_targets: int, cycles: int, n_legs: int, dwell_s: float,
+                        averaging_s: float, speeds_mm_s: tuple[float, ...] = (), velocity_mm_s: float = 10.0) -> float:
+    """A plan's rough time on the rig, s, from its figures alone (procedures/plan_size.py sizes a
+    plan with it before building one): `travel_mm` per pass (targets and overrun); stop-and-go,
+    travel at `velocity_mm_s` plus dwell and averaging at every target; on the fly (`speeds_mm_s`),
+    each pass at its own speed plus its return and its anchor's dwell and averaging."""
+    if speeds_mm_s:
+        n = len(speeds_mm_s)
+        per_leg = 0.0
+        for c in range(cycles):  # the speed of cycle c, as SweepPlan.speed_of_run
+            rnd, k = divmod(c, n)
+            speed = (speeds_mm_s if rnd % 2 == 0 else speeds_mm_s[::-1])[k]
+            per_leg += 2 * (travel_mm / speed + 1.0 + dwell_s + averaging_s)
+        return per_leg * n_legs
+    per_leg = 2 * cycles * (travel_mm / max(velocity_mm_s, 1e-9) + n_targets * (dwell_s + averaging_s))
+    return per_leg * n_legs
 
 
 # -- plan builders ---------------------------------------------------------------------------
@@ -355,7 +371,7 @@ def parse_legs(text: str) -> tuple[int, ...]:
             part = part.strip()
             if "-" in part:
                 a, b = part.split("-", 1)
-                legs.extend(range(int(a), int(b) + 1))
+                legs.extend(range(int(a), min(int(b), 7) + 1))  # beyond 6: refused below, never listed
             elif part:
                 legs.append(int(part))
     except ValueError:

@@ -29,6 +29,10 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     legs = {}                   # per-leg override, e.g. { 3 = "station" }
     tables_path = ""            # the station-side table store ("" = <recordings_dir>/station-tables.json)
 
+    [limits]                    # the largest sweep plan started without asking (procedures/plan_size.py)
+    max_points = 500000         # points measured, all legs
+    max_rig_hours = 72.0        # estimated time on the rig
+
     [metrology]                 # the measurement chain (docs/metrology.md); all optional
     reference_temp_c = 20.0     # lengths are normalised to this material temperature (ISO 1)
     wavelength_nm = 632.991     # the laser's VACUUM wavelength, 400..1700 nm
@@ -67,6 +71,7 @@ from typing import Any
 
 from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
 from procedures.errors import InputError
+from procedures.plan_size import PlanLimits
 
 
 LEG_COUNT = 6
@@ -211,6 +216,7 @@ class StationConfig:
     leg_overrides: dict[int, LegMaterial] = field(default_factory=dict)  # [legs.N]
     legs_from_file: bool = False  # the file has a [legs] section
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
+    limits: PlanLimits = field(default_factory=PlanLimits)  # [limits]: the largest plan started without asking
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -290,7 +296,7 @@ def _whoami() -> str:
 
 
 _SECTIONS = {"drive": DriveConfig, "interferometer": LaserConfig, "sim": SimConfig,
-             "compensation": CompensationConfig}
+             "compensation": CompensationConfig, "limits": PlanLimits}
 
 # (section, key) -> (lowest, strictly above it?, what the value is): physical sense of numbers
 _RANGES = {
@@ -298,6 +304,8 @@ _RANGES = {
     ("interferometer", "timeout_s"): (0.0, True, "seconds to wait for the interferometer's reply"),
     ("interferometer", "baudrate"): (0, True, "the serial line's bits per second"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
+    ("limits", "max_points"): (0, True, "the most points a sweep plan may have"),
+    ("limits", "max_rig_hours"): (0.0, True, "the longest a sweep plan may take on the rig, hours"),
     ("sim", "thermal_tau_s"): (0.0, True, "seconds the simulated material takes to follow the hall"),
     ("sim", "jerk_mm_s3"): (0.0, False, "the simulated drives' jerk limit in mm/s^3, 0 = not limited; "
                                         f"a real leg's is {SIM_LEG_JERK_MM_S3:g}"),

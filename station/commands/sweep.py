@@ -61,8 +61,10 @@ def plan_spec(args) -> PlanSpec:
     )
 
 
-def build_plan(args) -> SweepPlan:
-    return plan_from_spec(plan_spec(args))
+def build_plan(args, limits=None) -> SweepPlan:
+    """The plan asked for; with `limits` (the config's [limits]) sized first and refused beyond
+    them before anything is built (procedures/plan_size.py)."""
+    return plan_from_spec(plan_spec(args), limits)
 
 
 def run(args) -> int:
@@ -84,7 +86,7 @@ def run(args) -> int:
         if not out.parent.is_dir():
             raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first or choose "
                              "another --out (nothing is created behind your back)")
-        plan = build_plan(args)
+        plan = build_plan(args, cfg.limits)  # sized (and refused when huge) before anything connects
     for note in plan.notes:
         print(f"note: {note}")
     resume_hint = f"resume with: station sweep --resume {out}" + (" --sim" if cfg.is_sim else f" --config {args.config}")
@@ -95,12 +97,15 @@ def run(args) -> int:
                 result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
                                    resume=bool(args.resume))
             except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
-                print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))\n{resume_hint}")
+                print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))")
+                if out.exists():  # a hint never names a file that was not written
+                    print(resume_hint)
                 return 130
     print(f"session: {out} ({result.outcome}, {result.points} of {plan.total_points} points)")
     if result.outcome == Outcome.COMPLETED:
         print(f"next: station iso230 {out}   |   station fit {out} --out model.json")
         return 0
-    print(resume_hint)
+    if out.exists():
+        print(resume_hint)
     return 130 if control.reason == interrupt.REASON else 1  # Ctrl-C: as every command ends on it
 
