@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 from procedures.errors import PlanError
 from procedures.plan_spec import DEFAULT_CYCLES, ONTHEFLY_KINDS, PlanSpec
+from procedures.plans import SweepPlan
 from procedures.plans import ONTHEFLY_OVERRUN_MM, ONTHEFLY_SPEEDS_MM_S, PAPER_HALF_STROKE_MM, PAPER_STEP_MM, \
     estimate_duration_s, targets_from_file
 from procedures.recording.schema import POINT_DTYPE
@@ -164,3 +165,29 @@ def _finest_fitting_step(spec: PlanSpec, limits: PlanLimits) -> float | None:
             if size.points <= limits.max_points and size.rig_hours <= limits.max_rig_hours:
                 return float(f"{step:g}")
     return None
+
+
+def build_abortable(spec: PlanSpec, control) -> "SweepPlan | None":
+    """`plan_from_spec(spec)` built on a thread of its own while the caller waits for it or for
+    an abort of `control` (a RunControl), whichever comes first: None when aborted, at once,
+    even while a huge plan is still being built (its thread finishes and the plan is dropped)."""
+    import threading
+
+    from procedures.plan_spec import plan_from_spec
+
+    box: dict = {}
+
+    def build() -> None:
+        try:
+            box["plan"] = plan_from_spec(spec)
+        except BaseException as exc:  # handed to the caller
+            box["error"] = exc
+
+    builder = threading.Thread(target=build, name="plan-builder", daemon=True)
+    builder.start()
+    while builder.is_alive():
+        if control.wait_aborted(0.05):
+            return None
+    if "error" in box:
+        raise box["error"]
+    return None if control.aborted else box["plan"]

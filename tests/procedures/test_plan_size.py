@@ -88,3 +88,21 @@ def test_the_file_size_is_the_writers(tmp_path):
             run_sweep(rig, plan, out, cfg)
         actual = out.stat().st_size
         assert plan_size(spec).file_bytes == pytest.approx(actual, rel=0.15), (spec, actual)
+
+
+def test_an_abort_ends_the_building_of_a_huge_plan_at_once():
+    """build_abortable: the plan of 18 M points is being built (on its own thread) when the
+    abort comes; the caller has None within a tenth of a second, not the plan seconds later."""
+    import threading
+
+    from procedures.control import RunControl
+    from procedures.plan_size import build_abortable
+
+    spec = PlanSpec(step_mm=0.0001)
+    control = RunControl()
+    threading.Timer(0.02, control.abort).start()
+    t0 = time.perf_counter()
+    assert build_abortable(spec, control) is None
+    assert time.perf_counter() - t0 < 0.2
+    built = build_abortable(PlanSpec(step_mm=10.0), RunControl())
+    assert built == plan_from_spec(PlanSpec(step_mm=10.0))
