@@ -401,7 +401,14 @@ class StationApp(App):
         if message.error:
             self.notify(message.error, title=f"{message.action} leg {legs}", severity="error", timeout=12)
         else:
+            if message.action == "enable":  # the quick stop is over: its toasts ("enable it (e)") go
+                self._drop_notifications(lambda n: "quick-stopped" in n.message
+                                         and any(f"leg {leg} " in n.message for leg in message.legs))
             self.notify(f"{message.action}: leg {legs} done.", timeout=3)
+
+    def _drop_notifications(self, which: Callable) -> None:
+        for notification in [n for n in self._notifications if which(n)]:
+            self._unnotify(notification)
 
     def on_rig_move_done(self, message: RigMoveDone) -> None:
         self.rig_motion.pop(message.leg, None)

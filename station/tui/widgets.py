@@ -180,14 +180,15 @@ class SessionPicker(Horizontal):
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()
-        self._choose()
+        self.choose()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "session-open":
             event.stop()
-            self._choose()
+            self.choose()
 
-    def _choose(self) -> None:
+    def choose(self) -> None:
+        """Open what the path field names (Enter in it, the Open button, ctrl+o on the page)."""
         text = self.query_one("#session-path", Input).value.strip()
         if not text:
             self.app.notify("Choose a recent session or type the path of a session file (.h5).", severity="warning")

@@ -135,6 +135,15 @@ class StationScreen(Screen):
         if self.app.last_session is not None:
             self._on_new_session(self.app.last_session)
 
+    def action_open_session(self) -> None:
+        """Open the session the page's picker names (its Open button; ctrl+o on the pages that
+        have one: a control key, so it acts from the path field too)."""
+        from station.tui.widgets import SessionPicker
+
+        for picker in self.query(SessionPicker).results(SessionPicker):
+            picker.choose()
+            return
+
     def _on_new_session(self, path) -> None:
         from station.tui.widgets import SessionPicker
 

@@ -371,9 +371,16 @@ class PlatformScreen(StationScreen):
             if a is None:
                 status.update("no analysis on show: fit a six-leg session on Results (F3), or type a table and its "
                               "recording; then p")
-            else:
-                status.update(f"ready: the {a.method} model fitted on [b]{a.path.name}[/b] "
-                              f"(legs {list(a.session.legs)}); press p to run")
+            else:  # "press p" only for what p accepts: the errors of all six legs
+                legs = [int(leg) for leg in a.session.legs]
+                missing = [leg for leg in range(1, 7) if leg not in legs]
+                if missing:
+                    status.update(f"the {a.method} model on show ([b]{a.path.name}[/b]) has leg(s) {legs}, no "
+                                  f"{missing}: the platform needs all six legs. Fit a session of legs 1-6 on "
+                                  "Results (F3), or type a table and its recording above; then p")
+                else:
+                    status.update(f"ready: the {a.method} model fitted on [b]{a.path.name}[/b] "
+                                  f"(legs {legs}); press p to run")
             return
         from procedures.platform.experiment import MEASUREMENT_LABELS
 

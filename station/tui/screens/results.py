@@ -185,6 +185,7 @@ class ResultsScreen(StationScreen):
     MODE = "results"
     PAGE_HELP = "ISO 230-2 per leg, model over the measured points, residual; held-out RMS against the noise floor"
     BINDINGS = [
+        Binding("ctrl+o", "open_session", "Open", key_display="^o"),
         Binding("f", "fit", "Fit"),
         Binding("m", "toggle_method", "Method"),
         # the footer has no room left at 80 columns (it would push Quit out): the status names the key
@@ -224,8 +225,16 @@ class ResultsScreen(StationScreen):
         self._fitting: tuple[Path, str, bool] | None = None  # (path, method, raw) of the fit under way
         self.failure: tuple[str, str] | None = None  # (method, error) of the last failed fit
         self.raw = False  # the error basis asked for: False = normalised to 20 degC (the commands' default)
-        self.follow_sessions()
         self._show()
+        self.follow_sessions()  # after _show: it may start opening the newest session
+
+    def _on_new_session(self, path) -> None:
+        """A new recording (a sweep ended, a session opened on another page) is offered, and
+        opened when no session is open here: F3 after a sweep shows that session, not "no session
+        open" with its path filled in. One on show stays (the Compensation page works on it)."""
+        super()._on_new_session(path)
+        if self.app.analysis is None and self._fitting is None and Path(path).exists():
+            self._start_fit(Path(path), self._method(), self.raw)
 
     # -- actions -----------------------------------------------------------------------------------
     def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:

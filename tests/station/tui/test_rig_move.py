@@ -177,6 +177,10 @@ async def _stop(cfg, size, connected, wait_until, notes):
         assert any(f"leg 1 was quick-stopped at {st.position_mm:+.3f} mm on its way to +80.000 mm; enable it (e)" in n
                    for n in notes(app))
         await wait_until(pilot, lambda: "quick-stopped" in motion_text(app), what="the stop shown")
+        # enabled again: the quick stop's toast goes (it no longer says what to do)
+        await pilot.press("escape", "e")
+        await wait_until(pilot, lambda: app.rig.axes[1].status().enabled, what="leg 1 enabled again")
+        await wait_until(pilot, lambda: not any("quick-stopped" in n for n in notes(app)), what="the toast cleared")
 
 
 def test_moves_are_refused_while_a_sweep_runs_or_is_paused(cfg, size, connected, wait_until, notes):
