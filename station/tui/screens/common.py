@@ -74,9 +74,13 @@ class StationFooter(Footer):
         need = sum(len(k.key_display or k.key) + 1 + len(k.description) + 1 for k in keys if hasattr(k, "description"))
         width = self.app.size.width
         two_rows = 0 < width < need
+        columns = max(1, -(-len(keys) // 2)) if two_rows else max(1, len(keys))
+        if (two_rows, columns) == getattr(self, "_fitted", None):
+            return  # as laid out: no new layout (the keys stay where they are)
+        self._fitted = (two_rows, columns)
         self.set_class(two_rows, "-two-rows")
         self.styles.layout = "grid" if two_rows else "horizontal"
-        self.styles.grid_size_columns = max(1, -(-len(keys) // 2)) if two_rows else max(1, len(keys))
+        self.styles.grid_size_columns = columns
         self.styles.height = 2 if two_rows else 1
 
 
