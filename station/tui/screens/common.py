@@ -64,9 +64,9 @@ class StationFooter(Footer):
                 widget.add_class("-help-key")
             keys.append(widget)
             yield widget
-        self.fit(keys)
+        self.fit(keys, force=True)  # Footer.compose has just set its own grid columns
 
-    def fit(self, keys=None) -> None:
+    def fit(self, keys=None, force: bool = False) -> None:
         """Two rows (a grid of the keys) when one row of the terminal's width would cut keys off
         (the Rig page's twelve at 80 columns), one row otherwise."""
         keys = list(self.query("FooterKey")) if keys is None else keys
@@ -75,7 +75,7 @@ class StationFooter(Footer):
         width = self.app.size.width
         two_rows = 0 < width < need
         columns = max(1, -(-len(keys) // 2)) if two_rows else max(1, len(keys))
-        if (two_rows, columns) == getattr(self, "_fitted", None):
+        if not force and (two_rows, columns) == getattr(self, "_fitted", None):
             return  # as laid out: no new layout (the keys stay where they are)
         self._fitted = (two_rows, columns)
         self.set_class(two_rows, "-two-rows")
