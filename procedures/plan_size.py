@@ -18,9 +18,15 @@ from dataclasses import dataclass
 
 from procedures.errors import PlanError
 from procedures.plan_spec import DEFAULT_CYCLES, ONTHEFLY_KINDS, PlanSpec
-from procedures.plans import SweepPlan
-from procedures.plans import ONTHEFLY_OVERRUN_MM, ONTHEFLY_SPEEDS_MM_S, PAPER_HALF_STROKE_MM, PAPER_STEP_MM, \
-    estimate_duration_s, targets_from_file
+from procedures.plans import (
+    ONTHEFLY_OVERRUN_MM,
+    ONTHEFLY_SPEEDS_MM_S,
+    PAPER_HALF_STROKE_MM,
+    PAPER_STEP_MM,
+    SweepPlan,
+    estimate_duration_s,
+    targets_from_file,
+)
 from procedures.recording.schema import POINT_DTYPE
 
 FILE_FIXED_BYTES = 24_000
@@ -167,7 +173,7 @@ def _finest_fitting_step(spec: PlanSpec, limits: PlanLimits) -> float | None:
     return None
 
 
-def build_abortable(spec: PlanSpec, control) -> "SweepPlan | None":
+def build_abortable(spec: PlanSpec, control) -> SweepPlan | None:
     """`plan_from_spec(spec)` built on a thread of its own while the caller waits for it or for
     an abort of `control` (a RunControl), whichever comes first: None when aborted, at once,
     even while a huge plan is still being built (its thread finishes and the plan is dropped)."""
