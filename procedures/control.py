@@ -63,6 +63,10 @@ class RunControl:
     def paused(self) -> bool:
         return not self._running.is_set()
 
+    def wait_aborted(self, timeout_s: float) -> bool:
+        """Block until an abort is asked for or `timeout_s` has passed; True if aborted."""
+        return self._abort.wait(timeout_s)
+
     def on_abort(self, stop: Callable[[], None]) -> None:
         with self._lock:
             self._stops.append(stop)

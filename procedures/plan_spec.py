@@ -71,8 +71,14 @@ class PlanSpec:
                             "a targets file or a number of targets")
 
 
-def plan_from_spec(spec: PlanSpec) -> SweepPlan:
-    """The sweep plan `spec` asks for (PlanError with what to change when it is not a valid one)."""
+def plan_from_spec(spec: PlanSpec, limits=None) -> SweepPlan:
+    """The sweep plan `spec` asks for (PlanError with what to change when it is not a valid one).
+    `limits` (a plan_size.PlanLimits, e.g. the config's [limits]): the plan is sized first and
+    refused beyond them, before anything is built (procedures/plan_size.py)."""
+    if limits is not None:
+        from procedures.plan_size import check_plan_size  # it imports this module
+
+        check_plan_size(spec, limits)
     cycles = DEFAULT_CYCLES[spec.kind] if spec.cycles is None else spec.cycles
     if spec.kind in ONTHEFLY_KINDS:
         return onthefly_plan(spec.legs, cycles=cycles, step_mm=spec.step_mm or PAPER_STEP_MM, min_mm=spec.min_mm,

@@ -83,9 +83,15 @@ def sweep(
     for leg in plan.legs:
         control.on_abort(axes[leg].stop)
 
-    points = [p for p in plan.points() if p.index not in done_indices]
     total = plan.total_points
-    done = total - len(points)
+    # one point at a time: a huge plan starts (and aborts) at once instead of being listed first
+    points = (p for p in plan.iter_points() if p.index not in done_indices)
+    done = sum(1 for i in done_indices if 0 <= i < total)
+    if control.aborted:  # asked for before anything began (a huge plan being built): nothing moved or written
+        yield ev.SweepFinished(Outcome.ABORTED, done, control.reason)
+        return
+    if plan.onthefly:  # whole passes are grouped: a list (on-the-fly plans are sized like any other)
+        points = list(points)
     devices = {f"leg{leg}": axes[leg].identity() for leg in plan.legs}
     devices["interferometer"] = laser.identity()
     devices["laser_air_compensation"] = laser_compensation_record(laser)

@@ -35,6 +35,9 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     url = ""                    # shared catalog, e.g. "postgresql://station@dbhost/catalog" ("" = local only)
     connect_timeout_s = 2.0     # how long a write waits for the shared catalog before keeping it in the backlog
     calibration_interval_days = 365  # a leg is due this many days after its last calibration
+    [limits]                    # the largest sweep plan started without asking (procedures/plan_size.py)
+    max_points = 500000         # points measured, all legs
+    max_rig_hours = 72.0        # estimated time on the rig
 
     [metrology]                 # the measurement chain (docs/metrology.md); all optional
     reference_temp_c = 20.0     # lengths are normalised to this material temperature (ISO 1)
@@ -82,6 +85,7 @@ from procedures.errors import InputError
 from procedures.numbers import NotANumber, finite_float
 from procedures.metrology import defaults as MD
 from procedures.metrology.thermal import Material
+from procedures.plan_size import PlanLimits
 
 
 LEG_COUNT = 6
@@ -238,6 +242,7 @@ class StationConfig:
     legs_from_file: bool = False  # the file has a [legs] section
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
     catalog: CatalogConfig = field(default_factory=CatalogConfig)
+    limits: PlanLimits = field(default_factory=PlanLimits)  # [limits]: the largest plan started without asking
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -344,7 +349,7 @@ def _whoami() -> str:
 
 
 _SECTIONS = {"drive": DriveConfig, "interferometer": LaserConfig, "sim": SimConfig,
-             "compensation": CompensationConfig, "catalog": CatalogConfig}
+             "compensation": CompensationConfig, "catalog": CatalogConfig, "limits": PlanLimits}
 
 # (section, key) -> (lowest, strictly above it?, what the value is): physical sense of numbers
 _RANGES = {
@@ -354,6 +359,8 @@ _RANGES = {
     ("catalog", "connect_timeout_s"): (0.0, True, "seconds a write waits for the shared catalog"),
     ("catalog", "calibration_interval_days"): (0, True, "days from a leg's calibration to its next"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
+    ("limits", "max_points"): (0, True, "the most points a sweep plan may have"),
+    ("limits", "max_rig_hours"): (0.0, True, "the longest a sweep plan may take on the rig, hours"),
     ("sim", "thermal_tau_s"): (0.0, True, "seconds the simulated material takes to follow the hall"),
     ("sim", "jerk_mm_s3"): (0.0, False, "the simulated drives' jerk limit in mm/s^3, 0 = not limited; "
                                         f"a real leg's is {SIM_LEG_JERK_MM_S3:g}"),

@@ -178,6 +178,7 @@ class _DriveModel:
         self.stalled = False  # the nut cannot move (a jammed screw): set-points accepted, never reached
         self.reads = 0
         self.writes = 0
+        self.set_points = 0  # set-points latched (moves started, or refused beyond the soft limits)
         self._bank_cache: dict[int, tuple | None] = {}
         self._internal: dict[str, object] = {}  # values the profile maps to no register
         # on-the-fly capture (docs/onthefly.md): position-compare output, wired by the rig
@@ -324,6 +325,7 @@ class _DriveModel:
         self.cmd_mm = self.nut_mm + self.corr_um / 1000.0
 
     def _start_move(self, target_mm: float) -> None:
+        self.set_points += 1
         lim = self.p.limits
         if not lim.soft_min_mm <= target_mm <= lim.soft_max_mm:
             self.internal_limit = True
@@ -894,6 +896,12 @@ class SimDriveServer:
             code = self.profile.fault_by_name(code).code
         with self.lock:
             self._models[leg].inject_fault(int(code))
+
+    def set_points(self, leg: int) -> int:
+        """How many set-points drive `leg` has latched since it started: every move it was told
+        to make (a jog, a move, a sweep's point), whether it moved or refused the target."""
+        with self.lock:
+            return self._models[leg].set_points
 
     def set_stalled(self, leg: int, on: bool = True) -> None:
         """Make drive `leg`'s axis unable to move (a jammed screw, a seized bearing): it stays

@@ -72,8 +72,10 @@ def plan_spec(args) -> PlanSpec:
     )
 
 
-def build_plan(args) -> SweepPlan:
-    return plan_from_spec(plan_spec(args))
+def build_plan(args, limits=None) -> SweepPlan:
+    """The plan asked for; with `limits` (the config's [limits]) sized first and refused beyond
+    them before anything is built (procedures/plan_size.py)."""
+    return plan_from_spec(plan_spec(args), limits)
 
 
 def check_time_scale(time_scale: float | None) -> None:
@@ -113,7 +115,7 @@ def run(args) -> int:
             raise InputError(f"--out {args.out}: exists; add --force to replace it, choose another --out, or "
                              f"--resume {args.out} to finish it; nothing was written")
         out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
-        plan = build_plan(args)
+        plan = build_plan(args, cfg.limits)  # sized (and refused when huge) before anything connects
         if args.force and out.exists():
             out.unlink()  # --force: the new session replaces it (after the plan was accepted)
     for note in plan.notes:
@@ -126,12 +128,15 @@ def run(args) -> int:
                 result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
                                    resume=bool(args.resume), serials=serials, serials_file=args.serials)
             except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
-                print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))\n{resume_hint}")
+                print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))")
+                if out.exists():  # a hint never names a file that was not written
+                    print(resume_hint)
                 return 130
     print(f"session: {out} ({result.outcome}, {result.points} of {plan.total_points} points)")
     if result.outcome == Outcome.COMPLETED:
         print(f"next: station iso230 {out}   |   station fit {out} --out model.json")
         return 0
-    print(resume_hint)
+    if out.exists():
+        print(resume_hint)
     return 130 if control.reason == interrupt.REASON else 1  # Ctrl-C: as every command ends on it
 

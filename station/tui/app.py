@@ -33,6 +33,7 @@ from textual.message import Message
 
 from drivers.errors import DriveFault
 from procedures.control import RunControl
+from procedures.plan_spec import PlanSpec
 from procedures.plans import SweepPlan
 from procedures.states import AuditOutcome
 from station.config import StationConfig
@@ -403,7 +404,14 @@ class StationApp(App):
         if message.error:
             self.notify(message.error, title=f"{message.action} leg {legs}", severity="error", timeout=12)
         else:
+            if message.action == "enable":  # the quick stop is over: its toasts ("enable it (e)") go
+                self._drop_notifications(lambda n: "quick-stopped" in n.message
+                                         and any(f"leg {leg} " in n.message for leg in message.legs))
             self.notify(f"{message.action}: leg {legs} done.", timeout=3)
+
+    def _drop_notifications(self, which: Callable) -> None:
+        for notification in [n for n in self._notifications if which(n)]:
+            self._unnotify(notification)
 
     def on_rig_move_done(self, message: RigMoveDone) -> None:
         self.rig_motion.pop(message.leg, None)
@@ -418,7 +426,7 @@ class StationApp(App):
         self._rig_changed()
 
     # -- sweep -----------------------------------------------------------------------------------
-    def start_sweep(self, plan: SweepPlan, out: Path, label: str = "sweep",
+    def start_sweep(self, plan: SweepPlan | PlanSpec, out: Path, label: str = "sweep",
                     on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None,
                     resume: bool = False, serials: dict | None = None) -> bool:
         """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner), or
@@ -426,7 +434,9 @@ class StationApp(App):
         returning a JobOutcome). `label` names the job on screen ("sweep", "verification of leg
         2"); `on_done(state)` is called on the app's thread when it has ended (whatever the
         outcome), with the job's outcome in `state.result`. `resume`: `out` is an unfinished
-        session and `plan` its plan (see `resume_sweep`): the run appends to it. `serials`: the
+        session and `plan` its plan (see `resume_sweep`): the run appends to it. `plan` may be a
+        PlanSpec: it is then built in the worker, where an abort ends the building at once (a
+        huge plan takes seconds to build; procedures/plan_size.build_abortable). `serials`: the
         legs' serials entered on the Sweep page (leg -> {"serial": ...}), recorded in the session."""
         if self.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
@@ -448,8 +458,13 @@ class StationApp(App):
         if out.exists() and not resume:
             self.notify(f"{out} exists already; choose another file name.", severity="error")
             return False
-        state = SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting",
-                           total=plan.total_points, label=label)
+        if isinstance(plan, PlanSpec):  # sized, not built, on the app's thread
+            from procedures.plan_size import plan_size
+
+            total = plan_size(plan).points
+        else:
+            total = plan.total_points
+        state = SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting", total=total, label=label)
         if resume:
             _show_recorded_points(state, out)
         run = self._begin_run(state, on_done)
@@ -501,6 +516,13 @@ class StationApp(App):
                 error = "the rig stayed busy for 10 s (a rig action is still running); try again"
                 return
             try:
+                if isinstance(plan, PlanSpec):
+                    from procedures.plan_size import build_abortable
+
+                    plan = build_abortable(plan, control)
+                    if plan is None:  # aborted while the plan was being built: nothing moved or written
+                        outcome = "aborted"
+                        return
                 if job is None:
                     result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self, run)], control=control,
                                        resume=resume, serials=serials)
@@ -596,9 +618,11 @@ class StationApp(App):
         if message.error:
             self.notify(message.error, title="Sweep", severity="error", timeout=15)
         else:
-            resume = " Finish it later: r on the Sweep page (F2)." if s.label == "sweep" else ""
+            written = s.out is not None and s.out.exists()  # no hint names a file never written
+            resume = " Finish it later: r on the Sweep page (F2)." if s.label == "sweep" and written else ""
             note = {"completed": "completed." + (" Results: F3." if s.label == "sweep" else ""),
-                    "aborted": "aborted; drives stopped, recording kept." + resume,
+                    "aborted": ("aborted; drives stopped, recording kept." if written else
+                                "aborted before it began; nothing moved, nothing recorded.") + resume,
                     "failed": f"failed: {s.reason}" + resume}.get(s.status, s.status)
             extra = f"; {s.note}" if s.note else ""
             self.notify(f"{s.label.capitalize()} {note} ({s.done} of {s.total} points){extra}", title="Sweep",
@@ -696,7 +720,8 @@ class StationApp(App):
                     f"A {self.sweep.label} is running on leg {legs}.\n\nQuit anyway? It is aborted, the drives "
                     "are stopped and disabled, and the recording is kept"
                     + (f" (finish it later with r on the Sweep page, or `station sweep --resume {self.sweep.out}`)."
-                       if self.sweep.label == "sweep" else "."),
+                       if self.sweep.label == "sweep" and self.sweep.out is not None and self.sweep.out.exists()
+                       else "."),
                     yes="Abort and quit", no="Keep sweeping",
                 ),
                 confirmed,

@@ -110,6 +110,7 @@ def fit_columns(table, variants: Sequence[tuple[Sequence[str], Sequence[int] | N
 
 # -- choosing a session file -------------------------------------------------------------------
 
+import os  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from textual.app import ComposeResult  # noqa: E402
@@ -179,14 +180,15 @@ class SessionPicker(Horizontal):
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()
-        self._choose()
+        self.choose()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "session-open":
             event.stop()
-            self._choose()
+            self.choose()
 
-    def _choose(self) -> None:
+    def choose(self) -> None:
+        """Open what the path field names (Enter in it, the Open button, ctrl+o on the page)."""
         text = self.query_one("#session-path", Input).value.strip()
         if not text:
             self.app.notify("Choose a recent session or type the path of a session file (.h5).", severity="warning")
@@ -204,3 +206,15 @@ def sample_folders() -> list[Path]:
         if folder.is_dir() and all(folder.resolve() != o.resolve() for o in out):
             out.append(folder)
     return out
+
+
+def output_folder(recording: Path, recordings_dir) -> Path:
+    """Where the UI writes what it makes of `recording` (a model, a report, a CSV, a platform
+    folder): beside it, unless it is a sample session (recordings/, tracked by git: never written
+    into) or its folder cannot be written; then the config's recordings folder (runs/)."""
+    folder = Path(recording).parent
+    samples = {f.resolve() for f in sample_folders()}
+    if folder.resolve() in samples or not os.access(folder, os.W_OK):
+        Path(recordings_dir).mkdir(parents=True, exist_ok=True)  # runs/ on a fresh clone
+        return Path(recordings_dir)
+    return folder

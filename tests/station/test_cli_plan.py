@@ -49,7 +49,23 @@ def test_station_run_builds_the_iso230_plan_through_the_spec(monkeypatch):
         raise RuntimeError("stop")
 
     monkeypatch.setattr(run_command, "open_rig", fake_open_rig)
-    monkeypatch.setattr(run_command, "plan_from_spec", lambda spec: seen.setdefault("plan", plan_from_spec(spec)))
+    monkeypatch.setattr(run_command, "plan_from_spec",
+                        lambda spec, limits: seen.setdefault("plan", plan_from_spec(spec, limits)))
     with pytest.raises(RuntimeError, match="stop"):
         run_command.run(Namespace(legs="2,4", cycles=3, out=None, time_scale=0.0))
     assert seen["plan"] == iso230_plan((2, 4), cycles=3) and seen["legs"] == (2, 4)
+
+
+def test_a_plan_that_cannot_finish_is_refused_before_connecting_naming_the_step_that_fits(tmp_path, capsys):
+    """`station sweep --sim --step 0.0001`: 18 M points. Refused from its size alone (one line,
+    exit 2), before the rig is opened ("rig:" is printed once it is) and before the file exists.
+    Time and memory of the refusal: bench/bench_plan_refusal.py."""
+    out = tmp_path / "huge.h5"
+    assert main(["sweep", "--sim", "--step", "0.0001", "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert "rig:" not in captured.out and not out.exists()
+    (line,) = captured.err.splitlines()
+    assert "18 000 010 points" in line and "a step of 0.01 mm or more fits" in line and "[limits]" in line
+    # the step it names passes
+    assert main(["sweep", "--sim", "--step", "0.01", "--cycles", "1", "--legs", "1", "--min-mm", "0", "--max-mm",
+                 "0.05", "--dwell", "0", "--out", str(out)]) == 0

@@ -58,10 +58,30 @@ class StationFooter(Footer):
     many keys the page has (the help lists them all)."""
 
     def compose(self) -> ComposeResult:
+        keys = []
         for widget in super().compose():
             if getattr(widget, "key", None) == "question_mark":  # a FooterKey
                 widget.add_class("-help-key")
+            keys.append(widget)
             yield widget
+        self.fit(keys, force=True)  # Footer.compose has just set its own grid columns
+
+    def fit(self, keys=None, force: bool = False) -> None:
+        """Two rows (a grid of the keys) when one row of the terminal's width would cut keys off
+        (the Rig page's twelve at 80 columns), one row otherwise."""
+        keys = list(self.query("FooterKey")) if keys is None else keys
+        # each key as drawn compact: "k description", a space after it
+        need = sum(len(k.key_display or k.key) + 1 + len(k.description) + 1 for k in keys if hasattr(k, "description"))
+        width = self.app.size.width
+        two_rows = 0 < width < need
+        columns = max(1, -(-len(keys) // 2)) if two_rows else max(1, len(keys))
+        if not force and (two_rows, columns) == getattr(self, "_fitted", None):
+            return  # as laid out: no new layout (the keys stay where they are)
+        self._fitted = (two_rows, columns)
+        self.set_class(two_rows, "-two-rows")
+        self.styles.layout = "grid" if two_rows else "horizontal"
+        self.styles.grid_size_columns = columns
+        self.styles.height = 2 if two_rows else 1
 
 
 class StationScreen(Screen):
@@ -110,6 +130,8 @@ class StationScreen(Screen):
         self.set_class(self.short, "-short")
         for bar in self.query(".nav-bar").results(Static):
             bar.update(nav_bar(self.MODE, self.app.size.width or None))
+        for footer in self.query(StationFooter).results(StationFooter):
+            footer.fit()
         before, self._fitted = self._fitted, tuple(self.app.size)
         if before is not None and before != self._fitted:
             self.size_changed()
@@ -134,6 +156,15 @@ class StationScreen(Screen):
         self.app.session_listeners.append(self._on_new_session)
         if self.app.last_session is not None:
             self._on_new_session(self.app.last_session)
+
+    def action_open_session(self) -> None:
+        """Open the session the page's picker names (its Open button; ctrl+o on the pages that
+        have one: a control key, so it acts from the path field too)."""
+        from station.tui.widgets import SessionPicker
+
+        for picker in self.query(SessionPicker).results(SessionPicker):
+            picker.choose()
+            return
 
     def _on_new_session(self, path) -> None:
         from station.tui.widgets import SessionPicker

@@ -123,7 +123,9 @@ class CompensationScreen(StationScreen):
         if self.table is None or a is None:
             self.notify("Make a table first (t).", severity="warning")
             return
-        out = a.path.with_name(f"{a.path.stem}.{a.method}.table.csv")
+        from station.tui.widgets import output_folder  # a sample session's table goes to runs/, not recordings/
+
+        out = output_folder(a.path, self.app.cfg.recordings_dir) / f"{a.path.stem}.{a.method}.table.csv"
         try:
             write_table_csv(self.table, out, spec=self._spec())
         except Exception as exc:

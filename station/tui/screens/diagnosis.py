@@ -81,6 +81,7 @@ class DiagnosisScreen(StationScreen):
     MODE = "diagnosis"
     PAGE_HELP = "gap = recording − twin: where it lies, which effect explains it, how far it shrinks"
     BINDINGS = [
+        Binding("ctrl+o", "open_session", "Open", key_display="^o"),
         Binding("d", "diagnose", "Diagnose"),
         Binding("l", "next_leg", "Next leg"),
     ]

@@ -36,10 +36,13 @@ SHORT_MEASUREMENT = {"mean": "systematic", "pass": "one pass"}
 UNSAVED_MODEL = "fitted in the station UI, not saved (Results, F3: w saves it)"
 
 
-def report_folder(recording: Path) -> Path:
+def report_folder(recording: Path, recordings_dir) -> Path:
     """Where `w` writes: platform/<session name>/ beside the recording, so reports of several
-    sessions in one folder do not overwrite each other."""
-    return recording.parent / "platform" / recording.stem
+    sessions in one folder do not overwrite each other; a sample session's under the recordings
+    folder instead (widgets.output_folder: never into the tracked recordings/)."""
+    from station.tui.widgets import output_folder
+
+    return output_folder(recording, recordings_dir) / "platform" / recording.stem
 
 
 @dataclass
@@ -324,7 +327,7 @@ class PlatformScreen(StationScreen):
         if self.platform_run is None:
             self.notify("Run the experiment first (p).", title="Platform", severity="warning")
             return
-        self._write_worker(self.platform_run, report_folder(self.platform_run.recording))
+        self._write_worker(self.platform_run, report_folder(self.platform_run.recording, self.app.cfg.recordings_dir))
 
     @work(thread=True, exclusive=True, group="platform-write", exit_on_error=False)
     def _write_worker(self, run: PlatformRun, out: Path) -> None:
@@ -368,9 +371,16 @@ class PlatformScreen(StationScreen):
             if a is None:
                 status.update("no analysis on show: fit a six-leg session on Results (F3), or type a table and its "
                               "recording; then p")
-            else:
-                status.update(f"ready: the {a.method} model fitted on [b]{a.path.name}[/b] "
-                              f"(legs {list(a.session.legs)}); press p to run")
+            else:  # "press p" only for what p accepts: the errors of all six legs
+                legs = [int(leg) for leg in a.session.legs]
+                missing = [leg for leg in range(1, 7) if leg not in legs]
+                if missing:
+                    status.update(f"the {a.method} model on show ([b]{a.path.name}[/b]) has leg(s) {legs}, no "
+                                  f"{missing}: the platform needs all six legs. Fit a session of legs 1-6 on "
+                                  "Results (F3), or type a table and its recording above; then p")
+                else:
+                    status.update(f"ready: the {a.method} model fitted on [b]{a.path.name}[/b] "
+                                  f"(legs {legs}); press p to run")
             return
         from procedures.platform.experiment import MEASUREMENT_LABELS
 

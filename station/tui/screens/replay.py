@@ -63,6 +63,7 @@ class ReplayScreen(StationScreen):
     MODE = "replay"
     PAGE_HELP = "recorded sessions: inspect, analyse (Results, Diagnosis), or replay through the sweep"
     BINDINGS = [
+        Binding("ctrl+o", "open_session", "Open", key_display="^o"),
         Binding("o", "open_results", "Open in Results"),
         Binding("d", "open_diagnosis", "Diagnose"),
         Binding("r", "replay", "Replay"),
@@ -98,8 +99,9 @@ class ReplayScreen(StationScreen):
         if self.app.replay_path is not None:
             self.query_one(SessionPicker).set_path(self.app.replay_path)
             self._read(self.app.replay_path)
-        elif self.app.last_session is not None:
+        elif self.app.last_session is not None:  # F5 after a sweep: that session, opened
             self.query_one(SessionPicker).set_path(self.app.last_session)
+            self._read(self.app.last_session)
         self.app.session_listeners.append(self._on_new_session)
 
     def _on_new_session(self, path: Path) -> None:
@@ -107,6 +109,8 @@ class ReplayScreen(StationScreen):
         picker.rescan()
         if path != self.session_path:
             picker.set_path(path)
+            if self.session is None and self._reading is None:  # nothing open here: open it
+                self._read(path)
         sweep = self.app.sweep
         source = self.replay_source
         if source is not None and sweep.out == path and sweep.label == f"replay of {source.name}":

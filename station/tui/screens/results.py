@@ -35,7 +35,7 @@ from textual.widgets import Button, DataTable, Label, Select, Static
 
 from station.tui.errors import describe
 from station.tui.screens.common import StationScreen
-from station.tui.widgets import SessionPicker, XYPlot, fit_columns
+from station.tui.widgets import SessionPicker, XYPlot, fit_columns, output_folder
 
 NO_SESSION = "no session open: finish a sweep, or open a session file above"
 # The table's columns (µm throughout; "held-out" = RMS of the residual on cycles the fit did not
@@ -100,15 +100,17 @@ class FilesWritten(Message):
         self.error = error
 
 
-def report_folder(recording: Path, method: str) -> Path:
+def report_folder(recording: Path, method: str, recordings_dir) -> Path:
     """Where `r` writes: report/<session name>.<method>/ beside the recording (the `--out` of
-    `station report`), so reports of several sessions and methods do not overwrite each other."""
-    return recording.parent / "report" / f"{recording.stem}.{method}"
+    `station report`), so reports of several sessions and methods do not overwrite each other;
+    a sample session's under the recordings folder instead (widgets.output_folder)."""
+    return output_folder(recording, recordings_dir) / "report" / f"{recording.stem}.{method}"
 
 
-def csv_path(recording: Path) -> Path:
-    """Where `e` writes: <session name>.csv beside the recording (the `--out` of `station export`)."""
-    return recording.with_suffix(".csv")
+def csv_path(recording: Path, recordings_dir) -> Path:
+    """Where `e` writes: <session name>.csv beside the recording (the `--out` of `station export`);
+    a sample session's in the recordings folder (widgets.output_folder)."""
+    return output_folder(recording, recordings_dir) / f"{recording.stem}.csv"
 
 
 def iso_figures(iso: Any, leg: int) -> dict[str, float | None]:
@@ -183,6 +185,7 @@ class ResultsScreen(StationScreen):
     MODE = "results"
     PAGE_HELP = "ISO 230-2 per leg, model over the measured points, residual; held-out RMS against the noise floor"
     BINDINGS = [
+        Binding("ctrl+o", "open_session", "Open", key_display="^o"),
         Binding("f", "fit", "Fit"),
         Binding("m", "toggle_method", "Method"),
         # the footer has no room left at 80 columns (it would push Quit out): the status names the key
@@ -222,8 +225,16 @@ class ResultsScreen(StationScreen):
         self._fitting: tuple[Path, str, bool] | None = None  # (path, method, raw) of the fit under way
         self.failure: tuple[str, str] | None = None  # (method, error) of the last failed fit
         self.raw = False  # the error basis asked for: False = normalised to 20 degC (the commands' default)
-        self.follow_sessions()
         self._show()
+        self.follow_sessions()  # after _show: it may start opening the newest session
+
+    def _on_new_session(self, path) -> None:
+        """A new recording (a sweep ended, a session opened on another page) is offered, and
+        opened when no session is open here: F3 after a sweep shows that session, not "no session
+        open" with its path filled in. One on show stays (the Compensation page works on it)."""
+        super()._on_new_session(path)
+        if self.app.analysis is None and self._fitting is None and Path(path).exists():
+            self._start_fit(Path(path), self._method(), self.raw)
 
     # -- actions -----------------------------------------------------------------------------------
     def on_session_picker_chosen(self, message: SessionPicker.Chosen) -> None:
@@ -372,7 +383,7 @@ class ResultsScreen(StationScreen):
         from procedures.fit import save_model
         from procedures.recording.identity import model_identity
 
-        out = a.path.with_name(f"{a.path.stem}.{a.method}.model.json")
+        out = output_folder(a.path, self.app.cfg.recordings_dir) / f"{a.path.stem}.{a.method}.model.json"
         try:
             save_model(a.model, out, source_path=a.path, source_sha256=a.session.sha256,
                        identity=model_identity(a.session.identity, a.model.legs))
@@ -395,7 +406,7 @@ class ResultsScreen(StationScreen):
             self.notify("Open a session first: the report is of the session and model on show.", title="Report",
                         severity="warning")
             return
-        out = report_folder(a.path, a.method)
+        out = report_folder(a.path, a.method, self.app.cfg.recordings_dir)
         if out.exists() and (not out.is_dir() or any(out.iterdir())):
             self.notify(f"{self._where(out)} exists already (a report written before): rename or delete it, "
                         "then press r again.", title="Report", severity="warning", timeout=12)
@@ -425,7 +436,7 @@ class ResultsScreen(StationScreen):
             self.notify("Open a session first: the CSV is of the session on show.", title="Export CSV",
                         severity="warning")
             return
-        out = csv_path(a.path)
+        out = csv_path(a.path, self.app.cfg.recordings_dir)
         if out.exists():
             self.notify(f"{self._where(out)} exists already: rename or delete it, then press e again.",
                         title="Export CSV", severity="warning", timeout=12)

@@ -45,6 +45,9 @@ STATE_TEXT = {
     "not_ready": "[yellow]not ready[/yellow]",
 }
 JOG_STEPS_MM = (0.1, 1.0, 10.0)
+# The page's actions that move a leg or choose how it moves: their keys act only when no value
+# field has the focus (RigScreen.check_action). Stop all (x) is not one: it acts everywhere.
+MOTION_ACTIONS = frozenset({"move", "jog", "next_step", "leg_action"})
 
 
 class MoveField(Input):
@@ -342,14 +345,26 @@ class RigScreen(StationScreen):
         return MoveRequest(target_mm=target, speed_mm_s=speed)
 
     def _start_move(self, step_mm: float | None = None) -> None:
+        """Start the move (or jog) the fields ask for. The focus stays where it is: a target typed
+        and entered leaves the cursor in its field, so the next one typed goes there too (never
+        to the motion keys; x stops from the fields as well)."""
         leg = self.selected_leg()
         try:
             move = self.move_request(step_mm)
         except ValueError as exc:
             self.notify(str(exc), title=f"move leg {leg}", severity="error", timeout=10)
+            if step_mm is None and not self.query_one("#move-target", Input).value.strip():
+                self.query_one("#move-target", Input).focus()  # the digits typed next go there
             return
-        if self.app.rig_action("move", (leg,), move):
-            self.query_one("#drives", DataTable).focus()  # the letter keys (x: stop) act again
+        self.app.rig_action("move", (leg,), move)
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        """The keys that move a leg (or change how it moves) act only from the rig panel, never
+        while a value field has the focus (a `-` of "-25" is the field's, not a jog). None: shown
+        dimmed in the footer meanwhile. Buttons and Enter in a field call the actions directly."""
+        if action in MOTION_ACTIONS and isinstance(self.focused, Input):
+            return None
+        return True
 
     def action_move(self) -> None:
         self._start_move()

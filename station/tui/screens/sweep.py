@@ -16,12 +16,13 @@ from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Label, ProgressBar, Select, Static
 
+from procedures.plan_size import PlanSize, fmt_bytes, plan_size
 from procedures.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
 from procedures.plans import parse_legs
 from station.progress import fmt_duration
 from station.tui.errors import describe
 from station.tui.messages import SweepChanged
-from station.tui.screens.common import StationScreen
+from station.tui.screens.common import ConfirmScreen, StationScreen
 from station.tui.widgets import XYPlot, known_sessions
 
 PLANS = [("ISO 230-2", "iso230"), ("Paper (361 × 0.5 mm)", "paper"), ("On the fly", "onthefly"),
@@ -139,6 +140,13 @@ class SweepScreen(StationScreen):
             raise ValueError(f"serials: leg(s) {other} are not swept (legs {list(legs)})")
         leg_fields(self.app.cfg, entered)  # a bad serials file in the config is said before the start
         return entered
+    def plan_size(self) -> PlanSize:
+        """The size of the plan the form asks for, from the form alone (nothing built)."""
+        return plan_size(self.plan_spec())
+
+    def over_limits(self, size: PlanSize) -> bool:
+        limits = self.app.cfg.limits
+        return size.points > limits.max_points or size.rig_hours > limits.max_rig_hours
 
     def _update_summary(self) -> None:
         summary = self.query_one("#plan-summary", Static)
@@ -148,6 +156,11 @@ class SweepScreen(StationScreen):
             self.query_one(f"#{wid}", Input).disabled = (paper or self.app.sweep.active
                                                          or (wid == "n-targets" and kind in ONTHEFLY))
         try:
+            size = self.plan_size()
+            if self.over_limits(size):  # sized, never built here: a huge plan would take seconds per key
+                summary.update(f"[yellow b]{size.describe()}[/yellow b]: beyond the config's \\[limits]; Start asks "
+                               "first")
+                return
             plan = self.build_plan()
         except Exception as exc:
             summary.update(f"[red]{describe(exc)}[/red]")
@@ -161,6 +174,7 @@ class SweepScreen(StationScreen):
         else:
             text = (f"{len(plan.targets_mm)} targets × {plan.cycles} cycles × 2 directions × "
                     f"{len(plan.legs)} leg(s) = [b]{plan.total_points}[/b] points")
+        text += f"; a {fmt_bytes(size.file_bytes)} session file"
         for note in plan.notes:
             text += f"\n[yellow]note:[/yellow] {note}"
         summary.update(text)
@@ -187,17 +201,31 @@ class SweepScreen(StationScreen):
             self.app.action_abort_sweep()
 
     def action_start(self) -> None:
-        from station.tui.app import default_session_path
-
         if self.app.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
             return
         try:
+            spec = self.plan_spec()
+            size = plan_size(spec)  # before anything is built
+            if self.over_limits(size):
+                limits = self.app.cfg.limits
+                question = (f"This plan has [b]{size.describe()}[/b]: beyond the config's \\[limits] "
+                            f"(max_points {limits.max_points}, max_rig_hours {limits.max_rig_hours:g}).\n\n"
+                            "Start it anyway? Abort (a) or quitting stops it at any moment.")
+                self.app.push_screen(ConfirmScreen(question, yes="Start anyway", no="Cancel"),
+                                     lambda yes: self._start(spec) if yes else None)
+                return
             plan = self.build_plan()
             serials = self.serials(plan.legs)
         except Exception as exc:
             self.notify(describe(exc), title="Plan", severity="error", timeout=10)
             return
+        self._start(plan)
+
+    def _start(self, plan) -> None:
+        """Start `plan` (a SweepPlan, or a PlanSpec the app builds in its worker, abortably)."""
+        from station.tui.app import default_session_path
+
         out = default_session_path(self.app.cfg, plan.legs)
         if self.app.start_sweep(plan, out, serials=serials):
             self.plot_leg = None

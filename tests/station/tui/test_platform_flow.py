@@ -127,7 +127,8 @@ async def _analysis_on_show(path, cfg, size, wait_until, notes):
         await wait_until(pilot, lambda: screen.platform_run.written, 60, "the report files")
         assert [p.name for p in screen.platform_run.written] == list(REPORT_FILES)
         assert all((out / name).stat().st_size > 0 for name in REPORT_FILES)
-        assert any("Platform report written" in n for n in notes(app))
+        # the toast is a message the app handles after `written` is set: waited for, not raced
+        await wait_until(pilot, lambda: any("Platform report written" in n for n in notes(app)), what="the toast")
         written = json.loads((out / "platform_summary.json").read_text())
         assert written["poses"] == 500 and written["seed"] == 3 and written["measured"] == "mean"
         assert written["pose"] == json.loads(json.dumps(summary["pose"]))

@@ -50,6 +50,14 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         assert "max 20 mm/s" in motion_text(app) and "blank speed: 5 mm/s" in motion_text(app)
         assert app.screen.query_one("#move-speed", Input).placeholder == "5"
 
+        # m with no target says so and puts the cursor in the target field: the digits typed next go there
+        await pilot.press("m")
+        await wait_until(pilot, lambda: any("type a target position in mm" in n for n in notes(app)),
+                         what="the request for a target")
+        assert app.focused is app.screen.query_one("#move-target", Input)
+        await pilot.press("3", "0")
+        assert app.screen.query_one("#move-target", Input).value == "30"
+        app.screen.query_one("#drives", DataTable).focus()
         # a disabled leg is refused, with what to do
         await type_into(pilot, "move-target", "30")
         await pilot.press("m")
@@ -66,7 +74,18 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         await wait_until(pilot, lambda: any("leg 1 at +30.0000 mm (moved at 2 mm/s)" in n for n in notes(app)),
                          what="the move to 30 mm")
         assert position(app, 1) == pytest.approx(30.0, abs=1e-6)
-        assert isinstance(app.focused, DataTable), "after a move the letter keys (x: stop) act again"
+        target = app.screen.query_one("#move-target", Input)
+        assert app.focused is target, "the target field keeps the focus after its Enter"
+        # the next target typed goes into the field: its - is not a jog, its digits are not lost
+        moves = app.rig.sim.drive_server.set_points(1)
+        await type_into(pilot, "move-target", "")
+        await pilot.press("minus", "2", "5")
+        assert target.value == "-25" and app.focused is target
+        await pilot.pause(0.2)
+        assert app.rig.sim.drive_server.set_points(1) == moves and not app.rig_motion
+        assert position(app, 1) == pytest.approx(30.0, abs=1e-6)
+        await pilot.press("escape")  # out of the field: the motion keys act again
+        assert isinstance(app.focused, DataTable)
         # the drive's own profile velocity is back for the sweeps that follow
         reg = app.rig.profile.registers["profile_velocity"]
         ax = app.rig.axes[1]
@@ -158,6 +177,10 @@ async def _stop(cfg, size, connected, wait_until, notes):
         assert any(f"leg 1 was quick-stopped at {st.position_mm:+.3f} mm on its way to +80.000 mm; enable it (e)" in n
                    for n in notes(app))
         await wait_until(pilot, lambda: "quick-stopped" in motion_text(app), what="the stop shown")
+        # enabled again: the quick stop's toast goes (it no longer says what to do)
+        await pilot.press("escape", "e")
+        await wait_until(pilot, lambda: app.rig.axes[1].status().enabled, what="leg 1 enabled again")
+        await wait_until(pilot, lambda: not any("quick-stopped" in n for n in notes(app)), what="the toast cleared")
 
 
 def test_moves_are_refused_while_a_sweep_runs_or_is_paused(cfg, size, connected, wait_until, notes):

@@ -107,6 +107,9 @@ async def _controls_on_show(cfg, wait_until, size=SMALL):
             assert all(key in text for _, key, _ in PAGES), text
             assert bar.region.width == size[0]
             assert_on_show(app, "StationFooter FooterKey" + (".-help-key" if size[0] < 120 else ""))
+            for key in screen.query("StationFooter FooterKey"):  # every key whole: its key and its words
+                drawn = f"{key.key_display or key.key} {key.description}".strip()
+                assert key.region.right <= size[0] and key.content_region.width >= len(drawn), (mode, drawn, key.region)
             for selector in selectors:
                 assert_on_show(app, selector)
             if mode == "sweep":  # the form opens at its top
@@ -217,6 +220,10 @@ async def _results_and_compensation(cfg, connected, wait_until, session):
         table = app.screen.query_one("#results-table")
         labels = [str(c.label) for c in table.columns.values()]
         assert labels[:6] == ["Leg", "A", "E", "M", "B", "R"]
+        # the table shows its legs and the plots keep 8 rows or more (the page scrolls to them)
+        assert table.region.height >= 4
+        for plot in ("#model-plot", "#residual-plot"):
+            assert app.screen.query_one(plot).region.height >= 8, plot
 
         # Compensation: the table (made on showing the page; t, then the button), push (u, then
         # the button: the confirmation's buttons on show), verify (v), rollback (button)
