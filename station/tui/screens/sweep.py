@@ -206,6 +206,7 @@ class SweepScreen(StationScreen):
             return
         try:
             spec = self.plan_spec()
+            serials = self.serials(spec.legs)  # a bad serial is said before anything is asked or built
             size = plan_size(spec)  # before anything is built
             if self.over_limits(size):
                 limits = self.app.cfg.limits
@@ -213,17 +214,17 @@ class SweepScreen(StationScreen):
                             f"(max_points {limits.max_points}, max_rig_hours {limits.max_rig_hours:g}).\n\n"
                             "Start it anyway? Abort (a) or quitting stops it at any moment.")
                 self.app.push_screen(ConfirmScreen(question, yes="Start anyway", no="Cancel"),
-                                     lambda yes: self._start(spec) if yes else None)
+                                     lambda yes: self._start(spec, serials) if yes else None)
                 return
             plan = self.build_plan()
-            serials = self.serials(plan.legs)
         except Exception as exc:
             self.notify(describe(exc), title="Plan", severity="error", timeout=10)
             return
-        self._start(plan)
+        self._start(plan, serials)
 
-    def _start(self, plan) -> None:
-        """Start `plan` (a SweepPlan, or a PlanSpec the app builds in its worker, abortably)."""
+    def _start(self, plan, serials: dict[int, dict[str, str]]) -> None:
+        """Start `plan` (a SweepPlan, or a PlanSpec the app builds in its worker, abortably) with
+        the legs' `serials` from the form."""
         from station.tui.app import default_session_path
 
         out = default_session_path(self.app.cfg, plan.legs)
