@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from html import escape
 
-W, H = 640, 240
-LEFT, RIGHT, TOP, BOTTOM = 56, 12, 14, 30
+W, H = 600, 240
+LEFT, RIGHT, TOP, BOTTOM = 56, 12, 24, 30
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf")
 
 
@@ -72,7 +72,7 @@ def plot(title: str, series: list[Series], hlines: list[HLine] = (), x_labels: t
         out.append(f'<text class="tick" x="{LEFT - 4}" y="{_fmt(sy(y) + 4)}" text-anchor="end">{y:.2f}</text>')
     out.append(f'<text class="tick" x="{LEFT}" y="{H - 10}">{escape(x_labels[0])}</text>')
     out.append(f'<text class="tick" x="{W - RIGHT}" y="{H - 10}" text-anchor="end">{escape(x_labels[1])}</text>')
-    out.append(f'<text class="tick" x="6" y="{TOP + 8}">{escape(y_unit)}</text>')
+    out.append(f'<text class="tick" x="{LEFT}" y="{TOP - 8}">{escape(y_unit)}</text>')
     for h in hlines:
         y = _fmt(sy(h.y_um))
         out.append(f'<line class="hline hline-{h.kind}" data-y="{h.y_um:.4f}" x1="{LEFT}" x2="{W - RIGHT}" y1="{y}" y2="{y}"/>')
@@ -91,8 +91,8 @@ def plot(title: str, series: list[Series], hlines: list[HLine] = (), x_labels: t
                        f'data-series="{escape(s.name)}" data-label="{escape(p.label)}" data-y="{p.y_um:.4f}"{u}>'
                        f'<title>{escape(tip)}</title></circle>')
     for i, s in enumerate(series):  # legend
-        x = LEFT + 8 + 90 * i
-        out.append(f'<circle cx="{x}" cy="{TOP + 10}" r="4" fill="{COLOURS[i % len(COLOURS)]}"/>'
-                   f'<text class="legend" x="{x + 8}" y="{TOP + 14}">{escape(s.name)}</text>')
+        x = LEFT + 40 + 90 * i
+        out.append(f'<circle cx="{x}" cy="{TOP - 12}" r="4" fill="{COLOURS[i % len(COLOURS)]}"/>'
+                   f'<text class="legend" x="{x + 8}" y="{TOP - 8}">{escape(s.name)}</text>')
     out.append("</svg>")
     return "\n".join(out)
