@@ -130,3 +130,24 @@ def test_station_comparison(client):
     assert f"{-en:+.2f}" in t  # ST-A - ST-B
     one = client.get("/compare", params={"serial": "HX-0004"}).text
     assert points(one, "cmp-plot-E") == 2 and "pair flagged" not in one and "class=\"pair\"" in one
+
+
+def test_command_missing_catalog_is_one_line(tmp_path, capsys):
+    from station.cli import main
+
+    assert main(["web", "--catalog", str(tmp_path / "none.sqlite")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "none.sqlite: no such file" in err and "station catalog sync" in err
+    assert not (tmp_path / "none.sqlite").exists()  # nothing created
+
+
+def test_readonly_engine_refuses_writes(fleet_dir):
+    import sqlalchemy as sa
+
+    from station.web.engine import open_readonly
+
+    engine = open_readonly(str(db.sqlite_url(fleet_dir / "catalog.sqlite")))
+    with pytest.raises(sa.exc.OperationalError, match="readonly"):
+        with engine.begin() as conn:
+            conn.exec_driver_sql("DELETE FROM legs")
+    engine.dispose()
