@@ -62,6 +62,12 @@ def site(request, fleet_dir):
             write_recs(conn, fleet.records(), "ST-X", queue=False)
         engine.dispose()
     app, engine = web_app(url, fleet_dir, page_size=2)
+    if request.param == "postgresql":  # opened read-only: no page could write
+        import sqlalchemy as sa
+
+        with pytest.raises(sa.exc.InternalError, match="read-only transaction"):
+            with engine.begin() as conn:
+                conn.exec_driver_sql("DELETE FROM legs")
     server = Server(app)
     yield server.url, request.param
     server.stop()

@@ -151,3 +151,30 @@ def test_readonly_engine_refuses_writes(fleet_dir):
         with engine.begin() as conn:
             conn.exec_driver_sql("DELETE FROM legs")
     engine.dispose()
+
+
+def test_tolerances_read_tolerantly(tmp_path):
+    from station.web.extensions import tolerances_of
+
+    p = tmp_path / "s.toml"
+    p.write_text('[tolerances.L300]\nE_um = 12\nB_um = "x"\nR_um = -1\n[tolerances.L300.as_left]\nE_um = 10.5\n'
+                 '[tolerances.L450]\nnote = "none"\n')
+    assert tolerances_of(p) == {"L300": {"E": 10.5}}
+    p.write_text("not = [toml")
+    assert tolerances_of(p) == {} and tolerances_of(tmp_path / "missing.toml") == {} and tolerances_of(None) == {}
+
+
+def test_certificates_found_by_serial_only_beside_their_json(tmp_path):
+    import json
+
+    from station.web.extensions import certificates_of
+
+    fleet.write_certificate(tmp_path, "HX-0001", "C-1")
+    d = tmp_path / "certificates" / "other"
+    d.mkdir()
+    (d / "bad.json").write_text("{not json")
+    (d / "escape.json").write_text(json.dumps({"leg_serial": "HX-0001", "pdf": "../HX-0001/C-1.pdf"}))
+    (d / "missing.json").write_text(json.dumps({"leg_serial": "HX-0001", "pdf": "gone.pdf"}))
+    found = certificates_of(tmp_path, "HX-0001")
+    assert [c.pdf_name for c in found] == ["C-1.pdf"] and found[0].number == "C-1"
+    assert certificates_of(tmp_path, "HX-0002") == [] and certificates_of(tmp_path / "nowhere", "HX-0001") == []
