@@ -1,0 +1,139 @@
+"""The web view at scale: a catalog of 10 000 legs x 5 calibrations (bench_catalog's synthetic
+records through the catalog API) on SQLite and, when initdb is installed, a throwaway PostgreSQL
+(tests/pg.py). Times the fleet page (goal < 1 s) and a leg's page (goal < 300 ms) server side
+(FastAPI TestClient, median of repeats) and in headless Chromium (selenium; the navigation's
+duration, request to load event, from the Navigation Timing API) side by side.
+
+    .venv/bin/python bench/bench_web.py [--legs 10000] [--calibrations 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from bench_catalog import BATCH, synthetic, timed  # noqa: E402
+
+from station.catalog import db  # noqa: E402
+from station.catalog.store import Catalog, write_recs  # noqa: E402
+from station.web.app import WebSettings, create_app  # noqa: E402
+from station.web.engine import open_readonly  # noqa: E402
+
+GOALS_MS = {"fleet": 1000, "fleet --type": 1000, "fleet --due": 1000, "leg": 300}
+
+
+def fill(ingest, n_legs: int, n_cal: int) -> None:
+    batch = []
+    for rec in synthetic(n_legs, n_cal):
+        batch.append(rec)
+        if len(batch) == BATCH:
+            ingest(batch)
+            batch = []
+    if batch:
+        ingest(batch)
+
+
+def pages(n_legs: int) -> dict[str, str]:
+    serial = f"HX-{random.Random(3).randrange(n_legs):05d}"
+    return {"fleet": "/", "fleet --type": "/?type=HX-L450&page=3", "fleet --due": "/?due=2025-06-01",
+            "leg": f"/leg/{serial}"}
+
+
+def measure(url: str, n_legs: int, driver) -> dict[str, tuple[float, float | None]]:
+    """{page: (server ms, browser ms)}."""
+    from fastapi.testclient import TestClient
+
+    from tests.web.browser import Server
+
+    engine = open_readonly(url)
+    app = create_app(engine, WebSettings())
+    out = {}
+    with TestClient(app) as client:
+        for name, path in pages(n_legs).items():
+            r = client.get(path)
+            assert r.status_code == 200, (path, r.status_code)
+            out[name] = [timed(lambda: client.get(path), 7), None]
+    if driver is not None:
+        server = Server(app)
+        try:
+            for name, path in pages(n_legs).items():
+                durations = []
+                for _ in range(5):
+                    driver.get(server.url + path)
+                    durations.append(driver.execute_script(
+                        "return performance.getEntriesByType('navigation')[0].duration"))
+                out[name][1] = sorted(durations)[len(durations) // 2]
+        finally:
+            server.stop()
+    engine.dispose()
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--legs", type=int, default=10_000)
+    ap.add_argument("--calibrations", type=int, default=5)
+    args = ap.parse_args()
+    driver = None
+    results: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory() as d:
+        from tests.web.browser import CHROMIUM, DRIVER, chromium
+
+        if CHROMIUM and DRIVER:
+            driver = chromium(Path(d) / "profile", Path(d) / "downloads")
+        else:
+            print("browser: not measured (apt-get install chromium chromium-driver)")
+        try:
+            cat = Catalog(local=Path(d) / "catalog.sqlite", station_id="bench")
+            fill(lambda recs: cat.ingest(recs), args.legs, args.calibrations)
+            cat.close()
+            results["SQLite"] = measure(db.sqlite_url(Path(d) / "catalog.sqlite"), args.legs, driver)
+            cluster = None
+            try:
+                from tests.pg import remove, start_cluster
+
+                try:
+                    cluster = start_cluster()
+                except BaseException as exc:  # pytest.skip outside pytest: PostgreSQL not installed
+                    print(f"PostgreSQL: not measured ({exc})")
+                if cluster is not None:
+                    url = cluster.new_database()
+                    engine = db.open_engine(url)
+
+                    def ingest_pg(recs):
+                        with engine.begin() as conn:
+                            write_recs(conn, recs, "bench", queue=False)
+
+                    fill(ingest_pg, args.legs, args.calibrations)
+                    with engine.connect() as conn:  # the planner's statistics, as autovacuum would
+                        conn.execution_options(isolation_level="AUTOCOMMIT").exec_driver_sql("ANALYZE")
+                    engine.dispose()
+                    results["PostgreSQL"] = measure(url, args.legs, driver)
+            finally:
+                if cluster is not None:
+                    remove(cluster)
+        finally:
+            if driver is not None:
+                driver.quit()
+    print(f"\nweb view over a catalog of {args.legs} legs x {args.calibrations} calibrations "
+          f"(50 legs a page; median ms)")
+    print(f"{'engine':<11} {'page':<14} {'server ms':>10} {'browser ms':>11} {'goal ms':>8}")
+    for engine_name, rows in results.items():
+        for name, (server_ms, browser_ms) in rows.items():
+            b = f"{browser_ms:.0f}" if browser_ms is not None else "-"
+            print(f"{engine_name:<11} {name:<14} {server_ms:>10.0f} {b:>11} {GOALS_MS[name]:>8}")
+    print("server: TestClient request to response in process; browser: Chromium navigation, request to load event")
+    print(f"load average while measuring: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall times grow with it)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

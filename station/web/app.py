@@ -1,0 +1,222 @@
+"""The fleet web view (`station web`): a read-only FastAPI app over a catalog engine.
+
+Pages: `/` the fleet (legs, filters, pages), `/leg/SERIAL` a leg's history with plots, tables
+pushed and certificates, `/charts?type=T` control charts per leg type, `/compare` the station
+comparison. GET only; every error is an HTML page (400 bad query, 404 unknown serial or page,
+405 another method, 500 one line), never a traceback.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import urlencode
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, HTMLResponse
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+from sqlalchemy.engine import Engine
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from station.catalog.history import history, legs, parse_utc
+from station.web import queries, svg
+from station.web.extensions import CHART_FIGURES, certificates_of
+
+log = logging.getLogger(__name__)
+HERE = Path(__file__).parent
+PAGE_SIZE = 50
+CHART_POINTS = 2000  # the most recent calibrations drawn per chart (statistics use all)
+
+
+class PageError(Exception):
+    """A request the view answers with an error page: 400 (bad query) or 404 (nothing there)."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+@dataclass
+class WebSettings:
+    tolerances: dict[str, dict[str, float]] = field(default_factory=dict)
+    runs_dir: Path | None = None
+    interval_days: int = 365
+    where: str = ""  # which catalog, shown in the footer
+    page_size: int = PAGE_SIZE
+
+
+def _date(name: str, text: str | None) -> str | None:
+    if text in (None, ""):
+        return None
+    try:
+        return dt.date.fromisoformat(text).isoformat()
+    except ValueError:
+        raise PageError(400, f"{name}={text!r}: not a date; give it as YYYY-MM-DD") from None
+
+
+def _choice(name: str, text: str | None, known: list[str]) -> str | None:
+    if text in (None, ""):
+        return None
+    if text not in known:
+        raise PageError(400, f"{name}={text!r}: unknown {name}; known: {', '.join(known) or 'none'}")
+    return text
+
+
+def _page(text: str | None) -> int:
+    if text in (None, ""):
+        return 1
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise PageError(400, f"page={text!r}: give a page number 1, 2, ...")
+    return n
+
+
+def _x(time_utc: str) -> float:
+    return parse_utc(time_utc).timestamp()
+
+
+def history_plot(figure: str, cals, limit_um: float | None) -> str:
+    pts = [svg.Point(_x(c.time_utc), c.figures[figure]["value_um"], c.figures[figure].get("U_um"), c.time_utc[:10])
+           for c in cals if (c.figures.get(figure) or {}).get("value_um") is not None]
+    lines = [svg.HLine(limit_um, f"tolerance {limit_um:g} µm", "tol")] if limit_um is not None else []
+    ends = (cals[0].time_utc[:10], cals[-1].time_utc[:10]) if cals else ("", "")
+    return svg.plot(f"{figure} over the calibrations", [svg.Series(figure, pts)], lines, ends, "µm")
+
+
+def chart_plot(c: queries.Chart) -> str:
+    shown = c.values[-CHART_POINTS:]
+    pts = [svg.Point(_x(t), v, None, f"{serial} {t[:10]}") for t, serial, v in shown]
+    lines = []
+    if c.mean is not None:
+        lines.append(svg.HLine(c.mean, f"mean {c.mean:.2f}", "mean"))
+    if c.s is not None:
+        lines += [svg.HLine(c.ucl, f"+3s {c.ucl:.2f}", "limit"), svg.HLine(c.lcl, f"-3s {c.lcl:.2f}", "limit")]
+    if c.limit_um is not None:
+        lines.append(svg.HLine(c.limit_um, f"tolerance {c.limit_um:g}", "tol"))
+    ends = (shown[0][0][:10], shown[-1][0][:10]) if shown else ("", "")
+    return svg.plot(f"control chart {c.figure}", [svg.Series(c.figure, pts)], lines, ends, "µm")
+
+
+def compare_plot(item: queries.Compared, figure: str) -> str:
+    series = []
+    for i, st in enumerate(item.stations):
+        x, u = getattr(st, figure)
+        if x is not None:
+            series.append(svg.Series(st.station_id, [svg.Point(float(i), x, u, st.time_utc[:10])]))
+    names = [st.station_id for st in item.stations]
+    return svg.plot(f"{figure} of {item.serial} per station", series, [],
+                    (names[0], names[-1]) if names else ("", ""), "µm")
+
+
+def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
+    """The web view over `engine` (open it read-only where the engine allows: `open_readonly`)."""
+    s = settings or WebSettings()
+    app = FastAPI(title="station fleet", docs_url=None, redoc_url=None, openapi_url=None)
+    templates = Jinja2Templates(directory=str(HERE / "templates"))
+    app.mount("/static", StaticFiles(directory=str(HERE / "static")), name="static")
+
+    def page(request: Request, name: str, status_code: int = 200, **context) -> HTMLResponse:
+        context.update(where=s.where)
+        return templates.TemplateResponse(request, name, context, status_code=status_code)
+
+    def error_page(request: Request, status: int, message: str) -> HTMLResponse:
+        titles = {400: "Bad request", 404: "Not found", 405: "Method not allowed", 500: "Error"}
+        return page(request, "error.html", status, status=status, title=titles.get(status, "Error"), message=message)
+
+    @app.exception_handler(PageError)
+    async def _page_error(request: Request, exc: PageError):
+        return error_page(request, exc.status, exc.message)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException):
+        text = {404: f"nothing at {request.url.path}", 405: "this view is read-only (GET only)"}
+        return error_page(request, exc.status_code, text.get(exc.status_code, str(exc.detail)))
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation_error(request: Request, exc: RequestValidationError):
+        return error_page(request, 400, "; ".join(str(e.get("msg")) for e in exc.errors()))
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception):
+        log.exception("web: %s", request.url.path)
+        return error_page(request, 500, f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''} "
+                                        "(the server log has the details)")
+
+    @app.get("/", response_class=HTMLResponse)
+    def fleet(request: Request, type: str | None = None, station: str | None = None, since: str | None = None,
+              until: str | None = None, due: str | None = None):
+        types, stations = queries.filter_values(engine)
+        q = request.query_params
+        leg_type = _choice("type", type, types)
+        st = _choice("station", station, stations)
+        since_d, until_d = _date("since", since), _date("until", until)
+        due_d = dt.date.today().isoformat() if due == "today" else _date("due", due)
+        n = _page(q.get("page"))
+        rows = legs(engine, leg_type=leg_type, station=st, since=since_d, until=until_d, due_by=due_d,
+                    interval_days=s.interval_days)
+        pages = max(1, -(-len(rows) // s.page_size))
+        if n > pages:
+            raise PageError(404, f"page {n}: there are {pages} page(s) of legs with these filters")
+        shown = rows[(n - 1) * s.page_size: n * s.page_size]
+        filters = {k: v for k, v in dict(type=leg_type, station=st, since=since_d, until=until_d,
+                                         due=due if due == "today" else due_d).items() if v}
+        return page(request, "fleet.html", rows=shown, total=len(rows), page_no=n, pages=pages, types=types,
+                    stations=stations, filters=filters, qs=urlencode(filters), today=dt.date.today().isoformat())
+
+    @app.get("/leg/{serial}", response_class=HTMLResponse)
+    def leg(request: Request, serial: str):
+        h = history(engine, serial, s.interval_days)
+        if not h.rows and not h.leg_info:
+            raise PageError(404, f"no leg with serial {serial!r} in the catalog")
+        leg_type = h.leg_info.get("leg_type")
+        limits = s.tolerances.get(leg_type or "", {})
+        cals = h.calibrations
+        plots = {f: history_plot(f, cals, limits.get(f)) for f in CHART_FIGURES}
+        pushes = [r for r in h.rows if r.kind in ("push", "rollback")]
+        tables = [r for r in h.rows if r.kind == "table"]
+        files = queries.table_files(engine, sorted({r.table_sha256 for r in pushes if r.table_sha256}))
+        return page(request, "leg.html", serial=serial, h=h, leg_type=leg_type, limits=limits, plots=plots,
+                    pushes=pushes, tables=tables, files=files, certificates=certificates_of(s.runs_dir, serial),
+                    figures=CHART_FIGURES)
+
+    @app.get("/leg/{serial}/certificate/{name}")
+    def certificate(serial: str, name: str):
+        for c in certificates_of(s.runs_dir, serial):
+            if c.pdf_name == name:
+                return FileResponse(c.pdf_path, media_type="application/pdf", filename=name)
+        raise PageError(404, f"no certificate {name!r} for leg {serial!r}")
+
+    @app.get("/charts", response_class=HTMLResponse)
+    def charts(request: Request, type: str | None = None):
+        types, _ = queries.filter_values(engine)
+        leg_type = _choice("type", type, types) or (types[0] if types else None)
+        limits = s.tolerances.get(leg_type or "", {})
+        cals = queries.calibrations_of_type(engine, leg_type) if leg_type else []
+        cs = [queries.chart(cals, f, limits.get(f)) for f in CHART_FIGURES]
+        return page(request, "charts.html", types=types, leg_type=leg_type, charts=cs,
+                    plots={c.figure: chart_plot(c) for c in cs}, calibrations=len(cals), chart_points=CHART_POINTS)
+
+    @app.get("/compare", response_class=HTMLResponse)
+    def compare(request: Request, type: str | None = None, serial: str | None = None):
+        types, _ = queries.filter_values(engine)
+        leg_type = _choice("type", type, types)
+        n = _page(request.query_params.get("page"))
+        items, total = queries.compared_serials(engine, leg_type, serial or None, s.page_size, (n - 1) * s.page_size)
+        if serial and not items:
+            raise PageError(404, f"leg {serial!r} has no completed calibrations at more than one station")
+        pages = max(1, -(-total // s.page_size))
+        if n > pages:
+            raise PageError(404, f"page {n}: there are {pages} page(s) of compared legs")
+        plots = {f: compare_plot(items[0], f) for f in ("E", "B")} if serial else {}
+        return page(request, "compare.html", items=items, total=total, types=types, leg_type=leg_type,
+                    serial=serial, plots=plots, page_no=n, pages=pages)
+
+    return app

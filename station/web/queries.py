@@ -1,0 +1,170 @@
+"""What the web pages read from the catalog beyond `history` and `legs`: the filter values, the
+calibrations of a leg type (control charts), the legs measured at more than one station
+(comparison), the table files of a leg's pushes. Read-only queries; values in um.
+
+Control chart (individuals): mean and sample standard deviation s of the completed calibrations
+of a leg type, limits mean +- 3 s. The ISO 230-2 values E, B, R are >= 0 with an upper limit only,
+so Cpk = (limit - mean) / (3 s) (the one-sided index).
+
+Comparison of station A and B on one leg: E_n = (x_A - x_B) / sqrt(U_A^2 + U_B^2), each station's
+last completed calibration; |E_n| > 1 flags a disagreement beyond both uncertainties.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import sqlalchemy as sa
+from sqlalchemy.engine import Engine
+
+from station.catalog.models import Leg, Record, RecordLeg
+
+COMPLETED = sa.and_(RecordLeg.kind == "session", RecordLeg.outcome == "completed")
+
+
+def filter_values(engine: Engine) -> tuple[list[str], list[str]]:
+    """(leg types, stations) the catalog knows, sorted."""
+    with engine.connect() as conn:
+        types = [t for (t,) in conn.execute(sa.select(Leg.leg_type).where(Leg.leg_type.is_not(None)).distinct())]
+        stations = [s for (s,) in conn.execute(sa.select(RecordLeg.station_id)
+                                                .where(RecordLeg.station_id.is_not(None)).distinct())]
+    return sorted(types), sorted(stations)
+
+
+@dataclass
+class Calibration:
+    time_utc: str
+    serial: str
+    station_id: str | None
+    values: dict[str, tuple[float | None, float | None]]  # figure -> (value um, U um)
+
+
+def _calibrations(conn, where) -> list[Calibration]:
+    cols = [RecordLeg.time_utc, RecordLeg.leg_serial, RecordLeg.station_id]
+    cols += [getattr(RecordLeg, f"{n}{s}") for n in ("E", "B", "R") for s in ("_um", "_U_um")]
+    q = sa.select(*cols).where(COMPLETED, where).order_by(RecordLeg.time_utc)
+    out = []
+    for r in conn.execute(q):
+        m = r._mapping
+        out.append(Calibration(m["time_utc"], m["leg_serial"], m["station_id"],
+                               {n: (m[f"{n}_um"], m[f"{n}_U_um"]) for n in ("E", "B", "R")}))
+    return out
+
+
+def calibrations_of_type(engine: Engine, leg_type: str) -> list[Calibration]:
+    """Every completed calibration of a leg of type `leg_type`, oldest first."""
+    with engine.connect() as conn:
+        serials = sa.select(Leg.serial).where(Leg.leg_type == leg_type)
+        return _calibrations(conn, RecordLeg.leg_serial.in_(serials))
+
+
+@dataclass
+class Chart:
+    figure: str
+    values: list[tuple[str, str, float]]  # (time_utc, serial, value um)
+    mean: float | None = None
+    s: float | None = None
+    limit_um: float | None = None
+    cpk: float | None = None
+
+    @property
+    def ucl(self) -> float | None:
+        return None if self.mean is None or self.s is None else self.mean + 3 * self.s
+
+    @property
+    def lcl(self) -> float | None:
+        return None if self.mean is None or self.s is None else self.mean - 3 * self.s
+
+
+def chart(cals: list[Calibration], figure: str, limit_um: float | None) -> Chart:
+    values = [(c.time_utc, c.serial, c.values[figure][0]) for c in cals if c.values[figure][0] is not None]
+    out = Chart(figure, values, limit_um=limit_um)
+    ys = [v for _, _, v in values]
+    if ys:
+        out.mean = statistics.fmean(ys)
+    if len(ys) >= 2:
+        out.s = statistics.stdev(ys)
+        if limit_um is not None and out.s > 0:
+            out.cpk = (limit_um - out.mean) / (3 * out.s)
+    return out
+
+
+@dataclass
+class StationValue:
+    station_id: str
+    time_utc: str
+    E: tuple[float | None, float | None]
+    B: tuple[float | None, float | None]
+
+
+@dataclass
+class Pair:
+    a: str
+    b: str
+    en: dict[str, float | None]  # figure -> E_n
+
+    @property
+    def flagged(self) -> bool:
+        return any(v is not None and abs(v) > 1 for v in self.en.values())
+
+
+@dataclass
+class Compared:
+    serial: str
+    leg_type: str | None
+    stations: list[StationValue] = field(default_factory=list)
+    pairs: list[Pair] = field(default_factory=list)
+
+    @property
+    def flagged(self) -> bool:
+        return any(p.flagged for p in self.pairs)
+
+
+def e_n(a: tuple[float | None, float | None], b: tuple[float | None, float | None]) -> float | None:
+    """(x_A - x_B) / sqrt(U_A^2 + U_B^2); None without both values and a non-zero U."""
+    (xa, ua), (xb, ub) = a, b
+    if xa is None or xb is None or ua is None or ub is None or ua * ua + ub * ub <= 0:
+        return None
+    return (xa - xb) / math.sqrt(ua * ua + ub * ub)
+
+
+def compared_serials(engine: Engine, leg_type: str | None = None, serial: str | None = None,
+                     limit: int = 100, offset: int = 0) -> tuple[list[Compared], int]:
+    """Legs with completed calibrations at more than one station (of `leg_type`, or the one
+    `serial`): each station's last calibration and E_n of every pair; and how many legs there are."""
+    multi = (sa.select(RecordLeg.leg_serial).where(COMPLETED, RecordLeg.leg_serial.is_not(None))
+             .group_by(RecordLeg.leg_serial).having(sa.func.count(sa.distinct(RecordLeg.station_id)) > 1))
+    if serial:
+        multi = multi.where(RecordLeg.leg_serial == serial)
+    if leg_type:
+        multi = multi.where(RecordLeg.leg_serial.in_(sa.select(Leg.serial).where(Leg.leg_type == leg_type)))
+    with engine.connect() as conn:
+        total = int(conn.execute(sa.select(sa.func.count()).select_from(multi.subquery())).scalar_one())
+        page = [s for (s,) in conn.execute(multi.order_by(RecordLeg.leg_serial).limit(limit).offset(offset))]
+        types = dict(conn.execute(sa.select(Leg.serial, Leg.leg_type).where(Leg.serial.in_(page))).all())
+        cals = _calibrations(conn, RecordLeg.leg_serial.in_(page)) if page else []
+    latest: dict[str, dict[str, Calibration]] = {s: {} for s in page}
+    for c in cals:  # oldest first: the last one per station stays
+        if c.station_id:
+            latest[c.serial][c.station_id] = c
+    out = []
+    for s in page:
+        item = Compared(s, types.get(s))
+        for st, c in sorted(latest[s].items()):
+            item.stations.append(StationValue(st, c.time_utc, c.values["E"], c.values["B"]))
+        for a, b in combinations(item.stations, 2):
+            item.pairs.append(Pair(a.station_id, b.station_id, {"E": e_n(a.E, b.E), "B": e_n(a.B, b.B)}))
+        out.append(item)
+    return out, total
+
+
+def table_files(engine: Engine, sha256s: list[str]) -> dict[str, str]:
+    """{sha256: path} of the table records with these sha256."""
+    if not sha256s:
+        return {}
+    with engine.connect() as conn:
+        return dict(conn.execute(sa.select(Record.sha256, Record.path)
+                                 .where(Record.kind == "table", Record.sha256.in_(sha256s))).all())
