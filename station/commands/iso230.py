@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 
+from procedures import iso230_report
+from procedures.decision import decision_lines
 from procedures.errors import InputError
 from procedures.iso230 import dumps, evaluate, format_table
 from procedures.metrology.thermal import error_basis
@@ -16,7 +19,9 @@ HELP = "ISO 230-2 values (E, M, A, B, R; up, down, both) of each leg in a sessio
 DESCRIPTION = (
     "Evaluate a session file by ISO 230-2: per leg the systematic deviation E, accuracy A, repeatability R "
     "(per direction and bidirectional), range of mean bidirectional deviation M and reversal B, in micrometres. "
-    "Values that cannot be computed are shown as '-' with the reason."
+    "Values that cannot be computed are shown as '-' with the reason. Each leg with a leg type and "
+    "[tolerances.TYPE] (the --config's, else those the session recorded) is decided by ISO 14253-1 with the "
+    "expanded uncertainty U of each value: conforms / does not conform / cannot decide (docs/decisions.md)."
 )
 
 
@@ -25,6 +30,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", metavar="OUT", help="also write the values as JSON to OUT")
     p.add_argument("--raw", action="store_true",
                    help="evaluate the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
+    p.add_argument("--config", metavar="C", help="station TOML whose [tolerances.TYPE] decide (default: the "
+                   "tolerances the session's config recorded)")
+
+
+def session_decisions(session, raw: bool, tolerances: dict | None) -> dict:
+    """The ISO 230-2 report's values with U and their decisions (procedures.iso230_report.build):
+    `tolerances` {type: Tolerance.to_json()}, None = the session's recorded ones."""
+    return iso230_report.build(session.points, plan=session.plan, devices=session.devices,
+                               station_config=session.station_config, attrs=session.attrs,
+                               source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
+                               identity=session.identity.to_json() if session.identity.recorded else None,
+                               tolerances=tolerances)
 
 
 def run(args) -> int:
@@ -37,9 +54,23 @@ def run(args) -> int:
     for line in basis_lines:
         print(line)
     print(format_table(results), end="")
+    tolerances = None
+    if args.config:
+        from station.config import load_config  # noqa: PLC0415 (only with --config)
+
+        tolerances = {k: t.to_json() for k, t in load_config(args.config).tolerances.items()}
+    report = session_decisions(session, args.raw, tolerances)
+    decisions = report["decisions"]
+    print(f"Decisions ({decisions['rule']}):")
+    for line in decision_lines(decisions["legs"]):
+        print(f"  {line}")
     if args.json:
         out = Path(args.json)
-        text = dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis})
+        doc = json.loads(dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis}))
+        for leg, entry in doc["legs"].items():
+            entry["U_um"] = {name: v["U_um"] for name, v in report["legs"][leg]["values"].items()}
+        doc["decisions"] = decisions
+        text = json.dumps(doc, indent=2, allow_nan=False)
         tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
         try:
             tmp.write_text(text + "\n")
