@@ -200,13 +200,13 @@ def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, l
 
 def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict, attrs: dict,
           source: dict, raw: bool = False, identity: dict | None = None,
-          tolerances: dict | None = None) -> dict[str, Any]:
+          tolerances: dict | None = None, stage: str | None = None) -> dict[str, Any]:
     """The ISO 230-2 report's content as a JSON-able dict (module docstring); `raw`: on the raw
     error (`station report --raw`, or a model fitted to it), not normalised to 20 degC;
     `identity`: the session's /meta/identity (procedures.recording.identity), {} or None when it
     has none; `tolerances`: {leg type: procedures.decision.Tolerance.to_json()} to decide by
-    (None or {}: the ones the session's config recorded). A verification session is decided
-    against the as-left limits, any other against the as-found ones."""
+    (None or {}: the ones the session's config recorded); `stage` "as_found" / "as_left" (None:
+    as left for a session whose plan kind is "verification", else as found)."""
     if raw:
         pts, basis = points, {"basis": "raw", "normalised": False,
                               "statement": "Deviations NOT normalised to 20 degC (raw error asked for: --raw, or a model "
@@ -263,7 +263,7 @@ def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict
             "targets": targets, "budget": budget.to_json(),
         }
     tol = decision.tolerances_from_json(tolerances or (station_config or {}).get("tolerances"))
-    stage = "as_left" if (plan or {}).get("kind") == "verification" else "as_found"
+    stage = stage or ("as_left" if (plan or {}).get("kind") == "verification" else "as_found")
     out["decisions"] = {"stage": stage, "rule": decision.RULE, "legs": decision.decide_report(out, tol, stage)}
     return _json_safe(out)
 

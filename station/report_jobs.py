@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 
+from procedures import iso230_report
 from procedures.csv_io import ExportSummary
 from procedures.errors import InputError
 from procedures.report import ReportResult, make_report
@@ -69,3 +70,13 @@ def export_lines(summary: ExportSummary) -> list[str]:
         lines.append(f"left out {summary.skipped_no_error} points without a measured error")
     return lines
 
+
+def session_decisions(session, raw: bool = False, tolerances: dict | None = None, stage: str | None = None) -> dict:
+    """The ISO 230-2 report's values with U and their decisions (procedures.iso230_report.build):
+    `tolerances` {type: Tolerance.to_json()}, None = the session's recorded ones; `stage`
+    "as_found" / "as_left" (None: as left for a verification plan, else as found)."""
+    return iso230_report.build(session.points, plan=session.plan, devices=session.devices,
+                               station_config=session.station_config, attrs=session.attrs,
+                               source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
+                               identity=session.identity.to_json() if session.identity.recorded else None,
+                               tolerances=tolerances, stage=stage)

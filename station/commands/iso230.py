@@ -7,12 +7,12 @@ import json
 import os
 from pathlib import Path
 
-from procedures import iso230_report
 from procedures.decision import decision_lines
 from procedures.errors import InputError
 from procedures.iso230 import dumps, evaluate, format_table
 from procedures.metrology.thermal import error_basis
 from procedures.recording.reader import read_session
+from station.report_jobs import session_decisions
 
 NAME = "iso230"
 HELP = "ISO 230-2 values (E, M, A, B, R; up, down, both) of each leg in a session file"
@@ -32,16 +32,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="evaluate the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
     p.add_argument("--config", metavar="C", help="station TOML whose [tolerances.TYPE] decide (default: the "
                    "tolerances the session's config recorded)")
-
-
-def session_decisions(session, raw: bool, tolerances: dict | None) -> dict:
-    """The ISO 230-2 report's values with U and their decisions (procedures.iso230_report.build):
-    `tolerances` {type: Tolerance.to_json()}, None = the session's recorded ones."""
-    return iso230_report.build(session.points, plan=session.plan, devices=session.devices,
-                               station_config=session.station_config, attrs=session.attrs,
-                               source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
-                               identity=session.identity.to_json() if session.identity.recorded else None,
-                               tolerances=tolerances)
 
 
 def run(args) -> int:
