@@ -237,3 +237,21 @@ def decision_lines(decisions: Mapping[str, Any]) -> list[str]:
         for name, v in d["values"].items():
             lines.append(f"  {name}: {v['outcome']}: {v['reason']}")
     return lines
+
+
+def decision_summary(decisions: Mapping[str, Any]) -> str:
+    """One line for a screen: each leg's verdict and, when undecided or failing, which value and why
+    in a few words; "" when no leg has a tolerance (nothing to say)."""
+    parts = []
+    for leg, d in decisions.items():
+        if d["overall"] == NO_TOLERANCE:
+            continue
+        text = f"leg {leg} {d['overall'].upper()}"
+        bad = [(n, v) for n, v in d["values"].items() if v["outcome"] in (NOT_CONFORM, UNDECIDED)]
+        if bad:
+            n, v = bad[0]
+            text += f" ({n} {v['value_um']:.2f} ± {v['U_um']:.2f} vs {v['limit_um']:g} µm" + (
+                f"; U: {v['dominant'].split(' (')[0]}" if v["outcome"] == UNDECIDED and v.get("dominant") else "") + ")"
+        parts.append(text)
+    return ", ".join(parts)
+

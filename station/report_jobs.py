@@ -80,3 +80,15 @@ def session_decisions(session, raw: bool = False, tolerances: dict | None = None
                                source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
                                identity=session.identity.to_json() if session.identity.recorded else None,
                                tolerances=tolerances, stage=stage)
+
+
+def decisions_if_stated(session, raw: bool = False, stage: str | None = None) -> dict | None:
+    """session_decisions' "decisions" when the session's recorded [tolerances] hold a type of one
+    of its legs, else None without computing anything (the screens call this on every session)."""
+    from procedures.decision import tolerances_from_json  # noqa: PLC0415
+
+    tol = tolerances_from_json((session.station_config or {}).get("tolerances"))
+    if not any(session.identity.leg(leg).leg_type in tol for leg in session.legs):
+        return None
+    return session_decisions(session, raw, stage=stage)["decisions"]
+
