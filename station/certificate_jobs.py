@@ -26,6 +26,7 @@ from typing import Any
 
 from procedures import certificate
 from procedures.errors import InputError
+from procedures.iso230_report import _atomic_write  # temp + os.replace: the index is whole or old
 from station.report_jobs import session_decisions
 
 COUNTER_NAME = "certificate-counter.json"
@@ -57,17 +58,6 @@ def _create_new(path: Path, data: bytes) -> None:
         raise InputError(f"{path}: exists; an issued certificate is never overwritten") from None
     finally:
         Path(tmp).unlink(missing_ok=True)
-
-
-def _replace(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def next_report_no(counter_path: Path, station_id: str, day: _dt.date) -> str:
@@ -192,5 +182,5 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
                                "as_found_session": cert["as_found"]["session_sha256"],
                                "as_left_session": (cert["as_left"] or {}).get("session_sha256")})
     index_path = _index_path(folder, report_no)
-    _replace(index_path, (json.dumps(index, indent=2) + "\n").encode())
+    _atomic_write(index_path, (json.dumps(index, indent=2) + "\n").encode())
     return Issued(report_no, revision, pdf_path, json_path, index_path, cert)
