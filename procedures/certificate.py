@@ -236,7 +236,7 @@ def _blocks(c: dict) -> list[tuple]:
                          ("Temperature basis", st["error_basis"])]))
         n += 1
     for word, st in stages:
-        b.append(("h", f"{n}. Results {word}: ISO 230-2 values, U (k = 2), decision: {st['overall'].upper()}"))
+        b.append(("h", f"{n}. Results {word} (ISO 230-2, U with k = 2): {st['overall'].upper()}"))
         rows = []
         for name, v in st["values"].items():
             rows.append([name, v["meaning"], _num(v["value_um"]), _num(v["U_um"]), _num(v["limit_um"], "g"),
@@ -291,7 +291,9 @@ def pdf(c: dict) -> bytes:
     class Doc(FPDF):
         def header(self):
             self.set_font(t.family, "B", 9)
-            self.cell(0, 5, t(f"{c['laboratory']['name']}   ·   {TITLE}"), new_x=XPos.LMARGIN, new_y=YPos.NEXT)
+            name = c["laboratory"]["name"]
+            self.cell(0, 5, t(f"{name if name != 'not stated' else 'Laboratory not stated'}   ·   {TITLE}"),
+                      new_x=XPos.LMARGIN, new_y=YPos.NEXT)
             self.set_font(t.family, "", 8)
             self.cell(self.epw / 2, 4, t(f"Certificate {ident}, issued {issued}"))
             self.cell(self.epw / 2, 4, t(f"Page {self.page_no()} of {{nb}}"), align="R",
@@ -332,7 +334,7 @@ def pdf(c: dict) -> bytes:
                 doc.add_page()
             doc.ln(2)
             doc.set_font(t.family, "B", 11)
-            doc.multi_cell(0, 6, t(blk[1]), new_x=XPos.LMARGIN, new_y=YPos.NEXT)
+            doc.multi_cell(0, 6, t(blk[1]), new_x=XPos.LMARGIN, new_y=YPos.NEXT, align="L")
         elif kind == "p":
             doc.set_font(t.family, "", 8.5)
             doc.multi_cell(0, 4.3, t(blk[1]), new_x=XPos.LMARGIN, new_y=YPos.NEXT, align="L")

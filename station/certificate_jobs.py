@@ -127,13 +127,18 @@ def pick_leg(session, leg: int | None) -> int:
 def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: str | os.PathLike | None = None,
                       lab: dict | None = None, customer: str = "", folder: str | os.PathLike,
                       counter_path: str | os.PathLike, revise: str | None = None, reason: str = "",
-                      tolerances: dict | None = None, issued_utc: str | None = None) -> Issued:
+                      tolerances: dict | None = None, issued_utc: str | None = None,
+                      station_id: str = "") -> Issued:
     """Issue a certificate of `leg` from the sessions `as_found` (and `as_left`, a verification),
     both procedures.recording.reader.Session; `table` the compensation table pushed (its sha256 is
     stated); `revise` the report number of a certificate this one corrects (`reason` says why).
-    `tolerances` {type: Tolerance.to_json()} (None: the sessions' recorded ones)."""
+    `tolerances` {type: Tolerance.to_json()} (None: the sessions' recorded ones); `station_id`
+    names the issuing station in the report number when the session does not record one."""
     folder, counter_path = Path(folder), Path(counter_path)
     leg = pick_leg(as_found, leg)
+    if not as_found.identity.leg(leg).serial:
+        raise InputError(f"{as_found.path}: leg {leg} has no serial recorded; a certificate must identify the item "
+                         "calibrated: sweep it with --serial LEG=SERIAL (or [legs.N] serial) and certify that session")
     found = session_decisions(as_found, tolerances=tolerances, stage="as_found")
     left = session_decisions(as_left, tolerances=tolerances, stage="as_left") if as_left is not None else None
     if left is not None:
@@ -154,7 +159,7 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
         supersedes = {"report_no": revise, "revision": last["revision"], "sha256_pdf": last["sha256_pdf"],
                       "reason": reason}
     else:
-        station = as_found.identity.station.id or "station"
+        station = as_found.identity.station.id or station_id or "station"
         report_no = next_report_no(counter_path, station, _dt.date.fromisoformat(issued_utc[:10]))
         index, revision = {"report_no": report_no, "revisions": []}, 1
     try:

@@ -45,7 +45,7 @@ def run(args) -> int:
     issued = issue_certificate(as_found, leg=args.leg, as_left=as_left, table=args.table, lab=lab,
                                customer=args.customer or cfg.lab.customer, folder=folder,
                                counter_path=Path(cfg.recordings_dir) / COUNTER_NAME, revise=args.revise,
-                               reason=args.reason, tolerances=tolerances)
+                               reason=args.reason, tolerances=tolerances, station_id=cfg.station_id)
     c = issued.content
     print(f"certificate {issued.report_no} revision {issued.revision}: leg {c['item']['leg']} "
           f"serial {c['item']['serial']}, as found {c['as_found']['overall']}"

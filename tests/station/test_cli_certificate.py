@@ -105,6 +105,16 @@ def test_as_left_of_another_leg_refused(sessions, cfg, tmp_path, capsys):
     assert not list((tmp_path / "runs" / "certificates").glob("*.pdf"))
 
 
+def test_a_leg_without_serial_is_refused(cfg, tmp_path, capsys):
+    from tests.tooling import write_points_session
+
+    s = write_points_session(tmp_path / "anon.h5", synth_session({1: default_leg_configs(0)[0]},
+                                                                 np.linspace(-90.0, 90.0, 6), cycles=2))
+    rc, _, err = _issue(capsys, s, "--config", cfg)
+    assert rc == 2 and "anon.h5: leg 1 has no serial recorded" in err
+    assert not (tmp_path / "runs" / "certificate-counter.json").exists()  # no number used up
+
+
 def test_pdf_is_valid_paged_and_renders(sessions, cfg, tmp_path, capsys):
     assert _issue(capsys, sessions["found"], "--as-left", sessions["left"], "--config", cfg)[0] == 0
     (pdf,) = (tmp_path / "runs" / "certificates").glob("*_r1.pdf")
