@@ -9,6 +9,7 @@ import os
 
 from procedures import iso230_report
 from procedures.csv_io import ExportSummary
+from procedures.decision import NO_TOLERANCE, decision_lines
 from procedures.errors import InputError
 from procedures.report import ReportResult, make_report
 
@@ -44,6 +45,9 @@ def report_lines(result: ReportResult, model=None) -> list[str]:
     lines.append(f"residual = error minus model on this session's points: {result.summary['residuals']}; "
                  "figures: docs/figures.md")
     lines += iso_lines(result.iso230)
+    decided = ((result.iso230 or {}).get("decisions") or {}).get("legs") or {}
+    if any(d["overall"] != NO_TOLERANCE for d in decided.values()):
+        lines += decision_lines(decided)
     lines += [f"wrote {path}" for path in result.files]
     return lines
 

@@ -56,6 +56,7 @@ def test_report_carries_the_decisions(tmp_path, capsys):
     s = write_identified_session(tmp_path / "r.h5", default_legs_points(legs=(1,), cycles=3, step_mm=15.0),
                                  station_config={"tolerances": tol})
     assert main(["report", str(s), "--out", str(tmp_path / "rep")]) == 0
+    assert "leg 1 (HX300), as-found: CONFORMS (recorded)" in capsys.readouterr().out
     iso = json.loads((tmp_path / "rep" / "iso230-2.json").read_text())
     assert iso["decisions"]["stage"] == "as_found"
     assert iso["decisions"]["legs"]["1"]["overall"] == "conforms"
