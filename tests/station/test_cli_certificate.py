@@ -105,6 +105,16 @@ def test_as_left_of_another_leg_refused(sessions, cfg, tmp_path, capsys):
     assert not list((tmp_path / "runs" / "certificates").glob("*.pdf"))
 
 
+def test_several_legs_need_leg(cfg, tmp_path, capsys):
+    from tests.tooling import default_legs_points
+
+    s = write_identified_session(tmp_path / "two.h5", default_legs_points(legs=(1, 2), cycles=2, step_mm=30.0))
+    rc, _, err = _issue(capsys, s, "--config", cfg)
+    assert rc == 2 and "holds legs [1, 2]" in err and "--leg" in err
+    rc, out, _ = _issue(capsys, s, "--config", cfg, "--leg", "2")
+    assert rc == 0 and "leg 2 serial HX-0042" in out
+
+
 def test_a_leg_without_serial_is_refused(cfg, tmp_path, capsys):
     from tests.tooling import write_points_session
 
