@@ -112,6 +112,11 @@ def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_u
     for key_from, key_to in (("model", "model"), ("serial", "serial"), ("calibrated_on", "calibration_date")):
         if (instrument or {}).get(key_from):
             cert["instrument"][key_to] = instrument[key_from]
+    ci = cert["instrument"]
+    said = str(ci["reported_identity"])
+    if ci["serial"] not in ("not stated", "", None) and said not in ("not recorded", "") and ci["serial"] not in said:
+        ci["identity_mismatch"] = (f"CHECK THE INSTRUMENT: the laser connected reported itself as '{said}', which does "
+                                   f"not name the serial {ci['serial']} whose calibration is stated here.")
     if as_left is not None:
         if key not in as_left["legs"]:
             raise KeyError(f"leg {leg} is not in the as-left session")
@@ -198,6 +203,8 @@ def _blocks(c: dict) -> list[tuple]:
                      ("Wavelength, accuracy", f"{ins['wavelength_nm']:.3f} nm vacuum, {ins['laser_accuracy_ppm_k2']:g} ppm "
                                               f"(k = 2), resolution {ins['resolution_nm']:g} nm"),
                      ("Air compensation", ins["air_compensation"])]))
+    if ins.get("identity_mismatch"):
+        b.append(("box", ins["identity_mismatch"]))
     if not ins["traceable"]:
         b.append(("box", "NOT TRACEABLE. The laser interferometer was not in calibration on the day of the "
                          "measurement (" + ("; ".join(ins["warnings"]) or "no calibration due date stated") +
@@ -265,8 +272,15 @@ def _blocks(c: dict) -> list[tuple]:
     b.append(("h", f"{n}. Compensation table"))
     t = c.get("compensation_table")
     b.append(("kv", [("Table pushed", t["file"] if t else "none given (no --table)"),
-                     ("sha256", t["sha256"] if t else "–")]
-              + ([("Active as left", c["as_left"]["compensation_state"])] if c.get("as_left") else [])))
+                     ("sha256 of the file", t["sha256"] if t else "–")]
+              + ([("sha256 of the leg's rows", t["leg_rows_sha256"])] if t and t.get("leg_rows_sha256") else [])
+              + ([("Active as left", c["as_left"]["compensation_state"])] if c.get("as_left") else [])
+              + ([("Active table sha256", (t.get("active_as_left_sha256") or "not recorded") + (
+                  ": the table pushed" if t.get("matches_as_left") else ""))]
+                 if t and c.get("as_left") and "matches_as_left" in t else [])))
+    if t and t.get("matches_as_left") is False:
+        b.append(("box", "The table active during the as-left measurement is NOT the table named above: the as-left "
+                         "results do not show the effect of that table."))
     n += 1
     b.append(("h", f"{n}. Statements"))
     for s in c["statements"]:

@@ -106,6 +106,14 @@ def table_record(path: str | os.PathLike | None) -> dict[str, Any] | None:
     return {"file": p.name, "sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data)}
 
 
+def _active_table_sha256(session, leg: int) -> str | None:
+    """The sha256 of the table the session recorded active on `leg` (procedures.applied_table)."""
+    try:
+        return json.loads(session.devices.get(f"leg{leg}_compensation_table") or "{}").get("sha256") or None
+    except (TypeError, ValueError, AttributeError):
+        return None
+
+
 def _instrument(session) -> dict | None:
     """The laser as the session's identity recorded it (None for a session without identity)."""
     if not session.identity.recorded:
@@ -128,12 +136,14 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
                       lab: dict | None = None, customer: str = "", folder: str | os.PathLike,
                       counter_path: str | os.PathLike, revise: str | None = None, reason: str = "",
                       tolerances: dict | None = None, issued_utc: str | None = None,
-                      station_id: str = "") -> Issued:
+                      station_id: str = "", table_leg_sha256: str | None = None) -> Issued:
     """Issue a certificate of `leg` from the sessions `as_found` (and `as_left`, a verification),
     both procedures.recording.reader.Session; `table` the compensation table pushed (its sha256 is
     stated); `revise` the report number of a certificate this one corrects (`reason` says why).
     `tolerances` {type: Tolerance.to_json()} (None: the sessions' recorded ones); `station_id`
-    names the issuing station in the report number when the session does not record one."""
+    names the issuing station in the report number when the session does not record one;
+    `table_leg_sha256` the sha256 of the leg's rows of `table` as its holder stores them
+    (station.table_jobs.expected_tables), checked against the table the as-left session found active."""
     folder, counter_path = Path(folder), Path(counter_path)
     leg = pick_leg(as_found, leg)
     if not as_found.identity.leg(leg).serial:
@@ -162,9 +172,16 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
         station = as_found.identity.station.id or station_id or "station"
         report_no = next_report_no(counter_path, station, _dt.date.fromisoformat(issued_utc[:10]))
         index, revision = {"report_no": report_no, "revisions": []}, 1
+    table_rec = table_record(table)
+    if table_rec is not None and table_leg_sha256:
+        table_rec["leg_rows_sha256"] = table_leg_sha256
+        if as_left is not None:
+            active = _active_table_sha256(as_left, leg)
+            table_rec["active_as_left_sha256"] = active
+            table_rec["matches_as_left"] = active == table_leg_sha256 if active else None
     try:
         cert = certificate.content(found, leg, report_no=report_no, revision=revision, issued_utc=issued_utc,
-                                   lab=lab or {}, customer=customer, as_left=left, table=table_record(table),
+                                   lab=lab or {}, customer=customer, as_left=left, table=table_rec,
                                    supersedes=supersedes, instrument=_instrument(as_found))
     except (KeyError, ValueError) as exc:
         raise InputError(f"{as_found.path}: {exc}") from None

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from procedures.recording.reader import read_session
-from station.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate
+from station.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
 from station.config import load_config
 
 NAME = "certificate"
@@ -42,10 +42,18 @@ def run(args) -> int:
     tolerances = {k: t.to_json() for k, t in cfg.tolerances.items()} if args.config else None
     folder = Path(args.out) if args.out else Path(cfg.recordings_dir) / FOLDER_NAME
     lab = {"name": cfg.lab.name, "address": cfg.lab.address, "accreditation": cfg.lab.accreditation}
-    issued = issue_certificate(as_found, leg=args.leg, as_left=as_left, table=args.table, lab=lab,
+    leg = pick_leg(as_found, args.leg)
+    leg_sha = None
+    if args.table:  # the leg's rows as its drive (or the station) holds them: compared with the as-left table
+        from station.table_jobs import expected_tables  # noqa: PLC0415
+        from station.wiring import leg_table_spec  # noqa: PLC0415
+
+        leg_sha = expected_tables(args.table, (leg,), leg_table_spec(cfg, leg))[leg]
+    issued = issue_certificate(as_found, leg=leg, as_left=as_left, table=args.table, lab=lab,
                                customer=args.customer or cfg.lab.customer, folder=folder,
                                counter_path=Path(cfg.recordings_dir) / COUNTER_NAME, revise=args.revise,
-                               reason=args.reason, tolerances=tolerances, station_id=cfg.station_id)
+                               reason=args.reason, tolerances=tolerances, station_id=cfg.station_id,
+                               table_leg_sha256=leg_sha)
     c = issued.content
     print(f"certificate {issued.report_no} revision {issued.revision}: leg {c['item']['leg']} "
           f"serial {c['item']['serial']}, as found {c['as_found']['overall']}"
@@ -53,6 +61,8 @@ def run(args) -> int:
     if not c["instrument"]["traceable"]:
         print("warning: the laser was not in calibration on the day of the measurement: the certificate says "
               "NOT TRACEABLE")
+    if (c["compensation_table"] or {}).get("matches_as_left") is False:
+        print("warning: the table active in the as-left session is NOT the --table given; the certificate says so")
     if c["supersedes"]:
         print(f"supersedes revision {c['supersedes']['revision']} (kept; marked superseded in {issued.index})")
     print(f"wrote {issued.pdf}\nwrote {issued.json}\nindex {issued.index}")

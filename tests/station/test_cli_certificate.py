@@ -49,7 +49,10 @@ def _issue(capsys, *argv) -> tuple[int, str, str]:
 
 def test_certificate_content_numbering_and_revision(sessions, cfg, tmp_path, capsys):
     table = tmp_path / "table.csv"
-    table.write_text("leg,target_mm,up_um,down_um\n1,0,0,0\n")
+    from procedures.table import CompTable, LegTable, table_csv_text
+
+    zeros = tuple(0.0 for _ in range(31))
+    table.write_text(table_csv_text(CompTable({1: LegTable(1, -90.0, 6.0, zeros, zeros)})))
     rc, out, _ = _issue(capsys, sessions["found"], "--as-left", sessions["left"], "--table", table, "--config", cfg)
     assert rc == 0
     folder = tmp_path / "runs" / "certificates"
@@ -61,6 +64,8 @@ def test_certificate_content_numbering_and_revision(sessions, cfg, tmp_path, cap
     assert c["item"]["serial"] == "HX-0042" and c["item"]["leg_type"] == "HX300"
     assert c["instrument"]["traceable"] is True and c["instrument"]["model"] == "LI-6"
     assert c["compensation_table"]["sha256"] == __import__("hashlib").sha256(table.read_bytes()).hexdigest()
+    # the synthetic as-left session recorded no active table: no match claimed
+    assert c["compensation_table"]["matches_as_left"] is None
     # as found: decided against the as-found limits; as left: E held to 0.001 um cannot be met
     assert c["as_found"]["values"]["E"]["limit_um"] == 25.0 and c["as_found"]["values"]["E"]["U_um"] > 0
     assert c["as_left"]["values"]["E"]["decision"] == "does not conform"
