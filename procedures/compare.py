@@ -120,8 +120,12 @@ def compare(runs: list[StationRun]) -> dict[str, Any]:
                      f"a pair disagrees when |E_n| > 1 at k or more of its n targets, k the smallest count with "
                      f"P(X >= k) <= {ALPHA:g} for X ~ Binomial(n, {P_CHANCE:g}) (the chance exceedance of an honest "
                      "k = 2 uncertainty); a station is flagged when it disagrees with more than half of the others"),
-            "note": ("two stations: a disagreement flags both; a third station tells which one is off"
-                     if len(runs) == 2 else ""),
+            "note": "; ".join(
+                (["two stations: a disagreement flags both; a third station tells which one is off"] if len(runs) == 2
+                 else [])
+                + [f"{a.session} and {b.session} are both from station {a.station_id}: a repeat on one station, "
+                   "not a comparison between stations" for i, a in enumerate(runs) for b in runs[i + 1:]
+                   if a.station_id == b.station_id]),
             "pairs": pairs, "stations": stations}
 
 

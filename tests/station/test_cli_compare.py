@@ -103,3 +103,9 @@ def test_real_simulated_rig_bias_flagged_and_agreement_without(tmp_path, capsys)
           f"{pair['mean_difference_um']}, min |E_n| {min(abs(r['E_n']) for r in pair['rows']):.2f}")
     assert all(s["flagged"] for s in biased["stations"])
     assert pair["mean_difference_um"]["up"] == pytest.approx(-BIAS_UM, abs=0.3)
+
+
+def test_two_sessions_of_one_station_are_called_a_repeat(synthetic, tmp_path, capsys):
+    again = _synth(tmp_path / "a2.h5", 5, 0.0, "A")
+    c, printed = _result(tmp_path, capsys, synthetic["a"], again, rc=0)
+    assert "a.h5 and a2.h5 are both from station A: a repeat on one station" in c["note"] and "repeat" in printed
