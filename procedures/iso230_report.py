@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from procedures import iso230
+from procedures import decision, iso230
 from procedures.atomic import atomic_path, write_bytes_atomic
 from procedures.metrology.uncertainty import K_COVERAGE, UncertaintyInputs, leg_budget, table_budget
 from procedures.recording.identity import SessionIdentity, calibration_warnings, identity_from_json, instrument_identity
@@ -188,11 +188,14 @@ def _identification(attrs: dict, devices: dict, metrology: dict, source: dict, l
 
 
 def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict, attrs: dict,
-          source: dict, raw: bool = False, identity: dict | None = None) -> dict[str, Any]:
+          source: dict, raw: bool = False, identity: dict | None = None,
+          tolerances: dict | None = None, stage: str | None = None) -> dict[str, Any]:
     """The ISO 230-2 report's content as a JSON-able dict (module docstring); `raw`: on the raw
     error (`station report --raw`, or a model fitted to it), not normalised to 20 degC;
     `identity`: the session's /meta/identity (procedures.recording.identity), {} or None when it
-    has none."""
+    has none; `tolerances`: {leg type: procedures.decision.Tolerance.to_json()} to decide by
+    (None or {}: the ones the session's config recorded); `stage` "as_found" / "as_left" (None:
+    as left for a session whose plan kind is "verification", else as found)."""
     if raw:
         pts, basis = points, {"basis": "raw", "normalised": False,
                               "statement": "Deviations NOT normalised to 20 degC (raw error asked for: --raw, or a model "
@@ -248,6 +251,9 @@ def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict
             "values": values, "notes": list(r.notes) + list(budget.notes),
             "targets": targets, "budget": budget.to_json(),
         }
+    tol = decision.tolerances_from_json(tolerances or (station_config or {}).get("tolerances"))
+    stage = stage or ("as_left" if (plan or {}).get("kind") == "verification" else "as_found")
+    out["decisions"] = {"stage": stage, "rule": decision.RULE, "legs": decision.decide_report(out, tol, stage)}
     return _json_safe(out)
 
 
@@ -325,6 +331,9 @@ def sections(d: dict[str, Any]) -> list[tuple[str, list[str], list[list[str]] | 
                  f"{L['n_points']} points; error {d['error_basis']['basis']}."]
         paras += [f"Note: {n}" for n in L["notes"]]
         out.append((f"Leg {leg}: ISO 230-2 values with expanded uncertainty", paras, rows))
+        dec = ((d.get("decisions") or {}).get("legs") or {}).get(leg)
+        if dec:
+            out.append(decision_section(leg, dec))
         b = L["budget"]["values"]
         for name in ("E", "A", "B"):
             if name not in b:
@@ -345,6 +354,18 @@ def sections(d: dict[str, Any]) -> list[tuple[str, list[str], list[list[str]] | 
         "near tie does not inflate U. Details: docs/uncertainty.md.",
     ], None))
     return out
+
+
+def decision_section(leg: str, dec: dict) -> tuple[str, list[str], list[list[str]] | None]:
+    """(heading, paragraphs, rows) of one leg's decisions (procedures.decision.decide_leg)."""
+    stage = dec["stage"].replace("_", "-")
+    head = f"Leg {leg}: {stage} decision: {dec['overall'].upper()}"
+    if dec["overall"] == decision.NO_TOLERANCE:
+        return head, [f"No decision: {dec['reason']}."], None
+    rows = [["value", "value (um)", "U (um)", "limit (um)", "decision", "why"]]
+    for name, v in dec["values"].items():
+        rows.append([name, _f(v["value_um"]), _f(v["U_um"]), _f(v["limit_um"], "g"), v["outcome"], v["reason"]])
+    return head, [f"{dec['rule']}. Leg type {dec['leg_type']}, limits from {dec['tolerance_source']}."], rows
 
 
 def _grouped(contributions: list[dict]) -> list[dict]:
@@ -448,7 +469,7 @@ def pdf(d: dict[str, Any], graph_png: Path, path: Path) -> None:
     doc.set_font("helvetica", "", 9)
     doc.multi_cell(0, 5, _latin1(f"{d['uncertainty']}; values in um."), new_x="LMARGIN", new_y="NEXT")
     for heading, paras, rows in sections(d):
-        if heading.startswith("Leg ") and ": budget" not in heading:
+        if heading.startswith("Leg ") and ": budget" not in heading and " decision: " not in heading:
             doc.add_page()
         doc.ln(2)
         doc.set_font("helvetica", "B", 11)
@@ -479,11 +500,12 @@ def _col_widths(rows: list[list[str]], total: float) -> tuple[float, ...]:
 
 
 def write(points: np.ndarray, out_dir: str | os.PathLike, *, plan: dict, devices: dict, station_config: dict,
-          attrs: dict, source: dict, raw: bool = False, identity: dict | None = None) -> tuple[dict[str, Any], list[Path]]:
+          attrs: dict, source: dict, raw: bool = False, identity: dict | None = None,
+          tolerances: dict | None = None) -> tuple[dict[str, Any], list[Path]]:
     """Write the four files (module docstring) into `out_dir` (which exists); their content and paths."""
     out = Path(out_dir)
     d = build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs, source=source, raw=raw,
-              identity=identity)
+              identity=identity, tolerances=tolerances)
     paths = [out / name for name in FILES]
     write_bytes_atomic(paths[0], (json.dumps(d, indent=2, allow_nan=False) + "\n").encode())
     write_bytes_atomic(paths[1], markdown(d).encode())

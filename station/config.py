@@ -25,6 +25,8 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     jerk_mm_s3 = 2000.0         # the simulated drives' jerk limit (a real leg's; 0 = not limited)
     ambient_ramp_k_per_h = 0.0  # the simulated hall warming (docs/metrology.md)
     thermal_tau_s = 1800.0      # how fast the simulated legs follow it, s
+    laser_offset_um = 0.0       # added to every simulated laser reading after its zero: a station
+                                # bias for comparison tests (docs/decisions.md); 0 = off
 
     [compensation]              # where each leg's table is applied (docs/compensation.md)
     target = "drive"            # "drive" (its table banks), "station" (the station corrects commands), "controller"
@@ -69,11 +71,23 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     leg_type = "HX300"
     screw_lot = "L2026-11"
     drive_serial = ""           # the drive's serial when the drive cannot say it
+
+    [tolerances.HX300]          # upper limits (um) of a leg type, as found and as left (docs/decisions.md)
+    E_um = 6.0                  # E, A, B, R, M: E_um, A_um, B_um, R_um, M_um
+    [tolerances.HX300.as_left]  # limits after compensation (override per value)
+    E_um = 3.0
+
+    [lab]                       # the certificate's issuer and customer (docs/certificate.md)
+    name = ""
+    address = ""
+    accreditation = ""          # e.g. "DAkkS D-K-12345-01-00"; "" = not accredited
+    customer = ""               # default customer (station certificate --customer)
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import getpass
 import tomllib
 from dataclasses import asdict, dataclass, field, replace
@@ -81,6 +95,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
+from procedures.decision import Tolerance, parse_tolerances
 from procedures.errors import InputError
 from procedures.numbers import NotANumber, finite_float
 from procedures.metrology import defaults as MD
@@ -123,6 +138,9 @@ class SimConfig:
     # rig time a user sees for any plan is a real leg's (drivers.sim.plant LEG_JERK_MM_S3); the
     # sample recordings pin 0, the setting they were made with (station/commands/recordings.py)
     jerk_mm_s3: float = SIM_LEG_JERK_MM_S3
+    # um added to every simulated laser reading after its zero (a station bias; 0 = off, so the
+    # sample recordings stay identical): the station comparison's acceptance test (docs/decisions.md)
+    laser_offset_um: float = 0.0
 
     def leg_configs(self) -> list:
         """The simulated legs' plant configurations (drivers.sim.plant) for this seed, ramp, time
@@ -227,6 +245,16 @@ class CatalogConfig:
 
 
 @dataclass
+class LabConfig:
+    """[lab]: who issues certificates (docs/certificate.md); "" = not stated."""
+
+    name: str = ""
+    address: str = ""
+    accreditation: str = ""
+    customer: str = ""
+
+
+@dataclass
 class StationConfig:
     operator: str = field(default_factory=lambda: _whoami())
     recordings_dir: str = "runs"
@@ -243,6 +271,8 @@ class StationConfig:
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
     catalog: CatalogConfig = field(default_factory=CatalogConfig)
     limits: PlanLimits = field(default_factory=PlanLimits)  # [limits]: the largest plan started without asking
+    lab: LabConfig = field(default_factory=LabConfig)
+    tolerances: dict[str, Tolerance] = field(default_factory=dict)  # [tolerances.TYPE] (procedures.decision)
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -295,6 +325,7 @@ class StationConfig:
         # what the session's normalisation uses: every leg's effective material
         d["leg_materials"] = {str(n): asdict(self.material_of(n)) for n in range(1, LEG_COUNT + 1)}
         d["compensation"]["legs"] = {str(k): v for k, v in d["compensation"]["legs"].items()}
+        d["tolerances"] = {k: t.to_json() for k, t in self.tolerances.items()}
         return d
 
     def material_of(self, leg: int) -> LegMaterial:
@@ -349,7 +380,8 @@ def _whoami() -> str:
 
 
 _SECTIONS = {"drive": DriveConfig, "interferometer": LaserConfig, "sim": SimConfig,
-             "compensation": CompensationConfig, "catalog": CatalogConfig, "limits": PlanLimits}
+             "compensation": CompensationConfig, "catalog": CatalogConfig, "limits": PlanLimits,
+             "lab": LabConfig}
 
 # (section, key) -> (lowest, strictly above it?, what the value is): physical sense of numbers
 _RANGES = {
@@ -540,7 +572,11 @@ def load_config(path: str | Path | None) -> StationConfig:
         cfg.legs, cfg.leg_overrides, cfg.leg_identity = _load_legs(p, data["legs"])
         cfg.legs_from_file = True
     cfg.compensation.check(str(p))
-    unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs"}
+    if not math.isfinite(cfg.sim.laser_offset_um):
+        raise InputError(f"{p}: [sim] laser_offset_um = {cfg.sim.laser_offset_um!r}: must be a finite number of um")
+    if "tolerances" in data:
+        cfg.tolerances = parse_tolerances(data["tolerances"], str(p))
+    unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs", "tolerances"}
     if unknown:
         raise InputError(f"{p}: unknown section(s) {sorted(unknown)}")
     return cfg

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import os
 
+from procedures import iso230_report
 from procedures.csv_io import ExportSummary
+from procedures.decision import NO_TOLERANCE, decision_lines
 from procedures.errors import InputError
 from procedures.report import ReportResult, make_report
 from station.catalog.writer import register
@@ -46,6 +48,9 @@ def report_lines(result: ReportResult, model=None) -> list[str]:
     lines.append(f"residual = error minus model on this session's points: {result.summary['residuals']}; "
                  "figures: docs/figures.md")
     lines += iso_lines(result.iso230)
+    decided = ((result.iso230 or {}).get("decisions") or {}).get("legs") or {}
+    if any(d["overall"] != NO_TOLERANCE for d in decided.values()):
+        lines += decision_lines(decided)
     lines += [f"wrote {path}" for path in result.files]
     return lines
 
@@ -54,10 +59,7 @@ def session_iso230(session, raw: bool = False) -> dict:
     """The ISO 230-2 values of `session` with the expanded uncertainty U (k = 2) of each, on the
     basis of `station fit` (normalised to 20 degC unless `raw`): the content of the report's
     iso230-2.json (procedures.iso230_report.build), for the commands that print ISO values."""
-    from procedures.iso230_report import build
-
-    return build(session.points, plan=session.plan, devices=session.devices, station_config=session.station_config,
-                 attrs=session.attrs, source={"path": str(session.path), "sha256": session.sha256}, raw=raw)
+    return session_decisions(session, raw)
 
 
 def iso_lines(iso: dict | None) -> list[str]:
@@ -81,4 +83,26 @@ def export_lines(summary: ExportSummary) -> list[str]:
     if summary.skipped_no_error:
         lines.append(f"left out {summary.skipped_no_error} points without a measured error")
     return lines
+
+
+def session_decisions(session, raw: bool = False, tolerances: dict | None = None, stage: str | None = None) -> dict:
+    """The ISO 230-2 report's values with U and their decisions (procedures.iso230_report.build):
+    `tolerances` {type: Tolerance.to_json()}, None = the session's recorded ones; `stage`
+    "as_found" / "as_left" (None: as left for a verification plan, else as found)."""
+    return iso230_report.build(session.points, plan=session.plan, devices=session.devices,
+                               station_config=session.station_config, attrs=session.attrs,
+                               source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
+                               identity=session.identity.to_json() if session.identity.recorded else None,
+                               tolerances=tolerances, stage=stage)
+
+
+def decisions_if_stated(session, raw: bool = False, stage: str | None = None) -> dict | None:
+    """session_decisions' "decisions" when the session's recorded [tolerances] hold a type of one
+    of its legs, else None without computing anything (the screens call this on every session)."""
+    from procedures.decision import tolerances_from_json  # noqa: PLC0415
+
+    tol = tolerances_from_json((session.station_config or {}).get("tolerances"))
+    if not any(session.identity.leg(leg).leg_type in tol for leg in session.legs):
+        return None
+    return session_decisions(session, raw, stage=stage)["decisions"]
 

@@ -70,7 +70,8 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         nv = Path(cfg.sim.nv_path) if cfg.sim.nv_path else None
         # the plant is always cfg.sim.seed's; only the noise follows noise_seed
         seed = cfg.sim.seed if noise_seed is None else int(noise_seed)
-        sim = SimRig(time_scale=scale, seed=seed, configs=cfg.sim.leg_configs(), nv_path=nv, profile=profile).start()
+        sim = SimRig(time_scale=scale, seed=seed, configs=cfg.sim.leg_configs(), nv_path=nv, profile=profile,
+                     laser_offset_um=cfg.sim.laser_offset_um).start()
         try:
             axes = _connect_legs(cfg, sim.drive_url, legs, profile, clock=sim.clock)
             laser = SerialInterferometer(sim.laser_port, timeout_s=cfg.interferometer.timeout_s)

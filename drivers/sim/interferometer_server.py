@@ -50,11 +50,14 @@ class SimInterferometer:
         axes: int = 6,
         identity: tuple[str, str, str, str] = ("StationSim", "LI-6", "SIM-0001", "1.0"),
         signal_pct: float = 92.0,
+        offset_um: float = 0.0,
     ):
         bad = [a for a in plants if not 1 <= a <= axes]
         if bad:
             raise ValueError(f"simulated interferometer has axes 1..{axes}; plants given for axes {bad}")
         self.plants = dict(plants)
+        # added to every reading after the zero: a station's bias (station compare's tests; 0 = off)
+        self.offset_mm = 1e-3 * float(offset_um)
         self.clock = clock
         self.lock = lock if lock is not None else threading.RLock()
         self.air = tuple(float(v) for v in air)
@@ -296,7 +299,7 @@ class SimInterferometer:
         plant = self.plants.get(axis)
         if plant is None or broken:
             return f"{self._last_position_mm[axis]:+.9f}", "BEAM", "0.0", f"{t_s:.6f}"
-        position_mm = plant.measured_position_mm(t_s, 0.0) - self._datum_mm[axis]
+        position_mm = plant.measured_position_mm(t_s, 0.0) - self._datum_mm[axis] + self.offset_mm
         signal = float(np.clip(nominal_pct + self._rng.normal(0.0, 0.3), 0.0, 100.0))
         status = "LOW" if signal < p.LOW_SIGNAL_PCT else "OK"
         return f"{position_mm:+.9f}", status, f"{signal:.1f}", f"{t_s:.6f}"
@@ -356,7 +359,8 @@ class SimInterferometer:
                 status, signal = "BEAM", 0.0
                 position_mm = self._last_position_mm[axis]  # the last valid count
             else:
-                position_mm = (plant.measured_position_mm(t_s, averaging_s) - self._datum_mm[axis]) * self._air_scale(t_s)
+                position_mm = ((plant.measured_position_mm(t_s, averaging_s) - self._datum_mm[axis]) * self._air_scale(t_s)
+                               + self.offset_mm)
                 self._last_position_mm[axis] = position_mm
                 signal = float(np.clip(nominal_pct + self._rng.normal(0.0, 0.3), 0.0, 100.0))
                 status = "LOW" if signal < p.LOW_SIGNAL_PCT else "OK"

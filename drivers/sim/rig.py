@@ -31,6 +31,7 @@ class SimRig:
     profile: DriveProfile | None = None
     tcp_port: int = 0
     rtu: bool = False
+    laser_offset_um: float = 0.0  # a bias on every laser reading (station.config [sim] laser_offset_um)
     clock: VirtualClock = field(init=False)
     plants: dict[int, LegPlant] = field(init=False)
     drive_url: str = field(init=False, default="")
@@ -44,7 +45,8 @@ class SimRig:
         self.lock = threading.RLock()
         self.profile = self.profile or DriveProfile.load()
         self.drive_server = SimDriveServer(self.plants, self.clock, self.profile, nv_path=self.nv_path, lock=self.lock)
-        self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed)
+        self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed,
+                                            offset_um=self.laser_offset_um)
         # the drives' position-compare outputs wired to the laser's trigger inputs (on-the-fly capture)
         self.trigger_line = TriggerLine()
         self.trigger_line.connect(self.laser_server.trigger)

@@ -7,19 +7,22 @@ import json
 from pathlib import Path
 
 from procedures.atomic import write_text_atomic
+from procedures.decision import decision_lines
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
 from procedures.iso230 import dumps, evaluate, format_table
 from procedures.metrology.thermal import error_basis
 from procedures.recording.reader import read_session
-from station.report_jobs import iso_lines, session_iso230
+from station.report_jobs import iso_lines, session_decisions
 
 NAME = "iso230"
 HELP = "ISO 230-2 values (E, M, A, B, R; up, down, both) of each leg in a session file"
 DESCRIPTION = (
     "Evaluate a session file by ISO 230-2: per leg the systematic deviation E, accuracy A, repeatability R "
     "(per direction and bidirectional), range of mean bidirectional deviation M and reversal B, in micrometres. "
-    "Values that cannot be computed are shown as '-' with the reason."
+    "Values that cannot be computed are shown as '-' with the reason. Each leg with a leg type and "
+    "[tolerances.TYPE] (the --config's, else those the session recorded) is decided by ISO 14253-1 with the "
+    "expanded uncertainty U of each value: conforms / does not conform / cannot decide (docs/decisions.md)."
 )
 
 
@@ -29,6 +32,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--raw", action="store_true",
                    help="evaluate the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
+    p.add_argument("--config", metavar="C", help="station TOML whose [tolerances.TYPE] decide (default: the "
+                   "tolerances the session's config recorded)")
 
 
 def run(args) -> int:
@@ -43,14 +48,27 @@ def run(args) -> int:
     for line in basis_lines:
         print(line)
     print(format_table(results), end="")
-    iso = session_iso230(session, args.raw)  # the same values, each with its U (as station report)
+    tolerances = None
+    if args.config:
+        from station.config import load_config  # noqa: PLC0415 (only with --config)
+
+        tolerances = {k: t.to_json() for k, t in load_config(args.config).tolerances.items()}
+    # the report's values, each with its U (as station report), and their decisions
+    iso = report = session_decisions(session, args.raw, tolerances)
     for line in iso_lines(iso):
         print(line)
+    decisions = report["decisions"]
+    print(f"Decisions ({decisions['rule']}):")
+    for line in decision_lines(decisions["legs"]):
+        print(f"  {line}")
     if args.json:
         out = Path(args.json)
         doc = json.loads(dumps(results, source={"path": str(args.h5), "sha256": session.sha256, "error_basis": basis}))
         doc["expanded_uncertainty_um"] = {  # U (k = 2) beside every value, as the ISO 230-2 report gives it
             leg: {name: v["U_um"] for name, v in entry["values"].items()} for leg, entry in iso["legs"].items()}
+        for leg, entry in doc["legs"].items():
+            entry["U_um"] = {name: v["U_um"] for name, v in report["legs"][leg]["values"].items()}
+        doc["decisions"] = decisions
         write_text_atomic(out, json.dumps(doc, indent=2, allow_nan=False) + "\n")
         print(f"values written to {out}")
     return 0

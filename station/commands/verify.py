@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from procedures import events as ev
+from procedures.decision import decision_lines
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
 from procedures.plans import SweepPlan, iso230_plan
@@ -20,6 +21,7 @@ from procedures.verify import ACCEPT_RATIO
 from station.commands.push import audit_log, parse_leg_choice, station_config
 from station.commands.sweep import check_time_scale
 from station.progress import ConsoleProgress
+from station.report_jobs import session_decisions
 from station.table_jobs import controller_refusal, expected_tables, refusal_job, target_text, verify_job
 from station.wiring import drive_url_of, leg_table_spec, open_rig
 
@@ -152,6 +154,12 @@ def run(args) -> int:
     print(f"session: {out} ({verified.session['outcome']}, {job.run.points} of {plan.total_points} points)")
     print()
     print(verified.report)
+    # as-left: the verification's ISO 230-2 values with U against [tolerances.TYPE] as_left (docs/decisions.md)
+    as_left = session_decisions(read_session(out), raw=args.raw, stage="as_left")["decisions"]
+    print(f"As-left decisions ({as_left['rule']}):")
+    for line in decision_lines(as_left["legs"]):
+        print(f"  {line}")
+    doc["decisions"] = as_left
     if args.json:
         Path(args.json).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
         print(f"figures: {args.json}")

@@ -228,7 +228,7 @@ class CompensationScreen(StationScreen):
             return  # refused or broken off: the Sweep page said why
         verified = job.of(ev.Verified)[-1]
         result = verified.results[message.leg]
-        self.verify_text = verified.report
+        self.verify_text = verified.report + _as_left_text(verified.session.get("path"))
         line = next((e.entry.message for e in job.of(ev.AuditRecord) if e.entry.leg == message.leg), "")
         self.notify(line, title="Verify", severity="information" if result.passed else "warning", timeout=12)
         self._show()
@@ -290,3 +290,18 @@ class CompensationScreen(StationScreen):
     def _show_plots(self) -> None:
         leg = self._selected_leg()
         self.query_one(TablePlots).show(leg, self.table, self.drive_tables.get(leg) if leg is not None else None)
+
+
+def _as_left_text(path: str | None) -> str:
+    """The verification's as-left decisions in one line (ISO 14253-1, docs/decisions.md), "" when
+    its legs' types state no tolerance or the file cannot be read (the report above stands)."""
+    try:
+        from procedures.decision import decision_summary
+        from procedures.recording.reader import read_session
+        from station.report_jobs import decisions_if_stated
+
+        d = decisions_if_stated(read_session(path), stage="as_left") if path else None
+    except Exception:  # noqa: BLE001 (a decision line is an extra; the verification's figures stand)
+        return ""
+    return f"\nas-left (ISO 14253-1): {decision_summary(d['legs'])}" if d else ""
+

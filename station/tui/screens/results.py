@@ -68,6 +68,7 @@ class Analysis:
     points: Any = None  # the points analysed: session.points with error_um on the chosen basis
     basis_lines: tuple[str, ...] = ()  # what error_basis says, as the commands print it
     basis: dict | None = None  # the same as JSON (the model's options["error_basis"])
+    decisions: dict | None = None  # procedures.decision per leg when the session states tolerances
 
     @property
     def analysed_points(self) -> Any:
@@ -338,8 +339,16 @@ class ResultsScreen(StationScreen):
                 iso_u = iso_uncertainty(iso, points, session.station_config)
             except Exception as exc:  # the values stand without their U; say why
                 note = describe(exc, "ISO 230-2 uncertainty")
+        decisions = None
+        try:  # ISO 14253-1 against the recorded [tolerances] of the legs' types (docs/decisions.md)
+            from station.report_jobs import decisions_if_stated
+
+            decisions = decisions_if_stated(session, raw)
+        except Exception as exc:
+            note = describe(exc, "the tolerance decisions")
         self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note, iso_u=iso_u, raw=raw,
-                                                 points=points, basis_lines=tuple(basis_lines), basis=basis), request))
+                                                 points=points, basis_lines=tuple(basis_lines), basis=basis,
+                                                 decisions=decisions), request))
 
     def on_analysis_ready(self, message: AnalysisReady) -> None:
         if message.request != self._request:  # asked for before the last request
@@ -501,6 +510,10 @@ class ResultsScreen(StationScreen):
             text += f"\n[yellow]{basis_name(self.raw)} error chosen: press f to fit on it[/yellow]"
         if a.iso_note:
             text += f"\n[yellow]{a.iso_note}[/yellow]"
+        if a.decisions:
+            from procedures.decision import decision_summary
+
+            text += f"\n[b]{a.decisions['stage'].replace('_', '-')}[/b] (ISO 14253-1): {decision_summary(a.decisions['legs'])}"
         extra = []
         for leg, r in (a.iso or {}).items():
             extra += [f"[yellow]leg {leg}:[/yellow] {note}" for note in r.notes]
