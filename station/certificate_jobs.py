@@ -26,7 +26,7 @@ from typing import Any
 
 from procedures import certificate
 from procedures.errors import InputError
-from procedures.iso230_report import _atomic_write  # temp + os.replace: the index is whole or old
+from procedures.atomic import write_bytes_atomic  # the index is whole or old
 from station.report_jobs import session_decisions
 
 COUNTER_NAME = "certificate-counter.json"
@@ -204,5 +204,5 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
                                "as_found_session": cert["as_found"]["session_sha256"],
                                "as_left_session": (cert["as_left"] or {}).get("session_sha256")})
     index_path = _index_path(folder, report_no)
-    _atomic_write(index_path, (json.dumps(index, indent=2) + "\n").encode())
+    write_bytes_atomic(index_path, (json.dumps(index, indent=2) + "\n").encode())
     return Issued(report_no, revision, pdf_path, json_path, index_path, cert)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from procedures import compare as cmp
 from procedures.errors import InputError
-from procedures.iso230_report import _atomic_write  # temp + os.replace: never half a file
+from procedures.atomic import write_bytes_atomic  # never half a file
 from procedures.recording.reader import read_session
 from station.report_jobs import session_decisions
 
@@ -75,8 +75,8 @@ def run(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = [out / "compare.json", out / "compare.md", out / "compare.png"]
-    _atomic_write(files[0], (json.dumps(result, indent=2, allow_nan=False) + "\n").encode())
-    _atomic_write(files[1], cmp.markdown(result).encode())
+    write_bytes_atomic(files[0], (json.dumps(result, indent=2, allow_nan=False) + "\n").encode())
+    write_bytes_atomic(files[1], cmp.markdown(result).encode())
     tmp = out / ".compare.png.tmp.png"
     cmp.plot(result, tmp)
     tmp.replace(files[2])

@@ -73,13 +73,13 @@ def records() -> list[Rec]:
 
 
 def write_certificate(runs_dir, serial: str = "HX-0001", number: str = "C-2025-0001") -> bytes:
-    """A certificate as the certificate command leaves it: a JSON and a 2-page PDF beside it
-    (fpdf2); the PDF's bytes."""
+    """A certificate as `station certificate` leaves it (station.certificate_jobs): the PDF
+    (2 pages, fpdf2) and the report's index naming it; the PDF's bytes."""
     import json
 
     from fpdf import FPDF
 
-    folder = runs_dir / "certificates" / serial
+    folder = runs_dir / "certificates"
     folder.mkdir(parents=True, exist_ok=True)
     pdf = FPDF()
     for page in (1, 2):
@@ -87,7 +87,8 @@ def write_certificate(runs_dir, serial: str = "HX-0001", number: str = "C-2025-0
         pdf.set_font("Helvetica", size=12)
         pdf.cell(0, 10, f"Certificate {number} for {serial}, page {page} of 2")
     data = bytes(pdf.output())
-    (folder / f"{number}.pdf").write_bytes(data)
-    (folder / f"{number}.json").write_text(json.dumps({"number": number, "revision": 1, "serial": serial,
-                                                       "issued_utc": "2025-01-11T09:00:00Z", "pdf": f"{number}.pdf"}))
+    (folder / f"{number}_r1.pdf").write_bytes(data)
+    (folder / f"{number}.index.json").write_text(json.dumps({"report_no": number, "revisions": [
+        {"revision": 1, "status": "issued", "issued_utc": "2025-01-11T09:00:00Z", "pdf": f"{number}_r1.pdf",
+         "json": f"{number}_r1.json", "serial": serial}]}))
     return data

@@ -153,7 +153,7 @@ def test_leg_page_plots_and_certificate(browser, site, shoot):
     for old in browser.downloads.iterdir():
         old.unlink()
     browser.find_element(By.CSS_SELECTOR, "#certificates a").click()
-    target = browser.downloads / "C-2025-0001.pdf"
+    target = browser.downloads / "C-2025-0001_r1.pdf"
     deadline = time.monotonic() + 15
     while not target.is_file() and time.monotonic() < deadline:
         time.sleep(0.05)

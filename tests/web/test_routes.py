@@ -103,10 +103,10 @@ def test_leg_page(client):
 
 
 def test_certificate_download(client, fleet_dir):
-    r = client.get("/leg/HX-0001/certificate/C-2025-0001.pdf")
+    r = client.get("/leg/HX-0001/certificate/C-2025-0001_r1.pdf")
     assert r.status_code == 200 and r.headers["content-type"] == "application/pdf"
-    assert r.content.startswith(b"%PDF") and r.content == (fleet_dir / "certificates/HX-0001/C-2025-0001.pdf").read_bytes()
-    assert client.get("/leg/HX-0002/certificate/C-2025-0001.pdf").status_code == 404  # another leg's
+    assert r.content.startswith(b"%PDF") and r.content == (fleet_dir / "certificates/C-2025-0001_r1.pdf").read_bytes()
+    assert client.get("/leg/HX-0002/certificate/C-2025-0001_r1.pdf").status_code == 404  # another leg's
 
 
 def test_control_charts(client):
@@ -153,28 +153,30 @@ def test_readonly_engine_refuses_writes(fleet_dir):
     engine.dispose()
 
 
-def test_tolerances_read_tolerantly(tmp_path):
+def test_tolerances_are_the_configs_as_left_limits(tmp_path):
+    from procedures.errors import InputError
     from station.web.extensions import tolerances_of
 
     p = tmp_path / "s.toml"
-    p.write_text('[tolerances.L300]\nE_um = 12\nB_um = "x"\nR_um = -1\n[tolerances.L300.as_left]\nE_um = 10.5\n'
-                 '[tolerances.L450]\nnote = "none"\n')
-    assert tolerances_of(p) == {"L300": {"E": 10.5}}
-    p.write_text("not = [toml")
-    assert tolerances_of(p) == {} and tolerances_of(tmp_path / "missing.toml") == {} and tolerances_of(None) == {}
+    p.write_text('[tolerances.L300]\nE_um = 12\nB_um = 3\n[tolerances.L300.as_left]\nE_um = 10.5\n')
+    assert tolerances_of(p) == {"L300": {"E": 10.5, "B": 3.0}} and tolerances_of(None) == {}
+    p.write_text('[tolerances.L300]\nE_um = -1\n')
+    with pytest.raises(InputError, match=r"s.toml: \[tolerances.L300\] E_um"):
+        tolerances_of(p)
 
 
-def test_certificates_found_by_serial_only_beside_their_json(tmp_path):
+def test_certificates_found_by_serial_in_the_certificate_index(tmp_path):
     import json
 
     from station.web.extensions import certificates_of
 
     fleet.write_certificate(tmp_path, "HX-0001", "C-1")
-    d = tmp_path / "certificates" / "other"
-    d.mkdir()
-    (d / "bad.json").write_text("{not json")
-    (d / "escape.json").write_text(json.dumps({"leg_serial": "HX-0001", "pdf": "../HX-0001/C-1.pdf"}))
-    (d / "missing.json").write_text(json.dumps({"leg_serial": "HX-0001", "pdf": "gone.pdf"}))
+    d = tmp_path / "certificates"
+    (d / "bad.index.json").write_text("{not json")
+    (d / "escape.index.json").write_text(json.dumps({"report_no": "E", "revisions": [
+        {"revision": 1, "status": "issued", "serial": "HX-0001", "pdf": "../C-1_r1.pdf"}]}))
+    (d / "missing.index.json").write_text(json.dumps({"report_no": "M", "revisions": [
+        {"revision": 1, "status": "issued", "serial": "HX-0001", "pdf": "gone.pdf"}]}))
     found = certificates_of(tmp_path, "HX-0001")
-    assert [c.pdf_name for c in found] == ["C-1.pdf"] and found[0].number == "C-1"
+    assert [c.pdf_name for c in found] == ["C-1_r1.pdf"] and found[0].number == "C-1" and not found[0].superseded
     assert certificates_of(tmp_path, "HX-0002") == [] and certificates_of(tmp_path / "nowhere", "HX-0001") == []
