@@ -36,6 +36,7 @@ def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings:
     if comparison is not None:  # the fleet twin: how far this leg's features lie from its siblings'
         from procedures.diagnosis.fleet import error_map
 
+        report["twin"]["fleet"] = twin.info  # type, basis, siblings per leg, files left out
         for leg, rep in report["legs"].items():
             rep["fleet"] = finite_or_null(comparison(int(leg), error_map(points, int(leg)), settings.lead_mm),
                                           report["notes"], f"legs.{leg}.fleet")
