@@ -30,8 +30,10 @@ TARGETS = np.linspace(-88.0, 88.0, 45)
 CLEAN = 7  # clean legs; each has 6 clean siblings and the worn one
 
 
-def _write(path, cfg, seed, serial, day):
+def _write(path, cfg, seed, serial, day, temperature=True):
     pts = synth_session({1: cfg}, TARGETS, cycles=3, seed=seed, dwell_s=1.0)
+    if not temperature:
+        pts["material_temp_c"] = np.nan
     with SessionWriter.create(path, session_id=path.stem, operator="test", rig="sim", plan={"kind": "test"},
                               station_config={}, devices={}, software_version="test",
                               started_utc=f"2026-01-{day:02d}T08:00:00.000000Z") as w:
@@ -121,3 +123,22 @@ def test_fewer_than_three_siblings_is_refused_in_one_line(fleet, tmp_path, capsy
     assert f"2 sibling leg(s) of type {TYPE}" in err[0] and "at least 3" in err[0]
     with pytest.raises(InputError, match="name the leg type"):
         load_twin("fleet:")
+
+
+def test_a_sibling_without_material_temperature_makes_the_fleet_raw(fleet, tmp_path):
+    _, paths, _, _ = fleet
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    for serial in ("SN-0", "SN-1", "SN-2", "SN-3"):
+        shutil.copy(paths[serial], mixed / paths[serial].name)
+    _write(mixed / "bare.h5", default_leg_configs(3, 8)[4], 4, "SN-X", 20, temperature=False)
+    catalog, _ = _index(mixed)
+    target = mixed / paths["SN-0"].name
+    session = read_session(target)
+    twin = load_twin(f"fleet:{TYPE}", session=session, path=target, catalog=lambda: catalog.engine)
+    assert not twin.normalised and twin.info["basis"] == "raw" and "raw" in twin.description
+    assert sorted(twin.fleet[1].serials) == ["SN-1", "SN-2", "SN-3", "SN-X"]
+    from station.diagnosis_jobs import diagnose_session
+
+    report, _ = diagnose_session(session, target, twin)
+    assert "normalised_legs" not in report["twin"] and report["legs"]["1"]["fleet"]["basis"] == "raw"
