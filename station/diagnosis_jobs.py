@@ -18,9 +18,59 @@ def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings:
     used and the material temperature range per leg. The diagnosis works on the raw error_um on
     purpose: thermal expansion stays an effect it can find (docs/metrology.md)."""
     from procedures.diagnosis import DiagnosisSettings, diagnose
+    from procedures.diagnosis.diagnose import finite_or_null
     from procedures.metrology.thermal import diagnosis_temperature_note
 
-    report = diagnose(session.points, twin, settings if settings is not None else DiagnosisSettings(),
-                      recording={"path": str(path), "sha256": session.sha256}, source=str(path))
+    settings = settings if settings is not None else DiagnosisSettings()
+    points, twin, normalised_legs = on_common_basis(session, twin)
+    report = diagnose(points, twin, settings, recording={"path": str(path), "sha256": session.sha256}, source=str(path))
+    if normalised_legs:
+        report["twin"]["normalised_legs"] = normalised_legs
     temp_lines, report["material_temperature"] = diagnosis_temperature_note(session.points, session.station_config)
+    if normalised_legs:
+        temp_lines[0] = temp_lines[0].replace(
+            "raw (diagnosis does not normalise: thermal expansion stays a diagnosable effect)",
+            f"leg(s) {', '.join(map(str, normalised_legs))} normalised to 20 degC (NDE) like the twin, as both carry "
+            "the material temperature (a thermal finding there is expansion beyond the material's nominal), others raw")
+    comparison = getattr(twin, "comparison", None)
+    if comparison is not None:  # the fleet twin: how far this leg's features lie from its siblings'
+        from procedures.diagnosis.fleet import error_map
+
+        report["twin"]["fleet"] = twin.info  # type, basis, siblings per leg, files left out
+        for leg, rep in report["legs"].items():
+            rep["fleet"] = finite_or_null(comparison(int(leg), error_map(points, int(leg)), settings.lead_mm),
+                                          report["notes"], f"legs.{leg}.fleet")
     return report, temp_lines
+
+
+def on_common_basis(session: Any, twin: Any) -> tuple[Any, Any, list[int]]:
+    """(points, twin, legs compared normalised): the session's error normalised to 20 degC on the
+    legs where both it and the twin carry the material temperature (a reference recorded at
+    another temperature then shows no scale from the temperature alone), raw elsewhere."""
+    import numpy as np
+
+    from procedures.diagnosis.twin import ExternalTwin
+    from procedures.metrology.thermal import normalise_session
+
+    if getattr(twin, "kind", None) == "fleet":  # built on one basis for the whole session (station/twins.py)
+        if not twin.normalised:
+            return session.points, twin, []
+        n = normalise_session(session.points, session.station_config)
+        return n.points, twin, list(n.normalised)
+    alt = getattr(twin, "normalised_twin", None)
+    if alt is None:
+        return session.points, twin, []
+    n = normalise_session(session.points, session.station_config)
+    legs = [leg for leg in n.normalised if alt.legs is None or leg in alt.legs]
+    if not legs:
+        return session.points, twin, []
+    points = session.points.copy()
+    rows = np.isin(points["leg"], legs)
+    points["error_um"][rows] = n.points["error_um"][rows]
+    info = {k: ({**v, "basis": "normalised"} if isinstance(v, dict) and k.isdigit() and int(k) in legs else v)
+            for k, v in twin.info.items()}
+    combined = ExternalTwin(
+        predict=lambda leg, x, d: (alt if leg in legs else twin).predict(leg, x, d), kind=twin.kind,
+        description=f"{twin.description}; legs {', '.join(map(str, legs))} normalised to 20 degC on both sides",
+        legs=twin.legs, info=info)
+    return points, combined, legs

@@ -163,8 +163,9 @@ def scale_and_temperature(scale_ppm: float, leg: LegData, twin: Twin) -> dict | 
     """A scale found against a reference recording made at another material temperature, tied
     to the recorded difference: how many ppm per kelvin of it, against steel's expansion. None
     when either side carries no material temperature or they differ by less than 0.1 K."""
-    ref_c = ((getattr(twin, "info", None) or {}).get(str(leg.leg)) or {}).get("material_temp_c")
-    if ref_c is None or not leg.has_temp:
+    info = (getattr(twin, "info", None) or {}).get(str(leg.leg)) or {}
+    ref_c = info.get("material_temp_c")
+    if ref_c is None or not leg.has_temp or info.get("basis") == "normalised":  # no temperature between them then
         return None
     here_c = float(np.mean(leg.temp_c))
     dt = here_c - ref_c

@@ -69,6 +69,12 @@ def text_report(report: dict) -> str:
                          + (f" (chosen with {', '.join(tw['fitted_without'])} taken out)" if tw.get("fitted_without") else ""))
         else:
             lines.append(f"  twin: {tw.get('kind')}; zero offset of the recording against it {_um(tw.get('offset_um', 0), True)} um")
+        fl = leg.get("fleet")
+        if fl:
+            lines.append(f"  FLEET ({fl['siblings']} sibling legs of type {fl['leg_type']}, {fl['basis']}): "
+                         + (fl["finding"]["note"] if fl.get("finding") else fl.get("finding_note", "")))
+            lines.append("    " + ", ".join(f"{r['feature']} {r['sigma']:+.1f}" for r in fl["features"][:4]
+                                             if r.get("sigma") is not None) + " sigma")
         g = leg["gap"]
         lines.append(f"  gap: RMS {_um(g['rms_um'])} um, peak to peak {_um(g['p2p_um'])} um, mean {_um(g['mean_um'], True)} um")
         # the noise floor to 3 decimals, as station fit and station report print it; of the RAW error

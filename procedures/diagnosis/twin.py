@@ -281,6 +281,9 @@ class ExternalTwin(Twin):
     description: str = ""
     legs: frozenset[int] | None = None
     info: dict = field(default_factory=dict)
+    # the same twin on the error normalised to 20 degC (legs whose material temperature it
+    # carries): used for the legs whose recording carries it too (station.diagnosis_jobs)
+    normalised_twin: "ExternalTwin | None" = None
 
     def predict_um(self, leg: int, x_mm, direction) -> np.ndarray:
         if self.legs is not None and int(leg) not in self.legs:
@@ -296,8 +299,12 @@ class ExternalTwin(Twin):
         return out
 
 
-def twin_from_recording(points: np.ndarray, source: str = "the reference recording") -> ExternalTwin:
-    """A fixed twin: the position-only twin fitted on every pass of another recording."""
+def twin_from_recording(points: np.ndarray, source: str = "the reference recording",
+                        normalised_points: np.ndarray | None = None) -> ExternalTwin:
+    """A fixed twin: the position-only twin fitted on every pass of another recording.
+    `normalised_points`: the legs of that recording whose error could be normalised to 20 degC
+    (their material temperature recorded), with the normalised error: the twin then also carries
+    the twin of those (`normalised_twin`), for sessions that carry the material temperature too."""
     fits = {}
     legs = split_legs(points, source)
     for leg, data in legs.items():
@@ -312,6 +319,8 @@ def twin_from_recording(points: np.ndarray, source: str = "the reference recordi
                        # tied to the temperature difference (diagnose.py)
                        "material_temp_c": float(np.mean(data.temp_c)) if data.has_temp else None}
               for (k, v), data in zip(fits.items(), legs.values())},
+        normalised_twin=(twin_from_recording(normalised_points, f"{source} normalised to 20 degC")
+                         if normalised_points is not None and len(normalised_points) else None),
     )
 
 

@@ -11,4 +11,5 @@ names one. The files stay the records: the index can be rebuilt from them at any
 - files.py    scanning folders: index, rebuild, check
 - writer.py   the runner sink and `register` for the jobs
 - history.py  a leg's history, the list of legs, due dates and drift
+- fleet.py    the completed sessions of a leg type (the diagnosis' `--twin fleet:TYPE`)
 """

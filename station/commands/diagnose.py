@@ -43,7 +43,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", nargs="?", metavar="FILE.h5", help="session recording (station sweep / station import)")
     p.add_argument("--twin", metavar="TWIN",
                    help="MODEL.json (station fit), REFERENCE.h5 (a twin fitted on another recording), or "
-                        "sim:CONFIG.toml / sim:default (the simulated plant's systematic error)")
+                        "sim:CONFIG.toml / sim:default (the simulated plant's systematic error), or fleet:TYPE (the "
+                        "legs of that type in the catalog: their mean error map, and how many sigma this leg lies "
+                        "from them)")
+    p.add_argument("--config", metavar="C", help="station TOML whose catalog --twin fleet:TYPE reads (docs/catalog.md)")
+    p.add_argument("--local", action="store_true", help="--twin fleet:TYPE: read the local catalog, not the shared one")
     p.add_argument("--json", metavar="OUT", help="write the report (or the self-check results) as JSON")
     p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--threshold-um", type=float, default=0.1,
@@ -99,7 +103,7 @@ def run(args) -> int:
     from procedures.recording.reader import read_session
 
     session = read_session(path)
-    twin = load_twin(args.twin) if args.twin else None
+    twin = load_twin(args.twin, session=session, path=path, catalog=lambda: _catalog_engine(args)) if args.twin else None
     from station.diagnosis_jobs import diagnose_session
 
     report, temp_lines = diagnose_session(session, path, twin, settings)  # the same as the UI's Diagnosis page
@@ -109,6 +113,15 @@ def run(args) -> int:
         Path(args.json).write_text(to_json(report))
         print(f"\nreport written to {args.json}")
     return 0
+
+
+def _catalog_engine(args):
+    from station.catalog.store import catalog_of, reading_engine
+    from station.config import load_config
+
+    engine, where = reading_engine(catalog_of(load_config(args.config)), args.local)
+    print(where)
+    return engine
 
 
 # -- self-check -----------------------------------------------------------------------------------

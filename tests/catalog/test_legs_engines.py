@@ -34,4 +34,11 @@ def test_same_answers_on_both_engines(tmp_path, pg_url):
     assert [x.serial for x in legs(shared, station="ST-B")] == ["HX-1"]
     assert [x.serial for x in legs(shared, due_by="2026-12-01", interval_days=300)] == ["HX-2"]
     assert history(local.engine, "HX-1").to_json() == history(shared, "HX-1").to_json()
+    # the fleet twin's query (station diagnose --twin fleet:TYPE)
+    from station.catalog.fleet import completed_sessions_of_type
+
+    for t in ("HX-L300", "HX-L450"):
+        assert completed_sessions_of_type(local.engine, t) == completed_sessions_of_type(shared, t)
+    assert [(r.serial, r.leg) for r in completed_sessions_of_type(shared, "HX-L300")] == [
+        ("HX-1", 1), ("HX-2", 2), ("HX-1", 1)]
     shared.dispose()

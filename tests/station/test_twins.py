@@ -24,3 +24,48 @@ def test_the_simulated_plant_as_a_twin(tmp_path):
         twins.load_twin(f"sim:{config}")
     with pytest.raises(InputError, match="no such file"):
         twins.load_twin(str(tmp_path / "none.json"))
+
+
+def test_a_reference_3_k_warmer_is_compared_normalised_to_20_c(tmp_path):
+    """Two sessions of the same simulated leg (thermal expansion on, no heating), one at 20 C, the
+    reference at 23 C: raw, the reference shows as a scale of about -3 K x 11.5 ppm/K; both
+    normalised to 20 C (both carry the material temperature), no scale is left."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from drivers.sim.plant import default_leg_configs
+    from procedures.diagnosis import diagnose
+    from procedures.diagnosis.twin import twin_from_recording
+    from procedures.recording.reader import read_session
+    from station.diagnosis_jobs import diagnose_session
+    from station.synth import synth_session
+    from tests.tooling import write_points_session
+
+    cfg = replace(default_leg_configs(3)[0], heating_k_per_m=0.0)
+    targets = np.linspace(-90, 90, 61)
+    at = {t: synth_session({1: replace(cfg, initial_temp_c=t, ambient_temp_c=t)}, targets, 4, seed=int(t), dwell_s=2.0)
+          for t in (20.0, 23.0)}
+    here = read_session(write_points_session(tmp_path / "at20.h5", at[20.0]))
+    ref_path = write_points_session(tmp_path / "at23.h5", at[23.0])
+
+    raw = diagnose(here.points, twin_from_recording(at[23.0], "at23.h5"))
+    (scale,) = [f for f in raw["findings"] if f["effect"] == "scale"]
+    expected = -cfg.expansion_ppm_per_k * 3.0
+    assert abs(scale["parameters"]["scale_ppm"] - expected) < 0.1 * abs(expected)
+    assert "3.00 K warmer" in scale["temperature_difference"]["note"]  # the words stay where no normalising is done
+
+    report, lines = diagnose_session(here, tmp_path / "at20.h5", twins.load_twin(str(ref_path)))
+    assert report["twin"]["normalised_legs"] == [1]
+    assert not [f for f in report["findings"] if f["effect"] == "scale"]
+    (cand,) = [c for c in report["legs"]["1"]["candidates"] if c["effect"] == "scale"]
+    assert cand["status"] != "named"
+    assert "normalised to 20 degC (NDE) like the twin" in lines[0]
+
+    # a reference without material temperature: raw, the scale tied to nothing it could name
+    no_temp = at[23.0].copy()
+    no_temp["material_temp_c"] = np.nan
+    bare = write_points_session(tmp_path / "bare.h5", no_temp)
+    report, _ = diagnose_session(here, tmp_path / "at20.h5", twins.load_twin(str(bare)))
+    assert "normalised_legs" not in report["twin"]
+    assert [f for f in report["findings"] if f["effect"] == "scale"]

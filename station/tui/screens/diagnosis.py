@@ -31,8 +31,9 @@ from station.tui.widgets import SessionPicker, sample_folders, XYPlot
 
 # The choices of `station diagnose --twin` (the first, no --twin, is its default), and the model on Results.
 TWINS = [("fitted on the recording (default)", "fitted"), ("simulated plant (sim:default)", "sim"),
-         ("file: MODEL.json, REFERENCE.h5, sim:CONFIG.toml", "file"), ("model on the Results page", "results")]
-TWIN_SPEC_HINT = "MODEL.json, REFERENCE.h5 or sim:CONFIG.toml"
+         ("file: MODEL.json, REFERENCE.h5, sim:CONFIG.toml, fleet:TYPE", "file"),
+         ("model on the Results page", "results")]
+TWIN_SPEC_HINT = "MODEL.json, REFERENCE.h5, sim:CONFIG.toml or fleet:TYPE"
 
 
 def twin_spec(kind: str, typed: str = "") -> str | None:
@@ -184,7 +185,14 @@ class DiagnosisScreen(StationScreen):
             elif spec is not None:  # as `station diagnose --twin SPEC`
                 from station.twins import load_twin
 
-                twin = load_twin(spec)
+                cfg = self.app.cfg
+
+                def engine():  # fleet:TYPE reads the station's catalog, as `station diagnose --config` does
+                    from station.catalog.store import catalog_of, reading_engine
+
+                    return reading_engine(catalog_of(cfg))[0]
+
+                twin = load_twin(spec, session=session, path=path, catalog=engine)
             # the report of `station diagnose` (with its material_temperature), by the same function
             report, temp_lines = diagnose_session(session, path, twin)
         except Exception as exc:
