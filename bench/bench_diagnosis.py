@@ -17,7 +17,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drivers.sim.plant import default_leg_configs  # noqa: E402
-from station.synth import synth_session  # noqa: E402
+from station.services.synth import synth_session  # noqa: E402
 from procedures.diagnosis import diagnose  # noqa: E402
 from station.commands.diagnose import plant_twin  # noqa: E402
 

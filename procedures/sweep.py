@@ -105,7 +105,7 @@ def sweep(
 
     `materials`: leg -> its material (expansion coefficient, fixed point), which the adaptive
     stopping rule of an on-the-fly plan normalises with (the composing job gives the station
-    config's, station/jobs.py; None = the default material).
+    config's, station/services/jobs.py; None = the default material).
 
     Ends with `SweepFinished(outcome=...)`: COMPLETED, ABORTED or FAILED (retries exhausted;
     the `Fault` event before it names the point). Pauses at the start of each point and of each

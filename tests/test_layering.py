@@ -69,7 +69,7 @@ def is_command_line(module: str) -> bool:
 
 def test_the_terminal_ui_does_not_import_the_command_line():
     """station/tui and station/commands are two front ends over the same jobs (station/*_jobs.py,
-    station/twins.py, procedures/): the UI imports no command-line module, not even by name
+    station/services/twins.py, procedures/): the UI imports no command-line module, not even by name
     (`importlib.import_module("station.commands...")`). (`station ui`, a command, starts the UI.)"""
     bad: list[str] = []
     for path in sorted((REPO / "station" / "tui").rglob("*.py")):
@@ -98,7 +98,7 @@ def test_the_command_line_check_sees_every_form_of_import():
         assert any(is_command_line(m) for m in names), text
     # ... and not the modules beside it
     assert not any(is_command_line(m) for m in imported_modules(
-        "from station.jobs import replay_sweep\nfrom .common import StationScreen\nimport station.commandsx",
+        "from station.services.jobs import replay_sweep\nfrom .common import StationScreen\nimport station.commandsx",
         "station.tui.screens.sweep", with_names=True))
 
 

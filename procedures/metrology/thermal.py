@@ -38,7 +38,7 @@ LEG_NUMBERS = (1, 2, 3, 4, 5, 6)
 
 @dataclass(frozen=True)
 class Material:
-    """A leg's expansion (see station.config.LegMaterial, which a session records)."""
+    """A leg's expansion (see station.services.config.LegMaterial, which a session records)."""
 
     expansion_um_m_k: float = 11.5
     expansion_u_um_m_k: float = 1.0

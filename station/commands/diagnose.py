@@ -3,7 +3,7 @@ effect causes it, and how far it shrinks once that effect is added; and `--self-
 diagnosis run on simulated sessions with known effects withheld from the twin.
 
 This module is the composition root of the diagnosis: it reads files, takes its twins from
-station/twins.py (which the terminal UI uses too; the simulated plant's own systematic error for
+station/services/twins.py (which the terminal UI uses too; the simulated plant's own systematic error for
 `--twin sim:...` is made a twin there, so procedures never import the simulator) and makes the
 self-check's sessions with the plant.
 """
@@ -22,7 +22,7 @@ from procedures.diagnosis import DiagnosisSettings, to_json
 from procedures.diagnosis.selfcheck import Trial, format_self_check, run_self_check
 from procedures.diagnosis.text_report import text_report
 from procedures.errors import InputError
-from station.twins import load_twin, plant_twin
+from station.services.twins import load_twin, plant_twin
 
 NAME = "diagnose"
 HELP = "diagnose the gap between the twin and a recording (where, which effect, how far)"
@@ -86,7 +86,7 @@ def run(args) -> int:
 
     session = read_session(path)
     twin = load_twin(args.twin) if args.twin else None
-    from station.diagnosis_jobs import diagnose_session
+    from station.services.diagnosis_jobs import diagnose_session
 
     report, temp_lines = diagnose_session(session, path, twin, settings)  # the same as the UI's Diagnosis page
     print(text_report(report))
@@ -122,7 +122,7 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
     contribution log-uniform in SELF_CHECK_CONTRIBUTION_UM). Odd seeds use the simulated plant
     as twin, even seeds the twin fitted on the session."""
     from drivers.sim.plant import default_leg_configs, systematic_error_um
-    from station.synth import synth_session
+    from station.services.synth import synth_session
 
     rng = np.random.default_rng(10_000 + seed)
     fitted = seed % 2 == 0

@@ -1,7 +1,7 @@
 """`station push`: write one leg's compensation table to its drive, safely, with an audit entry.
 
 Also holds what `station rollback` shares: the drive arguments and the confirmation prompt.
-The work itself is procedures.push run by station.table_jobs, as in the terminal UI.
+The work itself is procedures.push run by station.services.table_jobs, as in the terminal UI.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from procedures.errors import InputError
 from procedures.plans import parse_legs
 from procedures.push import PushPlan
 from procedures.states import Action, AuditOutcome
-from station.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
-from station.table_jobs import (
+from station.services.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
+from station.services.table_jobs import (
     JobOutcome,
     controller_refusal,
     load_leg_table,
@@ -26,7 +26,7 @@ from station.table_jobs import (
     refusal_job,
     target_text,
 )
-from station.wiring import drive_url_of, open_drive
+from station.services.wiring import drive_url_of, open_drive
 
 NAME = "push"
 HELP = "write a leg's compensation table to its drive (inactive bank, read back, switch), with an audit entry"

@@ -30,7 +30,7 @@ from procedures import events as ev
 from procedures.errors import InputError
 from procedures.plans import iso230_plan, paper_plan
 from procedures.runner import CallbackSink
-from station.config import SimConfig, StationConfig
+from station.services.config import SimConfig, StationConfig
 
 NAME = "recordings"
 HELP = "regenerate the sample sessions of recordings/ on the simulated rig (deterministic)"
@@ -46,7 +46,7 @@ CAL_DRIVE_FAULT = (5, 2000)  # (leg, point of that leg after which its drive fau
 FAULT_LEG = 2
 FAULT_AFTER_INDEX = 157  # leg 2 run 5 (third upward pass), its 4th target is never measured
 # the drives' jerk limit the samples were made with (0 = not limited): pinned, not the station's
-# sim default (a real leg's, station.config.SimConfig.jerk_mm_s3), so recordings/*.h5 regenerate
+# sim default (a real leg's, station.services.config.SimConfig.jerk_mm_s3), so recordings/*.h5 regenerate
 # point for point; recorded in each sample's station_config as sim.jerk_mm_s3
 JERK_MM_S3 = 0.0
 
@@ -73,7 +73,7 @@ def open_sample_rig(seed: int = SEED):
     from drivers.interferometer.client import SerialInterferometer
     from drivers.modbus.client import connect_axes
     from drivers.sim.rig import SimRig
-    from station.wiring import Rig
+    from station.services.wiring import Rig
 
     sim = SimRig(time_scale=0.0, seed=seed, configs=plant_configs(seed)).start()
     try:
@@ -102,7 +102,7 @@ def _injector(actions: dict[int, Callable[[], None]], clear_beam: Callable[[ev.F
 
 
 def make_calibration(rig, out: Path, cfg: StationConfig):
-    from station.jobs import run_sweep
+    from station.services.jobs import run_sweep
 
     plan = paper_plan((1, 2, 3, 4, 5, 6))
     beam_leg, beam_k = CAL_BEAM_BREAK
@@ -125,7 +125,7 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
     from procedures.push import push_table
     from procedures.recording.reader import read_session
     from procedures.table import make_table
-    from station.jobs import run_sweep
+    from station.services.jobs import run_sweep
 
     session = read_session(calibration)
     model = fit(session.points, "default", source={"path": str(calibration), "sha256": session.sha256})
@@ -143,7 +143,7 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
 
 
 def make_fault(rig, out: Path, cfg: StationConfig):
-    from station.jobs import run_sweep
+    from station.services.jobs import run_sweep
 
     plan = iso230_plan((1, FAULT_LEG))
     sim = rig.sim

@@ -14,8 +14,8 @@ from pathlib import Path
 from procedures.errors import InputError
 from procedures.recording.reader import read_session
 from procedures.replay_compare import Comparison, compare_sessions  # noqa: F401  (re-exported)
-from station import jobs
-from station.jobs import ReplayRecorderSink, replay_sweep, retry_policy_of  # noqa: F401  (re-exported)
+from station.services import jobs
+from station.services.jobs import ReplayRecorderSink, replay_sweep, retry_policy_of  # noqa: F401  (re-exported)
 
 NAME = "replay"
 HELP = "replay a recorded session through the same drivers and record it again (--speed 1|N|max)"
@@ -29,7 +29,7 @@ DESCRIPTION = (
 
 
 def parse_speed(text: str) -> float | None:
-    """station.jobs.parse_speed for argparse: its message as an ArgumentTypeError."""
+    """station.services.jobs.parse_speed for argparse: its message as an ArgumentTypeError."""
     try:
         return jobs.parse_speed(text)
     except InputError as exc:
@@ -46,9 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # -- the command -----------------------------------------------------------------------------------
 
 def run(args) -> int:
-    from station.config import load_config
+    from station.services.config import load_config
     from station.progress import ConsoleProgress
-    from station.wiring import open_replay_rig
+    from station.services.wiring import open_replay_rig
 
     source = Path(args.session)
     session = read_session(source)

@@ -8,7 +8,7 @@ import argparse
 from procedures.fit import load_model
 from procedures.recording.reader import read_session
 from station.commands.fit import _lead
-from station.report_jobs import report_lines, session_report
+from station.services.report_jobs import report_lines, session_report
 
 NAME = "report"
 HELP = "plots, a summary before/after compensation and the ISO 230-2 test report with uncertainties (Markdown, JSON, PDF)"

@@ -13,13 +13,13 @@ from pathlib import Path
 
 from procedures.plan_spec import PlanSpec, plan_from_spec
 from procedures.plans import parse_legs
-from station.config import load_config
-from station.jobs import run_sweep
+from station.services.config import load_config
+from station.services.jobs import run_sweep
 from procedures.control import RunControl
 from procedures.states import Outcome
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
-from station.wiring import open_rig
+from station.services.wiring import open_rig
 
 NAME = "run"
 HELP = "headless calibration sweep on the simulated rig, then its ISO 230-2 evaluation"

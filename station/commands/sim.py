@@ -8,7 +8,7 @@ import threading
 from pathlib import Path
 
 from drivers.sim.rig import SimRig
-from station.config import SimConfig
+from station.services.config import SimConfig
 
 NAME = "sim"
 HELP = "start the simulated rig (Modbus drives + serial interferometer) and print where to reach it"

@@ -12,7 +12,7 @@ from procedures.errors import InputError
 from procedures.fit import load_model
 from procedures.plans import parse_legs
 from procedures.table import LINUXCNC_LIMITS, make_table, write_linuxcnc_comp, write_table_csv
-from station.wiring import drive_table_spec
+from station.services.wiring import drive_table_spec
 
 NAME = "table"
 HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"

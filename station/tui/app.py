@@ -35,7 +35,7 @@ from drivers.errors import DriveFault
 from procedures.control import RunControl
 from procedures.plans import SweepPlan
 from procedures.states import AuditOutcome
-from station.config import StationConfig
+from station.services.config import StationConfig
 from station.tui.bridge import SweepEnded, SweepEvent, TuiBridge
 from station.tui.errors import describe
 from station.tui.messages import (
@@ -168,7 +168,7 @@ class StationApp(App):
         self.hide_volatile = hide_volatile
         self.poll_interval_s = poll_interval_s
         # Assigned on the app's thread only (see the module docstring).
-        self.rig = None  # station.wiring.Rig once connected
+        self.rig = None  # station.services.wiring.Rig once connected
         self.rig_state = "not connected"  # "connecting" / "connected" / "not connected"
         self.rig_error = ""
         self.rig_lock = threading.Lock()
@@ -261,7 +261,7 @@ class StationApp(App):
 
     @work(thread=True, group="connect", exit_on_error=False)
     def _connect_worker(self, old, attempt: int, lock: threading.Lock) -> None:
-        from station.wiring import open_rig  # imported here: a missing driver is a notice, not a crash
+        from station.services.wiring import open_rig  # imported here: a missing driver is a notice, not a crash
 
         with lock:  # a poll or an action still using the old rig finishes first
             _close_quietly(old, "closing the previous rig failed")
@@ -418,8 +418,8 @@ class StationApp(App):
     def start_sweep(self, plan: SweepPlan, out: Path, label: str = "sweep",
                     on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None,
                     resume: bool = False) -> bool:
-        """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner), or
-        through `job(rig, sinks, control)` (a job of station.table_jobs, e.g. a verification,
+        """Start `plan`, recording to `out`, through station.services.jobs.run_sweep (the CLI's runner), or
+        through `job(rig, sinks, control)` (a job of station.services.table_jobs, e.g. a verification,
         returning a JobOutcome). `label` names the job on screen ("sweep", "verification of leg
         2"); `on_done(state)` is called on the app's thread when it has ended (whatever the
         outcome), with the job's outcome in `state.result`. `resume`: `out` is an unfinished
@@ -455,10 +455,10 @@ class StationApp(App):
 
     def resume_sweep(self, path: Path) -> bool:
         """Finish the aborted (or failed) session `path`: its own plan, appended to the same
-        file, by the job `station sweep --resume` runs (station.jobs.resumable_plan, then
+        file, by the job `station sweep --resume` runs (station.services.jobs.resumable_plan, then
         run_sweep(resume=True)). Refusals (a complete or imported file, a sweep running, no rig)
         are notifications; True if it started."""
-        from station.jobs import resumable_plan
+        from station.services.jobs import resumable_plan
 
         path = Path(path).expanduser()
         if self.sweep.active:
@@ -488,7 +488,7 @@ class StationApp(App):
     @work(thread=True, group="sweep", exit_on_error=False)
     def _sweep_worker(self, run: int, rig, lock: threading.Lock, plan: SweepPlan, out: Path, control: RunControl,
                       idle: threading.Event, job: Callable | None = None, resume: bool = False) -> None:
-        from station.jobs import run_sweep
+        from station.services.jobs import run_sweep
 
         outcome, points, error, ended = "error", 0, "", None
         try:
@@ -514,7 +514,7 @@ class StationApp(App):
             self.post_message(SweepEnded(outcome, points, error, result=ended, run=run))
 
     def start_replay(self, source: Path, speed: float | None) -> bool:
-        """Replay `source` through the replay devices and the sweep procedure (station.jobs.
+        """Replay `source` through the replay devices and the sweep procedure (station.services.jobs.
         replay_sweep, the job `station replay` runs), recording a new session; shown on the Sweep screen.
         `speed`: None = as fast as possible, 1 = real time, N = N times faster."""
         if self.sweep.active:
@@ -532,8 +532,8 @@ class StationApp(App):
         try:
             from procedures.recording.reader import read_session
             from procedures.replay_compare import compare_sessions
-            from station.jobs import replay_sweep
-            from station.wiring import open_replay_rig
+            from station.services.jobs import replay_sweep
+            from station.services.wiring import open_replay_rig
 
             session = read_session(source)
             if not session.plan:

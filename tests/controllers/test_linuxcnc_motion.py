@@ -31,7 +31,7 @@ from drivers.sim.plant import PlantConfig
 from procedures.controllers import linuxcnc
 from procedures.fit import fit
 from procedures.table import LINUXCNC_LIMITS, make_table
-from station.synth import synth_session
+from station.services.synth import synth_session
 
 HERE = Path(__file__).resolve().parent
 DISPLAY = HERE / "linuxcnc_display.py"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.diagnosis import DiagnosisSettings, diagnose, finding_events, to_json
 from procedures.events import Finding
 from procedures.errors import InputError, SchemaError

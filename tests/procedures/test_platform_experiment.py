@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import default_leg_configs
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.errors import InputError
 from procedures.platform.experiment import (
     FunctionLegErrors,

@@ -1,11 +1,11 @@
-"""The diagnosis twins both front ends build (station.twins): `station diagnose --twin` and the
+"""The diagnosis twins both front ends build (station.services.twins): `station diagnose --twin` and the
 terminal UI's Diagnosis page use the same functions."""
 
 import pytest
 
 from procedures.diagnosis.twin import ExternalTwin
 from procedures.errors import InputError
-from station import twins
+from station.services import twins
 from station.commands import diagnose as diagnose_command
 
 

@@ -6,7 +6,7 @@ Reading, fitting and evaluating run in a thread worker; the result is kept on th
 within seconds, in the worker, and said in a notification.
 
 `r` writes the report of `station report` and `e` the CSV of `station export` for the session
-on show, through the same functions (station.report_jobs, procedures.csv_io.export_csv), beside
+on show, through the same functions (station.services.report_jobs, procedures.csv_io.export_csv), beside
 the recording: report/<session>.<method>/ and <session>.csv. Neither replaces what is there.
 
 The error is the one `station fit` and `station iso230` use, chosen by the same function
@@ -404,7 +404,7 @@ class ResultsScreen(StationScreen):
     @work(thread=True, group="results-write", exit_on_error=False)
     def _report_worker(self, session, model, out: Path, hide: bool) -> None:
         try:
-            from station.report_jobs import report_lines, session_report
+            from station.services.report_jobs import report_lines, session_report
 
             result = session_report(session, out, model)
         except Exception as exc:
@@ -433,7 +433,7 @@ class ResultsScreen(StationScreen):
     def _export_worker(self, session_path: Path, out: Path, hide: bool) -> None:
         try:
             from procedures.csv_io import export_csv
-            from station.report_jobs import export_lines
+            from station.services.report_jobs import export_lines
 
             summary = export_csv(session_path, out, overwrite=False)
         except Exception as exc:

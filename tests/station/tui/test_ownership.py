@@ -47,14 +47,14 @@ def off_ui_thread(writes, ui: threading.Thread) -> list[str]:
 
 
 class RigTracker:
-    """Wraps station.wiring.open_rig: every rig opened, and the thread each was closed on."""
+    """Wraps station.services.wiring.open_rig: every rig opened, and the thread each was closed on."""
 
     def __init__(self, monkeypatch) -> None:
-        import station.wiring
+        import station.services.wiring
 
         self.opened: list = []
         self.closed: dict[int, threading.Thread] = {}
-        real = station.wiring.open_rig
+        real = station.services.wiring.open_rig
 
         def open_rig(*args, **kwargs):
             rig = real(*args, **kwargs)
@@ -68,7 +68,7 @@ class RigTracker:
             self.opened.append(rig)
             return rig
 
-        monkeypatch.setattr(station.wiring, "open_rig", open_rig)
+        monkeypatch.setattr(station.services.wiring, "open_rig", open_rig)
 
     def is_closed(self, rig) -> bool:
         return rig is not None and id(rig) in self.closed

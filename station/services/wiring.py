@@ -17,8 +17,8 @@ from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
 from procedures.errors import InputError
-from station.config import StationConfig
-from station.drive_lock import holds_drive_lock
+from station.services.config import StationConfig
+from station.services.drive_lock import holds_drive_lock
 
 
 @dataclass
@@ -53,7 +53,7 @@ class Rig:
         self.close()
 
 
-@holds_drive_lock(whole_rig=True)  # a leg another station process uses is refused (station/drive_lock.py)
+@holds_drive_lock(whole_rig=True)  # a leg another station process uses is refused (station/services/drive_lock.py)
 def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | None = None,
              noise_seed: int | None = None) -> Rig:
     """Connect to the rig named by `cfg`; on "sim" start the simulated rig in-process first.

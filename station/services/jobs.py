@@ -19,8 +19,8 @@ from procedures.recording.sink import RecorderSink
 from procedures.runner import RunResult, Sink, run
 from procedures.sweep import RetryPolicy, sweep
 from station import __version__
-from station.config import StationConfig
-from station.wiring import Rig
+from station.services.config import StationConfig
+from station.services.wiring import Rig
 
 
 def run_sweep(
@@ -139,7 +139,7 @@ def replay_sweep(
     sinks: Iterable[Sink] = (),
     control: RunControl | None = None,
 ) -> RunResult:
-    """Run `session`'s plan on the replay `rig` (station.wiring.open_replay_rig) through the
+    """Run `session`'s plan on the replay `rig` (station.services.wiring.open_replay_rig) through the
     sweep procedure and the runner, recording to `out` (rig kind "replay").
 
     Where the recording was cut short (aborted, killed), the run is aborted where the recording
@@ -147,7 +147,7 @@ def replay_sweep(
     recording does not hold, `rig.sim.mismatch` names the first one (the run then fails).
     """
     if rig.kind != "replay":
-        raise InputError(f"replay_sweep needs a replay rig (station.wiring.open_replay_rig), not a {rig.kind} rig")
+        raise InputError(f"replay_sweep needs a replay rig (station.services.wiring.open_replay_rig), not a {rig.kind} rig")
     cfg = cfg or StationConfig()
     control = control or RunControl()
     plan = SweepPlan.from_dict(session.plan)

@@ -36,8 +36,8 @@ from procedures.states import Action, AuditOutcome
 from procedures.table import LegTable, read_table_csv
 from procedures.verify import verify_procedure
 from station import __version__
-from station.config import LEG_COUNT, StationConfig
-from station.wiring import Rig
+from station.services.config import LEG_COUNT, StationConfig
+from station.services.wiring import Rig
 
 
 @dataclass
