@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from drivers.sim.plant import default_leg_configs  # noqa: E402
 from station.services.synth import synth_session  # noqa: E402
 from procedures.diagnosis import diagnose  # noqa: E402
-from station.commands.diagnose import plant_twin  # noqa: E402
+from station.services.twins import plant_twin  # noqa: E402
 
 TARGET_S = 2.0
 

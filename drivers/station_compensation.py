@@ -367,6 +367,9 @@ class StationCompensatedAxis:
     def limits(self) -> DriveLimits:
         return self.inner.limits()
 
+    def fault_text(self, code: int) -> str:
+        return self.inner.fault_text(code)
+
     def _report(self, st: DriveStatus, corr_um: float) -> DriveStatus:
         t = self._tables
         return DriveStatus(st.state, st.fault, st.fault_code, st.moving, st.target_reached,

@@ -23,7 +23,7 @@ from procedures.audit_view import (
     read_audit,
     select,
 )
-from station.commands.push import audit_log
+from station.commands._table_cli import audit_log
 from station.services.config import AUDIT_NAME, LEG_COUNT, load_config
 
 NAME = "audit"

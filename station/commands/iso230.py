@@ -7,9 +7,9 @@ import os
 from pathlib import Path
 
 from procedures.errors import InputError
-from procedures.iso230 import dumps, evaluate, format_table
-from procedures.metrology.thermal import error_basis
+from procedures.iso230 import dumps, format_table
 from procedures.recording.reader import read_session
+from station.services.analysis import analyse_session
 
 NAME = "iso230"
 HELP = "ISO 230-2 values (E, M, A, B, R; up, down, both) of each leg in a session file"
@@ -31,8 +31,10 @@ def run(args) -> int:
     session = read_session(Path(args.h5))
     if not len(session.points):
         raise InputError(f"{args.h5}: the session holds no points")
-    points, basis_lines, basis = error_basis(session, args.raw)
-    results = evaluate(points)
+    analysis = analyse_session(session, args.raw, iso=True)
+    if analysis.iso_error is not None:
+        raise analysis.iso_error
+    results, basis_lines, basis = analysis.iso, analysis.basis_lines, analysis.basis
     print(f"{args.h5} (sha256 {session.sha256[:16]}..., outcome {session.outcome})")
     for line in basis_lines:
         print(line)

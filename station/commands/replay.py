@@ -48,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from station.services.config import load_config
     from station.progress import ConsoleProgress
-    from station.services.wiring import open_replay_rig
+    from station.services.jobs import replay_and_compare
 
     source = Path(args.session)
     session = read_session(source)
@@ -62,13 +62,12 @@ def run(args) -> int:
     cfg = load_config(None)
     pace = "as fast as possible" if args.speed is None else ("real time" if args.speed == 1 else f"{args.speed:g}x real time")
     print(f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) {pace}")
-    with open_replay_rig(source, args.speed, cfg) as rig:
-        result = replay_sweep(rig, session, out, cfg, sinks=[ConsoleProgress()])
-        mismatch = rig.sim.mismatch
+    ended = replay_and_compare(source, session, out, cfg, args.speed, sinks=[ConsoleProgress()])
+    result = ended.result
     print(f"session: {out} ({result.outcome}, {result.points} points; rig replay)")
-    if mismatch is not None:
-        raise mismatch
-    cmp = compare_sessions(session, read_session(out))
+    if ended.mismatch is not None:
+        raise ended.mismatch
+    cmp = ended.comparison
     if cmp.identical:
         print(f"identical to the recording: {cmp.points} points (all fields), {cmp.faults} faults, outcome {result.outcome}")
         print(f"next: station fit {out} --out model.json   (gives the model of {source})")

@@ -8,7 +8,7 @@ from procedures import events as ev
 from procedures.errors import InputError
 from procedures.push import describe_table
 from procedures.states import Action
-from station.commands.push import (
+from station.commands._table_cli import (
     PlanPrinter,
     add_drive_arguments,
     audit_log,

@@ -8,13 +8,13 @@ non-interactive main job; `station` with no arguments starts the terminal UI.
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 from procedures.plan_spec import PlanSpec, plan_from_spec
 from procedures.plans import parse_legs
 from station.services.config import load_config
 from station.services.jobs import run_sweep
+from station.services.sessions import default_session_path
 from procedures.control import RunControl
 from procedures.states import Outcome
 from station.interrupt import abort_on_sigint
@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     cfg = load_config(None)
     plan = plan_from_spec(PlanSpec(legs=parse_legs(args.legs), kind="iso230", cycles=args.cycles))
-    out = Path(args.out or f"{cfg.recordings_dir}/run-{time.strftime('%Y%m%d-%H%M%S')}.h5")
+    out = Path(args.out) if args.out else default_session_path(cfg, prefix="run")
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:

@@ -10,6 +10,7 @@ from procedures.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
 from procedures.plans import parse_legs, SweepPlan
 from station.services.config import load_config
 from station.services.jobs import resumable_plan, run_sweep
+from station.services.sessions import new_session_problem
 from procedures.control import RunControl
 from procedures.states import Outcome
 from station import interrupt
@@ -79,9 +80,10 @@ def run(args) -> int:
         if not args.out:
             raise InputError("--out FILE.h5 is required (where to record the session)")
         out = Path(args.out)
-        if out.exists():
+        problem = new_session_problem(out)
+        if problem == "exists":
             raise InputError(f"{out} exists; choose another --out, or --resume {out} to finish it")
-        if not out.parent.is_dir():
+        if problem == "no folder":
             raise InputError(f"--out {out}: the folder {out.parent} does not exist; create it first or choose "
                              "another --out (nothing is created behind your back)")
         plan = build_plan(args)

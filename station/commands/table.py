@@ -66,9 +66,9 @@ def run(args) -> int:
     else:
         limits = drive_table_spec(args.profile)
         if limits is None:  # a drive without a table: the CSV is for the station's own table (target station)
-            from drivers.station_compensation import station_table_spec
+            from station.services.wiring import station_store_table_spec
 
-            limits = station_table_spec("[compensation] tables_path")
+            limits = station_store_table_spec("[compensation] tables_path")
             print(f"note: the drive of {args.profile} holds no compensation table; the table is checked for the "
                   "station's table store (compensation target station, docs/compensation.md); for the "
                   "controller use --format linuxcnc")

@@ -15,7 +15,7 @@ from procedures.plans import SweepPlan, iso230_plan
 from procedures.recording.reader import read_session
 from procedures.states import Action, AuditOutcome
 from procedures.verify import ACCEPT_RATIO
-from station.commands.push import audit_log, parse_leg_choice, station_config
+from station.commands._table_cli import audit_log, parse_leg_choice, station_config
 from station.progress import ConsoleProgress
 from station.services.table_jobs import controller_refusal, expected_tables, refusal_job, target_text, verify_job
 from station.services.wiring import drive_url_of, leg_table_spec, open_rig

@@ -102,7 +102,7 @@ class SimConfig:
     thermal_tau_s: float = 1800.0  # how fast the simulated legs' material follows the hall
     # the simulated drives' jerk limit, mm/s^3 (0 = not limited): a real leg's by default, so the
     # rig time a user sees for any plan is a real leg's (drivers.sim.plant LEG_JERK_MM_S3); the
-    # sample recordings pin 0, the setting they were made with (station/commands/recordings.py)
+    # sample recordings pin 0, the setting they were made with (station/services/samples.py)
     jerk_mm_s3: float = SIM_LEG_JERK_MM_S3
 
     def leg_configs(self) -> list:

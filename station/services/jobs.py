@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import math
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
+from typing import Callable, Iterable
 
 from procedures import events as ev
 from procedures.control import RunControl
@@ -165,3 +166,35 @@ def replay_sweep(
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, retry=retry_policy_of(session),
                       session_id=uuid.uuid4().hex[:12], t0_s=0.0, materials=materials)
     return run(procedure, [recorder, *sinks], control)
+
+
+@dataclass(frozen=True)
+class ReplayOutcome:
+    """How a replay ended: the run's result, the first request the recording did not hold
+    (`mismatch`, the run then failed), and the comparison of the new recording with the replayed
+    one (None after a mismatch or an abort: nothing worth comparing)."""
+
+    result: RunResult
+    mismatch: Exception | None
+    comparison: object | None  # procedures.replay_compare.Comparison
+
+
+def replay_and_compare(source: Path, session: Session, out: Path, cfg: StationConfig, speed: float | None,
+                       sinks: Iterable[Sink] = (), control: RunControl | None = None,
+                       on_rig_opened: Callable[[Rig], None] | None = None) -> ReplayOutcome:
+    """Replay the recording `source` (read as `session`) through the replay devices at `speed`
+    (None: as fast as possible), recording to `out`, and compare the two recordings: the job of
+    `station replay` and of the terminal UI's Replay page. `on_rig_opened(rig)` is told the
+    replay rig once it runs (the UI keeps it)."""
+    from procedures.replay_compare import compare_sessions
+    from station.services.wiring import open_replay_rig
+
+    with open_replay_rig(source, speed, cfg) as rig:
+        if on_rig_opened is not None:
+            on_rig_opened(rig)
+        result = replay_sweep(rig, session, out, cfg, sinks=sinks, control=control)
+        mismatch = rig.sim.mismatch
+    comparison = None
+    if mismatch is None and not (control is not None and control.aborted):
+        comparison = compare_sessions(session, read_session(out))
+    return ReplayOutcome(result, mismatch, comparison)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
+from drivers.errors import DriverError
 from drivers.interfaces import ServoAxis, TableSpec
 from procedures import events as ev
 from procedures.audit import AuditLog, AuditSink
@@ -166,3 +167,7 @@ def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *
                                  control=control, sweep_options={"session_id": uuid.uuid4().hex[:12]},
                                  normalise=normalise)
     return run_table_job(procedure, audit, [recorder, *sinks], control)
+
+
+class OperationFailed(DriverError):
+    """A push or rollback failed after it started writing (the message says which table is active)."""

@@ -11,7 +11,7 @@ import numpy as np
 from procedures.plans import onthefly_plan
 from procedures.recording.reader import read_session
 from procedures.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
-from station.commands.recordings import open_sample_rig
+from station.services.samples import open_sample_rig
 from station.commands.replay import compare_sessions, replay_sweep
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep

@@ -24,7 +24,7 @@ from procedures.plans import iso230_plan
 from procedures.recording.reader import read_session
 from procedures.replay_compare import compare_sessions
 from procedures.runner import CallbackSink
-from station.commands.recordings import FILES, open_sample_rig
+from station.services.samples import FILES, open_sample_rig
 from station.services.config import StationConfig
 from station.services.jobs import replay_sweep, run_sweep
 from station.services.wiring import REPLAY_LASER_TIMEOUT_S, open_replay_rig

@@ -17,7 +17,7 @@ from drivers.sim.plant import LEG_JERK_MM_S3
 from procedures.errors import InputError
 from procedures.plans import iso230_plan, onthefly_plan
 from procedures.recording.reader import read_session
-from station.commands import recordings
+from station.services import samples as recordings
 from station.services.config import LegMaterial, SimConfig, StationConfig, load_config
 from station.services.jobs import run_sweep
 from station.services.wiring import open_rig

@@ -5,13 +5,13 @@ import pytest
 
 from procedures.diagnosis.twin import ExternalTwin
 from procedures.errors import InputError
-from station.services import twins
+from station.services import selfcheck, twins
 from station.commands import diagnose as diagnose_command
 
 
-def test_the_command_uses_the_shared_twins():
+def test_the_command_and_the_self_check_use_the_shared_twins():
     assert diagnose_command.load_twin is twins.load_twin
-    assert diagnose_command.plant_twin is twins.plant_twin
+    assert selfcheck.plant_twin is twins.plant_twin
 
 
 def test_the_simulated_plant_as_a_twin(tmp_path):

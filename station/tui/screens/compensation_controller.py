@@ -243,7 +243,7 @@ class CompensationController:
         Sweep page. False (and a notice) when it cannot start."""
         from procedures.plans import SweepPlan
         from station.services.table_jobs import verify_job
-        from station.tui.app import default_session_path
+        from station.services.sessions import default_session_path
         from station.services.wiring import drive_url_of
 
         try:

@@ -170,7 +170,7 @@ class SweepScreen(StationScreen):
             self.app.action_abort_sweep()
 
     def action_start(self) -> None:
-        from station.tui.app import default_session_path
+        from station.services.sessions import default_session_path
 
         if self.app.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
