@@ -12,7 +12,7 @@ when one came before it (one raised, then lost, on the way there).
 
 from __future__ import annotations
 
-import signal
+import _signal  # the C module: `signal` imports enum, tens of milliseconds in which a Ctrl-C would be Python's
 
 _interrupted = False
 
@@ -42,7 +42,7 @@ def forget() -> None:
 
 
 def main() -> int:
-    signal.signal(signal.SIGINT, record_interrupt)
+    _signal.signal(_signal.SIGINT, record_interrupt)
     from station.cli import main as cli_main
 
     return cli_main()

@@ -34,7 +34,7 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
     two effects present in the plant but withheld from the twin, at a random magnitude (RMS
     contribution log-uniform in SELF_CHECK_CONTRIBUTION_UM). Odd seeds use the simulated plant
     as twin, even seeds the twin fitted on the session."""
-    from drivers.sim.plant import default_leg_configs, systematic_error_um
+    from drivers.sim.plant import default_leg_configs
     from station.services.synth import synth_session
 
     rng = np.random.default_rng(10_000 + seed)
@@ -54,83 +54,105 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
     pass_s = n_targets * (dwell_s + step / 10.0)
     session_s = 2 * cycles * pass_s
     lib = default_leg_configs(int(rng.integers(0, 1000)), 6)
-    base = {}
-    for leg in legs:
-        has_load = "load" in [e for e in chosen if where[e] == leg]
-        vary_load = has_load or rng.random() < 0.5
-        loads = tuple(float(v) for v in rng.uniform(0, 500, 2 * cycles + 2)) if vary_load else (0.0,)
-        for _attempt in range(50):
-            cfg = replace(
-                lib[leg - 1], enabled=frozenset(BASE_SOURCES), drift_um_per_h=0.0,
-                # the material temperature changes in every session (a confounder for drift and scale)
-                initial_temp_c=20.0 + float(rng.uniform(-1.0, 1.0)), tau_s=float(rng.uniform(900, 2400)),
-                ambient_swing_k=float(rng.uniform(0.3, 1.0)) * float(rng.choice([-1, 1])),
-                ambient_period_s=float(rng.uniform(0.5, 1.2)) * session_s,
-                load_per_pass_n=loads,
-                # the plant's compliance grows from the bearing up to the nut: with a load effect the
-                # bearing is below the stroke; else it may be at either end (thermal works both ways)
-                bearing_mm=(-1.0 if has_load else float(rng.choice([-1, 1]))) * float(rng.uniform(120, 250)),
-            )
-            # keep thermal and drift separable: the pass temperatures must not follow time linearly
-            trial_pts = synth_session({leg: cfg}, targets, cycles, seed=seed, dwell_s=dwell_s)
-            run = trial_pts["run"]
-            t_pass = np.array([trial_pts["time_s"][run == r].mean() for r in np.unique(run)])
-            temp_pass = np.array([trial_pts["material_temp_c"][run == r].mean() for r in np.unique(run)])
-            if abs(np.corrcoef(t_pass, temp_pass)[0, 1]) <= SEPARABLE_MAX_CORRELATION:
-                break
-        base[leg] = cfg
+    loaded = {leg for e, leg in where.items() if e == "load"}
+    base = {leg: _base_leg(rng, lib[leg - 1], leg, leg in loaded, targets, cycles, seed, dwell_s, session_s)
+            for leg in legs}
     dry = synth_session(base, targets, cycles, seed=seed, dwell_s=dwell_s)
     truth: dict[int, dict] = {leg: {} for leg in legs}
     real = dict(base)
     for eff in chosen:
         leg = where[eff]
         sel = dry["leg"] == leg
-        x, t_h = dry["target_mm"][sel], dry["time_s"][sel] / 3600.0
-        temp, load_n = dry["material_temp_c"][sel], dry["load_n"][sel]
         m = float(np.exp(rng.uniform(*np.log(contribution_um or SELF_CHECK_CONTRIBUTION_UM))))
-        cfg = real[leg]
-        if eff == "backlash":
-            cfg = replace(cfg, reversal_um=2 * m)
-            truth[leg][eff] = {"reversal_um": 2 * m}
-        elif eff == "drift":
-            d = m / float(np.std(_removed(t_h, x, fitted))) * float(rng.choice([-1, 1]))
-            cfg = replace(cfg, drift_um_per_h=d)
-            truth[leg][eff] = {"drift_um_per_h": d}
-        elif eff == "scale":
-            ppm = m / float(np.std(x / 1000.0)) * float(rng.choice([-1, 1]))
-            cfg = replace(cfg, scale_ppm=ppm)
-            truth[leg][eff] = {"scale_ppm": ppm}
-        elif eff == "cyclic":
-            lam = float(rng.uniform(8.0, 38.0))
-            while any(abs(lam - w) < 0.15 * w for w in (cfg.lead_mm, 2 * cfg.lead_mm)):
-                lam = float(rng.uniform(8.0, 38.0))
-            amp = m * np.sqrt(2.0)
-            cfg = replace(cfg, longwave=cfg.longwave + ((lam, amp, float(rng.uniform(0, 2 * np.pi))),))
-            truth[leg][eff] = {"wavelength_mm": lam, "amplitude_um": float(amp)}
-        elif eff == "thermal":
-            e_ppm = float(rng.uniform(8.0, 20.0))
-            unit = systematic_error_um(replace(cfg, expansion_ppm_per_k=e_ppm).only("thermal"), x, 1, temp, 0, 0)
-            k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
-            # scale the temperature excursion (not the steel) to reach the drawn magnitude
-            cfg = replace(cfg, expansion_ppm_per_k=e_ppm, initial_temp_c=20 + k * (cfg.initial_temp_c - 20),
-                          ambient_swing_k=k * cfg.ambient_swing_k, heating_k_per_m=k * cfg.heating_k_per_m)
-            truth[leg][eff] = {"expansion_ppm_per_k": e_ppm}
-        elif eff == "load":
-            cfg = replace(cfg, bearing_compliance_um_per_kn=float(rng.uniform(1.0, 3.0)),
-                          screw_compliance_um_per_kn_per_m=float(rng.uniform(10.0, 20.0)))
-            unit = systematic_error_um(cfg.only("load"), x, 1, 20.0, load_n, 0)
-            k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
-            cfg = replace(cfg, load_per_pass_n=tuple(k * v for v in cfg.load_per_pass_n))
-            truth[leg][eff] = {"compliance_um_per_kn": cfg.compliance_um_per_kn}
-        cfg = replace(cfg, enabled=cfg.enabled | ({"longwave"} if eff == "cyclic" else {eff}))
-        real[leg] = cfg
+        cfg, truth[leg][eff] = _withhold(rng, eff, real[leg], dry[sel], m, fitted)
+        real[leg] = replace(cfg, enabled=cfg.enabled | ({"longwave"} if eff == "cyclic" else {eff}))
     points = synth_session(real, targets, cycles, seed=seed, dwell_s=dwell_s)
-    # the true contribution of the withheld effects at every point
+    true_um = _true_contribution(points, truth, real, base)
+    twin = None if fitted else plant_twin(base, "simulated plant without the withheld effects")
+    label = ", ".join(f"{e}@leg{where[e]}" for e in chosen) or "no effect"
+    return Trial(seed, points, twin, truth, true_um, label, {"legs": legs, "targets": n_targets, "cycles": cycles})
+
+
+def _base_leg(rng, lib_cfg, leg: int, has_load: bool, targets, cycles: int, seed: int, dwell_s: float,
+              session_s: float):
+    """One leg of the plant without withheld effects: the base sources, a material temperature
+    that changes, sometimes a load varying per pass; drawn again (up to 50 times) until its pass
+    temperatures do not follow time linearly (thermal and drift stay separable)."""
+    from station.services.synth import synth_session
+
+    vary_load = has_load or rng.random() < 0.5
+    loads = tuple(float(v) for v in rng.uniform(0, 500, 2 * cycles + 2)) if vary_load else (0.0,)
+    for _attempt in range(50):
+        cfg = replace(
+            lib_cfg, enabled=frozenset(BASE_SOURCES), drift_um_per_h=0.0,
+            # the material temperature changes in every session (a confounder for drift and scale)
+            initial_temp_c=20.0 + float(rng.uniform(-1.0, 1.0)), tau_s=float(rng.uniform(900, 2400)),
+            ambient_swing_k=float(rng.uniform(0.3, 1.0)) * float(rng.choice([-1, 1])),
+            ambient_period_s=float(rng.uniform(0.5, 1.2)) * session_s,
+            load_per_pass_n=loads,
+            # the plant's compliance grows from the bearing up to the nut: with a load effect the
+            # bearing is below the stroke; else it may be at either end (thermal works both ways)
+            bearing_mm=(-1.0 if has_load else float(rng.choice([-1, 1]))) * float(rng.uniform(120, 250)),
+        )
+        # keep thermal and drift separable: the pass temperatures must not follow time linearly
+        trial_pts = synth_session({leg: cfg}, targets, cycles, seed=seed, dwell_s=dwell_s)
+        run = trial_pts["run"]
+        t_pass = np.array([trial_pts["time_s"][run == r].mean() for r in np.unique(run)])
+        temp_pass = np.array([trial_pts["material_temp_c"][run == r].mean() for r in np.unique(run)])
+        if abs(np.corrcoef(t_pass, temp_pass)[0, 1]) <= SEPARABLE_MAX_CORRELATION:
+            break
+    return cfg
+
+
+def _withhold(rng, eff: str, cfg, dry, m: float, fitted: bool):
+    """`cfg` with effect `eff` added at RMS contribution `m` um against the twin (measured on the
+    leg's points `dry` of the plant without it), and the effect's true parameters."""
+    from drivers.sim.plant import systematic_error_um
+
+    x, t_h = dry["target_mm"], dry["time_s"] / 3600.0
+    temp, load_n = dry["material_temp_c"], dry["load_n"]
+    if eff == "backlash":
+        return replace(cfg, reversal_um=2 * m), {"reversal_um": 2 * m}
+    if eff == "drift":
+        d = m / float(np.std(_removed(t_h, x, fitted))) * float(rng.choice([-1, 1]))
+        return replace(cfg, drift_um_per_h=d), {"drift_um_per_h": d}
+    if eff == "scale":
+        ppm = m / float(np.std(x / 1000.0)) * float(rng.choice([-1, 1]))
+        return replace(cfg, scale_ppm=ppm), {"scale_ppm": ppm}
+    if eff == "cyclic":
+        lam = float(rng.uniform(8.0, 38.0))
+        while any(abs(lam - w) < 0.15 * w for w in (cfg.lead_mm, 2 * cfg.lead_mm)):
+            lam = float(rng.uniform(8.0, 38.0))
+        amp = m * np.sqrt(2.0)
+        cfg = replace(cfg, longwave=cfg.longwave + ((lam, amp, float(rng.uniform(0, 2 * np.pi))),))
+        return cfg, {"wavelength_mm": lam, "amplitude_um": float(amp)}
+    if eff == "thermal":
+        e_ppm = float(rng.uniform(8.0, 20.0))
+        unit = systematic_error_um(replace(cfg, expansion_ppm_per_k=e_ppm).only("thermal"), x, 1, temp, 0, 0)
+        k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
+        # scale the temperature excursion (not the steel) to reach the drawn magnitude
+        cfg = replace(cfg, expansion_ppm_per_k=e_ppm, initial_temp_c=20 + k * (cfg.initial_temp_c - 20),
+                      ambient_swing_k=k * cfg.ambient_swing_k, heating_k_per_m=k * cfg.heating_k_per_m)
+        return cfg, {"expansion_ppm_per_k": e_ppm}
+    if eff == "load":
+        cfg = replace(cfg, bearing_compliance_um_per_kn=float(rng.uniform(1.0, 3.0)),
+                      screw_compliance_um_per_kn_per_m=float(rng.uniform(10.0, 20.0)))
+        unit = systematic_error_um(cfg.only("load"), x, 1, 20.0, load_n, 0)
+        k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
+        cfg = replace(cfg, load_per_pass_n=tuple(k * v for v in cfg.load_per_pass_n))
+        return cfg, {"compliance_um_per_kn": cfg.compliance_um_per_kn}
+    raise ValueError(f"unknown effect {eff!r}")
+
+
+def _true_contribution(points, truth: dict[int, dict], real: dict, base: dict) -> np.ndarray:
+    """The true contribution (um) of the withheld effects at every point."""
+    from drivers.sim.plant import systematic_error_um
+
     true_um = np.zeros(points.size)
-    for leg in legs:
+    for leg, effects in truth.items():
         sel = points["leg"] == leg
         p = points[sel]
-        for eff in truth[leg]:
+        for eff in effects:
             cfg = real[leg]
             if eff == "cyclic":
                 extra = replace(cfg, longwave=cfg.longwave[len(base[leg].longwave):]).only("longwave")
@@ -138,6 +160,4 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
                 extra = cfg.only(eff)
             true_um[sel] += systematic_error_um(extra, p["target_mm"], p["direction"], p["material_temp_c"],
                                                 p["load_n"], p["time_s"])
-    twin = None if fitted else plant_twin(base, "simulated plant without the withheld effects")
-    label = ", ".join(f"{e}@leg{where[e]}" for e in chosen) or "no effect"
-    return Trial(seed, points, twin, truth, true_um, label, {"legs": legs, "targets": n_targets, "cycles": cycles})
+    return true_um
