@@ -10,8 +10,6 @@ too (`interrupt_now`), and `station.interrupt.abort_on_sigint` aborts its run at
 when one came before it (one raised, then lost, on the way there).
 """
 
-from __future__ import annotations
-
 import _signal  # the C module: `signal` imports enum, tens of milliseconds in which a Ctrl-C would be Python's
 
 _interrupted = False
