@@ -9,7 +9,7 @@ profile's minimum, and the wall time per move + status on loopback at time scale
 
 Part 2, wire time: a stop-and-go sweep (`--targets` targets, 2 cycles, one leg) and, where the
 profile has position-compare registers, an on-the-fly sweep (2 passes at each plan speed) run
-through station.jobs.run_sweep on the simulated rig. The drive bus tallies the RTU frames of
+through station.services.jobs.run_sweep on the simulated rig. The drive bus tallies the RTU frames of
 every request (drivers/modbus/wire.py); the figures are per measured point (mean over the
 sweep's points after the first, approach moves included) and per on-the-fly pass (mean over the
 passes after the first, the capture read-out included), modelled on an RTU line at `--baud`:
@@ -44,9 +44,9 @@ from drivers.sim.plant import LegPlant, default_leg_configs  # noqa: E402
 from procedures import events as ev  # noqa: E402
 from procedures.plans import SweepPlan, onthefly_plan, uniform_targets  # noqa: E402
 from procedures.runner import CallbackSink  # noqa: E402
-from station.config import StationConfig  # noqa: E402
-from station.jobs import run_sweep  # noqa: E402
-from station.wiring import open_rig  # noqa: E402
+from station.services.config import StationConfig  # noqa: E402
+from station.services.jobs import run_sweep  # noqa: E402
+from station.services.wiring import open_rig  # noqa: E402
 
 LASER_BITS_PER_BYTE = 10  # 8N1
 

@@ -28,9 +28,9 @@ from pymodbus.client import ModbusTcpClient  # noqa: E402
 from procedures import events as ev  # noqa: E402
 from procedures.plans import SweepPlan, paper_plan  # noqa: E402
 from procedures.runner import CallbackSink  # noqa: E402
-from station.config import StationConfig  # noqa: E402
-from station.jobs import run_sweep  # noqa: E402
-from station.wiring import open_rig  # noqa: E402
+from station.services.config import StationConfig  # noqa: E402
+from station.services.jobs import run_sweep  # noqa: E402
+from station.services.wiring import open_rig  # noqa: E402
 
 
 def modbus_transactions(rig) -> int:

@@ -34,8 +34,8 @@ from procedures import events as ev  # noqa: E402
 from procedures.plans import paper_plan  # noqa: E402
 from procedures.recording.reader import read_session  # noqa: E402
 from procedures.runner import CallbackSink  # noqa: E402
-from station.config import StationConfig  # noqa: E402
-from station.jobs import run_sweep  # noqa: E402
+from station.services.config import StationConfig  # noqa: E402
+from station.services.jobs import run_sweep  # noqa: E402
 from tests.faults.rigs import faulty_rig  # noqa: E402
 
 TARGETS_PER_PASS = 361

@@ -4,13 +4,13 @@ For each plant seed, on the simulated six-leg rig (real Modbus TCP on 127.0.0.1 
 interferometer on a pty, time scale 0, legs with a real drive's jerk limit: PlantConfig.
 with_leg_motion), each plan in turn on a fresh rig:
 
-1. calibrate: the plan's sweep, recorded to HDF5 (station.jobs.run_sweep, as `station sweep`);
+1. calibrate: the plan's sweep, recorded to HDF5 (station.services.jobs.run_sweep, as `station sweep`);
 2. fit and table: the session's error normalised to 20 degC (as `station fit`), the default
    model (on-the-fly data: the speed-dependent part removed first), `station table`'s table;
-3. push: every leg's table to its drive (station.table_jobs.push_legs_job, as `station push`);
+3. push: every leg's table to its drive (station.services.table_jobs.push_legs_job, as `station push`);
 4. verify: a stop-and-go verification sweep with the tables active, the same plan for every
    calibration plan (41 irregular targets, 5 cycles: ISO 230-2 style, denser than its minimum so
-   a coarse table shows), then residual RMS / noise floor per leg (station.table_jobs.verify_job,
+   a coarse table shows), then residual RMS / noise floor per leg (station.services.table_jobs.verify_job,
    as `station verify`; pass at <= 1.1).
 
 Printed side by side: rig time per leg (calibration sweep / legs, from enabling the first leg
@@ -44,10 +44,10 @@ from procedures.plan_spec import PlanSpec, plan_from_spec  # noqa: E402
 from procedures.plans import iso230_plan  # noqa: E402
 from procedures.recording.reader import read_session  # noqa: E402
 from procedures.table import make_table  # noqa: E402
-from station.config import StationConfig  # noqa: E402
-from station.jobs import run_sweep  # noqa: E402
-from station.table_jobs import push_legs_job, verify_job  # noqa: E402
-from station.wiring import open_rig  # noqa: E402
+from station.services.config import StationConfig  # noqa: E402
+from station.services.jobs import run_sweep  # noqa: E402
+from station.services.table_jobs import push_legs_job, verify_job  # noqa: E402
+from station.services.wiring import open_rig  # noqa: E402
 
 PLANS = ("paper", "iso230", "onthefly", "onthefly-adaptive")
 BAUD = 115200

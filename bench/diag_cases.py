@@ -28,9 +28,9 @@ def _make(out: Path) -> None:
     from drivers.sim.plant import default_leg_configs, systematic_error_um
     from procedures.diagnosis import DiagnosisSettings
     from procedures.diagnosis.selfcheck import Trial, oracle_rms_um
-    from station.commands.diagnose import selfcheck_trial
-    from station.synth import synth_session
-    from station.twins import plant_twin
+    from station.services.selfcheck import selfcheck_trial
+    from station.services.synth import synth_session
+    from station.services.twins import plant_twin
 
     out.mkdir(parents=True, exist_ok=True)
     meta = {}

@@ -192,6 +192,8 @@ class ServoAxis(Protocol):
     `stop()` is a quick stop; it must be safe to call at any time, also after a fault.
     `table_spec()` says what compensation table the drive holds (None: none; then the
     compensation lives elsewhere, see docs/compensation.md), and the table methods use it.
+    `fault_text(code)` is the drive's own description of a fault code (`DriveStatus.fault_code`),
+    e.g. "0x8612 soft_limit: target beyond ...", so a front end shows it without knowing the drive family.
     """
 
     leg: int
@@ -205,6 +207,7 @@ class ServoAxis(Protocol):
     def move_to(self, target_mm: float, timeout_s: float | None = None,
                 velocity_mm_s: float | None = None) -> DriveStatus: ...
     def stop(self) -> None: ...
+    def fault_text(self, code: int) -> str: ...
     # compensation table
     def table_spec(self) -> TableSpec | None: ...
     def read_table(self, bank: int) -> TableBank: ...

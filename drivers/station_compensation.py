@@ -1,7 +1,7 @@
 """Station-side compensation: the station applies a leg's table to every target it commands.
 
 For a leg whose compensation target is `station` (config `[compensation]`, docs/compensation.md)
-`station/wiring.py` wraps the leg's drive in `StationCompensatedAxis`. The wrapper is a
+`station/services/wiring.py` wraps the leg's drive in `StationCompensatedAxis`. The wrapper is a
 `ServoAxis` like any drive, and holds two table banks, the active bank and the enable flag just
 as a drive with a table does, so push, verify, rollback and the audit log (procedures/push.py,
 procedures/verify.py) run through it unchanged. It lives in drivers/ because it *is* a driver
@@ -354,6 +354,9 @@ class StationCompensatedAxis:
 
     def limits(self) -> DriveLimits:
         return self.inner.limits()
+
+    def fault_text(self, code: int) -> str:
+        return self.inner.fault_text(code)
 
     def _report(self, st: DriveStatus, corr_um: float) -> DriveStatus:
         t = self._tables

@@ -26,8 +26,8 @@ Rule: stop when both
 else measure another round, up to the plan's cycles.
 
 Material: the leg's own (`AdaptiveRule.material`: its expansion coefficient and fixed point,
-station.config.StationConfig.material_of, which the session records as
-station_config.leg_materials), given by the job that composes the sweep (station/jobs.py
+station.services.config.StationConfig.material_of, which the session records as
+station_config.leg_materials), given by the job that composes the sweep (station/services/jobs.py
 run_sweep, and the recorded ones on replay); none given = the default material (steel, fixed
 at 0 mm), as `station fit` takes a session that recorded none.
 Why 5 %: the held-out RMS of a model that has converged still wanders by a few percent from

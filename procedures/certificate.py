@@ -4,7 +4,7 @@ reports of the as-found session and, optionally, of the as-left (verification) s
 
 `content(...)` gives a JSON-able dict (the certificate's JSON file); `pdf(content, path)` renders
 it with fpdf2 in DejaVu Sans (µm, °C, ±) when Debian's fonts-dejavu-core is installed, else in
-the core fonts with "um" / "degC". Numbering, revisions and files: station/certificate_jobs.py.
+the core fonts with "um" / "degC". Numbering, revisions and files: station/services/certificate_jobs.py.
 """
 
 from __future__ import annotations

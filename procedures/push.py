@@ -21,7 +21,7 @@ works, real, simulated or replayed. The safe path, for a push and for a rollback
 Compensation targets (docs/compensation.md): the same procedures serve a leg whose table the
 drive holds (target "drive") and a leg whose table the station applies to every command
 (target "station": drivers/station_compensation.py, a ServoAxis with the same two banks, wired
-in station/wiring.py). `compensation_target(axis)` tells them apart; the plan shows it, every
+in station/services/wiring.py). `compensation_target(axis)` tells them apart; the plan shows it, every
 audit entry records it in `details["target"]`, and a rollback only restores a push made to the
 same target.
 

@@ -64,7 +64,7 @@ def sweep(
 
     `materials`: leg -> its material (expansion coefficient, fixed point), which the adaptive
     stopping rule of an on-the-fly plan normalises with (the composing job gives the station
-    config's, station/jobs.py; None = the default material).
+    config's, station/services/jobs.py; None = the default material).
     `warnings`: said (Message, level "warning") right after SweepStarted, e.g. a laser past its
     calibration due date (the session's identity records them too).
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from drivers.errors import DriverError
 from procedures.errors import InputError
-from station import __version__
+from station import __version__, launch
 
 
 def _command_specs() -> dict[str, dict[str, str]]:
@@ -72,12 +72,15 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; its exit code. Ctrl-C at any moment, also while the command's modules
     load (the first fraction of a second), ends with one line and exit code 130."""
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # from here Ctrl-C is a KeyboardInterrupt
+        # while the command's modules load, a Ctrl-C is only recorded (station/launch.py says why)
+        signal.signal(signal.SIGINT, launch.record_interrupt)
     try:
         return _main(argv)
     except KeyboardInterrupt:
         print("station: interrupted", file=sys.stderr)
         return 130
+    finally:
+        launch.forget()
 
 
 def _main(argv: list[str] | None) -> int:
@@ -92,6 +95,11 @@ def _main(argv: list[str] | None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
+    if threading.current_thread() is threading.main_thread():
+        # loaded: a Ctrl-C that came meanwhile ends the command here; from now on one raises
+        signal.signal(signal.SIGINT, launch.interrupt_now)
+    if launch.interrupted():
+        raise KeyboardInterrupt
     try:
         return int(args._run(args) or 0)
     except (InputError, DriverError, FileNotFoundError, PermissionError, IsADirectoryError) as exc:

@@ -17,6 +17,7 @@ import sys
 import threading
 
 from procedures.control import RunControl
+from station import launch
 
 REASON = "interrupted (Ctrl-C)"
 
@@ -50,6 +51,10 @@ def abort_on_sigint(control: RunControl):
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGINT, handler)
+    if launch.interrupted() and not control.aborted:
+        # a Ctrl-C came on the way here (after the modules loaded) and its KeyboardInterrupt was
+        # lost (it landed in a finaliser, say): abort now, before anything moves
+        handler(signal.SIGINT, None)
     try:
         yield control
     finally:

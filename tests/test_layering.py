@@ -69,16 +69,10 @@ def is_command_line(module: str) -> bool:
 
 def test_the_terminal_ui_does_not_import_the_command_line():
     """station/tui and station/commands are two front ends over the same jobs (station/*_jobs.py,
-    station/twins.py, procedures/): the UI imports no command-line module, not even by name
+    station/services/twins.py, procedures/): the UI imports no command-line module, not even by name
     (`importlib.import_module("station.commands...")`). (`station ui`, a command, starts the UI.)"""
-    bad: list[str] = []
-    for path in sorted((REPO / "station" / "tui").rglob("*.py")):
-        module = ".".join(path.relative_to(REPO).with_suffix("").parts)
-        source = path.read_text()
-        names = imported_modules(source, module, with_names=True)
-        names |= {n.value for n in ast.walk(ast.parse(source)) if isinstance(n, ast.Constant) and isinstance(n.value, str)
-                  and n.value.strip() == n.value and " " not in n.value}  # module names given as strings
-        bad += [f"{path.relative_to(REPO)}: imports {m}" for m in sorted(names) if is_command_line(m)]
+    bad = [f"{path.relative_to(REPO)}: imports {m}" for path in sorted((REPO / "station" / "tui").rglob("*.py"))
+           for m in sorted(names_in(path)) if is_command_line(m)]
     assert not bad, "\n".join(bad)
 
 
@@ -98,7 +92,7 @@ def test_the_command_line_check_sees_every_form_of_import():
         assert any(is_command_line(m) for m in names), text
     # ... and not the modules beside it
     assert not any(is_command_line(m) for m in imported_modules(
-        "from station.jobs import replay_sweep\nfrom .common import StationScreen\nimport station.commandsx",
+        "from station.services.jobs import replay_sweep\nfrom .common import StationScreen\nimport station.commandsx",
         "station.tui.screens.sweep", with_names=True))
 
 
@@ -125,3 +119,156 @@ def test_the_audit_sink_is_the_only_writer_of_the_audit_log():
                 if "audit" in owner.lower() or built:
                     bad.append(f"{rel}:{node.lineno}: {ast.unparse(node)[:80]}")
     assert not bad, "\n".join(bad)
+
+
+def is_drivers(module: str) -> bool:
+    return module == "drivers" or module.startswith("drivers.")
+
+
+def names_in(path: Path) -> set[str]:
+    """Every module `path` names: its imports (relative ones made absolute, "M.N" for `from M
+    import N`) and module names given as strings (`importlib.import_module("drivers.x")`)."""
+    module = ".".join(path.relative_to(REPO).with_suffix("").parts)
+    source = path.read_text()
+    names = imported_modules(source, module, with_names=True)
+    names |= {n.value for n in ast.walk(ast.parse(source)) if isinstance(n, ast.Constant) and isinstance(n.value, str)
+              and n.value.strip() == n.value and " " not in n.value}
+    return names
+
+
+def test_front_ends_ask_the_devices_through_services():
+    """station/tui and station/commands import nothing from drivers/: device questions (a fault's
+    text, soft limits, the value types) go through station/services (the ServoAxis interface,
+    services/wiring.py, services/devices.py), so a new drive family leaves the front ends alone."""
+    bad = []
+    for front in ("station/tui", "station/commands"):
+        for path in sorted((REPO / front).rglob("*.py")):
+            bad += [f"{path.relative_to(REPO)}: imports {m}" for m in sorted(names_in(path)) if is_drivers(m)]
+    assert not bad, "\n".join(bad)
+
+
+def test_services_are_plain_python():
+    """station/services is the layer every front end calls: no Textual, no argparse."""
+    def front_end(m: str) -> bool:
+        return m.split(".")[0] in ("textual", "textual_plotext", "argparse") or m.startswith("station.tui") \
+            or m.startswith("station.commands")
+
+    bad = [f"{f}: imports {m}" for f, mods in imports_of("station/services").items() for m in sorted(mods) if front_end(m)]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_front_end_checks_see_every_form_of_import():
+    sources = [
+        ("station.tui.screens.rig", "from drivers.interfaces import DriveLimits"),
+        ("station.commands.sim", "import drivers.sim.rig"),
+        ("station.commands.sim", "from drivers import errors"),
+    ]
+    for module, text in sources:
+        assert any(is_drivers(m) for m in imported_modules(text, module, with_names=True)), text
+    assert not any(is_drivers(m) for m in imported_modules("from station.services.devices import DriveLimits",
+                                                           "station.tui.screens.rig", with_names=True))
+
+
+# -- no import cycle ---------------------------------------------------------------------------------
+CYCLE_PACKAGES = ("station", "procedures", "drivers")
+
+
+def module_graph() -> dict[str, set[str]]:
+    """Module -> the modules of CYCLE_PACKAGES it imports at module level (not inside a function:
+    a deferred import runs after both modules are loaded, and is how a cycle is broken on
+    purpose), `from P import M` counted as an import of P.M when P.M is a module."""
+    files: dict[str, Path] = {}
+    for top in CYCLE_PACKAGES:
+        for path in sorted((REPO / top).rglob("*.py")):
+            parts = path.relative_to(REPO).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            files[name] = path
+    graph: dict[str, set[str]] = {}
+    for name, path in files.items():
+        is_pkg = path.name == "__init__.py"
+        package = name if is_pkg else name.rsplit(".", 1)[0]
+        edges: set[str] = set()
+        tree = ast.parse(path.read_text(), str(path))
+        for node in _module_level(tree.body):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                    mod = f"{base}.{node.module}" if node.module else base
+                else:
+                    mod = node.module or ""
+                targets = [mod] + [f"{mod}.{a.name}" for a in node.names]
+            else:
+                continue
+            for t in targets:
+                # an import of a.b.c runs a/__init__, a/b/__init__ and a/b/c
+                pieces = t.split(".")
+                for i in range(1, len(pieces) + 1):
+                    m = ".".join(pieces[:i])
+                    # a package is loaded before its submodules anyway: no edge to an ancestor
+                    if m in files and m != name and not name.startswith(m + "."):
+                        edges.add(m)
+        graph[name] = edges
+    return graph
+
+
+def _module_level(body):
+    """The statements run when the module is imported: the top level, and inside if/try/with
+    blocks there (not functions or classes' methods; `if TYPE_CHECKING:` is never run)."""
+    for node in body:
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            yield from _module_level(node.orelse)
+            continue
+        yield node
+        for field_name in ("body", "orelse", "finalbody", "handlers"):
+            inner = getattr(node, field_name, None)
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) or not isinstance(inner, list):
+                continue
+            if isinstance(node, ast.ClassDef) and field_name == "body":
+                yield from (n for n in inner if isinstance(n, (ast.Import, ast.ImportFrom)))
+                continue
+            yield from _module_level(inner)
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import cycle of `graph` as [a, b, ..., a], or None."""
+    state: dict[str, int] = {}  # 1 on the path, 2 done
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        path.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return path[path.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        path.pop()
+        state[node] = 2
+        return None
+
+    for start in sorted(graph):
+        if start not in state:
+            found = visit(start)
+            if found:
+                return found
+    return None
+
+
+def test_no_import_cycle():
+    """station/, procedures/ and drivers/ import each other without a cycle (module-level imports):
+    a cycle makes what works depend on which module happens to be imported first."""
+    graph = module_graph()
+    cycle = find_cycle(graph)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+def test_the_cycle_check_finds_a_cycle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": set()}) is None
+    graph = module_graph()
+    assert "procedures.runner" in graph["station.services.jobs"]  # it reads the imports
+    assert "drivers.interfaces" in graph["procedures.sweep"]

@@ -411,6 +411,10 @@ class ModbusServoAxis:
                              f"version {v['map_version']}, the profile {self.profile.path} is for version "
                              f"{self.profile.map_version}.", hint="Use the drive profile that matches the drive's firmware.")
 
+    def fault_text(self, code: int) -> str:
+        """The profile's text of fault `code` (ServoAxis.fault_text)."""
+        return self.profile.fault_text(code)
+
     def limits(self, refresh: bool = False) -> DriveLimits:
         """Soft travel limits and motion limits as the drive reports them (read once, cached);
         a limit the profile maps to no register is the profile's [limits] value."""

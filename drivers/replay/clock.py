@@ -21,7 +21,7 @@ machine is. The wall-clock waits left are the clients' reply timeouts, and on a 
 them may fire for a request the replay devices answer: a timed-out request is asked again (a
 question the recording does not hold: the same reading served twice, or the next recorded fault
 taken for it) or becomes a fault the recording does not have. So on a replay both timeouts are
-long (station.wiring.open_replay_rig), and the interferometer client measures its timeout on a
+long (station.services.wiring.open_replay_rig), and the interferometer client measures its timeout on a
 `TimeoutClock`: the system's monotonic clock, jumping past any reply timeout whenever the
 replay instrument replays a recorded silence, so a recorded time-out still ends at once.
 """

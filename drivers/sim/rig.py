@@ -31,7 +31,7 @@ class SimRig:
     profile: DriveProfile | None = None
     tcp_port: int = 0
     rtu: bool = False
-    laser_offset_um: float = 0.0  # a bias on every laser reading (station.config [sim] laser_offset_um)
+    laser_offset_um: float = 0.0  # a bias on every laser reading (station.services.config [sim] laser_offset_um)
     clock: VirtualClock = field(init=False)
     plants: dict[int, LegPlant] = field(init=False)
     drive_url: str = field(init=False, default="")

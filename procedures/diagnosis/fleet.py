@@ -20,7 +20,7 @@ would be that far off a sibling set this small with less than the two-sided 3-si
 (0.27 %) among all features looked at: the t prediction interval of n siblings (n - 1 degrees
 of freedom, sd x sqrt(1 + 1/n)), Bonferroni over the features (`p_value_all_features`).
 
-Which maps (raw or normalised to 20 degC) is the caller's choice (station/twins.py).
+Which maps (raw or normalised to 20 degC) is the caller's choice (station/services/twins.py).
 """
 
 from __future__ import annotations

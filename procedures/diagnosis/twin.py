@@ -282,7 +282,7 @@ class ExternalTwin(Twin):
     legs: frozenset[int] | None = None
     info: dict = field(default_factory=dict)
     # the same twin on the error normalised to 20 degC (legs whose material temperature it
-    # carries): used for the legs whose recording carries it too (station.diagnosis_jobs)
+    # carries): used for the legs whose recording carries it too (station.services.diagnosis_jobs)
     normalised_twin: "ExternalTwin | None" = None
 
     def predict_um(self, leg: int, x_mm, direction) -> np.ndarray:

@@ -28,7 +28,7 @@ import numpy as np
 from scipy import sparse
 
 from procedures.diagnosis.effects import EFFECTS, TEMP_REF_C, Effect, _se
-from procedures.diagnosis.legdata import LegData, per_pass_line_removed
+from procedures.diagnosis.legdata import LegData
 
 MIN_TEMP_RANGE_VARIANT_K = 0.2  # a reversal or slope per kelvin needs a real temperature change
 WINDUP_GRID_MM = np.geomspace(0.3, 40.0, 48)  # refined by a parabola in log length

@@ -1,5 +1,5 @@
 """One home for the measurement chain's defaults: what a station assumes when its config gives no
-[metrology] or [legs] key (station.config), and what the metrology modules take when a session
+[metrology] or [legs] key (station.services.config), and what the metrology modules take when a session
 recorded none. Standard uncertainties (k = 1) are named `*_U_*`; the laser's stated accuracy is
 expanded (k = 2), as laser makers state it."""
 

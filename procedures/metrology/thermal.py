@@ -43,7 +43,7 @@ class Material:
     """A leg's thermal expansion: `expansion_um_m_k` (um per metre per kelvin, steel 11.5) with
     its standard uncertainty `expansion_u_um_m_k`, and `fixed_point_mm`, the position in the
     station's target_mm coordinate where the leg is fixed, so that its thermal expansion is
-    zero there (docs/metrology.md). The station config's [legs] (station.config.LegMaterial is
+    zero there (docs/metrology.md). The station config's [legs] (station.services.config.LegMaterial is
     this class); a session records every leg's."""
 
     expansion_um_m_k: float = D.EXPANSION_UM_M_K

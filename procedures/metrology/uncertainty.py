@@ -54,7 +54,7 @@ AIR_SENSITIVITY_FALLBACK = {"temp_ppm_per_k": -0.95, "pressure_ppm_per_pa": 0.00
 
 @dataclass(frozen=True)
 class UncertaintyInputs:
-    """The measurement chain's uncertainties (names and units as station.config's [metrology] and
+    """The measurement chain's uncertainties (names and units as station.services.config's [metrology] and
     [legs]). `*_u_*` are standard uncertainties (k = 1); `laser_accuracy_ppm` is the laser's
     stated accuracy, expanded (k = 2). Defaults: the station's config defaults."""
 
@@ -77,7 +77,7 @@ class UncertaintyInputs:
 
     @classmethod
     def from_config(cls, cfg: Any, leg: int) -> "UncertaintyInputs":
-        """From a station.config.StationConfig (its [metrology] and the leg's [legs] material)."""
+        """From a station.services.config.StationConfig (its [metrology] and the leg's [legs] material)."""
         m = getattr(cfg, "metrology", None)
         mat = cfg.material_of(leg) if hasattr(cfg, "material_of") else None
         return cls.from_dicts(asdict(m) if m is not None else {}, asdict(mat) if mat is not None else {})

@@ -102,7 +102,7 @@ def reduction_lines(summary: dict) -> str:
 
 
 def _basis_lines(summary: dict) -> list[str]:
-    """Which error of the recording was used (station.platform_jobs: the compensation's basis)."""
+    """Which error of the recording was used (station.services.platform_jobs: the compensation's basis)."""
     basis = (summary.get("inputs") or {}).get("error_basis")
     if not basis:
         return []

@@ -204,7 +204,7 @@ class Catalog:
 
 
 def catalog_of(cfg) -> Catalog:
-    """The catalog of a station configuration (station.config.StationConfig)."""
+    """The catalog of a station configuration (station.services.config.StationConfig)."""
     c = cfg.catalog
     return Catalog(local=Path(cfg.recordings_dir) / LOCAL_NAME, url=c.url, station_id=cfg.station_id,
                    connect_timeout_s=c.connect_timeout_s)

@@ -23,8 +23,8 @@ from procedures.audit_view import (
     read_audit,
     select,
 )
-from station.commands.push import audit_log
-from station.config import AUDIT_NAME, LEG_COUNT, load_config
+from station.commands._table_cli import audit_log
+from station.services.config import AUDIT_NAME, LEG_COUNT, load_config
 
 NAME = "audit"
 HELP = "show the audit log: every push, verify and rollback, and which table each leg should hold"

@@ -9,7 +9,7 @@ from pathlib import Path
 from procedures.errors import InputError
 from station.catalog import db, files
 from station.catalog.store import Catalog, catalog_of
-from station.config import load_config
+from station.services.config import load_config
 
 NAME = "catalog"
 HELP = "the index of every session, model, table, push, verification and report: rebuild, check, sync"

@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 
 from procedures.recording.reader import read_session
-from station.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
-from station.config import load_config
+from station.services.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
+from station.services.config import load_config
 
 NAME = "certificate"
 HELP = "calibration certificate of a leg (PDF + JSON): report number, as found / as left with U and decisions"
@@ -45,8 +45,8 @@ def run(args) -> int:
     leg = pick_leg(as_found, args.leg)
     leg_sha = None
     if args.table:  # the leg's rows as its drive (or the station) holds them: compared with the as-left table
-        from station.table_jobs import expected_tables  # noqa: PLC0415
-        from station.wiring import leg_table_spec  # noqa: PLC0415
+        from station.services.table_jobs import expected_tables  # noqa: PLC0415
+        from station.services.wiring import leg_table_spec  # noqa: PLC0415
 
         leg_sha = expected_tables(args.table, (leg,), leg_table_spec(cfg, leg))[leg]
     issued = issue_certificate(as_found, leg=leg, as_left=as_left, table=args.table, lab=lab,

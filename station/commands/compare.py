@@ -11,7 +11,7 @@ from procedures import compare as cmp
 from procedures.errors import InputError
 from procedures.atomic import write_bytes_atomic  # never half a file
 from procedures.recording.reader import read_session
-from station.report_jobs import session_decisions
+from station.services.report_jobs import session_decisions
 
 NAME = "compare"
 HELP = "station comparison: sessions of one reference leg from several stations, E_n per target, bias flagged"

@@ -2,10 +2,10 @@
 effect causes it, and how far it shrinks once that effect is added; and `--self-check`, the same
 diagnosis run on simulated sessions with known effects withheld from the twin.
 
-This module is the composition root of the diagnosis: it reads files, takes its twins from
-station/twins.py (which the terminal UI uses too; the simulated plant's own systematic error for
-`--twin sim:...` is made a twin there, so procedures never import the simulator) and makes the
-self-check's sessions with the plant.
+The command reads files and prints; its twins come from station/services/twins.py (which the
+terminal UI uses too; the simulated plant's own systematic error for `--twin sim:...` is made a
+twin there, so procedures never import the simulator), the self-check's sessions from
+station/services/selfcheck.py.
 """
 
 from __future__ import annotations
@@ -13,18 +13,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from procedures.diagnosis import DiagnosisSettings, to_json
-from procedures.diagnosis.selfcheck import Trial, format_self_check, run_self_check
+from procedures.diagnosis.selfcheck import format_self_check, run_self_check
 from procedures.diagnosis.text_report import text_report
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
-from station.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
-from station.twins import load_twin, plant_twin
+from station.services.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
+from station.services.twins import load_twin
+from station.services.selfcheck import SELF_CHECK_CONTRIBUTION_UM, selfcheck_trial
 
 NAME = "diagnose"
 HELP = "diagnose the gap between the twin and a recording (where, which effect, how far)"
@@ -104,7 +102,7 @@ def run(args) -> int:
 
     session = read_session(path)
     twin = load_twin(args.twin, session=session, path=path, catalog=lambda: _catalog_engine(args)) if args.twin else None
-    from station.diagnosis_jobs import diagnose_session
+    from station.services.diagnosis_jobs import diagnose_session
 
     report, temp_lines = diagnose_session(session, path, twin, settings)  # the same as the UI's Diagnosis page
     print(text_report(report))
@@ -117,7 +115,7 @@ def run(args) -> int:
 
 def _catalog_engine(args):
     from station.catalog.store import catalog_of, reading_engine
-    from station.config import load_config
+    from station.services.config import load_config
 
     engine, where = reading_engine(catalog_of(load_config(args.config)), args.local)
     print(where)
@@ -125,138 +123,6 @@ def _catalog_engine(args):
 
 
 # -- self-check -----------------------------------------------------------------------------------
-FITTED_TWIN_EFFECTS = ("backlash", "thermal", "load", "drift")
-SIM_TWIN_EFFECTS = FITTED_TWIN_EFFECTS + ("scale", "cyclic")
-SELF_CHECK_CONTRIBUTION_UM = (0.3, 3.0)  # RMS of a withheld effect against the twin, log-uniform
-BASE_SOURCES = ("lead", "longwave", "wobble", "noise", "run_offset")
-SEPARABLE_MAX_CORRELATION = 0.9  # |correlation| of pass temperature with pass time, else drawn again
-
-
-def _removed(v: np.ndarray, x: np.ndarray, fitted: bool) -> np.ndarray:
-    """What of a contribution the baseline cannot absorb: minus the per-position mean (a twin
-    fitted on the session) or minus the overall mean (an external twin's free zero)."""
-    if not fitted:
-        return v - v.mean()
-    ux, inv = np.unique(x, return_inverse=True)
-    return v - (np.bincount(inv, v) / np.bincount(inv))[inv]
-
-
-def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
-                    contribution_um: tuple[float, float] | None = None) -> Trial:
-    """One self-check session: 1-2 legs of a realistic plant (lead, long-wave, wobble, noise,
-    pass offsets, a material temperature that changes, sometimes varying load) with none, one or
-    two effects present in the plant but withheld from the twin, at a random magnitude (RMS
-    contribution log-uniform in SELF_CHECK_CONTRIBUTION_UM). Odd seeds use the simulated plant
-    as twin, even seeds the twin fitted on the session."""
-    from drivers.sim.plant import default_leg_configs, systematic_error_um
-    from station.synth import synth_session
-
-    rng = np.random.default_rng(10_000 + seed)
-    fitted = seed % 2 == 0
-    eligible = FITTED_TWIN_EFFECTS if fitted else SIM_TWIN_EFFECTS
-    n_legs = int(rng.integers(1, 3))
-    legs = sorted(int(v) for v in rng.choice(np.arange(1, 7), n_legs, replace=False))
-    u = rng.random()
-    n_eff = 0 if u < 0.2 else (1 if u < 0.6 else 2)
-    chosen = [str(e) for e in rng.choice(eligible, n_eff, replace=False)]
-    where = {e: int(rng.choice(legs)) for e in chosen}
-    # irregular targets (ISO 230-2): a regular grid with jitter
-    step = 180.0 / (n_targets - 1)
-    targets = np.linspace(-90, 90, n_targets) + rng.uniform(-0.3, 0.3, n_targets) * step
-    targets[0], targets[-1] = -90.0, 90.0
-    dwell_s = 4.0
-    pass_s = n_targets * (dwell_s + step / 10.0)
-    session_s = 2 * cycles * pass_s
-    lib = default_leg_configs(int(rng.integers(0, 1000)), 6)
-    base = {}
-    for leg in legs:
-        has_load = "load" in [e for e in chosen if where[e] == leg]
-        vary_load = has_load or rng.random() < 0.5
-        loads = tuple(float(v) for v in rng.uniform(0, 500, 2 * cycles + 2)) if vary_load else (0.0,)
-        for _attempt in range(50):
-            cfg = replace(
-                lib[leg - 1], enabled=frozenset(BASE_SOURCES), drift_um_per_h=0.0,
-                # the material temperature changes in every session (a confounder for drift and scale)
-                initial_temp_c=20.0 + float(rng.uniform(-1.0, 1.0)), tau_s=float(rng.uniform(900, 2400)),
-                ambient_swing_k=float(rng.uniform(0.3, 1.0)) * float(rng.choice([-1, 1])),
-                ambient_period_s=float(rng.uniform(0.5, 1.2)) * session_s,
-                load_per_pass_n=loads,
-                # the plant's compliance grows from the bearing up to the nut: with a load effect the
-                # bearing is below the stroke; else it may be at either end (thermal works both ways)
-                bearing_mm=(-1.0 if has_load else float(rng.choice([-1, 1]))) * float(rng.uniform(120, 250)),
-            )
-            # keep thermal and drift separable: the pass temperatures must not follow time linearly
-            trial_pts = synth_session({leg: cfg}, targets, cycles, seed=seed, dwell_s=dwell_s)
-            run = trial_pts["run"]
-            t_pass = np.array([trial_pts["time_s"][run == r].mean() for r in np.unique(run)])
-            temp_pass = np.array([trial_pts["material_temp_c"][run == r].mean() for r in np.unique(run)])
-            if abs(np.corrcoef(t_pass, temp_pass)[0, 1]) <= SEPARABLE_MAX_CORRELATION:
-                break
-        base[leg] = cfg
-    dry = synth_session(base, targets, cycles, seed=seed, dwell_s=dwell_s)
-    truth: dict[int, dict] = {leg: {} for leg in legs}
-    real = dict(base)
-    for eff in chosen:
-        leg = where[eff]
-        sel = dry["leg"] == leg
-        x, t_h = dry["target_mm"][sel], dry["time_s"][sel] / 3600.0
-        temp, load_n = dry["material_temp_c"][sel], dry["load_n"][sel]
-        m = float(np.exp(rng.uniform(*np.log(contribution_um or SELF_CHECK_CONTRIBUTION_UM))))
-        cfg = real[leg]
-        if eff == "backlash":
-            cfg = replace(cfg, reversal_um=2 * m)
-            truth[leg][eff] = {"reversal_um": 2 * m}
-        elif eff == "drift":
-            d = m / float(np.std(_removed(t_h, x, fitted))) * float(rng.choice([-1, 1]))
-            cfg = replace(cfg, drift_um_per_h=d)
-            truth[leg][eff] = {"drift_um_per_h": d}
-        elif eff == "scale":
-            ppm = m / float(np.std(x / 1000.0)) * float(rng.choice([-1, 1]))
-            cfg = replace(cfg, scale_ppm=ppm)
-            truth[leg][eff] = {"scale_ppm": ppm}
-        elif eff == "cyclic":
-            lam = float(rng.uniform(8.0, 38.0))
-            while any(abs(lam - w) < 0.15 * w for w in (cfg.lead_mm, 2 * cfg.lead_mm)):
-                lam = float(rng.uniform(8.0, 38.0))
-            amp = m * np.sqrt(2.0)
-            cfg = replace(cfg, longwave=cfg.longwave + ((lam, amp, float(rng.uniform(0, 2 * np.pi))),))
-            truth[leg][eff] = {"wavelength_mm": lam, "amplitude_um": float(amp)}
-        elif eff == "thermal":
-            e_ppm = float(rng.uniform(8.0, 20.0))
-            unit = systematic_error_um(replace(cfg, expansion_ppm_per_k=e_ppm).only("thermal"), x, 1, temp, 0, 0)
-            k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
-            # scale the temperature excursion (not the steel) to reach the drawn magnitude
-            cfg = replace(cfg, expansion_ppm_per_k=e_ppm, initial_temp_c=20 + k * (cfg.initial_temp_c - 20),
-                          ambient_swing_k=k * cfg.ambient_swing_k, heating_k_per_m=k * cfg.heating_k_per_m)
-            truth[leg][eff] = {"expansion_ppm_per_k": e_ppm}
-        elif eff == "load":
-            cfg = replace(cfg, bearing_compliance_um_per_kn=float(rng.uniform(1.0, 3.0)),
-                          screw_compliance_um_per_kn_per_m=float(rng.uniform(10.0, 20.0)))
-            unit = systematic_error_um(cfg.only("load"), x, 1, 20.0, load_n, 0)
-            k = m / max(float(np.std(_removed(unit, x, fitted))), 1e-9)
-            cfg = replace(cfg, load_per_pass_n=tuple(k * v for v in cfg.load_per_pass_n))
-            truth[leg][eff] = {"compliance_um_per_kn": cfg.compliance_um_per_kn}
-        cfg = replace(cfg, enabled=cfg.enabled | ({"longwave"} if eff == "cyclic" else {eff}))
-        real[leg] = cfg
-    points = synth_session(real, targets, cycles, seed=seed, dwell_s=dwell_s)
-    # the true contribution of the withheld effects at every point
-    true_um = np.zeros(points.size)
-    for leg in legs:
-        sel = points["leg"] == leg
-        p = points[sel]
-        for eff in truth[leg]:
-            cfg = real[leg]
-            if eff == "cyclic":
-                extra = replace(cfg, longwave=cfg.longwave[len(base[leg].longwave):]).only("longwave")
-            else:
-                extra = cfg.only(eff)
-            true_um[sel] += systematic_error_um(extra, p["target_mm"], p["direction"], p["material_temp_c"],
-                                                p["load_n"], p["time_s"])
-    twin = None if fitted else plant_twin(base, "simulated plant without the withheld effects")
-    label = ", ".join(f"{e}@leg{where[e]}" for e in chosen) or "no effect"
-    return Trial(seed, points, twin, truth, true_um, label, {"legs": legs, "targets": n_targets, "cycles": cycles})
-
-
 def _self_check(args, settings: DiagnosisSettings) -> int:
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     if args.variants:
@@ -277,11 +143,11 @@ def _self_check(args, settings: DiagnosisSettings) -> int:
 
 
 def _variant_check(args, settings: DiagnosisSettings, seeds) -> int:
-    """The variants' self-check: --seeds sessions per physics (station/selfcheck_variants.py),
+    """The variants' self-check: --seeds sessions per physics (station/services/selfcheck_variants.py),
     parameters within 15 %, gap within 25 % of the oracle's."""
     from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, format_by_physics,
                                                 summarise_by_physics)
-    from station.selfcheck_variants import variant_trial
+    from station.services.selfcheck_variants import variant_trial
 
     physics = [p.strip() for p in args.variants.split(",") if p.strip()]
     unknown = sorted(set(physics) - set(VARIANT_PHYSICS))

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from procedures.csv_io import export_csv
 from procedures.outputs import check_output_file
-from station.report_jobs import export_lines
+from station.services.report_jobs import export_lines
 
 NAME = "export"
 HELP = "write a session file's points as an interchange CSV"

@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
 from procedures.numbers import NotANumber, finite_float
-from procedures.fit import fit, save_model
+from procedures.fit import save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
-from procedures.metrology.thermal import error_basis
 from procedures.plans import parse_legs
 from procedures.recording.identity import model_identity
 from procedures.recording.reader import read_session
 from procedures.states import Outcome
 from station.catalog.writer import catalog_for, register
-from station.config import load_config
+from station.services.config import load_config
+from station.services.analysis import analyse_session
 
 NAME = "fit"
 HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"
@@ -72,13 +71,12 @@ def run(args) -> int:
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
     legs = parse_legs(args.legs) if args.legs else None
-    points, basis_lines, basis = error_basis(session, args.raw)
-    model = fit(points, args.method, legs=legs, n_params=args.params, lead_mm=args.lead_mm,
-                source={"path": str(session.path), "sha256": session.sha256})
-    model.options["error_basis"] = basis  # `station table` says which error its table holds
+    analysis = analyse_session(session, args.raw, fit_method=args.method,
+                               fit_options={"legs": legs, "n_params": args.params, "lead_mm": args.lead_mm})
+    model = analysis.model
     save_model(model, out, str(session.path), session.sha256, identity=model_identity(session.identity, model.legs))
     register(catalog_for(load_config(args.config)), out, "model")
-    for line in basis_lines:
+    for line in analysis.basis_lines:
         print(line)
     if session.outcome != Outcome.COMPLETED:
         print(f"note: the session's outcome is '{session.outcome}': the model uses the {session.points.size} points recorded")

@@ -7,7 +7,7 @@ import json
 
 from station.catalog.history import history, row_detail, value_with_u
 from station.catalog.store import catalog_of, reading_engine
-from station.config import load_config
+from station.services.config import load_config
 
 NAME = "history"
 HELP = "a leg's history by serial: calibrations (ISO 230-2 with U), tables, pushes, verifications, drift"

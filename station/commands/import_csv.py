@@ -42,10 +42,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def import_limits(legs: str = "1-6", profile: str | None = None) -> PointLimits:
     """The physical ranges of an import: the legs given, the drive profile's soft limits."""
-    from drivers.modbus.profile import DriveProfile
+    from station.services.wiring import drive_soft_limits
 
-    soft = DriveProfile.load(profile).limits
-    return PointLimits(legs=parse_legs(legs), stroke_mm=(soft.soft_min_mm, soft.soft_max_mm))
+    return PointLimits(legs=parse_legs(legs), stroke_mm=drive_soft_limits(profile))
 
 
 def run(args) -> int:

@@ -10,10 +10,10 @@ from procedures.atomic import write_text_atomic
 from procedures.decision import decision_lines
 from procedures.errors import InputError
 from procedures.outputs import check_output_file
-from procedures.iso230 import dumps, evaluate, format_table
-from procedures.metrology.thermal import error_basis
+from procedures.iso230 import dumps, format_table
 from procedures.recording.reader import read_session
-from station.report_jobs import iso_lines, session_decisions
+from station.services.report_jobs import iso_lines, session_decisions
+from station.services.analysis import analyse_session
 
 NAME = "iso230"
 HELP = "ISO 230-2 values (E, M, A, B, R; up, down, both) of each leg in a session file"
@@ -42,15 +42,17 @@ def run(args) -> int:
     session = read_session(Path(args.h5))
     if not len(session.points):
         raise InputError(f"{args.h5}: the session holds no points")
-    points, basis_lines, basis = error_basis(session, args.raw)
-    results = evaluate(points)
+    analysis = analyse_session(session, args.raw, iso=True)
+    if analysis.iso_error is not None:
+        raise analysis.iso_error
+    results, basis_lines, basis = analysis.iso, analysis.basis_lines, analysis.basis
     print(f"{args.h5} (sha256 {session.sha256[:16]}..., outcome {session.outcome})")
     for line in basis_lines:
         print(line)
     print(format_table(results), end="")
     tolerances = None
     if args.config:
-        from station.config import load_config  # noqa: PLC0415 (only with --config)
+        from station.services.config import load_config  # noqa: PLC0415 (only with --config)
 
         tolerances = {k: t.to_json() for k, t in load_config(args.config).tolerances.items()}
     # the report's values, each with its U (as station report), and their decisions

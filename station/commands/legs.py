@@ -10,7 +10,7 @@ from dataclasses import asdict
 from procedures.errors import InputError
 from station.catalog.history import legs
 from station.catalog.store import catalog_of, reading_engine
-from station.config import load_config
+from station.services.config import load_config
 
 NAME = "legs"
 HELP = "list legs by serial with last calibration and due date (filters: type, station, dates, due)"

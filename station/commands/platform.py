@@ -2,7 +2,7 @@
 
 The seed paper's Section 4 experiment (procedures.platform.experiment) on a session file or a
 fitted model, written as a Markdown + JSON report (the paper's Tables 1 and 2) and histograms
-(its Figs. 9 and 10). Loading the inputs and writing the report live in station/platform_jobs.py,
+(its Figs. 9 and 10). Loading the inputs and writing the report live in station/services/platform_jobs.py,
 which the terminal UI's Platform page uses too.
 """
 
@@ -13,7 +13,7 @@ import math
 
 from procedures.errors import InputError
 from procedures.outputs import check_output_folder
-from station.platform_jobs import load_errors, write_report
+from station.services.platform_jobs import load_errors, write_report
 
 NAME = "platform"
 HELP = "pose errors of the platform from leg errors, before and after compensation (paper's Table 2)"

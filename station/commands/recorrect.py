@@ -9,7 +9,7 @@ from procedures.outputs import check_output_file
 
 from procedures.metrology.air import EQUATIONS
 from procedures.metrology.recorrect import RecorrectOptions, recorrect_session
-from station.config import load_config
+from station.services.config import load_config
 
 NAME = "recorrect"
 HELP = "re-correct a session's laser readings for the air refractive index (Ciddor/Edlen) into a new file"

@@ -14,8 +14,8 @@ from pathlib import Path
 from procedures.errors import InputError
 from procedures.recording.reader import read_session
 from procedures.replay_compare import Comparison, compare_sessions  # noqa: F401  (re-exported)
-from station import jobs
-from station.jobs import ReplayRecorderSink, replay_sweep, retry_policy_of  # noqa: F401  (re-exported)
+from station.services import jobs
+from station.services.jobs import ReplayRecorderSink, replay_sweep, retry_policy_of  # noqa: F401  (re-exported)
 
 NAME = "replay"
 HELP = "replay a recorded session through the same drivers and record it again (--speed 1|N|max)"
@@ -29,7 +29,7 @@ DESCRIPTION = (
 
 
 def parse_speed(text: str) -> float | None:
-    """station.jobs.parse_speed for argparse: its message as an ArgumentTypeError."""
+    """station.services.jobs.parse_speed for argparse: its message as an ArgumentTypeError."""
     try:
         return jobs.parse_speed(text)
     except InputError as exc:
@@ -48,9 +48,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from procedures.outputs import check_output_file
-    from station.config import load_config
+    from station.services.config import load_config
     from station.progress import ConsoleProgress
-    from station.wiring import open_replay_rig
+    from station.services.jobs import replay_and_compare
 
     source = Path(args.session)
     session = read_session(source)
@@ -65,13 +65,12 @@ def run(args) -> int:
     print(f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) {pace}")
     if args.force and out.exists():
         out.unlink()  # --force: the new replay session replaces it
-    with open_replay_rig(source, args.speed, cfg) as rig:
-        result = replay_sweep(rig, session, out, cfg, sinks=[ConsoleProgress()])
-        mismatch = rig.sim.mismatch
+    ended = replay_and_compare(source, session, out, cfg, args.speed, sinks=[ConsoleProgress()])
+    result = ended.result
     print(f"session: {out} ({result.outcome}, {result.points} points; rig replay)")
-    if mismatch is not None:
-        raise mismatch
-    cmp = compare_sessions(session, read_session(out))
+    if ended.mismatch is not None:
+        raise ended.mismatch
+    cmp = ended.comparison
     if cmp.identical:
         print(f"identical to the recording: {cmp.points} points (all fields), {cmp.faults} faults, outcome {result.outcome}")
         print(f"next: station fit {out} --out model.json   (gives the model of {source})")

@@ -10,8 +10,8 @@ from procedures.outputs import check_output_folder
 from procedures.recording.reader import read_session
 from station.catalog.writer import catalog_for
 from station.commands.fit import _lead
-from station.config import load_config
-from station.report_jobs import report_lines, session_report
+from station.services.config import load_config
+from station.services.report_jobs import report_lines, session_report
 
 NAME = "report"
 HELP = "plots, a summary before/after compensation and the ISO 230-2 test report with uncertainties (Markdown, JSON, PDF)"

@@ -9,7 +9,7 @@ from procedures.errors import InputError
 from procedures.push import describe_table
 from procedures.states import Action
 from station.catalog.writer import catalog_for
-from station.commands.push import (
+from station.commands._table_cli import (
     PlanPrinter,
     add_drive_arguments,
     audit_log,
@@ -20,9 +20,9 @@ from station.commands.push import (
     station_config,
     warn_audit_problems,
 )
-from station.config import LEG_COUNT
-from station.table_jobs import controller_refusal, rollback_job, target_text
-from station.wiring import open_drive
+from station.services.config import LEG_COUNT
+from station.services.table_jobs import controller_refusal, rollback_job, target_text
+from station.services.wiring import open_drive
 
 NAME = "rollback"
 HELP = "restore the table a drive had before the last successful push (from the audit log)"

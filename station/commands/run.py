@@ -8,19 +8,19 @@ non-interactive main job; `station` with no arguments starts the terminal UI.
 from __future__ import annotations
 
 import argparse
-import time
 
 from procedures.plan_spec import PlanSpec, plan_from_spec
 from procedures.outputs import check_output_file
 from procedures.plans import parse_legs
 from station.commands.sweep import check_time_scale
-from station.config import load_config
-from station.jobs import run_sweep
+from station.services.config import load_config
+from station.services.jobs import run_sweep
+from station.services.sessions import default_session_path
 from procedures.control import RunControl
 from procedures.states import Outcome
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
-from station.wiring import open_rig
+from station.services.wiring import open_rig
 
 NAME = "run"
 HELP = "headless calibration sweep on the simulated rig, then its ISO 230-2 evaluation"
@@ -37,8 +37,7 @@ def run(args) -> int:
     cfg = load_config(None)
     plan = plan_from_spec(PlanSpec(legs=parse_legs(args.legs), kind="iso230", cycles=args.cycles), cfg.limits)
     check_time_scale(args.time_scale)
-    out = check_output_file(args.out or f"{cfg.recordings_dir}/run-{time.strftime('%Y%m%d-%H%M%S')}.h5",
-                            suffixes=(".h5",), make_parents=True)
+    out = check_output_file(args.out or default_session_path(cfg, prefix="run"), suffixes=(".h5",), make_parents=True)
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:
@@ -50,7 +49,7 @@ def run(args) -> int:
     from procedures.recording.reader import read_session
 
     from procedures.metrology.thermal import error_basis
-    from station.report_jobs import iso_lines, session_iso230
+    from station.services.report_jobs import iso_lines, session_iso230
 
     session = read_session(out)
     points, basis_lines, _ = error_basis(session, False)  # as station iso230 / fit: normalised to 20 degC

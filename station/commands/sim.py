@@ -7,8 +7,8 @@ import signal
 import threading
 from pathlib import Path
 
-from drivers.sim.rig import SimRig
-from station.config import SimConfig
+from station.services.config import SimConfig
+from station.services.wiring import start_sim_rig
 
 NAME = "sim"
 HELP = "start the simulated rig (Modbus drives + serial interferometer) and print where to reach it"
@@ -24,10 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     sim_cfg = SimConfig(seed=args.seed)  # the station's simulated legs: a real leg's jerk limit
-    rig = SimRig(time_scale=args.time_scale, seed=args.seed, tcp_port=args.port, rtu=args.rtu,
-                 nv_path=Path(args.nv) if args.nv else None, configs=sim_cfg.leg_configs())
     try:
-        rig.start()
+        rig = start_sim_rig(sim_cfg, args.time_scale, args.port, args.rtu, Path(args.nv) if args.nv else None)
     except OSError as exc:
         print(f"station sim: error: cannot listen on 127.0.0.1:{args.port} ({exc.strerror}); try --port 0")
         return 2

@@ -11,16 +11,16 @@ from procedures.errors import InputError
 from procedures.outputs import check_appendable, check_output_file
 from procedures.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
 from procedures.plans import parse_legs, SweepPlan
-from station.config import load_config
-from station.identity import leg_fields
-from station.serials import parse_serial_args
-from station.jobs import resumable_plan, run_sweep
+from station.services.config import load_config
+from station.services.identity import leg_fields
+from station.services.serials import parse_serial_args
+from station.services.jobs import resumable_plan, run_sweep
 from procedures.control import RunControl
 from procedures.states import Outcome
 from station import interrupt
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
-from station.wiring import open_rig
+from station.services.wiring import open_rig
 
 NAME = "sweep"
 HELP = "run a calibration sweep (ISO 230-2, the paper's, or on the fly) and record it to HDF5"

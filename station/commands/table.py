@@ -17,8 +17,8 @@ from procedures.outputs import check_output_file
 from procedures.plausibility import check_correction, settle
 from procedures.table import make_table, write_table_csv
 from station.catalog.writer import catalog_for, register
-from station.config import load_config
-from station.wiring import drive_table_spec
+from station.services.config import load_config
+from station.services.wiring import drive_table_spec
 
 NAME = "table"
 HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"
@@ -105,9 +105,9 @@ def run(args) -> int:
     else:
         limits = drive_table_spec(args.profile)
         if limits is None:  # a drive without a table: the CSV is for the station's own table (target station)
-            from drivers.station_compensation import station_table_spec
+            from station.services.wiring import station_store_table_spec
 
-            limits = station_table_spec("[compensation] tables_path")
+            limits = station_store_table_spec("[compensation] tables_path")
             print(f"note: the drive of {args.profile} holds no compensation table; the table is checked for the "
                   "station's table store (compensation target station, docs/compensation.md); for the "
                   "controller use --format linuxcnc")

@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 
 from procedures.errors import InputError
-from station.config import load_config
+from station.services.config import load_config
 
 NAME = "ui"
 HELP = "the terminal UI: rig status, sweeps, results, compensation, replay, diagnosis"

@@ -18,12 +18,12 @@ from procedures.plans import SweepPlan, iso230_plan
 from procedures.recording.reader import read_session
 from procedures.states import Action, AuditOutcome
 from procedures.verify import ACCEPT_RATIO
-from station.commands.push import audit_log, parse_leg_choice, station_config
+from station.commands._table_cli import audit_log, parse_leg_choice, station_config
 from station.commands.sweep import check_time_scale
 from station.progress import ConsoleProgress
-from station.report_jobs import session_decisions
-from station.table_jobs import controller_refusal, expected_tables, refusal_job, target_text, verify_job
-from station.wiring import drive_url_of, leg_table_spec, open_rig
+from station.services.report_jobs import session_decisions
+from station.services.table_jobs import controller_refusal, expected_tables, refusal_job, target_text, verify_job
+from station.services.wiring import drive_url_of, leg_table_spec, open_rig
 
 NAME = "verify"
 HELP = "verification sweep with the table active: compensated error and ISO 230-2 before vs after"

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from station.catalog import db
 from station.catalog.store import LOCAL_NAME
-from station.config import load_config
+from station.services.config import load_config
 
 NAME = "web"
 HELP = "the fleet web view: legs, a leg's history, control charts, station comparison (read-only)"

@@ -19,10 +19,8 @@ events (`SweepState.apply`).
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -31,12 +29,24 @@ from textual.app import App
 from textual.binding import Binding
 from textual.message import Message
 
-from drivers.errors import DriveFault
 from procedures.control import RunControl
 from procedures.plan_spec import PlanSpec
 from procedures.plans import SweepPlan
 from procedures.states import AuditOutcome
-from station.config import StationConfig
+from station.services.config import StationConfig
+from station.services.rig_session import (
+    JOB_LOCK_WAIT_S,
+    ActionRefused,
+    MoveRequest,
+    MoveStopped,
+    RigBusy,
+    RigSession,
+    checked_move,
+    close_quietly,
+    holding_rig,
+    rig_action,
+)
+from station.services.sessions import replay_output_path
 from station.tui.bridge import SweepEnded, SweepEvent, TuiBridge
 from station.tui.errors import describe
 from station.tui.messages import (
@@ -65,33 +75,6 @@ log = logging.getLogger("station.tui")
 ALL_LEGS = (1, 2, 3, 4, 5, 6)
 # How long quitting waits for an aborted sweep to stop the drives and close its recording.
 QUIT_WAIT_S = 15.0
-# A move or jog from the Rig page without a speed typed in runs at this fraction of the drive's
-# maximum velocity (DriveLimits.max_velocity_mm_s).
-JOG_SPEED_FRACTION = 0.25
-# Drive states a move is refused in, as the refusal names them (fault is refused separately).
-_NOT_ENABLED_TEXT = {
-    "switch_on_disabled": "disabled",
-    "ready_to_switch_on": "switched off (ready to switch on)",
-    "switched_on": "switched on but not enabled",
-    "quick_stop_active": "quick-stopped",
-    "not_ready": "not ready",
-}
-
-
-@dataclass(frozen=True)
-class MoveRequest:
-    """What a "move" rig action does: go to `target_mm`, or by `step_mm` from where the leg is
-    (a jog), at `speed_mm_s` (None: JOG_SPEED_FRACTION of the drive's maximum velocity; more than
-    the maximum is limited to it)."""
-
-    target_mm: float | None = None
-    step_mm: float | None = None
-    speed_mm_s: float | None = None
-
-    def describe(self) -> str:
-        where = f"to {self.target_mm:+.3f} mm" if self.step_mm is None else f"by {self.step_mm:+g} mm"
-        speed = f"{self.speed_mm_s:g} mm/s" if self.speed_mm_s else "the default speed"
-        return f"{where} at {speed}"
 
 
 class RigMoveDone(Message):
@@ -132,6 +115,7 @@ class StationApp(App):
         "history": HistoryScreen,
     }
     DEFAULT_MODE = "rig"
+    SESSION = RigSession  # the rig session's class (tests record its assignments)
     # The screens are told of sweep changes at most this often (s): a fast sweep folds many
     # events in between, and one redraw shows them all.
     SWEEP_REDRAW_S = 0.1
@@ -171,14 +155,9 @@ class StationApp(App):
         self.autoconnect = autoconnect
         self.hide_volatile = hide_volatile
         self.poll_interval_s = poll_interval_s
-        # Assigned on the app's thread only (see the module docstring).
-        self.rig = None  # station.wiring.Rig once connected
-        self.rig_state = "not connected"  # "connecting" / "connected" / "not connected"
-        self.rig_error = ""
-        self.rig_lock = threading.Lock()
-        self.rig_motion: dict[int, MoveRequest] = {}  # leg -> the move/jog under way (Rig page)
-        self.rig_motion_text = ""  # how the last move/jog ended, for the Rig page
-        self._connect_attempt = 0  # numbers the connect requests: only the newest one's rig is kept
+        # Assigned on the app's thread only (see the module docstring): the rig connection, its
+        # lock, the move under way (station.services.rig_session).
+        self.session = self.SESSION(self.cfg, self.legs, time_scale)
         self.sweep = SweepState()
         self.sweep_control: RunControl | None = None
         self._sweep_idle = threading.Event()  # set by the job's worker when it has returned
@@ -193,6 +172,36 @@ class StationApp(App):
         self.last_session: Path | None = None  # the newest recording made or opened here
         self.analysis = None  # results.Analysis: the session, model and ISO figures on show (Compensation, Platform use it)
         self.session_listeners: list[Callable[[Path], None]] = []
+
+    # -- the rig session's state, as the screens read it ----------------------------------------
+    @property
+    def rig(self):
+        """station.services.wiring.Rig once connected, else None."""
+        return self.session.rig
+
+    @rig.setter
+    def rig(self, rig) -> None:
+        self.session.rig = rig
+
+    @property
+    def rig_state(self) -> str:
+        return self.session.state  # "connecting" / "connected" / "not connected"
+
+    @property
+    def rig_error(self) -> str:
+        return self.session.error
+
+    @property
+    def rig_lock(self) -> threading.Lock:
+        return self.session.lock
+
+    @property
+    def rig_motion(self) -> dict[int, MoveRequest]:
+        return self.session.motion  # leg -> the move/jog under way (Rig page)
+
+    @property
+    def rig_motion_text(self) -> str:
+        return self.session.motion_text  # how the last move/jog ended, for the Rig page
 
     # -- lifecycle -------------------------------------------------------------------------
     def on_mount(self) -> None:
@@ -209,11 +218,7 @@ class StationApp(App):
         if self.sweep_control is not None and not self._sweep_idle.is_set():
             self.sweep_control.abort("the station UI closed")
             self._sweep_idle.wait(QUIT_WAIT_S)
-        self._close_rig()
-
-    def _close_rig(self) -> None:
-        rig, self.rig = self.rig, None
-        _close_quietly(rig, "closing the rig failed")
+        self.session.close()
 
     # -- notifications -----------------------------------------------------------------------
     def on_notice(self, message: Notice) -> None:
@@ -257,56 +262,43 @@ class StationApp(App):
     def connect_rig(self) -> None:
         """(Re)connect. The current rig is detached here, on the app's thread, so `app.rig` never
         names a rig that is being closed; the worker closes it, then opens the new one."""
-        old, self.rig = self.rig, None
-        self._connect_attempt += 1
-        self.rig_state, self.rig_error = "connecting", ""
+        old, attempt = self.session.detach()
         self._rig_changed()
-        self._connect_worker(old, self._connect_attempt, self.rig_lock)
+        self._connect_worker(old, attempt, self.session.lock)
 
     @work(thread=True, group="connect", exit_on_error=False)
     def _connect_worker(self, old, attempt: int, lock: threading.Lock) -> None:
-        from station.wiring import open_rig  # imported here: a missing driver is a notice, not a crash
-
-        with lock:  # a poll or an action still using the old rig finishes first
-            _close_quietly(old, "closing the previous rig failed")
-            try:
-                rig = open_rig(self.cfg, legs=self.legs, time_scale=self.time_scale)
-            except Exception as exc:
-                self.post_message(RigConnectFailed(describe(exc, "cannot connect to the rig"), attempt))
-                return
+        try:  # a poll or an action still using the old rig finishes first (the session takes the lock)
+            rig = self.session.open_rig_for(old, lock)
+        except Exception as exc:
+            self.post_message(RigConnectFailed(describe(exc, "cannot connect to the rig"), attempt))
+            return
         self.post_message(RigConnected(rig, attempt))
 
     def on_rig_connected(self, message: RigConnected) -> None:
-        if message.attempt != self._connect_attempt:  # a newer connect request is under way
+        if not self.session.accept(message.rig, message.attempt):  # a newer connect request is under way
             self._close_worker(message.rig)
             return
-        self.rig = message.rig
-        self.rig_state, self.rig_error = "connected", ""
         self.notify(f"Connected: {self._rig_kind_text()}.", timeout=4)
         self._rig_changed()
 
     def on_rig_connect_failed(self, message: RigConnectFailed) -> None:
-        if message.attempt != self._connect_attempt:
+        if not self.session.fail(message.error, message.attempt):
             return
-        self.rig_state, self.rig_error = "not connected", message.error
         self.notify(message.error + " Press c on the Rig screen (F1) to retry.", title="Rig",
                     severity="error", timeout=15)
         self._rig_changed()
 
     @work(thread=True, group="connect", exit_on_error=False)
     def _close_worker(self, rig) -> None:
-        _close_quietly(rig, "closing a superseded rig failed")
+        close_quietly(rig, "closing a superseded rig failed")
 
     def _rig_changed(self) -> None:
         """Tell the screens on show that the connection changed (the others redraw when shown)."""
         self._tell_screens(RigStateChanged)
 
     def _rig_kind_text(self) -> str:
-        if self.rig is None:
-            return "no rig"
-        if self.hide_volatile:
-            return {"sim": "simulated rig", "live": "live rig", "replay": "replayed session"}.get(self.rig.kind, self.rig.kind)
-        return self.rig.description
+        return self.session.kind_text(self.hide_volatile)
 
     # -- rig actions (enable, disable, home, reset, stop, move) ----------------------------------
     def rig_action(self, action: str, legs: tuple[int, ...], move: MoveRequest | None = None) -> bool:
@@ -314,7 +306,7 @@ class StationApp(App):
         holds the rig (except "stop", which always goes through and quick-stops a move too).
         "move" takes one leg and `move` (where to, how fast); it is refused while another move
         runs, and the worker refuses it on a leg in fault or not enabled, or beyond the drive's
-        soft limits, before anything moves (`_move_axis`)."""
+        soft limits, before anything moves (station.services.rig_session.move_axis)."""
         if self.rig is None:
             self.notify("Not connected to the rig: press c on the Rig screen to connect.", severity="warning")
             return False
@@ -325,13 +317,11 @@ class StationApp(App):
         if action == "move":
             if move is None or len(legs) != 1:
                 raise ValueError("a move is one leg's, with its MoveRequest")
-            if self.rig_motion:
-                leg, running = next(iter(self.rig_motion.items()))
-                self.notify(f"Leg {leg} is still moving ({running.describe()}): wait for it, or stop it (x).",
-                            title=f"move leg {legs[0]}", severity="warning")
+            refusal = self.session.move_refusal()
+            if refusal:
+                self.notify(refusal, title=f"move leg {legs[0]}", severity="warning")
                 return False
-            self.rig_motion[legs[0]] = move
-            self.rig_motion_text = ""
+            self.session.begin_move(legs[0], move)
             self._rig_changed()
         self._rig_action_worker(self.rig, self.rig_lock, action, legs, move)
         return True
@@ -342,57 +332,25 @@ class StationApp(App):
         if action == "move":
             self._move_worker_body(rig, lock, legs[0], move)
             return
-        locked = False
-        if action != "stop":  # a stop must never wait behind another transaction
-            locked = lock.acquire(timeout=5.0)
-            if not locked:
-                self.post_message(RigActionDone(action, legs, "the rig is busy (another action is running); try again"))
-                return
         try:
-            for leg in legs:
-                axis = rig.axes[leg]
-                if action == "enable":
-                    if axis.status().fault:
-                        raise _ActionRefused(f"leg {leg} is in fault: reset the fault (r) first")
-                    axis.enable()
-                elif action == "disable":
-                    axis.disable()
-                elif action == "home":  # the reference is mid-stroke, 0 mm
-                    if not axis.status().enabled:
-                        axis.enable()
-                    axis.move_to(0.0)
-                elif action == "reset":
-                    axis.reset_fault()
-                elif action == "stop":
-                    axis.stop()
-                else:
-                    raise _ActionRefused(f"unknown action {action!r}")
-        except _ActionRefused as exc:
+            rig_action(rig, lock, action, legs)
+        except ActionRefused as exc:
             self.post_message(RigActionDone(action, legs, str(exc)))
             return
         except Exception as exc:
             self.post_message(RigActionDone(action, legs, describe(exc, f"{action} failed")))
             return
-        finally:
-            if locked:
-                lock.release()
         self.post_message(RigActionDone(action, legs))
 
     def _move_worker_body(self, rig, lock: threading.Lock, leg: int, move: MoveRequest) -> None:
         """The "move" action, on the rig-action worker: always ends with one RigMoveDone."""
         done = RigMoveDone(leg, "the move stopped before it began (see the log)")
         try:
-            if not lock.acquire(timeout=5.0):
-                done = RigMoveDone(leg, "the rig is busy (another action is running); try again")
-                return
-            try:
-                position, speed = _move_axis(rig.axes[leg], leg, move)
-                done = RigMoveDone(leg, position_mm=position, speed_mm_s=speed)
-            finally:
-                lock.release()
-        except _MoveStopped as exc:
+            position, speed = checked_move(rig, lock, leg, move)
+            done = RigMoveDone(leg, position_mm=position, speed_mm_s=speed)
+        except MoveStopped as exc:
             done = RigMoveDone(leg, str(exc), stopped=True)
-        except _ActionRefused as exc:
+        except ActionRefused as exc:
             done = RigMoveDone(leg, str(exc))
         except Exception as exc:
             done = RigMoveDone(leg, describe(exc, f"move of leg {leg} failed"))
@@ -414,14 +372,13 @@ class StationApp(App):
             self._unnotify(notification)
 
     def on_rig_move_done(self, message: RigMoveDone) -> None:
-        self.rig_motion.pop(message.leg, None)
         if message.error:
-            self.rig_motion_text = message.error
+            self.session.end_move(message.leg, message.error)
             self.notify(message.error, title=f"move leg {message.leg}",
                         severity="warning" if message.stopped else "error", timeout=12)
         else:
-            self.rig_motion_text = (f"leg {message.leg} at {message.position_mm:+.4f} mm "
-                                    f"(moved at {message.speed_mm_s:g} mm/s)")
+            self.session.end_move(message.leg, f"leg {message.leg} at {message.position_mm:+.4f} mm "
+                                               f"(moved at {message.speed_mm_s:g} mm/s)")
             self.notify(f"move: {self.rig_motion_text}.", timeout=3)
         self._rig_changed()
 
@@ -429,8 +386,8 @@ class StationApp(App):
     def start_sweep(self, plan: SweepPlan | PlanSpec, out: Path, label: str = "sweep",
                     on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None,
                     resume: bool = False, serials: dict | None = None) -> bool:
-        """Start `plan`, recording to `out`, through station.jobs.run_sweep (the CLI's runner), or
-        through `job(rig, sinks, control)` (a job of station.table_jobs, e.g. a verification,
+        """Start `plan`, recording to `out`, through station.services.jobs.run_sweep (the CLI's runner), or
+        through `job(rig, sinks, control)` (a job of station.services.table_jobs, e.g. a verification,
         returning a JobOutcome). `label` names the job on screen ("sweep", "verification of leg
         2"); `on_done(state)` is called on the app's thread when it has ended (whatever the
         outcome), with the job's outcome in `state.result`. `resume`: `out` is an unfinished
@@ -441,22 +398,12 @@ class StationApp(App):
         if self.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
             return False
-        if self.rig is None:
-            self.notify("Not connected to the rig: go to the Rig screen (F1) and press c to connect.",
-                        severity="error", timeout=10)
+        what, refusal = self.session.job_refusal(plan.legs, out, resume)
+        if what == "out":
+            self.notify(refusal, severity="error")
             return False
-        missing = [leg for leg in plan.legs if leg not in self.rig.axes]
-        if missing:
-            self.notify(f"No drive connected for leg(s) {missing}; connected: {sorted(self.rig.axes)}.",
-                        severity="error", timeout=10)
-            return False
-        if self.rig_motion:
-            leg = next(iter(self.rig_motion))
-            self.notify(f"Leg {leg} is still moving (Rig page): wait for it, or stop it (x), first.",
-                        severity="warning", timeout=10)
-            return False
-        if out.exists() and not resume:
-            self.notify(f"{out} exists already; choose another file name.", severity="error")
+        if refusal:
+            self.notify(refusal, severity="warning" if what == "motion" else "error", timeout=10)
             return False
         if isinstance(plan, PlanSpec):  # sized, not built, on the app's thread
             from procedures.plan_size import plan_size
@@ -468,16 +415,16 @@ class StationApp(App):
         if resume:
             _show_recorded_points(state, out)
         run = self._begin_run(state, on_done)
-        self._sweep_worker(run, self.rig, self.rig_lock, plan, out, self.sweep_control, self._sweep_idle, job,
+        self._sweep_worker(run, self.rig, self.session.lock, plan, out, self.sweep_control, self._sweep_idle, job,
                            resume, serials)
         return True
 
     def resume_sweep(self, path: Path) -> bool:
         """Finish the aborted (or failed) session `path`: its own plan, appended to the same
-        file, by the job `station sweep --resume` runs (station.jobs.resumable_plan, then
+        file, by the job `station sweep --resume` runs (station.services.jobs.resumable_plan, then
         run_sweep(resume=True)). Refusals (a complete or imported file, a sweep running, no rig)
         are notifications; True if it started."""
-        from station.jobs import resumable_plan
+        from station.services.jobs import resumable_plan
 
         path = Path(path).expanduser()
         if self.sweep.active:
@@ -508,14 +455,12 @@ class StationApp(App):
     def _sweep_worker(self, run: int, rig, lock: threading.Lock, plan: SweepPlan, out: Path, control: RunControl,
                       idle: threading.Event, job: Callable | None = None, resume: bool = False,
                       serials: dict | None = None) -> None:
-        from station.jobs import run_sweep
+        from station.services.jobs import run_sweep
 
         outcome, points, error, ended = "error", 0, "", None
         try:
-            if not lock.acquire(timeout=10.0):
-                error = "the rig stayed busy for 10 s (a rig action is still running); try again"
-                return
-            try:
+            with holding_rig(lock, JOB_LOCK_WAIT_S, "the rig stayed busy for 10 s (a rig action is still running); "
+                                                    "try again"):
                 if isinstance(plan, PlanSpec):
                     from procedures.plan_size import build_abortable
 
@@ -532,8 +477,8 @@ class StationApp(App):
                     if ended.outcome == AuditOutcome.REFUSED:  # nothing moved: say why, as the CLI does
                         error = ended.finished.message
                 outcome, points = result.outcome, result.points
-            finally:
-                lock.release()
+        except RigBusy as exc:
+            error = str(exc)
         except Exception as exc:  # the runner has already stopped the drives in its finally
             error = describe(exc, "the sweep stopped")
         finally:
@@ -541,7 +486,7 @@ class StationApp(App):
             self.post_message(SweepEnded(outcome, points, error, result=ended, run=run))
 
     def start_replay(self, source: Path, speed: float | None) -> bool:
-        """Replay `source` through the replay devices and the sweep procedure (station.jobs.
+        """Replay `source` through the replay devices and the sweep procedure (station.services.jobs.
         replay_sweep, the job `station replay` runs), recording a new session; shown on the Sweep screen.
         `speed`: None = as fast as possible, 1 = real time, N = N times faster."""
         if self.sweep.active:
@@ -558,22 +503,19 @@ class StationApp(App):
         outcome, points, error, note = "error", 0, "", ""
         try:
             from procedures.recording.reader import read_session
-            from procedures.replay_compare import compare_sessions
-            from station.jobs import replay_sweep
-            from station.wiring import open_replay_rig
+            from station.services.jobs import replay_and_compare
 
             session = read_session(source)
             if not session.plan:
                 raise ValueError(f"{source.name}: the session stores no sweep plan, so there is nothing to replay")
-            with open_replay_rig(source, speed, self.cfg) as rig:
-                self.post_message(ReplayRigOpened(rig))  # the app keeps it as replay_rig (tests look at its devices)
-                result = replay_sweep(rig, session, out, self.cfg, sinks=[TuiBridge(self, run)], control=control)
-                mismatch = rig.sim.mismatch
-            outcome, points = result.outcome, result.points
-            if mismatch is not None:
-                error = describe(mismatch, "the replay met a request the recording does not hold")
-            elif not control.aborted:
-                cmp = compare_sessions(session, read_session(out))
+            # the app keeps the replay rig as replay_rig (tests look at its devices)
+            ended = replay_and_compare(source, session, out, self.cfg, speed, sinks=[TuiBridge(self, run)],
+                                       control=control, on_rig_opened=lambda rig: self.post_message(ReplayRigOpened(rig)))
+            outcome, points = ended.result.outcome, ended.result.points
+            if ended.mismatch is not None:
+                error = describe(ended.mismatch, "the replay met a request the recording does not hold")
+            elif ended.comparison is not None:
+                cmp = ended.comparison
                 note = ("identical to the recording" if cmp.identical
                         else "differs from the recording: " + "; ".join(cmp.differences[:2]))
         except Exception as exc:
@@ -730,53 +672,6 @@ class StationApp(App):
         self.exit()
 
 
-class _ActionRefused(Exception):
-    pass
-
-
-class _MoveStopped(Exception):
-    """A move was quick-stopped on its way (the message says where)."""
-
-
-def _move_axis(axis, leg: int, move: MoveRequest) -> tuple[float, float]:
-    """Check, then move one leg as `move` asks; (position reached mm, speed mm/s). Before any
-    motion, _ActionRefused with what to do for a leg in fault or not enabled, or a target beyond
-    the drive's soft limits (the driver would refuse it too, with SoftLimitError); _MoveStopped
-    when a quick stop (Stop all, x) ended it on the way."""
-    lim = axis.limits()
-    st = axis.status()
-    if st.fault:
-        raise _ActionRefused(f"leg {leg} is in fault: reset the fault (r), then enable it (e), first; nothing moved")
-    if not st.enabled:
-        state = _NOT_ENABLED_TEXT.get(str(st.state), str(st.state))
-        raise _ActionRefused(f"leg {leg} is {state}, not enabled: enable it (e) first; nothing moved")
-    if move.step_mm is not None:
-        target = st.position_mm + move.step_mm
-        how = f" (a jog of {move.step_mm:+g} mm from {st.position_mm:+.3f} mm)"
-    else:
-        target, how = move.target_mm, ""
-    if target is None or not math.isfinite(target) or not lim.min_mm <= target <= lim.max_mm:
-        shown = f"{target:+.3f} mm" if isinstance(target, (int, float)) else repr(target)
-        raise _ActionRefused(f"leg {leg}: {shown}{how} is beyond the drive's soft limits {lim.min_mm:+.3f} .. "
-                             f"{lim.max_mm:+.3f} mm; nothing moved")
-    speed = move.speed_mm_s if move.speed_mm_s is not None else JOG_SPEED_FRACTION * lim.max_velocity_mm_s
-    if not (math.isfinite(speed) and speed > 0):
-        raise _ActionRefused(f"leg {leg}: speed {speed:g} mm/s is not a speed > 0; nothing moved")
-    speed = min(speed, lim.max_velocity_mm_s)
-    try:
-        reached = axis.move_to(target, velocity_mm_s=speed)
-    except DriveFault:  # a quick stop ends move_to so: "not operation_enabled" (a timeout is a CommTimeout)
-        try:
-            now = axis.status()
-        except Exception:
-            now = None
-        if now is not None and str(now.state) == "quick_stop_active":
-            raise _MoveStopped(f"leg {leg} was quick-stopped at {now.position_mm:+.3f} mm on its way to "
-                               f"{target:+.3f} mm; enable it (e) to move again") from None
-        raise
-    return reached.position_mm, speed
-
-
 def _show_recorded_points(state: SweepState, path: Path) -> None:
     """Put the points `path` holds already into `state`'s plot, so a resumed sweep shows its
     whole session (the procedure's SweepStarted then sets the counts)."""
@@ -791,36 +686,3 @@ def _show_recorded_points(state: SweepState, path: Path) -> None:
         state.traces.setdefault(int(r["leg"]), LegTrace()).add(float(r["target_mm"]), float(r["error_um"]),
                                                                int(r["direction"]))
     state.done = state.resumed_points = len(points)
-
-
-def _close_quietly(rig, what: str) -> None:
-    """Close `rig` (None: nothing to close), logging instead of raising."""
-    if rig is None:
-        return
-    try:
-        rig.close()
-    except Exception:
-        log.exception(what)
-
-
-def replay_output_path(cfg: StationConfig, source: Path) -> Path:
-    """runs/NAME.replay.h5 (then -2, -3, ...): a replay never overwrites a session."""
-    base = Path(cfg.recordings_dir) / f"{source.stem}.replay.h5"
-    out, n = base, 1
-    while out.exists() or out.resolve() == source.resolve():
-        n += 1
-        out = base.with_name(f"{source.stem}.replay-{n}.h5")
-    return out
-
-
-def default_session_path(cfg: StationConfig, legs: tuple[int, ...]) -> Path:
-    """runs/ui-YYYYmmdd-HHMMSS-legs1-2.h5 under the config's recordings folder."""
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    tag = "-".join(str(leg) for leg in legs)
-    base = Path(cfg.recordings_dir) / f"ui-{stamp}-leg{tag}.h5"
-    n = 1
-    out = base
-    while out.exists():
-        n += 1
-        out = base.with_name(f"{base.stem}-{n}.h5")
-    return out

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 
-from drivers.errors import DriverError
+from station.services.devices import DriverError
 
 log = logging.getLogger("station.tui")
 

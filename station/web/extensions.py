@@ -2,12 +2,12 @@
 the certificates issued for a leg.
 
 - `tolerances_of(config_path)`: `[tolerances.TYPE]` limits in um per leg type, as the station
-  config reads them (procedures.decision.parse_tolerances via station.config.load_config: a bad
+  config reads them (procedures.decision.parse_tolerances via station.services.config.load_config: a bad
   section is refused naming file, section and key); the as-left limits, since a fleet in service is
   judged as left. A type without a limit has no tolerance line and no Cpk, and the page says so.
 - `certificates_of(runs_dir, serial)`: the certificates `station certificate` issued for a leg,
   every revision listed in `runs_dir/certificates/REPORT.index.json` whose serial is the leg's
-  (station.certificate_jobs), superseded revisions marked.
+  (station.services.certificate_jobs), superseded revisions marked.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ def tolerances_of(config_path: str | Path | None) -> dict[str, dict[str, float]]
     """{leg type: {figure: as-left upper limit um}} of the station TOML; {} without a config."""
     if not config_path:
         return {}
-    from station.config import load_config  # noqa: PLC0415
+    from station.services.config import load_config  # noqa: PLC0415
 
     return {t: tol.limits("as_left") for t, tol in load_config(config_path).tolerances.items() if tol.limits("as_left")}
 
@@ -40,7 +40,7 @@ class Certificate:
 
 def certificates_of(runs_dir: str | Path | None, serial: str) -> list[Certificate]:
     """The certificates of leg `serial` under `runs_dir/certificates/`, by issue time."""
-    from station.certificate_jobs import FOLDER_NAME  # noqa: PLC0415
+    from station.services.certificate_jobs import FOLDER_NAME  # noqa: PLC0415
 
     if not runs_dir:
         return []

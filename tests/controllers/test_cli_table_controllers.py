@@ -11,7 +11,7 @@ from procedures import controllers
 from procedures.fit import load_model
 from procedures.table import make_table
 from station.cli import main
-from station.synth import synth_session
+from station.services.synth import synth_session
 from tests.tooling import write_points_session as write_session
 
 CFG = PlantConfig(reversal_um=2.0).only("backlash", "lead", "longwave", "wobble", "noise")

@@ -18,7 +18,7 @@ from procedures.controllers.common import ControllerFileError
 from procedures.fit import fit
 from procedures.controllers.linuxcnc import LINUXCNC_LIMITS
 from procedures.table import CompTable, LegTable, make_table
-from station.synth import synth_session
+from station.services.synth import synth_session
 
 X = np.concatenate([np.linspace(-95, 95, 397), [-90.0, 0.0, 90.0]])  # between points, on them, beyond the table
 

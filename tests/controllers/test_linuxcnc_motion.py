@@ -33,7 +33,7 @@ from procedures.controllers import linuxcnc
 from procedures.fit import fit
 from procedures.controllers.linuxcnc import LINUXCNC_LIMITS
 from procedures.table import make_table
-from station.synth import synth_session
+from station.services.synth import synth_session
 
 HERE = Path(__file__).resolve().parent
 DISPLAY = HERE / "linuxcnc_display.py"

@@ -123,6 +123,8 @@ def check_fault_and_reset(make: Factory) -> None:
     st = ax.status()
     code = aut.fault_code if aut.reports_fault_code else 0
     assert st.fault and st.state == "fault" and st.fault_code == code
+    text = ax.fault_text(st.fault_code)  # the drive describes its own fault (shown by the Rig page)
+    assert isinstance(text, str) and f"0x{st.fault_code:04X}" in text
     with pytest.raises(DriveFault) as info:
         ax.move_to(1.0)
     assert info.value.code == code

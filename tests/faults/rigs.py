@@ -2,8 +2,8 @@
 
 `faulty_rig()` starts a `SimRig`, puts a `ModbusFaultProxy` in front of its drive server and a
 `SerialLineFaults` in front of its interferometer pty, and connects the station's ordinary
-clients (drivers.modbus.client, drivers.interferometer.client) through them: a `station.wiring.Rig`
-that the real jobs (station.jobs.run_sweep, station.table_jobs) use unchanged. Faults start
+clients (drivers.modbus.client, drivers.interferometer.client) through them: a `station.services.wiring.Rig`
+that the real jobs (station.services.jobs.run_sweep, station.services.table_jobs) use unchanged. Faults start
 switched off (`rig.link.arm()` switches them on), so connecting is not what is tested.
 
 `drive_truth(sim, leg)` reads a drive's active bank and table straight out of the simulated
@@ -25,7 +25,7 @@ from drivers.modbus.codec import crc16_modbus
 from drivers.sim.faults import LINE_KINDS, TCP_KINDS, FaultSchedule, ModbusFaultProxy, SerialLineFaults
 from drivers.sim.rig import SimRig
 from procedures.push import table_sha256
-from station.wiring import Rig
+from station.services.wiring import Rig
 
 DRIVE_TIMEOUT_S = 0.4
 """The drive client's timeout on the faulty link (two attempts of 0.2 s): short, so a thousand

@@ -35,9 +35,9 @@ from procedures.push import PushFailed, PushRefused, push_table, rollback
 from procedures.recording.reader import read_session
 from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
 from procedures.runner import CallbackSink
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.table_jobs import verify_job
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.table_jobs import verify_job
 from tests.faults.rigs import drive_truth, faulty_rig
 
 

@@ -1,4 +1,4 @@
-"""Fuzzing the TOML readers: the station config (station/config.py load_config) and drive
+"""Fuzzing the TOML readers: the station config (station/services/config.py load_config) and drive
 profiles (drivers/modbus/profile.py DriveProfile.load).
 
 Valid files (the documented config, the built-in profile) are damaged value by value, key by
@@ -18,7 +18,7 @@ from hypothesis import example, given, settings, strategies as st
 
 from drivers.modbus.profile import DEFAULT_PROFILE, DriveProfile, ProfileError
 from procedures.errors import InputError
-from station.config import load_config
+from station.services.config import load_config
 from tests.fuzz import tomlgen
 from tests.fuzz.tomlgen import damaged, toml_value
 from tests.fuzz.budget import examples, fed

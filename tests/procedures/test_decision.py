@@ -7,7 +7,7 @@ import pytest
 
 from procedures import decision as dec
 from procedures.errors import InputError
-from station.config import load_config
+from station.services.config import load_config
 
 BUDGET = [{"source": "laser", "u_um": 0.3}, {"source": "repeatability", "u_um": 0.4},
           {"source": "repeatability", "u_um": 0.3}]

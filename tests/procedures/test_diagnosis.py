@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.diagnosis import DiagnosisSettings, diagnose, finding_events, to_json
 from procedures.events import Finding
 from procedures.errors import InputError, SchemaError
-from station.commands.diagnose import plant_twin
+from station.services.twins import plant_twin
 
 BASE = PlantConfig(noise_um=0.03, run_offset_um=0.04).only("lead", "longwave", "wobble", "noise", "run_offset")
 TARGETS = np.linspace(-90.0, 90.0, 61)

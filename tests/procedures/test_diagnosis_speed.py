@@ -14,7 +14,7 @@ from procedures.diagnosis import diagnose
 from procedures.errors import InputError
 from procedures.import_map import convert, load_map
 from procedures.recording.reader import read_session
-from station.synth import synth_session
+from station.services.synth import synth_session
 
 
 def on_the_fly(speeds=(5.0, 10.0, 20.0)):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.errors import SchemaError
 from procedures.fit import fit, load_model, save_model
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.errors import InputError
 from procedures.fit import fit
 from procedures.plans import irregular_targets

@@ -17,7 +17,7 @@ from procedures import iso230, plans
 from procedures.metrology.thermal import normalise_points, Material
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
 from procedures.report import make_report
-from station.synth import synth_session
+from station.services.synth import synth_session
 
 PLAN = plans.iso230_plan(legs=(1, 2))
 CONFIG = {

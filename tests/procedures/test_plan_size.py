@@ -59,7 +59,7 @@ def test_a_huge_step_is_refused_with_the_figures_and_a_step_that_fits_without_bu
 
 
 def test_the_limits_are_the_configs(tmp_path):
-    from station.config import load_config
+    from station.services.config import load_config
 
     toml = tmp_path / "station.toml"
     toml.write_text('[limits]\nmax_points = 100\nmax_rig_hours = 0.5\n')
@@ -74,9 +74,9 @@ def test_the_limits_are_the_configs(tmp_path):
 
 def test_the_file_size_is_the_writers(tmp_path):
     """Record two plans on the simulated rig; the estimate is within 15 % of each file."""
-    from station.config import StationConfig
-    from station.jobs import run_sweep
-    from station.wiring import open_rig
+    from station.services.config import StationConfig
+    from station.services.jobs import run_sweep
+    from station.services.wiring import open_rig
 
     cfg = StationConfig(operator="test")
     cfg.recordings_dir = str(tmp_path)

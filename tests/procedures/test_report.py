@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.errors import InputError
 from procedures.fit import fit
 from procedures.report import make_report

@@ -20,8 +20,8 @@ from drivers.interfaces import TableBank
 from drivers.station_compensation import StationTableStore, station_table_spec
 from procedures.audit import AuditLog, read_entries
 from procedures.push import PushFailed, push_table, table_sha256
-from station.config import StationConfig
-from station.wiring import open_drive
+from station.services.config import StationConfig
+from station.services.wiring import open_drive
 
 REPO = Path(__file__).resolve().parents[2]
 PREVIOUS = TableBank(-90.0, 6.0, tuple(0.1 * i for i in range(31)), tuple(-0.1 * i for i in range(31)))
@@ -32,8 +32,8 @@ import os, signal, sys
 from drivers.interfaces import TableBank
 from procedures.audit import AuditLog
 from procedures.push import push_table
-from station.config import StationConfig
-from station.wiring import open_drive
+from station.services.config import StationConfig
+from station.services.wiring import open_drive
 
 runs, kill_at, when = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 cfg = StationConfig(operator="test")

@@ -8,7 +8,7 @@ import pytest
 from drivers.errors import TableRefused
 from drivers.interfaces import TableBank
 from drivers.sim.plant import PlantConfig
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.errors import InputError
 from procedures.fit import fit
 from procedures.controllers.linuxcnc import LINUXCNC_LIMITS, read_linuxcnc_comp, write_linuxcnc_comp

@@ -12,7 +12,7 @@ import pytest
 from drivers.sim.plant import PlantConfig
 from procedures import iso230, plans
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget, table_budget
-from station.synth import synth_session
+from station.services.synth import synth_session
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ import pytest
 
 from drivers.sim.plant import default_leg_configs
 from station.cli import main
-from station.synth import synth_session
+from station.services.synth import synth_session
 from tests.tooling import write_identified_session
 
 TOL = {"HX300": {"as_found_um": {"E": 25.0, "B": 6.0, "R": 3.0}, "as_left_um": {"E": 0.001}, "source": "recorded"}}

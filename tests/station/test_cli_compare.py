@@ -12,8 +12,8 @@ import pytest
 
 from drivers.sim.plant import default_leg_configs
 from station.cli import main
-from station.config import StationConfig
-from station.synth import synth_session
+from station.services.config import StationConfig
+from station.services.synth import synth_session
 from tests.tooling import write_identified_session
 
 BIAS_UM = 1.5
@@ -76,8 +76,8 @@ def _rig_session(path, station: str, noise_seed: int, offset_um: float):
     """A sweep of leg 1 (serial REF-1) on the simulated rig: the same plant (seed 0), its own
     measurement noise, the station's laser offset."""
     from procedures.plans import iso230_plan
-    from station.jobs import run_sweep
-    from station.wiring import open_rig
+    from station.services.jobs import run_sweep
+    from station.services.wiring import open_rig
 
     cfg = StationConfig(operator="test", id=station)
     cfg.sim.laser_offset_um = offset_um

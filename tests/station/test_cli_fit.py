@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from station.synth import synth_session
+from station.services.synth import synth_session
 from procedures.plans import irregular_targets
 from procedures.recording.reader import file_sha256
 from procedures.table import read_table_csv

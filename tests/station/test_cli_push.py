@@ -24,8 +24,8 @@ from procedures.audit import read_entries
 from procedures.push import quantize, table_sha256
 from procedures.table import CompTable, LegTable, table_csv_text
 from station.cli import main
-from station.wiring import open_drive
-from station.config import StationConfig
+from station.services.wiring import open_drive
+from station.services.config import StationConfig
 
 PROFILE = DriveProfile.load()
 NV = Path("runs/sim-drive-nv.json")

@@ -17,9 +17,9 @@ import pytest
 
 from procedures.plans import iso230_plan
 from station.cli import main
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.wiring import open_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_rig
 
 REPO = Path(__file__).resolve().parents[2]
 STATION = Path(sys.executable).with_name("station")

@@ -11,8 +11,8 @@ import pytest
 from drivers.errors import TableError
 from drivers.interfaces import TableBank
 from procedures.errors import InputError
-from station.config import StationConfig, load_config
-from station.wiring import leg_table_spec, open_drive
+from station.services.config import StationConfig, load_config
+from station.services.wiring import leg_table_spec, open_drive
 
 HEAD = '[drive]\nurl = "sim"\n[interferometer]\nport = "sim"\n'
 

@@ -6,7 +6,7 @@ import json
 import pytest
 
 from procedures.errors import InputError
-from station.config import LegMaterial, MetrologyConfig, load_config
+from station.services.config import LegMaterial, MetrologyConfig, load_config
 
 
 def _write(tmp_path, text):

@@ -1,6 +1,6 @@
 """`station diagnose --twin fleet:TYPE`: the legs of one type in the catalog as the twin, and how
 many sigma a feature of this leg lies from its siblings. Real session files from the project's
-generator (station.synth, the plant's leg-to-leg spread of default_leg_configs), indexed into a
+generator (station.services.synth, the plant's leg-to-leg spread of default_leg_configs), indexed into a
 real SQLite catalog by the catalog's own indexer."""
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from station.catalog import files
 from station.catalog.fleet import completed_sessions_of_type
 from station.catalog.store import Catalog
 from station.cli import main
-from station.synth import synth_session
-from station.twins import load_twin
+from station.services.synth import synth_session
+from station.services.twins import load_twin
 from tests.catalog.helpers import identity, stamp_identity
 
 TYPE = "HX-L300"
@@ -138,7 +138,7 @@ def test_a_sibling_without_material_temperature_makes_the_fleet_raw(fleet, tmp_p
     twin = load_twin(f"fleet:{TYPE}", session=session, path=target, catalog=lambda: catalog.engine)
     assert not twin.normalised and twin.info["basis"] == "raw" and "raw" in twin.description
     assert sorted(twin.fleet[1].serials) == ["SN-1", "SN-2", "SN-3", "SN-X"]
-    from station.diagnosis_jobs import diagnose_session
+    from station.services.diagnosis_jobs import diagnose_session
 
     report, _ = diagnose_session(session, target, twin)
     assert "normalised_legs" not in report["twin"] and report["legs"]["1"]["fleet"]["basis"] == "raw"

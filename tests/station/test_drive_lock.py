@@ -1,4 +1,4 @@
-"""Two stations, one drive (station/drive_lock.py): two real `station` processes on the simulated
+"""Two stations, one drive (station/services/drive_lock.py): two real `station` processes on the simulated
 rig sharing a drive (its table memory file). The second is refused with exit code 2 and a message
 naming leg, drive, PID, host, time and command; the first is unaffected; once the first has
 ended the second succeeds; a SIGKILLed holder leaves no stale lock."""
@@ -19,8 +19,8 @@ import pytest
 
 from procedures.recording.reader import read_session
 from procedures.table import CompTable, LegTable, table_csv_text
-from station import drive_lock
-from station.config import StationConfig
+from station.services import drive_lock
+from station.services.config import StationConfig
 
 STATION = str(Path(sys.executable).with_name("station"))
 
@@ -128,7 +128,7 @@ def test_lock_is_per_drive_and_leg_reentrant_in_a_process_and_released(tmp_path,
     held = drive_lock.lock_for(cfg, (1, 3), whole_rig=False)
     again = drive_lock.lock_for(cfg, 3, whole_rig=False)  # the same process (the UI reconnecting)
     # another process is refused leg 3, naming this one; leg 2 is free
-    probe = ("import sys; from station import drive_lock as d\n"
+    probe = ("import sys; from station.services import drive_lock as d\n"
              "try:\n    d.acquire(sys.argv[1], [int(sys.argv[2])], command='station push').release(); print('free')\n"
              "except d.DriveInUse as e:\n    print(e)\n")
     drive = f"sim:{(tmp_path / 'nv.json').resolve()}"

@@ -229,7 +229,7 @@ def test_the_results_page_shows_the_commands_figures_on_their_basis(outputs, tmp
 
     from textual.widgets import DataTable, Input
 
-    from station.config import StationConfig
+    from station.services.config import StationConfig
     from station.tui.app import StationApp
 
     normalised = {}

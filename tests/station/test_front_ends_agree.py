@@ -1,5 +1,5 @@
 """The command line and the terminal UI give the same refusals, audit lines and figures for push,
-rollback and verify on the same inputs: both run station.table_jobs over the simulated drive
+rollback and verify on the same inputs: both run station.services.table_jobs over the simulated drive
 (a real Modbus server on loopback, its table memory in a file), each in a folder of its own.
 
 The CLI is `station.cli.main` (answering its prompt through a terminal-like stdin); the UI is
@@ -20,10 +20,10 @@ from procedures.audit import read_entries
 from procedures.plans import iso230_plan
 from procedures.recording.reader import read_session
 from station.cli import main
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.table_jobs import load_leg_table
-from station.wiring import open_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.table_jobs import load_leg_table
+from station.services.wiring import open_rig
 
 LEG = 1
 POSITIONS_MM = [-90.0 + 15.0 * i for i in range(13)]

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from procedures.recording.reader import read_session
 from station.cli import main
-from station.report_jobs import session_iso230
+from station.services.report_jobs import session_iso230
 
 SAMPLE = Path(__file__).resolve().parents[2] / "recordings" / "calibration-6legs.h5"
 U_LINE = re.compile(r"^  leg (\d): E ([\d.]+) \+/- ([\d.]+), M ([\d.]+) \+/- ([\d.]+), A ([\d.]+) \+/- ([\d.]+), "

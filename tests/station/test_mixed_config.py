@@ -10,7 +10,7 @@ import asyncio
 import pytest
 
 from station.cli import main
-from station.config import load_config
+from station.services.config import load_config
 from station.tui.app import StationApp
 
 # an address nothing listens on: were the config not refused, connecting would fail differently

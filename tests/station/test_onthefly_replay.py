@@ -11,11 +11,11 @@ import numpy as np
 from procedures.plans import onthefly_plan
 from procedures.recording.reader import read_session
 from procedures.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
-from station.commands.recordings import open_sample_rig
+from station.services.samples import open_sample_rig
 from station.commands.replay import compare_sessions, replay_sweep
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.wiring import open_replay_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_replay_rig
 
 CFG = StationConfig(operator="test")
 
@@ -53,7 +53,7 @@ def test_an_aborted_onthefly_session_resumes_to_every_point_once(tmp_path: Path)
     from procedures import events as ev
     from procedures.control import RunControl
     from procedures.runner import CallbackSink
-    from station.jobs import resumable_plan
+    from station.services.jobs import resumable_plan
 
     out = tmp_path / "otf.h5"
     plan = onthefly_plan((1,), cycles=2, step_mm=5.0)

@@ -1,9 +1,9 @@
-"""The platform experiment's inputs and report live in station.platform_jobs, which both
+"""The platform experiment's inputs and report live in station.services.platform_jobs, which both
 `station platform` and the terminal UI's Platform page use (the UI imports no command module)."""
 
 import numpy as np
 
-from station import platform_jobs
+from station.services import platform_jobs
 from station.commands import platform as platform_command
 
 

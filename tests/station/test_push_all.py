@@ -13,8 +13,8 @@ from pathlib import Path
 
 from procedures.audit import read_entries
 from station.cli import main
-from station.config import StationConfig
-from station.wiring import open_drive
+from station.services.config import StationConfig
+from station.services.wiring import open_drive
 
 LEGS = (1, 2, 3, 4, 5, 6)
 

@@ -160,7 +160,7 @@ def test_a_negative_time_scale_is_one_line(value, tmp_path, capsys):
 
 def test_the_resume_hint_quotes_a_path_with_spaces():
     from station.commands.sweep import resume_command
-    from station.config import StationConfig
+    from station.services.config import StationConfig
 
     hint = resume_command(Path("my runs/cal 1.h5"), StationConfig(), "bench config.toml")
     assert hint == "resume with: station sweep --resume 'my runs/cal 1.h5' --config 'bench config.toml'"

@@ -13,9 +13,9 @@ from procedures.metrology.air import edlen
 from procedures.plans import SweepPlan
 from procedures.recording.reader import read_session
 from station.cli import main
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.wiring import open_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_rig
 
 PLAN = SweepPlan("test", (-90.0, -45.0, 0.0, 45.0, 90.0), cycles=2, legs=(1,), dwell_s=1.0)
 

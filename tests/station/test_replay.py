@@ -28,11 +28,11 @@ from procedures.recording.schema import FLAG_REPLAYED, FLAG_RETRIED_BEAM, FLAG_R
 from procedures.runner import CallbackSink
 from procedures.table import make_table, table_csv_text
 from station.cli import main
-from station.commands.recordings import FAULT_AFTER_INDEX, FAULT_LEG, FILES, open_sample_rig
+from station.services.samples import FAULT_AFTER_INDEX, FAULT_LEG, FILES, open_sample_rig
 from station.commands.replay import compare_sessions, parse_speed, replay_sweep, retry_policy_of
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.wiring import open_replay_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_replay_rig
 from tests.tooling import require_tool  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]

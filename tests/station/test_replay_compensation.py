@@ -17,9 +17,9 @@ from drivers.interferometer import protocol as p
 from drivers.replay.interferometer_server import ERR_NOT_RECORDED, ERR_REPLAYED, recorded_compensation_reply
 from procedures.plans import iso230_plan
 from procedures.recording.reader import read_session
-from station.config import StationConfig
-from station.jobs import replay_sweep, run_sweep
-from station.wiring import open_replay_rig, open_rig
+from station.services.config import StationConfig
+from station.services.jobs import replay_sweep, run_sweep
+from station.services.wiring import open_replay_rig, open_rig
 
 CFG = StationConfig(operator="test")
 KEY = "laser_air_compensation"

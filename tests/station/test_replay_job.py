@@ -1,4 +1,4 @@
-"""The replay job lives with the other jobs both front ends start (station.jobs), the comparison
+"""The replay job lives with the other jobs both front ends start (station.services.jobs), the comparison
 with the recording in procedures.replay_compare; `station replay` uses the same objects."""
 
 import argparse
@@ -7,7 +7,7 @@ import pytest
 
 from procedures.errors import InputError
 from procedures import replay_compare
-from station import jobs
+from station.services import jobs
 from station.commands import replay as replay_command
 
 

@@ -2,8 +2,8 @@
 however busy the machine is (every time_s equal), because no wall-clock timeout can fire on a
 request the replay devices answer, and a query answered again does not move the replay clock.
 
-The samples are replayed as `station replay` does (station.wiring.open_replay_rig, the replay job
-station.jobs.replay_sweep, procedures.replay_compare.compare_sessions), over the real Modbus TCP
+The samples are replayed as `station replay` does (station.services.wiring.open_replay_rig, the replay job
+station.services.jobs.replay_sweep, procedures.replay_compare.compare_sessions), over the real Modbus TCP
 and serial pty clients. The CPU-load test is statistical (it cannot fail on a correct replay, and
 a wall-clock leak makes it fail sometimes); the late-reply test makes the devices answer late on
 purpose, so it fails every time a timeout would fire on a replay."""
@@ -24,10 +24,10 @@ from procedures.plans import iso230_plan
 from procedures.recording.reader import read_session
 from procedures.replay_compare import compare_sessions
 from procedures.runner import CallbackSink
-from station.commands.recordings import FILES, open_sample_rig
-from station.config import StationConfig
-from station.jobs import replay_sweep, run_sweep
-from station.wiring import REPLAY_LASER_TIMEOUT_S, open_replay_rig
+from station.services.samples import FILES, open_sample_rig
+from station.services.config import StationConfig
+from station.services.jobs import replay_sweep, run_sweep
+from station.services.wiring import REPLAY_LASER_TIMEOUT_S, open_replay_rig
 
 RECORDINGS = Path(__file__).resolve().parents[2] / "recordings"
 CFG = StationConfig(operator="test")

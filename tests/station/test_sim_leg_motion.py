@@ -1,7 +1,7 @@
 """The station's simulated rig moves like a leg (a real leg's jerk limit, `[sim] jerk_mm_s3`),
 recorded in the session; the sample recordings pin the setting they were made with (0); the
 adaptive stopping rule of an on-the-fly sweep normalises with the legs' materials of the
-station config (station/jobs.py), not the default. Sweeps over the real Modbus TCP server on
+station config (station/services/jobs.py), not the default. Sweeps over the real Modbus TCP server on
 127.0.0.1 and the interferometer on a pty."""
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from drivers.sim.plant import LEG_JERK_MM_S3
 from procedures.errors import InputError
 from procedures.plans import iso230_plan, onthefly_plan
 from procedures.recording.reader import read_session
-from station.commands import recordings
-from station.config import LegMaterial, SimConfig, StationConfig, load_config
-from station.jobs import run_sweep
-from station.wiring import open_rig
+from station.services import samples as recordings
+from station.services.config import LegMaterial, SimConfig, StationConfig, load_config
+from station.services.jobs import run_sweep
+from station.services.wiring import open_rig
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
@@ -83,7 +83,7 @@ def test_leg_figures_depend_on_the_material_given():
     with its own fixed point, the noise floor is smaller than with the default one (fixed at 0 mm),
     whose wrong normalisation adds a per-pass offset."""
     from drivers.sim.plant import PlantConfig
-    from station.synth import synth_session
+    from station.services.synth import synth_session
 
     plant = PlantConfig(bearing_mm=-400.0, ambient_ramp_k_per_h=4.0, tau_s=60.0)
     points = synth_session({1: plant}, np.linspace(-90, 90, 37), cycles=4, seed=2, dwell_s=5.0)

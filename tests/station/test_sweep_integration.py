@@ -19,9 +19,9 @@ from procedures.control import RunControl
 from procedures.plans import SweepPlan
 from procedures.recording.reader import read_session
 from procedures.runner import CallbackSink, ListSink
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.wiring import open_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_rig
 
 REPO = Path(__file__).resolve().parents[2]
 PLAN = SweepPlan("test", (-60.0, -23.0, 0.0, 17.0, 61.0), cycles=2, legs=(1, 3), dwell_s=1.0)
@@ -149,9 +149,9 @@ import sys
 from procedures import events as ev
 from procedures.plans import SweepPlan
 from procedures.runner import CallbackSink
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.wiring import open_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_rig
 
 plan = SweepPlan("kill", tuple(float(x) for x in range(-80, 81, 10)), cycles=3, legs=(1, 2), dwell_s=1.0)
 def report(e):

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from procedures.plans import iso230_plan
 from procedures.recording.reader import read_session
-from station.config import StationConfig
-from station.jobs import run_sweep
-from station.wiring import open_rig
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_rig
 
 
 def test_a_stalled_axis_while_preparing_its_leg_is_recorded_as_a_fault(tmp_path):

@@ -1,17 +1,17 @@
-"""The diagnosis twins both front ends build (station.twins): `station diagnose --twin` and the
+"""The diagnosis twins both front ends build (station.services.twins): `station diagnose --twin` and the
 terminal UI's Diagnosis page use the same functions."""
 
 import pytest
 
 from procedures.diagnosis.twin import ExternalTwin
 from procedures.errors import InputError
-from station import twins
+from station.services import selfcheck, twins
 from station.commands import diagnose as diagnose_command
 
 
-def test_the_command_uses_the_shared_twins():
+def test_the_command_and_the_self_check_use_the_shared_twins():
     assert diagnose_command.load_twin is twins.load_twin
-    assert diagnose_command.plant_twin is twins.plant_twin
+    assert selfcheck.plant_twin is twins.plant_twin
 
 
 def test_the_simulated_plant_as_a_twin(tmp_path):
@@ -38,8 +38,8 @@ def test_a_reference_3_k_warmer_is_compared_normalised_to_20_c(tmp_path):
     from procedures.diagnosis import diagnose
     from procedures.diagnosis.twin import twin_from_recording
     from procedures.recording.reader import read_session
-    from station.diagnosis_jobs import diagnose_session
-    from station.synth import synth_session
+    from station.services.diagnosis_jobs import diagnose_session
+    from station.services.synth import synth_session
     from tests.tooling import write_points_session
 
     cfg = replace(default_leg_configs(3)[0], heating_k_per_m=0.0)

@@ -73,7 +73,7 @@ def records() -> list[Rec]:
 
 
 def write_certificate(runs_dir, serial: str = "HX-0001", number: str = "C-2025-0001") -> bytes:
-    """A certificate as `station certificate` leaves it (station.certificate_jobs): the PDF
+    """A certificate as `station certificate` leaves it (station.services.certificate_jobs): the PDF
     (2 pages, fpdf2) and the report's index naming it; the PDF's bytes."""
     import json
 

@@ -4,7 +4,7 @@ leg and the drive.
 
 Tables are made by procedures.table.make_table (the same as `station table`); errors are
 measured minus commanded, um, which the drive subtracts. Push, verify and rollback run the
-jobs of station.table_jobs through the controller (compensation_controller), exactly as the
+jobs of station.services.table_jobs through the controller (compensation_controller), exactly as the
 command line does: the same procedures, refusals and audit entries.
 """
 
@@ -85,7 +85,7 @@ class CompensationScreen(StationScreen):
     # -- making and exporting ------------------------------------------------------------------------
     def _spec(self):
         """What the connected drives hold (their profile's table), else the built-in drive's."""
-        from station.wiring import drive_table_spec
+        from station.services.wiring import drive_table_spec
 
         rig = self.app.rig
         if rig is not None and rig.axes:
@@ -298,7 +298,7 @@ def _as_left_text(path: str | None) -> str:
     try:
         from procedures.decision import decision_summary
         from procedures.recording.reader import read_session
-        from station.report_jobs import decisions_if_stated
+        from station.services.report_jobs import decisions_if_stated
 
         d = decisions_if_stated(read_session(path), stage="as_left") if path else None
     except Exception:  # noqa: BLE001 (a decision line is an extra; the verification's figures stand)

@@ -1,5 +1,5 @@
 """The Compensation page's controller: reads the drives' tables and runs push, rollback and
-verify through station.table_jobs (the same jobs and procedures as the command line), in
+verify through station.services.table_jobs (the same jobs and procedures as the command line), in
 worker threads. It asks for confirmation with a dialog on the UI thread and posts the outcome
 back as messages; it never touches a widget from a worker.
 """
@@ -35,7 +35,7 @@ class DriveTablesRead(Message):
 
 
 class TableJobDone(Message):
-    """A push or rollback ended, whichever way (`job`: station.table_jobs.JobOutcome, or None
+    """A push or rollback ended, whichever way (`job`: station.services.table_jobs.JobOutcome, or None
     with `error` when it could not run)."""
 
     def __init__(self, action: Action, leg: int, job: Any = None, error: str = "") -> None:
@@ -65,7 +65,7 @@ class CompensationController:
 
     def audit(self) -> AuditLog:
         """The audit log `station push/rollback/verify` use: <recordings_dir>/audit.jsonl."""
-        from station.identity import station_audit_log
+        from station.services.identity import station_audit_log
 
         return station_audit_log(self.app.cfg)
 
@@ -109,7 +109,7 @@ class CompensationController:
     # -- push and rollback ---------------------------------------------------------------------------
     def push(self, leg: int, table, source: dict | None) -> None:
         """Push `table` (a procedures.table.LegTable) to `leg`'s drive after a confirmation."""
-        from station.table_jobs import push_job
+        from station.services.table_jobs import push_job
 
         self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
             axis, table, audit=audit, drive_url=url, source=source, confirm=self.confirm,
@@ -117,7 +117,7 @@ class CompensationController:
 
     def push_all(self, tables: dict, sources: dict[int, dict]) -> None:
         """Push every leg's table after one confirmation (procedures.push.push_legs_procedure)."""
-        from station.table_jobs import push_legs_job
+        from station.services.table_jobs import push_legs_job
 
         def start(axes, audit, url):
             return push_legs_job(axes, tables, audit=audit, drive_url=url, sources=sources, confirm=self.confirm_all,
@@ -126,7 +126,7 @@ class CompensationController:
         self._table_job(Action.PUSH, None, start, legs=tuple(sorted(tables)))
 
     def rollback(self, leg: int) -> None:
-        from station.table_jobs import rollback_job
+        from station.services.table_jobs import rollback_job
 
         self._table_job(Action.ROLLBACK, leg, lambda axis, audit, url: rollback_job(
             axis, audit=audit, drive_url=url, confirm=self.confirm))
@@ -137,9 +137,9 @@ class CompensationController:
         rig, lock, audit, cfg = self.app.rig, self.app.rig_lock, self.audit(), self.app.cfg  # read on the UI thread
 
         def work() -> None:
-            from station.wiring import drive_url_of
+            from station.services.wiring import drive_url_of
 
-            from station.table_jobs import controller_refusal, refusal_job
+            from station.services.table_jobs import controller_refusal, refusal_job
 
             if rig is None:
                 self.screen.post_message(TableJobDone(action, leg, error="Not connected to the rig."))
@@ -243,19 +243,19 @@ class CompensationController:
     # -- verify ----------------------------------------------------------------------------------------
     def verify(self, leg: int, analysis) -> bool:
         """A verification sweep of `leg` with its table active, repeating the plan of the
-        calibration on show (`analysis.session`), through station.table_jobs.verify_job on the
+        calibration on show (`analysis.session`), through station.services.table_jobs.verify_job on the
         Sweep page. False (and a notice) when it cannot start."""
         from procedures.plans import SweepPlan
-        from station.table_jobs import verify_job
-        from station.tui.app import default_session_path
-        from station.wiring import drive_url_of
+        from station.services.table_jobs import verify_job
+        from station.services.sessions import default_session_path
+        from station.services.wiring import drive_url_of
 
         try:
             plan = replace(SweepPlan.from_dict(analysis.session.plan), legs=(leg,), kind="verification", notes=())
         except Exception as exc:
             self.app.post_message(Notice(describe(exc, "the calibration's plan cannot be repeated"), "error", "Verify"))
             return False
-        from station.table_jobs import controller_refusal, refusal_job
+        from station.services.table_jobs import controller_refusal, refusal_job
 
         controller = controller_refusal(self.app.cfg, (leg,), Action.VERIFY)
         if controller:  # the station cannot verify a table the controller applies: refused and logged

@@ -4,12 +4,12 @@ stroke. The diagnosis is procedures.diagnosis.diagnose (the same as `station dia
 thread worker, which also reads the session (a damaged file is refused within seconds and said in
 a notification) and builds the twin.
 
-The twin is chosen as `station diagnose --twin` chooses it (station.twins.load_twin): fitted on
+The twin is chosen as `station diagnose --twin` chooses it (station.services.twins.load_twin): fitted on
 the recording itself (no --twin, the default), the simulated plant (sim:default), or a file typed
 in (MODEL.json, REFERENCE.h5 or sim:CONFIG.toml); and, in the UI only, the model on the Results
 page.
 
-The report is station.diagnosis_jobs.diagnose_session's, as `station diagnose --json` writes it:
+The report is station.services.diagnosis_jobs.diagnose_session's, as `station diagnose --json` writes it:
 on the raw error, with the material temperature range per leg (`material_temperature`), which
 the status line and the end of the text show.
 """
@@ -176,14 +176,14 @@ class DiagnosisScreen(StationScreen):
         try:
             from procedures.diagnosis import twin_from_model
             from procedures.recording.reader import read_session
-            from station.diagnosis_jobs import diagnose_session
+            from station.services.diagnosis_jobs import diagnose_session
 
             session = read_session(path)
             twin = None
             if twin_kind == "results" and model is not None:
                 twin = twin_from_model(model[0], model[1])
             elif spec is not None:  # as `station diagnose --twin SPEC`
-                from station.twins import load_twin
+                from station.services.twins import load_twin
 
                 cfg = self.app.cfg
 

@@ -5,7 +5,7 @@ The input is the analysis on show (the session and the model fitted on Results),
 (TABLE.csv from `station table` / Compensation) or a model file typed in, with its recording.
 Both measurements of the leg error (the recording's systematic error and one recorded pass) run on
 the same poses in a thread worker through procedures.platform.experiment.run_measurements, the
-function the CLI uses; `w` writes the CLI's report (station.platform_jobs.write_report)
+function the CLI uses; `w` writes the CLI's report (station.services.platform_jobs.write_report)
 beside the session, in platform/<session name>/.
 """
 
@@ -108,7 +108,7 @@ def run_platform(request: PlatformRequest) -> PlatformRun:
     from procedures.platform.experiment import Workspace, run_measurements
     from procedures.platform.geometry import default_geometry
     from procedures.recording.reader import read_session
-    from station.platform_jobs import load_errors, model_errors
+    from station.services.platform_jobs import load_errors, model_errors
 
     a = request.analysis
     if request.compensation is None:  # the model on Results
@@ -138,7 +138,7 @@ def run_platform(request: PlatformRequest) -> PlatformRun:
 
 def write_platform_report(run: PlatformRun, out: Path) -> list[Path]:
     """The CLI's report files for `run` in `out` (any thread)."""
-    from station.platform_jobs import write_report
+    from station.services.platform_jobs import write_report
 
     inputs = copy.deepcopy(run.inputs)
     a = run.analysis
@@ -174,7 +174,7 @@ NARROW_POSE_COLUMNS = ("Measure", "x µm", "y µm", "z µm", "rx ″", "ry ″",
 
 
 def basis_words(inputs: dict) -> str:
-    """Which error of the recording the run used (station.platform_jobs: the compensation's basis,
+    """Which error of the recording the run used (station.services.platform_jobs: the compensation's basis,
     as `station platform` prints it in its first lines), for the status line."""
     basis = (inputs.get("error_basis") or {}).get("basis")
     return {"normalised": "; error normalised to 20 °C", "raw": "; raw error (not normalised to 20 °C)"}.get(basis, "")

@@ -248,7 +248,7 @@ class ReplayScreen(StationScreen):
             self.notify(capabilities.missing_text("replay", "Replay through the drivers"),
                         title="Replay", severity="warning", timeout=12)
             return
-        from station.jobs import parse_speed
+        from station.services.jobs import parse_speed
 
         try:
             speed = parse_speed(self.query_one("#replay-speed", Input).value)

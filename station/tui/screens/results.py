@@ -6,7 +6,7 @@ Reading, fitting and evaluating run in a thread worker; the result is kept on th
 within seconds, in the worker, and said in a notification.
 
 `r` writes the report of `station report` and `e` the CSV of `station export` for the session
-on show, through the same functions (station.report_jobs, procedures.csv_io.export_csv), beside
+on show, through the same functions (station.services.report_jobs, procedures.csv_io.export_csv), beside
 the recording: report/<session>.<method>/ and <session>.csv. Neither replaces what is there.
 
 The error is the one `station fit` and `station iso230` use, chosen by the same function
@@ -121,18 +121,6 @@ def iso_figures(iso: Any, leg: int) -> dict[str, float | None]:
         return {}
     values = iso[leg].values
     return {k: values.get(k) for k in "AEMBR"}
-
-
-def iso_uncertainty(iso: Any, points: Any, station_config: dict) -> dict[int, dict[str, float | None]]:
-    """U (k = 2, um) of every ISO 230-2 value per leg (procedures.metrology.uncertainty), with the
-    session's recorded [metrology] and leg materials (the station's defaults when it has none)."""
-    from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
-
-    out = {}
-    for leg, r in iso.items():
-        b = leg_budget(r, points, UncertaintyInputs.from_record(station_config or {}, leg))
-        out[leg] = {name: b.U(name) for name in r.values}
-    return out
 
 
 def basis_name(raw: bool) -> str:
@@ -312,42 +300,28 @@ class ResultsScreen(StationScreen):
     @work(thread=True, exclusive=True, group="analysis", exit_on_error=False)
     def _analyse(self, path: Path, method: str, raw: bool = False, request: int = 0) -> None:
         try:
-            from procedures.fit import fit
-            from procedures.metrology.thermal import error_basis
             from procedures.recording.reader import read_session
+            from station.services.analysis import analyse_session
 
-            session = read_session(path)
-            # the error `station fit` and `station iso230` use (normalised to 20 degC unless --raw)
-            points, basis_lines, basis = error_basis(session, raw)
-            model = fit(points, method, source={"path": str(path), "sha256": session.sha256})
-            model.options["error_basis"] = basis  # as `station fit` saves it: the table says which error it holds
+            # the error, model and ISO figures `station fit` and `station iso230` give (normalised to 20 degC unless raw)
+            a = analyse_session(read_session(path), raw, fit_method=method, iso=True, uncertainty=True)
         except Exception as exc:
             self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}"), method, request, raw))
             return
-        iso, note, iso_u = None, "", None
-        try:
-            from procedures import iso230
-        except ImportError:
-            note = "ISO 230-2 evaluation not available yet (procedures.iso230 missing)"
-        else:
-            try:
-                iso = iso230.evaluate(points)
-            except Exception as exc:
-                note = describe(exc, "ISO 230-2")
-        if iso:
-            try:
-                iso_u = iso_uncertainty(iso, points, session.station_config)
-            except Exception as exc:  # the values stand without their U; say why
-                note = describe(exc, "ISO 230-2 uncertainty")
+        note = ""
+        if a.iso_error is not None:
+            note = describe(a.iso_error, "ISO 230-2")
+        elif a.uncertainty_error is not None:  # the values stand without their U; say why
+            note = describe(a.uncertainty_error, "ISO 230-2 uncertainty")
         decisions = None
         try:  # ISO 14253-1 against the recorded [tolerances] of the legs' types (docs/decisions.md)
-            from station.report_jobs import decisions_if_stated
+            from station.services.report_jobs import decisions_if_stated
 
-            decisions = decisions_if_stated(session, raw)
+            decisions = decisions_if_stated(a.session, raw)
         except Exception as exc:
             note = describe(exc, "the tolerance decisions")
-        self.post_message(AnalysisReady(Analysis(path, session, method, model, iso, note, iso_u=iso_u, raw=raw,
-                                                 points=points, basis_lines=tuple(basis_lines), basis=basis,
+        self.post_message(AnalysisReady(Analysis(path, a.session, method, a.model, a.iso, note, iso_u=a.iso_u, raw=raw,
+                                                 points=a.points, basis_lines=a.basis_lines, basis=a.basis,
                                                  decisions=decisions), request))
 
     def on_analysis_ready(self, message: AnalysisReady) -> None:
@@ -427,7 +401,7 @@ class ResultsScreen(StationScreen):
     def _report_worker(self, session, model, out: Path, hide: bool) -> None:
         try:
             from station.catalog.writer import catalog_for
-            from station.report_jobs import report_lines, session_report
+            from station.services.report_jobs import report_lines, session_report
 
             result = session_report(session, out, model, catalog=catalog_for(self.app.cfg))
         except Exception as exc:
@@ -456,7 +430,7 @@ class ResultsScreen(StationScreen):
     def _export_worker(self, session_path: Path, out: Path, hide: bool) -> None:
         try:
             from procedures.csv_io import export_csv
-            from station.report_jobs import export_lines
+            from station.services.report_jobs import export_lines
 
             summary = export_csv(session_path, out, overwrite=False)
         except Exception as exc:

@@ -26,7 +26,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Select, Static
 
-from drivers.interfaces import DriveLimits, DriveStatus, Environment, Reading
+from station.services.devices import DriveLimits, DriveStatus, Environment, Reading
 from station.tui.errors import describe
 from station.tui.messages import RigStateChanged, SweepChanged
 from station.tui.screens.common import StationScreen
@@ -165,8 +165,8 @@ class RigScreen(StationScreen):
                 try:
                     snap.limits[leg] = axis.limits()  # read once by the driver, then cached
                     st = snap.drives[leg] = axis.status()
-                    if st.fault and rig.profile is not None:
-                        snap.fault_text[leg] = rig.profile.fault_text(st.fault_code)
+                    if st.fault:  # the drive's own text of its fault code (ServoAxis.fault_text)
+                        snap.fault_text[leg] = axis.fault_text(st.fault_code)
                 except Exception as exc:
                     snap.drives[leg] = describe(exc)
             try:
@@ -274,7 +274,7 @@ class RigScreen(StationScreen):
     def _show_motion(self) -> None:
         """The move bar's leg, default speed and the line under it: the selected leg's soft
         limits and speeds, the move under way, or how the last one ended."""
-        from station.tui.app import JOG_SPEED_FRACTION
+        from station.services.rig_session import JOG_SPEED_FRACTION
 
         app = self.app
         leg = self.selected_leg()
@@ -324,7 +324,7 @@ class RigScreen(StationScreen):
         """The MoveRequest the fields ask for (a jog by `step_mm` when given), checked as far as
         the page can (numbers, speed > 0, the target within the last poll's soft limits);
         ValueError saying what is wrong. The worker checks the target against the drive again."""
-        from station.tui.app import MoveRequest
+        from station.services.rig_session import MoveRequest
 
         leg = self.selected_leg()
         speed = self._number("move-speed", "speed")

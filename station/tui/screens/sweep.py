@@ -131,8 +131,8 @@ class SweepScreen(StationScreen):
     def serials(self, legs) -> dict[int, dict[str, str]]:
         """The Serials field as `station sweep --serial` takes it (InputError naming what is
         wrong); a serial for a leg the plan does not sweep is refused."""
-        from station.identity import leg_fields
-        from station.serials import parse_serial_args
+        from station.services.identity import leg_fields
+        from station.services.serials import parse_serial_args
 
         entered = parse_serial_args(self.query_one("#serials", Input).value.replace(",", " ").split())
         other = sorted(set(entered) - set(legs))
@@ -201,6 +201,7 @@ class SweepScreen(StationScreen):
             self.app.action_abort_sweep()
 
     def action_start(self) -> None:
+
         if self.app.sweep.active:
             self.notify("A sweep is already running.", severity="warning")
             return
@@ -225,7 +226,7 @@ class SweepScreen(StationScreen):
     def _start(self, plan, serials: dict[int, dict[str, str]]) -> None:
         """Start `plan` (a SweepPlan, or a PlanSpec the app builds in its worker, abortably) with
         the legs' `serials` from the form."""
-        from station.tui.app import default_session_path
+        from station.services.sessions import default_session_path
 
         out = default_session_path(self.app.cfg, plan.legs)
         if self.app.start_sweep(plan, out, serials=serials):

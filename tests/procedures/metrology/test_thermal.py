@@ -7,8 +7,8 @@ import pytest
 from drivers.sim.plant import PlantConfig
 from procedures.metrology.thermal import (Material, nde_correction_um, normalise_points, normalise_session,
                                           recorded_materials)
-from station.config import load_config
-from station.synth import synth_session
+from station.services.config import load_config
+from station.services.synth import synth_session
 
 TARGETS = np.linspace(-90.0, 90.0, 31)
 

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from station.config import StationConfig
+from station.services.config import StationConfig
 
 SIZE = (120, 40)
 
@@ -55,8 +55,8 @@ def recorded_session(tmp_path_factory):
     """A small completed session from the simulated rig (legs 1 and 2, 9 uniform targets
     -80..80 mm, 3 cycles), recorded by the same runner as the CLI and the UI."""
     from procedures.plans import iso230_plan
-    from station.jobs import run_sweep
-    from station.wiring import open_rig
+    from station.services.jobs import run_sweep
+    from station.services.wiring import open_rig
 
     out = tmp_path_factory.mktemp("session") / "two-legs.h5"
     plan = iso230_plan((1, 2), -80.0, 80.0, step_mm=20.0, cycles=3)
@@ -78,7 +78,7 @@ def notes():
 
 
 def write_six_leg_session(path, legs=(1, 2, 3, 4, 5, 6), cycles: int = 3, step_mm: float = 3.0, seed: int = 0):
-    """A small synthetic session straight from the simulated plant (station.synth, no protocol
+    """A small synthetic session straight from the simulated plant (station.services.synth, no protocol
     layer): `legs` of the default leg configs, uniform targets -90..90 mm, `cycles` cycles."""
     from tests.tooling import default_legs_points, write_points_session
 

@@ -19,6 +19,7 @@ from procedures import events as ev
 from procedures.plans import iso230_plan
 from procedures.states import Outcome
 from tests.tooling import start_paper_sweep
+from station.services.rig_session import RigSession
 from station.tui.app import StationApp
 from station.tui.messages import SweepChanged
 from station.tui.state import SweepState
@@ -30,15 +31,37 @@ OWNED = ("rig", "rig_state", "rig_error", "sweep", "sweep_control", "replay_rig"
          "_quit_after_sweep", "_connect_attempt", "_sweep_run", "_runs")
 
 
-class RecordingApp(StationApp):
-    """Records the thread of every assignment of an attribute on the app."""
+class RecordingSession(RigSession):
+    """Records the thread of every assignment on the app's rig session (station.services.
+    rig_session), under the app's names for them (`state` is the app's `rig_state`)."""
+
+    NAMES = {"state": "rig_state", "error": "rig_error", "motion_text": "rig_motion_text",
+             "_attempt": "_connect_attempt"}
 
     def __init__(self, *args, **kwargs) -> None:
-        object.__setattr__(self, "writes", [])  # (attribute, thread name, value)
+        object.__setattr__(self, "writes", [])
         super().__init__(*args, **kwargs)
 
     def __setattr__(self, name, value) -> None:
-        self.writes.append((name, threading.current_thread(), value))
+        self.writes.append((self.NAMES.get(name, name), threading.current_thread(), value))
+        super().__setattr__(name, value)
+
+
+class RecordingApp(StationApp):
+    """Records the thread of every assignment of an attribute on the app and its rig session."""
+
+    SESSION = RecordingSession
+
+    def __init__(self, *args, **kwargs) -> None:
+        object.__setattr__(self, "_writes", [])  # (attribute, thread name, value)
+        super().__init__(*args, **kwargs)
+
+    @property
+    def writes(self) -> list:
+        return self._writes + self.session.writes
+
+    def __setattr__(self, name, value) -> None:
+        self._writes.append((name, threading.current_thread(), value))
         super().__setattr__(name, value)
 
 
@@ -47,14 +70,14 @@ def off_ui_thread(writes, ui: threading.Thread) -> list[str]:
 
 
 class RigTracker:
-    """Wraps station.wiring.open_rig: every rig opened, and the thread each was closed on."""
+    """Wraps station.services.wiring.open_rig: every rig opened, and the thread each was closed on."""
 
     def __init__(self, monkeypatch) -> None:
-        import station.wiring
+        import station.services.wiring
 
         self.opened: list = []
         self.closed: dict[int, threading.Thread] = {}
-        real = station.wiring.open_rig
+        real = station.services.wiring.open_rig
 
         def open_rig(*args, **kwargs):
             rig = real(*args, **kwargs)
@@ -68,7 +91,7 @@ class RigTracker:
             self.opened.append(rig)
             return rig
 
-        monkeypatch.setattr(station.wiring, "open_rig", open_rig)
+        monkeypatch.setattr(station.services.wiring, "open_rig", open_rig)
 
     def is_closed(self, rig) -> bool:
         return rig is not None and id(rig) in self.closed

@@ -5,8 +5,8 @@ At time scale 0.02 one real millisecond is 50 ms of the rig's clock. The UI runs
 worker thread of the process that also draws the screens, so the sweep's thread is often kept
 waiting for tens of milliseconds; the move timeout once counted that wait as motion time and
 recorded `timeout` faults (`the drive did not reach ...`) the CLI never saw. The sweeps here run
-through the app's own sweep job (StationApp.start_sweep -> station.jobs.run_sweep, on the rig
-the app opened with station.wiring.open_rig) with the Sweep page drawing, and a thread of pure
+through the app's own sweep job (StationApp.start_sweep -> station.services.jobs.run_sweep, on the rig
+the app opened with station.services.wiring.open_rig) with the Sweep page drawing, and a thread of pure
 Python work competing for the interpreter, as a busy redraw does.
 """
 

@@ -1,6 +1,6 @@
 """Sweep flows through the UI on the simulated rig at time scale 0 (real Modbus TCP + serial pty).
 
-The recording is written by station.jobs.run_sweep (the CLI's runner); these tests check what
+The recording is written by station.services.jobs.run_sweep (the CLI's runner); these tests check what
 the operator sees (plot, progress, state) and what is left behind (drives, recording).
 """
 

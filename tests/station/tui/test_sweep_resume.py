@@ -1,5 +1,5 @@
 """Resuming an aborted sweep from the Sweep page (r): the same job as `station sweep --resume`
-(station.jobs.resumable_plan, then run_sweep(resume=True)), appending to the same file;
+(station.services.jobs.resumable_plan, then run_sweep(resume=True)), appending to the same file;
 refusals (complete, no plan, missing, a sweep running) are notifications. Simulated rig (real
 Modbus TCP + serial pty) at time scale 0.02, so a sweep in the UI lasts long enough to act on."""
 
@@ -17,8 +17,8 @@ from procedures.plans import iso230_plan
 from procedures.recording.reader import read_session
 from procedures.runner import CallbackSink
 from tests.tooling import start_paper_sweep
-from station.config import StationConfig
-from station.jobs import run_sweep
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
 from station.tui.app import StationApp
 from station.tui.screens.sweep import ResumeScreen
 
@@ -38,7 +38,7 @@ def aborted_session(path, legs=(2,), after: int = 4):
         if isinstance(e, ev.PointMeasured) and e.done == after:
             control.abort("test abort")
 
-    from station.wiring import open_rig
+    from station.services.wiring import open_rig
 
     cfg = StationConfig(operator="test")
     with open_rig(cfg, legs=legs, time_scale=0.0) as rig:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from station.config import StationConfig
+from station.services.config import StationConfig
 from station.tui.app import StationApp
 
 SIZE = (120, 40)

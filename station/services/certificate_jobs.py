@@ -27,7 +27,7 @@ from typing import Any
 from procedures import certificate
 from procedures.errors import InputError
 from procedures.atomic import write_bytes_atomic  # the index is whole or old
-from station.report_jobs import session_decisions
+from station.services.report_jobs import session_decisions
 
 COUNTER_NAME = "certificate-counter.json"
 FOLDER_NAME = "certificates"
@@ -143,7 +143,7 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
     `tolerances` {type: Tolerance.to_json()} (None: the sessions' recorded ones); `station_id`
     names the issuing station in the report number when the session does not record one;
     `table_leg_sha256` the sha256 of the leg's rows of `table` as its holder stores them
-    (station.table_jobs.expected_tables), checked against the table the as-left session found active."""
+    (station.services.table_jobs.expected_tables), checked against the table the as-left session found active."""
     folder, counter_path = Path(folder), Path(counter_path)
     leg = pick_leg(as_found, leg)
     if not as_found.identity.leg(leg).serial:

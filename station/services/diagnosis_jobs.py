@@ -52,7 +52,7 @@ def on_common_basis(session: Any, twin: Any) -> tuple[Any, Any, list[int]]:
     from procedures.diagnosis.twin import ExternalTwin
     from procedures.metrology.thermal import normalise_session
 
-    if getattr(twin, "kind", None) == "fleet":  # built on one basis for the whole session (station/twins.py)
+    if getattr(twin, "kind", None) == "fleet":  # built on one basis for the whole session (station/services/twins.py)
         if not twin.normalised:
             return session.points, twin, []
         n = normalise_session(session.points, session.station_config)

@@ -17,8 +17,8 @@ from procedures.recording.identity import (
     calibration_warnings,
     instrument_identity,
 )
-from station.config import StationConfig, _hostname
-from station.serials import merged_leg_identity, read_serials_file
+from station.services.config import StationConfig, _hostname
+from station.services.serials import merged_leg_identity, read_serials_file
 
 
 def leg_fields(cfg: StationConfig, entered: Mapping[int, Mapping[str, str]] | None = None,

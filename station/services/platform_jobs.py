@@ -111,7 +111,7 @@ def model_errors(model, session, recording_path, model_path, *, measured: str | 
 def _table_errors(src: Path, recording, profile, measured: str | None, raw: bool = False) -> tuple[object, object, dict]:
     from procedures.recording.reader import file_sha256, read_session
     from procedures.table import read_table_csv
-    from station.wiring import drive_table_spec
+    from station.services.wiring import drive_table_spec
 
     if not recording:
         raise InputError(f"{src}: a table does not name its recording; pass --recording FILE.h5 for the measured errors.")

@@ -6,7 +6,7 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     operator = "jdoe"
     recordings_dir = "runs"
     id = "bench-2"              # the station's id in every session ("" = the host name)
-    serials_file = ""           # CSV leg,serial[,part_number,leg_type,screw_lot] (station/serials.py)
+    serials_file = ""           # CSV leg,serial[,part_number,leg_type,screw_lot] (station/services/serials.py)
 
     [drive]
     url = "sim"                 # or "tcp://127.0.0.1:5020", "rtu:///dev/ttyUSB0?baud=115200"
@@ -136,7 +136,7 @@ class SimConfig:
     thermal_tau_s: float = 1800.0  # how fast the simulated legs' material follows the hall
     # the simulated drives' jerk limit, mm/s^3 (0 = not limited): a real leg's by default, so the
     # rig time a user sees for any plan is a real leg's (drivers.sim.plant LEG_JERK_MM_S3); the
-    # sample recordings pin 0, the setting they were made with (station/commands/recordings.py)
+    # sample recordings pin 0, the setting they were made with (station/services/samples.py)
     jerk_mm_s3: float = SIM_LEG_JERK_MM_S3
     # um added to every simulated laser reading after its zero (a station bias; 0 = off, so the
     # sample recordings stay identical): the station comparison's acceptance test (docs/decisions.md)
@@ -502,7 +502,7 @@ def _load_legs(p: Path, table: Any) -> tuple[LegMaterial, dict[int, LegMaterial]
             if not isinstance(v, str):
                 raise InputError(f"{p}: [legs.{key}] {k}: expected text (e.g. \"HX-0042\"), got {v!r}")
         if names:
-            from station.serials import check_serial  # one rule for serials everywhere
+            from station.services.serials import check_serial  # one rule for serials everywhere
 
             for k in ("serial", "drive_serial"):
                 if names.get(k):

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
+from drivers.errors import DriverError
 from drivers.interfaces import ServoAxis, TableSpec
 from procedures import events as ev
 from procedures.audit import AuditLog, AuditSink
@@ -38,9 +39,9 @@ from procedures.verify import verify_procedure
 from station import __version__
 from station.catalog.store import LOCAL_NAME, Catalog
 from station.catalog.writer import CatalogSink, catalog_for, enabled
-from station.config import LEG_COUNT, StationConfig
-from station.identity import session_identity
-from station.wiring import Rig
+from station.services.config import LEG_COUNT, StationConfig
+from station.services.identity import session_identity
+from station.services.wiring import Rig
 
 
 @dataclass
@@ -186,3 +187,7 @@ def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *
                                  control=control, normalise=normalise,
                                  sweep_options={"session_id": uuid.uuid4().hex[:12], "warnings": identity.warnings})
     return run_table_job(procedure, audit, [recorder, *sinks], control, catalog=catalog_for(cfg), session_path=out)
+
+
+class OperationFailed(DriverError):
+    """A push or rollback failed after it started writing (the message says which table is active)."""

@@ -64,8 +64,8 @@ def _beyond(part: np.ndarray, cols: list[np.ndarray], x: np.ndarray, fitted: boo
 def variant_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 5) -> Trial:
     """One session with `physics` (PHYSICS) withheld from the twin; deterministic for the seed."""
     from drivers.sim.plant import default_leg_configs, systematic_error_um
-    from station.synth import synth_session
-    from station.twins import plant_twin
+    from station.services.synth import synth_session
+    from station.services.twins import plant_twin
 
     if physics not in PHYSICS:
         raise ValueError(f"unknown physics {physics!r}; known: {', '.join(PHYSICS)}")

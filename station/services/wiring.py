@@ -17,8 +17,8 @@ from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
 from procedures.errors import InputError
-from station.config import StationConfig
-from station.drive_lock import holds_drive_lock
+from station.services.config import StationConfig
+from station.services.drive_lock import holds_drive_lock
 
 
 @dataclass
@@ -53,7 +53,7 @@ class Rig:
         self.close()
 
 
-@holds_drive_lock(whole_rig=True)  # a leg another station process uses is refused (station/drive_lock.py)
+@holds_drive_lock(whole_rig=True)  # a leg another station process uses is refused (station/services/drive_lock.py)
 def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | None = None,
              noise_seed: int | None = None) -> Rig:
     """Connect to the rig named by `cfg`; on "sim" start the simulated rig in-process first.
@@ -205,15 +205,39 @@ def drive_table_spec(profile_path: str | Path | None = None) -> TableSpec | None
         raise InputError(str(exc)) from None
 
 
+def drive_soft_limits(profile_path: str | Path | None = None) -> tuple[float, float]:
+    """(min_mm, max_mm): the soft travel limits of the drive of a profile (the built-in one
+    without a path), without connecting; what bounds the targets of an imported session."""
+    soft = DriveProfile.load(str(profile_path) if profile_path else None).limits
+    return soft.soft_min_mm, soft.soft_max_mm
+
+
+def station_store_table_spec(where: str) -> TableSpec:
+    """What the station's own table store holds (compensation target station); `where` names
+    its setting in messages."""
+    from drivers.station_compensation import station_table_spec
+
+    return station_table_spec(where)
+
+
+def start_sim_rig(cfg_sim, time_scale: float, tcp_port: int, rtu: bool, nv_path: Path | None):
+    """The simulated rig served standalone (`station sim`): started SimRig with the station's
+    simulated legs (`cfg_sim`, a SimConfig); the caller stops it. OSError when the port is taken."""
+    from drivers.sim.rig import SimRig
+
+    rig = SimRig(time_scale=time_scale, seed=cfg_sim.seed, tcp_port=tcp_port, rtu=rtu, nv_path=nv_path,
+                 configs=cfg_sim.leg_configs())
+    rig.start()
+    return rig
+
+
 def leg_table_spec(cfg: StationConfig, leg: int) -> TableSpec:
     """What holds leg `leg`'s table by its [compensation] target, without connecting: the
     station's store (target station) or the drive of cfg's profile (target drive). InputError
     for a leg whose target is controller, or drive on a drive without a table (naming the others)."""
     target = cfg.compensation.target_of(leg)
     if target == "station":
-        from drivers.station_compensation import station_table_spec
-
-        return station_table_spec(cfg.station_tables_path)
+        return station_store_table_spec(cfg.station_tables_path)
     if target == "controller":
         raise InputError(f"leg {leg}: compensation target is controller ([compensation] in {cfg.source}): the "
                          "controller applies the table; export it with `station table --format linuxcnc`")

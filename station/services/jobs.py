@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping
+from typing import Callable
 
 from procedures import events as ev
 from procedures.control import RunControl
@@ -21,9 +23,9 @@ from procedures.runner import RunResult, Sink, run
 from procedures.sweep import RetryPolicy, sweep
 from station import __version__
 from station.catalog.writer import CatalogSink, catalog_for
-from station.config import StationConfig
-from station.identity import session_identity
-from station.wiring import Rig
+from station.services.config import StationConfig
+from station.services.identity import session_identity
+from station.services.wiring import Rig
 
 
 def run_sweep(
@@ -41,8 +43,8 @@ def run_sweep(
     """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`).
 
     `serials`: leg -> identity fields entered for this session (--serial, the Sweep page), on
-    top of `serials_file` / [station] serials_file and [legs.N] (station/serials.py). The session
-    records the identity (station/identity.py); the laser's calibration warnings are said at the
+    top of `serials_file` / [station] serials_file and [legs.N] (station/services/serials.py). The session
+    records the identity (station/services/identity.py); the laser's calibration warnings are said at the
     start of every session, a resumed one too."""
     control = control or RunControl()
     out = Path(out)
@@ -153,7 +155,7 @@ def replay_sweep(
     sinks: Iterable[Sink] = (),
     control: RunControl | None = None,
 ) -> RunResult:
-    """Run `session`'s plan on the replay `rig` (station.wiring.open_replay_rig) through the
+    """Run `session`'s plan on the replay `rig` (station.services.wiring.open_replay_rig) through the
     sweep procedure and the runner, recording to `out` (rig kind "replay").
 
     Where the recording was cut short (aborted, killed), the run is aborted where the recording
@@ -161,7 +163,7 @@ def replay_sweep(
     recording does not hold, `rig.sim.mismatch` names the first one (the run then fails).
     """
     if rig.kind != "replay":
-        raise InputError(f"replay_sweep needs a replay rig (station.wiring.open_replay_rig), not a {rig.kind} rig")
+        raise InputError(f"replay_sweep needs a replay rig (station.services.wiring.open_replay_rig), not a {rig.kind} rig")
     cfg = cfg or StationConfig()
     control = control or RunControl()
     plan = SweepPlan.from_dict(session.plan)
@@ -181,3 +183,35 @@ def replay_sweep(
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, retry=retry_policy_of(session),
                       session_id=uuid.uuid4().hex[:12], t0_s=0.0, materials=materials)
     return run(procedure, [recorder, *sinks], control)
+
+
+@dataclass(frozen=True)
+class ReplayOutcome:
+    """How a replay ended: the run's result, the first request the recording did not hold
+    (`mismatch`, the run then failed), and the comparison of the new recording with the replayed
+    one (None after a mismatch or an abort: nothing worth comparing)."""
+
+    result: RunResult
+    mismatch: Exception | None
+    comparison: object | None  # procedures.replay_compare.Comparison
+
+
+def replay_and_compare(source: Path, session: Session, out: Path, cfg: StationConfig, speed: float | None,
+                       sinks: Iterable[Sink] = (), control: RunControl | None = None,
+                       on_rig_opened: Callable[[Rig], None] | None = None) -> ReplayOutcome:
+    """Replay the recording `source` (read as `session`) through the replay devices at `speed`
+    (None: as fast as possible), recording to `out`, and compare the two recordings: the job of
+    `station replay` and of the terminal UI's Replay page. `on_rig_opened(rig)` is told the
+    replay rig once it runs (the UI keeps it)."""
+    from procedures.replay_compare import compare_sessions
+    from station.services.wiring import open_replay_rig
+
+    with open_replay_rig(source, speed, cfg) as rig:
+        if on_rig_opened is not None:
+            on_rig_opened(rig)
+        result = replay_sweep(rig, session, out, cfg, sinks=sinks, control=control)
+        mismatch = rig.sim.mismatch
+    comparison = None
+    if mismatch is None and not (control is not None and control.aborted):
+        comparison = compare_sessions(session, read_session(out))
+    return ReplayOutcome(result, mismatch, comparison)

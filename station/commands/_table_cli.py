@@ -1,0 +1,154 @@
+"""What the table commands share (`station push`, `rollback`, `verify`, `audit`): the drive
+arguments, the config they make, the audit log, the confirmation prompt, the plan printer and
+how an operation's end is reported. Command-line only (argparse, stdin, print); the work itself
+is station.services.table_jobs, as in the terminal UI. (Not a command: cli.py skips "_" modules.)"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from procedures import events as ev
+from procedures.audit import AuditError, AuditLog
+from procedures.errors import InputError
+from procedures.plans import parse_legs
+from procedures.states import Action, AuditOutcome
+from station.catalog.writer import catalog_for
+from station.services.identity import station_audit_log
+from station.services.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
+from station.services.table_jobs import JobOutcome, OperationFailed, refusal_job
+from station.services.wiring import drive_url_of
+
+
+def add_drive_arguments(p: argparse.ArgumentParser, several: bool = False) -> None:
+    """--leg, where the drive is (--sim | --drive URL | --config C), --profile, --audit, --yes."""
+    if several:
+        p.add_argument("--leg", required=True, metavar="N|1-6|all",
+                       help=f"leg number (1..{LEG_COUNT}), or several (1-6, 1,4, all): one confirmation for all")
+    else:
+        p.add_argument("--leg", type=int, required=True, metavar="N", help=f"leg number (1..{LEG_COUNT})")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--sim", action="store_true",
+                       help=f"the simulated drive; its table memory is <recordings_dir>/{SIM_NV_NAME} "
+                            "(runs/ by default; config [sim] nv_path overrides)")
+    where.add_argument("--drive", metavar="URL", help="the drive's bus: tcp://HOST:PORT or rtu:///dev/ttyUSB0?baud=115200")
+    where.add_argument("--config", metavar="C", help="station TOML naming the drives ([drive] url, profile, timeout)")
+    p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile (default: the config's, or the built-in one)")
+    p.add_argument("--audit", metavar="FILE", help="audit log (default <recordings_dir>/audit.jsonl, i.e. runs/audit.jsonl)")
+    p.add_argument("--yes", action="store_true", help="do not ask for confirmation (needed when stdin is not a terminal)")
+
+
+def station_config(args, interferometer: bool = False) -> StationConfig:
+    """The config of --config (or the built-in one), with --drive, --sim and --profile applied
+    and the simulated drive's table memory defaulted (StationConfig.with_sim_memory). A config
+    file must name the drive (and the interferometer when `interferometer`)."""
+    cfg = load_config(getattr(args, "config", None))
+    cfg.require_devices(interferometer=interferometer)
+    drive = getattr(args, "drive", None)
+    if drive:
+        if drive.strip().lower() == "sim":
+            raise InputError("--drive sim: use --sim for the simulated drive")
+        cfg.drive.url = drive
+    if getattr(args, "sim", False):
+        cfg.drive.url = "sim"
+    if getattr(args, "profile", None):
+        cfg.drive.profile = args.profile
+    return cfg.with_sim_memory()
+
+
+def audit_log(args, cfg: StationConfig) -> AuditLog:
+    return station_audit_log(cfg, getattr(args, "audit", None))
+
+
+def prompt(yes: bool, stdin=None, stdout=None):
+    """`ask(question) -> bool` for the command line: True with --yes, else the user types y/yes at
+    the terminal. InputError when stdin is not a terminal and --yes was not given (nobody can
+    answer: refuse rather than guess)."""
+
+    def ask(question: str) -> bool:
+        if yes:
+            return True
+        inp = stdin or sys.stdin
+        out = stdout or sys.stdout
+        if not (hasattr(inp, "isatty") and inp.isatty()):
+            raise InputError("not confirmed: stdin is not a terminal, so nobody can answer the question; "
+                             "run it in a terminal, or add --yes to confirm on the command line. Nothing was written.")
+        out.write(f"{question} [y/N] ")
+        out.flush()
+        return inp.readline().strip().lower() in ("y", "yes")
+
+    return ask
+
+
+class PlanPrinter:
+    """Runner sink: prints a push or rollback plan before the confirmation question."""
+
+    critical = False
+
+    def __init__(self, header: str = "") -> None:
+        self.header = header
+
+    def handle(self, event: ev.Event) -> None:
+        if isinstance(event, ev.TablePlanned):
+            plan = event.plan
+            if plan.action == Action.ROLLBACK:
+                print(f"rollback of the push of {plan.details.get('push_time_utc')}")
+            elif self.header:
+                print(self.header)
+            for line in plan.describe():
+                print(line)
+            sys.stdout.flush()
+
+    def close(self, outcome: str) -> None:
+        pass
+
+
+def drive_text(cfg: StationConfig) -> str:
+    """Which drive a push or rollback writes to, said before anything else."""
+    if cfg.drive.url == "sim":
+        return f"the SIMULATED drive (its table memory {cfg.sim.nv_path}); not a real drive"
+    return f"{cfg.drive.url}" + (f" (config {cfg.source})" if cfg.from_file else "")
+
+
+def warn_audit_problems(audit: AuditLog) -> None:
+    try:
+        _, problems = audit.read()
+    except AuditError:
+        return
+    for p in problems[:3]:
+        print(f"warning: {audit.path}, line {p.line}: {p.reason} (left as is: the log is append-only)", file=sys.stderr)
+
+
+def report(job: JobOutcome, audit: AuditLog) -> int:
+    """Print how a push or rollback ended; the exit code (0 ok, 1 cancelled, else an error)."""
+    for problem in job.audit_problems:
+        print(f"warning: {problem}", file=sys.stderr)
+    end = job.finished
+    if end is None:
+        raise InputError("the operation ended without an outcome")
+    if end.outcome == AuditOutcome.OK:
+        return 0
+    if end.outcome == AuditOutcome.CANCELLED:
+        print("cancelled; nothing was written")
+        return 1
+    if end.outcome == AuditOutcome.FAILED:
+        raise OperationFailed(end.message)
+    raise InputError(end.message)
+
+
+def refuse(args, cfg: StationConfig, audit: AuditLog, action: Action, leg: int, exc: BaseException,
+           source: dict | None = None) -> int:
+    """A refusal found before the drive is opened: logged through the audit sink, then reported."""
+    job = refusal_job(action, leg, exc, audit=audit, drive_url=drive_url_of(cfg), source=source, catalog=catalog_for(cfg))
+    return report(job, audit)
+
+
+def parse_leg_choice(text: str) -> tuple[int, ...]:
+    """"3", "1-6", "1,4" or "all" as leg numbers; InputError naming what is wrong."""
+    if str(text).strip().lower() == "all":
+        return tuple(range(1, LEG_COUNT + 1))
+    try:
+        return parse_legs(str(text))
+    except InputError:
+        raise InputError(f"--leg {text}: give a leg number from 1 to {LEG_COUNT}, a range (1-6), a list (1,4) "
+                         "or all") from None

@@ -1,0 +1,72 @@
+"""The analysis of a recorded session, composed once for every front end: the error on the
+chosen basis (procedures.metrology.thermal.error_basis: normalised to 20 degC unless raw), then
+the fitted leg-error model tagged with that basis, and the ISO 230-2 values with their expanded
+uncertainty U (k = 2). `station fit`, `station iso230` and the terminal UI's Results page call it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from procedures.metrology.thermal import error_basis
+
+
+@dataclass
+class SessionAnalysis:
+    """What `analyse_session` found. `iso_error` / `uncertainty_error`: why the ISO 230-2 values
+    or their U could not be had (the rest stands without them)."""
+
+    session: Any  # procedures.recording.reader.Session
+    points: Any  # session.points with error_um on the chosen basis
+    basis_lines: tuple[str, ...]  # what error_basis says, as the commands print it
+    basis: dict  # the same as JSON (a model carries it as options["error_basis"])
+    raw: bool = False
+    model: Any = None  # procedures.fit.LegErrorModel, when a fit was asked for
+    iso: Any = None  # procedures.iso230.evaluate's result, when asked for
+    iso_u: dict[int, dict[str, float | None]] | None = None  # leg -> value name -> U (k = 2), um
+    iso_error: Exception | None = None
+    uncertainty_error: Exception | None = None
+    fit_options: dict = field(default_factory=dict)
+
+
+def analyse_session(session, raw: bool = False, *, fit_method: str | None = None, fit_options: dict | None = None,
+                    iso: bool = False, uncertainty: bool = False) -> SessionAnalysis:
+    """Analyse `session` (procedures.recording.reader.Session) on the raw error (`raw`) or the
+    error normalised to 20 degC. With `fit_method` ("default", "paper"), fit a model (keyword
+    arguments of procedures.fit.fit in `fit_options`) naming the recording and tagged with the
+    error basis (`station table` says which error its table holds); fitting errors are raised.
+    With `iso`, evaluate ISO 230-2, and with `uncertainty` also its U per value; their errors
+    are kept in the result (`iso_error`, `uncertainty_error`)."""
+    points, basis_lines, basis = error_basis(session, raw)
+    out = SessionAnalysis(session, points, tuple(basis_lines), basis, raw, fit_options=dict(fit_options or {}))
+    if fit_method is not None:
+        from procedures.fit import fit
+
+        out.model = fit(points, fit_method, source={"path": str(session.path), "sha256": session.sha256},
+                        **out.fit_options)
+        out.model.options["error_basis"] = basis
+    if iso:
+        from procedures import iso230
+
+        try:
+            out.iso = iso230.evaluate(points)
+        except Exception as exc:
+            out.iso_error = exc
+        if out.iso and uncertainty:
+            try:
+                out.iso_u = iso_uncertainty(out.iso, points, session.station_config)
+            except Exception as exc:  # the values stand without their U
+                out.uncertainty_error = exc
+    return out
+
+
+def iso_uncertainty(iso: Any, points: Any, station_config: dict) -> dict[int, dict[str, float | None]]:
+    """U (k = 2, um) of every ISO 230-2 value per leg (procedures.metrology.uncertainty), with the
+    session's recorded [metrology] and leg materials (the station's defaults when it has none)."""
+    from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
+
+    out = {}
+    for leg, r in iso.items():
+        b = leg_budget(r, points, UncertaintyInputs.from_record(station_config or {}, leg))
+        out[leg] = {name: b.U(name) for name in r.values}
+    return out
