@@ -9,7 +9,7 @@ from procedures.fit import fit
 from procedures.metrology.thermal import normalise_session
 from procedures.platform.experiment import RecordedLegErrors, Workspace, run_measurements
 from procedures.platform.geometry import default_geometry
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "calibration-6legs.h5"
 

@@ -25,9 +25,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pymodbus.client import ModbusTcpClient  # noqa: E402
 
-from procedures import events as ev  # noqa: E402
-from procedures.plans import SweepPlan, paper_plan  # noqa: E402
-from procedures.runner import CallbackSink  # noqa: E402
+from procedures.engine import events as ev  # noqa: E402
+from procedures.acquisition.plans import SweepPlan, paper_plan  # noqa: E402
+from procedures.engine.runner import CallbackSink  # noqa: E402
 from station.services.config import StationConfig  # noqa: E402
 from station.services.jobs import run_sweep  # noqa: E402
 from station.services.wiring import open_rig  # noqa: E402

@@ -19,8 +19,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from procedures.recording.reader import read_session  # noqa: E402
-from procedures.recording.writer import SessionWriter  # noqa: E402
+from procedures.io.recording.reader import read_session  # noqa: E402
+from procedures.io.recording.writer import SessionWriter  # noqa: E402
 
 PAPER_POINTS = 6 * 361 * 2 * 6  # six legs, 361 targets, six bidirectional cycles = 25 992
 
@@ -102,7 +102,7 @@ def main() -> None:
             "import os, signal\n"
             "from bench.bench_recording import _create, _record\n"
             "w = _create(%r)\n"
-            "w.append_points(__import__('numpy').concatenate([__import__('procedures.recording.writer', fromlist=['x'])"
+            "w.append_points(__import__('numpy').concatenate([__import__('procedures.io.recording.writer', fromlist=['x'])"
             ".point_row(_record(i)) for i in range(%d)]))\n"
             "os.kill(os.getpid(), signal.SIGKILL)\n"
         ) % (str(Path(__file__).resolve().parents[1]), str(killed), half)

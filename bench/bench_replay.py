@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from procedures.recording.reader import read_session  # noqa: E402
+from procedures.io.recording.reader import read_session  # noqa: E402
 from station.commands.replay import compare_sessions, parse_speed, replay_sweep  # noqa: E402
 from station.services.config import StationConfig  # noqa: E402
 from station.services.wiring import open_replay_rig  # noqa: E402

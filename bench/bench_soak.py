@@ -30,10 +30,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from procedures import events as ev  # noqa: E402
-from procedures.plans import paper_plan  # noqa: E402
-from procedures.recording.reader import read_session  # noqa: E402
-from procedures.runner import CallbackSink  # noqa: E402
+from procedures.engine import events as ev  # noqa: E402
+from procedures.acquisition.plans import paper_plan  # noqa: E402
+from procedures.io.recording.reader import read_session  # noqa: E402
+from procedures.engine.runner import CallbackSink  # noqa: E402
 from station.services.config import StationConfig  # noqa: E402
 from station.services.jobs import run_sweep  # noqa: E402
 from tests.faults.rigs import faulty_rig  # noqa: E402

@@ -36,14 +36,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from procedures import events as ev  # noqa: E402
-from procedures.audit import AuditLog  # noqa: E402
+from procedures.engine import events as ev  # noqa: E402
+from procedures.compensation.audit import AuditLog  # noqa: E402
 from procedures.fit import fit  # noqa: E402
 from procedures.metrology.thermal import error_basis  # noqa: E402
-from procedures.plan_spec import PlanSpec, plan_from_spec  # noqa: E402
-from procedures.plans import iso230_plan  # noqa: E402
-from procedures.recording.reader import read_session  # noqa: E402
-from procedures.table import make_table  # noqa: E402
+from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec  # noqa: E402
+from procedures.acquisition.plans import iso230_plan  # noqa: E402
+from procedures.io.recording.reader import read_session  # noqa: E402
+from procedures.compensation.table import make_table  # noqa: E402
 from station.services.config import StationConfig  # noqa: E402
 from station.services.jobs import run_sweep  # noqa: E402
 from station.services.table_jobs import push_legs_job, verify_job  # noqa: E402

@@ -168,9 +168,9 @@ def _diagnose(src: Path, tree: Path) -> None:
 
 def _through_csv(pts, src: Path):
     """The on-the-fly session written as an interchange CSV and imported (speed_mm_s column)."""
-    from procedures.csv_io import import_csv
-    from procedures.errors import InputError
-    from procedures.recording.reader import read_session
+    from procedures.io.csv_io import import_csv
+    from procedures.engine.errors import InputError
+    from procedures.io.recording.reader import read_session
 
     csv_path, h5 = src / "otf.csv", src / "otf.h5"
     h5.unlink(missing_ok=True)

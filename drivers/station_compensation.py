@@ -3,8 +3,8 @@
 For a leg whose compensation target is `station` (config `[compensation]`, docs/compensation.md)
 `station/services/wiring.py` wraps the leg's drive in `StationCompensatedAxis`. The wrapper is a
 `ServoAxis` like any drive, and holds two table banks, the active bank and the enable flag just
-as a drive with a table does, so push, verify, rollback and the audit log (procedures/push.py,
-procedures/verify.py) run through it unchanged. It lives in drivers/ because it *is* a driver
+as a drive with a table does, so push, verify, rollback and the audit log (procedures/compensation/push.py,
+procedures/compensation/verify.py) run through it unchanged. It lives in drivers/ because it *is* a driver
 (a decorator of another one) that procedures must not be able to tell from a drive.
 
 Sign convention (the same as the drive's, drivers/sim/drive_server.py `_start_move`): a table

@@ -23,7 +23,7 @@ import threading
 from pathlib import Path
 
 from drivers.errors import DriverError
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 from station import __version__, launch
 
 

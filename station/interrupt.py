@@ -16,7 +16,7 @@ import signal
 import sys
 import threading
 
-from procedures.control import RunControl
+from procedures.engine.control import RunControl
 from station import launch
 
 REASON = "interrupted (Ctrl-C)"

@@ -6,7 +6,7 @@ import sys
 import time
 from typing import TextIO
 
-from procedures import events as ev
+from procedures.engine import events as ev
 
 
 class Eta:

@@ -50,7 +50,7 @@ def kill_process(proc) -> None:
 def write_points_session(path, points):
     """A completed session file at `path` holding `points` (POINT_DTYPE), written through the real
     SessionWriter. Returns the path."""
-    from procedures.recording.writer import SessionWriter
+    from procedures.io.recording.writer import SessionWriter
 
     with SessionWriter.create(path, session_id=path.stem, operator="test", rig="sim", plan={"kind": "test"},
                               station_config={}, devices={}, software_version="test") as w:
@@ -90,8 +90,8 @@ def write_identified_session(path, points, *, station_id="bench-1", serial="HX-0
     through the real SessionWriter. Returns the path."""
     import numpy as np
 
-    from procedures.recording.identity import InstrumentIdentity, LegIdentity, SessionIdentity, StationIdentity
-    from procedures.recording.writer import SessionWriter
+    from procedures.io.recording.identity import InstrumentIdentity, LegIdentity, SessionIdentity, StationIdentity
+    from procedures.io.recording.writer import SessionWriter
 
     legs = {int(leg): LegIdentity(serial=serial, part_number="HX-L-300", leg_type=leg_type)
             for leg in np.unique(points["leg"])}

@@ -382,7 +382,7 @@ class ModbusServoAxis:
         return f"{v['vendor']} {v['product']} s/n {v['serial']} fw {v['firmware']}"
 
     def drive_identity(self) -> dict:
-        """The drive's identity for the session (procedures/recording/identity.py): vendor,
+        """The drive's identity for the session (procedures/io/recording/identity.py): vendor,
         product_code, revision from Read Device Identification (43/14) when the profile says the
         drive answers it (`[protocol] device_identification`), source "modbus-device-id"; else the
         profile's [identity] vendor and product, source "config". The serial from the drive's

@@ -119,7 +119,7 @@ def _err_text(text: str) -> str:
 def recorded_compensation_reply(record: str | None, source: str = "the recording") -> bytes:
     """The reply to COMP? of a replay of a session whose `laser_air_compensation` is `record`.
 
-    - the JSON record procedures.sweep wrote from the recorded instrument's COMP? answer: that
+    - the JSON record procedures.acquisition.sweep wrote from the recorded instrument's COMP? answer: that
       answer again, numbers exact (`repr`), so the replayed session's record is the same text;
     - "not reported (...)" (the recorded instrument refused COMP?, or its driver had none): ERR 11,
       the refusal replayed, the recorded text in it; the replayed session records it as not reported;

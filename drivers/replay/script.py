@@ -1,6 +1,6 @@
 """What the replay devices answer: a recording's points and faults, per leg, in recorded order.
 
-Built from the arrays of a session file (field names of procedures/recording/schema.py; this
+Built from the arrays of a session file (field names of procedures/io/recording/schema.py; this
 module takes plain structured arrays so drivers never import procedures). Every value a device
 reports over its protocol must be known, so a point with an unknown (NaN) measured position,
 drive position, load, time or air value is refused here, when the replay is opened, with the

@@ -37,8 +37,8 @@ from procedures.diagnosis.variants import VARIANTS
 from procedures.diagnosis.unexplained import unexplained
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
-from procedures.errors import InputError
-from procedures.events import Finding
+from procedures.engine.errors import InputError
+from procedures.engine.events import Finding
 from procedures.fit.noise import noise_floor
 
 FORMAT = "station-diagnosis"
@@ -387,7 +387,7 @@ def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
 
 
 def finding_events(report: dict) -> list[Finding]:
-    """The report's findings as `procedures.events.Finding` events (for sinks and front ends)."""
+    """The report's findings as `procedures.engine.events.Finding` events (for sinks and front ends)."""
     return [Finding(leg=f["leg"], effect=f["effect"], parameters=dict(f["parameters"])) for f in report["findings"]]
 
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from procedures.errors import InputError
-from procedures.points import check_points, usable_rows_by_leg
+from procedures.engine.errors import InputError
+from procedures.acquisition.points import check_points, usable_rows_by_leg
 
 
 

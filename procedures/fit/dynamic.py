@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from procedures.errors import InputError
-from procedures.recording.schema import FLAG_ANCHOR
+from procedures.engine.errors import InputError
+from procedures.io.recording.schema import FLAG_ANCHOR
 
 
 @dataclass(frozen=True)

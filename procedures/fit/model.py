@@ -136,7 +136,7 @@ class LegErrorModel:
         self.options = dict(options or {})
         self.created_utc = created_utc
         # station, operator, software version, per leg serial/part number/type of the session it
-        # was fitted to (procedures.recording.identity.model_identity); {} in older model files
+        # was fitted to (procedures.io.recording.identity.model_identity); {} in older model files
         self.identity = dict(identity or {})
 
     def leg(self, leg: int) -> LegFit:

@@ -11,7 +11,7 @@ The content is deterministic: the same points and options give the same file apa
 `source` and `created_utc` (keys sorted, floats written with Python's round-trip repr).
 A file that is not JSON, is another format, or lacks or mistypes a field is refused with a
 `SchemaError` naming the file and the field; so is a value no fit of a real leg gives
-(`procedures.ranges.SESSION_BOUNDS`: a stroke a metre from mid-stroke, an error of 0.1 m, a
+(`procedures.io.ranges.SESSION_BOUNDS`: a stroke a metre from mid-stroke, an error of 0.1 m, a
 leg other than 1-6, a basis or sample grid too large to evaluate).
 """
 
@@ -24,12 +24,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from procedures.atomic import write_text_atomic
-from procedures.errors import SchemaError
+from procedures.io.atomic import write_text_atomic
+from procedures.engine.errors import SchemaError
 from procedures.fit.bidirectional import bidirectional_from_json
 from procedures.fit.model import FORMAT, METHODS, VERSION, FitStats, LegErrorModel, LegFit
 from procedures.fit.paper import paper_from_json
-from procedures.ranges import LEG_NUMBERS, SESSION_BOUNDS
+from procedures.io.ranges import LEG_NUMBERS, SESSION_BOUNDS
 
 MAX_SAMPLES = 100_000  # paper model: samples of the stroke (the paper's sweep has 361)
 MAX_WAVES = 100  # default model: stroke harmonics (the fit tries at most 24)
@@ -74,7 +74,7 @@ def model_to_json(model: LegErrorModel, source_path: str | os.PathLike | None = 
 def save_model(model: LegErrorModel, path: str | os.PathLike, source_path: str | os.PathLike | None = None,
                source_sha256: str | None = None, identity: dict | None = None) -> Path:
     """Write `model` as JSON to `path` (atomically: a partial file never replaces a good one);
-    `identity`: the session's (procedures.recording.identity.model_identity), default the model's."""
+    `identity`: the session's (procedures.io.recording.identity.model_identity), default the model's."""
     path = Path(path)
     text = model_to_json(model, source_path, source_sha256, identity=identity)
     return write_text_atomic(path, text)

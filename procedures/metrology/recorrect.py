@@ -39,13 +39,13 @@ from typing import Any
 import h5py
 import numpy as np
 
-from procedures.atomic import atomic_path
-from procedures.errors import InputError
+from procedures.io.atomic import atomic_path
+from procedures.engine.errors import InputError
 from procedures.metrology import defaults as D
 from procedures.metrology.air import EQUATIONS, refractive_index
-from procedures.recording.columns import read_point_column, write_point_column
-from procedures.recording.reader import read_session
-from procedures.recording.writer import build_session_file, to_json_text
+from procedures.io.recording.columns import read_point_column, write_point_column
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.writer import build_session_file, to_json_text
 
 RECORD_KEY = "laser_air_compensation"
 """The devices entry holding how the instrument compensated (drivers.interferometer.protocol.

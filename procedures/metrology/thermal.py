@@ -241,7 +241,7 @@ def normalise_session(points: np.ndarray, station_config: Mapping[str, Any] | No
 
 
 def error_basis(session: Any, raw: bool = False) -> tuple[np.ndarray, list[str], dict[str, Any]]:
-    """The points an analysis of `session` (as procedures.recording.reader reads it) uses, the
+    """The points an analysis of `session` (as procedures.io.recording.reader reads it) uses, the
     lines saying which error that is, and the same as JSON: normalised to 20 degC by default,
     raw when `raw` (the `--raw` option of fit, iso230 and verify)."""
     if raw:

@@ -44,7 +44,7 @@ from procedures.metrology import defaults as D
 K_COVERAGE = 2.0
 SQRT3 = math.sqrt(3.0)
 SQRT12 = math.sqrt(12.0)
-TARGET_TOLERANCE_MM = 0.001  # as procedures.iso230: targets closer than this are one position
+TARGET_TOLERANCE_MM = 0.001  # as procedures.reporting.iso230: targets closer than this are one position
 
 # Sensitivities of the air refractive index near 20 degC, 1013.25 hPa, 50 %RH, 633 nm (Ciddor
 # 1996; docs/uncertainty.md), ppm of n per unit; used when procedures.metrology.air is missing.
@@ -282,7 +282,7 @@ def _term(coef: float, kind: str, t: dict) -> Term:
 
 
 def _forms(r, temps: dict) -> dict[str, tuple[float, list[Term], str, list[str]]]:
-    """Each ISO value of `r` (procedures.iso230.LegIso230) as (value, linear form, how, notes)."""
+    """Each ISO value of `r` (procedures.reporting.iso230.LegIso230) as (value, linear form, how, notes)."""
     up = _stats_terms(r.up, 1, temps)
     down = _stats_terms(r.down, -1, temps)
     out: dict = {}
@@ -599,7 +599,7 @@ def _stroke(stats) -> float:
 
 
 def leg_budget(iso_leg, points: np.ndarray, inputs: UncertaintyInputs | None = None) -> LegBudget:
-    """Uncertainty budgets of every ISO 230-2 value of `iso_leg` (procedures.iso230.LegIso230),
+    """Uncertainty budgets of every ISO 230-2 value of `iso_leg` (procedures.reporting.iso230.LegIso230),
     evaluated on the leg's `points` (POINT_DTYPE: the environment and material temperatures)."""
     inp = inputs or UncertaintyInputs()
     pts = points[points["leg"] == iso_leg.leg] if points.dtype.names and "leg" in points.dtype.names else points
@@ -656,6 +656,6 @@ def table_budget(positions_mm: Iterable[float], s_um: float, n: int, inputs: Unc
 
 
 def session_budget(iso_results: dict, points: np.ndarray, inputs_of=None) -> dict[int, LegBudget]:
-    """leg -> LegBudget for procedures.iso230.evaluate's result; `inputs_of(leg)` gives the leg's
+    """leg -> LegBudget for procedures.reporting.iso230.evaluate's result; `inputs_of(leg)` gives the leg's
     UncertaintyInputs (default: UncertaintyInputs())."""
     return {leg: leg_budget(r, points, inputs_of(leg) if inputs_of else None) for leg, r in iso_results.items()}

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 
 GEOMETRY_FORMAT = "station.platform.geometry/1"
 DEFAULT_GEOMETRY_PATH = Path(__file__).with_name("geometries") / "default.toml"

@@ -21,7 +21,7 @@ from alembic.script import ScriptDirectory
 from sqlalchemy import event
 from sqlalchemy.engine import Engine
 
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
 _LOCK_KEY = 230_2023  # advisory lock id for migrations on PostgreSQL

@@ -50,7 +50,7 @@ class Rec:
 
 
 def sha256_of(path: str | os.PathLike) -> str:
-    from procedures.recording.reader import file_sha256
+    from procedures.io.recording.reader import file_sha256
 
     return file_sha256(path)
 
@@ -135,8 +135,8 @@ def session_iso(session) -> dict[int, dict]:
     """ISO 230-2 values of each leg with U (k = 2), on the basis of the ISO 230-2 report
     (normalised to 20 degC where the session allows): {leg: {"E": {"value_um", "U_um"}, ...}}.
     The leg-level budget only: the report's per-target U is not needed here and costs most."""
-    from procedures import iso230
-    from procedures.iso230_report import VALUE_ORDER, _normalised
+    from procedures.reporting import iso230
+    from procedures.reporting.iso230_report import VALUE_ORDER, _normalised
     from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
 
     pts, _ = _normalised(session.points, session.station_config or {})
@@ -154,7 +154,7 @@ def session_iso(session) -> dict[int, dict]:
 def session_rec(path: str | os.PathLike) -> Rec:
     """A session file's record: identity, times, outcome, ISO 230-2 values with U per leg.
     InputError (naming the file) when it is not a readable session."""
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
 
     session = read_session(path)
     attrs = session.attrs
@@ -303,7 +303,7 @@ AUDIT_KINDS = {"push": "push", "verify": "verification", "rollback": "rollback"}
 def audit_rec(d: Any, log_path: str | os.PathLike) -> Rec | None:
     """The record of one audit entry (its parsed JSON line), keyed by the entry's id (None for a
     line that is not an entry, has no id or an unknown action)."""
-    from procedures.audit import AuditEntry
+    from procedures.compensation.audit import AuditEntry
 
     try:
         entry = AuditEntry.from_json(d)

@@ -15,7 +15,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from procedures import events as ev
+from procedures.engine import events as ev
 from station.catalog import readers
 from station.catalog.store import Catalog, catalog_of
 
@@ -49,7 +49,7 @@ def _forward_quietly(catalog: Catalog) -> None:
 class CatalogSink:
     """A runner sink (not critical) that indexes, when the run closes, the session file the run
     recorded (`session_path`, already finished by the recorder, which closes before it) and the
-    audit entries `audit_sink` wrote (procedures.audit.AuditSink)."""
+    audit entries `audit_sink` wrote (procedures.compensation.audit.AuditSink)."""
 
     critical = False
 

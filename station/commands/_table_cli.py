@@ -8,11 +8,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from procedures import events as ev
-from procedures.audit import AuditError, AuditLog
-from procedures.errors import InputError
-from procedures.plans import parse_legs
-from procedures.states import Action, AuditOutcome
+from procedures.engine import events as ev
+from procedures.compensation.audit import AuditError, AuditLog
+from procedures.engine.errors import InputError
+from procedures.acquisition.plans import parse_legs
+from procedures.engine.states import Action, AuditOutcome
 from station.catalog.writer import catalog_for
 from station.services.identity import station_audit_log
 from station.services.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config

@@ -1,5 +1,5 @@
 """`station audit`: show the audit log, one line per push / verify / rollback, and which table
-each leg should hold. The joining and the per-leg summary are procedures.audit_view; this
+each leg should hold. The joining and the per-leg summary are procedures.compensation.audit_view; this
 module only presents them."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import json
 import sys
 from typing import Any
 
-from procedures.audit import ACTIONS
-from procedures.errors import InputError
-from procedures.audit_view import (
+from procedures.compensation.audit import ACTIONS
+from procedures.engine.errors import InputError
+from procedures.compensation.audit_view import (
     INTERRUPTED,
     AuditView,
     LegState,

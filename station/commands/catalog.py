@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 from station.catalog import db, files
 from station.catalog.store import Catalog, catalog_of
 from station.services.config import load_config

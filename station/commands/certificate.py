@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.services.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
 from station.services.config import load_config
 

@@ -7,10 +7,10 @@ import argparse
 import json
 from pathlib import Path
 
-from procedures import compare as cmp
-from procedures.errors import InputError
-from procedures.atomic import write_bytes_atomic  # never half a file
-from procedures.recording.reader import read_session
+from procedures.reporting import compare as cmp
+from procedures.engine.errors import InputError
+from procedures.io.atomic import write_bytes_atomic  # never half a file
+from procedures.io.recording.reader import read_session
 from station.services.report_jobs import session_decisions
 
 NAME = "compare"

@@ -18,8 +18,8 @@ from pathlib import Path
 from procedures.diagnosis import DiagnosisSettings, to_json
 from procedures.diagnosis.selfcheck import format_self_check, run_self_check
 from procedures.diagnosis.text_report import text_report
-from procedures.errors import InputError
-from procedures.outputs import check_output_file
+from procedures.engine.errors import InputError
+from procedures.io.outputs import check_output_file
 from station.services.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
 from station.services.twins import load_twin
 from station.services.selfcheck import SELF_CHECK_CONTRIBUTION_UM, selfcheck_trial
@@ -98,7 +98,7 @@ def run(args) -> int:
     if path.suffix.lower() == ".csv":
         raise InputError(f"{path}: a CSV must be imported first: `station import {path} --out FILE.h5`, "
                          "then `station diagnose FILE.h5`")
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
 
     session = read_session(path)
     twin = load_twin(args.twin, session=session, path=path, catalog=lambda: _catalog_engine(args)) if args.twin else None

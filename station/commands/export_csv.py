@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from procedures.csv_io import export_csv
-from procedures.outputs import check_output_file
+from procedures.io.csv_io import export_csv
+from procedures.io.outputs import check_output_file
 from station.services.report_jobs import export_lines
 
 NAME = "export"

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.errors import InputError
-from procedures.outputs import check_output_file
-from procedures.numbers import NotANumber, finite_float
+from procedures.engine.errors import InputError
+from procedures.io.outputs import check_output_file
+from procedures.io.numbers import NotANumber, finite_float
 from procedures.fit import save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
-from procedures.plans import parse_legs
-from procedures.recording.identity import model_identity
-from procedures.recording.reader import read_session
-from procedures.states import Outcome
+from procedures.acquisition.plans import parse_legs
+from procedures.io.recording.identity import model_identity
+from procedures.io.recording.reader import read_session
+from procedures.engine.states import Outcome
 from station.catalog.writer import catalog_for, register
 from station.services.config import load_config
 from station.services.analysis import analyse_session
@@ -66,7 +66,7 @@ def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
 def run(args) -> int:
     if args.params < 1:
         raise InputError(f"--params must be >= 1, got {args.params}")
-    out = check_output_file(args.out, force=args.force)  # before the fit (procedures/outputs.py)
+    out = check_output_file(args.out, force=args.force)  # before the fit (procedures/io/outputs.py)
     session = read_session(args.session)
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")

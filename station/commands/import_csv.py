@@ -6,10 +6,10 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from procedures.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
-from procedures.outputs import check_output_file
-from procedures.plans import parse_legs
-from procedures.ranges import MAX_ERROR_UM, PointLimits
+from procedures.io.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
+from procedures.io.outputs import check_output_file
+from procedures.acquisition.plans import parse_legs
+from procedures.io.ranges import MAX_ERROR_UM, PointLimits
 from station import __version__
 
 NAME = "import"
@@ -72,8 +72,8 @@ def run(args) -> int:
 def _import_mapped(args, limits, warnings):
     """Convert through the map, then import the interchange CSV; its problems are reported in
     terms of the source file (its lines and column names)."""
-    from procedures.errors import InputError
-    from procedures.import_map import convert, load_map, source_message
+    from procedures.engine.errors import InputError
+    from procedures.io.import_map import convert, load_map, source_message
 
     mapping = load_map(args.map)
     converted = convert(args.csv, mapping)

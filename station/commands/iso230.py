@@ -6,12 +6,12 @@ import argparse
 import json
 from pathlib import Path
 
-from procedures.atomic import write_text_atomic
-from procedures.decision import decision_lines
-from procedures.errors import InputError
-from procedures.outputs import check_output_file
-from procedures.iso230 import dumps, format_table
-from procedures.recording.reader import read_session
+from procedures.io.atomic import write_text_atomic
+from procedures.reporting.decision import decision_lines
+from procedures.engine.errors import InputError
+from procedures.io.outputs import check_output_file
+from procedures.reporting.iso230 import dumps, format_table
+from procedures.io.recording.reader import read_session
 from station.services.report_jobs import iso_lines, session_decisions
 from station.services.analysis import analyse_session
 

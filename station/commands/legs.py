@@ -7,7 +7,7 @@ import datetime as dt
 import json
 from dataclasses import asdict
 
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 from station.catalog.history import legs
 from station.catalog.store import catalog_of, reading_engine
 from station.services.config import load_config

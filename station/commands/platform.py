@@ -11,8 +11,8 @@ from __future__ import annotations
 import argparse
 import math
 
-from procedures.errors import InputError
-from procedures.outputs import check_output_folder
+from procedures.engine.errors import InputError
+from procedures.io.outputs import check_output_folder
 from station.services.platform_jobs import load_errors, write_report
 
 NAME = "platform"

@@ -1,19 +1,19 @@
 """`station push`: write one leg's compensation table to its drive, safely, with an audit entry.
 
 What it shares with `station rollback`, `verify` and `audit` (the drive arguments, the
-confirmation prompt, the report) is in station/commands/_table_cli.py. The work itself is procedures.push run by station.services.table_jobs, as in the terminal UI.
+confirmation prompt, the report) is in station/commands/_table_cli.py. The work itself is procedures.compensation.push run by station.services.table_jobs, as in the terminal UI.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from procedures import events as ev
-from procedures.audit import AuditLog
-from procedures.errors import InputError
-from procedures.plausibility import check_table_values, settle
-from procedures.push import PushPlan
-from procedures.states import Action
+from procedures.engine import events as ev
+from procedures.compensation.audit import AuditLog
+from procedures.engine.errors import InputError
+from procedures.io.plausibility import check_table_values, settle
+from procedures.compensation.push import PushPlan
+from procedures.engine.states import Action
 from station.catalog.writer import catalog_for
 from station.commands._table_cli import (
     PlanPrinter,

@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from procedures.atomic import atomic_paths
-from procedures.errors import InputError
+from procedures.io.atomic import atomic_paths
+from procedures.engine.errors import InputError
 from station.services.samples import (
     FILES,
     SAMPLES,

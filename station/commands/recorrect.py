@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from procedures.outputs import check_output_file
+from procedures.io.outputs import check_output_file
 
 from procedures.metrology.air import EQUATIONS
 from procedures.metrology.recorrect import RecorrectOptions, recorrect_session

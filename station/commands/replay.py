@@ -11,9 +11,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from procedures.errors import InputError
-from procedures.recording.reader import read_session
-from procedures.replay_compare import Comparison, compare_sessions  # noqa: F401  (re-exported)
+from procedures.engine.errors import InputError
+from procedures.io.recording.reader import read_session
+from procedures.io.replay_compare import Comparison, compare_sessions  # noqa: F401  (re-exported)
 from station.services import jobs
 from station.services.jobs import ReplayRecorderSink, replay_sweep, retry_policy_of  # noqa: F401  (re-exported)
 
@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # -- the command -----------------------------------------------------------------------------------
 
 def run(args) -> int:
-    from procedures.outputs import check_output_file
+    from procedures.io.outputs import check_output_file
     from station.services.config import load_config
     from station.progress import ConsoleProgress
     from station.services.jobs import replay_and_compare

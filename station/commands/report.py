@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 
 from procedures.fit import load_model
-from procedures.outputs import check_output_folder
-from procedures.recording.reader import read_session
+from procedures.io.outputs import check_output_folder
+from procedures.io.recording.reader import read_session
 from station.catalog.writer import catalog_for
 from station.commands.fit import _lead
 from station.services.config import load_config
@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    check_output_folder(args.out, force=args.force)  # before reading and fitting (procedures/outputs.py)
+    check_output_folder(args.out, force=args.force)  # before reading and fitting (procedures/io/outputs.py)
     session = read_session(args.session)
     model = load_model(args.model) if args.model else None
     result = session_report(session, args.out, model, lead_mm=args.lead_mm, raw=args.raw, model_name=args.model or "",

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from procedures import events as ev
-from procedures.errors import InputError
-from procedures.push import describe_table
-from procedures.states import Action
+from procedures.engine import events as ev
+from procedures.engine.errors import InputError
+from procedures.compensation.push import describe_table
+from procedures.engine.states import Action
 from station.catalog.writer import catalog_for
 from station.commands._table_cli import (
     PlanPrinter,

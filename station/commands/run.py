@@ -9,15 +9,15 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.plan_spec import PlanSpec, plan_from_spec
-from procedures.outputs import check_output_file
-from procedures.plans import parse_legs
+from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
+from procedures.io.outputs import check_output_file
+from procedures.acquisition.plans import parse_legs
 from station.commands.sweep import check_time_scale
 from station.services.config import load_config
 from station.services.jobs import run_sweep
 from station.services.sessions import default_session_path
-from procedures.control import RunControl
-from procedures.states import Outcome
+from procedures.engine.control import RunControl
+from procedures.engine.states import Outcome
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.services.wiring import open_rig
@@ -45,8 +45,8 @@ def run(args) -> int:
     print(f"session recorded: {out.resolve()} ({result.outcome}, {result.points} points)")
     if result.outcome != Outcome.COMPLETED:
         return 1
-    from procedures.iso230 import evaluate, format_table
-    from procedures.recording.reader import read_session
+    from procedures.reporting.iso230 import evaluate, format_table
+    from procedures.io.recording.reader import read_session
 
     from procedures.metrology.thermal import error_basis
     from station.services.report_jobs import iso_lines, session_iso230

@@ -7,16 +7,16 @@ import math
 import shlex
 from pathlib import Path
 
-from procedures.errors import InputError
-from procedures.outputs import check_appendable, check_output_file
-from procedures.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
-from procedures.plans import parse_legs, SweepPlan
+from procedures.engine.errors import InputError
+from procedures.io.outputs import check_appendable, check_output_file
+from procedures.acquisition.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
+from procedures.acquisition.plans import parse_legs, SweepPlan
 from station.services.config import load_config
 from station.services.identity import leg_fields
 from station.services.serials import parse_serial_args
 from station.services.jobs import resumable_plan, run_sweep
-from procedures.control import RunControl
-from procedures.states import Outcome
+from procedures.engine.control import RunControl
+from procedures.engine.states import Outcome
 from station import interrupt
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
@@ -74,7 +74,7 @@ def plan_spec(args) -> PlanSpec:
 
 def build_plan(args, limits=None) -> SweepPlan:
     """The plan asked for; with `limits` (the config's [limits]) sized first and refused beyond
-    them before anything is built (procedures/plan_size.py)."""
+    them before anything is built (procedures/acquisition/plan_size.py)."""
     return plan_from_spec(plan_spec(args), limits)
 
 
@@ -99,7 +99,7 @@ def run(args) -> int:
     check_time_scale(args.time_scale)
     if args.seed is not None:
         cfg.sim.seed = args.seed
-    # every output is checked before anything connects or moves (procedures/outputs.py)
+    # every output is checked before anything connects or moves (procedures/io/outputs.py)
     if args.resume:
         if args.serial or args.serials:
             raise InputError("--serial/--serials name the legs of a new session; a resumed session keeps the identity "

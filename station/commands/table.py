@@ -8,14 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures import controllers
-from procedures.errors import InputError
+from procedures.compensation import controllers
+from procedures.engine.errors import InputError
 from procedures.fit import load_model
-from procedures.plans import parse_legs
-from procedures.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
-from procedures.outputs import check_output_file
-from procedures.plausibility import check_correction, settle
-from procedures.table import make_table, write_table_csv
+from procedures.acquisition.plans import parse_legs
+from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
+from procedures.io.outputs import check_output_file
+from procedures.io.plausibility import check_correction, settle
+from procedures.compensation.table import make_table, write_table_csv
 from station.catalog.writer import catalog_for, register
 from station.services.config import load_config
 from station.services.wiring import drive_table_spec
@@ -65,7 +65,7 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
         return [Path(out)]
     if fmt == "linuxcnc":
         return list(linuxcnc_paths(out, legs).values())
-    from procedures.controllers.common import leg_paths
+    from procedures.compensation.controllers.common import leg_paths
 
     module = controllers.module(fmt)
     return list(leg_paths(out, legs, module.SUFFIX, stem=getattr(module, "STEM", "leg{leg}")).values())
@@ -73,7 +73,7 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
 
 def implausible_corrections(model, table) -> list:
     """The legs of `table` whose corrections span more than the error `model` was fitted to
-    (procedures.plausibility.check_correction)."""
+    (procedures.io.plausibility.check_correction)."""
     source = model.source.get("path") or "the model's recording"
     found = []
     for leg, t in table.legs.items():

@@ -6,7 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 from station.services.config import load_config
 
 NAME = "ui"

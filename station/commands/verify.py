@@ -10,14 +10,14 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from procedures import events as ev
-from procedures.decision import decision_lines
-from procedures.errors import InputError
-from procedures.outputs import check_output_file
-from procedures.plans import SweepPlan, iso230_plan
-from procedures.recording.reader import read_session
-from procedures.states import Action, AuditOutcome
-from procedures.verify import ACCEPT_RATIO
+from procedures.engine import events as ev
+from procedures.reporting.decision import decision_lines
+from procedures.engine.errors import InputError
+from procedures.io.outputs import check_output_file
+from procedures.acquisition.plans import SweepPlan, iso230_plan
+from procedures.io.recording.reader import read_session
+from procedures.engine.states import Action, AuditOutcome
+from procedures.compensation.verify import ACCEPT_RATIO
 from station.commands._table_cli import audit_log, parse_leg_choice, station_config
 from station.commands.sweep import check_time_scale
 from station.progress import ConsoleProgress
@@ -118,7 +118,7 @@ def run(args) -> int:
         job = refusal_job(Action.VERIFY, controller[0], controller[1], audit=audit, drive_url=drive_url_of(cfg))
         raise InputError(job.finished.message)
     check_time_scale(args.time_scale)
-    # every output checked before anything connects or moves (procedures/outputs.py)
+    # every output checked before anything connects or moves (procedures/io/outputs.py)
     out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
     if args.json:
         check_output_file(args.json, force=args.force, option="--json")

@@ -16,13 +16,13 @@ class SessionAnalysis:
     """What `analyse_session` found. `iso_error` / `uncertainty_error`: why the ISO 230-2 values
     or their U could not be had (the rest stands without them)."""
 
-    session: Any  # procedures.recording.reader.Session
+    session: Any  # procedures.io.recording.reader.Session
     points: Any  # session.points with error_um on the chosen basis
     basis_lines: tuple[str, ...]  # what error_basis says, as the commands print it
     basis: dict  # the same as JSON (a model carries it as options["error_basis"])
     raw: bool = False
     model: Any = None  # procedures.fit.LegErrorModel, when a fit was asked for
-    iso: Any = None  # procedures.iso230.evaluate's result, when asked for
+    iso: Any = None  # procedures.reporting.iso230.evaluate's result, when asked for
     iso_u: dict[int, dict[str, float | None]] | None = None  # leg -> value name -> U (k = 2), um
     iso_error: Exception | None = None
     uncertainty_error: Exception | None = None
@@ -31,7 +31,7 @@ class SessionAnalysis:
 
 def analyse_session(session, raw: bool = False, *, fit_method: str | None = None, fit_options: dict | None = None,
                     iso: bool = False, uncertainty: bool = False) -> SessionAnalysis:
-    """Analyse `session` (procedures.recording.reader.Session) on the raw error (`raw`) or the
+    """Analyse `session` (procedures.io.recording.reader.Session) on the raw error (`raw`) or the
     error normalised to 20 degC. With `fit_method` ("default", "paper"), fit a model (keyword
     arguments of procedures.fit.fit in `fit_options`) naming the recording and tagged with the
     error basis (`station table` says which error its table holds); fitting errors are raised.
@@ -46,7 +46,7 @@ def analyse_session(session, raw: bool = False, *, fit_method: str | None = None
                         **out.fit_options)
         out.model.options["error_basis"] = basis
     if iso:
-        from procedures import iso230
+        from procedures.reporting import iso230
 
         try:
             out.iso = iso230.evaluate(points)

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from procedures import certificate
-from procedures.errors import InputError
-from procedures.atomic import write_bytes_atomic  # the index is whole or old
+from procedures.reporting import certificate
+from procedures.engine.errors import InputError
+from procedures.io.atomic import write_bytes_atomic  # the index is whole or old
 from station.services.report_jobs import session_decisions
 
 COUNTER_NAME = "certificate-counter.json"
@@ -107,7 +107,7 @@ def table_record(path: str | os.PathLike | None) -> dict[str, Any] | None:
 
 
 def _active_table_sha256(session, leg: int) -> str | None:
-    """The sha256 of the table the session recorded active on `leg` (procedures.applied_table)."""
+    """The sha256 of the table the session recorded active on `leg` (procedures.compensation.applied_table)."""
     try:
         return json.loads(session.devices.get(f"leg{leg}_compensation_table") or "{}").get("sha256") or None
     except (TypeError, ValueError, AttributeError):
@@ -138,7 +138,7 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
                       tolerances: dict | None = None, issued_utc: str | None = None,
                       station_id: str = "", table_leg_sha256: str | None = None) -> Issued:
     """Issue a certificate of `leg` from the sessions `as_found` (and `as_left`, a verification),
-    both procedures.recording.reader.Session; `table` the compensation table pushed (its sha256 is
+    both procedures.io.recording.reader.Session; `table` the compensation table pushed (its sha256 is
     stated); `revise` the report number of a certificate this one corrects (`reason` says why).
     `tolerances` {type: Tolerance.to_json()} (None: the sessions' recorded ones); `station_id`
     names the issuing station in the report number when the session does not record one;

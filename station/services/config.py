@@ -37,7 +37,7 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     url = ""                    # shared catalog, e.g. "postgresql://station@dbhost/catalog" ("" = local only)
     connect_timeout_s = 2.0     # how long a write waits for the shared catalog before keeping it in the backlog
     calibration_interval_days = 365  # a leg is due this many days after its last calibration
-    [limits]                    # the largest sweep plan started without asking (procedures/plan_size.py)
+    [limits]                    # the largest sweep plan started without asking (procedures/acquisition/plan_size.py)
     max_points = 500000         # points measured, all legs
     max_rig_hours = 72.0        # estimated time on the rig
 
@@ -95,12 +95,12 @@ from pathlib import Path
 from typing import Any
 
 from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
-from procedures.decision import Tolerance, parse_tolerances
-from procedures.errors import InputError
-from procedures.numbers import NotANumber, finite_float
+from procedures.reporting.decision import Tolerance, parse_tolerances
+from procedures.engine.errors import InputError
+from procedures.io.numbers import NotANumber, finite_float
 from procedures.metrology import defaults as MD
 from procedures.metrology.thermal import Material
-from procedures.plan_size import PlanLimits
+from procedures.acquisition.plan_size import PlanLimits
 
 
 LEG_COUNT = 6
@@ -272,7 +272,7 @@ class StationConfig:
     catalog: CatalogConfig = field(default_factory=CatalogConfig)
     limits: PlanLimits = field(default_factory=PlanLimits)  # [limits]: the largest plan started without asking
     lab: LabConfig = field(default_factory=LabConfig)
-    tolerances: dict[str, Tolerance] = field(default_factory=dict)  # [tolerances.TYPE] (procedures.decision)
+    tolerances: dict[str, Tolerance] = field(default_factory=dict)  # [tolerances.TYPE] (procedures.reporting.decision)
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 

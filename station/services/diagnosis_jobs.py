@@ -13,7 +13,7 @@ from typing import Any
 
 def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings: Any = None
                      ) -> tuple[dict, list[str]]:
-    """The diagnosis report of `session` (as procedures.recording.reader reads it, from `path`)
+    """The diagnosis report of `session` (as procedures.io.recording.reader reads it, from `path`)
     against `twin` (None: the twin fitted on the recording), and the lines saying which error it
     used and the material temperature range per leg. The diagnosis works on the raw error_um on
     purpose: thermal expansion stays an effect it can find (docs/metrology.md)."""

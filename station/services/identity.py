@@ -1,4 +1,4 @@
-"""The identity a session records (procedures/recording/identity.py), put together from the
+"""The identity a session records (procedures/io/recording/identity.py), put together from the
 config, the serials entered for this session and what each drive says about itself."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from types import MappingProxyType
 from typing import Any, Iterable, Mapping
 
 from drivers.errors import DriverError
-from procedures.audit import AuditLog
-from procedures.recording.identity import (
+from procedures.compensation.audit import AuditLog
+from procedures.io.recording.identity import (
     DriveIdentity,
     LegIdentity,
     SessionIdentity,

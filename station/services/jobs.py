@@ -10,17 +10,17 @@ from pathlib import Path
 from typing import Iterable, Mapping
 from typing import Callable
 
-from procedures import events as ev
-from procedures.control import RunControl
-from procedures.errors import InputError
-from procedures.numbers import NotANumber, finite_float
+from procedures.engine import events as ev
+from procedures.engine.control import RunControl
+from procedures.engine.errors import InputError
+from procedures.io.numbers import NotANumber, finite_float
 from procedures.metrology.thermal import recorded_materials
-from procedures.plans import SweepPlan
-from procedures.recording.reader import Session, read_session
-from procedures.recording.schema import FLAG_REPLAYED
-from procedures.recording.sink import RecorderSink
-from procedures.runner import RunResult, Sink, run
-from procedures.sweep import RetryPolicy, sweep
+from procedures.acquisition.plans import SweepPlan
+from procedures.io.recording.reader import Session, read_session
+from procedures.io.recording.schema import FLAG_REPLAYED
+from procedures.io.recording.sink import RecorderSink
+from procedures.engine.runner import RunResult, Sink, run
+from procedures.acquisition.sweep import RetryPolicy, sweep
 from station import __version__
 from station.catalog.writer import CatalogSink, catalog_for
 from station.services.config import StationConfig
@@ -193,7 +193,7 @@ class ReplayOutcome:
 
     result: RunResult
     mismatch: Exception | None
-    comparison: object | None  # procedures.replay_compare.Comparison
+    comparison: object | None  # procedures.io.replay_compare.Comparison
 
 
 def replay_and_compare(source: Path, session: Session, out: Path, cfg: StationConfig, speed: float | None,
@@ -203,7 +203,7 @@ def replay_and_compare(source: Path, session: Session, out: Path, cfg: StationCo
     (None: as fast as possible), recording to `out`, and compare the two recordings: the job of
     `station replay` and of the terminal UI's Replay page. `on_rig_opened(rig)` is told the
     replay rig once it runs (the UI keeps it)."""
-    from procedures.replay_compare import compare_sessions
+    from procedures.io.replay_compare import compare_sessions
     from station.services.wiring import open_replay_rig
 
     with open_replay_rig(source, speed, cfg) as rig:

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.atomic import atomic_folder, write_text_atomic
-from procedures.errors import InputError
+from procedures.io.atomic import atomic_folder, write_text_atomic
+from procedures.engine.errors import InputError
 
 REPORT_MD = "platform_report.md"
 SUMMARY_JSON = "platform_summary.json"
@@ -30,7 +30,7 @@ LEG_PNG = "leg_error_hist.png"
 def _recording_for_model(src: Path, model, recording: str | Path | None) -> tuple[object, Path, bool]:
     """The session the model's measured errors come from, and whether it is another one than the
     model was fitted to (held out)."""
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
 
     source_path = model.source.get("path", "")
     source_sha = model.source.get("sha256", "")
@@ -64,7 +64,7 @@ def check_model_legs(model, name) -> None:
 def recording_error(session, *, model=None, raw: bool = False, model_name: str = "the model") -> tuple[object, dict]:
     """The recording's points with `error_um` on the compensation's basis (module docstring) and
     that basis as JSON ({"basis": "normalised"|"raw", "lines": [what the commands print], ...})."""
-    from procedures.report import report_basis
+    from procedures.reporting.report import report_basis
 
     points, _, basis = report_basis(session.points, getattr(session, "station_config", None), model, raw,
                                     model_name=model_name)
@@ -109,8 +109,8 @@ def model_errors(model, session, recording_path, model_path, *, measured: str | 
 
 
 def _table_errors(src: Path, recording, profile, measured: str | None, raw: bool = False) -> tuple[object, object, dict]:
-    from procedures.recording.reader import file_sha256, read_session
-    from procedures.table import read_table_csv
+    from procedures.io.recording.reader import file_sha256, read_session
+    from procedures.compensation.table import read_table_csv
     from station.services.wiring import drive_table_spec
 
     if not recording:
@@ -140,7 +140,7 @@ def load_errors(source, *, recording=None, measured: str | None = None,
     file, a model file or a table (with `recording`), as `station platform` takes them; the
     recording's error on the basis the module docstring states (`raw`: --raw)."""
     from procedures.platform.experiment import RecordedLegErrors
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
 
     src = Path(source)
     if not src.exists():
@@ -151,7 +151,7 @@ def load_errors(source, *, recording=None, measured: str | None = None,
 
         model = load_model(src)
         check_model_legs(model, src)
-        from procedures.report import basis_is_raw
+        from procedures.reporting.report import basis_is_raw
 
         basis_is_raw(model, raw, model_name=str(src))  # refuse a basis mismatch before reading the recording
         session, rec_path, held_out = _recording_for_model(src, model, recording)

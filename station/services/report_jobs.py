@@ -1,23 +1,23 @@
 """A session's report and its CSV export, for both front ends: `station report` / `station
 export` and the terminal UI's Results page call these, so they write the same files and say the
-same about them. The export itself is procedures.csv_io.export_csv. Moved here from
+same about them. The export itself is procedures.io.csv_io.export_csv. Moved here from
 station/commands/report.py and export_csv.py (the UI never imports a command module)."""
 
 from __future__ import annotations
 
 import os
 
-from procedures import iso230_report
-from procedures.csv_io import ExportSummary
-from procedures.decision import NO_TOLERANCE, decision_lines
-from procedures.errors import InputError
-from procedures.report import ReportResult, make_report
+from procedures.reporting import iso230_report
+from procedures.io.csv_io import ExportSummary
+from procedures.reporting.decision import NO_TOLERANCE, decision_lines
+from procedures.engine.errors import InputError
+from procedures.reporting.report import ReportResult, make_report
 from station.catalog.writer import register
 
 
 def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: float | str | None = "auto",
                    raw: bool = False, model_name: str = "", catalog=None) -> ReportResult:
-    """`station report`: the report files of `session` (procedures.recording.reader.Session)
+    """`station report`: the report files of `session` (procedures.io.recording.reader.Session)
     into `out_dir`, before and after `model` (None: the default model fitted to the session), on
     the error basis of `station fit`: normalised to 20 degC unless `raw`; with a model, the
     model's own basis (a normalised model with `raw` is refused; `model_name` names it)."""
@@ -58,7 +58,7 @@ def report_lines(result: ReportResult, model=None) -> list[str]:
 def session_iso230(session, raw: bool = False) -> dict:
     """The ISO 230-2 values of `session` with the expanded uncertainty U (k = 2) of each, on the
     basis of `station fit` (normalised to 20 degC unless `raw`): the content of the report's
-    iso230-2.json (procedures.iso230_report.build), for the commands that print ISO values."""
+    iso230-2.json (procedures.reporting.iso230_report.build), for the commands that print ISO values."""
     return session_decisions(session, raw)
 
 
@@ -86,7 +86,7 @@ def export_lines(summary: ExportSummary) -> list[str]:
 
 
 def session_decisions(session, raw: bool = False, tolerances: dict | None = None, stage: str | None = None) -> dict:
-    """The ISO 230-2 report's values with U and their decisions (procedures.iso230_report.build):
+    """The ISO 230-2 report's values with U and their decisions (procedures.reporting.iso230_report.build):
     `tolerances` {type: Tolerance.to_json()}, None = the session's recorded ones; `stage`
     "as_found" / "as_left" (None: as left for a verification plan, else as found)."""
     return iso230_report.build(session.points, plan=session.plan, devices=session.devices,
@@ -99,7 +99,7 @@ def session_decisions(session, raw: bool = False, tolerances: dict | None = None
 def decisions_if_stated(session, raw: bool = False, stage: str | None = None) -> dict | None:
     """session_decisions' "decisions" when the session's recorded [tolerances] hold a type of one
     of its legs, else None without computing anything (the screens call this on every session)."""
-    from procedures.decision import tolerances_from_json  # noqa: PLC0415
+    from procedures.reporting.decision import tolerances_from_json  # noqa: PLC0415
 
     tol = tolerances_from_json((session.station_config or {}).get("tolerances"))
     if not any(session.identity.leg(leg).leg_type in tol for leg in session.legs):

@@ -18,7 +18,7 @@ import re
 from pathlib import Path
 from typing import Iterable, Mapping
 
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 
 LEG_COUNT = 6
 SERIAL_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._/-]{0,63}")

@@ -1,7 +1,7 @@
 """Fast synthetic sessions straight from the plant, without the protocol layer.
 
 It lives in station/ (the composition root) because it joins the plant (drivers/sim) with the
-session format (procedures/recording): drivers never import procedures.
+session format (procedures/io/recording): drivers never import procedures.
 
 For analysis tests, benchmarks and the diagnosis self-check, where thousands of sessions are
 needed and the Modbus/serial path is already covered by the integration tests. The motion
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from drivers.sim.plant import LegPlant, PlantConfig
-from procedures.recording.schema import POINT_DTYPE
+from procedures.io.recording.schema import POINT_DTYPE
 
 
 def synth_session(

@@ -1,6 +1,6 @@
 """Jobs both front ends start on a drive's compensation table: push, rollback and verify.
 
-Each runs a procedure (procedures.push, procedures.verify) through the one runner with the audit
+Each runs a procedure (procedures.compensation.push, procedures.compensation.verify) through the one runner with the audit
 sink (the only writer of the audit log) and the front end's own sinks, and returns what ended
 it. The command line and the terminal UI differ only in how they ask for confirmation and how
 they show the events, so they give the same refusals, audit lines and figures.
@@ -15,12 +15,12 @@ from typing import Any, Iterable, Iterator
 
 from drivers.errors import DriverError
 from drivers.interfaces import ServoAxis, TableSpec
-from procedures import events as ev
-from procedures.audit import AuditLog, AuditSink
-from procedures.control import RunControl
-from procedures.errors import InputError
-from procedures.plans import SweepPlan
-from procedures.push import (
+from procedures.engine import events as ev
+from procedures.compensation.audit import AuditLog, AuditSink
+from procedures.engine.control import RunControl
+from procedures.engine.errors import InputError
+from procedures.acquisition.plans import SweepPlan
+from procedures.compensation.push import (
     Confirm,
     finished,
     push_legs_procedure,
@@ -30,12 +30,12 @@ from procedures.push import (
     rollback_procedure,
     table_sha256,
 )
-from procedures.recording.reader import file_sha256, read_session
-from procedures.recording.sink import RecorderSink
-from procedures.runner import ListSink, RunResult, Sink, run
-from procedures.states import Action, AuditOutcome
-from procedures.table import LegTable, read_table_csv
-from procedures.verify import verify_procedure
+from procedures.io.recording.reader import file_sha256, read_session
+from procedures.io.recording.sink import RecorderSink
+from procedures.engine.runner import ListSink, RunResult, Sink, run
+from procedures.engine.states import Action, AuditOutcome
+from procedures.compensation.table import LegTable, read_table_csv
+from procedures.compensation.verify import verify_procedure
 from station import __version__
 from station.catalog.store import LOCAL_NAME, Catalog
 from station.catalog.writer import CatalogSink, catalog_for, enabled
@@ -126,7 +126,7 @@ def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]
 def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: str, source: dict[str, Any] | None,
              confirm: Confirm | None, sinks: Iterable[Sink] = (), leg_serial: str | None = None,
              catalog: Catalog | None = None) -> JobOutcome:
-    """Push one leg's table to its drive (procedures.push.push_procedure); `leg_serial`: the
+    """Push one leg's table to its drive (procedures.compensation.push.push_procedure); `leg_serial`: the
     serial the leg carries (config), which the table's must match."""
     return run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source,
                                         leg_serial=leg_serial), audit, sinks, catalog=catalog)
@@ -135,14 +135,14 @@ def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: st
 def push_legs_job(axes: dict[int, ServoAxis], tables: dict[int, LegTable], *, audit: AuditLog, drive_url: str,
                   sources: dict[int, dict[str, Any]] | None, confirm, sinks: Iterable[Sink] = (),
                   leg_serials: dict[int, str] | None = None, catalog: Catalog | None = None) -> JobOutcome:
-    """Push several legs' tables after one confirmation (procedures.push.push_legs_procedure)."""
+    """Push several legs' tables after one confirmation (procedures.compensation.push.push_legs_procedure)."""
     return run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources,
                                              leg_serials=leg_serials), audit, sinks, catalog=catalog)
 
 
 def rollback_job(axis: ServoAxis, *, audit: AuditLog, drive_url: str, confirm: Confirm | None,
                  sinks: Iterable[Sink] = (), catalog: Catalog | None = None) -> JobOutcome:
-    """Restore what the drive held before the last successful push (procedures.push.rollback_procedure)."""
+    """Restore what the drive held before the last successful push (procedures.compensation.push.rollback_procedure)."""
     return run_table_job(rollback_procedure(axis, audit, confirm=confirm, drive_url=drive_url), audit, sinks,
                          catalog=catalog)
 
@@ -172,7 +172,7 @@ def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *
                drive_url: str = "", sinks: Iterable[Sink] = (), control: RunControl | None = None,
                normalise: bool = True) -> JobOutcome:
     """A verification sweep of `plan` with the tables active, recorded to `out`, compared with the
-    calibration `before` (procedures.verify.verify_procedure); errors normalised to 20 degC
+    calibration `before` (procedures.compensation.verify.verify_procedure); errors normalised to 20 degC
     unless `normalise` is False."""
     out = Path(out)
     if out.exists():

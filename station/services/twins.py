@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.diagnosis.twin import ExternalTwin, twin_from_model, twin_from_recording
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 
 
 def load_twin(spec: str, *, session=None, path=None, catalog=None):
@@ -38,7 +38,7 @@ def load_twin(spec: str, *, session=None, path=None, catalog=None):
         return twin_from_model(load_model(path), str(path))
     if path.suffix.lower() in (".h5", ".hdf5"):
         from procedures.metrology.thermal import normalise_session
-        from procedures.recording.reader import read_session
+        from procedures.io.recording.reader import read_session
 
         ref = read_session(path)
         n = normalise_session(ref.points, ref.station_config)
@@ -128,7 +128,7 @@ def fleet_twin(leg_type: str, session, path, engine):
     from procedures.diagnosis.fleet import MIN_SIBLINGS, error_map, fleet_leg
     from procedures.diagnosis.fleet import fleet_twin as make_twin
     from procedures.metrology.thermal import normalise_session
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
     from station.catalog.fleet import completed_sessions_of_type, latest_per_serial
     from station.catalog.identity import legs_of
     from station.catalog.readers import session_identity

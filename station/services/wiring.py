@@ -16,7 +16,7 @@ from drivers.interfaces import Clock, Interferometer, ServoAxis, TableSpec
 from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 from station.services.config import StationConfig
 from station.services.drive_lock import holds_drive_lock
 
@@ -268,8 +268,8 @@ def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationCo
     `legs`: the drives to connect (default: the legs of the recorded plan). The Rig's `sim` is
     the drivers.replay.ReplayRig (its `mismatch`, `ended`, `on_end`). See docs/replay.md."""
     from drivers.replay import ReplayRig, ReplayScript
-    from procedures.plans import SweepPlan
-    from procedures.recording.reader import read_session
+    from procedures.acquisition.plans import SweepPlan
+    from procedures.io.recording.reader import read_session
 
     cfg = cfg or StationConfig()
     session = read_session(path)

@@ -29,10 +29,10 @@ from textual.app import App
 from textual.binding import Binding
 from textual.message import Message
 
-from procedures.control import RunControl
-from procedures.plan_spec import PlanSpec
-from procedures.plans import SweepPlan
-from procedures.states import AuditOutcome
+from procedures.engine.control import RunControl
+from procedures.acquisition.plan_spec import PlanSpec
+from procedures.acquisition.plans import SweepPlan
+from procedures.engine.states import AuditOutcome
 from station.services.config import StationConfig
 from station.services.rig_session import (
     JOB_LOCK_WAIT_S,
@@ -406,7 +406,7 @@ class StationApp(App):
             self.notify(refusal, severity="warning" if what == "motion" else "error", timeout=10)
             return False
         if isinstance(plan, PlanSpec):  # sized, not built, on the app's thread
-            from procedures.plan_size import plan_size
+            from procedures.acquisition.plan_size import plan_size
 
             total = plan_size(plan).points
         else:
@@ -462,7 +462,7 @@ class StationApp(App):
             with holding_rig(lock, JOB_LOCK_WAIT_S, "the rig stayed busy for 10 s (a rig action is still running); "
                                                     "try again"):
                 if isinstance(plan, PlanSpec):
-                    from procedures.plan_size import build_abortable
+                    from procedures.acquisition.plan_size import build_abortable
 
                     plan = build_abortable(plan, control)
                     if plan is None:  # aborted while the plan was being built: nothing moved or written
@@ -502,7 +502,7 @@ class StationApp(App):
                        idle: threading.Event) -> None:
         outcome, points, error, note = "error", 0, "", ""
         try:
-            from procedures.recording.reader import read_session
+            from procedures.io.recording.reader import read_session
             from station.services.jobs import replay_and_compare
 
             session = read_session(source)
@@ -528,7 +528,7 @@ class StationApp(App):
         self.replay_rig = message.rig
 
     def on_sweep_event(self, message: SweepEvent) -> None:
-        from procedures import events as ev
+        from procedures.engine import events as ev
 
         run = self._runs.get(message.run)
         if run is None:  # its job has ended already (an event after its end: nothing to show)
@@ -675,7 +675,7 @@ class StationApp(App):
 def _show_recorded_points(state: SweepState, path: Path) -> None:
     """Put the points `path` holds already into `state`'s plot, so a resumed sweep shows its
     whole session (the procedure's SweepStarted then sets the counts)."""
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
 
     try:
         points = read_session(path).points

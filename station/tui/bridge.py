@@ -14,7 +14,7 @@ from typing import Any
 from textual.app import App
 from textual.message import Message
 
-from procedures import events as ev
+from procedures.engine import events as ev
 
 
 class SweepEvent(Message):

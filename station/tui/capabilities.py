@@ -14,7 +14,7 @@ NOT_AVAILABLE = "{what} is not available yet in this build ({where} is missing).
 # what -> candidate (module, attribute) pairs, first found wins
 PIECES: dict[str, list[tuple[str, str]]] = {
     "replay": [("station.services.wiring", "open_replay_rig")],
-    "iso230": [("procedures.iso230", "evaluate")],
+    "iso230": [("procedures.reporting.iso230", "evaluate")],
 }
 
 

@@ -5,7 +5,7 @@ read it to draw, so a sweep survives screen changes and redraws; the app tells t
 changed with a `SweepChanged` message (station.tui.messages), they never poll it.
 
 The status follows the procedure's events (`apply`): "paused" and "running" again come from its
-Paused / Resumed events (procedures.control.RunControl.checkpoint), the outcome from
+Paused / Resumed events (procedures.engine.control.RunControl.checkpoint), the outcome from
 SweepFinished, never from the operator's request. The one request state is "aborting"
 (`request_abort`), set by the app's abort action while the run winds down.
 """
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from procedures import events as ev
+from procedures.engine import events as ev
 from station.progress import Eta
 
 

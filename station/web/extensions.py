@@ -2,7 +2,7 @@
 the certificates issued for a leg.
 
 - `tolerances_of(config_path)`: `[tolerances.TYPE]` limits in um per leg type, as the station
-  config reads them (procedures.decision.parse_tolerances via station.services.config.load_config: a bad
+  config reads them (procedures.reporting.decision.parse_tolerances via station.services.config.load_config: a bad
   section is refused naming file, section and key); the as-left limits, since a fleet in service is
   judged as left. A type without a limit has no tolerance line and no Cpk, and the page says so.
 - `certificates_of(runs_dir, serial)`: the certificates `station certificate` issued for a leg,

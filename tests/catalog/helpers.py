@@ -31,7 +31,7 @@ def write_session(path: str | Path, serials: dict[int, str] | None = None, *, st
                   started_utc: str = "2026-01-10T08:00:00.000000Z", seed: int = 0, cycles: int = 2,
                   step_mm: float = 15.0, leg_type: str = "HX-L300") -> Path:
     """A completed session of the legs in `serials` (default leg 1 without identity: a 1.0 file)."""
-    from procedures.recording.writer import SessionWriter
+    from procedures.io.recording.writer import SessionWriter
 
     path = Path(path)
     legs = sorted(serials) if serials else [1]

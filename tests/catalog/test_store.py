@@ -10,7 +10,7 @@ import os
 import pytest
 import sqlalchemy as sa
 
-from procedures.audit import AuditEntry, AuditLog
+from procedures.compensation.audit import AuditEntry, AuditLog
 from station.catalog import db, files, history
 from station.catalog.store import Catalog
 from station.cli import main
@@ -168,7 +168,7 @@ def test_an_unwritable_catalog_never_fails_the_work(runs, tmp_path, caplog):
 
 def test_instrument_from_identity_or_the_configs_metrology(runs):
     """A 1.1 session names its instrument in /meta identity; a 1.0 session in its recorded config."""
-    from procedures.recording.writer import SessionWriter
+    from procedures.io.recording.writer import SessionWriter
     from station.catalog import readers
     from tests.tooling import default_legs_points
 

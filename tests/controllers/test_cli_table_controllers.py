@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from procedures import controllers
+from procedures.compensation import controllers
 from procedures.fit import load_model
-from procedures.table import make_table
+from procedures.compensation.table import make_table
 from station.cli import main
 from station.services.synth import synth_session
 from tests.tooling import write_points_session as write_session

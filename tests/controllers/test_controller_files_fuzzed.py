@@ -9,9 +9,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from procedures.controllers import ecmc, heidenhain, linuxcnc, siemens840d, twincat
-from procedures.errors import InputError
-from procedures.import_map import convert, load_map
+from procedures.compensation.controllers import ecmc, heidenhain, linuxcnc, siemens840d, twincat
+from procedures.engine.errors import InputError
+from procedures.io.import_map import convert, load_map
 
 # text built from the formats' own vocabulary, so the fuzzing gets past the first line
 WORDS = st.sampled_from(["BEGIN", "X.COM", "MM", "NR", "AXISPOS", "X", "BACKLASH", "[END]", "PREC=5", "PREC=x",

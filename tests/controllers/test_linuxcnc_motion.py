@@ -29,10 +29,10 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import PlantConfig
-from procedures.controllers import linuxcnc
+from procedures.compensation.controllers import linuxcnc
 from procedures.fit import fit
-from procedures.controllers.linuxcnc import LINUXCNC_LIMITS
-from procedures.table import make_table
+from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS
+from procedures.compensation.table import make_table
 from station.services.synth import synth_session
 
 HERE = Path(__file__).resolve().parent
@@ -275,7 +275,7 @@ def test_linuxcnc_applies_the_exported_comp_files(linuxcnc_present, table, tmp_p
     assert set(figures) == {(0, 1), (0, -1), (1, 1), (1, -1)}
     for key, f in figures.items():
         assert f["dev"] <= TOLERANCE_MM, f"type {key[0]}, direction {key[1]:+d}: {f['dev']:.3e} mm"
-        assert f["reader"] <= TOLERANCE_MM, key  # procedures.controllers.linuxcnc models the rule
+        assert f["reader"] <= TOLERANCE_MM, key  # procedures.compensation.controllers.linuxcnc models the rule
         # the check has teeth: a flipped sign would be off by 2|e| and a swapped direction by the
         # reversal (~2 um), both far beyond the tolerance
         assert f["largest"] > 1000 * TOLERANCE_MM and f["swapped"] > 1000 * TOLERANCE_MM, key

@@ -14,7 +14,7 @@ from drivers.interferometer import protocol as p
 from drivers.interferometer.client import SerialInterferometer
 from drivers.sim.interferometer_server import SimInterferometer
 from drivers.sim.plant import LegPlant, PlantConfig
-from procedures.sweep import laser_compensation_record
+from procedures.acquisition.sweep import laser_compensation_record
 
 
 def _reply(line: bytes) -> list[str]:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drivers.modbus.profile import DEFAULT_PROFILE, DriveProfile
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 
 REAL = sorted(p for p in DEFAULT_PROFILE.parent.glob("*.toml") if p.name != DEFAULT_PROFILE.name)

@@ -18,7 +18,7 @@ from drivers.interferometer import protocol as p
 from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import ModbusBus, ModbusServoAxis, connect_axes
 from drivers.replay import ReplayClock, ReplayDataError, ReplayMismatch, ReplayRig, ReplayScript
-from procedures.recording.schema import FAULT_DTYPE, POINT_DTYPE
+from procedures.io.recording.schema import FAULT_DTYPE, POINT_DTYPE
 
 TARGETS = (-40.0, -12.5, 0.0, 7.25, 33.0)
 OVERRUN = 2.0

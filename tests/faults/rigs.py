@@ -24,7 +24,7 @@ from drivers.modbus.client import connect_axes
 from drivers.modbus.codec import crc16_modbus
 from drivers.sim.faults import LINE_KINDS, TCP_KINDS, FaultSchedule, ModbusFaultProxy, SerialLineFaults
 from drivers.sim.rig import SimRig
-from procedures.push import table_sha256
+from procedures.compensation.push import table_sha256
 from station.services.wiring import Rig
 
 DRIVE_TIMEOUT_S = 0.4

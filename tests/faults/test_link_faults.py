@@ -28,13 +28,13 @@ import pytest
 
 from drivers.errors import DriverError
 from drivers.interfaces import TableBank
-from procedures import events as ev
-from procedures.audit import AuditLog
-from procedures.plans import SweepPlan
-from procedures.push import PushFailed, PushRefused, push_table, rollback
-from procedures.recording.reader import read_session
-from procedures.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
-from procedures.runner import CallbackSink
+from procedures.engine import events as ev
+from procedures.compensation.audit import AuditLog
+from procedures.acquisition.plans import SweepPlan
+from procedures.compensation.push import PushFailed, PushRefused, push_table, rollback
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
+from procedures.engine.runner import CallbackSink
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep
 from station.services.table_jobs import verify_job

@@ -1,5 +1,5 @@
-"""Fuzzing the readers of controller files (procedures/controllers/: LinuxCNC, SINUMERIK 840D,
-Heidenhain, TwinCAT, ecmc) and of mapped imports (procedures/import_map.py: the map TOML and the
+"""Fuzzing the readers of controller files (procedures/compensation/controllers/: LinuxCNC, SINUMERIK 840D,
+Heidenhain, TwinCAT, ecmc) and of mapped imports (procedures/io/import_map.py: the map TOML and the
 foreign data file).
 
 Valid files written by the station's own writers (the documented example maps and their data)
@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from procedures.controllers import FORMATS, module
-from procedures.errors import InputError
-from procedures.import_map import convert, load_map
-from procedures.table import CompTable, LegTable
+from procedures.compensation.controllers import FORMATS, module
+from procedures.engine.errors import InputError
+from procedures.io.import_map import convert, load_map
+from procedures.compensation.table import CompTable, LegTable
 from tests.fuzz import tomlgen
 from tests.fuzz.budget import examples, fed
 from tests.fuzz.tomlgen import damaged

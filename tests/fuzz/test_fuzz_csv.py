@@ -1,4 +1,4 @@
-"""Fuzzing the interchange CSV reader (procedures/csv_io.py): read_csv_points and import_csv.
+"""Fuzzing the interchange CSV reader (procedures/io/csv_io.py): read_csv_points and import_csv.
 
 Property: a result whose rows hold what a leg can produce, or InputError naming the file;
 never another exception, and a failed import leaves no file behind.
@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from procedures.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv, read_csv_points
-from procedures.errors import InputError
-from procedures.ranges import PointLimits
+from procedures.io.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv, read_csv_points
+from procedures.engine.errors import InputError
+from procedures.io.ranges import PointLimits
 from tests.fuzz.budget import examples, fed
 
 COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS

@@ -1,4 +1,4 @@
-"""Fuzzing the HDF5 session reader (procedures/recording/reader.py read_session).
+"""Fuzzing the HDF5 session reader (procedures/io/recording/reader.py read_session).
 
 A valid session, written by the real SessionWriter, is damaged: random bytes, cut short,
 blocks overwritten, and -- through h5py -- root and /meta attributes of other types and
@@ -19,11 +19,11 @@ import h5py
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from procedures.csv_io import export_csv
-from procedures.errors import InputError
-from procedures.recording.reader import check_points, read_session
-from procedures.recording.schema import FAULT_DTYPE, POINT_DTYPE
-from procedures.recording.writer import SessionWriter
+from procedures.io.csv_io import export_csv
+from procedures.engine.errors import InputError
+from procedures.io.recording.reader import check_points, read_session
+from procedures.io.recording.schema import FAULT_DTYPE, POINT_DTYPE
+from procedures.io.recording.writer import SessionWriter
 from tests.fuzz.budget import examples, fed
 
 

@@ -1,4 +1,4 @@
-"""Fuzzing the compensation-table readers (procedures/table.py): the table CSV, and LinuxCNC
+"""Fuzzing the compensation-table readers (procedures/compensation/table.py): the table CSV, and LinuxCNC
 COMP_FILEs read back as LinuxCNC loads them.
 
 Property: a table that fits the drive (TableSpec.check passes) or TableValidationError /
@@ -15,9 +15,9 @@ import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
 from drivers.errors import TableRefused
-from procedures.errors import InputError
-from procedures.controllers.linuxcnc import read_linuxcnc_comp, write_linuxcnc_comp
-from procedures.table import (
+from procedures.engine.errors import InputError
+from procedures.compensation.controllers.linuxcnc import read_linuxcnc_comp, write_linuxcnc_comp
+from procedures.compensation.table import (
     CSV_HEADER,
     DEFAULT_SPEC,
     CompTable,

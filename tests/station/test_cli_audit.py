@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from drivers.modbus.client import ModbusServoAxis
-from procedures.audit import read_entries
-from procedures.push import quantize, table_sha256
-from procedures.table import CompTable, LegTable, table_csv_text
+from procedures.compensation.audit import read_entries
+from procedures.compensation.push import quantize, table_sha256
+from procedures.compensation.table import CompTable, LegTable, table_csv_text
 from station.cli import main
 
 AUDIT = Path("runs/audit.jsonl")
@@ -270,7 +270,7 @@ def test_audit_and_config_choose_the_file(capsys, log, tmp_path):
 
 
 def test_the_summary_says_what_a_later_failure_or_a_verify_found(capsys, tmp_path, monkeypatch):
-    from procedures.audit import AuditEntry, AuditLog
+    from procedures.compensation.audit import AuditEntry, AuditLog
 
     monkeypatch.chdir(tmp_path)
     log = AuditLog(AUDIT, operator="jdoe")

@@ -49,7 +49,7 @@ def _issue(capsys, *argv) -> tuple[int, str, str]:
 
 def test_certificate_content_numbering_and_revision(sessions, cfg, tmp_path, capsys):
     table = tmp_path / "table.csv"
-    from procedures.table import CompTable, LegTable, table_csv_text
+    from procedures.compensation.table import CompTable, LegTable, table_csv_text
 
     zeros = tuple(0.0 for _ in range(31))
     table.write_text(table_csv_text(CompTable({1: LegTable(1, -90.0, 6.0, zeros, zeros)})))
@@ -144,7 +144,7 @@ def test_pdf_is_valid_paged_and_renders(sessions, cfg, tmp_path, capsys):
     assert pages >= 2
     for i in range(1, pages + 1):
         assert f"Page {i} of {pages}" in text
-    from procedures.certificate import DEJAVU
+    from procedures.reporting.certificate import DEJAVU
 
     if (DEJAVU / "DejaVuSans.ttf").exists():  # Unicode units with Debian's fonts-dejavu-core, else ASCII
         assert "µm" in text and "°C" in text and " um" not in text

@@ -56,7 +56,7 @@ def test_three_stations_flag_the_biased_one_only(synthetic, tmp_path, capsys):
 
 
 def test_binomial_rule():
-    from procedures.compare import binomial_tail, critical_count
+    from procedures.reporting.compare import binomial_tail, critical_count
 
     # 22 targets at 5 %: P(X >= 4) = 0.0239 <= 5 %, P(X >= 3) = 0.0952 > 5 %
     assert critical_count(22) == 4
@@ -75,7 +75,7 @@ def test_another_leg_is_refused_naming_both(synthetic, tmp_path, capsys):
 def _rig_session(path, station: str, noise_seed: int, offset_um: float):
     """A sweep of leg 1 (serial REF-1) on the simulated rig: the same plant (seed 0), its own
     measurement noise, the station's laser offset."""
-    from procedures.plans import iso230_plan
+    from procedures.acquisition.plans import iso230_plan
     from station.services.jobs import run_sweep
     from station.services.wiring import open_rig
 

@@ -69,7 +69,7 @@ def test_a_twin_without_the_leg_is_refused(tmp_path, capsys):
 
 
 def test_twin_from_a_model_that_has_the_reversal_leaves_no_backlash(backlash_session, tmp_path, capsys):
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
 
     model_path = tmp_path / "model.json"
     save_model(fit(read_session(backlash_session).points), model_path)

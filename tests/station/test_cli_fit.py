@@ -9,9 +9,9 @@ import pytest
 
 from drivers.sim.plant import PlantConfig
 from station.services.synth import synth_session
-from procedures.plans import irregular_targets
-from procedures.recording.reader import file_sha256
-from procedures.table import read_table_csv
+from procedures.acquisition.plans import irregular_targets
+from procedures.io.recording.reader import file_sha256
+from procedures.compensation.table import read_table_csv
 from station.cli import main
 from tests.tooling import write_points_session as write_session
 

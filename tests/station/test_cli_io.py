@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from procedures.iso230 import VALUE_NAMES
-from procedures.recording.reader import read_session
+from procedures.reporting.iso230 import VALUE_NAMES
+from procedures.io.recording.reader import read_session
 from station.cli import main
 
 

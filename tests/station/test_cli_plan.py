@@ -1,11 +1,11 @@
-"""`station sweep` / `station run` build their plan through PlanSpec (procedures.plan_spec)."""
+"""`station sweep` / `station run` build their plan through PlanSpec (procedures.acquisition.plan_spec)."""
 
 from argparse import Namespace
 
 import pytest
 
-from procedures.plan_spec import PlanSpec, plan_from_spec
-from procedures.plans import iso230_plan
+from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
+from procedures.acquisition.plans import iso230_plan
 from station.cli import build_parser, main
 from station.commands import run as run_command
 from station.commands.sweep import build_plan, plan_spec

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from procedures.recording.reader import file_sha256
+from procedures.io.recording.reader import file_sha256
 from station.cli import main
 from tests.tooling import default_legs_points, write_points_session
 
@@ -177,7 +177,7 @@ def test_platform_applies_a_model_to_the_recordings_error_on_the_models_basis(tm
     from procedures.metrology.thermal import normalise_session
     from procedures.platform.experiment import RecordedLegErrors, Workspace, run_measurements
     from procedures.platform.geometry import default_geometry
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
 
     session = read_session(SAMPLE)
     legs_all = {}

@@ -20,9 +20,9 @@ from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
 from drivers.sim.plant import LegPlant, default_leg_configs
-from procedures.audit import read_entries
-from procedures.push import quantize, table_sha256
-from procedures.table import CompTable, LegTable, table_csv_text
+from procedures.compensation.audit import read_entries
+from procedures.compensation.push import quantize, table_sha256
+from procedures.compensation.table import CompTable, LegTable, table_csv_text
 from station.cli import main
 from station.services.wiring import open_drive
 from station.services.config import StationConfig

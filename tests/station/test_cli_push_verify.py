@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from procedures.audit import read_entries
-from procedures.table import CompTable, LegTable, table_csv_text
+from procedures.compensation.audit import read_entries
+from procedures.compensation.table import CompTable, LegTable, table_csv_text
 from station.cli import main
 
 

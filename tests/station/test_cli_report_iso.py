@@ -8,9 +8,9 @@ import json
 
 import pytest
 
-from procedures import iso230
+from procedures.reporting import iso230
 from procedures.metrology.thermal import normalise_session
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 
 pytestmark = pytest.mark.timeout(180)

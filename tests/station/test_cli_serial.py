@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from procedures.audit import read_entries
-from procedures.recording.identity import read_identity
-from procedures.table import read_table_csv
+from procedures.compensation.audit import read_entries
+from procedures.io.recording.identity import read_identity
+from procedures.compensation.table import read_table_csv
 from station.cli import main
 
 SWEEP = ("sweep", "--cycles", "1", "--n-targets", "5")  # the simulated rig unless --config

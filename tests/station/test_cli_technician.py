@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from procedures.plans import iso230_plan
+from procedures.acquisition.plans import iso230_plan
 from station.cli import main
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep

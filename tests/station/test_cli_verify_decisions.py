@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from procedures.table import CompTable, LegTable, table_csv_text
+from procedures.compensation.table import CompTable, LegTable, table_csv_text
 from station.cli import main
 
 

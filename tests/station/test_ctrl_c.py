@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from procedures.recording.reader import read_session
-from procedures.states import Outcome
+from procedures.io.recording.reader import read_session
+from procedures.engine.states import Outcome
 
 REPO = Path(__file__).resolve().parents[2]
 

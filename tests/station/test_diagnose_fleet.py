@@ -14,9 +14,9 @@ import pytest
 
 from drivers.sim.plant import default_leg_configs
 from procedures.diagnosis.fleet import error_map
-from procedures.errors import InputError
-from procedures.recording.reader import read_session
-from procedures.recording.writer import SessionWriter
+from procedures.engine.errors import InputError
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.writer import SessionWriter
 from station.catalog import files
 from station.catalog.fleet import completed_sessions_of_type
 from station.catalog.store import Catalog

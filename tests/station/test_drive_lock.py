@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from procedures.recording.reader import read_session
-from procedures.table import CompTable, LegTable, table_csv_text
+from procedures.io.recording.reader import read_session
+from procedures.compensation.table import CompTable, LegTable, table_csv_text
 from station.services import drive_lock
 from station.services.config import StationConfig
 

@@ -32,9 +32,9 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import default_leg_configs
-from procedures.audit import read_entries
+from procedures.compensation.audit import read_entries
 from procedures.metrology.thermal import error_basis
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 
 LEGS = (1, 2, 3)

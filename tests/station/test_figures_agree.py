@@ -13,7 +13,7 @@ import pytest
 
 from procedures.fit import load_model, save_model
 from procedures.fit.figures import LABELS
-from procedures.iso230 import MEANINGS, VALUE_NAMES
+from procedures.reporting.iso230 import MEANINGS, VALUE_NAMES
 from station.cli import main
 
 REPO = Path(__file__).resolve().parents[2]

@@ -16,9 +16,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from procedures.audit import read_entries
-from procedures.plans import iso230_plan
-from procedures.recording.reader import read_session
+from procedures.compensation.audit import read_entries
+from procedures.acquisition.plans import iso230_plan
+from procedures.io.recording.reader import read_session
 from station.cli import main
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep

@@ -12,8 +12,8 @@ import sys
 import time
 from pathlib import Path
 
-from procedures.recording.reader import read_session
-from procedures.states import Outcome
+from procedures.io.recording.reader import read_session
+from procedures.engine.states import Outcome
 
 REPO = Path(__file__).resolve().parents[2]
 

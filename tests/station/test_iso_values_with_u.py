@@ -1,6 +1,6 @@
 """ISO 230-2 values are shown with their basis and their expanded uncertainty U wherever they are
 shown (issue 22, item 5): `station iso230` (text and --json) and `station run` (`make sweep`)
-print the U the ISO 230-2 report computes (procedures.iso230_report), on the same basis."""
+print the U the ISO 230-2 report computes (procedures.reporting.iso230_report), on the same basis."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 import re
 from pathlib import Path
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 from station.services.report_jobs import session_iso230
 

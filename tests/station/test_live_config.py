@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 
 REPO = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}

@@ -6,7 +6,7 @@ A calibration sweep during which the leg warms by about 2 K (the simulated hall 
 one from the raw error (`--raw`); each pushed and verified on the same leg at 20 degC (a second
 config without the warming). The normalised table verifies within 1.1 x the noise floor, the raw
 one does not: it carries the calibration's thermal expansion (about 11.5 um/m/K x 1 K over the
-stroke), which is not there at 20 degC. Residual / noise floor as procedures/verify.py defines it.
+stroke), which is not there at 20 degC. Residual / noise floor as procedures/compensation/verify.py defines it.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 
 ACCEPT = 1.1

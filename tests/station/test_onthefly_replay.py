@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.plans import onthefly_plan
-from procedures.recording.reader import read_session
-from procedures.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
+from procedures.acquisition.plans import onthefly_plan
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
 from station.services.samples import open_sample_rig
 from station.commands.replay import compare_sessions, replay_sweep
 from station.services.config import StationConfig
@@ -50,9 +50,9 @@ def test_onthefly_session_replays_identically(tmp_path: Path):
 
 
 def test_an_aborted_onthefly_session_resumes_to_every_point_once(tmp_path: Path):
-    from procedures import events as ev
-    from procedures.control import RunControl
-    from procedures.runner import CallbackSink
+    from procedures.engine import events as ev
+    from procedures.engine.control import RunControl
+    from procedures.engine.runner import CallbackSink
     from station.services.jobs import resumable_plan
 
     out = tmp_path / "otf.h5"

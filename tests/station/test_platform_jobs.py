@@ -19,12 +19,12 @@ def test_a_model_held_in_memory_is_measured_on_its_own_basis(tmp_path):
     against a normalised model is refused."""
     import pytest
 
-    from procedures.errors import InputError
+    from procedures.engine.errors import InputError
     from procedures.fit import fit
     from procedures.metrology.thermal import error_basis
     from procedures.platform.experiment import RecordedLegErrors, run_measurements
     from procedures.platform.geometry import default_geometry
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
     from tests.tooling import default_legs_points, write_points_session
 
     path = tmp_path / "s.h5"

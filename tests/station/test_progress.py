@@ -1,6 +1,6 @@
 import io
 
-from procedures import events as ev
+from procedures.engine import events as ev
 from station.progress import ConsoleProgress, fmt_duration
 
 

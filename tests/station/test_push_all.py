@@ -11,7 +11,7 @@ import io
 from pathlib import Path
 
 
-from procedures.audit import read_entries
+from procedures.compensation.audit import read_entries
 from station.cli import main
 from station.services.config import StationConfig
 from station.services.wiring import open_drive
@@ -77,7 +77,7 @@ def test_the_ui_pushes_every_leg_after_one_confirmation(tmp_path):
 
 
 async def _ui_push_all(tmp_path):
-    from procedures.table import read_table_csv
+    from procedures.compensation.table import read_table_csv
     from station.tui.app import StationApp
     from station.tui.screens.common import ConfirmScreen
 
@@ -116,7 +116,7 @@ def test_closing_the_ui_while_a_push_awaits_its_confirmation_writes_nothing(tmp_
 
 
 async def _close_during_confirmation(tmp_path):
-    from procedures.table import read_table_csv
+    from procedures.compensation.table import read_table_csv
     from station.tui.app import StationApp
     from station.tui.screens.common import ConfirmScreen
 

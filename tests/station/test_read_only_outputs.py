@@ -168,7 +168,7 @@ def test_the_resume_hint_quotes_a_path_with_spaces():
 
 
 def test_nothing_is_left_behind_by_the_check_itself(tmp_path):
-    from procedures.outputs import check_output_file, check_output_folder
+    from procedures.io.outputs import check_output_file, check_output_folder
 
     check_output_file(tmp_path / "a.json")
     check_output_folder(tmp_path / "new" / "report")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from procedures.verify import ACCEPT_RATIO
+from procedures.compensation.verify import ACCEPT_RATIO
 
 REPO = Path(__file__).resolve().parents[2]
 BLOCK_TITLE = "A whole calibration from the command line"

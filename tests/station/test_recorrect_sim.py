@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from procedures.metrology.air import edlen
-from procedures.plans import SweepPlan
-from procedures.recording.reader import read_session
+from procedures.acquisition.plans import SweepPlan
+from procedures.io.recording.reader import read_session
 from station.cli import main
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep

@@ -17,16 +17,16 @@ import h5py
 import numpy as np
 import pytest
 
-from procedures import events as ev
-from procedures.control import RunControl
+from procedures.engine import events as ev
+from procedures.engine.control import RunControl
 from procedures.diagnosis import diagnose, to_json
 from procedures.fit import fit, model_to_json
-from procedures.iso230 import dumps as iso230_json, evaluate as iso230
-from procedures.plans import SweepPlan, iso230_plan
-from procedures.recording.reader import read_session
-from procedures.recording.schema import FLAG_REPLAYED, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
-from procedures.runner import CallbackSink
-from procedures.table import make_table, table_csv_text
+from procedures.reporting.iso230 import dumps as iso230_json, evaluate as iso230
+from procedures.acquisition.plans import SweepPlan, iso230_plan
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.schema import FLAG_REPLAYED, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
+from procedures.engine.runner import CallbackSink
+from procedures.compensation.table import make_table, table_csv_text
 from station.cli import main
 from station.services.samples import FAULT_AFTER_INDEX, FAULT_LEG, FILES, open_sample_rig
 from station.commands.replay import compare_sessions, parse_speed, replay_sweep, retry_policy_of

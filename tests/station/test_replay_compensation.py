@@ -15,8 +15,8 @@ import pytest
 
 from drivers.interferometer import protocol as p
 from drivers.replay.interferometer_server import ERR_NOT_RECORDED, ERR_REPLAYED, recorded_compensation_reply
-from procedures.plans import iso230_plan
-from procedures.recording.reader import read_session
+from procedures.acquisition.plans import iso230_plan
+from procedures.io.recording.reader import read_session
 from station.services.config import StationConfig
 from station.services.jobs import replay_sweep, run_sweep
 from station.services.wiring import open_replay_rig, open_rig

@@ -1,12 +1,12 @@
 """The replay job lives with the other jobs both front ends start (station.services.jobs), the comparison
-with the recording in procedures.replay_compare; `station replay` uses the same objects."""
+with the recording in procedures.io.replay_compare; `station replay` uses the same objects."""
 
 import argparse
 
 import pytest
 
-from procedures.errors import InputError
-from procedures import replay_compare
+from procedures.engine.errors import InputError
+from procedures.io import replay_compare
 from station.services import jobs
 from station.commands import replay as replay_command
 

@@ -12,11 +12,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import procedures.adaptive as adaptive
+import procedures.acquisition.adaptive as adaptive
 from drivers.sim.plant import LEG_JERK_MM_S3
-from procedures.errors import InputError
-from procedures.plans import iso230_plan, onthefly_plan
-from procedures.recording.reader import read_session
+from procedures.engine.errors import InputError
+from procedures.acquisition.plans import iso230_plan, onthefly_plan
+from procedures.io.recording.reader import read_session
 from station.services import samples as recordings
 from station.services.config import LegMaterial, SimConfig, StationConfig, load_config
 from station.services.jobs import run_sweep

@@ -23,9 +23,9 @@ from pathlib import Path
 import h5py
 import pytest
 
-from procedures.applied_table import recorded_tables
-from procedures.audit import read_entries
-from procedures.recording.reader import read_session
+from procedures.compensation.applied_table import recorded_tables
+from procedures.compensation.audit import read_entries
+from procedures.io.recording.reader import read_session
 from station.cli import main
 
 REPO = Path(__file__).resolve().parents[2]

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from drivers.sim.plant import systematic_error_um
-from procedures import events as ev
-from procedures.control import RunControl
-from procedures.plans import SweepPlan
-from procedures.recording.reader import read_session
-from procedures.runner import CallbackSink, ListSink
+from procedures.engine import events as ev
+from procedures.engine.control import RunControl
+from procedures.acquisition.plans import SweepPlan
+from procedures.io.recording.reader import read_session
+from procedures.engine.runner import CallbackSink, ListSink
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep
 from station.services.wiring import open_rig
@@ -146,9 +146,9 @@ def test_drive_fault_mid_sweep_is_reset_and_retried(rig, tmp_path):
 
 CHILD = r"""
 import sys
-from procedures import events as ev
-from procedures.plans import SweepPlan
-from procedures.runner import CallbackSink
+from procedures.engine import events as ev
+from procedures.acquisition.plans import SweepPlan
+from procedures.engine.runner import CallbackSink
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep
 from station.services.wiring import open_rig

@@ -3,8 +3,8 @@ row saying so, like a point's fault: the session tells where and why it stopped.
 
 from __future__ import annotations
 
-from procedures.plans import iso230_plan
-from procedures.recording.reader import read_session
+from procedures.acquisition.plans import iso230_plan
+from procedures.io.recording.reader import read_session
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep
 from station.services.wiring import open_rig

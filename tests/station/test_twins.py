@@ -4,7 +4,7 @@ terminal UI's Diagnosis page use the same functions."""
 import pytest
 
 from procedures.diagnosis.twin import ExternalTwin
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 from station.services import selfcheck, twins
 from station.commands import diagnose as diagnose_command
 
@@ -37,7 +37,7 @@ def test_a_reference_3_k_warmer_is_compared_normalised_to_20_c(tmp_path):
     from drivers.sim.plant import default_leg_configs
     from procedures.diagnosis import diagnose
     from procedures.diagnosis.twin import twin_from_recording
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
     from station.services.diagnosis_jobs import diagnose_session
     from station.services.synth import synth_session
     from tests.tooling import write_points_session

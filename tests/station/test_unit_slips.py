@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 
 REPO = Path(__file__).resolve().parents[2]

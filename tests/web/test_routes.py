@@ -154,7 +154,7 @@ def test_readonly_engine_refuses_writes(fleet_dir):
 
 
 def test_tolerances_are_the_configs_as_left_limits(tmp_path):
-    from procedures.errors import InputError
+    from procedures.engine.errors import InputError
     from station.web.extensions import tolerances_of
 
     p = tmp_path / "s.toml"

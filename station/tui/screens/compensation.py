@@ -2,7 +2,7 @@
 table active in each drive, export, and push / verify / rollback with a confirmation naming the
 leg and the drive.
 
-Tables are made by procedures.table.make_table (the same as `station table`); errors are
+Tables are made by procedures.compensation.table.make_table (the same as `station table`); errors are
 measured minus commanded, um, which the drive subtracts. Push, verify and rollback run the
 jobs of station.services.table_jobs through the controller (compensation_controller), exactly as the
 command line does: the same procedures, refusals and audit entries.
@@ -64,7 +64,7 @@ class CompensationScreen(StationScreen):
 
     def on_mount(self) -> None:
         self.jobs = CompensationController(self)
-        self.table = None  # procedures.table.CompTable
+        self.table = None  # procedures.compensation.table.CompTable
         self.table_model_id: int | None = None
         self.drive_tables: dict[int, DriveTable] = {}
         self.plot_leg: int | None = None
@@ -95,7 +95,7 @@ class CompensationScreen(StationScreen):
         return drive_table_spec(self.app.cfg.drive.profile or None)
 
     def action_make_table(self) -> None:
-        from procedures.table import make_table
+        from procedures.compensation.table import make_table
 
         a = self.app.analysis
         if a is None:
@@ -117,7 +117,7 @@ class CompensationScreen(StationScreen):
             self.action_read_drives()
 
     def action_save_csv(self) -> None:
-        from procedures.table import write_table_csv
+        from procedures.compensation.table import write_table_csv
 
         a = self.app.analysis
         if self.table is None or a is None:
@@ -208,7 +208,7 @@ class CompensationScreen(StationScreen):
 
     def action_verify(self) -> None:
         """A verification sweep of the selected leg with its table active: the calibration's plan
-        again, then procedures.verify compares it with the calibration (before vs after)."""
+        again, then procedures.compensation.verify compares it with the calibration (before vs after)."""
         a = self.app.analysis
         leg = self._selected_leg()
         if a is None or leg is None:
@@ -220,7 +220,7 @@ class CompensationScreen(StationScreen):
             self.app.switch_mode("sweep")
 
     def on_verification_done(self, message: VerificationDone) -> None:
-        from procedures import events as ev
+        from procedures.engine import events as ev
 
         self._show_audit()
         job = message.job
@@ -296,8 +296,8 @@ def _as_left_text(path: str | None) -> str:
     """The verification's as-left decisions in one line (ISO 14253-1, docs/decisions.md), "" when
     its legs' types state no tolerance or the file cannot be read (the report above stands)."""
     try:
-        from procedures.decision import decision_summary
-        from procedures.recording.reader import read_session
+        from procedures.reporting.decision import decision_summary
+        from procedures.io.recording.reader import read_session
         from station.services.report_jobs import decisions_if_stated
 
         d = decisions_if_stated(read_session(path), stage="as_left") if path else None

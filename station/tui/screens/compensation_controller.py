@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING, Any
 
 from textual.message import Message
 
-from procedures.audit import AuditLog
-from procedures.push import PushPlan
-from procedures.states import Action, AuditOutcome
+from procedures.compensation.audit import AuditLog
+from procedures.compensation.push import PushPlan
+from procedures.engine.states import Action, AuditOutcome
 from station.tui.errors import describe
 from station.tui.messages import Notice
 from station.tui.screens.common import ConfirmScreen
@@ -108,7 +108,7 @@ class CompensationController:
 
     # -- push and rollback ---------------------------------------------------------------------------
     def push(self, leg: int, table, source: dict | None) -> None:
-        """Push `table` (a procedures.table.LegTable) to `leg`'s drive after a confirmation."""
+        """Push `table` (a procedures.compensation.table.LegTable) to `leg`'s drive after a confirmation."""
         from station.services.table_jobs import push_job
 
         self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
@@ -116,7 +116,7 @@ class CompensationController:
             leg_serial=audit.leg_serials.get(leg)))
 
     def push_all(self, tables: dict, sources: dict[int, dict]) -> None:
-        """Push every leg's table after one confirmation (procedures.push.push_legs_procedure)."""
+        """Push every leg's table after one confirmation (procedures.compensation.push.push_legs_procedure)."""
         from station.services.table_jobs import push_legs_job
 
         def start(axes, audit, url):
@@ -245,7 +245,7 @@ class CompensationController:
         """A verification sweep of `leg` with its table active, repeating the plan of the
         calibration on show (`analysis.session`), through station.services.table_jobs.verify_job on the
         Sweep page. False (and a notice) when it cannot start."""
-        from procedures.plans import SweepPlan
+        from procedures.acquisition.plans import SweepPlan
         from station.services.table_jobs import verify_job
         from station.services.sessions import default_session_path
         from station.services.wiring import drive_url_of

@@ -49,7 +49,7 @@ def material_summary(doc: dict | None) -> str:
     to the reference temperature."""
     if not doc:
         return "[dim]material temperature: not in the report[/dim]"
-    from procedures.ranges import legs_text
+    from procedures.io.ranges import legs_text
 
     ref = doc.get("reference_temp_c", 20.0)
     legs = doc.get("legs") or {}
@@ -175,7 +175,7 @@ class DiagnosisScreen(StationScreen):
     def _run(self, path: Path, twin_kind: str, spec: str | None, model, request: int = 0) -> None:
         try:
             from procedures.diagnosis import twin_from_model
-            from procedures.recording.reader import read_session
+            from procedures.io.recording.reader import read_session
             from station.services.diagnosis_jobs import diagnose_session
 
             session = read_session(path)

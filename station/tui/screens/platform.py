@@ -92,7 +92,7 @@ class PlatformWritten(Message):
 
 
 def _require_six_legs(session, name: str) -> None:
-    from procedures.errors import InputError
+    from procedures.engine.errors import InputError
 
     legs = [int(leg) for leg in session.legs]
     missing = [leg for leg in range(1, 7) if leg not in legs]
@@ -107,7 +107,7 @@ def run_platform(request: PlatformRequest) -> PlatformRun:
     """Load the error sources and run both measurements on the same poses (any thread)."""
     from procedures.platform.experiment import Workspace, run_measurements
     from procedures.platform.geometry import default_geometry
-    from procedures.recording.reader import read_session
+    from procedures.io.recording.reader import read_session
     from station.services.platform_jobs import load_errors, model_errors
 
     a = request.analysis

@@ -51,7 +51,7 @@ def _text(value) -> str:
 
 
 def fault_rows(faults, session: str) -> list[tuple[str, ...]]:
-    """One row per fault record (procedures.recording.schema.FAULT_DTYPE, file order): index
+    """One row per fault record (procedures.io.recording.schema.FAULT_DTYPE, file order): index
     (the plan point), leg, run, target mm, time s, kind, attempt, gave up, message."""
     return [(session, str(int(f["index"])), str(int(f["leg"])), str(int(f["run"])), f"{float(f['target_mm']):+.4f}",
              f"{float(f['time_s']):.3f}", _text(f["kind"]), str(int(f["attempt"])),
@@ -126,7 +126,7 @@ class ReplayScreen(StationScreen):
     @work(thread=True, exclusive=True, group="replay-read", exit_on_error=False)
     def _read_worker(self, path: Path) -> None:
         try:
-            from procedures.recording.reader import read_session
+            from procedures.io.recording.reader import read_session
 
             self.post_message(SessionRead(path, read_session(path)))
         except Exception as exc:
@@ -135,7 +135,7 @@ class ReplayScreen(StationScreen):
     @work(thread=True, exclusive=True, group="replay-read-replayed", exit_on_error=False)
     def _read_replayed(self, path: Path, source: Path) -> None:
         try:
-            from procedures.recording.reader import read_session
+            from procedures.io.recording.reader import read_session
 
             self.post_message(SessionRead(path, read_session(path), replayed=True, source=source))
         except Exception as exc:

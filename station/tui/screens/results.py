@@ -6,7 +6,7 @@ Reading, fitting and evaluating run in a thread worker; the result is kept on th
 within seconds, in the worker, and said in a notification.
 
 `r` writes the report of `station report` and `e` the CSV of `station export` for the session
-on show, through the same functions (station.services.report_jobs, procedures.csv_io.export_csv), beside
+on show, through the same functions (station.services.report_jobs, procedures.io.csv_io.export_csv), beside
 the recording: report/<session>.<method>/ and <session>.csv. Neither replaces what is there.
 
 The error is the one `station fit` and `station iso230` use, chosen by the same function
@@ -57,7 +57,7 @@ class Analysis:
     """A recording with its fitted model and ISO 230-2 evaluation (None when unavailable)."""
 
     path: Path
-    session: Any  # procedures.recording.reader.Session
+    session: Any  # procedures.io.recording.reader.Session
     method: str
     model: Any  # procedures.fit.LegErrorModel
     iso: Any = None
@@ -68,7 +68,7 @@ class Analysis:
     points: Any = None  # the points analysed: session.points with error_um on the chosen basis
     basis_lines: tuple[str, ...] = ()  # what error_basis says, as the commands print it
     basis: dict | None = None  # the same as JSON (the model's options["error_basis"])
-    decisions: dict | None = None  # procedures.decision per leg when the session states tolerances
+    decisions: dict | None = None  # procedures.reporting.decision per leg when the session states tolerances
 
     @property
     def analysed_points(self) -> Any:
@@ -115,7 +115,7 @@ def csv_path(recording: Path, recordings_dir) -> Path:
 
 
 def iso_figures(iso: Any, leg: int) -> dict[str, float | None]:
-    """A, E, M, B, R (um, both directions) of one leg from procedures.iso230.evaluate's result;
+    """A, E, M, B, R (um, both directions) of one leg from procedures.reporting.iso230.evaluate's result;
     a value the standard's definitions cannot give from this data is None (shown as n/a)."""
     if not iso or leg not in iso:
         return {}
@@ -134,7 +134,7 @@ def basis_text(lines: tuple[str, ...] | list[str], basis: dict | None, raw: bool
     switch. The commands' full lines are the status' tooltip."""
     from rich.markup import escape
 
-    from procedures.ranges import legs_text
+    from procedures.io.ranges import legs_text
 
     if not lines:
         return f"error: {basis_name(raw)}"
@@ -300,7 +300,7 @@ class ResultsScreen(StationScreen):
     @work(thread=True, exclusive=True, group="analysis", exit_on_error=False)
     def _analyse(self, path: Path, method: str, raw: bool = False, request: int = 0) -> None:
         try:
-            from procedures.recording.reader import read_session
+            from procedures.io.recording.reader import read_session
             from station.services.analysis import analyse_session
 
             # the error, model and ISO figures `station fit` and `station iso230` give (normalised to 20 degC unless raw)
@@ -364,7 +364,7 @@ class ResultsScreen(StationScreen):
             self.notify("Fit a model first (f).", severity="warning")
             return
         from procedures.fit import save_model
-        from procedures.recording.identity import model_identity
+        from procedures.io.recording.identity import model_identity
 
         out = output_folder(a.path, self.app.cfg.recordings_dir) / f"{a.path.stem}.{a.method}.model.json"
         try:
@@ -429,7 +429,7 @@ class ResultsScreen(StationScreen):
     @work(thread=True, group="results-write", exit_on_error=False)
     def _export_worker(self, session_path: Path, out: Path, hide: bool) -> None:
         try:
-            from procedures.csv_io import export_csv
+            from procedures.io.csv_io import export_csv
             from station.services.report_jobs import export_lines
 
             summary = export_csv(session_path, out, overwrite=False)
@@ -485,7 +485,7 @@ class ResultsScreen(StationScreen):
         if a.iso_note:
             text += f"\n[yellow]{a.iso_note}[/yellow]"
         if a.decisions:
-            from procedures.decision import decision_summary
+            from procedures.reporting.decision import decision_summary
 
             text += f"\n[b]{a.decisions['stage'].replace('_', '-')}[/b] (ISO 14253-1): {decision_summary(a.decisions['legs'])}"
         extra = []

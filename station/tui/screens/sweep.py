@@ -16,9 +16,9 @@ from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Label, ProgressBar, Select, Static
 
-from procedures.plan_size import PlanSize, fmt_bytes, plan_size
-from procedures.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
-from procedures.plans import parse_legs
+from procedures.acquisition.plan_size import PlanSize, fmt_bytes, plan_size
+from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
+from procedures.acquisition.plans import parse_legs
 from station.progress import fmt_duration
 from station.tui.errors import describe
 from station.tui.messages import SweepChanged

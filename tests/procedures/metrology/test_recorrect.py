@@ -13,12 +13,12 @@ import h5py
 import numpy as np
 import pytest
 
-from procedures.errors import InputError
+from procedures.engine.errors import InputError
 from procedures.metrology.air import ciddor, edlen
 from procedures.metrology.recorrect import RecorrectOptions, recorrect_points
-from procedures.recording.columns import read_point_column
-from procedures.recording.reader import read_session
-from procedures.recording.schema import POINT_DTYPE
+from procedures.io.recording.columns import read_point_column
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.schema import POINT_DTYPE
 from station.cli import main
 
 

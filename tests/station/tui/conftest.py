@@ -54,7 +54,7 @@ def size():
 def recorded_session(tmp_path_factory):
     """A small completed session from the simulated rig (legs 1 and 2, 9 uniform targets
     -80..80 mm, 3 cycles), recorded by the same runner as the CLI and the UI."""
-    from procedures.plans import iso230_plan
+    from procedures.acquisition.plans import iso230_plan
     from station.services.jobs import run_sweep
     from station.services.wiring import open_rig
 

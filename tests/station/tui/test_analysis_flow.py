@@ -16,8 +16,8 @@ from textual.widgets import DataTable, Input, Static
 from procedures.diagnosis import diagnose
 from procedures.fit import fit
 from procedures.metrology.thermal import error_basis
-from procedures.recording.reader import read_session
-from procedures.table import make_table
+from procedures.io.recording.reader import read_session
+from procedures.compensation.table import make_table
 from station.tui import capabilities
 from station.tui.app import StationApp
 from tests.station.tui.steps import open_session
@@ -48,7 +48,7 @@ async def _results(path, cfg, size, wait_until, notes):
         evaluate = capabilities.find("iso230")
         if evaluate is None:
             assert "ISO 230-2 evaluation not available yet" in str(app.screen.query_one("#results-status", Static).render())
-        else:  # A, E, M, B, R of both directions, as procedures.iso230 computes them
+        else:  # A, E, M, B, R of both directions, as procedures.reporting.iso230 computes them
             iso = evaluate(points)
             for row, leg in enumerate(expected.legs):
                 shown = table.get_row_at(row)[7:12]
@@ -128,9 +128,9 @@ def test_push_after_confirming_then_verify_and_roll_back(recorded_session, cfg, 
 
 
 async def _push(path, cfg, size, wait_until, notes, connected):
-    from procedures.audit import read_entries
-    from procedures.push import quantize, table_sha256
-    from procedures.verify import format_report, verify
+    from procedures.compensation.audit import read_entries
+    from procedures.compensation.push import quantize, table_sha256
+    from procedures.compensation.verify import format_report, verify
     from station.tui.screens.common import ConfirmScreen
 
     app = StationApp(cfg, time_scale=0.0)
@@ -181,9 +181,9 @@ async def _push(path, cfg, size, wait_until, notes, connected):
         await wait_until(pilot, lambda: app.sweep.label == "verification of leg 1", what="the verification sweep")
         await wait_until(pilot, lambda: comp.verify_text != "", 60, "the verification report")
         assert app.sweep.status == "completed"
-        from procedures.recording.reader import read_session as rs
+        from procedures.io.recording.reader import read_session as rs
 
-        from procedures.verify import error_basis
+        from procedures.compensation.verify import error_basis
 
         # both sessions normalised to 20 degC (the default), the report saying so first
         after_pts, before_pts, basis, _ = error_basis(rs(app.sweep.out), rs(path), True)

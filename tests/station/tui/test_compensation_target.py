@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from textual.widgets import DataTable, Static
 
-from procedures.audit import read_entries
-from procedures.push import quantize, table_sha256
+from procedures.compensation.audit import read_entries
+from procedures.compensation.push import quantize, table_sha256
 from station.tui.app import StationApp
 from tests.station.tui.steps import open_session
 from station.tui.screens.common import ConfirmScreen

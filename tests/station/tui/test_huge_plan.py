@@ -14,7 +14,7 @@ import time
 import pytest
 from textual.widgets import Input, Static
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.tui.app import StationApp
 from station.tui.screens.common import ConfirmScreen
 
@@ -58,7 +58,7 @@ async def _asks_then_aborts(cfg, size, connected, wait_until, notes):
         assert not app.sweep.active and app.sweep.status == "idle"
 
         # started, then aborted at once: while its plan is being built (a fraction of a second
-        # here; tests/procedures/test_plan_size.py aborts the building itself) or just after
+        # here; tests/procedures/acquisition/test_plan_size.py aborts the building itself) or just after
         await pilot.press("s")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question")
         await pilot.press("y")

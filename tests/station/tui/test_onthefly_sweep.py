@@ -9,7 +9,7 @@ import asyncio
 import pytest
 from textual.widgets import Input, Select, Static
 
-from procedures.plan_spec import plan_from_spec
+from procedures.acquisition.plan_spec import plan_from_spec
 from station.cli import build_parser
 from station.commands.sweep import plan_spec as cli_plan_spec
 from station.tui.app import StationApp

@@ -15,9 +15,9 @@ from types import SimpleNamespace
 import pytest
 from textual.widgets import ProgressBar, Static
 
-from procedures import events as ev
-from procedures.plans import iso230_plan
-from procedures.states import Outcome
+from procedures.engine import events as ev
+from procedures.acquisition.plans import iso230_plan
+from procedures.engine.states import Outcome
 from tests.tooling import start_paper_sweep
 from station.services.rig_session import RigSession
 from station.tui.app import StationApp

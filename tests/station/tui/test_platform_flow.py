@@ -13,7 +13,7 @@ from procedures.fit import fit
 from procedures.metrology.thermal import error_basis
 from procedures.platform.experiment import RecordedLegErrors, run_measurements
 from procedures.platform.geometry import default_geometry
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 from station.tui.app import StationApp
 from station.tui.screens.platform import COMPONENTS

@@ -18,7 +18,7 @@ from textual.widgets import DataTable, Input, Static
 from procedures.fit import load_model
 from procedures.metrology.thermal import error_basis
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.cli import main
 from station.tui.app import StationApp
 from tests.station.tui.steps import open_session
@@ -71,7 +71,7 @@ def _check_against_cli(app, session, cli: dict, raw: bool) -> dict[int, dict[str
                                        rtol=0, atol=1e-9)
         iso = cli["iso"]["legs"][str(leg)]
         inputs = UncertaintyInputs.from_record(session.station_config, leg)
-        from procedures import iso230
+        from procedures.reporting import iso230
 
         budget = leg_budget(iso230.evaluate(points)[leg], points, inputs)
         shown[leg] = {}

@@ -8,10 +8,10 @@ import asyncio
 import pytest
 from textual.widgets import DataTable
 
-from procedures import iso230
+from procedures.reporting import iso230
 from procedures.metrology.thermal import error_basis
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.tui.app import StationApp
 from tests.station.tui.steps import open_session
 

@@ -8,7 +8,7 @@ import socket
 import pytest
 from textual.widgets import DataTable, Input, Static
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.tui.app import StationApp
 
 pytestmark = pytest.mark.timeout(120)

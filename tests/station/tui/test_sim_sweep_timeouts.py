@@ -19,9 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from procedures.plans import iso230_plan
-from procedures.recording.reader import read_session
-from procedures.recording.schema import FLAG_RETRIED_DRIVE
+from procedures.acquisition.plans import iso230_plan
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.schema import FLAG_RETRIED_DRIVE
 from station.commands.ui import DEFAULT_SIM_TIME_SCALE
 from station.tui.app import StationApp
 

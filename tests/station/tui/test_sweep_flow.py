@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from textual.widgets import Input, ProgressBar, Select
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.tui.app import StationApp
 from station.tui.screens.common import ConfirmScreen
 from station.tui.widgets import XYPlot

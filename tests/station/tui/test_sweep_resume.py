@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from textual.widgets import Input, Static
 
-from procedures import events as ev
-from procedures.control import RunControl
-from procedures.plans import iso230_plan
-from procedures.recording.reader import read_session
-from procedures.runner import CallbackSink
+from procedures.engine import events as ev
+from procedures.engine.control import RunControl
+from procedures.acquisition.plans import iso230_plan
+from procedures.io.recording.reader import read_session
+from procedures.engine.runner import CallbackSink
 from tests.tooling import start_paper_sweep
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from textual.widgets import DataTable, Input, Select, Static
 
-from procedures.recording.reader import read_session
+from procedures.io.recording.reader import read_session
 from station.tui.app import StationApp
 
 pytestmark = pytest.mark.timeout(180)
@@ -214,7 +214,7 @@ async def _no_session(cfg, size, wait_until, notes):
 def irregular_session(tmp_path):
     """Legs 1 and 2 on ISO 230-2 irregular targets: the paper's method refuses them."""
     from drivers.sim.plant import default_leg_configs
-    from procedures.plans import irregular_targets
+    from procedures.acquisition.plans import irregular_targets
     from station.services.synth import synth_session
     from tests.tooling import write_points_session
 
@@ -345,7 +345,7 @@ def test_a_cut_session_file_is_a_notice_on_every_page_and_the_ui_stays_live(perc
                                                                             wait_until, notes, monkeypatch):
     import threading
 
-    import procedures.recording.reader as reader
+    import procedures.io.recording.reader as reader
 
     data = SAMPLE_6LEGS.read_bytes()
     cut = tmp_path / "cut" / f"calibration-6legs-{percent}.h5"

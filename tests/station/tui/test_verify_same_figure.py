@@ -1,5 +1,5 @@
 """One figure, one value (issue 22, item 5): `station verify` and the Compensation page give the
-verification ratio on the same basis. Each front end's figure is the one procedures.verify
+verification ratio on the same basis. Each front end's figure is the one procedures.compensation.verify
 computes from the sessions it recorded, normalised to 20 degC (the CLI's --raw: raw on both
 sides), so the same data give the same figure in both. The 2.29 / 7.8 / 1.15 of the issue were
 a residual RMS on one basis divided by a noise floor on another: this test fails on any such mix
@@ -14,8 +14,8 @@ import re
 
 import pytest
 
-from procedures.recording.reader import read_session
-from procedures.verify import error_basis, verify
+from procedures.io.recording.reader import read_session
+from procedures.compensation.verify import error_basis, verify
 from station.cli import main
 from station.tui.app import StationApp
 from tests.station.tui.steps import open_session

@@ -1,0 +1,207 @@
+"""The on-the-fly passes of a sweep (docs/onthefly.md): move through all targets at constant
+speed; the drive's position-compare output triggers the interferometer at every target.
+
+For each pass: move (at the profile speed) to the run-up start `overrun_mm` before the first
+target, arm the drive's compare list (first target, step signed by the direction, count) and
+the laser's capture, move at the pass speed to `overrun_mm` beyond the last target, then read
+the samples back. A sample's position is the compare position (the drive's position actual at
+the pulse, by construction), its reading the laser's latched one, its time the instrument's
+time of the pulse, its speed the central difference of positions over those times. Then, at
+rest where the pass ended (`overrun_mm` beyond its last target), after the dwell, one averaged
+reading: the pass's anchor (FLAG_ANCHOR), which shares the pass's offset and so tells the
+speed-dependent error from it (procedures/fit/dynamic.py). The
+environment (air, material temperature) is read after every pass and holds for its samples.
+
+A fault during a pass (a sample taken without beam, fewer samples than pulses expected, a drive
+fault) is retried as the stop-and-go sweep retries a point (procedures/acquisition/passes.py), but for the
+whole pass (a moving axis cannot go back for one sample). `sweep()` calls `onthefly_passes` in
+place of its loop over points; safety (limits checked before any motion, stop and disable on
+every exit) stays with `sweep()`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Iterator, Mapping
+
+import numpy as np
+
+from drivers.interfaces import (
+    CapturingInterferometer,
+    Clock,
+    DriverError,
+    Interferometer,
+    PositionCompareAxis,
+    ServoAxis,
+)
+from procedures.engine import events as ev
+from procedures.acquisition.adaptive import AdaptiveRule
+from procedures.engine.control import Aborted, RunControl
+from procedures.acquisition.passes import RetryPolicy, point_record, retry_after, start_leg
+from procedures.acquisition.plans import PlanPoint, SweepPlan
+from procedures.io.recording.schema import FLAG_ANCHOR, POINT_DTYPE
+from procedures.io.recording.writer import point_row
+
+
+class CaptureShort(DriverError):
+    """The laser latched fewer samples than the drive's compare list should have fired."""
+
+
+def _passes(points: list[PlanPoint]) -> list[list[PlanPoint]]:
+    out: list[list[PlanPoint]] = []
+    for p in points:
+        if out and out[-1][0].leg == p.leg and out[-1][0].run == p.run:
+            out[-1].append(p)
+        else:
+            out.append([p])
+    return out
+
+
+def speeds_of(positions_mm: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """Signed speed at each sample, mm/s: central differences (one-sided at the ends)."""
+    if positions_mm.size < 2:
+        return np.zeros(positions_mm.size)
+    return np.gradient(positions_mm, t_s)
+
+
+def onthefly_passes(
+    plan: SweepPlan,
+    points: list[PlanPoint],
+    axes: Mapping[int, ServoAxis],
+    laser: Interferometer,
+    clock: Clock,
+    control: RunControl,
+    retry: RetryPolicy,
+    t_start: float,
+    done: int,
+    total: int,
+    materials: Mapping[int, Any] | None = None,
+) -> Iterator[ev.Event]:
+    """Measure the passes of `points` (the plan's points not yet done) on the fly; yields the
+    sweep's events and returns the count of points done. Leg changes, faults and retries as the
+    stop-and-go sweep (procedures/acquisition/passes.py; retries run out: SweepFailed). `materials`: leg ->
+    material the adaptive rule normalises with (procedures.acquisition.adaptive; a leg not in it: the default)."""
+    if not isinstance(laser, CapturingInterferometer):
+        raise DriverError("the interferometer has no capture mode (CAPARM/CAP?), so an on-the-fly plan cannot run; "
+                          "use a stop-and-go plan")
+    for leg in plan.legs:
+        if not isinstance(axes[leg], PositionCompareAxis):
+            raise DriverError(f"leg {leg}: the drive has no position-compare output; use a stop-and-go plan")
+    all_targets = np.asarray(plan.targets_mm, dtype=float)
+    n = all_targets.size
+    step = plan.step_mm
+    rounds_cycles = 2 * plan.cycles_per_round  # passes per round
+    current_leg: int | None = None
+    stopped: set[int] = set()
+    rules: dict[int, AdaptiveRule] = {}
+    measured: dict[int, list[np.ndarray]] = {}
+    planned_left: dict[int, int] = {}
+    for p in points:
+        planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
+    prev_temp: tuple[float, float] | None = None
+    for pas in _passes(points):
+        first = pas[0]
+        leg, run, d = first.leg, first.run, first.direction
+        if leg in stopped:
+            continue
+        yield from control.checkpoint()
+        if leg != current_leg:
+            last_leg, current_leg = current_leg, leg
+            yield from start_leg(plan, axes, laser, clock, control, first, last_leg, t_start)
+            prev_temp = None  # (session time, material temperature) of the reading before a pass
+        axis = axes[leg]
+        speed = plan.speed_of_run(run)
+        seq = all_targets if d > 0 else all_targets[::-1]
+        start_mm = float(seq[0] - d * plan.overrun_mm)
+        end_mm = float(seq[-1] + d * plan.overrun_mm)
+        flags = 0
+        attempt = 0
+        samples = None
+        while samples is None:
+            yield from control.checkpoint()
+            attempt += 1
+            try:
+                axis.move_to(start_mm)
+                if prev_temp is None or prev_temp[0] is None:
+                    # the first pass of the leg: the temperature as it starts (time: its first sample)
+                    prev_temp = (None, laser.environment().material_temp_of(leg))
+                axis.arm_position_compare(float(seq[0]), d * step, n)  # type: ignore[attr-defined]
+                laser.arm_capture(leg, n)  # type: ignore[attr-defined]
+                status = axis.move_to(end_mm, velocity_mm_s=speed)
+                axis.arm_position_compare(float(seq[0]), d * step, 0)  # type: ignore[attr-defined]  # off
+                captured, _ = laser.capture_count(leg)  # type: ignore[attr-defined]
+                if captured < n:
+                    raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
+                                       "(trigger wiring, or the move stopped short)")
+                readings = laser.capture_samples(leg, 0, n)  # type: ignore[attr-defined]
+                # the anchor: at rest where the pass ended, settled, averaged (same pass offset)
+                clock.sleep(plan.dwell_s)
+                anchor_reading = laser.read(leg)
+                # after every pass: a pass heats the screw by its travel in seconds, so the
+                # material temperature of the pass before would be stale (the readings are
+                # normalised to 20 degC with it)
+                env = laser.environment()
+                samples = (readings, status, env, anchor_reading)
+            except Aborted:
+                raise
+            except DriverError as exc:
+                flags |= yield from retry_after(exc, attempt, retry, control, clock, axis, first, t_start,
+                                                "on-the-fly pass: ")
+        readings, status, env, anchor_reading = samples
+        t_abs = np.array([r.t_s for r in readings], dtype=float)
+        v = speeds_of(seq, t_abs)
+        by_target = {round(float(x), 9): i for i, x in enumerate(seq)}
+        rows = []
+        anchor_mm = plan.anchor_mm(d)
+        t_after = clock.now() - t_start  # session times, as recorded: a replay computes the same
+        temp_after = env.material_temp_of(leg)
+        t_rel = t_abs - t_start
+        run_up_s = plan.overrun_mm / speed
+        # the screw heats by its travel: from the start of the motion (the first pass of a leg:
+        # from its first sample, when the reading before it is taken as holding) to its end
+        t_heat0 = t_rel[0] if prev_temp is None or prev_temp[0] is None else t_rel[0] - run_up_s
+        t_heat1 = t_rel[-1] + run_up_s
+
+        def temp_c(t_s: float) -> float:
+            """The material temperature at a sample, interpolated over the pass's motion between
+            the reading before it (after the pass before, or before the first pass of the leg)
+            and the one after it; a pass heats the screw within seconds, and the readings are
+            normalised to 20 degC with it."""
+            if prev_temp is None or not t_heat1 > t_heat0:
+                return temp_after
+            f = min(max((t_s - t_heat0) / (t_heat1 - t_heat0), 0.0), 1.0)
+            return prev_temp[1] + (temp_after - prev_temp[1]) * f
+
+        for p in pas:
+            is_anchor = abs(p.target_mm - anchor_mm) < 1e-9
+            r = anchor_reading if is_anchor else readings[by_target[round(p.target_mm, 9)]]
+            if is_anchor:  # read at rest: the drive's own position, time of the reading, no speed
+                record = point_record(p, r, env, drive_position_mm=status.position_mm, time_s=t_after,
+                                      material_temp_c=temp_after, load_n=status.load_n, flags=flags | FLAG_ANCHOR,
+                                      speed_mm_s=float("nan"))
+            else:  # the compare fires when position actual passes the target: that is the drive's position
+                record = point_record(p, r, env, drive_position_mm=p.target_mm, time_s=r.t_s - t_start,
+                                      material_temp_c=temp_c(r.t_s - t_start), load_n=status.load_n, flags=flags,
+                                      speed_mm_s=float(v[by_target[round(p.target_mm, 9)]]))
+            done += 1
+            planned_left[leg] -= 1
+            rows.append(record)
+            yield ev.PointMeasured(record, done, total)
+        prev_temp = (t_after, temp_after)
+        if plan.adaptive:
+            measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
+            if run % rounds_cycles == 0 and planned_left[leg] > 0:
+                rule = rules.setdefault(leg, AdaptiveRule(material=(materials or {}).get(leg)))
+                reason = rule.after_round(np.concatenate(measured[leg]).astype(POINT_DTYPE), leg)
+                if reason is not None:
+                    stopped.add(leg)
+                    skipped = planned_left[leg]
+                    total -= skipped
+                    yield ev.PassesStopped(leg, run // 2, reason, tuple(rule.heldout_um), rule.noise_floor_um, skipped)
+                    yield ev.Message(f"leg {leg}: adaptive stop after {run // 2} cycles: {reason}; "
+                                     f"{skipped} planned points not needed", "info")
+            elif planned_left[leg] == 0:
+                rule = rules.setdefault(leg, AdaptiveRule(material=(materials or {}).get(leg)))
+                reason = f"the plan's most cycles ({plan.cycles}) measured before the held-out RMS stopped improving"
+                yield ev.PassesStopped(leg, run // 2, reason, tuple(rule.heldout_um), rule.noise_floor_um, 0)
+                yield ev.Message(f"leg {leg}: {reason}", "info")
+    return done

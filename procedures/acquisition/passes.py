@@ -1,0 +1,167 @@
+"""What the stop-and-go sweep (procedures/acquisition/sweep.py) and the on-the-fly passes
+(procedures/acquisition/onthefly.py) share: the retry policy and how a fault is named, retried or given up,
+preparing a leg (enable, zero at mid-stroke), recovering an axis, stopping every axis, and the
+point record both yield.
+
+Point record fields and units: procedures/io/recording/schema.py. `error_um` = interferometer
+reading minus target, micrometres (positive = leg longer than commanded).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any, Generator, Iterator, Mapping
+
+from drivers.interfaces import (
+    BeamBreak,
+    Clock,
+    CommTimeout,
+    DriveFault,
+    DriverError,
+    Environment,
+    FramingError,
+    Interferometer,
+    ServoAxis,
+)
+from procedures.engine import events as ev
+from procedures.engine.control import Aborted, RunControl
+from procedures.acquisition.plans import PlanPoint, SweepPlan
+from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
+from procedures.engine.states import FaultKind
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RetryPolicy:
+    """Bounded retries per point. `beam_wait_s`: wait before re-reading after a beam break."""
+
+    beam_retries: int = 3
+    drive_retries: int = 2
+    comm_retries: int = 2
+    beam_wait_s: float = 0.5
+    env_interval_s: float = 10.0  # environment is read at most this often (it changes slowly)
+
+    def limit_for(self, kind: FaultKind) -> int:
+        """Retries allowed at one point for a fault of `kind` (beam, drive, else communication)."""
+        return {FaultKind.BEAM_BREAK: self.beam_retries, FaultKind.DRIVE_FAULT: self.drive_retries}.get(
+            kind, self.comm_retries)
+
+
+class SweepFailed(Exception):
+    """Retries exhausted at a point; the session stops there and can be resumed."""
+
+    def __init__(self, fault: ev.Fault):
+        super().__init__(f"{fault.kind} at leg {fault.leg}, run {fault.run}, target {fault.target_mm:.4f} mm: {fault.message}")
+        self.fault = fault
+
+
+def fault_kind(exc: BaseException) -> FaultKind:
+    if isinstance(exc, BeamBreak):
+        return FaultKind.BEAM_BREAK
+    if isinstance(exc, DriveFault):
+        return FaultKind.DRIVE_FAULT
+    if isinstance(exc, CommTimeout):
+        return FaultKind.TIMEOUT
+    if isinstance(exc, FramingError):
+        return FaultKind.FRAMING
+    return FaultKind.ERROR
+
+
+def start_leg(plan: SweepPlan, axes: Mapping[int, ServoAxis], laser: Interferometer, clock: Clock,
+              control: RunControl, first: PlanPoint, last_leg: int | None, t_start: float) -> Iterator[ev.Event]:
+    """Switch to `first.leg`: LegStarted, then set the laser's averaging (the first leg) or disable
+    the leg before, and prepare the new one. A driver error here (a link failing while switching
+    legs too) is recorded like a point's fault and stops the session resumable (SweepFailed)."""
+    yield ev.LegStarted(first.leg)
+    try:
+        if last_leg is None:
+            laser.set_averaging(plan.averaging_s)
+        else:
+            axes[last_leg].disable()
+        prepare_leg(axes[first.leg], laser, first.leg, clock, plan)
+    except DriverError as exc:
+        if control.aborted:
+            raise Aborted(control.reason) from exc
+        fault = ev.Fault(first.index, first.leg, first.run, 0.0, fault_kind(exc),
+                         f"preparing leg {first.leg} (enable, zero at mid-stroke): {exc}", 1, True, clock.now() - t_start)
+        yield fault
+        raise SweepFailed(fault) from exc
+
+
+def retry_after(exc: DriverError, attempt: int, retry: RetryPolicy, control: RunControl, clock: Clock,
+                axis: ServoAxis, p: PlanPoint, t_start: float, what: str = "") -> Generator[ev.Event, None, int]:
+    """A driver error at attempt `attempt` of point (or pass) `p`: yield its Fault; give up
+    (SweepFailed) once the retries for its kind are spent; else get ready for the next attempt
+    (a beam break: wait, the axis did not move; else recover the axis) and return the flag the
+    point will carry (FLAG_RETRIED_BEAM or FLAG_RETRIED_DRIVE). `what` prefixes the message."""
+    if control.aborted:
+        raise Aborted(control.reason) from exc
+    kind = fault_kind(exc)
+    gave_up = attempt > retry.limit_for(kind)
+    fault = ev.Fault(p.index, p.leg, p.run, p.target_mm, kind, f"{what}{exc}", attempt, gave_up, clock.now() - t_start)
+    yield fault
+    if gave_up:
+        raise SweepFailed(fault) from exc
+    if kind is FaultKind.BEAM_BREAK:
+        clock.sleep(retry.beam_wait_s)
+        return FLAG_RETRIED_BEAM
+    recover_axis(axis)
+    return FLAG_RETRIED_DRIVE
+
+
+def point_record(p: PlanPoint, reading: Any, env: Environment, *, drive_position_mm: float, time_s: float,
+                 material_temp_c: float, load_n: float, flags: int, **extra: float) -> dict[str, Any]:
+    """The record of a measured point (POINT_DTYPE field names; `extra`: optional fields such
+    as an on-the-fly sample's speed_mm_s). `reading`: the interferometer's (position_mm, signal_pct)."""
+    return {
+        "index": p.index, "leg": p.leg, "run": p.run, "direction": p.direction,
+        "target_mm": p.target_mm, "commanded_mm": p.target_mm,
+        "drive_position_mm": drive_position_mm, "measured_mm": reading.position_mm,
+        "error_um": (reading.position_mm - p.target_mm) * 1000.0,
+        "time_s": time_s,
+        "air_temp_c": env.air_temp_c, "air_pressure_hpa": env.air_pressure_hpa,
+        "humidity_pct": env.humidity_pct, "material_temp_c": material_temp_c,
+        "load_n": load_n, "signal_pct": reading.signal_pct, "flags": flags,
+        **extra,
+    }
+
+
+def prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan) -> None:
+    """Enable the drive, go to the mid-stroke reference and zero the interferometer there.
+
+    The reference is always approached upwards (from -overrun), so the zero carries the same
+    reversal state in every session, with or without a compensation table active."""
+    st = axis.status()
+    if st.fault:
+        axis.reset_fault()
+    axis.enable()
+    axis.move_to(-max(plan.overrun_mm, 0.5))
+    axis.move_to(0.0)
+    clock.sleep(plan.dwell_s)
+    laser.zero(leg)
+
+
+def recover_axis(axis: ServoAxis) -> None:
+    try:
+        st = axis.status()
+        if st.fault:
+            axis.reset_fault()
+        if not axis.status().enabled:
+            axis.enable()
+    except DriverError:
+        log.warning("axis recovery failed; the next attempt will report it", exc_info=True)
+
+
+def stop_all(axes: Mapping[int, ServoAxis], legs) -> None:
+    """Quick stop then disable every axis of the plan; never raises (a dead link is logged)."""
+    for leg in legs:
+        axis = axes.get(leg)
+        if axis is None:
+            continue
+        for action in (axis.stop, axis.disable):
+            try:
+                action()
+            except Exception:
+                log.warning("leg %s: %s failed while making the rig safe", leg, action.__name__, exc_info=True)

@@ -1,0 +1,60 @@
+"""Which compensation table a leg applies, as a session records it at the start of a sweep.
+
+`applied_table(axis)` reads the leg's table state through the `ServoAxis` interface (a drive's
+banks or the station-side table, drivers/station_compensation.py) and returns what a session
+stores in its `devices` (meta attribute, written when the file is created, so a session killed
+mid-sweep still says which table was applied): key `leg{N}_compensation_table`, a JSON object
+
+    {"target": "drive" | "station", "enabled": bool, "bank": int, "points": int,
+     "sha256": str ("" for an empty table), "start_mm": float, "spacing_mm": float,
+     "store": path of the station's table store (target station only)}
+
+or {"target": ..., "error": "..."} when the state could not be read.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from drivers.errors import DriverError
+from drivers.interfaces import ServoAxis
+from procedures.compensation.push import _target_details, table_sha256
+
+DEVICES_KEY = "leg{leg}_compensation_table"
+"""The `devices` key of a leg's applied table in a session file."""
+
+
+def applied_table(axis: ServoAxis) -> dict[str, Any]:
+    """The table `axis` applies now (module docstring)."""
+    d = _target_details(axis)
+    try:
+        st = axis.status()
+        d.update(enabled=bool(st.table_enabled), bank=int(st.active_bank))
+        if axis.table_spec() is None:
+            d.update(points=0, sha256="")
+            return d
+        table = axis.read_table(st.active_bank)
+    except Exception as exc:  # noqa: BLE001  (a record must never stop the sweep it describes)
+        d["error"] = str(exc) if isinstance(exc, DriverError) else f"{type(exc).__name__}: {exc}"
+        return d
+    d.update(points=table.point_count, sha256=table_sha256(table) if table.point_count else "",
+             start_mm=float(table.start_mm), spacing_mm=float(table.spacing_mm))
+    return d
+
+
+def applied_tables_devices(axes: dict[int, ServoAxis], legs) -> dict[str, str]:
+    """`devices` entries (JSON text) of every leg in `legs`."""
+    return {DEVICES_KEY.format(leg=leg): json.dumps(applied_table(axes[leg]), sort_keys=True) for leg in legs}
+
+
+def recorded_tables(devices: dict[str, Any]) -> dict[int, dict[str, Any]]:
+    """Per leg, the applied table a session's `devices` records ({} for sessions from before)."""
+    out: dict[int, dict[str, Any]] = {}
+    for key, value in (devices or {}).items():
+        if key.startswith("leg") and key.endswith("_compensation_table"):
+            try:
+                out[int(key[3:-len("_compensation_table")])] = json.loads(value) if isinstance(value, str) else dict(value)
+            except (ValueError, TypeError):
+                continue
+    return out

@@ -1,0 +1,164 @@
+"""Events a procedure yields. Frozen dataclasses; front ends and sinks only present them.
+
+Units are in the field names; `t_s` is on the rig clock (virtual on the simulated rig).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from procedures.engine.states import FaultKind, Outcome
+
+if TYPE_CHECKING:  # the payload types import this module (their procedures yield these events)
+    from procedures.compensation.audit import AuditEntry
+    from procedures.compensation.push import PushPlan, PushResult
+    from procedures.compensation.verify import LegVerification
+
+
+@dataclass(frozen=True)
+class Event:
+    pass
+
+
+@dataclass(frozen=True)
+class SweepStarted(Event):
+    session_id: str
+    legs: tuple[int, ...]
+    total_points: int
+    plan: dict[str, Any]  # the plan as JSON-able data
+    devices: dict[str, str]  # leg/instrument -> identity string
+    resumed_points: int = 0  # points already on disk when resuming
+
+
+@dataclass(frozen=True)
+class LegStarted(Event):
+    leg: int
+
+
+@dataclass(frozen=True)
+class PointMeasured(Event):
+    """One point measured. `record` maps the POINT_DTYPE field names to values."""
+
+    record: dict[str, float]
+    done: int  # points done including this one
+    total: int
+
+
+@dataclass(frozen=True)
+class Fault(Event):
+    """A fault during a sweep. `gave_up` is True once retries are exhausted."""
+
+    index: int
+    leg: int
+    run: int
+    target_mm: float
+    kind: FaultKind
+    message: str
+    attempt: int
+    gave_up: bool
+    t_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class Paused(Event):
+    """The run is paused (yielded by `RunControl.checkpoint`, before any further motion)."""
+
+
+@dataclass(frozen=True)
+class Resumed(Event):
+    pass
+
+
+@dataclass(frozen=True)
+class Message(Event):
+    text: str
+    level: str = "info"  # info / warning / error
+
+
+@dataclass(frozen=True)
+class SweepFinished(Event):
+    outcome: Outcome  # COMPLETED / ABORTED / FAILED
+    points: int
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class TablePushed(Event):
+    leg: int
+    bank: int
+    table_sha256: str
+    drive: str
+
+
+@dataclass(frozen=True)
+class Finding(Event):
+    leg: int
+    effect: str
+    parameters: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class AuditRecord(Event):
+    """An entry for the audit log (a procedures.compensation.audit.AuditEntry). Procedures yield these; the
+    audit sink (procedures.compensation.audit.AuditSink) is the only writer of the log."""
+
+    entry: AuditEntry
+
+
+@dataclass(frozen=True)
+class TablePlanned(Event):
+    """A push or rollback read the drive and checked the table (a procedures.compensation.push.PushPlan):
+    what will be written and what it replaces. Nothing is written yet; the procedure asks for
+    confirmation next."""
+
+    plan: PushPlan
+
+
+@dataclass(frozen=True)
+class LegChecked(Event):
+    """A verification found `leg`'s table active and fit to verify: `bank`, `table_sha256`,
+    `description` (points, span, largest correction)."""
+
+    leg: int
+    drive: str
+    bank: int
+    table_sha256: str
+    description: str
+
+
+@dataclass(frozen=True)
+class Verified(Event):
+    """A verification's figures (procedures.compensation.verify.LegVerification per leg), after its sweep."""
+
+    results: dict[int, LegVerification]
+    report: str
+    session: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class OperationFinished(Event):
+    """A push, rollback or verification ended. `action`: procedures.engine.states.Action; `outcome`:
+    procedures.engine.states.AuditOutcome (ok / refused / cancelled / failed for a push or rollback;
+    refused / completed / aborted / failed for a verification). `message` says what happened
+    and, after a failed push, which table is active. `result`: a push's PushResult."""
+
+    action: str
+    leg: int | None
+    outcome: str
+    message: str
+    result: PushResult | None = None
+
+
+@dataclass(frozen=True)
+class PassesStopped(Event):
+    """Adaptive stopping (procedures/acquisition/adaptive.py): `leg` needs no more passes after `cycles`
+    cycles. `reason` says why (the rule and the figures); `heldout_um` lists the
+    cross-validated held-out RMS after each round, um; `skipped_points` were planned, not measured."""
+
+    leg: int
+    cycles: int
+    reason: str
+    heldout_um: tuple[float, ...]
+    noise_floor_um: float | None
+    skipped_points: int

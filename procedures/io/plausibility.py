@@ -1,0 +1,128 @@
+"""Values that are possible but more likely a slip, named with the slip (issue 22, item 6).
+
+A physical range (procedures/io/ranges.py) refuses what no leg can produce. Inside it some values
+are far more likely a unit slip than a measurement: 68 in a degC column is 20 degC typed in
+degF; 500 in an um column is 0.5 um typed in nm; a table that corrects more than the leg's error
+ever spanned comes from an extrapolated model, or a model of something else. Such a value is
+refused, naming where it is (file, line, field) and the slip it looks like, unless the user
+states that it is right (`--accept-implausible`); then it is kept, with a warning line.
+
+Front-end independent: `station import`, `station table` and the terminal UI call the same
+checks and `settle`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from procedures.engine.errors import InputError
+
+ACCEPT_OPTION = "--accept-implausible"
+
+FAHRENHEIT_FROM_C = 40.0
+"""A workshop's air, and a leg's material, above this many degC is rare (a screw warms a few
+kelvin with travel); 50..104 degF is 10..40 degC, so a degC column reading above it most
+likely holds degF (68 degF = 20 degC)."""
+
+NM_FROM_UM = 100.0
+"""A ball-screw leg's positioning error is micrometres to tens of micrometres; an error column
+whose values go beyond 100 um most likely holds nm (0.5 um = 500 nm)."""
+
+CORRECTION_SPAN_FACTOR = 1.5
+"""A table may correct a little more than the recorded error spanned (the model smooths and
+meets both directions), not 1.5 times as much: beyond, it extrapolates or is not this leg's."""
+
+CORRECTION_SPAN_MARGIN_UM = 0.5
+"""...plus this, so that a leg with almost no error (a compensated one) is not flagged for noise."""
+
+
+@dataclass(frozen=True)
+class Implausible:
+    """One implausible value: `where` (file, line, field or key), the value, the likely slip."""
+
+    where: str
+    value: float
+    slip: str
+
+    def text(self) -> str:
+        return f"{self.where} = {self.value:g}: {self.slip}"
+
+
+def fahrenheit_slip(value_c: float) -> str:
+    return (f"looks like degF in a degC field ({value_c:g} degF = {(value_c - 32.0) * 5.0 / 9.0:.1f} degC; a "
+            f"workshop and a leg are rarely above {FAHRENHEIT_FROM_C:g} degC)")
+
+
+def nm_slip(value_um: float) -> str:
+    return (f"looks like nm in an um field ({value_um:g} nm = {value_um / 1000.0:g} um; a ball-screw leg is off by "
+            f"micrometres to tens of micrometres, not {NM_FROM_UM:g} um and more)")
+
+
+def check_points(points: np.ndarray, source: str, lines: Sequence[int] | None = None) -> list[Implausible]:
+    """The first implausible value of each field of `points` (POINT_DTYPE rows from `source`;
+    `lines`: each row's line in the file, to name it): temperatures in degF, errors in nm."""
+    found: list[Implausible] = []
+
+    def where(row: int, field: str) -> str:
+        line = f"line {lines[row]}" if lines is not None and row < len(lines) else f"row {row + 1}"
+        return f"{source}, {line}, field {field}"  # as the import's other problems are named
+
+    names = points.dtype.names or ()
+    for field in ("material_temp_c", "air_temp_c"):
+        if field in names:
+            values = np.asarray(points[field], float)
+            hits = np.flatnonzero(np.isfinite(values) & (values > FAHRENHEIT_FROM_C))
+            if hits.size:
+                row = int(hits[0])
+                found.append(Implausible(where(row, field), float(values[row]), fahrenheit_slip(float(values[row]))))
+    if "error_um" in names:
+        values = np.asarray(points["error_um"], float)
+        hits = np.flatnonzero(np.isfinite(values) & (np.abs(values) > NM_FROM_UM))
+        if hits.size:
+            row = int(hits[0])
+            found.append(Implausible(where(row, "error_um"), float(values[row]), nm_slip(float(values[row]))))
+    return found
+
+
+def check_table_values(table, source: str, limit_um: float = float("inf")) -> Implausible | None:
+    """A table leg (procedures.compensation.table.LegTable) whose correction goes beyond 100 um: most likely
+    nm written into the um columns. The first such value, named by file, leg, row (with its
+    position) and column, as the table's other refusals name it; else None. Values beyond
+    `limit_um` (what the drive can hold) are left to that limit's own, firmer refusal."""
+    for field_name in ("error_fwd_um", "error_rev_um"):
+        v = np.asarray(getattr(table, field_name), float)
+        hits = np.flatnonzero(np.isfinite(v) & (np.abs(v) > NM_FROM_UM) & (np.abs(v) <= limit_um))
+        if hits.size:
+            i = int(hits[0])
+            return Implausible(f"{source}, leg {table.leg}, {table.point_name(i)}, field {field_name}",
+                               float(v[i]), nm_slip(float(v[i])))
+    return None
+
+
+def check_correction(leg: int, correction_span_um: float, error_span_um: float, source: str) -> Implausible | None:
+    """A table for `leg` whose corrections span (max - min, both directions) more than the error
+    recorded in `source` spanned: an Implausible naming both, else None."""
+    if not (np.isfinite(correction_span_um) and np.isfinite(error_span_um)):
+        return None
+    if correction_span_um <= CORRECTION_SPAN_FACTOR * error_span_um + CORRECTION_SPAN_MARGIN_UM:
+        return None
+    return Implausible(f"leg {leg}: correction span (um)", correction_span_um,
+                       f"larger than the error it corrects ({error_span_um:.3f} um peak to peak in {source}): "
+                       "the model extrapolates (a table beyond the recorded stroke, a --step coarser than the "
+                       "error's wiggles) or is not this leg's; a table must never add more error than it removes")
+
+
+def settle(found: Sequence[Implausible], accept: bool, what: str = "nothing was written") -> list[str]:
+    """Refuse `found` (InputError: the first, how many more, how to accept them), or, when the
+    user accepted them, their warning lines. [] when nothing was found. `what`: what the refusal
+    adds ("" when the caller says it itself)."""
+    if not found:
+        return []
+    if not accept:
+        more = f" (and {len(found) - 1} more implausible value(s))" if len(found) > 1 else ""
+        raise InputError(f"{found[0].text()}{more}; correct it, or add {ACCEPT_OPTION} if the values are right"
+                         + (f"; {what}" if what else ""))
+    return [f"warning: {f.text()} (kept: {ACCEPT_OPTION})" for f in found]

@@ -1,0 +1,113 @@
+"""The HDF5 session schema: one place for field names, types and units.
+
+Layout of a session file (schema version SCHEMA_VERSION, attribute `schema_version` on the root):
+
+    /                      attrs: schema_version, software_version, session_id, operator,
+                                  started_utc, ended_utc, outcome, rig ("sim"/"live"/"replay"/"import")
+    /points                compound dataset, one row per measured point (POINT_DTYPE), chunked,
+                           resizable; attrs `units_<field>` give each field's unit
+    /faults                compound dataset (FAULT_DTYPE), one row per fault event
+    /meta                  group; attrs hold JSON strings: plan, station_config, devices, and
+                           (1.1, optional) identity (procedures/io/recording/identity.py)
+
+Sign convention: `error_um` = measured minus target (interferometer minus commanded target),
+micrometres; positive = the leg is longer than commanded. `direction` +1 = approached while the
+position increased.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+SCHEMA_VERSION = "1.1"  # major.minor; readers refuse another major (1.1 added /meta identity)
+
+# (name, numpy type, unit) -- the unit goes into the `units_<name>` attribute
+POINT_FIELDS: list[tuple[str, str, str]] = [
+    ("index", "<i8", "1"),  # position of the point in the plan (for resume): unique per session
+    ("leg", "<i2", "1"),
+    ("run", "<i4", "1"),  # one-direction pass number within the leg, 1-based
+    ("direction", "<i1", "1"),  # +1 / -1
+    ("target_mm", "<f8", "mm"),
+    ("commanded_mm", "<f8", "mm"),  # what was sent to the drive
+    ("drive_position_mm", "<f8", "mm"),  # drive-reported position actual
+    ("measured_mm", "<f8", "mm"),  # interferometer reading
+    ("error_um", "<f8", "um"),  # measured - target
+    ("time_s", "<f8", "s"),  # since the session start
+    ("air_temp_c", "<f8", "degC"),
+    ("air_pressure_hpa", "<f8", "hPa"),
+    ("humidity_pct", "<f8", "%RH"),
+    ("material_temp_c", "<f8", "degC"),
+    ("load_n", "<f8", "N"),  # axial load, compression positive
+    ("signal_pct", "<f4", "%"),
+    ("flags", "<u4", "bitfield"),  # see FLAG_*
+    # on-the-fly capture (docs/onthefly.md): signed speed of the axis when the reading was
+    # latched, + = increasing position; NaN for stop-and-go readings (taken at rest after the
+    # dwell) and in files written before the field existed
+    ("speed_mm_s", "<f8", "mm/s"),
+]
+POINT_DTYPE = np.dtype([(n, t) for n, t, _ in POINT_FIELDS])
+POINT_UNITS = {n: u for n, _, u in POINT_FIELDS}
+
+# flags bits
+FLAG_RETRIED_BEAM = 1  # the reading needed a retry after a beam break
+FLAG_RETRIED_DRIVE = 2  # the move needed a retry after a drive fault/timeout
+FLAG_IMPORTED = 4  # came from CSV: commanded/drive/measured positions are derived
+FLAG_REPLAYED = 8  # came from a replay device
+FLAG_ANCHOR = 16  # on the fly: the pass's anchor, read at rest where the pass ends (docs/onthefly.md)
+
+FAULT_FIELDS: list[tuple[str, str, str]] = [
+    ("index", "<i8", "1"),  # plan index of the point the fault hit
+    ("leg", "<i2", "1"),
+    ("run", "<i4", "1"),
+    ("target_mm", "<f8", "mm"),
+    ("time_s", "<f8", "s"),
+    ("kind", "S16", ""),  # a FaultKind value: beam_break / drive_fault / timeout / framing / error
+    ("attempt", "<i2", "1"),
+    ("gave_up", "<i1", "1"),  # 1 when retries were exhausted and the point was skipped/failed
+    ("message", "S200", ""),
+]
+FAULT_DTYPE = np.dtype([(n, t) for n, t, _ in FAULT_FIELDS])
+
+OPTIONAL_NAN_FIELDS = ("time_s", "air_temp_c", "air_pressure_hpa", "humidity_pct", "material_temp_c", "load_n")
+"""Fields that may be unknown (NaN) in imported data: NaN means 'not measured', never zero."""
+
+# --- additions (recording writer/reader) -------------------------------------------------------
+
+FAULT_UNITS = {n: u for n, _, u in FAULT_FIELDS}
+
+POINT_REQUIRED_KEYS = ("index", "leg", "run", "direction", "target_mm")
+"""Keys a point record must carry; every other POINT_DTYPE field defaults to unknown (NaN, or 0
+for `flags`)."""
+
+ROOT_ATTRS = (
+    "schema_version", "software_version", "session_id", "operator", "rig",
+    "started_utc", "ended_utc", "outcome", "resumed_utc",
+)
+"""Root attributes of a session file, all strings. `ended_utc` and `outcome` are "" while the
+session is open or when it was cut short; `resumed_utc` is a JSON list of the UTC times at which
+the session was resumed ("[]" when never)."""
+
+META_ATTRS = ("plan", "station_config", "devices")
+"""Attributes of the /meta group: JSON text."""
+
+OPTIONAL_META_ATTRS = ("identity",)
+"""/meta attributes added in 1.1: a file without them (1.0, an import) reads them as unknown."""
+
+# The root `outcome` attribute of a finished session holds an `Outcome.written()` value
+# (procedures/engine/states.py): "completed", "aborted" or "failed"; "" while open or when cut short.
+
+POINTS_CHUNK_ROWS = 32  # 3.5 kB: each flush rewrites the whole last chunk, so keep it about a page
+FAULTS_CHUNK_ROWS = 16
+UNWRITTEN_INDEX = -1
+"""Fill value of `index`: a row whose index is -1 was allocated but never written (a kill
+between growing the dataset and writing the row). Readers drop such rows."""
+
+
+ADDED_POINT_FIELDS = ("speed_mm_s",)
+"""Point fields added after schema 1.0 (minor additions): a file without them is read with them
+unknown (NaN), not refused."""
+
+
+def schema_major(version: str) -> int:
+    """The major number of a "major.minor" schema version string (ValueError if malformed)."""
+    return int(str(version).split(".")[0])

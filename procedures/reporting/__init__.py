@@ -1,0 +1,1 @@
+"""What a session becomes on paper: the ISO 230-2 evaluation, its test report, the session report."""
