@@ -130,7 +130,7 @@ def recorded_compensation_reply(record: str | None, source: str = "the recording
     if not record:
         return p.format_error(ERR_NOT_RECORDED, _err_text(
             "replay: no air-compensation record (laser_air_compensation; recorded before the station asked "
-            f"COMP?) in {source}"))  # the reason first: a long path is what the length limit cuts
+            f"COMP?) in {source}"))  # the reason first: a long name is what the length limit cuts
     if record.startswith("not reported"):
         return p.format_error(ERR_REPLAYED, _err_text(f"replay: recorded as {record}"))
     try:

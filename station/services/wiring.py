@@ -289,8 +289,9 @@ def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationCo
     recorded = str((session.station_config.get("drive") or {}).get("profile") or "")
     profile = DriveProfile.load(recorded if recorded and Path(recorded).is_file() else (cfg.drive.profile or None))
     replay = ReplayRig(script, speed=speed, profile=profile)
-    # COMP? answers the recorded air compensation, so the replayed session records the same
-    replay.laser_server.set_recorded_compensation(session.devices.get("laser_air_compensation"), str(path))
+    # COMP? answers the recorded air compensation, so the replayed session records the same; the
+    # file's name, not its path: the instrument's line is length-limited and cut a long temp path
+    replay.laser_server.set_recorded_compensation(session.devices.get("laser_air_compensation"), path.name)
     replay.start()
     try:
         # nothing recorded may depend on the wall clock: no timeout may fire on a request the
