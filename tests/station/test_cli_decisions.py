@@ -33,7 +33,7 @@ def test_iso230_decides_by_the_tolerance_of_the_leg_type(session, tmp_path, caps
     # limits placed around the value: each side of value +/- U decides as the rule says
     for limit, outcome in ((E + U + 0.01, "conforms"), (E, "cannot decide"), (E - U - 0.01, "does not conform")):
         assert main(["iso230", str(session), "--config", _config(tmp_path, round(limit, 6)),
-                     "--json", str(js)]) == 0
+                     "--json", str(js), "--force"]) == 0  # --force: the one overwrite rule
         out = capsys.readouterr().out
         d = json.loads(js.read_text())["decisions"]["legs"]["1"]
         assert d["values"]["E"]["outcome"] == outcome, d

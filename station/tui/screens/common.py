@@ -13,11 +13,11 @@ from textual.widgets import Button, Footer, Header, Label, Static
 
 PAGES = [("rig", "F1", "Rig"), ("sweep", "F2", "Sweep"), ("results", "F3", "Results"),
          ("compensation", "F4", "Compensation"), ("replay", "F5", "Replay"), ("diagnosis", "F6", "Diagnosis"),
-         ("platform", "F7", "Platform")]
+         ("platform", "F7", "Platform"), ("history", "F8", "History")]
 
 
 # Shorter page titles for the tab bar of a narrow terminal (the help keeps the full ones).
-SHORT_TITLES = {"compensation": "Comp", "diagnosis": "Diag", "platform": "Platf"}
+SHORT_TITLES = {"compensation": "Comp", "diagnosis": "Diag", "platform": "Platf", "history": "Hist"}
 
 # Below these sizes (cells) a page is laid out for a small terminal (an 80x24 bench laptop, an
 # SSH session): the screen gets the class "-narrow" / "-short", which station.tcss styles

@@ -33,7 +33,7 @@ class HistoryLoaded(Message):
 class HistoryScreen(StationScreen):
     MODE = "history"
     PAGE_HELP = "a leg's calibrations, tables and verifications by serial number, from the catalog (station history)"
-    AUTO_FOCUS = "#hist-serial"
+    AUTO_FOCUS = "#hist-load"  # as on every page: a letter key acts, the serial is one click or Tab away
     BINDINGS = [Binding("l", "load", "Load")]
 
     def compose(self) -> ComposeResult:

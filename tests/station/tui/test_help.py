@@ -53,7 +53,7 @@ async def _help(cfg, size, wait_until):
             for b in page_bindings(app.MODES[mode]):
                 assert f"{key_display(app, b)} {b.description}" in text, (title, b)
         for needed in ("m Move to", "+ Jog +", "- Jog −", "j Jog step", "x Stop all", "r Resume aborted",
-                       "F1..F7 pages", "? / F12 Help", "^q", "Quit", "esc Leave field"):
+                       "F1..F8 pages", "? / F12 Help", "^q", "Quit", "esc Leave field"):
             assert needed in text, needed
         await pilot.press("q")
         await wait_until(pilot, lambda: not isinstance(app.screen, HelpScreen), what="the help to close (q)")

@@ -38,7 +38,9 @@ async def _history(cfg, size, wait_until, expected):
         await pilot.press("f8")
         await wait_until(pilot, lambda: getattr(app.screen, "MODE", "") == "history", what="the History page")
         screen = app.screen
-        screen.query_one("#hist-serial", Input).value = "HX-0042"
+        field = screen.query_one("#hist-serial", Input)
+        field.focus()  # as a click in the field does
+        field.value = "HX-0042"
         await pilot.press("enter")
         table = screen.query_one("#hist-table", DataTable)
         await wait_until(pilot, lambda: table.row_count == len(expected.rows), 30, "the history rows")
@@ -51,7 +53,8 @@ async def _history(cfg, size, wait_until, expected):
         assert f"due {expected.due}" in status and "2 calibration(s)" in status
         assert screen.query_one("#hist-plot", XYPlot).drawn_series == ["E", "B"]
         # a serial the catalog does not know says so
-        screen.query_one("#hist-serial", Input).value = "NOPE"
+        field.focus()
+        field.value = "NOPE"
         await pilot.press("enter")
         await wait_until(pilot, lambda: "no records" in str(screen.query_one("#hist-status", Static).render()), 30,
                          "the unknown serial")
