@@ -97,7 +97,8 @@ def test_sweeps_complete_or_stop_resumable_and_lose_no_acknowledged_point(tmp_pa
                     # refused before the first motion (the drives' identity or limits unreadable):
                     # the operator sees one line; the file, if any, is as it was
                     figures["starts refused"] += 1
-                    assert before is None or np.array_equal(read_session(out).points, before)
+                    # byte for byte: stop-and-go rows hold NaN (speed_mm_s), which array_equal never equals
+                    assert before is None or read_session(out).points.tobytes() == before.tobytes()
                     resumes += 1
                     assert resumes <= MAX_RESUMES
                     continue
