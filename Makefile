@@ -21,8 +21,11 @@ run: $(STAMP)
 sweep: $(STAMP)
 	$(VENV)/bin/station run
 
+# Two workers (pytest-xdist, a test file per worker: module fixtures stay shared); WORKERS=0 runs
+# the suite in one process.
+WORKERS ?= 2
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(PY) -m pytest -q -p no:cacheprovider $(if $(filter-out 0,$(WORKERS)),-n $(WORKERS) --dist loadfile)
 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
