@@ -48,6 +48,10 @@ class RetryPolicy:
     comm_retries: int = 2
     beam_wait_s: float = 0.5
     env_interval_s: float = 10.0  # environment is read at most this often (it changes slowly)
+    # point indices at which the environment is not read again: the one held is this point's
+    # (a replay: the recording's environment did not change since the point before, so asking the
+    # replay instrument again would return the same values; station/jobs.py retry_policy_of)
+    env_unchanged_at: frozenset[int] = frozenset()
 
     def limit_for(self, kind: FaultKind) -> int:
         """Retries allowed at one point for a fault of `kind` (beam, drive, else communication)."""
@@ -188,7 +192,8 @@ def sweep(
                     status = axis.move_to(p.target_mm)
                     clock.sleep(plan.dwell_s)
                     reading = laser.read(p.leg)
-                    if env is None or clock.now() - env_t >= retry.env_interval_s:
+                    if env is None or (clock.now() - env_t >= retry.env_interval_s
+                                       and p.index not in retry.env_unchanged_at):
                         env = laser.environment()
                         env_t = clock.now()
                     record = {
