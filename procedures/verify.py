@@ -338,7 +338,8 @@ def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray,
     the materials each session recorded (`normalise`), or raw; with the lines saying which."""
     before_points = before.points if before is not None else None
     if not normalise:
-        return session.points, before_points, ["error: raw, not normalised to 20 degC (--raw)"], {"normalised": False}
+        return (_static(session.points), before_points, ["error: raw, not normalised to 20 degC (--raw)"],
+                {"normalised": False})
     after = normalise_session(session.points, getattr(session, "station_config", None))
     lines = [f"verification {after.lines()[0]}", *after.lines()[1:]]
     doc = {"normalised": True, "verification": after.to_json()}
@@ -347,7 +348,16 @@ def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray,
         before_points = cal.points
         lines += [f"calibration {cal.lines()[0]}", *cal.lines()[1:]]
         doc["calibration"] = cal.to_json()
-    return after.points, before_points, lines, doc
+    return _static(after.points), before_points, lines, doc
+
+
+def _static(points: np.ndarray) -> np.ndarray:
+    """An on-the-fly verification's points as `station fit` takes on-the-fly points: the
+    speed-dependent part removed and the anchors dropped (procedures.fit.dynamic), since a table
+    is static; stop-and-go points as they are."""
+    from procedures.fit.dynamic import is_onthefly, static_points
+
+    return static_points(points, source="the verification session") if is_onthefly(points) else points
 
 
 def summary_line(outcome: str, r: LegVerification) -> str:

@@ -116,3 +116,26 @@ def test_onthefly_plan_checks_and_round_trip():
         SweepPlan("onthefly", (0.0, 1.0, 3.0), 2, speeds_mm_s=(5.0, 10.0))
     with pytest.raises(PlanError, match="on-the-fly"):
         SweepPlan("iso230-2", (0.0, 1.0), 2, adaptive=True)
+
+
+def test_an_onthefly_verification_is_judged_on_its_static_points():
+    """A verification measured on the fly carries the speed-dependent error (tens of um) that no
+    static table removes: `station verify` takes its points static, as `station fit` does, and
+    drops the anchors; its noise floor is then the one of a stop-and-go judgement."""
+    from types import SimpleNamespace
+
+    from procedures.verify import error_basis, verify
+
+    points, _, _, _ = run(onthefly_plan((1,), cycles=4, step_mm=2.0), seed=2)
+    session = SimpleNamespace(points=points, station_config={})
+    for normalise in (True, False):
+        judged, _, _, _ = error_basis(session, None, normalise)
+        assert not np.any(judged["flags"] & FLAG_ANCHOR)
+        assert np.all(np.isfinite(judged["speed_mm_s"]) & (judged["speed_mm_s"] != 0))
+    judged, _, _, _ = error_basis(session, None, False)
+    raw = points[(points["flags"] & FLAG_ANCHOR) == 0]
+    static_floor = verify(judged)[1].after.noise_floor_um
+    raw_floor = verify(raw)[1].after.noise_floor_um
+    # the raw points' floor holds the speed-dependent error (passes at two speeds differ at
+    # every target by the lag's difference), which would hide a table's residual under it
+    assert static_floor < 0.5 * raw_floor, (static_floor, raw_floor)
