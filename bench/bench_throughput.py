@@ -71,6 +71,8 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path) -> dict:
         t0 = rig.clock.now()
         laser_bytes0 = rig.laser.bytes_out + rig.laser.bytes_in
         result = run_sweep(rig, plan, cal, cfg)
+        if str(result.outcome) != "completed":  # e.g. a link fault that gave up on a loaded machine
+            raise SystemExit(f"{kind} seed {seed}: the calibration sweep ended {result.outcome}: {result.reason}")
         rig_s = rig.clock.now() - t0
         laser_bytes = rig.laser.bytes_out + rig.laser.bytes_in - laser_bytes0
         session = read_session(cal)
@@ -113,7 +115,12 @@ def main(argv=None) -> int:
         for seed in args.seeds:
             for kind in args.plans:
                 n = args.paper_legs if kind == "paper" else args.legs
-                rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp)))
+                try:
+                    rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp)))
+                except SystemExit as exc:  # one plan's failure is reported; the others still run
+                    print(f"  seed {seed} {kind}: {exc}", file=sys.stderr, flush=True)
+                    print(f"seed {seed} {kind}: NOT measured: {exc}")
+                    continue
                 r = rows[-1]
                 print(f"  seed {seed} {kind}: done in {r['wall_s']:.0f} s wall", file=sys.stderr, flush=True)
     print("Calibration throughput on the simulated rig (time scale 0, jerk-limited legs), verification sweep "
