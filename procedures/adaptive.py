@@ -28,9 +28,11 @@ Rule: stop when both
   floor, is the yardstick because it does not depend on the material: a wrong expansion
   coefficient or fixed point (a station config that does not describe the leg) inflates the pass
   offsets and so the noise floor, not the within-pass scatter;
-else measure another cycle, up to the plan's cycles (`DEFAULT_CYCLES["onthefly-adaptive"]`, 6:
-a leg whose reversal is not known by then is not better known at 8, measured: the verification
-ratio of seed 0's legs after 4, 5, 6 and 8 cycles scatters by as much as it changes).
+else measure another cycle, up to the plan's cycles (`DEFAULT_CYCLES["onthefly-adaptive"]`, 5:
+a leg whose reversal is not known after five is not better known at six or eight, measured on the
+simulated rig: the verification ratios of seed 0's legs with tables from the first 2, 3, 4, 5, 6
+and 8 cycles of one session scatter by as much as they change, and the legs of seed 1 that the
+rule ran to six cycles verified as with the fixed six-cycle plan, failing legs included).
 
 Why a cycle at a time, not a round (both speeds): a leg that is known after its fourth cycle
 stops there, and one that is not gets one more pair, not two; the rig time goes where the
