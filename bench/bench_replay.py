@@ -3,9 +3,13 @@
 The replay goes through everything a live sweep does: Modbus TCP on 127.0.0.1 to the replay
 drives, the serial client over a pty to the replay interferometer, the sweep procedure, the
 runner and the HDF5 recorder (flush per point). Prints points per second, the wall time, the
-protocol transactions per point, and whether the new session equals the recording.
+protocol transactions per point, and whether the new session equals the recording; then the same
+replay by the old path in the same run (the environment asked at every point, as before
+station.services.jobs.env_unchanged_at) and the ratio of the two. On a loaded machine a point's wall time
+is mostly the hand-overs between the station's thread and the replay devices' threads (a
+request, a reply: the scheduler's), so exchanges per point are what counts.
 
-    .venv/bin/python bench/bench_replay.py [--session recordings/calibration-6legs.h5] [--speed max]
+    .venv/bin/python bench/bench_replay.py [--session recordings/calibration-6legs.h5] [--speed max] [--no-old]
 """
 
 from __future__ import annotations
@@ -57,10 +61,33 @@ def device_round_trips(path: Path, cfg: StationConfig) -> tuple[float, float, fl
     return ms(tm), ms(tr), ms(te), len(pts)
 
 
+def old_path(session, path: Path, speed, cfg: StationConfig) -> tuple[float, int, bool]:
+    """Points per second, interferometer exchanges and identity of the replay by the old path:
+    the environment asked at every point (no recorded point counted as unchanged)."""
+    import station.services.jobs as jobs
+
+    kept = jobs.env_unchanged_at
+    jobs.env_unchanged_at = lambda points: frozenset()
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "old.h5"
+            with open_replay_rig(path, speed, cfg) as rig:
+                lx0 = rig.laser.transactions
+                t0 = time.perf_counter()
+                result = replay_sweep(rig, session, out, cfg)
+                wall = time.perf_counter() - t0
+                lx = rig.laser.transactions - lx0
+            same = compare_sessions(session, read_session(out)).identical
+    finally:
+        jobs.env_unchanged_at = kept
+    return result.points / wall, lx, same
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--session", type=Path, default=DEFAULT, help="session to replay (default: the six-leg sample)")
     ap.add_argument("--speed", type=parse_speed, default=None, help="1, N or max (default max)")
+    ap.add_argument("--no-old", action="store_true", help="skip the old path's replay")
     args = ap.parse_args()
     cfg = StationConfig(operator="bench")
     t_read = time.perf_counter()
@@ -90,6 +117,11 @@ def main() -> None:
     print(f"  per point: {tx / n:.2f} Modbus transactions, {lx / n:.2f} interferometer exchanges")
     print(f"  outcome {result.outcome}; mismatch {mismatch}; identical to the recording: {cmp.identical}"
           + ("" if cmp.identical else f" ({'; '.join(cmp.differences)})"))
+    if not args.no_old:
+        old_rate, old_lx, old_same = old_path(session, args.session, args.speed, cfg)
+        print(f"  old path (environment asked at every point), same run: {old_rate:8.1f} points/s, "
+              f"{old_lx / n:.2f} interferometer exchanges per point, identical: {old_same}; "
+              f"new / old {n / wall / old_rate:.2f}x")
     move_ms, read_ms, env_ms, k = device_round_trips(args.session, cfg)
     print(f"  replay devices alone ({k} points of leg 1, medians): move {move_ms:.3f} ms (Modbus TCP), "
           f"position {read_ms:.3f} ms, environment {env_ms:.3f} ms (pty)")

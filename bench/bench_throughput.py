@@ -20,7 +20,7 @@ simulated clock, where the pty costs nothing; the instrument's turnaround not mo
 verification ratio per leg (mean, max, legs passing). The goal of issue 15: on-the-fly adaptive
 verifies within 1.1 x the noise floor in at most the ISO 230-2 plan's rig time per leg.
 
-    .venv/bin/python bench/bench_throughput.py [--seeds 0 1] [--legs 6] [--paper-legs 6]
+    .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans onthefly-adaptive] [--legs 6] [--paper-legs 6]
 """
 
 from __future__ import annotations
@@ -71,6 +71,8 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path) -> dict:
         t0 = rig.clock.now()
         laser_bytes0 = rig.laser.bytes_out + rig.laser.bytes_in
         result = run_sweep(rig, plan, cal, cfg)
+        if str(result.outcome) != "completed":  # e.g. a link fault that gave up on a loaded machine
+            raise SystemExit(f"{kind} seed {seed}: the calibration sweep ended {result.outcome}: {result.reason}")
         rig_s = rig.clock.now() - t0
         laser_bytes = rig.laser.bytes_out + rig.laser.bytes_in - laser_bytes0
         session = read_session(cal)
@@ -101,7 +103,9 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    ap.add_argument("--plans", nargs="+", choices=PLANS, default=list(PLANS),
+                    help="the plans to run (default: all; the goal lines need onthefly-adaptive and iso230)")
     ap.add_argument("--legs", type=int, default=6)
     ap.add_argument("--paper-legs", type=int, default=6, help="legs for the paper plan (its sweep is the slow one)")
     args = ap.parse_args(argv)
@@ -109,9 +113,14 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
-            for kind in PLANS:
+            for kind in args.plans:
                 n = args.paper_legs if kind == "paper" else args.legs
-                rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp)))
+                try:
+                    rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp)))
+                except SystemExit as exc:  # one plan's failure is reported; the others still run
+                    print(f"  seed {seed} {kind}: {exc}", file=sys.stderr, flush=True)
+                    print(f"seed {seed} {kind}: NOT measured: {exc}")
+                    continue
                 r = rows[-1]
                 print(f"  seed {seed} {kind}: done in {r['wall_s']:.0f} s wall", file=sys.stderr, flush=True)
     print("Calibration throughput on the simulated rig (time scale 0, jerk-limited legs), verification sweep "
@@ -131,14 +140,26 @@ def main(argv=None) -> int:
           "sessions' noise floor, mean over legs; ratio = verification residual RMS / its noise floor (pass <= 1.1)")
     for seed in args.seeds:
         by = {r["kind"]: r for r in rows if r["seed"] == seed}
-        a, iso = by["onthefly-adaptive"], by["iso230"]
+        if "onthefly-adaptive" not in by:
+            continue
+        a, iso = by["onthefly-adaptive"], by.get("iso230")
         total = a["rig_s"] + a["readout_s"]
-        ok_time = total <= iso["rig_s"]
         ok_ratio = max(a["ratios"]) <= 1.1
-        print(f"goal, seed {seed}: on-the-fly adaptive {total / 60:.2f} min/leg (with read-out) vs ISO 230-2 "
-              f"{iso['rig_s'] / 60:.2f} min/leg: {'met' if ok_time else 'NOT met'}; worst verification ratio "
-              f"{max(a['ratios']):.3f}: {'met' if ok_ratio else 'NOT met'} (<= 1.1); "
-              f"{by['paper']['rig_s'] / max(total, 1e-9):.1f}x faster than the paper plan")
+        line = (f"goal, seed {seed}: on-the-fly adaptive {total / 60:.2f} min/leg (with read-out); worst verification "
+                f"ratio {max(a['ratios']):.3f}: {'met' if ok_ratio else 'NOT met'} (<= 1.1)")
+        if iso is not None:
+            line += f"; ISO 230-2 {iso['rig_s'] / 60:.2f} min/leg: {'met' if total <= iso['rig_s'] else 'NOT met'}"
+        if "paper" in by:
+            line += f"; {by['paper']['rig_s'] / max(total, 1e-9):.1f}x faster than the paper plan"
+        print(line)
+    adaptive = [r for r in rows if r["kind"] == "onthefly-adaptive"]
+    if adaptive:
+        every = np.concatenate([r["ratios"] for r in adaptive])
+        mean_min = np.mean([(r["rig_s"] + r["readout_s"]) / 60 for r in adaptive])
+        print(f"issue 26 goal, seeds {' '.join(str(r['seed']) for r in adaptive)}: on-the-fly adaptive worst leg "
+              f"{every.max():.3f} ({int(np.sum(every <= 1.1))}/{every.size} legs <= 1.1: "
+              f"{'met' if every.max() <= 1.1 else 'NOT met'}), mean rig time per leg with read-out "
+              f"{mean_min:.2f} min ({'met' if mean_min <= 3.0 else 'NOT met'}: <= 3)")
     return 0
 
 

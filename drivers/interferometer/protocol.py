@@ -92,6 +92,9 @@ def show_line(line: bytes, limit: int = 60) -> str:
     return repr(line[:limit]) + f"... ({len(line)} bytes)"
 
 
+_PRINTABLE = bytes(range(0x20, 0x7F))
+
+
 def split_reply(line: bytes) -> list[str]:
     """Check terminator, characters and checksum of one reply line; return its fields.
 
@@ -102,7 +105,7 @@ def split_reply(line: bytes) -> list[str]:
     if not line.endswith(TERMINATOR):
         raise ProtocolError(f"reply not terminated by \\r\\n ({len(line)} bytes received before the timeout)")
     content = line[: -len(TERMINATOR)]
-    if any(b < 0x20 or b > 0x7E for b in content):
+    if content.translate(None, _PRINTABLE):  # what is left is not printable ASCII (C speed: per reply)
         raise ProtocolError("reply contains non-printable or non-ASCII bytes (line noise?)")
     star = content.rfind(b"*")
     if star < 0:

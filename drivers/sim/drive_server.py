@@ -371,9 +371,16 @@ class _DriveModel:
         m = self.motion
         if m is None or not self.compare.armed:
             return
-        offset_mm = self.corr_um / 1000.0  # position actual = nut + the table's shift
+        # position actual = nut + the table's shift, and a drive applies its table along the move
+        # (the correction at the position it passes, in the move's direction), not only at the
+        # target: a pass's samples see the table as a stop-and-go point at the same target does
+        sign = int(m.sign)
+
+        def offset_mm(pos_mm: float) -> float:
+            return self.correction_um(pos_mm, sign) / 1000.0
+
         for _, pos_mm, t_s, v_mm_s in self.compare.due(m, self._compare_t, t_to, offset_mm):
-            self.nut_mm = pos_mm - offset_mm
+            self.nut_mm = pos_mm - offset_mm(pos_mm)
             self.plant.move(self.nut_mm, t_s)
             self._plant_velocity(v_mm_s)
             if self.trigger is not None:

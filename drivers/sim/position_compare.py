@@ -51,9 +51,11 @@ class PositionCompare:
     def next_mm(self) -> float:
         return self.start_mm + self.fired * self.step_mm
 
-    def due(self, motion, t_from: float, t_to: float, offset_mm: float = 0.0) -> list[tuple[int, float, float, float]]:
+    def due(self, motion, t_from: float, t_to: float,
+            offset_mm: float | Callable[[float], float] = 0.0) -> list[tuple[int, float, float, float]]:
         """Pulses of `motion` (a drivers.sim.motion.SmoothedMove of the nut) in (t_from, t_to];
-        `offset_mm` = position actual minus nut position (the active table's shift)."""
+        `offset_mm` = position actual minus nut position (the active table's shift): a constant,
+        or a function of the compare position (a table applied along the move)."""
         out: list[tuple[int, float, float, float]] = []
         if motion is None or not self.armed:
             return out
@@ -63,7 +65,8 @@ class PositionCompare:
         t = t_from
         while self.armed:
             pos = self.next_mm()
-            t_hit = motion.time_at(pos - offset_mm, t)
+            shift = offset_mm(pos) if callable(offset_mm) else offset_mm
+            t_hit = motion.time_at(pos - shift, t)
             if t_hit is None or t_hit > t_to:
                 break
             out.append((self.fired, pos, t_hit, motion.velocity(t_hit)))

@@ -89,7 +89,6 @@ def onthefly_passes(
     all_targets = np.asarray(plan.targets_mm, dtype=float)
     n = all_targets.size
     step = plan.step_mm
-    rounds_cycles = 2 * plan.cycles_per_round  # passes per round
     current_leg: int | None = None
     stopped: set[int] = set()
     rules: dict[int, AdaptiveRule] = {}
@@ -189,9 +188,9 @@ def onthefly_passes(
         prev_temp = (t_after, temp_after)
         if plan.adaptive:
             measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
-            if run % rounds_cycles == 0 and planned_left[leg] > 0:
+            if run % 2 == 0 and planned_left[leg] > 0:  # after every cycle (a direction pair)
                 rule = rules.setdefault(leg, AdaptiveRule(material=(materials or {}).get(leg)))
-                reason = rule.after_round(np.concatenate(measured[leg]).astype(POINT_DTYPE), leg)
+                reason = rule.after_cycle(np.concatenate(measured[leg]).astype(POINT_DTYPE), leg)
                 if reason is not None:
                     stopped.add(leg)
                     skipped = planned_left[leg]

@@ -42,6 +42,10 @@ class RetryPolicy:
     comm_retries: int = 2
     beam_wait_s: float = 0.5
     env_interval_s: float = 10.0  # environment is read at most this often (it changes slowly)
+    # point indices at which the environment is not read again: the one held is this point's
+    # (a replay: the recording's environment did not change since the point before, so asking the
+    # replay instrument again would return the same values; station/services/jobs.py retry_policy_of)
+    env_unchanged_at: frozenset[int] = frozenset()
 
     def limit_for(self, kind: FaultKind) -> int:
         """Retries allowed at one point for a fault of `kind` (beam, drive, else communication)."""

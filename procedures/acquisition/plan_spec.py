@@ -25,10 +25,10 @@ from procedures.acquisition.plans import (
 
 PlanKind = Literal["iso230", "paper", "onthefly", "onthefly-adaptive"]
 PLAN_KINDS: tuple[PlanKind, ...] = ("iso230", "paper", "onthefly", "onthefly-adaptive")
-DEFAULT_CYCLES: dict[str, int] = {"iso230": 5, "paper": 6, "onthefly": 6, "onthefly-adaptive": 8}
+DEFAULT_CYCLES: dict[str, int] = {"iso230": 5, "paper": 6, "onthefly": 6, "onthefly-adaptive": 5}
 """ISO 230-2: 5 approaches; the paper: 6 sets; on the fly: 3 rounds of both speeds; adaptive: at
-most 4 rounds, so at most an ISO 230-2 plan's rig time (it stops earlier once the table stops
-improving: docs/onthefly.md)."""
+most 5 cycles (10, 20, 20, 10, 10 mm/s), 4 once the table's shape and reversal are known
+(procedures/acquisition/adaptive.py, docs/onthefly.md)."""
 ONTHEFLY_KINDS = ("onthefly", "onthefly-adaptive")
 
 

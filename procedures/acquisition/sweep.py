@@ -141,7 +141,8 @@ def sweep(
                     status = axis.move_to(p.target_mm)
                     clock.sleep(plan.dwell_s)
                     reading = laser.read(p.leg)
-                    if env is None or clock.now() - env_t >= retry.env_interval_s:
+                    if env is None or (clock.now() - env_t >= retry.env_interval_s
+                                       and p.index not in retry.env_unchanged_at):
                         env = laser.environment()
                         env_t = clock.now()
                     record = point_record(p, reading, env, drive_position_mm=status.position_mm,

@@ -215,3 +215,34 @@ def test_capture_block_line_protocol():
         p.parse_capture_block(p.split_reply(reply), 3, 8, 20)
     with pytest.raises(p.ProtocolError, match="asked for at most 2"):
         p.parse_capture_block(p.split_reply(reply), 3, 7, 2)
+
+
+def test_the_active_table_applies_along_an_on_the_fly_pass_as_at_a_stop(rig):
+    """A drive applies its table at the position it passes, not only at a move's target: the
+    samples of a pass with a table active differ from those without by the table's value at each
+    target (its forward column on an upward pass), not by one constant (its value at the pass's end)."""
+    from drivers.interfaces import TableBank
+
+    r, axes, laser = rig
+    ax = axes[1]
+    table = TableBank(-10.0, 10.0, (20.0, 40.0, 60.0), (-10.0, -30.0, -50.0))
+    targets = np.arange(-10.0, 10.5, 1.0)
+    ax.write_table(1, table)
+    ax.activate_table(1)
+    ax.enable()
+
+    def pass_errors_um(enabled: bool) -> np.ndarray:
+        ax.set_table_enabled(enabled)
+        ax.move_to(-14.0)
+        ax.arm_position_compare(-10.0, 1.0, targets.size)
+        laser.arm_capture(1, targets.size)
+        ax.move_to(14.0, velocity_mm_s=5.0)
+        assert laser.capture_count(1) == (targets.size, targets.size)
+        pos = np.array([s.position_mm for s in laser.capture_samples(1, 0, targets.size)])
+        return (pos - targets) * 1000.0
+
+    off = pass_errors_um(False)
+    on = pass_errors_um(True)
+    predicted_um = np.interp(targets, [-10.0, 0.0, 10.0], table.error_fwd_um)
+    # the drive subtracts the predicted error: the measured error falls by it, target by target
+    assert np.allclose(off - on, predicted_um, atol=0.5), off - on - predicted_um

@@ -276,3 +276,26 @@ def test_fault_sample_regenerates_identically(tmp_path, capsys):
     assert np.array_equal(new.faults[["index", "kind", "attempt", "time_s"]], committed.faults[["index", "kind", "attempt", "time_s"]])
     assert new.plan == committed.plan
     assert new.station_config["sim"]["jerk_mm_s3"] == 0.0  # the setting the samples were made with, recorded
+
+
+def test_replay_reads_the_environment_again_only_where_the_recording_changed_it(recorded, tmp_path):
+    """A replayed point whose recorded environment is the one of the point just before (same leg)
+    keeps the values held instead of asking the instrument again; the session stays identical."""
+    from drivers.interferometer import protocol as p
+    from station.services.jobs import env_unchanged_at
+
+    session = read_session(recorded)
+    pts = np.sort(session.points, order="index")
+    unchanged = env_unchanged_at(session.points)
+    # the recorded rig reads its environment every 10 s of rig time, a point takes about 1 s
+    assert 0 < len(unchanged) < len(pts)
+    for i in unchanged:
+        k = int(np.flatnonzero(pts["index"] == i)[0])
+        assert pts["leg"][k] == pts["leg"][k - 1] and pts["material_temp_c"][k] == pts["material_temp_c"][k - 1]
+    out = tmp_path / "env.h5"
+    with open_replay_rig(recorded, None, CFG) as rig:
+        result = replay_sweep(rig, session, out, CFG)
+        asked = rig.sim.laser_server.commands[p.CMD_ENV]
+    assert result.outcome == session.outcome
+    assert asked <= len(pts) - len(unchanged) + len(session.faults)  # retried points may ask again
+    assert compare_sessions(session, read_session(out)).identical

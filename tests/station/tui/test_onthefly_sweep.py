@@ -10,6 +10,7 @@ import pytest
 from textual.widgets import Input, Select, Static
 
 from procedures.acquisition.plan_spec import plan_from_spec
+from procedures.acquisition.plan_spec import DEFAULT_CYCLES
 from station.cli import build_parser
 from station.commands.sweep import plan_spec as cli_plan_spec
 from station.tui.app import StationApp
@@ -30,13 +31,14 @@ async def _run(cfg, size, connected, wait_until):
         screen = app.screen
         screen.query_one("#plan", Select).value = "onthefly-adaptive"
         await pilot.pause()
-        assert screen.query_one("#cycles", Input).value == "8"  # the plan's most cycles
+        most = str(DEFAULT_CYCLES["onthefly-adaptive"])
+        assert screen.query_one("#cycles", Input).value == most  # the plan's most cycles
         assert screen.query_one("#n-targets", Input).disabled  # positions come from the step
         screen.query_one("#step", Input).value = "2"
         screen.query_one("#legs", Input).value = "1"
         await pilot.pause()
         cli = cli_plan_spec(build_parser("sweep").parse_args(
-            ["sweep", "--sim", "--plan", "onthefly-adaptive", "--legs", "1", "--cycles", "8", "--step", "2"]))
+            ["sweep", "--sim", "--plan", "onthefly-adaptive", "--legs", "1", "--cycles", most, "--step", "2"]))
         assert screen.plan_spec() == cli
         plan = screen.build_plan()
         assert plan == plan_from_spec(cli) and plan.onthefly and plan.adaptive
