@@ -161,16 +161,17 @@ def test_fault_message_names_the_code(sim_drives):
 
 def test_unresponsive_drive_times_out_within_the_configured_timeout(sim_drives):
     sd = sim_drives()
-    ax = sd.axis(3, bus=sd.bus(timeout_s=0.3, retries=1))
+    ax = sd.axis(3, bus=sd.bus(timeout_s=1.0, retries=1))
     ax.enable()
     sd.server.set_unresponsive(3, True)
     t0 = time.monotonic()
     with pytest.raises(CommTimeout) as info:
         ax.status()
     elapsed = time.monotonic() - t0
-    assert 0.25 <= elapsed <= 0.3 + 0.25, elapsed
+    # one timeout, not one per attempt (2 s); the margin is for a loaded CI worker
+    assert 0.95 <= elapsed <= 1.0 + 0.75, elapsed
     text = str(info.value)
-    assert sd.url in text and "unit id 3" in text and "0.3 s" in text
+    assert sd.url in text and "unit id 3" in text and "1 s" in text
     sd.server.set_unresponsive(3, False)
     assert ax.status().enabled, "the bus recovers once the drive answers again"
 
@@ -189,8 +190,8 @@ def test_absent_unit_id_times_out(sim_drives):
     sd = sim_drives(legs=2)
     t0 = time.monotonic()
     with pytest.raises(CommTimeout) as info:
-        connect_axes(sd.url, [1, 2, 3], sd.profile, timeout_s=0.3)
-    assert time.monotonic() - t0 <= 0.3 + 0.25
+        connect_axes(sd.url, [1, 2, 3], sd.profile, timeout_s=1.0)
+    assert time.monotonic() - t0 <= 1.0 + 0.75  # one timeout (not two); the margin is for a loaded CI worker
     assert "unit id 3" in str(info.value)
 
 
