@@ -147,6 +147,25 @@ def test_front_ends_ask_the_devices_through_services():
     assert not bad, "\n".join(bad)
 
 
+CATALOG_WRITES = ("station.catalog.writer.register", "station.catalog.writer.CatalogSink",  # what writes
+                  "station.catalog.files")  # (store: reading; only the services write through it)
+
+
+def test_no_front_end_writes_the_catalog():
+    """The catalog is written by the runner's sink and by the services that make models, tables
+    and reports (issue 23): station/tui, station/commands and station/web may hand a job the
+    station's catalog (`catalog_for`), never register a file or hold a sink themselves. (The
+    `station catalog` command is the catalog's own maintenance: sync, rebuild, check.)"""
+    bad = []
+    for front in ("station/tui", "station/commands", "station/web"):
+        for path in sorted((REPO / front).rglob("*.py")):
+            if path.name == "catalog.py" and front == "station/commands":
+                continue  # `station catalog sync|rebuild|check` is the catalog's own maintenance
+            bad += [f"{path.relative_to(REPO)}: imports {m}" for m in sorted(names_in(path))
+                    if any(m == w or m.startswith(w + ".") for w in CATALOG_WRITES)]
+    assert not bad, "\n".join(bad)
+
+
 def test_services_are_plain_python():
     """station/services is the layer every front end calls: no Textual, no argparse."""
     def front_end(m: str) -> bool:

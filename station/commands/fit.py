@@ -7,15 +7,12 @@ import argparse
 from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_file
 from procedures.io.numbers import NotANumber, finite_float
-from procedures.fit import save_model
 from procedures.fit.paper import DEFAULT_N_PARAMS
 from procedures.acquisition.plans import parse_legs
-from procedures.io.recording.identity import model_identity
 from procedures.io.recording.reader import read_session
 from procedures.engine.states import Outcome
-from station.catalog.writer import catalog_for, register
 from station.services.config import load_config
-from station.services.analysis import analyse_session
+from station.services.analysis import analyse_session, save_session_model
 
 NAME = "fit"
 HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"
@@ -74,8 +71,7 @@ def run(args) -> int:
     analysis = analyse_session(session, args.raw, fit_method=args.method,
                                fit_options={"legs": legs, "n_params": args.params, "lead_mm": args.lead_mm})
     model = analysis.model
-    save_model(model, out, str(session.path), session.sha256, identity=model_identity(session.identity, model.legs))
-    register(catalog_for(load_config(args.config)), out, "model")
+    save_session_model(model, out, session, load_config(args.config))
     for line in analysis.basis_lines:
         print(line)
     if session.outcome != Outcome.COMPLETED:

@@ -15,9 +15,9 @@ from procedures.acquisition.plans import parse_legs
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
 from procedures.io.outputs import check_output_file
 from procedures.io.plausibility import check_correction, settle
-from procedures.compensation.table import make_table, write_table_csv
-from station.catalog.writer import catalog_for, register
+from procedures.compensation.table import make_table
 from station.services.config import load_config
+from station.services.table_jobs import write_table
 from station.services.wiring import drive_table_spec
 
 NAME = "table"
@@ -114,8 +114,7 @@ def run(args) -> int:
     table = make_table(model, args.step, limits, legs=legs)
     warnings = settle(implausible_corrections(model, table), args.accept_implausible)
     if args.format == "csv":
-        written = [write_table_csv(table, args.out, limits)]
-        register(catalog_for(load_config(args.config)), written[0], "table")
+        written = [write_table(table, args.out, load_config(args.config), limits)]
     elif args.format in controllers.FORMATS:
         options = {"siemens840d": {"mode": args.siemens_mode, "reference_mm": args.reference_mm},
                    "heidenhain": {"axis": args.axis_name}, "ecmc": {"direction": args.ecmc_direction}}

@@ -6,6 +6,7 @@ uncertainty U (k = 2). `station fit`, `station iso230` and the terminal UI's Res
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from procedures.metrology.thermal import error_basis
@@ -70,3 +71,16 @@ def iso_uncertainty(iso: Any, points: Any, station_config: dict) -> dict[int, di
         b = leg_budget(r, points, UncertaintyInputs.from_record(station_config or {}, leg))
         out[leg] = {name: b.U(name) for name in r.values}
     return out
+
+
+def save_session_model(model: Any, out: Any, session: Any, cfg: Any) -> Path:
+    """Write `model` (fitted to `session`) as JSON with the session's identity, and index it in
+    the catalog of station config `cfg` (a catalog that cannot be written never fails the save:
+    `station catalog sync` indexes the file later). Both front ends save models through this."""
+    from procedures.fit import save_model
+    from procedures.io.recording.identity import model_identity
+    from station.catalog.writer import catalog_for, register
+
+    path = save_model(model, out, str(session.path), session.sha256, identity=model_identity(session.identity, model.legs))
+    register(catalog_for(cfg), path, "model")
+    return Path(path)

@@ -34,11 +34,11 @@ from procedures.io.recording.reader import file_sha256, read_session
 from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import ListSink, RunResult, Sink, run
 from procedures.engine.states import Action, AuditOutcome
-from procedures.compensation.table import LegTable, read_table_csv
+from procedures.compensation.table import CompTable, LegTable, read_table_csv, write_table_csv
 from procedures.compensation.verify import verify_procedure
 from station import __version__
 from station.catalog.store import LOCAL_NAME, Catalog
-from station.catalog.writer import CatalogSink, catalog_for, enabled
+from station.catalog.writer import CatalogSink, catalog_for, enabled, register
 from station.services.config import LEG_COUNT, StationConfig
 from station.services.identity import session_identity
 from station.services.wiring import Rig
@@ -191,3 +191,11 @@ def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *
 
 class OperationFailed(DriverError):
     """A push or rollback failed after it started writing (the message says which table is active)."""
+
+
+def write_table(table: CompTable, out: str | Path, cfg: StationConfig, spec: TableSpec | None = None) -> Path:
+    """Write `table` as CSV (validated against `spec`) and index it in the catalog of `cfg`; both
+    front ends write table CSVs through this (a catalog that cannot be written never fails it)."""
+    path = write_table_csv(table, out, spec)
+    register(catalog_for(cfg), path, "table")
+    return path

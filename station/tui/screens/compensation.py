@@ -117,7 +117,7 @@ class CompensationScreen(StationScreen):
             self.action_read_drives()
 
     def action_save_csv(self) -> None:
-        from procedures.compensation.table import write_table_csv
+        from station.services.table_jobs import write_table
 
         a = self.app.analysis
         if self.table is None or a is None:
@@ -127,7 +127,7 @@ class CompensationScreen(StationScreen):
 
         out = output_folder(a.path, self.app.cfg.recordings_dir) / f"{a.path.stem}.{a.method}.table.csv"
         try:
-            write_table_csv(self.table, out, spec=self._spec())
+            write_table(self.table, out, self.app.cfg, spec=self._spec())
         except Exception as exc:
             self.notify(describe(exc, "cannot write the table"), severity="error", timeout=12)
             return

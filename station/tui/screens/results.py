@@ -363,13 +363,11 @@ class ResultsScreen(StationScreen):
         if a is None:
             self.notify("Fit a model first (f).", severity="warning")
             return
-        from procedures.fit import save_model
-        from procedures.io.recording.identity import model_identity
+        from station.services.analysis import save_session_model
 
         out = output_folder(a.path, self.app.cfg.recordings_dir) / f"{a.path.stem}.{a.method}.model.json"
         try:
-            save_model(a.model, out, source_path=a.path, source_sha256=a.session.sha256,
-                       identity=model_identity(a.session.identity, a.model.legs))
+            save_session_model(a.model, out, a.session, self.app.cfg)
         except Exception as exc:
             self.notify(describe(exc, "cannot save the model"), severity="error", timeout=12)
             return
