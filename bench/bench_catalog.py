@@ -60,7 +60,8 @@ def timed(fn, repeat: int) -> float:
     return statistics.median(times)
 
 
-def measure(name: str, engine, ingest, n_legs: int, n_cal: int) -> dict:
+def ingest_all(ingest, n_legs: int, n_cal: int) -> tuple[int, float]:
+    """Every synthetic record through `ingest` in batches: (records, records per second)."""
     t = time.perf_counter()
     batch: list[Rec] = []
     n = 0
@@ -73,10 +74,12 @@ def measure(name: str, engine, ingest, n_legs: int, n_cal: int) -> dict:
     if batch:
         ingest(batch)
         n += len(batch)
-    rate = n / (time.perf_counter() - t)
-    if name == "PostgreSQL":  # what autovacuum does after a bulk load: the planner's statistics
-        with engine.connect() as conn:
-            conn.execution_options(isolation_level="AUTOCOMMIT").exec_driver_sql("ANALYZE")
+    return n, n / (time.perf_counter() - t)
+
+
+def measure(name: str, engine, n_legs: int, n_cal: int, ingested: tuple[int, float]) -> dict:
+    """The query figures on a filled catalog; `ingested` = ingest_all's (records, rate)."""
+    n, rate = ingested
     rnd = random.Random(7)
     serials = [f"HX-{rnd.randrange(n_legs):05d}" for _ in range(20)]
     it = iter(serials * 10)
@@ -104,28 +107,22 @@ def main() -> int:
     results = []
     with tempfile.TemporaryDirectory() as d:
         cat = Catalog(local=Path(d) / "catalog.sqlite", station_id="bench")
-        results.append(measure("SQLite", cat.engine, lambda recs: cat.ingest(recs), args.legs, args.calibrations))
+        ingested = ingest_all(cat.ingest, args.legs, args.calibrations)
+        results.append(measure("SQLite", cat.engine, args.legs, args.calibrations, ingested))
         cat.close()
-    cluster = None
-    try:
-        from tests.pg import remove, start_cluster
+    pg: dict[str, tuple[int, float]] = {}
 
-        try:
-            cluster = start_cluster()
-        except BaseException as exc:  # pytest.skip outside pytest: PostgreSQL not installed
-            print(f"PostgreSQL: not measured ({exc})")
-        if cluster is not None:
-            engine = db.open_engine(cluster.new_database())
+    def fill(ingest, n_legs, n_cal):
+        pg["ingested"] = ingest_all(ingest, n_legs, n_cal)
 
-            def ingest_pg(recs):
-                with engine.begin() as conn:
-                    write_recs(conn, recs, "bench", queue=False)
+    from tests.pg import bench_engine
 
-            results.append(measure("PostgreSQL", engine, ingest_pg, args.legs, args.calibrations))
+    with bench_engine(lambda conn, recs: write_recs(conn, recs, "bench", queue=False), args.legs, args.calibrations,
+                      fill) as url:
+        if url is not None:
+            engine = db.open_engine(url)
+            results.append(measure("PostgreSQL", engine, args.legs, args.calibrations, pg["ingested"]))
             engine.dispose()
-    finally:
-        if cluster is not None:
-            remove(cluster)
     n = args.legs * args.calibrations
     print(f"\ncatalog at {args.legs} legs x {args.calibrations} calibrations = {n} session records "
           f"(batches of {BATCH} through the catalog API)")

@@ -96,30 +96,12 @@ def main() -> int:
             fill(lambda recs: cat.ingest(recs), args.legs, args.calibrations)
             cat.close()
             results["SQLite"] = measure(db.sqlite_url(Path(d) / "catalog.sqlite"), args.legs, driver)
-            cluster = None
-            try:
-                from tests.pg import remove, start_cluster
+            from tests.pg import bench_engine
 
-                try:
-                    cluster = start_cluster()
-                except BaseException as exc:  # pytest.skip outside pytest: PostgreSQL not installed
-                    print(f"PostgreSQL: not measured ({exc})")
-                if cluster is not None:
-                    url = cluster.new_database()
-                    engine = db.open_engine(url)
-
-                    def ingest_pg(recs):
-                        with engine.begin() as conn:
-                            write_recs(conn, recs, "bench", queue=False)
-
-                    fill(ingest_pg, args.legs, args.calibrations)
-                    with engine.connect() as conn:  # the planner's statistics, as autovacuum would
-                        conn.execution_options(isolation_level="AUTOCOMMIT").exec_driver_sql("ANALYZE")
-                    engine.dispose()
+            with bench_engine(lambda conn, recs: write_recs(conn, recs, "bench", queue=False), args.legs,
+                              args.calibrations, fill) as url:
+                if url is not None:
                     results["PostgreSQL"] = measure(url, args.legs, driver)
-            finally:
-                if cluster is not None:
-                    remove(cluster)
         finally:
             if driver is not None:
                 driver.quit()

@@ -6,6 +6,7 @@ except under CI=true, where .ci/run installs it and a missing server is a failur
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pwd
 import shutil
@@ -101,3 +102,34 @@ def remove(cluster: PgCluster) -> None:
     except Exception:
         pass
     shutil.rmtree(cluster.root, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def bench_engine(ingest_recs, legs: int, calibrations: int, fill):
+    """For the benches: a throwaway cluster's new database, filled by `fill(ingest, legs,
+    calibrations)` through `ingest_recs(conn, recs)` and ANALYZEd (the planner's statistics, as
+    autovacuum would keep them); yields its URL, or None (said on stdout) when PostgreSQL is not
+    installed. The cluster is removed afterwards."""
+    from station.catalog import db
+
+    try:
+        cluster = start_cluster()
+    except BaseException as exc:  # pytest.skip outside pytest: PostgreSQL not installed
+        print(f"PostgreSQL: not measured ({exc})")
+        yield None
+        return
+    try:
+        url = cluster.new_database()
+        engine = db.open_engine(url)
+
+        def ingest(recs):
+            with engine.begin() as conn:
+                ingest_recs(conn, recs)
+
+        fill(ingest, legs, calibrations)
+        with engine.connect() as conn:
+            conn.execution_options(isolation_level="AUTOCOMMIT").exec_driver_sql("ANALYZE")
+        engine.dispose()
+        yield url
+    finally:
+        remove(cluster)
