@@ -61,6 +61,7 @@ IMPROVEMENT = 0.05
 NEAR_FLOOR = 1.05
 REVERSAL_SE = 0.7
 MIN_CYCLES = 4  # two pairs at each of the two speeds: the first with three degrees of freedom for the reversal's scatter
+MIN_CYCLES_WITH_PROBES = 2  # one pair at each speed: the speed coefficients; the probes know the reversal
 
 
 @dataclass
@@ -69,13 +70,22 @@ class AdaptiveRule:
 
     improvement: float = IMPROVEMENT
     near_floor: float = NEAR_FLOOR
-    reversal_se: float = REVERSAL_SE
+    reversal_se: float | None = REVERSAL_SE  # None: the reversal is not the passes' to know (probes)
     min_cycles: int = MIN_CYCLES
     # the leg's material (procedures.metrology.thermal.Material or anything with its fields:
     # expansion_um_m_k, fixed_point_mm); None = the default (steel, fixed at 0 mm)
     material: Any = None
     heldout_um: list[float] = field(default_factory=list)
     noise_floor_um: float | None = None
+
+    @classmethod
+    def for_plan(cls, plan: Any, material: Any = None) -> "AdaptiveRule":
+        """The rule for a leg of `plan`: with reversal probes (SweepPlan.reversal_probes) the
+        reversal is theirs to know (procedures/fit/reversal_probes.py), so the passes stop on
+        their shape alone (`reversal_se` None) from the second cycle on (one at each speed)."""
+        if getattr(plan, "reversal_probes", 0):
+            return cls(material=material, reversal_se=None, min_cycles=MIN_CYCLES_WITH_PROBES)
+        return cls(material=material)
 
     def after_cycle(self, points: np.ndarray, leg: int) -> str | None:
         """The reason to stop after this cycle (None: measure another). `points`: this leg's
@@ -96,6 +106,8 @@ class AdaptiveRule:
             shape = f"held-out RMS {h:.4f} um improved by less than {100 * self.improvement:g} % on {prev:.4f} um"
         else:
             return None
+        if self.reversal_se is None:
+            return f"after cycle {k}: {shape}; the reversal is left to the reversal probes"
         if f.reversal_se_um is None or not f.within_pass_um or f.reversal_se_um > self.reversal_se * f.within_pass_um:
             return None
         return (f"after cycle {k}: {shape}; reversal known to {f.reversal_se_um:.4f} um (standard error), within "

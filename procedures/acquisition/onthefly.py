@@ -38,7 +38,7 @@ from procedures.acquisition.adaptive import AdaptiveRule
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.passes import RetryPolicy, point_record, retry_after, start_leg
 from procedures.acquisition.plans import PlanPoint, SweepPlan
-from procedures.io.recording.schema import FLAG_ANCHOR, POINT_DTYPE
+from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE, POINT_DTYPE
 from procedures.io.recording.writer import point_row
 
 
@@ -61,6 +61,45 @@ def speeds_of(positions_mm: np.ndarray, t_s: np.ndarray) -> np.ndarray:
     if positions_mm.size < 2:
         return np.zeros(positions_mm.size)
     return np.gradient(positions_mm, t_s)
+
+
+def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer, clock: Clock,
+           control: RunControl, retry: RetryPolicy, t_start: float, done: int, total: int
+           ) -> Iterator[ev.Event]:
+    """One reversal probe (SweepPlan, docs/onthefly.md "Reversal probes"): a stop-and-go reading
+    at `p.target_mm` approached in `p.direction` (the probe before it, or the leg's last pass,
+    left the axis on the other side: every probe follows a reversal), after the dwell, averaged
+    over the plan's probe averaging (the anchors' averaging set back after it). Returns the count
+    of points done."""
+    flags = FLAG_PROBE
+    attempt = 0
+    while True:
+        yield from control.checkpoint()
+        attempt += 1
+        try:
+            # at the plan's faster pass speed: the leg runs it on the fly anyway, and the probes'
+            # moves (up the stroke in steps, a gap down) are most of their time after the dwell
+            status = axis.move_to(p.target_mm, velocity_mm_s=max(plan.speeds_mm_s))
+            clock.sleep(plan.dwell_s)
+            laser.set_averaging(plan.probe_averaging_s)
+            try:
+                reading = laser.read(p.leg)
+            finally:
+                laser.set_averaging(plan.averaging_s)
+            env = laser.environment()
+            break
+        except Aborted:
+            raise
+        except DriverError as exc:
+            flags |= yield from retry_after(exc, attempt, retry, control, clock, axis, p, t_start, "reversal probe: ")
+            # the retry recovered the axis wherever it stopped: approach again from the probe's side
+            axis.move_to(p.approach_mm(plan.probe_gap_mm), velocity_mm_s=max(plan.speeds_mm_s))
+    record = point_record(p, reading, env, drive_position_mm=status.position_mm, time_s=clock.now() - t_start,
+                          material_temp_c=env.material_temp_of(p.leg), load_n=status.load_n, flags=flags,
+                          speed_mm_s=float("nan"))
+    done += 1
+    yield ev.PointMeasured(record, done, total)
+    return done
 
 
 def onthefly_passes(
@@ -95,12 +134,14 @@ def onthefly_passes(
     measured: dict[int, list[np.ndarray]] = {}
     planned_left: dict[int, int] = {}
     for p in points:
-        planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
+        if not plan.is_probe_run(p.run):  # what an adaptive stop can skip: the passes
+            planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
     prev_temp: tuple[float, float] | None = None
     for pas in _passes(points):
         first = pas[0]
         leg, run, d = first.leg, first.run, first.direction
-        if leg in stopped:
+        probe = plan.is_probe_run(run)
+        if leg in stopped and not probe:
             continue
         yield from control.checkpoint()
         if leg != current_leg:
@@ -108,6 +149,9 @@ def onthefly_passes(
             yield from start_leg(plan, axes, laser, clock, control, first, last_leg, t_start)
             prev_temp = None  # (session time, material temperature) of the reading before a pass
         axis = axes[leg]
+        if probe:
+            done = yield from _probe(plan, first, axis, laser, clock, control, retry, t_start, done, total)
+            continue
         speed = plan.speed_of_run(run)
         seq = all_targets if d > 0 else all_targets[::-1]
         start_mm = float(seq[0] - d * plan.overrun_mm)
@@ -189,7 +233,7 @@ def onthefly_passes(
         if plan.adaptive:
             measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
             if run % 2 == 0 and planned_left[leg] > 0:  # after every cycle (a direction pair)
-                rule = rules.setdefault(leg, AdaptiveRule(material=(materials or {}).get(leg)))
+                rule = rules.setdefault(leg, AdaptiveRule.for_plan(plan, (materials or {}).get(leg)))
                 reason = rule.after_cycle(np.concatenate(measured[leg]).astype(POINT_DTYPE), leg)
                 if reason is not None:
                     stopped.add(leg)
@@ -199,7 +243,7 @@ def onthefly_passes(
                     yield ev.Message(f"leg {leg}: adaptive stop after {run // 2} cycles: {reason}; "
                                      f"{skipped} planned points not needed", "info")
             elif planned_left[leg] == 0:
-                rule = rules.setdefault(leg, AdaptiveRule(material=(materials or {}).get(leg)))
+                rule = rules.setdefault(leg, AdaptiveRule.for_plan(plan, (materials or {}).get(leg)))
                 reason = f"the plan's most cycles ({plan.cycles}) measured before the held-out RMS stopped improving"
                 yield ev.PassesStopped(leg, run // 2, reason, tuple(rule.heldout_um), rule.noise_floor_um, 0)
                 yield ev.Message(f"leg {leg}: {reason}", "info")

@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass
 
 from procedures.engine.errors import PlanError
-from procedures.acquisition.plan_spec import DEFAULT_CYCLES, ONTHEFLY_KINDS, PlanSpec
+from procedures.acquisition.plan_spec import DEFAULT_CYCLES, ONTHEFLY_KINDS, REVERSAL_PROBES, PlanSpec
 from procedures.acquisition.plans import (
     ONTHEFLY_OVERRUN_MM,
     ONTHEFLY_SPEEDS_MM_S,
@@ -124,11 +124,12 @@ def plan_size(spec: PlanSpec) -> PlanSize:
         raise PlanError(f"cycles must be >= 1, got {cycles}")
     onthefly = spec.kind in ONTHEFLY_KINDS
     per_pass = n + (1 if onthefly else 0)  # on the fly: each pass's anchor
-    points = len(spec.legs) * cycles * 2 * per_pass
+    probes = REVERSAL_PROBES if onthefly else 0
+    points = len(spec.legs) * (cycles * 2 * per_pass + 2 * probes)
     overrun = max(spec.overrun_mm, ONTHEFLY_OVERRUN_MM) if onthefly else spec.overrun_mm
     rig_s = estimate_duration_s(span_mm + 2 * overrun, n, cycles, len(spec.legs), spec.dwell_s,
                                 1.0 if onthefly else spec.averaging_s,
-                                ONTHEFLY_SPEEDS_MM_S if onthefly else (), STOP_AND_GO_SPEED_MM_S)
+                                ONTHEFLY_SPEEDS_MM_S if onthefly else (), STOP_AND_GO_SPEED_MM_S, probes)
     file_bytes = FILE_FIXED_BYTES + POINT_DTYPE.itemsize * points + PLAN_JSON_BYTES_PER_TARGET * n
     return PlanSize(points, n, rig_s, file_bytes)
 

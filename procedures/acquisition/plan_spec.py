@@ -27,9 +27,13 @@ PlanKind = Literal["iso230", "paper", "onthefly", "onthefly-adaptive"]
 PLAN_KINDS: tuple[PlanKind, ...] = ("iso230", "paper", "onthefly", "onthefly-adaptive")
 DEFAULT_CYCLES: dict[str, int] = {"iso230": 5, "paper": 6, "onthefly": 6, "onthefly-adaptive": 5}
 """ISO 230-2: 5 approaches; the paper: 6 sets; on the fly: 3 rounds of both speeds; adaptive: at
-most 5 cycles (10, 20, 20, 10, 10 mm/s), 4 once the table's shape and reversal are known
-(procedures/acquisition/adaptive.py, docs/onthefly.md)."""
+most 5 cycles (10, 20, 20, 10, 10 mm/s), 2 once the table's shape is known (its reversal: the
+reversal probes; procedures/acquisition/adaptive.py, docs/onthefly.md)."""
 ONTHEFLY_KINDS = ("onthefly", "onthefly-adaptive")
+REVERSAL_PROBES = 24
+"""Reversal probe pairs after each leg's on-the-fly passes (SweepPlan.reversal_probes): the
+table's reversal to about 0.012 um (one standard error) on the simulated legs, whose passes
+scatter by 0.04 um (docs/onthefly.md, "Reversal probes"); about 1.4 min per leg."""
 
 
 @dataclass(frozen=True)
@@ -83,7 +87,8 @@ def plan_from_spec(spec: PlanSpec, limits=None) -> SweepPlan:
     if spec.kind in ONTHEFLY_KINDS:
         return onthefly_plan(spec.legs, cycles=cycles, step_mm=spec.step_mm or PAPER_STEP_MM, min_mm=spec.min_mm,
                              max_mm=spec.max_mm, overrun_mm=max(spec.overrun_mm, ONTHEFLY_OVERRUN_MM),
-                             adaptive=spec.kind == "onthefly-adaptive", dwell_s=spec.dwell_s)
+                             adaptive=spec.kind == "onthefly-adaptive", dwell_s=spec.dwell_s,
+                             reversal_probes=REVERSAL_PROBES)
     if spec.kind == "paper":
         return paper_plan(spec.legs, cycles=cycles, overrun_mm=spec.overrun_mm, dwell_s=spec.dwell_s,
                           averaging_s=spec.averaging_s)

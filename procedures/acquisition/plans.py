@@ -25,6 +25,13 @@ PAPER_STEP_MM = 0.5
 PAPER_HALF_STROKE_MM = 90.0
 
 
+PROBE_GAP_MM = 1.0
+"""Reversal probes: the downward reading this far below the upward one (a short move each way)."""
+PROBE_AVERAGING_S = 0.3
+"""Reversal probes: laser averaging per reading, s (0.3 s: the white noise below the pass offsets
+the probes sample, at a third of the anchors' 1 s)."""
+
+
 @dataclass(frozen=True)
 class PlanPoint:
     index: int  # position in the whole plan, unique: the key for resume
@@ -52,6 +59,15 @@ class SweepPlan:
     `speeds_mm_s[(c - 1) % n]`, the order reversed every other round of n cycles (a slow drift
     then weighs on every speed alike). `adaptive`: repeat rounds only until the cross-validated
     held-out error stops improving (procedures/acquisition/adaptive.py), `cycles` being the most.
+
+    `reversal_probes` (on the fly only): after a leg's passes, that many stop-and-go reversal
+    pairs (docs/onthefly.md, "Reversal probes"): a reading approached upwards at `probe_up_mm(k)`,
+    then one approached downwards `probe_gap_mm` below it, and so on up the stroke, every reading
+    right after a reversal (so each carries a pass offset of its own), after `dwell_s`, averaged
+    over `probe_averaging_s`. They fix the table's reversal (procedures/fit/reversal_probes.py):
+    each pair is one more sample of the pass-to-pass offsets that decide it, at a few seconds
+    each instead of a whole pair of passes. Each reading is a run of its own (run numbers after
+    the passes), flagged FLAG_PROBE.
     """
 
     kind: str
@@ -64,6 +80,9 @@ class SweepPlan:
     notes: tuple[str, ...] = field(default=())
     speeds_mm_s: tuple[float, ...] = field(default=())
     adaptive: bool = False
+    reversal_probes: int = 0
+    probe_gap_mm: float = PROBE_GAP_MM
+    probe_averaging_s: float = PROBE_AVERAGING_S
 
     def __post_init__(self) -> None:
         t = np.asarray(self.targets_mm, dtype=float)
@@ -88,6 +107,12 @@ class SweepPlan:
                                 "fires every step); use a uniform step")
         elif self.adaptive:
             raise PlanError("adaptive stopping needs an on-the-fly plan (speeds_mm_s)")
+        if self.reversal_probes:
+            if not self.speeds_mm_s:
+                raise PlanError("reversal probes belong to an on-the-fly plan (a stop-and-go plan's passes are its probes)")
+            if self.reversal_probes < 1 or not (0 < self.probe_gap_mm < t[-1] - t[0]) or self.probe_averaging_s < 0:
+                raise PlanError(f"reversal probes: a count >= 1, a gap between 0 and the stroke, an averaging >= 0 "
+                                f"(got {self.reversal_probes}, {self.probe_gap_mm:g} mm, {self.probe_averaging_s:g} s)")
 
     # -- on-the-fly ----------------------------------------------------------------------
     @property
@@ -116,7 +141,18 @@ class SweepPlan:
     # -- expansion -----------------------------------------------------------------------
     @property
     def points_per_leg(self) -> int:
-        return 2 * self.cycles * self.points_per_pass
+        return 2 * self.cycles * self.points_per_pass + 2 * self.reversal_probes
+
+    def is_probe_run(self, run: int) -> bool:
+        """Whether pass `run` of a leg is a reversal probe (runs after the plan's cycles)."""
+        return run > 2 * self.cycles
+
+    def probe_up_mm(self, k: int) -> float:
+        """Where probe pair `k` (0-based) reads approaching upwards: the pairs spread evenly over
+        the stroke, the downward reading `probe_gap_mm` below (so every target lies inside it)."""
+        lo, hi = self.targets_mm[0] + self.probe_gap_mm, self.targets_mm[-1]
+        n = self.reversal_probes
+        return float(lo + (hi - lo) * (k + 0.5) / n)
 
     @property
     def points_per_pass(self) -> int:
@@ -152,6 +188,12 @@ class SweepPlan:
                     if self.speeds_mm_s:  # the pass's anchor, read at rest where it ends
                         yield PlanPoint(index, leg, run, direction, self.anchor_mm(direction))
                         index += 1
+            for k in range(self.reversal_probes):  # after a downward pass: each reading follows a reversal
+                up_mm = self.probe_up_mm(k)
+                for direction, target in ((1, up_mm), (-1, up_mm - self.probe_gap_mm)):
+                    run += 1
+                    yield PlanPoint(index, leg, run, direction, float(target))
+                    index += 1
 
     def travel_range_mm(self) -> tuple[float, float]:
         return (self.targets_mm[0] - self.overrun_mm, self.targets_mm[-1] + self.overrun_mm)
@@ -179,7 +221,7 @@ class SweepPlan:
         the fly: each pass at its own speed, and the return to its start)."""
         span = self.targets_mm[-1] - self.targets_mm[0] + 2 * self.overrun_mm
         return estimate_duration_s(span, len(self.targets_mm), self.cycles, len(self.legs), self.dwell_s,
-                                   self.averaging_s, self.speeds_mm_s, velocity_mm_s)
+                                   self.averaging_s, self.speeds_mm_s, velocity_mm_s, self.reversal_probes)
 
     # -- serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -193,6 +235,8 @@ class SweepPlan:
             d["speeds_mm_s"] = [float(v) for v in self.speeds_mm_s]
         else:
             del d["speeds_mm_s"], d["adaptive"]
+        if not self.reversal_probes:  # stored as before probes existed
+            del d["reversal_probes"], d["probe_gap_mm"], d["probe_averaging_s"]
         return d
 
     @classmethod
@@ -209,20 +253,27 @@ class SweepPlan:
                 notes=tuple(d.get("notes", ())),
                 speeds_mm_s=tuple(float(v) for v in d.get("speeds_mm_s", ())),
                 adaptive=bool(d.get("adaptive", False)),
+                reversal_probes=int(d.get("reversal_probes", 0)),
+                probe_gap_mm=float(d.get("probe_gap_mm", PROBE_GAP_MM)),
+                probe_averaging_s=float(d.get("probe_averaging_s", PROBE_AVERAGING_S)),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise PlanError(f"the stored sweep plan is incomplete or malformed ({exc!r})") from exc
 
 
 def estimate_duration_s(travel_mm: float, n_targets: int, cycles: int, n_legs: int, dwell_s: float,
-                        averaging_s: float, speeds_mm_s: tuple[float, ...] = (), velocity_mm_s: float = 10.0) -> float:
+                        averaging_s: float, speeds_mm_s: tuple[float, ...] = (), velocity_mm_s: float = 10.0,
+                        reversal_probes: int = 0) -> float:
     """A plan's rough time on the rig, s, from its figures alone (procedures/acquisition/plan_size.py sizes a
     plan with it before building one): `travel_mm` per pass (targets and overrun); stop-and-go,
     travel at `velocity_mm_s` plus dwell and averaging at every target; on the fly (`speeds_mm_s`),
-    each pass at its own speed plus its return and its anchor's dwell and averaging."""
+    each pass at its own speed plus its return and its anchor's dwell and averaging, then the
+    `reversal_probes` pairs (a climb through the stroke at the faster speed, two short moves, dwells
+    and readings a pair)."""
     if speeds_mm_s:
         n = len(speeds_mm_s)
-        per_leg = 0.0
+        per_leg = reversal_probes * 2 * (0.5 + dwell_s + PROBE_AVERAGING_S) + (
+            travel_mm / max(speeds_mm_s) if reversal_probes else 0.0)
         for c in range(cycles):  # the speed of cycle c, as SweepPlan.speed_of_run
             rnd, k = divmod(c, n)
             speed = (speeds_mm_s if rnd % 2 == 0 else speeds_mm_s[::-1])[k]
@@ -319,13 +370,15 @@ ONTHEFLY_OVERRUN_MM = 4.0  # run-up to 20 mm/s: v^2/2a + v*a/(2 jerk) = 2.5 mm a
 def onthefly_plan(legs: Iterable[int] = (1,), cycles: int = 6, speeds_mm_s: tuple[float, ...] = ONTHEFLY_SPEEDS_MM_S,
                   step_mm: float = PAPER_STEP_MM, min_mm: float = -PAPER_HALF_STROKE_MM,
                   max_mm: float = PAPER_HALF_STROKE_MM, overrun_mm: float = ONTHEFLY_OVERRUN_MM,
-                  adaptive: bool = False, dwell_s: float = 1.0, averaging_s: float = 1.0) -> SweepPlan:
+                  adaptive: bool = False, dwell_s: float = 1.0, averaging_s: float = 1.0,
+                  reversal_probes: int = 0) -> SweepPlan:
     """On-the-fly capture at the paper's 361 positions (0.5 mm), `cycles` bidirectional passes
     cycling through `speeds_mm_s`; `adaptive` stops a leg's passes once the held-out error of
     its table stops improving (then `cycles` is the most). Nothing stops at the targets; each
     pass ends at rest `overrun_mm` beyond its last target and reads an anchor there after
     `dwell_s` (settling) with `averaging_s` averaging: a static reading sharing the pass's offset,
-    from which the speed-dependent error is found (procedures/fit/dynamic.py)."""
+    from which the speed-dependent error is found (procedures/fit/dynamic.py). `reversal_probes`:
+    stop-and-go reversal pairs after each leg's passes (SweepPlan), which fix the table's reversal."""
     if len(speeds_mm_s) < 2 or len(set(speeds_mm_s)) < 2:
         raise PlanError("on-the-fly capture needs two different speeds, to separate the speed-dependent error")
     if cycles < len(speeds_mm_s):
@@ -334,7 +387,7 @@ def onthefly_plan(legs: Iterable[int] = (1,), cycles: int = 6, speeds_mm_s: tupl
     kind = "onthefly-adaptive" if adaptive else "onthefly"
     notes = _lead_warning(step_mm, 5.0)
     return SweepPlan(kind, targets, cycles, tuple(legs), overrun_mm, dwell_s, averaging_s, tuple(notes),
-                     tuple(float(v) for v in speeds_mm_s), adaptive)
+                     tuple(float(v) for v in speeds_mm_s), adaptive, reversal_probes)
 
 
 def targets_from_file(path) -> tuple[float, ...]:

@@ -26,7 +26,9 @@ direction, so it adds hardly any noise (a per-position extrapolation from two sp
 multiply the noise by sqrt(5) at 10 and 20 mm/s).
 
 Stop-and-go readings (speed NaN or 0) are left as they are; anchors are dropped once used (they
-lie beyond the stroke of the table).
+lie beyond the stroke of the table), and so are reversal probes (their use is the reversal,
+procedures/fit/reversal_probes.py; in the fit, the noise floor or ISO 230-2 figures they would
+count as passes of one reading).
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from procedures.engine.errors import InputError
-from procedures.io.recording.schema import FLAG_ANCHOR
+from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE
 
 
 @dataclass(frozen=True)
@@ -129,7 +131,8 @@ def static_points(points: np.ndarray, source: str = "the session",
     out = np.array(points, copy=True)
     if not is_onthefly(points):
         return out
-    out = out[(np.asarray(out["flags"]) & FLAG_ANCHOR) == 0]
+    # anchors and reversal probes (static readings beside the passes) have done their work
+    out = out[(np.asarray(out["flags"]) & (FLAG_ANCHOR | FLAG_PROBE)) == 0]
     coeffs = coefficients if coefficients is not None else speed_coefficients(points, source)
     v = np.asarray(out["speed_mm_s"], dtype=float)
     moving = np.isfinite(v) & (v != 0)

@@ -15,6 +15,7 @@ from procedures.fit.figures import range_um, rms_um
 from procedures.fit.model import METHODS, FitStats, LegErrorModel, LegFit
 from procedures.fit.noise import estimate_noise_floor
 from procedures.fit.paper import DEFAULT_N_PARAMS, fit_paper_leg
+from procedures.fit.reversal_probes import apply_probes, is_probe
 
 _DEFAULT_OPTS = ("lead_mm", "trend_degree", "reversal_degree", "fourier_terms", "lead_harmonics",
                  "max_fourier_terms", "nested")
@@ -98,7 +99,8 @@ def fit(
     elif lead_mm is not None and not (np.isfinite(lead_mm) and lead_mm > 0):
         raise InputError(f"screw lead must be a positive number of mm, got {lead_mm}")
     src = (source or {}).get("path", "") or "the session"
-    if is_onthefly(points):  # on-the-fly readings: fit their static part (docs/onthefly.md)
+    probes = points[is_probe(points)] if len(points) else points
+    if is_onthefly(points):  # on-the-fly readings: fit their static part (docs/onthefly.md); probes dropped
         points = static_points(points, src)
     by_leg = split_legs(points, source=src)
     if legs is not None:
@@ -114,4 +116,7 @@ def fit(
                 "fourier_terms": fourier_terms, "lead_harmonics": lead_harmonics,
                 "max_fourier_terms": int(max_fourier_terms), "nested": bool(nested)}
     fits = {leg: fit_leg(data, method, **opts) for leg, data in by_leg.items()}
+    if method == "default" and len(probes):  # the reversal from the probes (procedures/fit/reversal_probes.py)
+        for leg, leg_fit in fits.items():
+            apply_probes(leg_fit, probes[probes["leg"] == leg])
     return LegErrorModel(method, fits, source=source, options=opts)

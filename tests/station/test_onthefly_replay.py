@@ -10,7 +10,7 @@ import numpy as np
 
 from procedures.acquisition.plans import onthefly_plan
 from procedures.io.recording.reader import read_session
-from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
+from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE, FLAG_REPLAYED
 from station.services.samples import open_sample_rig
 from station.commands.replay import compare_sessions, replay_sweep
 from station.services.config import StationConfig
@@ -22,19 +22,21 @@ CFG = StationConfig(operator="test")
 
 def test_onthefly_session_replays_identically(tmp_path: Path):
     original = tmp_path / "otf.h5"
-    plan = onthefly_plan((1, 2), cycles=2, step_mm=2.5)
+    plan = onthefly_plan((1, 2), cycles=2, step_mm=2.5, reversal_probes=3)
     with open_sample_rig() as rig:
         result = run_sweep(rig, plan, original, CFG)
     assert result.outcome == "completed"
     live = read_session(original)
-    # 2 legs x 2 cycles x 2 directions x (73 captured targets + the pass's anchor at rest)
-    assert len(live.points) == plan.total_points == 2 * 2 * 2 * (73 + 1)
+    # 2 legs x (2 cycles x 2 directions x (73 captured targets + the pass's anchor at rest) + 3 probe pairs)
+    assert len(live.points) == plan.total_points == 2 * (2 * 2 * (73 + 1) + 3 * 2)
     anchors = (live.points["flags"] & FLAG_ANCHOR) != 0
     assert np.count_nonzero(anchors) == 8 and np.all(np.isnan(live.points["speed_mm_s"][anchors]))
     assert set(np.abs(live.points["target_mm"][anchors])) == {94.0}
-    v = live.points["speed_mm_s"][~anchors]
+    probes = (live.points["flags"] & FLAG_PROBE) != 0
+    assert np.count_nonzero(probes) == 12 and np.all(np.isnan(live.points["speed_mm_s"][probes]))
+    v = live.points["speed_mm_s"][~anchors & ~probes]
     # every sample carries its speed: +/-10 and +/-20 mm/s, signed with the direction
-    assert np.all(np.sign(v) == live.points["direction"][~anchors])
+    assert np.all(np.sign(v) == live.points["direction"][~anchors & ~probes])
     assert sorted({round(abs(x)) for x in v}) == [10, 20]
     out = tmp_path / "replayed.h5"
     with open_replay_rig(original, None, CFG) as rig:
@@ -56,11 +58,11 @@ def test_an_aborted_onthefly_session_resumes_to_every_point_once(tmp_path: Path)
     from station.services.jobs import resumable_plan
 
     out = tmp_path / "otf.h5"
-    plan = onthefly_plan((1,), cycles=2, step_mm=5.0)
+    plan = onthefly_plan((1,), cycles=2, step_mm=5.0, reversal_probes=4)
     control = RunControl()
 
     def abort_mid_pass(e):
-        if isinstance(e, ev.PointMeasured) and e.done == 50:  # in the second pass
+        if isinstance(e, ev.PointMeasured) and e.done in (50, 156):  # in the second pass; then among the probes
             control.abort("test")
 
     with open_sample_rig() as rig:
@@ -69,6 +71,11 @@ def test_an_aborted_onthefly_session_resumes_to_every_point_once(tmp_path: Path)
     partial = read_session(out)
     assert 0 < len(partial.points) < plan.total_points
     assert resumable_plan(out) == plan
+    with open_sample_rig() as rig:  # the passes, then the first probes (4 x 38 points before them)
+        control = RunControl()
+        second = run_sweep(rig, plan, out, CFG, resume=True, sinks=[CallbackSink(abort_mid_pass)], control=control)
+    assert second.outcome == "aborted"
+    assert 152 < len(read_session(out).points) < plan.total_points
     with open_sample_rig() as rig:
         second = run_sweep(rig, plan, out, CFG, resume=True)
     assert second.outcome == "completed"

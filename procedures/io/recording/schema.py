@@ -54,6 +54,7 @@ FLAG_RETRIED_DRIVE = 2  # the move needed a retry after a drive fault/timeout
 FLAG_IMPORTED = 4  # came from CSV: commanded/drive/measured positions are derived
 FLAG_REPLAYED = 8  # came from a replay device
 FLAG_ANCHOR = 16  # on the fly: the pass's anchor, read at rest where the pass ends (docs/onthefly.md)
+FLAG_PROBE = 32  # on the fly: a reversal probe, a stop-and-go reading right after a reversal (docs/onthefly.md)
 
 FAULT_FIELDS: list[tuple[str, str, str]] = [
     ("index", "<i8", "1"),  # plan index of the point the fault hit

@@ -1,0 +1,147 @@
+"""Reversal probes (docs/onthefly.md, "Reversal probes"): stop-and-go readings right after a
+reversal, after an on-the-fly leg's passes, fix its table's reversal. The plan, the sweep over
+the real protocols (Modbus TCP on 127.0.0.1, the interferometer on a pty) and the fit."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from drivers.interferometer.client import SerialInterferometer
+from drivers.modbus.client import connect_axes
+from drivers.sim.plant import default_leg_configs
+from drivers.sim.rig import SimRig
+from procedures.acquisition.adaptive import MIN_CYCLES_WITH_PROBES
+from procedures.acquisition.plans import SweepPlan, onthefly_plan
+from procedures.acquisition.sweep import sweep
+from procedures.engine import events as ev
+from procedures.engine.errors import PlanError
+from procedures.fit import fit
+from procedures.fit.dynamic import static_points
+from procedures.fit.reversal_probes import apply_probes, is_probe
+from procedures.io.recording.schema import FLAG_PROBE
+from procedures.io.recording.writer import point_row
+from procedures.metrology.thermal import Material, normalise_points
+
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+
+def run(plan: SweepPlan, seed: int, legs: int, without: tuple[str, ...] = ()):
+    """(points, events, plant configs) of `plan` on a fresh simulated rig with jerk-limited legs."""
+    cfgs = [c.with_leg_motion().without(*without) for c in default_leg_configs(seed, legs)]
+    with SimRig(time_scale=0.0, seed=seed, legs=legs, configs=cfgs) as rig:
+        axes = connect_axes(rig.drive_url, list(plan.legs), clock=rig.clock)
+        laser = SerialInterferometer(rig.laser_port)
+        try:
+            events = list(sweep(plan, axes, laser, rig.clock))
+        finally:
+            laser.close()
+            for a in axes.values():
+                a.close()
+    return np.concatenate([point_row(e.record) for e in events if isinstance(e, ev.PointMeasured)]), events, cfgs
+
+
+def test_probe_points_follow_the_passes_each_after_a_reversal():
+    plan = onthefly_plan((1, 2), cycles=2, step_mm=2.0, reversal_probes=5)
+    pts = plan.points()
+    assert len(pts) == plan.total_points == 2 * (2 * 2 * plan.points_per_pass + 10)
+    for leg in (1, 2):
+        mine = [p for p in pts if p.leg == leg]
+        probes = [p for p in mine if plan.is_probe_run(p.run)]
+        assert len(probes) == 10 and mine[-10:] == probes  # after the leg's passes
+        assert [p.run for p in probes] == list(range(5, 15))  # a run each: each its own pass offset
+        assert [p.direction for p in probes] == [1, -1] * 5  # the last pass went down: every probe reverses
+        ups = np.array([p.target_mm for p in probes[::2]])
+        downs = np.array([p.target_mm for p in probes[1::2]])
+        assert np.allclose(ups - downs, plan.probe_gap_mm)
+        assert np.all(np.diff(ups) > 0)  # up the stroke, inside it
+        assert downs.min() >= plan.targets_mm[0] and ups.max() <= plan.targets_mm[-1]
+    again = SweepPlan.from_dict(plan.to_dict())
+    assert again == plan and again.reversal_probes == 5
+    assert "reversal_probes" not in onthefly_plan((1,), cycles=2).to_dict()  # stored as before probes
+    with pytest.raises(PlanError, match="on-the-fly"):
+        SweepPlan("iso230-2", (0.0, 1.0), 2, reversal_probes=3)
+    with pytest.raises(PlanError, match="gap"):
+        SweepPlan("onthefly", tuple(np.arange(0.0, 10.5, 0.5)), 2, speeds_mm_s=(10.0, 20.0), reversal_probes=3,
+            probe_gap_mm=20.0)
+
+
+@pytest.fixture(scope="module")
+def clean():
+    """Two legs without noise, pass offsets or drift: what the probes measure is the plant's reversal."""
+    plan = onthefly_plan((1, 2), cycles=2, step_mm=1.0, reversal_probes=6)
+    return run(plan, seed=3, legs=2, without=("noise", "run_offset", "drift"))
+
+
+def test_probes_are_read_at_rest_and_recorded_flagged(clean):
+    points, _, _ = clean
+    probes = points[is_probe(points)]
+    assert len(probes) == 2 * 12
+    assert np.all(probes["flags"] & FLAG_PROBE) and np.all(np.isnan(probes["speed_mm_s"]))
+    # at rest at the target (the drive's position actual there), a run each
+    assert np.allclose(probes["drive_position_mm"], probes["target_mm"], atol=1e-3)
+    assert len(np.unique(probes["run"][probes["leg"] == 1])) == 12
+    # dropped from what the fit, the noise floor and ISO 230-2 see
+    assert not np.any(is_probe(static_points(points)))
+
+
+def test_without_pass_offsets_the_probes_give_the_plants_reversal(clean):
+    points, _, cfgs = clean
+    model = fit(points)
+    for leg in (1, 2):
+        f = model.legs[leg]
+        got = f.selection["reversal_probes"]
+        assert got["pairs"] == 6
+        # sign: the reversal is down minus up, as the plant's reversal_um
+        assert f.reversal_um == pytest.approx(cfgs[leg - 1].reversal_um, abs=0.003)
+        assert got["after_um"] == pytest.approx(f.reversal_um)
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    """Three legs with the plant's pass offsets (0.04 um a reversal) and noise, two cycles each
+    (adaptive: stopped on the shape, the reversal left to the probes), 24 probe pairs; the points
+    normalised to 20 degC with each simulated leg's material, as `station fit` does."""
+    plan = onthefly_plan((1, 2, 3), cycles=5, step_mm=1.0, reversal_probes=24, adaptive=True)
+    points, events, cfgs = run(plan, seed=5, legs=3)
+    mats = {leg: Material(cfgs[leg - 1].expansion_ppm_per_k, 1.0, cfgs[leg - 1].bearing_mm) for leg in (1, 2, 3)}
+    return plan, normalise_points(points, mats).points, events, cfgs
+
+
+def test_with_pass_offsets_the_probes_know_the_reversal_better_than_the_passes(noisy):
+    plan, points, events, cfgs = noisy
+    stops = [e for e in events if isinstance(e, ev.PassesStopped)]
+    assert len(stops) == 3
+    for s in stops:  # the rule stops on the shape from the second cycle on; the probes still run
+        assert MIN_CYCLES_WITH_PROBES <= s.cycles <= plan.cycles
+        assert "reversal probes" in s.reason or "most cycles" in s.reason
+    assert np.count_nonzero(is_probe(points)) == 3 * 48
+    model = fit(points)
+    errors, stderrs = [], []
+    for leg in (1, 2, 3):
+        got = model.legs[leg].selection["reversal_probes"]
+        errors.append(model.legs[leg].reversal_um - cfgs[leg - 1].reversal_um)
+        stderrs.append(got["stderr_um"])
+        # its own standard error says how well it is known: 24 pairs of 0.04 um offsets and noise
+        assert 0.006 < got["stderr_um"] < 0.02, got
+    # within 4 standard errors of the plant's reversal, leg by leg
+    assert np.all(np.abs(errors) <= 4 * np.array(stderrs)), (errors, stderrs)
+
+
+def test_apply_probes_moves_only_the_reversal_constant(clean):
+    points, _, _ = clean
+    model = fit(points[~is_probe(points)])
+    f = model.legs[1]
+    x = np.linspace(-80, 80, 9)
+    up0, down0 = f.predict_um(x, 1), f.predict_um(x, -1)
+    probes = points[is_probe(points) & (points["leg"] == 1)].copy()
+    probes["error_um"][probes["direction"] < 0] += 0.05  # the probes see 0.05 um more reversal
+    r = apply_probes(f, probes)
+    assert r is not None and r.pairs == 6
+    up1, down1 = f.predict_um(x, 1), f.predict_um(x, -1)
+    # moved by half each way, the mean (the zero reference) and the shape untouched
+    assert np.allclose(down1 - up1 - (down0 - up0), r.shift_um) and np.allclose(up1 + down1, up0 + down0)
+    assert r.after_um - r.before_um == pytest.approx(r.shift_um)
+    assert apply_probes(f, probes[probes["direction"] > 0]) is None  # one direction: nothing to tell
