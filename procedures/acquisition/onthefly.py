@@ -79,7 +79,10 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
         try:
             # at the plan's faster pass speed: the leg runs it on the fly anyway, and the probes'
             # moves (up the stroke in steps, a gap down) are most of their time after the dwell
-            status = axis.move_to(p.target_mm, velocity_mm_s=max(plan.speeds_mm_s))
+            speed = max(plan.speeds_mm_s)
+            if attempt > 1:  # recovered wherever it stopped: approach again from the probe's side
+                axis.move_to(p.approach_mm(plan.probe_gap_mm), velocity_mm_s=speed)
+            status = axis.move_to(p.target_mm, velocity_mm_s=speed)
             clock.sleep(plan.dwell_s)
             laser.set_averaging(plan.probe_averaging_s)
             try:
@@ -92,8 +95,6 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
             raise
         except DriverError as exc:
             flags |= yield from retry_after(exc, attempt, retry, control, clock, axis, p, t_start, "reversal probe: ")
-            # the retry recovered the axis wherever it stopped: approach again from the probe's side
-            axis.move_to(p.approach_mm(plan.probe_gap_mm), velocity_mm_s=max(plan.speeds_mm_s))
     record = point_record(p, reading, env, drive_position_mm=status.position_mm, time_s=clock.now() - t_start,
                           material_temp_c=env.material_temp_of(p.leg), load_n=status.load_n, flags=flags,
                           speed_mm_s=float("nan"))

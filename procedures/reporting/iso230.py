@@ -250,9 +250,15 @@ def evaluate(points: np.ndarray) -> dict[int, LegIso230]:
     """ISO 230-2 values per leg (leg number -> LegIso230) from POINT_DTYPE rows, micrometres.
 
     Uses `leg`, `direction`, `target_mm` and `error_um` (measured - target); runs and order do
-    not matter. Points without a measured error are left out (and noted).
+    not matter. Points without a measured error are left out (and noted). A session's on-the-fly
+    readings are judged on their static part, its anchors and reversal probes left out
+    (procedures.fit.dynamic.static_points, as `station fit` and `station verify` take them).
     """
+    from procedures.fit.dynamic import is_onthefly, static_points  # the fit package imports this one
+
     pts = np.asarray(points)
+    if len(pts) and is_onthefly(pts):
+        pts = static_points(pts)
     return {int(leg): evaluate_leg(pts, int(leg)) for leg in np.unique(pts["leg"])}
 
 

@@ -134,8 +134,12 @@ def report_basis(points: np.ndarray, station_config: dict | None, model: LegErro
 
     from procedures.metrology.thermal import error_basis
 
+    from procedures.fit.dynamic import is_onthefly, static_points
+
     raw = basis_is_raw(model, raw, model_name)
     pts, lines, doc = error_basis(SimpleNamespace(points=points, station_config=station_config), raw)
+    if len(pts) and is_onthefly(pts):  # on-the-fly readings: their static part, as the model was fitted to
+        pts = static_points(pts)
     if model is not None and not isinstance((getattr(model, "options", None) or {}).get("error_basis"), dict):
         # fitted before models recorded their basis (or by fit() alone): raw; a model of
         # `station fit --raw` keeps error_basis's own "(--raw)" line, as the command printed it

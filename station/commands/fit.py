@@ -8,6 +8,7 @@ from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_file
 from procedures.io.numbers import NotANumber, finite_float
 from procedures.fit.paper import DEFAULT_N_PARAMS
+from procedures.fit.reversal_probes import ProbeReversal
 from procedures.acquisition.plans import parse_legs
 from procedures.io.recording.reader import read_session
 from procedures.engine.states import Outcome
@@ -61,6 +62,7 @@ def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
 
 
 def run(args) -> int:
+
     if args.params < 1:
         raise InputError(f"--params must be >= 1, got {args.params}")
     out = check_output_file(args.out, force=args.force)  # before the fit (procedures/io/outputs.py)
@@ -96,6 +98,9 @@ def run(args) -> int:
             print(f"     note: {s.note}")
         if s.dropped:
             print(f"     note: {s.dropped} point(s) without a finite error were left out")
+        probes = getattr(f, "selection", {}).get("reversal_probes")
+        if probes:
+            print(f"     {ProbeReversal(**probes).describe()}")
     print("held-out: each cycle scored by a model fitted without it; held-out ratio = held-out RMS / noise floor;"
           " (ideal) = the held-out ratio a perfect static model would score; held-out range = max - min of the"
           " held-out residuals (figures: docs/figures.md)")

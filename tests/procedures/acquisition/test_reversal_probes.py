@@ -145,3 +145,32 @@ def test_apply_probes_moves_only_the_reversal_constant(clean):
     assert np.allclose(down1 - up1 - (down0 - up0), r.shift_um) and np.allclose(up1 + down1, up0 + down0)
     assert r.after_um - r.before_um == pytest.approx(r.shift_um)
     assert apply_probes(f, probes[probes["direction"] > 0]) is None  # one direction: nothing to tell
+
+
+def test_a_beam_break_at_a_probe_is_retried_and_the_probe_flagged():
+    from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_RETRIED_BEAM
+
+    plan = onthefly_plan((1,), cycles=2, step_mm=5.0, reversal_probes=3)
+    cfgs = [c.with_leg_motion() for c in default_leg_configs(0, 1)]
+    with SimRig(time_scale=0.0, seed=0, legs=1, configs=cfgs) as rig:
+        axes = connect_axes(rig.drive_url, [1], clock=rig.clock)
+        laser = SerialInterferometer(rig.laser_port)
+        events = []
+        try:
+            for e in sweep(plan, axes, laser, rig.clock):
+                events.append(e)
+                if isinstance(e, ev.PointMeasured) and e.record["flags"] & FLAG_ANCHOR and e.record["run"] == 4:
+                    rig.laser_server.set_beam_break(1, True)  # the beam goes as the probes begin
+                elif isinstance(e, ev.Fault):
+                    rig.laser_server.set_beam_break(1, False)  # and comes back while the sweep waits
+        finally:
+            laser.close()
+            axes[1].close()
+    faults = [e for e in events if isinstance(e, ev.Fault)]
+    assert len(faults) == 1 and "reversal probe" in faults[0].message and not faults[0].gave_up
+    points = np.concatenate([point_row(e.record) for e in events if isinstance(e, ev.PointMeasured)])
+    probes = points[is_probe(points)]
+    assert len(probes) == 6 and len(points) == plan.total_points  # nothing lost, nothing twice
+    assert probes["flags"][0] & FLAG_RETRIED_BEAM and not np.any(probes["flags"][1:] & FLAG_RETRIED_BEAM)
+    assert np.isfinite(probes["error_um"]).all()
+    assert [e for e in events if isinstance(e, ev.SweepFinished)][0].outcome == "completed"
