@@ -7,6 +7,7 @@ import logging
 from pathlib import Path
 
 from procedures.engine.errors import InputError
+from station.commands.sweep import check_time_scale
 from station.services.config import load_config
 
 NAME = "ui"
@@ -33,8 +34,7 @@ def run(args) -> int:
     time_scale = args.time_scale
     if time_scale is None and args.config is None:
         time_scale = DEFAULT_SIM_TIME_SCALE
-    if time_scale is not None and time_scale < 0:
-        raise InputError(f"--time-scale must be >= 0, got {time_scale:g}")
+    check_time_scale(time_scale)  # nan and inf too, as `station sweep` does
     if args.replay and not Path(args.replay).is_file():
         raise InputError(f"--replay {args.replay}: no such file (give a session .h5 file)")
     cfg.with_sim_memory()  # the simulated drives keep their tables where `station push/verify --sim` find them

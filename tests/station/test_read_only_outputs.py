@@ -151,10 +151,13 @@ def test_a_sweep_into_a_file_that_is_not_hdf5_is_refused(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("value", ["-1", "nan", "inf"])
-def test_a_negative_time_scale_is_one_line(value, tmp_path, capsys):
-    assert main(["sweep", "--sim", "--time-scale", value, "--out", str(tmp_path / "s.h5")]) == 2
+@pytest.mark.parametrize("command", ["sweep", "ui"])
+def test_a_negative_time_scale_is_one_line(command, value, tmp_path, capsys):
+    argv = ["sweep", "--sim", "--time-scale", value, "--out", str(tmp_path / "s.h5")] if command == "sweep" else \
+        ["ui", "--time-scale", value]  # refused before the terminal UI starts
+    assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("station sweep: error: --time-scale must be a number >= 0"), err
+    assert len(err) == 1 and err[0].startswith(f"station {command}: error: --time-scale must be a number >= 0"), err
     assert list(tmp_path.iterdir()) == []
 
 
