@@ -40,6 +40,7 @@ from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.engine.errors import InputError
 from procedures.engine.events import Finding
 from procedures.fit.noise import noise_floor
+from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE
 
 FORMAT = "station-diagnosis"
 VERSION = 2  # 2: `noise_floor_um` is the noise floor of station fit; version 1's is repeat_scatter_after_effects_um
@@ -357,6 +358,18 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     return rep, findings
 
 
+def _passes_only(points: np.ndarray) -> tuple[np.ndarray, int]:
+    """`points` without an on-the-fly session's anchors and reversal probes (FLAG_ANCHOR,
+    FLAG_PROBE: single readings at rest beside the passes; as passes of their own they would
+    be taken for outliers, and their NaN speed would hide the passes' speeds), and how many
+    were set aside."""
+    names = points.dtype.names or ()
+    if "flags" not in names or len(points) == 0:
+        return points, 0
+    beside = (np.asarray(points["flags"]).astype(np.int64) & (FLAG_ANCHOR | FLAG_PROBE)) != 0
+    return (points[~beside], int(beside.sum())) if beside.any() else (points, 0)
+
+
 def diagnose(points: np.ndarray, twin: Twin | None = None, settings: DiagnosisSettings | None = None,
              recording: dict | None = None, source: str = "the session") -> dict:
     """Diagnose every leg of a POINT_DTYPE array against `twin` (None: a position-only twin
@@ -367,6 +380,7 @@ def diagnose(points: np.ndarray, twin: Twin | None = None, settings: DiagnosisSe
 
 
 def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
+    points, set_aside = _passes_only(points)
     legs = split_legs(points, source)
     report: dict = {
         "format": FORMAT, "version": VERSION, "recording": recording or {},
@@ -374,6 +388,10 @@ def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
                   "there are few targets) fitted on this recording's training passes"} if twin is None else {"kind": twin.kind, "description": twin.description}),
         "settings": asdict(s), "findings": [], "legs": {}, "notes": [],
     }
+    if set_aside:
+        report["notes"].append(f"{set_aside} on-the-fly anchor and reversal probe reading(s) set aside: readings at rest "
+                               "beside the passes, which the fit uses to take the passes static (docs/onthefly.md), "
+                               "not passes to compare")
     for n, leg in legs.items():
         rep, findings = _diagnose_leg(leg, twin, s)
         report["legs"][str(n)] = rep

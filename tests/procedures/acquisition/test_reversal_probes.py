@@ -174,3 +174,21 @@ def test_a_beam_break_at_a_probe_is_retried_and_the_probe_flagged():
     assert probes["flags"][0] & FLAG_RETRIED_BEAM and not np.any(probes["flags"][1:] & FLAG_RETRIED_BEAM)
     assert np.isfinite(probes["error_um"]).all()
     assert [e for e in events if isinstance(e, ev.SweepFinished)][0].outcome == "completed"
+
+
+def test_diagnosis_sets_the_anchors_and_probes_aside_and_finds_the_speed_effect():
+    """A recorded on-the-fly session diagnosed whole: its anchors and probes are readings beside
+    the passes, not passes (as passes of one reading they were outliers, and their NaN speed hid
+    the passes' speeds, so the leg-end lag was taken for backlash)."""
+    from procedures.diagnosis import diagnose
+
+    plan = onthefly_plan((1,), cycles=3, step_mm=2.0, reversal_probes=4)
+    points, _, cfgs = run(plan, seed=0, legs=1)
+    report = diagnose(points)
+    assert any("14 on-the-fly anchor and reversal probe reading(s) set aside" in n for n in report["notes"])
+    leg = report["legs"]["1"]
+    assert leg["points"] == 3 * 2 * 91 and leg["passes"] == 6
+    speed = [f for f in report["findings"] if f["effect"] == "speed"]
+    assert speed, [f["effect"] for f in report["findings"]]
+    # the leg end lags the encoder moving up by the plant's lag (0.12 ms)
+    assert speed[0]["parameters"]["lag_up_ms"] == pytest.approx(cfgs[0].dynamic_lag_up_s * 1000, abs=0.03)
