@@ -6,21 +6,35 @@ with_leg_motion), each plan in turn on a fresh rig:
 
 1. calibrate: the plan's sweep, recorded to HDF5 (station.services.jobs.run_sweep, as `station sweep`);
 2. fit and table: the session's error normalised to 20 degC (as `station fit`), the default
-   model (on-the-fly data: the speed-dependent part removed first), `station table`'s table;
-3. push: every leg's table to its drive (station.services.table_jobs.push_legs_job, as `station push`);
-4. verify: a stop-and-go verification sweep with the tables active, the same plan for every
-   calibration plan (41 irregular targets, 5 cycles: ISO 230-2 style, denser than its minimum so
-   a coarse table shows), then residual RMS / noise floor per leg (station.services.table_jobs.verify_job,
-   as `station verify`; pass at <= 1.1).
+   model (on-the-fly data: the speed-dependent part removed first, the reversal from the
+   reversal probes), `station table`'s table;
+3. push and verify on a fresh rig of the same plant with the verification's own noise seed, the
+   same for every plan (so every table meets the same noise and pass offsets: paired), the table
+   pushed (station.services.table_jobs.push_legs_job, as `station push`), then a stop-and-go
+   verification sweep (41 irregular targets x 20 cycles) and residual RMS / noise floor per leg
+   (verify_job, as `station verify`; pass at <= 1.1).
+
+Why 20 verification cycles, not ISO 230-2's 5: the ratio's floor and residual both rest on the
+verification's own pass offsets (0.04 um a pass on the simulated legs, against 0.03 um of noise),
+10 of them with 5 cycles. The `oracle` row (a table of the simulated legs' own error, 0.001 um
+from it, no sweep) shows what that does to a perfect table: with 5 cycles it read 0.92-1.33 over
+seeds 0-3 (1 leg of 24 above 1.1; simulated, 3.9 % of legs above 1.1 and a 39 % chance that all
+24 pass), with 20 cycles 0.98-1.02. A 5-cycle verification cannot tell a table at 1.1 x the floor
+from a perfect one; `--verify-cycles 5` prints it.
 
 Printed side by side: rig time per leg (calibration sweep / legs, from enabling the first leg
 to the last point), for on-the-fly plans also the serial time of the laser line in the sweep (the
 bytes it carried, mostly the capture read-out, on a real 115200 baud line, 8N1; not on the
-simulated clock, where the pty costs nothing; the instrument's turnaround not modelled), and the
-verification ratio per leg (mean, max, legs passing). The goal of issue 15: on-the-fly adaptive
-verifies within 1.1 x the noise floor in at most the ISO 230-2 plan's rig time per leg.
+simulated clock, where the pty costs nothing; the instrument's turnaround not modelled), the
+table's error against the simulated leg's own (only a simulation knows it), and the verification
+ratio per leg (mean, max, legs passing). Issue 26's goal: the adaptive on-the-fly plan verifies
+every leg of seeds 0-3 within 1.1 x the noise floor in at most 3 min of rig time per leg with the
+read-out; `onthefly-adaptive-passes` is the same plan without its reversal probes (the rule before
+them), for comparison.
 
-    .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans onthefly-adaptive] [--legs 6] [--paper-legs 6]
+    .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans ...] [--jobs 2] [--verify-cycles 20]
+
+Seeds run in parallel processes with `--jobs` (the figures are on the rig's clock, not the wall's).
 """
 
 from __future__ import annotations
@@ -30,7 +44,9 @@ import logging
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -162,6 +178,23 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cyc
             "table_um": table_error_um(table, cfgs, legs), "wall_s": time.monotonic() - wall0}
 
 
+def run_seed(seed: int, plans: tuple[str, ...], legs: int, paper_legs: int, verify_cycles: int) -> list[dict]:
+    """Every plan of `plans` on plant seed `seed` (a process of its own with --jobs): their rows;
+    a plan that fails is reported and left out, the others still run."""
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in plans:
+            n = paper_legs if kind == "paper" else legs
+            try:
+                rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp), verify_cycles))
+            except SystemExit as exc:
+                print(f"  seed {seed} {kind}: NOT measured: {exc}", file=sys.stderr, flush=True)
+                continue
+            print(f"  seed {seed} {kind}: done in {rows[-1]['wall_s']:.0f} s wall", file=sys.stderr, flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
@@ -172,21 +205,17 @@ def main(argv=None) -> int:
     ap.add_argument("--verify-cycles", type=int, default=VERIFY_CYCLES,
                     help=f"cycles of the verification sweep (41 targets; default {VERIFY_CYCLES}; 5 is ISO 230-2's, "
                          "whose ratio scatters too much to tell 1.1 from 1.0: see the module docstring)")
+    ap.add_argument("--jobs", type=int, default=1, help="seeds measured in parallel processes (default 1)")
     args = ap.parse_args(argv)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for seed in args.seeds:
-            for kind in args.plans:
-                n = args.paper_legs if kind == "paper" else args.legs
-                try:
-                    rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp), args.verify_cycles))
-                except SystemExit as exc:  # one plan's failure is reported; the others still run
-                    print(f"  seed {seed} {kind}: {exc}", file=sys.stderr, flush=True)
-                    print(f"seed {seed} {kind}: NOT measured: {exc}")
-                    continue
-                r = rows[-1]
-                print(f"  seed {seed} {kind}: done in {r['wall_s']:.0f} s wall", file=sys.stderr, flush=True)
+    work = partial(run_seed, plans=tuple(args.plans), legs=args.legs, paper_legs=args.paper_legs,
+                   verify_cycles=args.verify_cycles)
+    if args.jobs > 1:
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            per_seed = list(pool.map(work, args.seeds))
+    else:
+        per_seed = [work(seed) for seed in args.seeds]
+    rows = [r for seed_rows in per_seed for r in seed_rows]
     print("Calibration throughput on the simulated rig (time scale 0, jerk-limited legs), verification sweep "
           f"with the pushed tables on a fresh rig (the same noise for every plan): 41 irregular targets x "
           f"{args.verify_cycles} cycles, stop-and-go")
