@@ -225,6 +225,12 @@ def format_report(results: dict[int, LegVerification]) -> str:
     return "\n".join(lines)
 
 
+FEW_VERIFY_CYCLES = 10
+"""Below this many cycles a verification's ratio scatters by about +/- 0.1 for a perfect table."""
+NEAR_LIMIT_RATIO = 1.3
+"""Up to this ratio an ABOVE verdict from few cycles may be the verification's own scatter."""
+
+
 def next_step(r: LegVerification) -> str:
     """What a technician does after an ABOVE verdict for leg `r.leg`: the likeliest cause first."""
     b, a = r.before, r.after
@@ -236,8 +242,14 @@ def next_step(r: LegVerification) -> str:
     if b is not None and b.material_temp_c is not None and a.material_temp_c is not None \
             and abs(a.material_temp_c - b.material_temp_c) >= THERMAL_NOTE_K:
         return "let the leg settle to the calibration's temperature and verify again (see the note above)"
-    return (f"`station diagnose` on the calibration names what the table leaves; calibrate again (more "
-            f"--cycles, or targets every 1 mm: `station sweep --step 1 --cycles 8 --legs {r.leg} ...`), {again}")
+    diagnose = (f"`station diagnose` on the calibration names what the table leaves; calibrate again (more "
+                f"--cycles, or targets every 1 mm: `station sweep --step 1 --cycles 8 --legs {r.leg} ...`), {again}")
+    if a.n_cycles < FEW_VERIFY_CYCLES and r.ratio is not None and r.ratio <= NEAR_LIMIT_RATIO:
+        return (f"a {a.n_cycles}-cycle verification's ratio rests on {2 * a.n_cycles} pass offsets and scatters: a perfect "
+                f"table reads above {ACCEPT_RATIO:g} on about 1 leg in 25 with 5 cycles (docs/onthefly.md, Figures); "
+                f"verify again with more cycles (`station verify --leg {r.leg} --cycles 20 ...`) before calibrating "
+                f"again; if it stays above: {diagnose}")
+    return diagnose
 
 
 # -- the procedure ---------------------------------------------------------------------------------
