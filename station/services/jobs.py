@@ -41,8 +41,11 @@ def run_sweep(
     retry: RetryPolicy = RetryPolicy(),
     serials: Mapping[int, Mapping[str, str]] | None = None,
     serials_file: str | None = None,
+    index: bool = True,
 ) -> RunResult:
-    """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`).
+    """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`), and index the
+    session in the station's catalog (`index` False: not, e.g. the sample sessions, which are
+    made under temporary names and describe no real leg).
 
     `serials`: leg -> identity fields entered for this session (--serial, the Sweep page), on
     top of `serials_file` / [station] serials_file and [legs.N] (station/services/serials.py). The session
@@ -67,7 +70,8 @@ def run_sweep(
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, done_indices=done,
                       retry=retry, session_id=session_id, materials=materials, warnings=identity.warnings)
     # the catalog sink after the recorder: it indexes the session once the recorder closed it
-    return run(procedure, [recorder, CatalogSink(catalog_for(cfg), out), *sinks], control)
+    catalog = [CatalogSink(catalog_for(cfg), out)] if index else []
+    return run(procedure, [recorder, *catalog, *sinks], control)
 
 
 def plan_of_recording(path: str | Path) -> SweepPlan:

@@ -100,7 +100,7 @@ def make_calibration(rig, out: Path, cfg: StationConfig):
          drive_after: lambda: sim.drive_server.inject_fault(drive_leg, "overcurrent")},
         clear_beam=lambda f: sim.laser_server.set_beam_break(beam_leg, False),  # transient: one bad reading
     )
-    return run_sweep(rig, plan, out, cfg, sinks=[sink])
+    return run_sweep(rig, plan, out, cfg, sinks=[sink], index=False)  # samples: no leg's record
 
 
 def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> list[str]:
@@ -123,7 +123,7 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
         lines.append(f"leg {leg}: table of {res.points} points, step {leg_table.step_mm:g} mm, pushed to bank "
                      f"{res.bank} (active), sha256 {res.table_sha256[:12]}")
     plan = iso230_plan((1, 2, 3, 4, 5, 6))
-    result = run_sweep(rig, plan, out, cfg)
+    result = run_sweep(rig, plan, out, cfg, index=False)
     return lines + [f"verification: {result.outcome}, {result.points} points"]
 
 
@@ -133,7 +133,7 @@ def make_fault(rig, out: Path, cfg: StationConfig):
     plan = iso230_plan((1, FAULT_LEG))
     sim = rig.sim
     sink = _injector({FAULT_AFTER_INDEX: lambda: sim.laser_server.set_beam_break(FAULT_LEG, True)})
-    return run_sweep(rig, plan, out, cfg, sinks=[sink])
+    return run_sweep(rig, plan, out, cfg, sinks=[sink], index=False)  # samples: no leg's record
 
 
 def sample_config() -> StationConfig:
