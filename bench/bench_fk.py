@@ -5,7 +5,11 @@ Both start from the home pose, use the same analytic Jacobian and must bring eve
 within TOL_MM of the request; the script checks that each did (and how close each pose came back)
 before printing poses per second and the ratio.
 
-    .venv/bin/python bench/bench_fk.py [--poses N] [--scipy-poses M]
+Rounds of both solvers one after the other (`--rounds`, default 5): the ratio of each side's
+best time (its speed on a quiet machine), and the ratio round by round (min, median, max: what
+a loaded machine does to it).
+
+    .venv/bin/python bench/bench_fk.py [--poses N] [--scipy-poses M] [--rounds 5]
 """
 
 from __future__ import annotations
@@ -48,22 +52,13 @@ def scipy_fk(geo, lengths: np.ndarray, xtol: float) -> tuple[np.ndarray, np.ndar
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--poses", type=int, default=20000, help="poses for the vectorised solver")
-    ap.add_argument("--scipy-poses", type=int, default=500, help="poses for scipy (one call each)")
-    ap.add_argument("--repeat", type=int, default=3, help="best of this many runs")
+    ap.add_argument("--scipy-poses", type=int, default=300, help="poses for scipy (one call each)")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds of both solvers (default 5); best of them")
     args = ap.parse_args()
 
     geo = default_geometry()
     poses = workspace_poses(geo, args.poses, seed=1)
     lengths = inverse_kinematics(geo, poses)
-
-    best = np.inf
-    for _ in range(args.repeat):
-        t0 = time.perf_counter()
-        res = forward_kinematics(geo, lengths, tol_mm=TOL_MM, check_stroke=False)
-        best = min(best, time.perf_counter() - t0)
-    ok = res.status == FkStatus.CONVERGED
-    vec_rate = args.poses / best
-    vec_err = np.abs(res.poses_mm_rad[ok] - poses[ok])
 
     # Equal tolerance: scipy has no leg-residual stop, so use its loosest step tolerance (xtol)
     # at which every pose of a trial set ends within TOL_MM, as the vectorised solver must.
@@ -72,13 +67,23 @@ def main() -> None:
         if np.all(scipy_fk(geo, trial, xtol)[1] <= TOL_MM):
             break
     sp_poses = poses[: args.scipy_poses]
-    sp_best = np.inf
-    for _ in range(max(1, args.repeat - 1)):
+    # rounds of both, one after the other: a machine whose load changes during the run slows
+    # both sides of a round alike; each side's best over the rounds is its unloaded speed
+    vec_times, sp_times = [], []
+    for _ in range(args.rounds):
+        t0 = time.perf_counter()
+        res = forward_kinematics(geo, lengths, tol_mm=TOL_MM, check_stroke=False)
+        vec_times.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         sp, sp_resid = scipy_fk(geo, lengths[: args.scipy_poses], xtol)
-        sp_best = min(sp_best, time.perf_counter() - t0)
+        sp_times.append(time.perf_counter() - t0)
+    best, sp_best = min(vec_times), min(sp_times)
+    ok = res.status == FkStatus.CONVERGED
+    vec_rate = args.poses / best
+    vec_err = np.abs(res.poses_mm_rad[ok] - poses[ok])
     sp_rate = args.scipy_poses / sp_best
     sp_err = np.abs(sp - sp_poses)
+    per_round = sorted((args.poses / v) / (args.scipy_poses / t) for v, t in zip(vec_times, sp_times))
 
     print(f"forward kinematics, default geometry, tolerance {TOL_MM:g} mm on every leg length")
     print(
@@ -91,7 +96,8 @@ def main() -> None:
         f"within tolerance {(sp_resid <= TOL_MM).sum()}/{args.scipy_poses}, max residual {sp_resid.max():.1e} mm, "
         f"max pose error {sp_err[:, :3].max():.1e} mm / {sp_err[:, 3:].max():.1e} rad"
     )
-    print(f"  ratio vectorised / scipy: {vec_rate / sp_rate:.0f}x")
+    print(f"  ratio vectorised / scipy: {vec_rate / sp_rate:.0f}x (best times of {args.rounds} rounds); per round "
+          f"min {per_round[0]:.0f}x, median {per_round[len(per_round) // 2]:.0f}x, max {per_round[-1]:.0f}x")
 
 
 if __name__ == "__main__":
