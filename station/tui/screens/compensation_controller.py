@@ -113,9 +113,11 @@ class CompensationController:
         self.screen.post_message(DriveTablesRead(out))
 
     # -- push and rollback ---------------------------------------------------------------------------
-    def push(self, leg: int, table, source: dict | None, table_name: str, accept_implausible: bool = False) -> None:
+    def push(self, leg: int, table, source: dict | None, table_name: str | None = None,
+             accept_implausible: bool = False) -> None:
         """Push `table` (a procedures.compensation.table.LegTable) to `leg`'s drive after a confirmation;
-        values that look like a unit slip are refused unless `accept_implausible` (`table_name` names it)."""
+        values that look like a unit slip are refused unless `accept_implausible` (`table_name` names it;
+        default: the source's path)."""
         from station.services.table_jobs import push_job
 
         self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
@@ -123,7 +125,8 @@ class CompensationController:
             leg_serial=audit.leg_serials.get(leg), accept_implausible=accept_implausible, table_name=table_name,
             override=UI_OVERRIDE), again=lambda: self.push(leg, table, source, table_name, accept_implausible=True))
 
-    def push_all(self, tables: dict, sources: dict[int, dict], table_name: str, accept_implausible: bool = False) -> None:
+    def push_all(self, tables: dict, sources: dict[int, dict], table_name: str | None = None,
+                 accept_implausible: bool = False) -> None:
         """Push every leg's table after one confirmation (procedures.compensation.push.push_legs_procedure)."""
         from station.services.table_jobs import push_legs_job
 
