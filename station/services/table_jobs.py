@@ -148,13 +148,13 @@ def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: st
     """Push one leg's table to its drive (procedures.compensation.push.push_procedure); `leg_serial`: the
     serial the leg carries (config), which the table's must match. Corrections that look like nm
     are refused first (`check_push_values`; `table_name` names the table in the refusal)."""
-    refusal, warnings, source = _plausible_push({axis.leg: axis}, {axis.leg: table}, {axis.leg: source}, audit=audit,
-                                                drive_url=drive_url, sinks=sinks, catalog=catalog,
-                                                accept_implausible=accept_implausible, table_name=table_name,
-                                                override=override)
+    refusal, warnings, checked = _plausible_push({axis.leg: axis}, {axis.leg: table}, {axis.leg: source}, audit=audit,
+                                                 drive_url=drive_url, sinks=sinks, catalog=catalog,
+                                                 accept_implausible=accept_implausible, table_name=table_name,
+                                                 override=override)
     if refusal is not None:
         return refusal
-    job = run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source[axis.leg],
+    job = run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=checked[axis.leg],
                                        leg_serial=leg_serial), audit, sinks, catalog=catalog)
     job.warnings = warnings
     return job

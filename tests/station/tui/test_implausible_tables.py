@@ -18,7 +18,7 @@ from procedures.compensation.audit import read_entries
 from procedures.compensation.push import quantize, table_sha256
 from station.tui.app import StationApp
 from station.tui.screens.common import ConfirmScreen
-from tests.station.tui.steps import open_session
+from tests.station.tui.steps import connect_and_fit
 from tests.tooling import slipped_model
 
 pytestmark = pytest.mark.timeout(120)
@@ -45,9 +45,7 @@ async def _implausible(path, cfg, size, wait_until, notes, connected):
     audit_path = Path(cfg.recordings_dir) / "audit.jsonl"
     app = StationApp(cfg, time_scale=0.0)
     async with app.run_test(size=size) as pilot:
-        await connected(pilot)
-        await open_session(pilot, wait_until, "f3", path)
-        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        await connect_and_fit(pilot, wait_until, connected, path)
         app.analysis = replace(app.analysis, model=slipped_model(app.analysis.model))
         before = _held(app)
         # the page makes the table on arrival: refused, said on the page, and a dialog offers to accept it
