@@ -105,3 +105,32 @@ def write_identified_session(path, points, *, station_id="bench-1", serial="HX-0
         w.append_points(points)
         w.finish("completed")
     return path
+
+
+class _ScaledFit:
+    """A leg fit predicting `factor` times what `fit` predicts; everything else is `fit`'s."""
+
+    def __init__(self, fit, factor: float) -> None:
+        self._fit, self._factor = fit, float(factor)
+
+    def __getattr__(self, name):
+        return getattr(self._fit, name)
+
+    def predict_um(self, position_mm, direction=1):
+        return self._factor * self._fit.predict_um(position_mm, direction)
+
+
+def slipped_model(model, peak_um: float = 180.0):
+    """`model` (procedures.fit.LegErrorModel) as if its error had been read in the wrong unit: every
+    leg's prediction scaled so its largest correction is `peak_um` (beyond 100 um, most likely nm,
+    yet within the simulated drive's +/-300 um), while its recorded error span stays the real one."""
+    import numpy as np
+
+    from procedures.fit.model import LegErrorModel
+
+    legs = {}
+    for leg, fit in model.legs.items():
+        x = np.linspace(fit.stroke_mm[0], fit.stroke_mm[1], 201)
+        worst = max(float(np.max(np.abs(fit.predict_um(x, d)))) for d in (1, -1))
+        legs[leg] = _ScaledFit(fit, peak_um / worst)
+    return LegErrorModel(model.method, legs, model.source, model.options, model.created_utc, model.identity)

@@ -7,8 +7,9 @@ ever spanned comes from an extrapolated model, or a model of something else. Suc
 refused, naming where it is (file, line, field) and the slip it looks like, unless the user
 states that it is right (`--accept-implausible`); then it is kept, with a warning line.
 
-Front-end independent: `station import`, `station table` and the terminal UI call the same
-checks and `settle`.
+Front-end independent: `station import` (procedures.io.csv_io), and `station table`, `station push`
+and the terminal UI's Compensation page (through station.services.table_jobs) call the same checks
+and `settle`; each front end says how its user accepts the values (`Override`).
 """
 
 from __future__ import annotations
@@ -37,6 +38,25 @@ meets both directions), not 1.5 times as much: beyond, it extrapolates or is not
 
 CORRECTION_SPAN_MARGIN_UM = 0.5
 """...plus this, so that a leg with almost no error (a compensated one) is not flagged for noise."""
+
+
+@dataclass(frozen=True)
+class Override:
+    """How a front end lets its user accept implausible values: `how` the refusal says to do it,
+    `kept` the warning line names what kept them. The default is the command line's option."""
+
+    how: str = f"add {ACCEPT_OPTION}"
+    kept: str = ACCEPT_OPTION
+
+
+class ImplausibleError(InputError):
+    """A refusal of implausible values (`settle`): bad input the user may override, unlike the
+    other InputErrors. `findings`: what was refused; `leg`: whose values, when the caller knows."""
+
+    def __init__(self, message: str, findings: Sequence["Implausible"] = (), leg: int | None = None) -> None:
+        super().__init__(message)
+        self.findings = tuple(findings)
+        self.leg = leg
 
 
 @dataclass(frozen=True)
@@ -115,14 +135,15 @@ def check_correction(leg: int, correction_span_um: float, error_span_um: float, 
                        "error's wiggles) or is not this leg's; a table must never add more error than it removes")
 
 
-def settle(found: Sequence[Implausible], accept: bool, what: str = "nothing was written") -> list[str]:
-    """Refuse `found` (InputError: the first, how many more, how to accept them), or, when the
-    user accepted them, their warning lines. [] when nothing was found. `what`: what the refusal
-    adds ("" when the caller says it itself)."""
+def settle(found: Sequence[Implausible], accept: bool, what: str = "nothing was written",
+           override: Override = Override()) -> list[str]:
+    """Refuse `found` (ImplausibleError: the first, how many more, how to accept them), or, when
+    the user accepted them, their warning lines. [] when nothing was found. `what`: what the
+    refusal adds ("" when the caller says it itself); `override`: the front end's way to accept."""
     if not found:
         return []
     if not accept:
         more = f" (and {len(found) - 1} more implausible value(s))" if len(found) > 1 else ""
-        raise InputError(f"{found[0].text()}{more}; correct it, or add {ACCEPT_OPTION} if the values are right"
-                         + (f"; {what}" if what else ""))
-    return [f"warning: {f.text()} (kept: {ACCEPT_OPTION})" for f in found]
+        raise ImplausibleError(f"{found[0].text()}{more}; correct it, or {override.how} if the values are right"
+                               + (f"; {what}" if what else ""), found)
+    return [f"warning: {f.text()} (kept: {override.kept})" for f in found]

@@ -11,7 +11,7 @@ import argparse
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditLog
 from procedures.engine.errors import InputError
-from procedures.io.plausibility import check_table_values, settle
+from procedures.io.plausibility import ImplausibleError
 from procedures.compensation.push import PushPlan
 from procedures.engine.states import Action
 from station.catalog.writer import catalog_for
@@ -30,6 +30,7 @@ from station.commands._table_cli import (
 from station.services.identity import configured_serials
 from station.services.devices import DriverError
 from station.services.table_jobs import (
+    check_push_values,
     controller_refusal,
     load_leg_table,
     push_job,
@@ -75,17 +76,15 @@ def run(args) -> int:
     controller = controller_refusal(cfg, legs, Action.PUSH)
     if controller:
         return refuse(args, cfg, audit, Action.PUSH, controller[0], InputError(controller[1]), sources[controller[0]])
-    for leg, t in tables.items():  # a unit slip (nm in the um columns) never reaches a drive unasked
-        try:
-            limit_um = leg_table_spec(cfg, leg).max_correction_um  # what its holder takes, without connecting
-        except InputError:
-            limit_um = float("inf")
-        found = check_table_values(t, str(args.table), limit_um)
-        try:
-            for line in settle([found] if found else [], args.accept_implausible, ""):  # refuse() adds it
-                print(line)
-        except InputError as exc:
-            return refuse(args, cfg, audit, Action.PUSH, leg, exc, sources[leg])
+    try:  # a unit slip (nm in the um columns) never reaches a drive unasked: refused before connecting,
+        # against what each leg's holder takes by the config (the push job checks again against the drive's)
+        accepted = check_push_values(tables, str(args.table), {leg: _configured_limit_um(cfg, leg) for leg in legs},
+                                     accept_implausible=args.accept_implausible)
+    except ImplausibleError as exc:
+        return refuse(args, cfg, audit, Action.PUSH, exc.leg, exc, sources[exc.leg])
+    warned = [line for lines in accepted.values() for line in lines]
+    for line in warned:
+        print(line)
     print(f"drive: {drive_text(cfg)}")
     for leg in legs:  # the plan names every leg's target; said first where it is not the drive
         if cfg.compensation.target_of(leg) != "drive":
@@ -99,11 +98,15 @@ def run(args) -> int:
             job = push_job(drive.axis, tables[leg], audit=audit, drive_url=drive.url, source=sources[leg],
                            confirm=_with_audit_line(prompt(args.yes), audit), leg_serial=serials.get(leg),
                            sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…), rows of leg {leg}")],
-                           catalog=catalog_for(cfg))
+                           catalog=catalog_for(cfg), accept_implausible=args.accept_implausible, table_name=str(args.table))
         else:
             job = push_legs_job(drive.axes, tables, audit=audit, drive_url=drive.url, sources=sources,
                                 confirm=_with_audit_line(prompt(args.yes), audit), leg_serials=serials,
-                                sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…)")], catalog=catalog_for(cfg))
+                                sinks=[PlanPrinter(f"table: {args.table} (sha256 {sha[:12]}…)")], catalog=catalog_for(cfg),
+                                accept_implausible=args.accept_implausible, table_name=str(args.table))
+    for line in job.warnings:  # found only against the drive's own limit
+        if line not in warned:
+            print(line)
     for end in job.of(ev.OperationFinished):
         result = end.result
         if end.leg is not None and result is not None:
@@ -126,6 +129,14 @@ def run(args) -> int:
     print(f"next: station verify --leg {which} {verify_where} --before CALIBRATION.h5 --out VERIFY.h5"
           f"   |   undo: station rollback --leg N {undo_where}")
     return 0
+
+
+def _configured_limit_um(cfg, leg: int) -> float:
+    """What leg `leg`'s table holder takes by the config, without connecting (inf when unknown)."""
+    try:
+        return leg_table_spec(cfg, leg).max_correction_um
+    except InputError:
+        return float("inf")
 
 
 def _with_audit_line(ask, audit: AuditLog):

@@ -14,10 +14,8 @@ from procedures.fit import load_model
 from procedures.acquisition.plans import parse_legs
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
 from procedures.io.outputs import check_output_file
-from procedures.io.plausibility import check_correction, settle
-from procedures.compensation.table import make_table
 from station.services.config import load_config
-from station.services.table_jobs import write_table
+from station.services.table_jobs import make_checked_table, write_table
 from station.services.wiring import drive_table_spec
 
 NAME = "table"
@@ -71,20 +69,6 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
     return list(leg_paths(out, legs, module.SUFFIX, stem=getattr(module, "STEM", "leg{leg}")).values())
 
 
-def implausible_corrections(model, table) -> list:
-    """The legs of `table` whose corrections span more than the error `model` was fitted to
-    (procedures.io.plausibility.check_correction)."""
-    source = model.source.get("path") or "the model's recording"
-    found = []
-    for leg, t in table.legs.items():
-        values = np.concatenate([np.asarray(t.error_fwd_um, float), np.asarray(t.error_rev_um, float)])
-        finding = check_correction(leg, float(values.max() - values.min()), float(model.legs[leg].stats.range_before_um),
-                                   source)
-        if finding is not None:
-            found.append(finding)
-    return found
-
-
 def run(args) -> int:
     model = load_model(args.model)
     legs = parse_legs(args.legs) if args.legs else None
@@ -111,8 +95,8 @@ def run(args) -> int:
             print(f"note: the drive of {args.profile} holds no compensation table; the table is checked for the "
                   "station's table store (compensation target station, docs/compensation.md); for the "
                   "controller use --format linuxcnc")
-    table = make_table(model, args.step, limits, legs=legs)
-    warnings = settle(implausible_corrections(model, table), args.accept_implausible)
+    # the unit-slip check is the service's, as on the UI's Compensation page
+    table, warnings = make_checked_table(model, args.step, limits, legs=legs, accept_implausible=args.accept_implausible)
     if args.format == "csv":
         written = [write_table(table, args.out, load_config(args.config), limits)]
     elif args.format in controllers.FORMATS:

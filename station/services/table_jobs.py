@@ -4,6 +4,12 @@ Each runs a procedure (procedures.compensation.push, procedures.compensation.ver
 sink (the only writer of the audit log) and the front end's own sinks, and returns what ended
 it. The command line and the terminal UI differ only in how they ask for confirmation and how
 they show the events, so they give the same refusals, audit lines and figures.
+
+The unit-slip checks (procedures.io.plausibility) are made here too: a table correcting more than
+the error it was made from (`make_checked_table`) and a push of corrections beyond 100 um, most
+likely nm (`push_job`, `push_legs_job`, before anything reaches a drive), are refused unless the
+front end passes `accept_implausible=True` (the command line's --accept-implausible, the UI's
+confirmation dialog).
 """
 
 from __future__ import annotations
@@ -11,7 +17,9 @@ from __future__ import annotations
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable, Iterator, Mapping
+
+import numpy as np
 
 from drivers.errors import DriverError
 from drivers.interfaces import ServoAxis, TableSpec
@@ -30,11 +38,19 @@ from procedures.compensation.push import (
     rollback_procedure,
     table_sha256,
 )
+from procedures.io.plausibility import (
+    Implausible,
+    ImplausibleError,
+    Override,
+    check_correction,
+    check_table_values,
+    settle,
+)
 from procedures.io.recording.reader import file_sha256, read_session
 from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import ListSink, RunResult, Sink, run
 from procedures.engine.states import Action, AuditOutcome
-from procedures.compensation.table import CompTable, LegTable, read_table_csv, write_table_csv
+from procedures.compensation.table import CompTable, LegTable, make_table, read_table_csv, write_table_csv
 from procedures.compensation.verify import verify_procedure
 from station import __version__
 from station.catalog.store import LOCAL_NAME, Catalog
@@ -54,6 +70,8 @@ class JobOutcome:
     events: list[ev.Event] = field(default_factory=list)
     audit_problems: list[str] = field(default_factory=list)
     run: RunResult | None = None
+    implausible: bool = False  # refused for values that look like a unit slip: the user may accept them
+    warnings: list[str] = field(default_factory=list)  # implausible values the user accepted, one line each
 
     @property
     def outcome(self) -> str:
@@ -125,19 +143,39 @@ def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]
 
 def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: str, source: dict[str, Any] | None,
              confirm: Confirm | None, sinks: Iterable[Sink] = (), leg_serial: str | None = None,
-             catalog: Catalog | None = None) -> JobOutcome:
+             catalog: Catalog | None = None, accept_implausible: bool = False, table_name: str | None = None,
+             override: Override = Override()) -> JobOutcome:
     """Push one leg's table to its drive (procedures.compensation.push.push_procedure); `leg_serial`: the
-    serial the leg carries (config), which the table's must match."""
-    return run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=source,
-                                        leg_serial=leg_serial), audit, sinks, catalog=catalog)
+    serial the leg carries (config), which the table's must match. Corrections that look like nm
+    are refused first (`check_push_values`; `table_name` names the table in the refusal)."""
+    refusal, warnings, checked = _plausible_push({axis.leg: axis}, {axis.leg: table}, {axis.leg: source}, audit=audit,
+                                                 drive_url=drive_url, sinks=sinks, catalog=catalog,
+                                                 accept_implausible=accept_implausible, table_name=table_name,
+                                                 override=override)
+    if refusal is not None:
+        return refusal
+    job = run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=checked[axis.leg],
+                                       leg_serial=leg_serial), audit, sinks, catalog=catalog)
+    job.warnings = warnings
+    return job
 
 
 def push_legs_job(axes: dict[int, ServoAxis], tables: dict[int, LegTable], *, audit: AuditLog, drive_url: str,
                   sources: dict[int, dict[str, Any]] | None, confirm, sinks: Iterable[Sink] = (),
-                  leg_serials: dict[int, str] | None = None, catalog: Catalog | None = None) -> JobOutcome:
-    """Push several legs' tables after one confirmation (procedures.compensation.push.push_legs_procedure)."""
-    return run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources,
-                                             leg_serials=leg_serials), audit, sinks, catalog=catalog)
+                  leg_serials: dict[int, str] | None = None, catalog: Catalog | None = None,
+                  accept_implausible: bool = False, table_name: str | None = None,
+                  override: Override = Override()) -> JobOutcome:
+    """Push several legs' tables after one confirmation (procedures.compensation.push.push_legs_procedure);
+    corrections that look like nm in any leg are refused first, nothing written to any leg."""
+    refusal, warnings, sources = _plausible_push(axes, tables, sources or {}, audit=audit, drive_url=drive_url,
+                                                 sinks=sinks, catalog=catalog, accept_implausible=accept_implausible,
+                                                 table_name=table_name, override=override)
+    if refusal is not None:
+        return refusal
+    job = run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources,
+                                            leg_serials=leg_serials), audit, sinks, catalog=catalog)
+    job.warnings = warnings
+    return job
 
 
 def rollback_job(axis: ServoAxis, *, audit: AuditLog, drive_url: str, confirm: Confirm | None,
@@ -154,6 +192,80 @@ def refusal_job(action: Action, leg: int, reason: BaseException | str, *, audit:
     have), logged and reported like any other."""
     return run_table_job(refused(action, leg, reason, drive_url=drive_url, source=source), audit, sinks,
                          catalog=catalog)
+
+
+# -- plausibility: a likely unit slip reaches neither a table file nor a drive unasked ------------------
+
+def implausible_corrections(model, table: CompTable) -> list[Implausible]:
+    """The legs of `table` whose corrections span more than the error `model` was fitted to
+    (procedures.io.plausibility.check_correction)."""
+    source = model.source.get("path") or "the model's recording"
+    found = []
+    for leg, t in table.legs.items():
+        values = np.concatenate([np.asarray(t.error_fwd_um, float), np.asarray(t.error_rev_um, float)])
+        finding = check_correction(leg, float(values.max() - values.min()), float(model.legs[leg].stats.range_before_um),
+                                   source)
+        if finding is not None:
+            found.append(finding)
+    return found
+
+
+def make_checked_table(model, step_mm: float | None = None, spec: TableSpec | None = None, *,
+                       legs: Iterable[int] | None = None, accept_implausible: bool = False,
+                       override: Override = Override()) -> tuple[CompTable, list[str]]:
+    """The table of `model` (procedures.compensation.table.make_table) and the warning lines of what was
+    accepted; ImplausibleError (nothing is made) when its corrections span far more than the
+    recorded error did, unless `accept_implausible`. Both front ends make tables through this."""
+    table = make_table(model, step_mm, spec, legs=legs)
+    return table, settle(implausible_corrections(model, table), accept_implausible, override=override)
+
+
+def check_push_values(tables: Mapping[int, LegTable], table_name: str, limits_um: Mapping[int, float], *,
+                      accept_implausible: bool = False, override: Override = Override()) -> dict[int, list[str]]:
+    """Refuse (ImplausibleError, its `leg` set) a leg's corrections beyond 100 um and within
+    `limits_um[leg]` (what its holder takes; beyond, the push's own refusal), most likely nm in
+    the um columns, unless `accept_implausible`; else each leg's warning lines of what was accepted."""
+    warnings: dict[int, list[str]] = {}
+    for leg, t in tables.items():
+        found = check_table_values(t, table_name, limits_um.get(leg, float("inf")))
+        try:
+            lines = settle([found] if found else [], accept_implausible, "", override)  # the refusal adds it
+        except ImplausibleError as exc:
+            exc.leg = leg
+            raise
+        if lines:
+            warnings[leg] = lines
+    return warnings
+
+
+def _limit_um(axis: ServoAxis) -> float:
+    """The largest correction `axis`'s table holder takes (inf when unknown: the push says why)."""
+    try:
+        spec = axis.table_spec()
+    except Exception:  # noqa: BLE001 (the push reads it again and refuses with the drive's own reason)
+        return float("inf")
+    return spec.max_correction_um if spec is not None else float("inf")
+
+
+def _plausible_push(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, Any], *,
+                    audit: AuditLog, drive_url: str, sinks: Iterable[Sink], catalog: Catalog | None,
+                    accept_implausible: bool, table_name: str | None, override: Override):
+    """(refusal job, [], sources) when a leg's values look like a unit slip and were not accepted,
+    its audit line written and nothing sent to a drive; else (None, warning lines, the sources
+    with what each leg's user accepted, for its audit entries)."""
+    first = (sources.get(min(tables)) or {}) if tables else {}
+    name = table_name or str(first.get("path") or "the table")
+    try:
+        accepted = check_push_values(tables, name, {leg: _limit_um(axes[leg]) for leg in tables if leg in axes},
+                                     accept_implausible=accept_implausible, override=override)
+    except ImplausibleError as exc:
+        job = refusal_job(Action.PUSH, exc.leg, exc, audit=audit, drive_url=drive_url, source=sources.get(exc.leg),
+                          sinks=sinks, catalog=catalog)
+        job.implausible = True
+        return job, [], dict(sources)
+    out = {leg: ({**(s or {}), "implausible_accepted": accepted[leg]} if leg in accepted else s)
+           for leg, s in sources.items()}
+    return None, [line for lines in accepted.values() for line in lines], out
 
 
 # -- verify ------------------------------------------------------------------------------------------

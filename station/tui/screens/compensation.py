@@ -2,22 +2,26 @@
 table active in each drive, export, and push / verify / rollback with a confirmation naming the
 leg and the drive.
 
-Tables are made by procedures.compensation.table.make_table (the same as `station table`); errors are
-measured minus commanded, um, which the drive subtracts. Push, verify and rollback run the
+Tables are made by station.services.table_jobs.make_checked_table (the same as `station table`); errors
+are measured minus commanded, um, which the drive subtracts. Push, verify and rollback run the
 jobs of station.services.table_jobs through the controller (compensation_controller), exactly as the
-command line does: the same procedures, refusals and audit entries.
+command line does: the same procedures, refusals and audit entries. A table or push the service
+refuses as a likely unit slip (procedures.io.plausibility) is said on the page; a confirmation
+dialog then lets the user accept it (the command line's --accept-implausible).
 """
 
 from __future__ import annotations
 
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, VerticalScroll
 from textual.widgets import Button, DataTable, Input, Label, Static
 
 from station.tui.errors import describe
-from station.tui.screens.common import StationScreen
+from station.tui.screens.common import ConfirmScreen, StationScreen
 from station.tui.screens.compensation_controller import (
+    UI_OVERRIDE,
     CompensationController,
     DriveTablesRead,
     TableJobDone,
@@ -69,6 +73,7 @@ class CompensationScreen(StationScreen):
         self.drive_tables: dict[int, DriveTable] = {}
         self.plot_leg: int | None = None
         self.verify_text = ""
+        self.slip_text = ""  # a unit-slip refusal, or the warnings of what the user accepted
         self._show()
 
     def size_changed(self) -> None:
@@ -94,27 +99,44 @@ class CompensationScreen(StationScreen):
                 return spec
         return drive_table_spec(self.app.cfg.drive.profile or None)
 
-    def action_make_table(self) -> None:
-        from procedures.compensation.table import make_table
+    def action_make_table(self, accept_implausible: bool = False) -> None:
+        from procedures.io.plausibility import ImplausibleError
+        from station.services.table_jobs import make_checked_table
 
         a = self.app.analysis
         if a is None:
             self.notify("No model yet: fit one on the Results screen (F3, then f).", severity="warning")
             return
         text = self.query_one("#comp-step", Input).value.strip()
+        refused = None
         try:
             step = float(text) if text else None
-            table = make_table(a.model, step_mm=step, spec=self._spec())
+            table, warnings = make_checked_table(a.model, step, self._spec(), accept_implausible=accept_implausible,
+                                                 override=UI_OVERRIDE)
             # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s
             serials = {leg: s for leg in table.legs if (s := a.session.identity.leg_serial(leg))}
             self.table = type(table)(table.legs, serials or table.serials)
+            self.slip_text = "\n".join(warnings)
+        except ImplausibleError as exc:  # a likely unit slip: said here, then the user may accept it
+            self.table, refused = None, exc
+            self.slip_text = f"table refused: {exc}"
         except ValueError as exc:
             self.table = None
             self.notify(describe(exc, "cannot make the table"), severity="error", timeout=12)
         self.table_model_id = id(a.model)
         self._show()
-        if self.table is not None and self.app.rig is not None and not self.app.sweep.active:
+        if refused is not None:
+            self.notify(str(refused), title="Table refused", severity="error", timeout=12)
+            self._offer_override(f"[b]Make this table anyway?[/b]\n\n{escape(str(refused))}", "Make anyway",
+                                 lambda: self.action_make_table(accept_implausible=True))
+        elif self.table is not None and self.app.rig is not None and not self.app.sweep.active:
             self.action_read_drives()
+
+    def _offer_override(self, question: str, yes: str, accept) -> None:
+        """The deliberate way past a unit-slip refusal: `accept()` only on an explicit yes."""
+        question += ("\n\nOnly if the values are right: they are kept as they are, with a warning"
+                     + (" and a note in the audit log." if yes.startswith("Push") else "."))
+        self.app.push_screen(ConfirmScreen(question, yes=yes, no="Cancel"), lambda ok: accept() if ok else None)
 
     def action_save_csv(self) -> None:
         from station.services.table_jobs import write_table
@@ -171,7 +193,7 @@ class CompensationScreen(StationScreen):
             return
         if not self._ready("Pushing a table"):
             return
-        self.jobs.push(leg, self.table.legs[leg], self._source(leg))
+        self.jobs.push(leg, self.table.legs[leg], self._source(leg), self._table_name())
 
     def action_push_all(self) -> None:
         """Every leg of the table, one confirmation listing each drive and what it gets."""
@@ -180,7 +202,13 @@ class CompensationScreen(StationScreen):
             return
         if not self._ready("Pushing the tables"):
             return
-        self.jobs.push_all(dict(self.table.legs), {leg: self._source(leg) for leg in self.table.legs})
+        self.jobs.push_all(dict(self.table.legs), {leg: self._source(leg) for leg in self.table.legs},
+                           self._table_name())
+
+    def _table_name(self) -> str:
+        """How a refusal names the table on show: the model it was made from."""
+        a = self.app.analysis
+        return f"the table of the {a.method} model of {a.path.name}" if a is not None else "the table"
 
     def _source(self, leg: int) -> dict | None:
         a = self.app.analysis
@@ -202,7 +230,19 @@ class CompensationScreen(StationScreen):
         text, severity = self.jobs.notice(message)
         self.notify(text, title=message.action.capitalize(), severity=severity,  # type: ignore[arg-type]
                     timeout=12 if severity == "error" else 6)
+        if message.accept_again is not None or (message.job is not None and message.job.warnings):
+            self.slip_text = text  # the unit-slip refusal (or what was accepted) stays on the page
+            self._show()
         self._show_audit()
+        if message.accept_again is not None:
+            again = message.accept_again
+
+            def push_anyway() -> None:
+                if self._ready("Pushing a table"):
+                    again()
+
+            self._offer_override(f"[b]Push anyway?[/b]\n\n{escape(message.job.finished.message)}", "Push anyway",
+                                 push_anyway)
         if self.app.rig is not None and not self.app.sweep.active:
             self.action_read_drives()
 
@@ -266,7 +306,7 @@ class CompensationScreen(StationScreen):
             src.update(f"model: [b]{a.method}[/b] fitted on {a.path.name}"
                        + (f" (saved {a.model_path.name})" if a.model_path else "") + self._targets_text())
         self.query_one(LegTablesView).show(self.table, self.drive_tables)
-        self.query_one("#comp-status", Static).update(self.verify_text.rstrip())
+        self.query_one("#comp-status", Static).update("\n".join(t for t in (escape(self.slip_text), self.verify_text.rstrip()) if t))
         self._show_audit()
         self._show_plots()
 

@@ -15,6 +15,7 @@ from textual.message import Message
 from procedures.compensation.audit import AuditLog
 from procedures.compensation.push import PushPlan
 from procedures.engine.states import Action, AuditOutcome
+from procedures.io.plausibility import Override
 from station.tui.errors import describe
 from station.tui.messages import Notice
 from station.tui.screens.common import ConfirmScreen
@@ -23,6 +24,9 @@ from station.tui.screens.compensation_widgets import DriveTable
 if TYPE_CHECKING:  # pragma: no cover
     from station.tui.app import StationApp
 
+
+UI_OVERRIDE = Override(how="confirm it in the dialog that follows", kept="confirmed in the dialog")
+"""How the page lets the user accept implausible values (the command line's --accept-implausible)."""
 
 RIG_WAIT_S = 5.0
 """How long an action waits for the rig (a status poll, another action) before saying it is busy."""
@@ -36,14 +40,16 @@ class DriveTablesRead(Message):
 
 class TableJobDone(Message):
     """A push or rollback ended, whichever way (`job`: station.services.table_jobs.JobOutcome, or None
-    with `error` when it could not run)."""
+    with `error` when it could not run). `accept_again`: for a push refused for implausible values,
+    the same push with them accepted (started only after the user confirms it)."""
 
-    def __init__(self, action: Action, leg: int, job: Any = None, error: str = "") -> None:
+    def __init__(self, action: Action, leg: int, job: Any = None, error: str = "", accept_again=None) -> None:
         super().__init__()
         self.action = action
         self.leg = leg
         self.job = job
         self.error = error
+        self.accept_again = accept_again
 
 
 class VerificationDone(Message):
@@ -107,23 +113,30 @@ class CompensationController:
         self.screen.post_message(DriveTablesRead(out))
 
     # -- push and rollback ---------------------------------------------------------------------------
-    def push(self, leg: int, table, source: dict | None) -> None:
-        """Push `table` (a procedures.compensation.table.LegTable) to `leg`'s drive after a confirmation."""
+    def push(self, leg: int, table, source: dict | None, table_name: str | None = None,
+             accept_implausible: bool = False) -> None:
+        """Push `table` (a procedures.compensation.table.LegTable) to `leg`'s drive after a confirmation;
+        values that look like a unit slip are refused unless `accept_implausible` (`table_name` names it;
+        default: the source's path)."""
         from station.services.table_jobs import push_job
 
         self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
             axis, table, audit=audit, drive_url=url, source=source, confirm=self.confirm,
-            leg_serial=audit.leg_serials.get(leg)))
+            leg_serial=audit.leg_serials.get(leg), accept_implausible=accept_implausible, table_name=table_name,
+            override=UI_OVERRIDE), again=lambda: self.push(leg, table, source, table_name, accept_implausible=True))
 
-    def push_all(self, tables: dict, sources: dict[int, dict]) -> None:
+    def push_all(self, tables: dict, sources: dict[int, dict], table_name: str | None = None,
+                 accept_implausible: bool = False) -> None:
         """Push every leg's table after one confirmation (procedures.compensation.push.push_legs_procedure)."""
         from station.services.table_jobs import push_legs_job
 
         def start(axes, audit, url):
             return push_legs_job(axes, tables, audit=audit, drive_url=url, sources=sources, confirm=self.confirm_all,
-                                 leg_serials=audit.leg_serials)
+                                 leg_serials=audit.leg_serials, accept_implausible=accept_implausible,
+                                 table_name=table_name, override=UI_OVERRIDE)
 
-        self._table_job(Action.PUSH, None, start, legs=tuple(sorted(tables)))
+        self._table_job(Action.PUSH, None, start, legs=tuple(sorted(tables)),
+                        again=lambda: self.push_all(tables, sources, table_name, accept_implausible=True))
 
     def rollback(self, leg: int) -> None:
         from station.services.table_jobs import rollback_job
@@ -131,9 +144,10 @@ class CompensationController:
         self._table_job(Action.ROLLBACK, leg, lambda axis, audit, url: rollback_job(
             axis, audit=audit, drive_url=url, confirm=self.confirm))
 
-    def _table_job(self, action: Action, leg: int | None, start, legs: tuple[int, ...] = ()) -> None:
+    def _table_job(self, action: Action, leg: int | None, start, legs: tuple[int, ...] = (), again=None) -> None:
         """Run `start(axis or axes, audit, drive_url)` in a worker holding the rig; `legs` for
-        several legs (then `start` gets the axes by leg)."""
+        several legs (then `start` gets the axes by leg); `again`: the job with implausible values
+        accepted, offered when they refused it."""
         rig, lock, audit, cfg = self.app.rig, self.app.rig_lock, self.audit(), self.app.cfg  # read on the UI thread
 
         def work() -> None:
@@ -169,7 +183,7 @@ class CompensationController:
                 return
             finally:
                 lock.release()
-            self.screen.post_message(TableJobDone(action, leg, job))
+            self.screen.post_message(TableJobDone(action, leg, job, accept_again=again if job.implausible else None))
 
         self.screen.run_worker(work, thread=True, exclusive=True, group="push", exit_on_error=False)
 
@@ -227,6 +241,7 @@ class CompensationController:
             return message.error, "error"
         job = message.job
         problems = "".join(f" (audit log: {p})" for p in job.audit_problems)
+        problems += "".join(f"\n{w}" for w in job.warnings)  # implausible values the user accepted
         end = job.finished
         if end.outcome == AuditOutcome.OK and end.leg is None:  # several legs
             return f"{end.message}; backups in the audit log.{problems}", "information"

@@ -13,3 +13,11 @@ async def open_session(pilot, wait_until, mode_key: str, path) -> None:
     await wait_until(pilot, lambda: app.screen.query("#session-path"), what="the session picker")
     app.screen.query_one("#session-path", Input).value = str(path)
     await pilot.click("#session-open")
+
+
+async def connect_and_fit(pilot, wait_until, connected, path) -> None:
+    """Wait for the rig, open `path` on Results (F3) and wait for its fit: the model the
+    Compensation page makes its table from."""
+    await connected(pilot)
+    await open_session(pilot, wait_until, "f3", path)
+    await wait_until(pilot, lambda: pilot.app.analysis is not None, 60, "the fit")

@@ -16,7 +16,7 @@ from textual.widgets import DataTable, Static
 from procedures.compensation.audit import read_entries
 from procedures.compensation.push import quantize, table_sha256
 from station.tui.app import StationApp
-from tests.station.tui.steps import open_session
+from tests.station.tui.steps import connect_and_fit
 from station.tui.screens.common import ConfirmScreen
 
 pytestmark = pytest.mark.timeout(120)
@@ -32,9 +32,7 @@ async def _station_target(path, cfg, size, wait_until, notes, connected):
     audit_path = Path(cfg.recordings_dir) / "audit.jsonl"
     app = StationApp(cfg, time_scale=0.0)
     async with app.run_test(size=size) as pilot:
-        await connected(pilot)
-        await open_session(pilot, wait_until, "f3", path)
-        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        await connect_and_fit(pilot, wait_until, connected, path)
         await pilot.press("f4")
         comp = app.screen
         table = comp.query_one("#comp-table", DataTable)
@@ -80,9 +78,7 @@ async def _controller(path, cfg, size, wait_until, notes, connected):
     audit_path = Path(cfg.recordings_dir) / "audit.jsonl"
     app = StationApp(cfg, time_scale=0.0)
     async with app.run_test(size=size) as pilot:
-        await connected(pilot)
-        await open_session(pilot, wait_until, "f3", path)
-        await wait_until(pilot, lambda: app.analysis is not None, 60, "the fit")
+        await connect_and_fit(pilot, wait_until, connected, path)
         await pilot.press("f4")
         table = app.screen.query_one("#comp-table", DataTable)
         await wait_until(pilot, lambda: table.row_count == 2, 30, "the table")
