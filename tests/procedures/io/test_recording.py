@@ -236,6 +236,7 @@ def test_plain_h5py_snippet_in_the_docs_reads_a_session(tmp_path):
     with _create(path) as w:  # left open: the snippet must cope with a file being written
         for i in range(7):
             w.append_point(_point(i))
+        w.flush()  # a plain HDF5 reader sees the points the writer has moved from its journal
         proc = subprocess.run([sys.executable, "-c", snippet, str(path)], capture_output=True, text=True,
                               cwd=tmp_path, timeout=60)
     assert proc.returncode == 0, proc.stderr
