@@ -345,6 +345,7 @@ class ModbusServoAxis:
                                  and self._move_block is not None and len(status_runs) == 1
                                  and self._move_block.words <= self._proto.max_write_words)
         self._status_run = status_runs[0]
+        self._status_decode = p.run_decoder(self._status_run[2])
         bus.require_gap(self._proto.min_frame_gap_ms / 1000.0)
         bus.acquire()
 
@@ -458,9 +459,7 @@ class ModbusServoAxis:
         return self._status_from(self._read_block("status"))
 
     def _decode_status_run(self, words: list[int]) -> DriveStatus:
-        address, _, names = self._status_run
-        regs = self.profile.registers
-        return self._status_from({n: regs[n].decode(words[regs[n].address - address : regs[n].end - address]) for n in names})
+        return self._status_from(self._status_decode(words))
 
     # -- state machine ------------------------------------------------------------------------------
     def _command(self, name: str) -> None:
