@@ -258,6 +258,8 @@ class SerialInterferometer:
     # -- one exchange ------------------------------------------------------------------------
 
     def _check_axis(self, axis: int) -> int:
+        if type(axis) is int and 1 <= axis <= self.axes:  # the usual case, without the ABC check
+            return axis
         if isinstance(axis, bool) or not isinstance(axis, numbers.Integral) or not 1 <= axis <= self.axes:
             raise ValueError(f"interferometer axis must be an integer in 1..{self.axes}, got {axis!r}")
         return int(axis)

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import reduce
+from operator import xor
 
 from drivers.errors import DriverError
 
@@ -73,10 +75,7 @@ class InstrumentError(DriverError):
 
 def checksum(body: bytes) -> str:
     """NMEA-style checksum of `body` (all bytes before '*'): XOR of the bytes, 2 upper hex."""
-    value = 0
-    for byte in body:
-        value ^= byte
-    return f"{value:02X}"
+    return f"{reduce(xor, body, 0):02X}"  # per reply: the loop in C
 
 
 def frame_reply(*fields: object) -> bytes:
