@@ -101,22 +101,29 @@ _FAULT_FILL = _FAULT_BLANK[0].copy()
 
 _POINT_DEFAULTS = tuple(_POINT_BLANK[0].tolist())
 _POINT_POS = {name: i for i, name in enumerate(POINT_DTYPE.names)}
+# the field names from the first up to each one that completes the required keys
+_POINT_PREFIXES = frozenset(POINT_DTYPE.names[:n] for n in range(1, len(POINT_DTYPE.names) + 1)
+                            if set(POINT_REQUIRED_KEYS) <= set(POINT_DTYPE.names[:n]))
 
 
 def _point_values(record: Mapping[str, Any]) -> list[Any]:
     """The POINT_DTYPE field values of a dict record, in field order, defaults filled in and
     checked (see point_row)."""
-    missing = [k for k in POINT_REQUIRED_KEYS if k not in record]
-    if missing:
-        raise SchemaError(f"point record lacks required field(s) {', '.join(missing)}")
-    values = list(_POINT_DEFAULTS)
-    for key, value in record.items():
-        pos = _POINT_POS.get(key)
-        if pos is None:
-            raise SchemaError(
-                f"point record has unknown field '{key}'; known fields: {', '.join(POINT_DTYPE.names)}"
-            )
-        values[pos] = value
+    keys = tuple(record)
+    if keys in _POINT_PREFIXES:  # the fields in file order (a sweep's records): no lookup per key
+        values = [*record.values(), *_POINT_DEFAULTS[len(keys):]]
+    else:
+        missing = [k for k in POINT_REQUIRED_KEYS if k not in record]
+        if missing:
+            raise SchemaError(f"point record lacks required field(s) {', '.join(missing)}")
+        values = list(_POINT_DEFAULTS)
+        for key, value in record.items():
+            pos = _POINT_POS.get(key)
+            if pos is None:
+                raise SchemaError(
+                    f"point record has unknown field '{key}'; known fields: {', '.join(POINT_DTYPE.names)}"
+                )
+            values[pos] = value
     index, leg, run, direction = (values[_POINT_POS[k]] for k in ("index", "leg", "run", "direction"))
     if index < 0 or direction not in (1, -1) or leg < 1 or run < 1:
         _check_point(np.array([tuple(values)], POINT_DTYPE))  # raises with the message

@@ -254,7 +254,9 @@ def test_point_bytes_are_the_bytes_of_the_numpy_row():
 
     rnd = random.Random(3)
     floats = [0.0, -0.0, float("nan"), float("inf"), -1.5e-310, 1e300, 123.456789, np.float64(2.5), np.float32(0.1), 7]
-    records = [dict(index=5, leg=1, run=1, direction=-1, target_mm=0.0)]
+    records = [dict(index=5, leg=1, run=1, direction=-1, target_mm=0.0),  # the fields in file order, as a sweep
+               {name: (i if name in ("index", "leg", "run") else 1 if name == "direction" else 0.5 + i)
+                for i, name in enumerate(POINT_DTYPE.names)}]
     for i in range(300):
         rec = dict(index=rnd.choice([i, np.int64(i), 2**40 + i]), leg=rnd.choice([1, 6, np.int16(3), True]),
                    run=rnd.randint(1, 100_000), direction=rnd.choice([1, -1, np.int8(-1), 1.0]),
