@@ -346,6 +346,7 @@ class ModbusServoAxis:
                                  and self._move_block.words <= self._proto.max_write_words)
         self._status_run = status_runs[0]
         self._status_decode = p.run_decoder(self._status_run[2])
+        self._sw_decoded: dict[int, tuple[DriveState, bool]] = {}
         bus.require_gap(self._proto.min_frame_gap_ms / 1000.0)
         bus.acquire()
 
@@ -437,8 +438,10 @@ class ModbusServoAxis:
                                f"status (position {v['position_actual']} mm, axial load {load} N): a reply garbled "
                                "on the link; read it again.")
         sw = v["statusword"]
-        state = p.state_of(sw)
-        reached = p.sw_bit(sw, "target_reached")
+        decoded = self._sw_decoded.get(sw)
+        if decoded is None:  # a statusword takes a few values: each decoded once
+            decoded = self._sw_decoded[sw] = (p.state_of(sw), p.sw_bit(sw, "target_reached"))
+        state, reached = decoded
         self._last_position_mm = v["position_actual"]
         # registers a drive does not have: not measured (NaN), no code, no table
         return DriveStatus(
