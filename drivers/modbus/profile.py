@@ -21,6 +21,7 @@ import math
 import struct
 import tomllib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Callable, Mapping, Sequence
@@ -127,10 +128,14 @@ class Register:
         return raw
 
     def encode(self, value: Any) -> list[int]:
-        """Registers for an engineering value (str for ascii)."""
+        """Registers for an engineering value (str for ascii); CodecError as `counts` says."""
         if self.type == "ascii":
             return encode_ascii(str(value), self.words)
-        return encode_int(self.counts(value), self.type, self.word_order)
+        raw = round(value / self.scale) if self.scale else int(value)
+        try:  # encoded once (counts() would encode to check, then again)
+            return encode_int(raw, self.type, self.word_order)
+        except CodecError as exc:
+            raise CodecError(f"{self.name}: {value:g} {self.unit} is out of range ({exc})") from None
 
     def decode(self, words: Sequence[int]) -> Any:
         """Engineering value (float when scaled, int otherwise, str for ascii) of `words`."""
@@ -192,7 +197,7 @@ class TableLayout:
     def banks(self) -> int:
         return len(self.bank_base)
 
-    @property
+    @cached_property  # asked on every write the simulated drive serves: computed once (frozen: never changes)
     def header_words(self) -> int:
         return max(r.end for r in self.header.values())
 
@@ -209,7 +214,11 @@ class TableLayout:
 
     def bank_end(self, bank: int) -> int:
         """First address after the bank."""
-        return self.bank_base[bank] + max(self.header_words, self.fwd_offset + self.max_points, self.rev_offset + self.max_points)
+        return self.bank_base[bank] + self._bank_words
+
+    @cached_property
+    def _bank_words(self) -> int:
+        return max(self.header_words, self.fwd_offset + self.max_points, self.rev_offset + self.max_points)
 
     def entry_counts(self, error_um: float) -> int:
         """Raw entry for an error in um (rounded to the entry resolution)."""

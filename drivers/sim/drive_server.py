@@ -180,6 +180,7 @@ class _DriveModel:
         self.writes = 0
         self.set_points = 0  # set-points latched (moves started, or refused beyond the soft limits)
         self._bank_cache: dict[int, tuple | None] = {}
+        self._statuswords: dict[tuple, int] = {}
         self._internal: dict[str, object] = {}  # values the profile maps to no register
         # on-the-fly capture (docs/onthefly.md): position-compare output, wired by the rig
         self.compare = PositionCompare()
@@ -477,13 +478,16 @@ class _DriveModel:
 
     def _update_status(self) -> None:
         moving = self.motion is not None
-        sw = self.p.statusword_of(
-            self.state,
-            target_reached=not moving,
-            internal_limit_active=self.internal_limit,
-            set_point_acknowledge=self.set_point_ack,
-            remote=True,
-        )
+        key = (self.state, moving, self.internal_limit, self.set_point_ack)
+        sw = self._statuswords.get(key)
+        if sw is None:  # after every request: each combination composed once
+            sw = self._statuswords[key] = self.p.statusword_of(
+                self.state,
+                target_reached=not moving,
+                internal_limit_active=self.internal_limit,
+                set_point_acknowledge=self.set_point_ack,
+                remote=True,
+            )
         if self.motion is not None and not self.stalled:
             now = self.clock.now()
             v = self.motion.velocity(now)
