@@ -10,6 +10,8 @@ beam status other than OK as `BeamBreak`: retrying those is the caller's decisio
 from __future__ import annotations
 
 import numbers
+import os
+import select
 import time
 from urllib.parse import parse_qs, urlparse
 
@@ -21,6 +23,7 @@ from drivers.interfaces import Clock, Environment, Reading
 from drivers.interferometer import protocol as p
 
 _POLL_S = 0.02  # longest blocking read: bounds how late a deadline is noticed
+_POSIX_SERIAL = getattr(serial, "Serial", None) if os.name == "posix" else None  # pyserial's serialposix.Serial
 try:  # pyserial's POSIX backend raises termios.error from tcflush on a port that went away
     import termios
 
@@ -339,9 +342,26 @@ class SerialInterferometer:
         slice so the deadline is kept within _POLL_S.
         """
         line = bytearray()
+        port = self._serial
+        fd = getattr(port, "fd", None) if type(port) is _POSIX_SERIAL else None
         while True:
-            waiting = self._serial.in_waiting
-            line += self._serial.read(waiting if waiting else 1)
+            if fd is not None:
+                # pyserial's POSIX port, read as it does (select, then a non-blocking read) but
+                # once per chunk: read(1) then read(in_waiting) costs two selects, an ioctl and
+                # two Timeout objects per reply
+                if select.select((fd,), (), (), port.timeout)[0]:
+                    try:
+                        chunk = os.read(fd, p.MAX_LINE_BYTES)
+                    except BlockingIOError:
+                        chunk = None  # raced away: as a silent poll slice
+                    if chunk == b"":
+                        raise serial.SerialException("device reports readiness to read but returned no data "
+                                                     "(device disconnected or multiple access on port?)")
+                    if chunk:
+                        line += chunk
+            else:
+                waiting = port.in_waiting
+                line += port.read(waiting if waiting else 1)
             end = line.find(p.TERMINATOR)
             if end >= 0:
                 # bytes after the terminator are not an answer to anything: dropped
