@@ -291,7 +291,7 @@ class SerialInterferometer:
                 # the deadline is taken before the command goes out, so whatever the device does
                 # after receiving it (on a replay: a recorded silence moving `clock` on) counts
                 deadline = self._clock.now() + wait_s
-                self._serial.write(command)
+                self._write(command)
                 self.bytes_out += len(command)
                 line = self._read_line(deadline)
                 self.bytes_in += len(line)
@@ -331,6 +331,26 @@ class SerialInterferometer:
             f"({timeouts} without reply): {reason}; last line {p.show_line(line)}."
         )
 
+    def _posix_fd(self) -> int | None:
+        """The file descriptor of pyserial's POSIX port (open), else None."""
+        port = self._serial
+        return getattr(port, "fd", None) if type(port) is _POSIX_SERIAL else None
+
+    def _write(self, data: bytes) -> None:
+        """Write a command. On pyserial's POSIX port, one os.write when the line takes it whole
+        (a command is a few bytes): pyserial's write then waits in select for the port to be
+        writable again, with Timeout objects, on every call; what is left goes through it."""
+        fd = self._posix_fd()
+        if fd is not None:
+            try:
+                n = os.write(fd, data)
+            except BlockingIOError:
+                n = 0
+            if n == len(data):
+                return
+            data = data[n:]
+        self._serial.write(data)
+
     def _read_line(self, deadline: float) -> bytes:
         """Read one reply line until `deadline` (on the client's clock); b'' on silence, the
         partial line if the terminator did not come in time (the caller's split_reply rejects it).
@@ -343,7 +363,7 @@ class SerialInterferometer:
         """
         line = bytearray()
         port = self._serial
-        fd = getattr(port, "fd", None) if type(port) is _POSIX_SERIAL else None
+        fd = self._posix_fd()
         while True:
             if fd is not None:
                 # pyserial's POSIX port, read as it does (select, then a non-blocking read) but
