@@ -524,7 +524,8 @@ def read_session(path: str | os.PathLike) -> Session:
 
 
 class LiveReader:
-    """Follows a session file while another process writes it (SWMR read).
+    """Follows a session file while another process writes it (SWMR read, and the writer's
+    journal: every acknowledged point, not only those of its last batch).
 
     `poll()` returns the rows added since the previous call (POINT_DTYPE). It never returns a
     row that is allocated but not yet written; such a row comes with a later poll.
