@@ -1,15 +1,23 @@
-"""Bench: replay of the six-leg sample calibration at full speed, recorded again.
+"""Bench: replay of the six-leg sample calibration at full speed, recorded again, against the
+same replay by the station before issue 26's overhead work (goal: at least 2x, identical).
 
 The replay goes through everything a live sweep does: Modbus TCP on 127.0.0.1 to the replay
 drives, the serial client over a pty to the replay interferometer, the sweep procedure, the
-runner and the HDF5 recorder (flush per point). Prints points per second, the wall time, the
-protocol transactions per point, and whether the new session equals the recording; then the same
-replay by the old path in the same run (the environment asked at every point, as before
-station.services.jobs.env_unchanged_at) and the ratio of the two. On a loaded machine a point's wall time
-is mostly the hand-overs between the station's thread and the replay devices' threads (a
-request, a reply: the scheduler's), so exchanges per point are what counts.
+runner and the HDF5 recorder. Prints points per second, the wall time, the protocol
+transactions per point, and whether the new session equals the recording. Each round is
+followed by the same replay by commit BASELINE's tree (its own bench_replay.py, run from a
+`git archive` of it in a temporary directory with this interpreter: same venv, same machine,
+the same moment's load), and the speed-up is printed round by round, then min / median / max.
+On a loaded machine a point's wall time is mostly the hand-overs between the station's thread
+and the replay devices' threads (a request, a reply: the scheduler's), so the rounds scatter.
 
-    .venv/bin/python bench/bench_replay.py [--session recordings/calibration-6legs.h5] [--speed max] [--no-old]
+Measured 2026-11-27 (2 cores, other jobs running, load average 4.3-5.2; three runs of two
+rounds): 1667-2554 points/s against the baseline's 794-1275; speed-up per run 1.77 / 1.92 /
+2.30x (min / median / max), the six rounds 1.62-2.59x; every replay identical. At load 3:
+3306-4368 points/s, 1.62 and 2.51x. docs/replay.md says where the time went.
+
+    .venv/bin/python bench/bench_replay.py [--session recordings/calibration-6legs.h5] [--speed max]
+        [--rounds N] [--baseline REV] [--old]
 """
 
 from __future__ import annotations
