@@ -1,4 +1,4 @@
-"""Recording speed and size: append+flush per point, file size of a 26 000-point session,
+"""Recording speed and size: append per point (a journal write; /points in batches), file size of a 26 000-point session,
 fsync cost, resume (rebuild) and read times. Prints figures; targets: station overhead
 <= 2 ms per point including recording, a 26 000-point session <= 10 MB.
 
@@ -77,7 +77,7 @@ def main() -> None:
         cpu = time.thread_time() - cpu0
         total = time.perf_counter() - t_all
         size_mb = path.stat().st_size / 1e6
-        print(f"session of {args.points} points, one append_point (dict -> row, write, flush) each:")
+        print(f"session of {args.points} points, one append_point (dict -> row bytes, journal write; every 64th writes and flushes a batch) each:")
         _stats("append_point", times)
         print(f"{'whole session (create..finish)':34} {total:.2f} s = {total / args.points * 1e3:.3f} ms per point"
               f" wall, {cpu / args.points * 1e3:.3f} ms CPU (kernel time of the writes included)")
@@ -88,7 +88,7 @@ def main() -> None:
             for rec in records[:1000]:
                 w.append_point(rec)
         if wchar0 is not None:
-            print(f"{'bytes written per append_point':34} {(_wchar() - wchar0) / 1000:.0f} (one chunk + metadata)")
+            print(f"{'bytes written per append_point':34} {(_wchar() - wchar0) / 1000:.0f} (the journal row, a share of a batch)")
 
         t0 = time.perf_counter()
         s = read_session(path)

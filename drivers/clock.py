@@ -37,9 +37,9 @@ class VirtualClock:
         self._real0 = time.monotonic()
 
     def now(self) -> float:
+        if self.time_scale == 0:
+            return self._offset_s  # one attribute read, atomic: no lock (asked several times a point)
         with self._lock:
-            if self.time_scale == 0:
-                return self._offset_s
             return self._offset_s + (time.monotonic() - self._real0) / self.time_scale
 
     def advance(self, dt_s: float) -> None:

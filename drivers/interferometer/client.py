@@ -10,6 +10,8 @@ beam status other than OK as `BeamBreak`: retrying those is the caller's decisio
 from __future__ import annotations
 
 import numbers
+import os
+import select
 import time
 from urllib.parse import parse_qs, urlparse
 
@@ -21,6 +23,7 @@ from drivers.interfaces import Clock, Environment, Reading
 from drivers.interferometer import protocol as p
 
 _POLL_S = 0.02  # longest blocking read: bounds how late a deadline is noticed
+_POSIX_SERIAL = getattr(serial, "Serial", None) if os.name == "posix" else None  # pyserial's serialposix.Serial
 try:  # pyserial's POSIX backend raises termios.error from tcflush on a port that went away
     import termios
 
@@ -258,6 +261,8 @@ class SerialInterferometer:
     # -- one exchange ------------------------------------------------------------------------
 
     def _check_axis(self, axis: int) -> int:
+        if type(axis) is int and 1 <= axis <= self.axes:  # the usual case, without the ABC check
+            return axis
         if isinstance(axis, bool) or not isinstance(axis, numbers.Integral) or not 1 <= axis <= self.axes:
             raise ValueError(f"interferometer axis must be an integer in 1..{self.axes}, got {axis!r}")
         return int(axis)
@@ -286,7 +291,7 @@ class SerialInterferometer:
                 # the deadline is taken before the command goes out, so whatever the device does
                 # after receiving it (on a replay: a recorded silence moving `clock` on) counts
                 deadline = self._clock.now() + wait_s
-                self._serial.write(command)
+                self._write(command)
                 self.bytes_out += len(command)
                 line = self._read_line(deadline)
                 self.bytes_in += len(line)
@@ -326,6 +331,26 @@ class SerialInterferometer:
             f"({timeouts} without reply): {reason}; last line {p.show_line(line)}."
         )
 
+    def _posix_fd(self) -> int | None:
+        """The file descriptor of pyserial's POSIX port (open), else None."""
+        port = self._serial
+        return getattr(port, "fd", None) if type(port) is _POSIX_SERIAL else None
+
+    def _write(self, data: bytes) -> None:
+        """Write a command. On pyserial's POSIX port, one os.write when the line takes it whole
+        (a command is a few bytes): pyserial's write then waits in select for the port to be
+        writable again, with Timeout objects, on every call; what is left goes through it."""
+        fd = self._posix_fd()
+        if fd is not None:
+            try:
+                n = os.write(fd, data)
+            except BlockingIOError:
+                n = 0
+            if n == len(data):
+                return
+            data = data[n:]
+        self._serial.write(data)
+
     def _read_line(self, deadline: float) -> bytes:
         """Read one reply line until `deadline` (on the client's clock); b'' on silence, the
         partial line if the terminator did not come in time (the caller's split_reply rejects it).
@@ -337,9 +362,26 @@ class SerialInterferometer:
         slice so the deadline is kept within _POLL_S.
         """
         line = bytearray()
+        port = self._serial
+        fd = self._posix_fd()
         while True:
-            waiting = self._serial.in_waiting
-            line += self._serial.read(waiting if waiting else 1)
+            if fd is not None:
+                # pyserial's POSIX port, read as it does (select, then a non-blocking read) but
+                # once per chunk: read(1) then read(in_waiting) costs two selects, an ioctl and
+                # two Timeout objects per reply
+                if select.select((fd,), (), (), port.timeout)[0]:
+                    try:
+                        chunk = os.read(fd, p.MAX_LINE_BYTES)
+                    except BlockingIOError:
+                        chunk = None  # raced away: as a silent poll slice
+                    if chunk == b"":
+                        raise serial.SerialException("device reports readiness to read but returned no data "
+                                                     "(device disconnected or multiple access on port?)")
+                    if chunk:
+                        line += chunk
+            else:
+                waiting = port.in_waiting
+                line += port.read(waiting if waiting else 1)
             end = line.find(p.TERMINATOR)
             if end >= 0:
                 # bytes after the terminator are not an answer to anything: dropped

@@ -74,7 +74,7 @@ class InstrumentError(DriverError):
 def checksum(body: bytes) -> str:
     """NMEA-style checksum of `body` (all bytes before '*'): XOR of the bytes, 2 upper hex."""
     value = 0
-    for byte in body:
+    for byte in body:  # a plain loop: several times faster than functools.reduce(operator.xor, ...)
         value ^= byte
     return f"{value:02X}"
 
@@ -111,7 +111,7 @@ def split_reply(line: bytes) -> list[str]:
     if star < 0:
         raise ProtocolError("reply has no '*HH' checksum")
     body, given = content[:star], content[star + 1 :]
-    if len(given) != 2 or any(c not in b"0123456789ABCDEF" for c in given):
+    if len(given) != 2 or given.translate(None, b"0123456789ABCDEF"):  # something not uppercase hex left
         raise ProtocolError(f"checksum field {given.decode('ascii')!r} is not two uppercase hex digits")
     expected = checksum(body)
     if given.decode("ascii") != expected:

@@ -345,6 +345,8 @@ class ModbusServoAxis:
                                  and self._move_block is not None and len(status_runs) == 1
                                  and self._move_block.words <= self._proto.max_write_words)
         self._status_run = status_runs[0]
+        self._status_decode = p.run_decoder(self._status_run[2])
+        self._sw_decoded: dict[int, tuple[DriveState, bool]] = {}
         bus.require_gap(self._proto.min_frame_gap_ms / 1000.0)
         bus.acquire()
 
@@ -436,8 +438,10 @@ class ModbusServoAxis:
                                f"status (position {v['position_actual']} mm, axial load {load} N): a reply garbled "
                                "on the link; read it again.")
         sw = v["statusword"]
-        state = p.state_of(sw)
-        reached = p.sw_bit(sw, "target_reached")
+        decoded = self._sw_decoded.get(sw)
+        if decoded is None:  # a statusword takes a few values: each decoded once
+            decoded = self._sw_decoded[sw] = (p.state_of(sw), p.sw_bit(sw, "target_reached"))
+        state, reached = decoded
         self._last_position_mm = v["position_actual"]
         # registers a drive does not have: not measured (NaN), no code, no table
         return DriveStatus(
@@ -458,9 +462,7 @@ class ModbusServoAxis:
         return self._status_from(self._read_block("status"))
 
     def _decode_status_run(self, words: list[int]) -> DriveStatus:
-        address, _, names = self._status_run
-        regs = self.profile.registers
-        return self._status_from({n: regs[n].decode(words[regs[n].address - address : regs[n].end - address]) for n in names})
+        return self._status_from(self._status_decode(words))
 
     # -- state machine ------------------------------------------------------------------------------
     def _command(self, name: str) -> None:

@@ -52,6 +52,7 @@ from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import NoSuchIdException
 from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from drivers.atomic import write_files_atomic
@@ -180,6 +181,7 @@ class _DriveModel:
         self.writes = 0
         self.set_points = 0  # set-points latched (moves started, or refused beyond the soft limits)
         self._bank_cache: dict[int, tuple | None] = {}
+        self._statuswords: dict[tuple, int] = {}
         self._internal: dict[str, object] = {}  # values the profile maps to no register
         # on-the-fly capture (docs/onthefly.md): position-compare output, wired by the rig
         self.compare = PositionCompare()
@@ -477,13 +479,16 @@ class _DriveModel:
 
     def _update_status(self) -> None:
         moving = self.motion is not None
-        sw = self.p.statusword_of(
-            self.state,
-            target_reached=not moving,
-            internal_limit_active=self.internal_limit,
-            set_point_acknowledge=self.set_point_ack,
-            remote=True,
-        )
+        key = (self.state, moving, self.internal_limit, self.set_point_ack)
+        sw = self._statuswords.get(key)
+        if sw is None:  # after every request: each combination composed once
+            sw = self._statuswords[key] = self.p.statusword_of(
+                self.state,
+                target_reached=not moving,
+                internal_limit_active=self.internal_limit,
+                set_point_acknowledge=self.set_point_ack,
+                remote=True,
+            )
         if self.motion is not None and not self.stalled:
             now = self.clock.now()
             v = self.motion.velocity(now)
@@ -606,6 +611,36 @@ class FrameStats:
     shortest_gap_s: float = math.inf
     read_write_requests: int = 0  # function 23 requests served
     refused_functions: int = 0  # requests of a function the profile says the drive does not serve (exception 01)
+
+
+class _LoopRequestHandler(ServerRequestHandler):
+    """pymodbus' request handler with the request run as a task of the server's loop. Its own
+    `handle_later`, called on that loop already, goes through run_coroutine_threadsafe: a
+    concurrent Future, a write to the loop's self-pipe and two more turns of the loop for every
+    request (a fifth of the simulated drive's time per point in a replay)."""
+
+    def handle_later(self) -> None:
+        task = self.loop.create_task(self.handle_request())
+        _REQUESTS.add(task)  # the loop holds tasks weakly: kept until done
+        task.add_done_callback(_REQUESTS.discard)
+
+
+_REQUESTS: set[asyncio.Task] = set()
+
+
+class _LoopRequests:
+    """A pymodbus server whose connections get `_LoopRequestHandler`."""
+
+    def callback_new_connection(self):
+        return _LoopRequestHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+
+
+class _TcpServer(_LoopRequests, ModbusTcpServer):
+    pass
+
+
+class _SerialServer(_LoopRequests, ModbusSerialServer):
+    pass
 
 
 class SimDriveServer:
@@ -801,7 +836,7 @@ class SimDriveServer:
         self._ensure_loop()
 
         async def start():
-            server = ModbusTcpServer(self._devices(), address=(host, port), ignore_missing_devices=True)
+            server = _TcpServer(self._devices(), address=(host, port), ignore_missing_devices=True)
             self._device_identification(server)
             try:
                 await server.serve_forever(background=True)
@@ -830,7 +865,7 @@ class SimDriveServer:
             for src, dst in ((m_srv, m_cli), (m_cli, m_srv)):
                 os.set_blocking(src, False)
                 loop.add_reader(src, partial(self._copy, src, dst))
-            server = ModbusSerialServer(self._devices(), framer=FramerType.RTU, port=os.ttyname(s_srv),
+            server = _SerialServer(self._devices(), framer=FramerType.RTU, port=os.ttyname(s_srv),
                                         baudrate=baudrate, ignore_missing_devices=True)
             self._device_identification(server)
             await server.serve_forever(background=True)

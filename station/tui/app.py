@@ -652,7 +652,9 @@ class StationApp(App):
             legs = ", ".join(str(leg) for leg in self.sweep.legs)
 
             def confirmed(yes: bool | None) -> None:
-                if yes:
+                if yes and not self.sweep.active:  # it ended while the question was open
+                    self.exit()
+                elif yes:
                     self._quit_after_sweep = True
                     self.action_abort_sweep()
                     self.notify("Stopping the drives and closing the recording, then quitting…", timeout=10)

@@ -217,3 +217,19 @@ def test_scaling_address_base_and_runs(tmp_path):
     base1 = DriveProfile.load(p1)
     for name in base0.registers:  # the same printed numbers, one lower on the wire
         assert base1.address(name) == base0.address(name) - 1
+
+
+@pytest.mark.parametrize("name", ["default", "delta_asda_a2", "kinco_fd"])
+def test_run_decoder_gives_the_values_of_register_by_register_decoding(name):
+    """The status run's one-call decoder agrees with Register.decode on every value, extremes
+    of each type included (sign bits, the top of 32-bit words)."""
+    prof = DriveProfile.load(Path(__file__).resolve().parents[2] / "drivers" / "modbus" / "profiles" / f"{name}.toml")
+    rnd = random.Random(7)
+    for address, count, names in prof.runs(prof.blocks["status"].names):
+        decode = prof.run_decoder(names)
+        for words in ([0] * count, [0xFFFF] * count, [0x8000] * count, [0x7FFF] * count,
+                      *([rnd.randrange(0x10000) for _ in range(count)] for _ in range(200))):
+            want = {n: prof.registers[n].decode(words[prof.registers[n].address - address:
+                                                      prof.registers[n].end - address]) for n in names}
+            got = decode(words)
+            assert got == want and [type(v) for v in got.values()] == [type(want[n]) for n in got]

@@ -43,6 +43,7 @@ import numpy as np
 from procedures.engine.errors import InputError, SchemaError
 from procedures.io.ranges import SESSION_BOUNDS
 from procedures.io.recording.identity import SessionIdentity, identity_of_meta
+from procedures.io.recording.journal import merge_journal, read_journal_raw
 from procedures.io.recording.schema import (
     ADDED_POINT_FIELDS,
     FAULT_DTYPE,
@@ -472,6 +473,9 @@ def read_session(path: str | os.PathLike) -> Session:
     missing dataset, field or attribute) with a message naming the file and what is wrong.
     """
     path = Path(path)
+    # the journal before the HDF5 file: a batch the writer moves from one to the other meanwhile
+    # is then seen at least once (rows are told apart by index)
+    journal = read_journal_raw(path)
     with open_h5(path) as f:
         try:
             version = check_schema(f, path)
@@ -493,6 +497,8 @@ def read_session(path: str | os.PathLike) -> Session:
     if unwritten:
         points = points[written]
     faults = faults[faults["index"] != UNWRITTEN_INDEX]
+    if not attrs.get("outcome"):  # cut short or still written: its last points may be journalled only
+        points = merge_journal(points, journal.rows(str(attrs.get("session_id", ""))))
     check_points(points, path, meta["plan"])
     try:
         resumed = json.loads(attrs.get("resumed_utc", "[]") or "[]")
@@ -518,7 +524,8 @@ def read_session(path: str | os.PathLike) -> Session:
 
 
 class LiveReader:
-    """Follows a session file while another process writes it (SWMR read).
+    """Follows a session file while another process writes it (SWMR read, and the writer's
+    journal: every acknowledged point, not only those of its last batch).
 
     `poll()` returns the rows added since the previous call (POINT_DTYPE). It never returns a
     row that is allocated but not yet written; such a row comes with a later poll.
@@ -532,22 +539,28 @@ class LiveReader:
             if "points" not in self._f:
                 raise SchemaError(f"{self.path}: dataset /points is missing")
             self._ds = self._f["points"]
+            self._session_id = str(_text(self._f.attrs.get("session_id", "")))
         except BaseException as exc:
             self._f.close()
             if isinstance(exc, (OSError, RuntimeError, KeyError)):
                 raise damaged(self.path, f"HDF5: {_one_line(exc)}") from None
             raise
-        self._next = 0
+        self._next = 0  # rows of /points read
+        self._journal_at = 0  # bytes of the writer's journal read
+        self._seen: set[int] = set()  # indices returned (from either)
+        self._returned = 0
 
     def poll(self) -> np.ndarray:
-        """New rows since the last call (possibly none)."""
+        """New rows since the last call (possibly none): those in /points, then those the writer
+        has acknowledged but not yet written there (its journal, read first: a batch moved from
+        one to the other meanwhile is seen at least once; rows are told apart by index)."""
+        journal = read_journal_raw(self.path, self._journal_at)
+        self._journal_at = journal.end
         try:
             if self._f.swmr_mode:
                 self._ds.refresh()
             n = self._ds.shape[0]
-            if n <= self._next:
-                return np.empty(0, POINT_DTYPE)
-            data = self._ds[self._next : n]
+            data = self._ds[self._next : n] if n > self._next else np.empty(0, self._ds.dtype)
         except (OSError, RuntimeError) as exc:
             raise damaged(self.path, f"HDF5: {_one_line(exc)}") from None
         gaps = np.flatnonzero(data["index"] == UNWRITTEN_INDEX)
@@ -559,11 +572,21 @@ class LiveReader:
             for name in POINT_DTYPE.names:
                 out[name] = data[name]
             data = out
+        data = np.concatenate([data, journal.rows(self._session_id)]) if journal.data else data
+        if not len(data):
+            return data
+        keep = np.fromiter((int(i) not in self._seen for i in data["index"]), bool, len(data))
+        data = data[keep]
+        _, first = np.unique(data["index"], return_index=True)
+        data = data[np.sort(first)]
+        self._seen.update(int(i) for i in data["index"])
+        self._returned += len(data)
         return data
 
     @property
     def rows_read(self) -> int:
-        return self._next
+        """Points returned so far."""
+        return self._returned
 
     def close(self) -> None:
         self._f.close()

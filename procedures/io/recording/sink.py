@@ -1,7 +1,8 @@
 """The recording sink: writes a sweep's events into an HDF5 session file.
 
-It is the runner's *critical* sink: if it cannot write, the run stops. A point is on disk
-(flushed) before `handle` returns, i.e. before the procedure makes the next move.
+It is the runner's *critical* sink: if it cannot write, the run stops. A point is durable (in
+the session's journal, writer.py) before `handle` returns, i.e. before the procedure makes the
+next move; a procedure's SweepFinished writes the last batch to the HDF5 file and closes it.
 """
 
 from __future__ import annotations

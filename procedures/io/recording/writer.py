@@ -1,8 +1,11 @@
 """Crash-safe writer of HDF5 session files (layout in schema.py and docs/session-schema.md).
 
-Durability: `append_point` grows /points by one row, writes it and flushes the file before it
-returns, so every point the caller acknowledges survives a kill of the process (SIGKILL,
-crash, Ctrl-C). Power loss needs `fsync=True` as well (0.25 ms to a few ms more per point, by disk).
+Durability: `append_point` writes the point's row to the journal beside the file (journal.py:
+one os.write, in the kernel's page cache when it returns) before it returns, so every point the
+caller acknowledges survives a kill of the process (SIGKILL, crash, Ctrl-C); /points of the HDF5
+file grows in batches (every FLUSH_ROWS points or FLUSH_S seconds, and before a fault, `flush`,
+`finish` and `close`). Readers of a session cut short add the journal's rows (reader.py), a clean
+close removes the journal. Power loss needs `fsync=True` as well (the journal is fsynced per point).
 
 Live reading: the file is in SWMR mode while it is written, so another process can open it
 with `h5py.File(path, "r", swmr=True)` (or `reader.LiveReader`) and watch it grow.
@@ -17,6 +20,8 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import struct
+import time
 from collections.abc import Mapping
 from datetime import datetime, timezone
 from pathlib import Path
@@ -26,6 +31,7 @@ import h5py
 import numpy as np
 
 from procedures.engine.errors import InputError, SchemaError
+from procedures.io.recording.journal import Journal
 from procedures.io.recording.schema import (
     FAULT_DTYPE,
     FAULT_UNITS,
@@ -42,6 +48,11 @@ from procedures.engine.states import Outcome
 
 # v1.10 file format: needed for SWMR, and still readable by HDF5 1.10 tools (Debian's h5dump).
 LIBVER = ("v110", "v110")
+
+FLUSH_ROWS = 64
+"""Points written to /points at once (their journal rows make them durable before that)."""
+FLUSH_S = 0.5
+"""... or sooner, when the oldest unwritten point is this old (a live HDF5 reader's lag)."""
 
 
 def utc_now() -> str:
@@ -90,6 +101,33 @@ _FAULT_FILL = _FAULT_BLANK[0].copy()
 
 _POINT_DEFAULTS = tuple(_POINT_BLANK[0].tolist())
 _POINT_POS = {name: i for i, name in enumerate(POINT_DTYPE.names)}
+# the field names from the first up to each one that completes the required keys
+_POINT_PREFIXES = frozenset(POINT_DTYPE.names[:n] for n in range(1, len(POINT_DTYPE.names) + 1)
+                            if set(POINT_REQUIRED_KEYS) <= set(POINT_DTYPE.names[:n]))
+
+
+def _point_values(record: Mapping[str, Any]) -> list[Any]:
+    """The POINT_DTYPE field values of a dict record, in field order, defaults filled in and
+    checked (see point_row)."""
+    keys = tuple(record)
+    if keys in _POINT_PREFIXES:  # the fields in file order (a sweep's records): no lookup per key
+        values = [*record.values(), *_POINT_DEFAULTS[len(keys):]]
+    else:
+        missing = [k for k in POINT_REQUIRED_KEYS if k not in record]
+        if missing:
+            raise SchemaError(f"point record lacks required field(s) {', '.join(missing)}")
+        values = list(_POINT_DEFAULTS)
+        for key, value in record.items():
+            pos = _POINT_POS.get(key)
+            if pos is None:
+                raise SchemaError(
+                    f"point record has unknown field '{key}'; known fields: {', '.join(POINT_DTYPE.names)}"
+                )
+            values[pos] = value
+    index, leg, run, direction = (values[_POINT_POS[k]] for k in ("index", "leg", "run", "direction"))
+    if index < 0 or direction not in (1, -1) or leg < 1 or run < 1:
+        _check_point(np.array([tuple(values)], POINT_DTYPE))  # raises with the message
+    return values
 
 
 def point_row(record: Mapping[str, Any] | np.void) -> np.ndarray:
@@ -107,22 +145,29 @@ def point_row(record: Mapping[str, Any] | np.void) -> np.ndarray:
         record = {n: record[n] for n in record.dtype.names}
     if not isinstance(record, Mapping):
         raise TypeError(f"a point record must be a dict or a numpy record, not {type(record).__name__}")
-    missing = [k for k in POINT_REQUIRED_KEYS if k not in record]
-    if missing:
-        raise SchemaError(f"point record lacks required field(s) {', '.join(missing)}")
-    values = list(_POINT_DEFAULTS)
-    for key, value in record.items():
-        pos = _POINT_POS.get(key)
-        if pos is None:
-            raise SchemaError(
-                f"point record has unknown field '{key}'; known fields: {', '.join(POINT_DTYPE.names)}"
-            )
-        values[pos] = value
-    index, leg, run, direction = (values[_POINT_POS[k]] for k in ("index", "leg", "run", "direction"))
-    if index < 0 or direction not in (1, -1) or leg < 1 or run < 1:
-        _check_point(np.array([tuple(values)], POINT_DTYPE))  # raises with the message
     # one tuple -> one row: several times faster than assigning the fields one by one
-    return np.array([tuple(values)], POINT_DTYPE)
+    return np.array([tuple(_point_values(record))], POINT_DTYPE)
+
+
+_STRUCT_CODE = {"<i8": "q", "<i2": "h", "<i4": "i", "|i1": "b", "<f8": "d", "<f4": "f", "<u4": "I"}
+_POINT_STRUCT = struct.Struct("<" + "".join(_STRUCT_CODE[POINT_DTYPE[n].str] for n in POINT_DTYPE.names))
+assert _POINT_STRUCT.size == POINT_DTYPE.itemsize  # packed, no padding: the same bytes as numpy's row
+
+
+def point_bytes(record: Mapping[str, Any] | np.void) -> tuple[int, bytes]:
+    """(index, the bytes of `point_row(record)`): a dict of plain numbers is packed with one
+    struct call, a quarter of the time of a numpy row (once per point: the recorder's main
+    cost); anything struct does not take as numpy does (a float in an integer field, a text
+    number, a value out of a field's range) goes the numpy way, with its conversions and errors."""
+    if isinstance(record, Mapping):
+        values = _point_values(record)
+        try:
+            return int(values[0]), _POINT_STRUCT.pack(*values)
+        except (struct.error, OverflowError, TypeError):
+            row = np.array([tuple(values)], POINT_DTYPE)
+    else:
+        row = point_row(record)
+    return int(row[0]["index"]), row.tobytes()
 
 
 class _IndexSet:
@@ -349,6 +394,14 @@ class SessionWriter:
         # on every call (about 0.4 ms per row).
         self._ptype = self._pds.id.get_type()
         self._ftype = self._fds.id.get_type()
+        self._pending: list[bytes] = []  # acknowledged rows (in the journal) not yet in /points
+        self._pending_since = 0.0
+        try:
+            self._journal: Journal | None = Journal(path, str(self._f.attrs.get("session_id", "")), fsync)
+        except BaseException:
+            self._f.close()
+            lock.release()
+            raise
 
     # -- opening ---------------------------------------------------------------------------
 
@@ -459,18 +512,35 @@ class SessionWriter:
     # -- writing ---------------------------------------------------------------------------
 
     def append_point(self, record: Mapping[str, Any] | np.void) -> None:
-        """Write one point (POINT_DTYPE field names; units in the names / schema) and flush.
+        """Record one point (POINT_DTYPE field names; units in the names / schema).
 
-        When this returns, the row is in the file and survives a kill of this process.
+        When this returns, the row is in the journal and survives a kill of this process; it
+        reaches /points with the next batch (see the module docstring).
         Raises InputError for an index already in the file (a resume must skip those).
         """
-        row = point_row(record)
-        index = int(row[0]["index"])
+        index, raw = point_bytes(record)
         if index in self._indices:
             raise InputError(f"{self.path}: point index {index} is already recorded; a resume must skip it")
-        self._append(self._pds, self._ptype, row)
+        if self._f is None or self._journal is None:
+            raise InputError(f"{self.path}: the session file is closed")
+        self._journal.append(raw)
+        pending = self._pending
+        pending.append(raw)
         self._indices.add(index)
         self._points_written += 1
+        now = time.monotonic()
+        if len(pending) == 1:
+            self._pending_since = now
+        elif len(pending) >= FLUSH_ROWS or now - self._pending_since >= FLUSH_S:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the journalled points not yet in /points to the HDF5 file and flush it (a live
+        HDF5 reader sees them from then on)."""
+        if self._pending:
+            rows = np.frombuffer(b"".join(self._pending), POINT_DTYPE)  # no field-by-field concatenate
+            self._append(self._pds, self._ptype, rows)
+            self._pending = []  # only once written: an interrupted write is tried again at close
 
     def append_points(self, records: np.ndarray) -> None:
         """Write many POINT_DTYPE rows with one flush (import, batch copy)."""
@@ -486,12 +556,14 @@ class SessionWriter:
         if dup or len(set(idx)) != len(idx):
             seen = dup or {i for i in idx if idx.count(i) > 1}
             raise InputError(f"{self.path}: point index {min(seen)} would be recorded twice")
+        self.flush()
         self._append(self._pds, self._ptype, np.ascontiguousarray(rows))
         self._indices.update(idx)
         self._points_written += len(rows)
 
     def append_fault(self, record: Mapping[str, Any] | np.void) -> None:
-        """Write one fault row (FAULT_DTYPE field names) and flush."""
+        """Write one fault row (FAULT_DTYPE field names) and flush (the points before it too)."""
+        self.flush()
         self._append(self._fds, self._ftype, fault_row(record))
         self._faults_written += 1
 
@@ -546,14 +618,26 @@ class SessionWriter:
 
     def close(self) -> None:
         """Flush and close the file (idempotent). The outcome stays unset unless `finish` ran."""
-        self._close_file()
-        self._lock.release()
+        try:
+            self._close_file()
+        finally:
+            self._lock.release()
 
     def _close_file(self) -> None:
-        if self._f is not None and self._f.id.valid:
-            self._f.flush()
-            self._f.close()
-        self._f = None
+        try:
+            if self._f is not None and self._f.id.valid:
+                self.flush()
+                self._f.flush()
+                self._f.close()
+                if self._journal is not None:
+                    self._journal.remove()  # every row is in the closed file now
+        finally:
+            if self._f is not None and self._f.id.valid:
+                self._f.close()  # the batch could not be written: its rows stay in the journal
+            if self._journal is not None:
+                self._journal.close()
+            self._journal = None
+            self._f = None
 
     @property
     def closed(self) -> bool:

@@ -236,7 +236,45 @@ def test_plain_h5py_snippet_in_the_docs_reads_a_session(tmp_path):
     with _create(path) as w:  # left open: the snippet must cope with a file being written
         for i in range(7):
             w.append_point(_point(i))
+        w.flush()  # a plain HDF5 reader sees the points the writer has moved from its journal
         proc = subprocess.run([sys.executable, "-c", snippet, str(path)], capture_output=True, text=True,
                               cwd=tmp_path, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert "7 points" in proc.stdout and json.dumps(PLAN["kind"]).strip('"') in proc.stdout
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered in cast:RuntimeWarning")  # float32 overflow: inf, both ways
+def test_point_bytes_are_the_bytes_of_the_numpy_row():
+    """The recorder packs a point with struct; the bytes must be numpy's row's, whatever the
+    values' types (numpy scalars, bools, a float in an integer field, text numbers, NaN, -0.0,
+    float32 rounding and overflow), and bad records are refused alike."""
+    import random
+
+    from procedures.io.recording.writer import point_bytes, point_row
+
+    rnd = random.Random(3)
+    floats = [0.0, -0.0, float("nan"), float("inf"), -1.5e-310, 1e300, 123.456789, np.float64(2.5), np.float32(0.1), 7]
+    records = [dict(index=5, leg=1, run=1, direction=-1, target_mm=0.0),  # the fields in file order, as a sweep
+               {name: (i if name in ("index", "leg", "run") else 1 if name == "direction" else 0.5 + i)
+                for i, name in enumerate(POINT_DTYPE.names)}]
+    for i in range(300):
+        rec = dict(index=rnd.choice([i, np.int64(i), 2**40 + i]), leg=rnd.choice([1, 6, np.int16(3), True]),
+                   run=rnd.randint(1, 100_000), direction=rnd.choice([1, -1, np.int8(-1), 1.0]),
+                   target_mm=rnd.choice(floats), flags=rnd.choice([0, 3, 2**32 - 1]))
+        for name in ("measured_mm", "error_um", "signal_pct", "air_temp_c", "speed_mm_s"):
+            if rnd.random() < 0.7:
+                rec[name] = rnd.choice(floats + ["1.25", rnd.uniform(-1e3, 1e3)])
+        records.append(rec)
+    for rec in records:
+        index, raw = point_bytes(rec)
+        row = point_row(rec)
+        assert raw == row.tobytes() and index == int(row[0]["index"]), rec
+    assert point_bytes(point_row(records[0])[0]) == (5, point_row(records[0]).tobytes())
+    for bad, error in ((dict(index=-1, leg=1, run=1, direction=1, target_mm=0.0), InputError),
+                       (dict(index=1, leg=1, run=1, direction=2, target_mm=0.0), InputError),
+                       (dict(index=1, leg=1, run=1, direction=1), SchemaError),
+                       (dict(index=1, leg=1, run=1, direction=1, target_mm=0.0, typo=1), SchemaError)):
+        with pytest.raises(error):
+            point_bytes(bad)
+        with pytest.raises(error):
+            point_row(bad)

@@ -240,3 +240,54 @@ def test_resume_is_refused_while_another_process_is_still_writing(tmp_path):
         proc.wait(timeout=30)
     assert read_session(path).indices == {0, 1}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["live.h5"]  # lock file gone
+
+
+def test_points_acknowledged_after_the_last_batch_survive_a_kill_in_the_journal(tmp_path):
+    """/points grows in batches; a point acknowledged since the last one is in the journal only,
+    and every reader of the killed file (read_session, LiveReader, resume) has it."""
+    from procedures.io.recording.journal import journal_path
+    from procedures.io.recording.writer import FLUSH_ROWS
+
+    path = tmp_path / "s.h5"
+    n = FLUSH_ROWS + FLUSH_ROWS // 2  # one batch in /points, the rest journalled (fast: < FLUSH_S)
+    proc = subprocess.Popen([sys.executable, "-c", CHILD.replace("w.finish(", "time.sleep(60); w.finish(")
+                             .replace("import os,", "import time, os,"), str(path), "new", str(n)],
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        lines = [proc.stdout.readline() for _ in range(n + 1)]
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+        proc.stdout.close()
+    acked = [int(x) for x in lines[1:]]
+    assert len(acked) == n and journal_path(path).exists()
+    with h5py.File(path, "r", swmr=True) as h:  # a plain HDF5 reader: the batches only
+        in_h5 = {int(i) for i in h["points"]["index"][...] if i >= 0}
+    assert set(acked) - in_h5, "no point was in the journal only: the test did not test it"
+    s = read_session(path)
+    assert set(acked) <= s.indices and np.array_equal(s.points["error_um"], _expected(s.points["index"]))
+    with LiveReader(path) as live:
+        assert set(acked) <= set(live.poll()["index"].tolist())
+    with SessionWriter.resume(path) as w:
+        assert set(acked) <= w.indices_written()
+        w.finish("completed")
+    with h5py.File(path, "r") as h:  # all in the HDF5 file now, the journal gone
+        assert set(acked) <= set(h["points"]["index"][...].tolist())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.h5"]
+
+
+def test_a_journal_row_cut_short_or_of_another_session_is_not_read(tmp_path):
+    from procedures.io.recording.journal import journal_path
+
+    path = tmp_path / "s.h5"
+    acked = _run_and_kill(path, "new", 5)
+    j = journal_path(path)
+    data = j.read_bytes()
+    whole = read_session(path).indices
+    assert set(acked) <= whole
+    j.write_bytes(data + data[-50:])  # a kill mid-write of one more row
+    assert read_session(path).indices == whole
+    j.write_bytes(data.replace(b'"kill"', b'"kilX"', 1))  # another session's journal beside it
+    with h5py.File(path, "r", swmr=True) as h:
+        in_h5 = {int(i) for i in h["points"]["index"][...] if i >= 0}
+    assert read_session(path).indices == in_h5  # only what /points holds: the journal is not this session's

@@ -140,7 +140,8 @@ def test_quit_during_a_sweep_asks_then_aborts_and_keeps_the_recording(cfg, size,
 
 
 async def _test_quit_during_a_sweep_asks_then_aborts_and_keeps_the_recording(cfg, size, connected, wait_until):
-    app = StationApp(cfg, time_scale=0.0)
+    # a few ms per point: at time scale 0 the plan's 4332 points can end while a question is open
+    app = StationApp(cfg, time_scale=0.005)
     async with app.run_test(size=size) as pilot:
         await start_sweep(pilot, connected, wait_until, legs="4", plan="paper")
         await wait_until(pilot, lambda: app.sweep.done >= 3, what="first points")
@@ -161,3 +162,23 @@ async def _test_quit_during_a_sweep_asks_then_aborts_and_keeps_the_recording(cfg
     assert s.attrs["outcome"] == "aborted"
     assert len(s.points) == app.sweep.done > before
     assert sim.drive_server.state(4) != "operation_enabled"
+
+
+def test_quit_confirmed_after_the_sweep_ended_meanwhile_quits(cfg, size, connected, wait_until):
+    asyncio.run(_test_quit_confirmed_after_the_sweep_ended_meanwhile_quits(cfg, size, connected, wait_until))
+
+
+async def _test_quit_confirmed_after_the_sweep_ended_meanwhile_quits(cfg, size, connected, wait_until):
+    """The question was asked while a sweep ran, the sweep ended before the answer: "abort and
+    quit" then quits (it waited for a sweep end that had already come)."""
+    app = StationApp(cfg, time_scale=0.0)
+    async with app.run_test(size=size) as pilot:
+        await start_sweep(pilot, connected, wait_until, legs="3", plan="paper")  # 4332 points: seconds
+        await wait_until(pilot, lambda: app.sweep.done >= 3, what="first points")
+        await pilot.press("ctrl+q")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the quit question")
+        await wait_until(pilot, lambda: app.sweep.status == "completed", timeout_s=240, what="the sweep to complete")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: not app.is_running, what="the app to exit")
+    assert app.sweep.status == "completed"
+    assert len(read_session(app.sweep.out).points) == app.sweep.total
