@@ -18,5 +18,6 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys):
     assert err == [
         f"station ui: error: --replay {tmp_path / 'none.h5'}: no such file (give a session .h5 file)",
         f"station ui: error: {tmp_path / 'none.toml'}: config file not found",
-        "station ui: error: --time-scale must be >= 0, got -1",
+        "station ui: error: --time-scale must be a number >= 0 (real seconds per simulated second; 0 = no waiting), "
+        "got -1",
     ]
