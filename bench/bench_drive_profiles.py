@@ -24,6 +24,7 @@ capture read back one sample per exchange (`CAP?`), after: in blocks (`CAPB?`).
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import tempfile
@@ -32,6 +33,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# sessions in temporary folders, of no leg: not for the station's catalog (whose indexing thread
+# would find them gone)
+os.environ.setdefault("STATION_CATALOG", "off")
 
 import logging  # noqa: E402
 

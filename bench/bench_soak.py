@@ -26,6 +26,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# sessions in temporary folders, of no leg: not for the station's catalog (whose indexing thread
+# would find them gone)
+os.environ.setdefault("STATION_CATALOG", "off")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402

@@ -40,6 +40,7 @@ Seeds run in parallel processes with `--jobs` (the figures are on the rig's cloc
 from __future__ import annotations
 
 import argparse
+import os
 import logging
 import sys
 import tempfile
@@ -52,6 +53,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# sessions in temporary folders, of no leg: not for the station's catalog (whose indexing thread
+# would find them gone)
+os.environ.setdefault("STATION_CATALOG", "off")
 
 from procedures.engine import events as ev  # noqa: E402
 from procedures.compensation.audit import AuditLog  # noqa: E402
