@@ -40,8 +40,11 @@ some rounds, not as a median on this loaded machine. On the same box with nothin
 (load average 0.5-2.7 and falling, 7 rounds): own CPU 0.215 ms per point against a floor of
 0.093 ms, ratio 1.91 / 2.48 / 4.59 (min / median / max over the rounds; the rig in another
 process: 0.238 against 0.105 ms, 2.10 / 2.20 / 2.89); wall 0.555 ms against 0.294 ms, ratio
-1.53 / 1.82 / 3.48 (another process 1.93 / 2.00 / 2.17): within 2 on the wall clock, not yet on
-own CPU.
+1.53 / 1.82 / 3.48 (another process 1.93 / 2.00 / 2.17). Then, the benches no longer indexing
+their sessions in the station's catalog (a thread per sweep computing its ISO 230-2 budget
+beside the rounds), load average 1.0-1.1, three runs: own CPU 0.219-0.232 ms against a floor of
+0.115-0.124 ms, median ratio 1.88, 1.79, 1.85 (rounds 1.50-2.22; the rig in another process:
+2.02, 1.94, 1.95); wall medians 1.63, 1.66, 1.61 (another process 1.84, 1.79, 1.79).
 
 Targets (issue 2 and 3): <= 2 ms and <= 3 Modbus transactions per point; a full six-leg,
 361-target, six-cycle sweep (25 992 points) <= 2 ms per point including recording, file <= 10 MB.
