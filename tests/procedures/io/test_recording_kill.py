@@ -20,7 +20,7 @@ from procedures.engine.errors import InputError
 from procedures.io.recording.reader import LiveReader, file_sha256, read_session
 from procedures.io.recording.writer import SessionWriter
 
-TOTAL = 600
+TOTAL = 20000  # far more than a child can append between its printing and its kill (a pipe holds ~10 000 lines)
 
 # value of every field is a function of the index, so the test can check content, not just count
 CHILD = r"""
@@ -28,7 +28,7 @@ import os, signal, sys
 from procedures.io.recording.writer import SessionWriter
 path, mode, total = sys.argv[1], sys.argv[2], int(sys.argv[3])
 def rec(i):
-    return dict(index=i, leg=1 + i // 300, run=1 + (i % 300) // 10, direction=1 - 2 * (((i % 300) // 10) % 2),
+    return dict(index=i, leg=1 + i // 3400, run=1 + (i % 3400) // 10, direction=1 - 2 * (((i % 3400) // 10) % 2),
                 target_mm=(i % 10) * 1.5, commanded_mm=(i % 10) * 1.5, error_um=i * 0.001, time_s=i * 2.0)
 if mode == "new":
     w = SessionWriter.create(path, session_id="kill", operator="t", rig="sim", plan={"total": total},
