@@ -83,7 +83,7 @@ class AdaptiveRule:
         """The rule for a leg of `plan`: with reversal probes (SweepPlan.reversal_probes) the
         reversal is theirs to know (procedures/fit/reversal_probes.py), so the passes stop on
         their shape alone (`reversal_se` None) from the second cycle on (one at each speed)."""
-        if getattr(plan, "reversal_probes", 0):
+        if plan.reversal_probes:
             return cls(material=material, reversal_se=None, min_cycles=MIN_CYCLES_WITH_PROBES)
         return cls(material=material)
 

@@ -64,13 +64,14 @@ def speeds_of(positions_mm: np.ndarray, t_s: np.ndarray) -> np.ndarray:
 
 
 def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer, clock: Clock,
-           control: RunControl, retry: RetryPolicy, t_start: float, done: int, total: int
-           ) -> Iterator[ev.Event]:
+           control: RunControl, retry: RetryPolicy, t_start: float, done: int, total: int,
+           set_averaging: bool) -> Iterator[ev.Event]:
     """One reversal probe (SweepPlan, docs/onthefly.md "Reversal probes"): a stop-and-go reading
     at `p.target_mm` approached in `p.direction` (the probe before it, or the leg's last pass,
     left the axis on the other side: every probe follows a reversal), after the dwell, averaged
-    over the plan's probe averaging (the anchors' averaging set back after it). Returns the count
-    of points done."""
+    over the plan's probe averaging (`set_averaging`: set it first; the probes of a leg follow
+    one another, and the next leg's first pass sets the anchors' back). Returns the count of
+    points done."""
     flags = FLAG_PROBE
     attempt = 0
     while True:
@@ -84,11 +85,10 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
                 axis.move_to(p.approach_mm(plan.probe_gap_mm), velocity_mm_s=speed)
             status = axis.move_to(p.target_mm, velocity_mm_s=speed)
             clock.sleep(plan.dwell_s)
-            laser.set_averaging(plan.probe_averaging_s)
-            try:
-                reading = laser.read(p.leg)
-            finally:
-                laser.set_averaging(plan.averaging_s)
+            if set_averaging:
+                laser.set_averaging(plan.probe_averaging_s)
+                set_averaging = False
+            reading = laser.read(p.leg)
             env = laser.environment()
             break
         except Aborted:
@@ -138,6 +138,7 @@ def onthefly_passes(
         if not plan.is_probe_run(p.run):  # what an adaptive stop can skip: the passes
             planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
     prev_temp: tuple[float, float] | None = None
+    probing = False  # the laser holds the probes' averaging (a new session sets the plan's at its first leg)
     for pas in _passes(points):
         first = pas[0]
         leg, run, d = first.leg, first.run, first.direction
@@ -151,7 +152,9 @@ def onthefly_passes(
             prev_temp = None  # (session time, material temperature) of the reading before a pass
         axis = axes[leg]
         if probe:
-            done = yield from _probe(plan, first, axis, laser, clock, control, retry, t_start, done, total)
+            done = yield from _probe(plan, first, axis, laser, clock, control, retry, t_start, done, total,
+                                     set_averaging=not probing)
+            probing = True
             continue
         speed = plan.speed_of_run(run)
         seq = all_targets if d > 0 else all_targets[::-1]
@@ -164,6 +167,9 @@ def onthefly_passes(
             yield from control.checkpoint()
             attempt += 1
             try:
+                if probing:  # the last leg's probes left their averaging: the anchor wants the plan's
+                    laser.set_averaging(plan.averaging_s)
+                    probing = False
                 axis.move_to(start_mm)
                 if prev_temp is None or prev_temp[0] is None:
                     # the first pass of the leg: the temperature as it starts (time: its first sample)

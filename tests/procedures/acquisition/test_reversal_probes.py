@@ -192,3 +192,29 @@ def test_diagnosis_sets_the_anchors_and_probes_aside_and_finds_the_speed_effect(
     assert speed, [f["effect"] for f in report["findings"]]
     # the leg end lags the encoder moving up by the plant's lag (0.12 ms)
     assert speed[0]["parameters"]["lag_up_ms"] == pytest.approx(cfgs[0].dynamic_lag_up_s * 1000, abs=0.03)
+
+
+def test_the_probes_averaging_is_set_once_per_leg_and_the_anchors_get_theirs_back():
+    """Each leg's probes read with the probe averaging, set once before its first probe; the next
+    leg's passes (their anchors) read with the plan's again."""
+    calls: list[float] = []
+
+    class Logged(SerialInterferometer):
+        def set_averaging(self, averaging_s: float) -> None:
+            calls.append(averaging_s)
+            super().set_averaging(averaging_s)
+
+    plan = onthefly_plan((1, 2), cycles=2, step_mm=5.0, reversal_probes=3)
+    cfgs = [c.with_leg_motion() for c in default_leg_configs(0, 2)]
+    with SimRig(time_scale=0.0, seed=0, legs=2, configs=cfgs) as rig:
+        axes = connect_axes(rig.drive_url, [1, 2], clock=rig.clock)
+        laser = Logged(rig.laser_port)
+        try:
+            events = list(sweep(plan, axes, laser, rig.clock))
+        finally:
+            laser.close()
+            for a in axes.values():
+                a.close()
+    assert [e for e in events if isinstance(e, ev.SweepFinished)][0].outcome == "completed"
+    a, p = plan.averaging_s, plan.probe_averaging_s
+    assert calls == [a, p, a, p]
