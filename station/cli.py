@@ -75,12 +75,20 @@ def main(argv: list[str] | None = None) -> int:
         # while the command's modules load, a Ctrl-C is only recorded (station/launch.py says why)
         signal.signal(signal.SIGINT, launch.record_interrupt)
     try:
-        return _main(argv)
-    except KeyboardInterrupt:
-        print("station: interrupted", file=sys.stderr)
-        return 130
-    finally:
+        try:
+            return _main(argv)
+        except KeyboardInterrupt:
+            print("station: interrupted", file=sys.stderr)
+            return 130
+        finally:
+            if threading.current_thread() is threading.main_thread():
+                # the command has ended: a Ctrl-C from now on (a second one while the first's
+                # abort closes the recording) only counts, it cannot raise out of here
+                signal.signal(signal.SIGINT, launch.record_interrupt)
+            launch.forget()
+    except KeyboardInterrupt:  # one that landed in the lines just above
         launch.forget()
+        return 130
 
 
 def _main(argv: list[str] | None) -> int:

@@ -1,5 +1,6 @@
-"""The simulated servo drives: a real pymodbus server (TCP on 127.0.0.1, RTU over a pty) in
-front of the leg plants.
+"""The simulated servo drives: real Modbus servers in front of the leg plants, TCP on 127.0.0.1
+(the station's own, drivers/sim/modbus_tcp.py: a thread per connection, held byte for byte to
+pymodbus' server by tests/drivers/test_modbus_tcp_server.py) and RTU over a pty (pymodbus').
 
 One server serves every leg on one bus: unit id from the profile (by default leg n = unit n),
 each with its own register space laid out by the drive profile (drivers/modbus/profiles/*.toml,
@@ -61,6 +62,7 @@ from drivers.interfaces import Clock
 from drivers.modbus.codec import crc16_modbus
 from drivers.modbus.profile import DriveProfile
 from drivers.sim import device_id
+from drivers.sim.modbus_tcp import MbapServer, NoReply
 from drivers.sim.motion import SmoothedMove
 from drivers.sim.plant import LegPlant
 from drivers.sim.position_compare import PositionCompare, TriggerLine
@@ -132,6 +134,9 @@ class _Motion:
         return self.sign * v
 
 
+_NOTHING = object()
+
+
 class _DriveModel:
     """One simulated drive (one unit id): its registers and its behaviour.
 
@@ -183,6 +188,8 @@ class _DriveModel:
         self._bank_cache: dict[int, tuple | None] = {}
         self._statuswords: dict[tuple, int] = {}
         self._internal: dict[str, object] = {}  # values the profile maps to no register
+        self._slots: dict[str, tuple] = {}  # name -> (Register | None, address, end, read-only)
+        self._held: dict[str, object] = {}  # read-only register -> the value its words encode
         # on-the-fly capture (docs/onthefly.md): position-compare output, wired by the rig
         self.compare = PositionCompare()
         self.trigger: TriggerLine | None = None
@@ -190,23 +197,37 @@ class _DriveModel:
         self._init_registers()
 
     # -- registers ------------------------------------------------------------------------------
+    # Every request updates the status registers (twice for a move), so names resolve to their
+    # slice once, and a read-only register set to the value it holds is not encoded again (only
+    # _set writes those: a client cannot, and the table code writes only bank registers).
+    def _slot(self, name: str):
+        slot = self._slots.get(name)
+        if slot is None:
+            r = self.p.registers.get(name)
+            slot = self._slots[name] = (r, r.address, r.end, not r.writable) if r is not None else (None, 0, 0, False)
+        return slot
+
     def _set(self, name: str, value) -> None:
-        r = self.p.registers.get(name)
+        r, a, e, read_only = self._slot(name)
         if r is None:  # the profile maps no register for it: the drive keeps it internally
             self._internal[name] = value
             return
-        self.regs[r.address : r.end] = r.encode(value)
+        if read_only:
+            if self._held.get(name, _NOTHING) == value:
+                return
+            self._held[name] = value
+        self.regs[a:e] = r.encode(value)
 
     def _get(self, name: str):
-        r = self.p.registers.get(name)
+        r, a, e, _ = self._slot(name)
         if r is None:
             return self._internal.get(name, 0)
-        return r.decode(self.regs[r.address : r.end])
+        return r.decode(self.regs[a:e])
 
     def _touched(self, name: str, address: int, count: int) -> bool:
         """Whether a request at `address` (+`count`) covers register `name` (False if unmapped)."""
-        r = self.p.registers.get(name)
-        return r is not None and r.address < address + count and r.end > address
+        r, a, e, _ = self._slot(name)
+        return r is not None and a < address + count and e > address
 
     def _init_registers(self) -> None:
         ident = self.p.identity
@@ -290,6 +311,11 @@ class _DriveModel:
     # -- motion -------------------------------------------------------------------------------------
     def refresh(self) -> None:
         """Bring the motion up to the clock's now and the status registers up to date."""
+        self._advance()
+        self._update_status()
+
+    def _advance(self) -> None:
+        """Bring the motion (and the plant) up to the clock's now; the status registers stay."""
         if self.motion is not None and not self.stalled:
             now = self.clock.now()
             m = self.motion
@@ -300,7 +326,6 @@ class _DriveModel:
                 self.nut_mm = m.position(now)
                 self.plant.move(self.nut_mm, now)
                 self._plant_velocity(m.velocity(now))
-        self._update_status()
 
     def _arrive(self) -> None:
         m = self.motion
@@ -524,7 +549,14 @@ class _DriveModel:
         count = len(values)
         if address < 0 or address + count > len(self.regs) or not all(self.writable[address : address + count]):
             return ExcCodes.ILLEGAL_ADDRESS
-        self.refresh()
+        self._advance()
+        try:
+            return self._apply(address, values)
+        finally:
+            self._update_status()  # once, whether the write was applied or refused
+
+    def _apply(self, address: int, values: list[int]) -> ExcCodes | None:
+        count = len(values)
         touched = lambda name: self._touched(name, address, count)  # noqa: E731
         banks = self._bank_of(address, count)
         active = self._get("active_bank")
@@ -561,7 +593,6 @@ class _DriveModel:
             self._controlword(self._get("controlword"))
         if self.p.control == "pr_trigger":
             self._pr_command(touched)
-        self._update_status()
         return None
 
     def touches_nv(self, address: int, count: int) -> bool:
@@ -643,6 +674,29 @@ class _SerialServer(_LoopRequests, ModbusSerialServer):
     pass
 
 
+class _Units:
+    """The drives as drivers/sim/modbus_tcp.py asks for them: unit id -> leg."""
+
+    def __init__(self, server: "SimDriveServer"):
+        self.server = server
+        proto = server.profile.protocol
+        self.legs = {proto.unit_id(leg): leg for leg in server._models}
+        answers = proto.device_identification
+        self.objects = device_id.device_objects(server.profile.identity) if answers else None
+
+    def serves(self, unit: int) -> bool:
+        return unit in self.legs
+
+    def read_registers(self, unit: int, function: int, address: int, count: int) -> list[int] | int:
+        return self.server.request(self.legs[unit], function, address, count, None)
+
+    def write_registers(self, unit: int, function: int, address: int, values: list[int]) -> int | None:
+        return self.server.request(self.legs[unit], function, address, len(values), values)
+
+    def device_objects(self, unit: int) -> dict[int, bytes] | None:
+        return self.objects
+
+
 class SimDriveServer:
     """Simulated drives for `plants` (leg -> plant; unit id = leg) behind a pymodbus server.
 
@@ -673,7 +727,8 @@ class SimDriveServer:
             self._load_nv()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
-        self._servers: list = []
+        self._servers: list = []  # pymodbus servers, on the loop
+        self._tcp: list[MbapServer] = []  # the station's Modbus TCP servers, threads of their own
         self._fds: list[int] = []
         self._tick: asyncio.Task | None = None
         self.tcp_port: int | None = None
@@ -710,7 +765,7 @@ class SimDriveServer:
     # -- request handling (runs in the server thread) ------------------------------------------------
     def _line_rules(self, count: int, write: bool) -> ExcCodes | None:
         """Apply the profile's line rules to a request of `count` words; count what breaks them.
-        Returns the exception to answer with; raises NoSuchIdException for no answer."""
+        Returns the exception to answer with; raises NoReply for no answer."""
         proto = self.profile.protocol
         f = self.frames
         now = time.monotonic()
@@ -724,44 +779,51 @@ class SimDriveServer:
         if gap * 1000.0 < proto.min_frame_gap_ms:
             f.gap_violations += 1
             # on an RTU line the frame would have merged with the previous one: no reply
-            raise NoSuchIdException(f"request {gap * 1000.0:.2f} ms after the previous reply, the drive needs "
+            raise NoReply(f"request {gap * 1000.0:.2f} ms after the previous reply, the drive needs "
                                     f"{proto.min_frame_gap_ms:g} ms")
         if count > (proto.max_write_words if write else proto.max_read_words):
             f.oversize += 1
             if proto.oversize_reply == "silence":
-                raise NoSuchIdException(f"request of {count} words, longer than the drive accepts")
+                raise NoReply(f"request of {count} words, longer than the drive accepts")
             return ExcCodes.ILLEGAL_VALUE  # exception 03, as the manuals say
         return None
 
     async def _action(self, leg, function_code, start_address, address, count, registers, set_values):
+        """pymodbus' datastore action (the RTU server): `_request` into its register buffer."""
         try:
-            return await self._answer(leg, function_code, start_address, address, count, registers, set_values)
+            res = self.request(leg, function_code, address, count, set_values)
+        except NoReply as exc:
+            raise NoSuchIdException(str(exc)) from None
+        if isinstance(res, list):
+            registers[address - start_address : address - start_address + count] = res
+            return None
+        return res
+
+    def request(self, leg: int, function_code: int, address: int, count: int,
+                set_values: list[int] | None) -> list[int] | ExcCodes | None:
+        """One request to drive `leg`, as both servers pass it: a read (`set_values` None) returns
+        the registers or an exception; a write returns None or an exception. Function 23 comes
+        as its write, then its read. Raises NoReply for a request the drive would not answer."""
+        try:
+            with self.lock:
+                if function_code == 23:
+                    refused = self._read_write_rules(count, set_values is not None)
+                else:
+                    refused = self._line_rules(count, set_values is not None)
+                if refused is not None:
+                    return refused
+                model = self._models[leg]
+                if model.unresponsive:
+                    raise NoReply(f"leg {leg} set unresponsive")  # no reply at all
+                if set_values is None:
+                    return model.read(address, count)
+                values = [int(v) for v in set_values]
+                res = model.write(address, values)
+                if res is None and model.touches_nv(address, count):
+                    self._save_nv()
+                return res
         finally:
             self._last_reply_t = time.monotonic()
-
-    async def _answer(self, leg, function_code, start_address, address, count, registers, set_values):
-        with self.lock:
-            if function_code == 23:
-                # read/write multiple registers: pymodbus asks for its write, then its read
-                refused = self._read_write_rules(count, set_values is not None)
-            else:
-                refused = self._line_rules(count, set_values is not None)
-            if refused is not None:
-                return refused
-            model = self._models[leg]
-            if model.unresponsive:
-                raise NoSuchIdException(f"leg {leg} set unresponsive")  # no reply at all
-            if set_values is None:
-                res = model.read(address, count)
-                if isinstance(res, ExcCodes):
-                    return res
-                registers[address - start_address : address - start_address + count] = res
-                return None
-            values = [int(v) for v in set_values]
-            res = model.write(address, values)
-            if res is None and model.touches_nv(address, count):
-                self._save_nv()
-            return res
 
     def _read_write_rules(self, count: int, write: bool) -> ExcCodes | None:
         """Function 23: exception 01 (illegal function) from a drive whose profile says it does
@@ -829,11 +891,23 @@ class SimDriveServer:
             for m in self._models.values():
                 m.refresh()
 
-    def start_tcp(self, host: str = "127.0.0.1", port: int = 0) -> int:
-        """Serve Modbus TCP on `host` (loopback only) and `port` (0 = any free); returns the port."""
+    def start_tcp(self, host: str = "127.0.0.1", port: int = 0, engine: str = "station") -> int:
+        """Serve Modbus TCP on `host` (loopback only) and `port` (0 = any free); returns the port.
+        `engine` "station" is drivers/sim/modbus_tcp.py, "pymodbus" pymodbus' server (kept for
+        the test that holds the two to the same bytes)."""
         if not ipaddress.ip_address(host).is_loopback:
             raise ValueError(f"the simulated drive serves loopback only, not {host}; use 127.0.0.1")
+        if engine not in ("station", "pymodbus"):
+            raise ValueError(f"unknown Modbus TCP server engine {engine!r}: station or pymodbus")
         self._ensure_loop()
+        if engine == "station":
+            server = MbapServer(_Units(self), host, port, name="sim-drive-tcp")
+            try:
+                self.tcp_port = server.start()
+            except OSError as exc:
+                raise OSError(exc.errno, f"cannot listen on {host}:{port} ({exc.strerror or exc})") from None
+            self._tcp.append(server)
+            return self.tcp_port
 
         async def start():
             server = _TcpServer(self._devices(), address=(host, port), ignore_missing_devices=True)
@@ -908,6 +982,9 @@ class SimDriveServer:
                 except (ValueError, OSError):
                     pass
 
+        for server in self._tcp:
+            server.close()
+        self._tcp.clear()
         try:
             self._call(shutdown())
         finally:

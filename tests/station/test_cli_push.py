@@ -13,13 +13,13 @@ import sys
 from pathlib import Path
 
 import pytest
-from pymodbus.exceptions import NoSuchIdException
 
 from drivers.clock import VirtualClock
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
 from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.sim.modbus_tcp import NoReply  # the simulated drive answers nothing
 from procedures.compensation.audit import read_entries
 from procedures.compensation.push import quantize, table_sha256
 from procedures.compensation.table import CompTable, LegTable, table_csv_text
@@ -238,7 +238,7 @@ def test_link_lost_at_a_random_chunk_of_a_push_leaves_the_previous_table_active(
             seen["n"] += 1
             if seen["n"] == die_at:
                 model.unresponsive = True  # the cable is pulled: no more answers
-                raise NoSuchIdException("link lost")
+                raise NoReply("link lost")
         return original(address, values)
 
     model.write = write

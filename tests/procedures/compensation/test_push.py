@@ -11,7 +11,6 @@ import threading
 
 import pytest
 from pymodbus.constants import ExcCodes
-from pymodbus.exceptions import NoSuchIdException
 
 from drivers.clock import VirtualClock
 from drivers.interfaces import TableBank
@@ -30,6 +29,7 @@ from procedures.compensation.push import (
     table_sha256,
 )
 from drivers.modbus.client import table_spec
+from drivers.sim.modbus_tcp import NoReply  # the simulated drive answers nothing
 from procedures.compensation.table import LegTable
 
 IDEAL = PlantConfig().only()
@@ -257,7 +257,7 @@ def test_an_unanswered_switch_that_landed_counts_as_done(drive, audit):
     def silent_after(address, values, original):
         res = original(address, values)
         if address <= reg.address < address + len(values):
-            raise NoSuchIdException("reply lost")  # applied, but no answer
+            raise NoReply("reply lost")  # applied, but no answer
         return res
 
     _table_writes(drive.model(), silent_after)
@@ -274,7 +274,7 @@ def test_an_unanswered_switch_with_a_dead_drive_says_the_state_is_unknown(drive,
     def dies(address, values, original):
         if address <= reg.address < address + len(values):
             model.unresponsive = True
-            raise NoSuchIdException("drive died")
+            raise NoReply("drive died")
         return original(address, values)
 
     _table_writes(model, dies)
@@ -297,7 +297,7 @@ def test_link_lost_at_a_random_chunk_leaves_the_previous_table_active(drive, aud
             count["n"] += 1
             if count["n"] == die_at:
                 model.unresponsive = True
-                raise NoSuchIdException("link lost")
+                raise NoReply("link lost")
         return original(address, values)
 
     _table_writes(model, maybe_die)

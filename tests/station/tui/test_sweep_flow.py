@@ -89,17 +89,18 @@ def test_plot_and_progress_advance_live_and_pause_holds_motion(cfg, size, connec
 async def _test_plot_and_progress_advance_live_and_pause_holds_motion(cfg, size, connected, wait_until):
     app = StationApp(cfg, time_scale=0.0)
     async with app.run_test(size=size) as pilot:
-        await start_sweep(pilot, connected, wait_until, legs="2", plan="paper")  # 4332 points: runs for minutes, we stop it
+        # 6 x 4332 points: longer than the test (its pause, resume and abort), whatever the machine
+        await start_sweep(pilot, connected, wait_until, legs="1-6", plan="paper")
         bar = app.screen.query_one("#progress", ProgressBar)
         await wait_until(pilot, lambda: plot(app).drawn_points >= 3 and bar.progress >= 3, what="first points on screen")
         first_plot, first_bar = plot(app).drawn_points, bar.progress
         await wait_until(pilot, lambda: plot(app).drawn_points >= first_plot + 20, what="the plot to advance")
-        assert bar.progress > first_bar and bar.total == 2 * 6 * 361
+        assert bar.progress > first_bar and bar.total == 6 * 2 * 6 * 361
         # pause: the run holds between points and the drive is not moving
         await pilot.press("p")
         await wait_until(pilot, lambda: app.sweep.status == "paused", what="the pause")
         held = app.sweep.done
-        st = app.rig.axes[2].status()
+        st = app.rig.axes[1].status()
         assert not st.moving
         for _ in range(10):  # a few UI frames: nothing is measured while paused
             await pilot.pause()
