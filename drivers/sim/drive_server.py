@@ -190,6 +190,7 @@ class _DriveModel:
         self._internal: dict[str, object] = {}  # values the profile maps to no register
         self._slots: dict[str, tuple] = {}  # name -> (Register | None, address, end, read-only)
         self._held: dict[str, object] = {}  # read-only register -> the value its words encode
+        self._spans: dict[tuple[int, int], tuple[frozenset[str], frozenset[int]]] = {}
         # on-the-fly capture (docs/onthefly.md): position-compare output, wired by the rig
         self.compare = PositionCompare()
         self.trigger: TriggerLine | None = None
@@ -226,8 +227,22 @@ class _DriveModel:
 
     def _touched(self, name: str, address: int, count: int) -> bool:
         """Whether a request at `address` (+`count`) covers register `name` (False if unmapped)."""
-        r, a, e, _ = self._slot(name)
-        return r is not None and a < address + count and e > address
+        return name in self._span(address, count)[0]
+
+    def _span(self, address: int, count: int) -> tuple[frozenset[str], frozenset[int]]:
+        """The registers (names) and table banks a request at `address` (+`count`) covers,
+        worked out once per span (a client uses a handful)."""
+        key = (address, count)
+        span = self._spans.get(key)
+        if span is None:
+            if len(self._spans) > 4096:  # a fuzzer's spans: do not grow without end
+                self._spans.clear()
+            end = address + count
+            names = frozenset(n for n, r in self.p.registers.items() if r.address < end and r.end > address)
+            banks = frozenset(b for b in range(self.t.banks if self.t else 0)
+                              if address < self.t.bank_end(b) and end > self.t.bank_base[b])
+            span = self._spans[key] = (names, banks)
+        return span
 
     def _init_registers(self) -> None:
         ident = self.p.identity
@@ -536,12 +551,8 @@ class _DriveModel:
         self.refresh()
         return self.regs[address : address + count]
 
-    def _bank_of(self, address: int, count: int) -> set[int]:
-        hit = set()
-        for b in range(self.t.banks if self.t else 0):
-            if address < self.t.bank_end(b) and address + count > self.t.bank_base[b]:
-                hit.add(b)
-        return hit
+    def _bank_of(self, address: int, count: int) -> frozenset[int]:
+        return self._span(address, count)[1]
 
     def write(self, address: int, values: list[int]) -> ExcCodes | None:
         """Apply a register write; returns a Modbus exception code to refuse it (nothing applied)."""
@@ -557,8 +568,8 @@ class _DriveModel:
 
     def _apply(self, address: int, values: list[int]) -> ExcCodes | None:
         count = len(values)
-        touched = lambda name: self._touched(name, address, count)  # noqa: E731
-        banks = self._bank_of(address, count)
+        names, banks = self._span(address, count)
+        touched = names.__contains__
         active = self._get("active_bank")
         if active in banks:
             return ExcCodes.ILLEGAL_ADDRESS  # the active table is read-only while active
@@ -598,9 +609,8 @@ class _DriveModel:
     def touches_nv(self, address: int, count: int) -> bool:
         if self.t is None:
             return False
-        if any(self._touched(n, address, count) for n in ("active_bank", "table_enable")):
-            return True
-        return bool(self._bank_of(address, count))
+        names, banks = self._span(address, count)
+        return "active_bank" in names or "table_enable" in names or bool(banks)
 
     def nv_state(self) -> dict:
         return {

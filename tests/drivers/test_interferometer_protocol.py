@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import random
 import re
 import select
 import threading
@@ -31,6 +32,17 @@ def test_checksum_matches_a_published_nmea_sentence():
     # a GPS sentence with its published checksum (NMEA 0183: XOR of the bytes between $ and *)
     body = b"GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,"
     assert p.checksum(body) == "76"
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 7, 8, 9, 40, 63, 64, 65, 255])
+def test_checksum_is_the_xor_of_every_byte(n):
+    rng = random.Random(n)
+    for _ in range(20):
+        body = bytes(rng.randrange(256) for _ in range(n))
+        value = 0
+        for byte in body:  # the definition, one byte at a time
+            value ^= byte
+        assert p.checksum(body) == f"{value:02X}"
 
 
 def test_frame_and_split_round_trip():
