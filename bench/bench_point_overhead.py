@@ -44,7 +44,15 @@ process: 0.238 against 0.105 ms, 2.10 / 2.20 / 2.89); wall 0.555 ms against 0.29
 their sessions in the station's catalog (a thread per sweep computing its ISO 230-2 budget
 beside the rounds), load average 1.0-1.1, three runs: own CPU 0.219-0.232 ms against a floor of
 0.115-0.124 ms, median ratio 1.88, 1.79, 1.85 (rounds 1.50-2.22; the rig in another process:
-2.02, 1.94, 1.95); wall medians 1.63, 1.66, 1.61 (another process 1.84, 1.79, 1.79).
+2.02, 1.94, 1.95); wall medians 1.63, 1.66, 1.61 (another process 1.84, 1.79, 1.79). Then,
+the simulated drive serving Modbus TCP with its own server (drivers/sim/modbus_tcp.py, threads
+with blocking sockets, instead of pymodbus' asyncio server; the floor's bare move talks to it
+too), load average 0.9-1.0, three runs: own CPU 0.120-0.133 ms against a floor of 0.085-0.093
+ms, median ratio 1.43, 1.41, 1.43 (rounds 1.32-1.52); the rig in another process 0.136-0.144
+against 0.076-0.086 ms, 1.73, 1.62, 1.70 (rounds 1.50-2.28, one round of 21 above 2). Both
+sides' CPU fell with the server (the station's thread from 0.22 to 0.13 ms, the bare client's
+from 0.12 to 0.09); why the client side fell too was not measured (a guess: fewer GIL
+hand-overs with a server thread that wakes straight from recv, not from a loop's selector).
 
 Targets (issue 2 and 3): <= 2 ms and <= 3 Modbus transactions per point; a full six-leg,
 361-target, six-cycle sweep (25 992 points) <= 2 ms per point including recording, file <= 10 MB.
