@@ -16,9 +16,12 @@ rounds): 1667-2554 points/s against the baseline's 794-1275; speed-up per run 1.
 2.30x (min / median / max), the six rounds 1.62-2.59x; every replay identical. At load 3:
 3306-4368 points/s, 1.62 and 2.51x. On the same box with nothing else running (load average
 0.4-1.0, two runs of three rounds): 1957-2051 points/s against 1167-1217, 1.64 / 1.66-1.69 /
-1.70x: the goal of 2 is met only under load, where the fewer hand-overs count for more; a
-replayed point is now mostly the replay drive's pymodbus server (0.31 ms a move on loopback
-against 0.12 ms a position exchange on the pty). docs/replay.md says where the time went.
+1.70x: the goal of 2 was met only under load; a replayed point was then mostly the replay
+drive's pymodbus server. With the simulated drive's own Modbus TCP server
+(drivers/sim/modbus_tcp.py) and a leaner drive model, same box, load average 0.9-1.0, three
+runs of three rounds: 2432-2716 points/s against 1176-1285, speed-up 2.08 / 2.13 / 2.17,
+2.09 / 2.11 / 2.16 and 1.99 / 2.17 / 2.26x (min / median / max per run); every replay
+identical. docs/replay.md says where the time went.
 
     .venv/bin/python bench/bench_replay.py [--session recordings/calibration-6legs.h5] [--speed max]
         [--rounds N] [--baseline REV] [--old]
