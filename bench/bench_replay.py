@@ -19,7 +19,7 @@ rounds): 1667-2554 points/s against the baseline's 794-1275; speed-up per run 1.
 1.70x: the goal of 2 was met only under load; a replayed point was then mostly the replay
 drive's pymodbus server. With the simulated drive's own Modbus TCP server
 (drivers/sim/modbus_tcp.py) and a leaner drive model, same box, load average 0.9-1.0, three
-runs of three rounds: 2432-2716 points/s against 1176-1285, speed-up 2.08 / 2.13 / 2.17,
+runs of three rounds: 2481-2716 points/s against 1193-1317, speed-up 2.08 / 2.13 / 2.17,
 2.09 / 2.11 / 2.16 and 1.99 / 2.17 / 2.26x (min / median / max per run); every replay
 identical. docs/replay.md says where the time went.
 
