@@ -65,13 +65,16 @@ def speeds_of(positions_mm: np.ndarray, t_s: np.ndarray) -> np.ndarray:
 
 def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer, clock: Clock,
            control: RunControl, retry: RetryPolicy, t_start: float, done: int, total: int,
-           set_averaging: bool) -> Iterator[ev.Event]:
+           set_averaging: bool, in_place: bool) -> Iterator[ev.Event]:
     """One reversal probe (SweepPlan, docs/onthefly.md "Reversal probes"): a stop-and-go reading
-    at `p.target_mm` approached in `p.direction` (the probe before it, or the leg's last pass,
-    left the axis on the other side: every probe follows a reversal), after the dwell, averaged
+    at `p.target_mm` approached in `p.direction` right after a reversal, after the dwell, averaged
     over the plan's probe averaging (`set_averaging`: set it first; the probes of a leg follow
-    one another, and the next leg's first pass sets the anchors' back). Returns the count of
-    points done."""
+    one another, and the next leg's first pass sets the anchors' back). `in_place`: the reading
+    before it in the plan (the probe before, or the leg's last pass) has just left the axis on
+    the other side; else (a resume among the probes, after preparing the leg) and on a retry
+    (recovered wherever it stopped) the axis goes back there first, arriving against the probe's
+    direction (`SweepPlan.before_probe_mm`), so the probe follows the same reversal over the
+    same travel as in an uninterrupted run. Returns the count of points done."""
     flags = FLAG_PROBE
     attempt = 0
     while True:
@@ -81,8 +84,11 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
             # at the plan's faster pass speed: the leg runs it on the fly anyway, and the probes'
             # moves (up the stroke in steps, a gap down) are most of their time after the dwell
             speed = max(plan.speeds_mm_s)
-            if attempt > 1:  # recovered wherever it stopped: approach again from the probe's side
-                axis.move_to(p.approach_mm(plan.probe_gap_mm), velocity_mm_s=speed)
+            if attempt > 1 or not in_place:
+                before_mm = plan.before_probe_mm(p.run)
+                # beyond it on the probe's side (inside the plan's travel: the stroke or the anchor's gap)
+                axis.move_to(before_mm + p.direction * plan.probe_gap_mm, velocity_mm_s=speed)
+                axis.move_to(before_mm, velocity_mm_s=speed)
             status = axis.move_to(p.target_mm, velocity_mm_s=speed)
             clock.sleep(plan.dwell_s)
             if set_averaging:
@@ -139,6 +145,7 @@ def onthefly_passes(
             planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
     prev_temp: tuple[float, float] | None = None
     probing = False  # the laser holds the probes' averaging (a new session sets the plan's at its first leg)
+    in_place = False  # the axis stands where the plan's point before the next one left it
     for pas in _passes(points):
         first = pas[0]
         leg, run, d = first.leg, first.run, first.direction
@@ -150,11 +157,12 @@ def onthefly_passes(
             last_leg, current_leg = current_leg, leg
             yield from start_leg(plan, axes, laser, clock, control, first, last_leg, t_start)
             prev_temp = None  # (session time, material temperature) of the reading before a pass
+            in_place = False  # the leg was just prepared (at mid-stroke), not where its plan's last point left it
         axis = axes[leg]
         if probe:
             done = yield from _probe(plan, first, axis, laser, clock, control, retry, t_start, done, total,
-                                     set_averaging=not probing)
-            probing = True
+                                     set_averaging=not probing, in_place=in_place)
+            probing = in_place = True
             continue
         speed = plan.speed_of_run(run)
         seq = all_targets if d > 0 else all_targets[::-1]
@@ -237,6 +245,7 @@ def onthefly_passes(
             rows.append(record)
             yield ev.PointMeasured(record, done, total)
         prev_temp = (t_after, temp_after)
+        in_place = True
         if plan.adaptive:
             measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
             if run % 2 == 0 and planned_left[leg] > 0:  # after every cycle (a direction pair)

@@ -154,6 +154,19 @@ class SweepPlan:
         n = self.reversal_probes
         return float(lo + (hi - lo) * (k + 0.5) / n)
 
+    def before_probe_mm(self, run: int) -> float:
+        """Where the plan's order leaves the axis before probe `run` (a probe run of a leg), reached
+        moving against the probe's direction: the reading before it, i.e. the pair's upward
+        reading before its downward one, the previous pair's downward reading before an upward
+        one, and the leg's last (downward) pass's anchor before the first. A probe approached from
+        here follows a reversal, as in an uninterrupted run (onthefly.py re-approaches a resumed or
+        retried probe this way)."""
+        j = run - 2 * self.cycles - 1  # 0-based reading among the leg's probes
+        k, down = divmod(j, 2)
+        if down:
+            return self.probe_up_mm(k)
+        return self.anchor_mm(-1) if k == 0 else self.probe_up_mm(k - 1) - self.probe_gap_mm
+
     @property
     def points_per_pass(self) -> int:
         """Targets of a pass, plus on the fly its anchor (a reading at rest at the pass's end)."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from procedures.diagnosis.aliasing import sampling_warning
 from procedures.diagnosis.blas import single_threaded_blas
 from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
 from procedures.diagnosis.legdata import LegData, split_legs
+from procedures.diagnosis.probe_reversal import FixedReversal, fixed_reversal, probe_points
 from procedures.diagnosis.selection import (LegProblem, contribution_um, evaluate, prune, refine_variants,
                                             select_effects)
 from procedures.diagnosis.variants import VARIANTS
@@ -185,7 +186,14 @@ def scale_and_temperature(scale_ppm: float, leg: LegData, twin: Twin) -> dict | 
             "steel_expansion_ppm": steel, "note": note}
 
 
-def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tuple[dict, list[dict]]:
+def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings,
+                  fixed: FixedReversal | None = None) -> tuple[dict, list[dict]]:
+    """One leg's report and findings. `fixed`: the reversal from the leg's reversal probes
+    (procedures/diagnosis/probe_reversal.py), taken out of the passes first and reported as the
+    backlash finding instead of being selected among the effects."""
+    raw_leg = leg
+    if fixed is not None:  # the error holds -reversal/2 x direction (Backlash.columns): take it out
+        leg = replace(leg, error_um=leg.error_um + 0.5 * fixed.reversal_um * leg.direction)
     ctx = prepare_leg(leg, twin, s)
     problem = ctx.problem
     can_cv = problem.folds is not None
@@ -214,6 +222,10 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     applicable: list[Effect] = []
     for name in s.effects:
         e = EFFECTS[name]
+        if fixed is not None and name == "backlash":
+            cands.append({"effect": name, "status": "named", "p_value": fixed.p_value,
+                          "reason": f"fixed by {fixed.pairs} reversal probe pairs before the other effects"})
+            continue
         why = e.applicable(leg, twin is not None)
         if why is None and not can_cv:
             why = "needs at least two cycles to score on held-out passes"
@@ -322,7 +334,12 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
                 if warn:
                     findings[-1]["sampling"] = warn
     after_all = problem.cv_rms(chosen)
-    rep["combined"] = {"effects": [_name(e) for e in chosen], "heldout_rms_before_um": baseline,
+    if fixed is not None:
+        baseline = _with_fixed_reversal(fixed, raw_leg, leg, twin, s, ctx, problem, chosen, bonf, findings, baseline)
+        next(c for c in cands if c["effect"] == "backlash")["heldout_contribution_um"] = \
+            findings[0]["heldout_contribution_um"]
+    rep["combined"] = {"effects": (["backlash"] if fixed is not None else []) + [_name(e) for e in chosen],
+                       "heldout_rms_before_um": baseline,
                        "heldout_rms_after_um": after_all,
                        "shrink_pct": 100.0 * (1 - after_all / baseline) if baseline > 0 else 0.0}
     chosen_base = tuple(getattr(c, "base", c) for c in chosen)
@@ -358,6 +375,38 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings) -> tupl
     return rep, findings
 
 
+def _with_fixed_reversal(fixed: FixedReversal, raw_leg: LegData, leg: LegData, twin: Twin | None,
+                         s: DiagnosisSettings, ctx: LegContext, problem: LegProblem, chosen: list, bonf: dict,
+                         findings: list[dict], baseline_um: float) -> float:
+    """The probes' reversal as the first finding (its held-out effect: the twin alone on the raw
+    passes against on the passes without it), the other findings on top of it, their
+    uncertainties widened by what one standard error of the reversal moves them (a refit with the
+    reversal that much larger, added in quadrature). Returns the held-out RMS before any effect."""
+    if chosen:
+        final = problem.full_fit(chosen, bonf)
+        moved = replace(leg, error_um=leg.error_um + 0.5 * fixed.stderr_um * leg.direction)
+        refit = LegProblem(moved, problem.base, ctx.fixed_um, problem.folds).full_fit(chosen, bonf)
+        for e, f in zip(chosen, findings):  # one finding per chosen effect, in order
+            sl = final.slices[e.name]
+            again, _ = e.parameters(refit.gls.coef[sl], refit.gls.cov[sl, sl], refit.specs.get(e.name), leg,
+                                    refit.resid_um)
+            for k, se in f["uncertainty"].items():
+                if k in again:
+                    f["uncertainty"][k] = float(np.hypot(se, again[k] - f["parameters"][k]))
+            f["added_to"] = ["backlash"] + f["added_to"]
+    before = prepare_leg(raw_leg, twin, s).problem.cv_rms(())
+    findings.insert(0, {
+        "leg": leg.leg, "effect": "backlash", "parameters": {"reversal_um": fixed.reversal_um},
+        "uncertainty": {"reversal_um": fixed.stderr_um}, "source": "reversal probes", "probe_pairs": fixed.pairs,
+        "heldout_rms_before_um": before, "heldout_rms_after_um": baseline_um,
+        "shrink_pct": 100.0 * (1 - baseline_um / before) if before > 0 else 0.0,
+        "heldout_contribution_um": contribution_um(before, baseline_um), "added_to": [], "added_with": [],
+        "heldout_rms_alone_after_um": baseline_um, "p_value": fixed.p_value,
+        "f_stat": (fixed.reversal_um / fixed.stderr_um) ** 2, "df_denominator": fixed.pairs - 1,
+    })
+    return before
+
+
 def _passes_only(points: np.ndarray) -> tuple[np.ndarray, int]:
     """`points` without an on-the-fly session's anchors and reversal probes (FLAG_ANCHOR,
     FLAG_PROBE: single readings at rest beside the passes; as passes of their own they would
@@ -380,6 +429,7 @@ def diagnose(points: np.ndarray, twin: Twin | None = None, settings: DiagnosisSe
 
 
 def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
+    probes = probe_points(points) if "backlash" in s.effects else probe_points(points[:0])
     points, set_aside = _passes_only(points)
     legs = split_legs(points, source)
     report: dict = {
@@ -393,7 +443,12 @@ def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
                                "beside the passes, which the fit uses to take the passes static (docs/onthefly.md), "
                                "not passes to compare")
     for n, leg in legs.items():
-        rep, findings = _diagnose_leg(leg, twin, s)
+        fixed = None
+        if len(probes) and leg.n_cycles >= 2:  # the reversal from the probes (probe_reversal.py)
+            fixed = fixed_reversal(probes[probes["leg"] == n], leg, twin)
+            if fixed is not None:
+                report["notes"].append(fixed.note(n))
+        rep, findings = _diagnose_leg(leg, twin, s, fixed)
         report["legs"][str(n)] = rep
         report["findings"].extend(findings)
     if not report["findings"]:

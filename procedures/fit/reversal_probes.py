@@ -73,6 +73,28 @@ def _pair_stderr_um(resid: np.ndarray, direction: np.ndarray, run: np.ndarray, o
     return float(np.std(diffs, ddof=1) / np.sqrt(len(diffs)))
 
 
+def reversal_of_residuals(resid_um: np.ndarray, direction: np.ndarray, run: np.ndarray
+                          ) -> tuple[float, float | None, int] | None:
+    """(reversal, its standard error, pairs) of probe residuals `resid_um` (each probe's reading
+    minus a prediction of the same shape for both directions, um; NaN = not read): the mean
+    downward residual minus the mean upward one; the standard error from the pairs
+    (`_pair_stderr_um`), else from the scatter per direction; pairs = the fewer of up and down
+    readings. None without a reading in either direction. Also the diagnosis's reversal
+    (procedures/diagnosis/probe_reversal.py)."""
+    resid, d = np.asarray(resid_um, dtype=float), np.asarray(direction)
+    ok = np.isfinite(resid)
+    up, down = ok & (d > 0), ok & (d < 0)
+    if not np.any(up) or not np.any(down):
+        return None
+    shift = float(np.mean(resid[down]) - np.mean(resid[up]))
+    n_up, n_down = int(up.sum()), int(down.sum())
+    stderr = _pair_stderr_um(resid, d, np.asarray(run), ok)
+    if stderr is None and n_up + n_down > 2:  # no whole pairs to go by: the scatter per direction
+        ss = float(np.sum((resid[up] - resid[up].mean()) ** 2) + np.sum((resid[down] - resid[down].mean()) ** 2))
+        stderr = float(np.sqrt(ss / (n_up + n_down - 2) * (1.0 / n_up + 1.0 / n_down)))
+    return shift, stderr, min(n_up, n_down)
+
+
 def apply_probes(leg_fit: Any, probes: np.ndarray) -> ProbeReversal | None:
     """Move `leg_fit`'s constant reversal coefficient to what its `probes` (this leg's probe
     points, error normalised) say (module docstring), in place; the result is also stored in
@@ -81,23 +103,16 @@ def apply_probes(leg_fit: Any, probes: np.ndarray) -> ProbeReversal | None:
     basis = getattr(leg_fit, "basis", None)
     if basis is None or basis.reversal_degree < 0:
         return None
-    e = np.asarray(probes["error_um"], dtype=float)
     d = np.asarray(probes["direction"])
-    ok = np.isfinite(e)
-    up, down = ok & (d > 0), ok & (d < 0)
-    if not np.any(up) or not np.any(down):
+    resid = np.asarray(probes["error_um"], dtype=float) - leg_fit.predict_um(np.asarray(probes["target_mm"], dtype=float), d)
+    found = reversal_of_residuals(resid, d, np.asarray(probes["run"]))
+    if found is None:
         return None
-    resid = e - leg_fit.predict_um(np.asarray(probes["target_mm"], dtype=float), d)
-    shift = float(np.mean(resid[down]) - np.mean(resid[up]))
-    n_up, n_down = int(up.sum()), int(down.sum())
-    stderr = _pair_stderr_um(resid, d, np.asarray(probes["run"]), ok)
-    if stderr is None and n_up + n_down > 2:  # no whole pairs to go by: the scatter per direction
-        ss = float(np.sum((resid[up] - resid[up].mean()) ** 2) + np.sum((resid[down] - resid[down].mean()) ** 2))
-        stderr = float(np.sqrt(ss / (n_up + n_down - 2) * (1.0 / n_up + 1.0 / n_down)))
+    shift, stderr, pairs = found
     before = float(leg_fit.reversal_um)
     # r_0 is the reversal's constant Legendre coefficient: P_0 = 1 everywhere, so adding the
     # shift to it moves the reversal by the shift at every position, the shape untouched
     leg_fit.coef_um[basis.trend_degree + 1] += shift
-    result = ProbeReversal(min(n_up, n_down), shift, before, float(leg_fit.reversal_um), stderr)
+    result = ProbeReversal(pairs, shift, before, float(leg_fit.reversal_um), stderr)
     leg_fit.selection["reversal_probes"] = result.to_json()
     return result

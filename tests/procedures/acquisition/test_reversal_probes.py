@@ -218,3 +218,43 @@ def test_the_probes_averaging_is_set_once_per_leg_and_the_anchors_get_theirs_bac
     assert [e for e in events if isinstance(e, ev.SweepFinished)][0].outcome == "completed"
     a, p = plan.averaging_s, plan.probe_averaging_s
     assert calls == [a, p, a, p]
+
+
+DIAGNOSED_SEEDS = (0, 1)
+LAG_TOLERANCE_SE = 4.0  # seeds 0-3 measured: within 1.7 standard errors but seed 2's lags, 3.7 and 2.8
+
+
+@pytest.fixture(scope="module")
+def diagnosed():
+    """seed -> (report, plant config): a bounded on-the-fly session (one leg, four cycles at 10 and
+    20 mm/s, a capture every 1 mm, 12 probe pairs) on the simulated leg, diagnosed whole."""
+    from procedures.diagnosis import diagnose
+
+    plan = onthefly_plan((1,), cycles=4, step_mm=1.0, reversal_probes=12)
+    out = {}
+    for seed in DIAGNOSED_SEEDS:
+        points, _, cfgs = run(plan, seed=seed, legs=1)
+        out[seed] = diagnose(points), cfgs[0]
+    return out
+
+
+@pytest.mark.parametrize("seed", DIAGNOSED_SEEDS)
+def test_diagnosis_fixes_the_reversal_from_the_probes_and_finds_the_plants_lags(diagnosed, seed):
+    """With passes only, a constant reversal and the leg-end lag are nearly collinear (on this
+    plan the passes alone gave no speed effect and a 3.9 um reversal on seed 0); the probes pin
+    the reversal, and the lags come out within their stated standard errors of the plant's."""
+    report, cfg = diagnosed[seed]
+    found = {f["effect"]: f for f in report["findings"]}
+    backlash, speed = found["backlash"], found["speed"]
+    assert backlash["source"] == "reversal probes" and backlash["probe_pairs"] == 12
+    assert any(n.startswith("leg 1: reversal") and "12 reversal probe pairs" in n for n in report["notes"])
+    se = backlash["uncertainty"]["reversal_um"]
+    assert 0.005 < se < 0.05
+    assert abs(backlash["parameters"]["reversal_um"] - cfg.reversal_um) <= LAG_TOLERANCE_SE * se
+    assert "backlash" in speed["added_to"]
+    for key, true_s in (("lag_up_ms", cfg.dynamic_lag_up_s), ("lag_down_ms", cfg.dynamic_lag_down_s)):
+        got, se = speed["parameters"][key], speed["uncertainty"][key]
+        assert 0 < se < 0.01, (key, se)
+        assert abs(got - true_s * 1000) <= LAG_TOLERANCE_SE * se, (key, got, se, true_s * 1000)
+    cand = {c["effect"]: c for c in report["legs"]["1"]["candidates"]}
+    assert cand["backlash"]["status"] == "named" and "probe" in cand["backlash"]["reason"]
