@@ -164,13 +164,16 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         rows = legs(engine, leg_type=leg_type, station=st, since=since_d, until=until_d, due_by=due_d,
                     interval_days=s.interval_days)
         verdict = _choice("decision", decision, list(queries.DECISIONS))
-        decided = queries.latest_decisions(engine, {r.serial: r.leg_type for r in rows}, s.decision_tolerances)
-        if verdict:
+        decided = {}
+        if verdict:  # every leg decided, then filtered; else only the page shown
+            decided = queries.latest_decisions(engine, {r.serial: r.leg_type for r in rows}, s.decision_tolerances)
             rows = [r for r in rows if decided.get(r.serial) == queries.DECISIONS[verdict]]
         pages = max(1, -(-len(rows) // s.page_size))
         if n > pages:
             raise PageError(404, f"page {n}: there are {pages} page(s) of legs with these filters")
         shown = rows[(n - 1) * s.page_size: n * s.page_size]
+        if not verdict:
+            decided = queries.latest_decisions(engine, {r.serial: r.leg_type for r in shown}, s.decision_tolerances)
         filters = {k: v for k, v in dict(type=leg_type, station=st, since=since_d, until=until_d,
                                          due=due if due == "today" else due_d, decision=verdict).items() if v}
         return page(request, "fleet.html", rows=shown, total=len(rows), page_no=n, pages=pages, types=types,

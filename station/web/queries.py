@@ -187,8 +187,11 @@ def latest_decisions(engine: Engine, leg_types: dict[str, str | None],
     completed session's ISO 230-2 values with U; a leg never calibrated has none."""
     if not leg_types:
         return {}
-    latest = (sa.select(RecordLeg.leg_serial, sa.func.max(RecordLeg.time_utc).label("t"))
-              .where(COMPLETED, RecordLeg.leg_serial.is_not(None)).group_by(RecordLeg.leg_serial).subquery())
+    latest = sa.select(RecordLeg.leg_serial, sa.func.max(RecordLeg.time_utc).label("t")).where(
+        COMPLETED, RecordLeg.leg_serial.is_not(None))
+    if len(leg_types) <= 500:  # a page of legs: their index seeks only, not the whole fleet's
+        latest = latest.where(RecordLeg.leg_serial.in_(sorted(leg_types)))
+    latest = latest.group_by(RecordLeg.leg_serial).subquery()
     cols = [RecordLeg.leg_serial, RecordLeg.uid, Record.summary]
     cols += [getattr(RecordLeg, f"{n}{s}") for n in FIGURES for s in ("_um", "_U_um")]
     q = (sa.select(*cols).join(Record, Record.uid == RecordLeg.uid)
