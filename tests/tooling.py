@@ -83,6 +83,16 @@ async def start_paper_sweep(pilot, legs: str) -> None:
     await pilot.click("#start")
 
 
+def lab_config(folder) -> "Path":
+    """A station TOML in `folder` for certificates: recordings in folder/runs, a [lab] with a customer."""
+    from pathlib import Path
+
+    p = Path(folder) / "station.toml"
+    p.write_text(f'[station]\nrecordings_dir = "{Path(folder) / "runs"}"\n[lab]\nname = "Hexapod Metrology Lab"\n'
+                 'address = "Werkstr. 5, Musterstadt"\naccreditation = "D-K-12345-01-00"\ncustomer = "ACME"\n')
+    return p
+
+
 def write_identified_session(path, points, *, station_id="bench-1", serial="HX-0042", leg_type="HX300",
                              plan=None, station_config=None, calibration_due="2099-01-01", started_utc=None):
     """A completed session file at `path` holding `points`, with an identity (station, the serial

@@ -186,6 +186,12 @@ def overall(decisions: Iterable[Decision]) -> str:
     return UNDECIDED
 
 
+def stage_of(plan_kind: str | None) -> str:
+    """The stage a session is decided at: "as_left" for a verification sweep (plan kind
+    "verification", after compensation), else "as_found"."""
+    return "as_left" if plan_kind == "verification" else "as_found"
+
+
 def decide_leg(leg_values: Mapping[str, Any], budget_values: Mapping[str, Any], leg_type: str | None,
                tolerances: Mapping[str, Tolerance], stage: str) -> dict[str, Any]:
     """The decisions of one leg of an ISO 230-2 report (procedures.reporting.iso230_report.build's

@@ -163,7 +163,9 @@ def session_rec(path: str | os.PathLike) -> Rec:
               outcome=session.outcome, path=_abs(path), sha256=session.sha256)
     rec.summary = {"session_id": ident.text(attrs.get("session_id")), "rig": ident.text(attrs.get("rig")),
                    "ended_utc": ident.text(attrs.get("ended_utc")), "points": int(session.points.size),
-                   "schema_version": session.schema_version}
+                   "schema_version": session.schema_version,
+                   # "verification" for an as-left sweep (`station verify`): certificates by serial tell them apart
+                   "plan_kind": ident.text((session.plan or {}).get("kind"))}
     iso: dict = {}
     if session.points.size:
         try:

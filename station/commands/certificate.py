@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from procedures.engine.errors import InputError
 from procedures.io.recording.reader import read_session
 from station.services.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
 from station.services.config import load_config
@@ -19,12 +20,18 @@ DESCRIPTION = (
     "mean deviation, s and B_i, the compensation table's sha256 (--table) and approval fields. Numbered "
     "STATION-YYYYMMDD-NNNN from <recordings_dir>/certificate-counter.json (never reused); files are never "
     "overwritten: --revise REPORT_NO --reason TEXT issues the next revision and marks the old one superseded in "
-    "REPORT_NO.index.json. docs/certificate.md."
+    "REPORT_NO.index.json. --serial SERIAL instead of SESSION.h5 finds the leg's latest calibration, the latest "
+    "verification after it and the last table pushed since in the catalog (--catalog URL). docs/certificate.md."
 )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", metavar="SESSION.h5", help="the calibration session (as found)")
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument("session", metavar="SESSION.h5", nargs="?", help="the calibration session (as found)")
+    which.add_argument("--serial", metavar="SERIAL", help="the leg's serial: its sessions and table found in the "
+                       "catalog (latest calibration, the latest verification after it, the last table pushed)")
+    p.add_argument("--catalog", metavar="URL", help="with --serial: catalog URL or SQLite file (default: the "
+                   "config's shared catalog when set and reachable, else its local one)")
     p.add_argument("--as-left", metavar="VERIFY_SESSION.h5", help="the verification session (as left)")
     p.add_argument("--table", metavar="TABLE.csv", help="the compensation table pushed (its sha256 is stated)")
     p.add_argument("--leg", type=int, metavar="N", help="the leg (needed when the session holds several)")
@@ -35,21 +42,68 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reason", default="", help="with --revise: what the revision corrects")
 
 
+def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:
+    """The as-found session, as-left session and table of the leg --serial, from the catalog; printed."""
+    from station.catalog import db  # noqa: PLC0415
+    from station.catalog.certificate_sources import certificate_sources  # noqa: PLC0415
+    from station.catalog.store import catalog_of, reading_engine  # noqa: PLC0415
+    from station.web.engine import catalog_url, open_readonly  # noqa: PLC0415
+
+    try:
+        if args.catalog:
+            url = catalog_url(args.catalog)
+            engine, where = open_readonly(url, cfg.catalog.connect_timeout_s), f"catalog: {db.describe(url)}"
+        else:
+            engine, where = reading_engine(catalog_of(cfg))
+    except db.CatalogUnreachable as exc:
+        raise InputError(f"{exc}; give --catalog with a reachable catalog (or the local catalog.sqlite)") from None
+    found = certificate_sources(engine, args.serial)
+    print(where)
+    given = {"as left": args.as_left, "table": args.table}  # given on the command line: those win
+    picked = [("as found", found.as_found, "calibration session", "no calibration"),
+              ("as left", found.as_left, "verification session", "no verification session after the calibration"),
+              ("table", found.table, "last table pushed", "no table pushed after the calibration is indexed")]
+    for label, src, what, none in picked:
+        if given.get(label):
+            print(f"{label}: {given[label]} (given)")
+        elif src is None:
+            print(f"{label}: none ({none})")
+        else:
+            print(f"{label}: {src.path} ({what}, {src.time_utc}, sha256 {(src.sha256 or '?')[:16]})")
+            if not Path(src.path).is_file():
+                raise InputError(f"{src.path}: the catalog lists this {what} of leg {args.serial} but the file is "
+                                 "missing; restore it, or re-index with `station catalog check` and `station catalog "
+                                 "rebuild DIR`")
+    if found.table is None and found.pushed_table_sha256 and not args.table:
+        print(f"note: a table (sha256 {found.pushed_table_sha256[:16]}) was pushed after the calibration but its "
+              "file is not in the catalog; give it with --table to state it")
+    if args.leg is None:
+        args.leg = found.as_found.leg
+    return (found.as_found.path, args.as_left or (found.as_left.path if found.as_left else None),
+            args.table or (found.table.path if found.table else None))
+
+
 def run(args) -> int:
     cfg = load_config(args.config)
-    as_found = read_session(Path(args.session))
-    as_left = read_session(Path(args.as_left)) if args.as_left else None
+    if args.catalog and not args.serial:
+        raise InputError("--catalog goes with --serial (a session file names its own sessions)")
+    if args.serial:
+        session, as_left_path, table = _from_catalog(args, cfg)
+    else:
+        session, as_left_path, table = args.session, args.as_left, args.table
+    as_found = read_session(Path(session))
+    as_left = read_session(Path(as_left_path)) if as_left_path else None
     tolerances = {k: t.to_json() for k, t in cfg.tolerances.items()} if args.config else None
     folder = Path(args.out) if args.out else Path(cfg.recordings_dir) / FOLDER_NAME
     lab = {"name": cfg.lab.name, "address": cfg.lab.address, "accreditation": cfg.lab.accreditation}
     leg = pick_leg(as_found, args.leg)
     leg_sha = None
-    if args.table:  # the leg's rows as its drive (or the station) holds them: compared with the as-left table
+    if table:  # the leg's rows as its drive (or the station) holds them: compared with the as-left table
         from station.services.table_jobs import expected_tables  # noqa: PLC0415
         from station.services.wiring import leg_table_spec  # noqa: PLC0415
 
-        leg_sha = expected_tables(args.table, (leg,), leg_table_spec(cfg, leg))[leg]
-    issued = issue_certificate(as_found, leg=leg, as_left=as_left, table=args.table, lab=lab,
+        leg_sha = expected_tables(table, (leg,), leg_table_spec(cfg, leg))[leg]
+    issued = issue_certificate(as_found, leg=leg, as_left=as_left, table=table, lab=lab,
                                customer=args.customer or cfg.lab.customer, folder=folder,
                                counter_path=Path(cfg.recordings_dir) / COUNTER_NAME, revise=args.revise,
                                reason=args.reason, tolerances=tolerances, station_id=cfg.station_id,

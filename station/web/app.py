@@ -44,6 +44,7 @@ class PageError(Exception):
 @dataclass
 class WebSettings:
     tolerances: dict[str, dict[str, float]] = field(default_factory=dict)
+    decision_tolerances: dict = field(default_factory=dict)  # {type: Tolerance}: the fleet's decisions
     runs_dir: Path | None = None
     interval_days: int = 365
     where: str = ""  # which catalog, shown in the footer
@@ -152,7 +153,7 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
 
     @app.get("/", response_class=HTMLResponse)
     def fleet(request: Request, type: str | None = None, station: str | None = None, since: str | None = None,
-              until: str | None = None, due: str | None = None):
+              until: str | None = None, due: str | None = None, decision: str | None = None):
         types, stations = queries.filter_values(engine)
         q = request.query_params
         leg_type = _choice("type", type, types)
@@ -162,14 +163,22 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         n = _page(q.get("page"))
         rows = legs(engine, leg_type=leg_type, station=st, since=since_d, until=until_d, due_by=due_d,
                     interval_days=s.interval_days)
+        verdict = _choice("decision", decision, list(queries.DECISIONS))
+        decided = {}
+        if verdict:  # every leg decided, then filtered; else only the page shown
+            decided = queries.latest_decisions(engine, {r.serial: r.leg_type for r in rows}, s.decision_tolerances)
+            rows = [r for r in rows if decided.get(r.serial) == queries.DECISIONS[verdict]]
         pages = max(1, -(-len(rows) // s.page_size))
         if n > pages:
             raise PageError(404, f"page {n}: there are {pages} page(s) of legs with these filters")
         shown = rows[(n - 1) * s.page_size: n * s.page_size]
+        if not verdict:
+            decided = queries.latest_decisions(engine, {r.serial: r.leg_type for r in shown}, s.decision_tolerances)
         filters = {k: v for k, v in dict(type=leg_type, station=st, since=since_d, until=until_d,
-                                         due=due if due == "today" else due_d).items() if v}
+                                         due=due if due == "today" else due_d, decision=verdict).items() if v}
         return page(request, "fleet.html", rows=shown, total=len(rows), page_no=n, pages=pages, types=types,
-                    stations=stations, filters=filters, qs=urlencode(filters), today=dt.date.today().isoformat())
+                    stations=stations, filters=filters, qs=urlencode(filters), today=dt.date.today().isoformat(),
+                    decisions=queries.DECISIONS, decided=decided)
 
     @app.get("/leg/{serial}", response_class=HTMLResponse)
     def leg(request: Request, serial: str):

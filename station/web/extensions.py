@@ -15,17 +15,27 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from procedures.reporting.decision import Tolerance
 
 CHART_FIGURES = ("E", "B", "R")
 
 
-def tolerances_of(config_path: str | Path | None) -> dict[str, dict[str, float]]:
-    """{leg type: {figure: as-left upper limit um}} of the station TOML; {} without a config."""
+def decision_tolerances_of(config_path: str | Path | None) -> dict[str, "Tolerance"]:
+    """{leg type: procedures.reporting.decision.Tolerance} of the station TOML (both stages), for
+    the fleet's ISO 14253-1 decisions; {} without a config."""
     if not config_path:
         return {}
     from station.services.config import load_config  # noqa: PLC0415
 
-    return {t: tol.limits("as_left") for t, tol in load_config(config_path).tolerances.items() if tol.limits("as_left")}
+    return dict(load_config(config_path).tolerances)
+
+
+def tolerances_of(config_path: str | Path | None) -> dict[str, dict[str, float]]:
+    """{leg type: {figure: as-left upper limit um}} of the station TOML; {} without a config."""
+    return {t: tol.limits("as_left") for t, tol in decision_tolerances_of(config_path).items() if tol.limits("as_left")}
 
 
 @dataclass

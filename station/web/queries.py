@@ -6,6 +6,11 @@ Control chart (individuals): mean and sample standard deviation s of the complet
 of a leg type, limits mean +- 3 s. The ISO 230-2 values E, B, R are >= 0 with an upper limit only,
 so Cpk = (limit - mean) / (3 s) (the one-sided index).
 
+Decision of a leg (the fleet's decision filter): the ISO 14253-1 verdict of its latest completed
+session (the one whose E and B the fleet shows) against `[tolerances.TYPE]`, by the same
+function the certificate and `station report` use (procedures.reporting.decision.decide_leg), at
+the stage of that session (as left for a verification sweep, else as found).
+
 Comparison of station A and B on one leg: E_n = (x_A - x_B) / sqrt(U_A^2 + U_B^2), each station's
 last completed calibration; |E_n| > 1 flags a disagreement beyond both uncertainties.
 """
@@ -20,7 +25,8 @@ from itertools import combinations
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from station.catalog.models import Leg, Record, RecordLeg
+from procedures.reporting import decision
+from station.catalog.models import FIGURES, Leg, Record, RecordLeg
 
 COMPLETED = sa.and_(RecordLeg.kind == "session", RecordLeg.outcome == "completed")
 
@@ -168,3 +174,37 @@ def table_files(engine: Engine, sha256s: list[str]) -> dict[str, str]:
     with engine.connect() as conn:
         return dict(conn.execute(sa.select(Record.sha256, Record.path)
                                  .where(Record.kind == "table", Record.sha256.in_(sha256s))).all())
+
+
+# the fleet's decision filter: URL value -> the verdict decide_leg states
+DECISIONS = {"conforming": decision.CONFORMS, "not-conforming": decision.NOT_CONFORM,
+             "undecided": decision.UNDECIDED, "no-tolerance": decision.NO_TOLERANCE}
+
+
+def latest_decisions(engine: Engine, leg_types: dict[str, str | None],
+                     tolerances: dict[str, decision.Tolerance]) -> dict[str, str]:
+    """{serial: overall verdict} of the legs `leg_types` ({serial: leg type}) from their latest
+    completed session's ISO 230-2 values with U; a leg never calibrated has none."""
+    if not leg_types:
+        return {}
+    latest = sa.select(RecordLeg.leg_serial, sa.func.max(RecordLeg.time_utc).label("t")).where(
+        COMPLETED, RecordLeg.leg_serial.is_not(None))
+    if len(leg_types) <= 500:  # a page of legs: their index seeks only, not the whole fleet's
+        latest = latest.where(RecordLeg.leg_serial.in_(sorted(leg_types)))
+    latest = latest.group_by(RecordLeg.leg_serial).subquery()
+    cols = [RecordLeg.leg_serial, RecordLeg.uid, Record.summary]
+    cols += [getattr(RecordLeg, f"{n}{s}") for n in FIGURES for s in ("_um", "_U_um")]
+    q = (sa.select(*cols).join(Record, Record.uid == RecordLeg.uid)
+         .join(latest, sa.and_(RecordLeg.leg_serial == latest.c.leg_serial, RecordLeg.time_utc == latest.c.t))
+         .where(COMPLETED).order_by(RecordLeg.leg_serial, RecordLeg.uid))
+    out: dict[str, str] = {}
+    with engine.connect() as conn:
+        for r in conn.execute(q):
+            m = r._mapping
+            if m["leg_serial"] not in leg_types:
+                continue
+            values = {n: {"value_um": m[f"{n}_um"], "U_um": m[f"{n}_U_um"]} for n in FIGURES}
+            stage = decision.stage_of((m["summary"] or {}).get("plan_kind"))
+            out[m["leg_serial"]] = decision.decide_leg(values, {}, leg_types[m["leg_serial"]], tolerances,
+                                                       stage)["overall"]
+    return out

@@ -15,7 +15,7 @@ import pytest
 from drivers.sim.plant import default_leg_configs
 from station.cli import main
 from station.services.synth import synth_session
-from tests.tooling import write_identified_session
+from tests.tooling import lab_config, write_identified_session
 
 TOL = {"HX300": {"as_found_um": {"E": 25.0, "B": 6.0, "R": 3.0}, "as_left_um": {"E": 0.001}, "source": "recorded"}}
 
@@ -35,10 +35,7 @@ def sessions(tmp_path_factory):
 
 @pytest.fixture
 def cfg(tmp_path):
-    p = tmp_path / "station.toml"
-    p.write_text(f'[station]\nrecordings_dir = "{tmp_path / "runs"}"\n[lab]\nname = "Hexapod Metrology Lab"\n'
-                 'address = "Werkstr. 5, Musterstadt"\naccreditation = "D-K-12345-01-00"\ncustomer = "ACME"\n')
-    return p
+    return lab_config(tmp_path)
 
 
 def _issue(capsys, *argv) -> tuple[int, str, str]:

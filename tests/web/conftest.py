@@ -8,7 +8,7 @@ import pytest
 from station.catalog.store import Catalog
 from station.web.app import WebSettings, create_app
 from station.web.engine import open_readonly
-from station.web.extensions import tolerances_of
+from station.web.extensions import decision_tolerances_of, tolerances_of
 from tests.web import fleet
 
 
@@ -28,5 +28,6 @@ def web_app(url: str, runs_dir, page_size: int = 2):
     the few legs span several."""
     engine = open_readonly(url)
     settings = WebSettings(tolerances=tolerances_of(runs_dir / "station.toml"), runs_dir=runs_dir,
+                           decision_tolerances=decision_tolerances_of(runs_dir / "station.toml"),
                            where=f"catalog: {url}", page_size=page_size)
     return create_app(engine, settings), engine

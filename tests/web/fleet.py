@@ -3,7 +3,8 @@ web view must show of it. Values um; times UTC.
 
 L300: HX-0001 (3 calibrations at ST-A, then one at ST-B reading E and B 3 um higher with U 0.5:
       |E_n| > 1), a table, its push to drive D1 and a verification; HX-0002 (2 at ST-B and one
-      aborted session, which is no calibration); HX-0003 (one at ST-A in 2023: due long ago).
+      aborted session, which is no calibration); HX-0003 (one at ST-A in 2023: due long ago, U so
+      large that no decision can be made).
 L450: HX-0004 (ST-A and ST-B agreeing within U: |E_n| <= 1); HX-0005 (a table only: never calibrated).
 """
 
@@ -25,6 +26,10 @@ EXPECT = {
     "calibrations": {"HX-0001": 4, "HX-0002": 2, "HX-0003": 1, "HX-0004": 2, "HX-0005": 0},
     "compared": {"HX-0001": True, "HX-0004": False},  # serial -> flagged
     "due_by_2025_06_01": {"HX-0003", "HX-0005"},
+    # ISO 14253-1 of the latest completed session against [tolerances.L300] (L450 has none):
+    # HX-0001 B 5.5 - 0.5 > 4; HX-0002 all within; HX-0003 7 +- 6 straddles 12 (B, R likewise)
+    "decisions": {"HX-0001": "does not conform", "HX-0002": "conforms", "HX-0003": "cannot decide",
+                  "HX-0004": "no tolerance stated", "HX-0005": "-"},
 }
 TYPES = {"HX-0001": "L300", "HX-0002": "L300", "HX-0003": "L300", "HX-0004": "L450", "HX-0005": "L450"}
 
@@ -53,7 +58,7 @@ def records() -> list[Rec]:
         _session("HX-0002", "2024-03-01T10:00:00Z", "ST-B", 6.0, 1.5, 2.0),
         _session("HX-0002", "2024-09-01T10:00:00Z", "ST-B", 6.5, 1.7, 2.1),
         _session("HX-0002", "2024-10-01T10:00:00Z", "ST-B", 99.0, 99.0, 99.0, outcome="aborted"),
-        _session("HX-0003", "2023-03-01T08:00:00Z", "ST-A", 7.0, 1.9, 2.5),
+        _session("HX-0003", "2023-03-01T08:00:00Z", "ST-A", 7.0, 1.9, 2.5, u=6.0),  # every interval straddles
         _session("HX-0004", "2025-03-01T08:00:00Z", "ST-A", 10.0, 3.0, 4.0),
         _session("HX-0004", "2025-03-05T08:00:00Z", "ST-B", 10.3, 3.2, 4.1),
     ]

@@ -113,9 +113,20 @@ def click_and_wait(browser, element) -> None:
     from selenium.webdriver.support import expected_conditions as EC
     from selenium.webdriver.support.ui import WebDriverWait
 
+    from selenium.common.exceptions import WebDriverException
+
     old = browser.find_element("tag name", "html")
     element.click()
-    WebDriverWait(browser, 15).until(EC.staleness_of(old))
+
+    def replaced(driver) -> bool:
+        try:
+            return EC.staleness_of(old)(driver)
+        except WebDriverException as exc:  # Chromium may say so instead of "stale" while the page swaps
+            if "does not belong to the document" in str(exc):
+                return True
+            raise
+
+    WebDriverWait(browser, 15).until(replaced)
 
 
 def test_fleet_and_filters(browser, site, shoot):
@@ -185,3 +196,36 @@ def test_charts_compare_and_errors(browser, site, shoot):
     browser.get(base + "/?since=2025-13-01")
     assert "400 Bad request" in browser.find_element(By.TAG_NAME, "h1").text
     shoot("400")
+
+
+def test_fleet_decision_filter(browser, site, shoot):
+    """Each decision filter value lists the legs whose latest session has that ISO 14253-1 verdict,
+    and the table shows every leg's verdict."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    base, _ = site
+    expected = fleet.EXPECT["decisions"]
+    visit(browser, base + "/")
+    rows = browser.find_elements(By.CSS_SELECTOR, "#legs tr.leg")
+    shown = {r.find_element(By.CSS_SELECTOR, "td:first-child a").text: r.find_element(By.CSS_SELECTOR, "td.decision").text
+             for r in rows}
+    assert shown == {s: expected[s] for s in ("HX-0001", "HX-0002")}
+    for label in ("conforms", "does not conform", "cannot decide", "no tolerance stated"):
+        Select(browser.find_element(By.ID, "f-decision")).select_by_visible_text(label)
+        click_and_wait(browser, browser.find_element(By.ID, "f-apply"))
+        want = sorted(s for s, d in expected.items() if d == label)
+        assert listed(browser) == want, label
+        assert [e.text for e in browser.find_elements(By.CSS_SELECTOR, "#legs td.decision")] == [label] * len(want)
+        assert browser.find_element(By.ID, "total").text == str(len(want))
+        assert Select(browser.find_element(By.ID, "f-decision")).first_selected_option.text == label
+        if label == "cannot decide":
+            shoot("fleet-decision-undecided")
+    Select(browser.find_element(By.ID, "f-decision")).select_by_visible_text("all")
+    click_and_wait(browser, browser.find_element(By.ID, "f-apply"))
+    assert browser.find_element(By.ID, "total").text == str(fleet.EXPECT["legs"])
+    # combined with the type filter, and kept across pages
+    visit(browser, base + "/?type=L300&decision=conforming")
+    assert listed(browser) == ["HX-0002"]
+    visit(browser, base + "/?type=L450&decision=conforming")
+    assert listed(browser) == [] and browser.find_element(By.ID, "total").text == "0"

@@ -54,6 +54,16 @@ def test_fleet_pages_and_filters(client):
     assert '<span id="total">3</span>' in text and 'id="next"' in text and "type=L300&amp;page=2" in text
 
 
+def test_fleet_decision_filter(client):
+    decided = fleet.EXPECT["decisions"]
+    for key, label in (("conforming", "conforms"), ("not-conforming", "does not conform"),
+                       ("undecided", "cannot decide"), ("no-tolerance", "no tolerance stated")):
+        assert all_fleet(client, decision=key) == sorted(s for s, d in decided.items() if d == label), key
+    assert all_fleet(client, decision="") == sorted(fleet.TYPES)
+    html = client.get("/", params={"decision": "undecided"}).text
+    assert '<td class="decision">cannot decide</td>' in html and '<option value="undecided" selected>' in html
+
+
 @pytest.mark.parametrize("query, what", [
     ({"since": "2025-13-01"}, "since='2025-13-01': not a date"),
     ({"until": "yesterday"}, "until='yesterday': not a date"),
@@ -62,6 +72,7 @@ def test_fleet_pages_and_filters(client):
     ({"station": "ST-Z"}, "unknown station"),
     ({"page": "-1"}, "page='-1': give a page number"),
     ({"page": "two"}, "page='two'"),
+    ({"decision": "ok"}, "decision='ok': unknown decision; known: conforming, not-conforming, undecided, no-tolerance"),
 ])
 def test_bad_queries_are_400_pages(client, query, what):
     r = client.get("/", params=query)
