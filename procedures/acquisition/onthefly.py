@@ -35,6 +35,7 @@ from drivers.interfaces import (
 )
 from procedures.engine import events as ev
 from procedures.acquisition.adaptive import AdaptiveRule
+from procedures.acquisition.probe_rule import ProbeRule
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.passes import RetryPolicy, point_record, retry_after, start_leg
 from procedures.acquisition.plans import PlanPoint, SweepPlan
@@ -74,7 +75,9 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
     the other side; else (a resume among the probes, after preparing the leg) and on a retry
     (recovered wherever it stopped) the axis goes back there first, arriving against the probe's
     direction (`SweepPlan.before_probe_mm`), so the probe follows the same reversal over the
-    same travel as in an uninterrupted run. Returns the count of points done."""
+    same travel as in an uninterrupted run; and where the reading before lies on the probe's far
+side (a descending block of an adaptive count), it is approached from `probe_gap_mm` short of
+it (`SweepPlan.probe_via_mm`). Returns the count of points done and the probe's record."""
     flags = FLAG_PROBE
     attempt = 0
     while True:
@@ -89,6 +92,9 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
                 # beyond it on the probe's side (inside the plan's travel: the stroke or the anchor's gap)
                 axis.move_to(before_mm + p.direction * plan.probe_gap_mm, velocity_mm_s=speed)
                 axis.move_to(before_mm, velocity_mm_s=speed)
+            via_mm = plan.probe_via_mm(p.run)
+            if via_mm is not None:  # the reading before lies on the probe's far side (a descending block)
+                axis.move_to(via_mm, velocity_mm_s=speed)
             status = axis.move_to(p.target_mm, velocity_mm_s=speed)
             clock.sleep(plan.dwell_s)
             if set_averaging:
@@ -106,7 +112,7 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
                           speed_mm_s=float("nan"))
     done += 1
     yield ev.PointMeasured(record, done, total)
-    return done
+    return done, record
 
 
 def onthefly_passes(
@@ -137,12 +143,19 @@ def onthefly_passes(
     step = plan.step_mm
     current_leg: int | None = None
     stopped: set[int] = set()
+    probes_done: set[int] = set()  # legs whose probe rule stopped them
     rules: dict[int, AdaptiveRule] = {}
     measured: dict[int, list[np.ndarray]] = {}
     planned_left: dict[int, int] = {}
     for p in points:
         if not plan.is_probe_run(p.run):  # what an adaptive stop can skip: the passes
             planned_left[p.leg] = planned_left.get(p.leg, 0) + 1
+    probe_rules: dict[int, ProbeRule] = {}
+    probes_of: dict[int, list[np.ndarray]] = {}
+    probes_left: dict[int, int] = {}
+    for p in points:
+        if plan.is_probe_run(p.run):
+            probes_left[p.leg] = probes_left.get(p.leg, 0) + 1
     prev_temp: tuple[float, float] | None = None
     probing = False  # the laser holds the probes' averaging (a new session sets the plan's at its first leg)
     in_place = False  # the axis stands where the plan's point before the next one left it
@@ -150,7 +163,7 @@ def onthefly_passes(
         first = pas[0]
         leg, run, d = first.leg, first.run, first.direction
         probe = plan.is_probe_run(run)
-        if leg in stopped and not probe:
+        if (leg in stopped and not probe) or (probe and leg in probes_done):
             continue
         yield from control.checkpoint()
         if leg != current_leg:
@@ -160,9 +173,27 @@ def onthefly_passes(
             in_place = False  # the leg was just prepared (at mid-stroke), not where its plan's last point left it
         axis = axes[leg]
         if probe:
-            done = yield from _probe(plan, first, axis, laser, clock, control, retry, t_start, done, total,
-                                     set_averaging=not probing, in_place=in_place)
+            done, record = yield from _probe(plan, first, axis, laser, clock, control, retry, t_start, done, total,
+                                             set_averaging=not probing, in_place=in_place)
             probing = in_place = True
+            probes_left[leg] -= 1
+            if plan.probe_target_um > 0 and first.direction < 0:  # after every pair
+                rule = probe_rules.get(leg)
+                if rule is None:  # the leg's passes (none when resumed among its probes): the shape
+                    rule = probe_rules[leg] = ProbeRule(plan.probe_target_um, plan.reversal_probes,
+                                                        material=(materials or {}).get(leg))
+                    rule.shape(np.concatenate(measured[leg]).astype(POINT_DTYPE) if measured.get(leg) else None, leg)
+                probes_of.setdefault(leg, []).append(point_row(record))
+                reason = rule.after_pair(np.concatenate(probes_of[leg]).astype(POINT_DTYPE), leg)
+                if reason is not None:
+                    probes_done.add(leg)
+                    skipped = probes_left[leg]
+                    total -= skipped
+                    yield ev.ProbesStopped(leg, rule.pairs, reason, rule.stderr_um, plan.probe_target_um, skipped)
+                    yield ev.Message(f"leg {leg}: reversal probes stopped: {reason}"
+                                     + (f"; {skipped} planned points not needed" if skipped else ""), "info")
+            elif plan.probe_target_um > 0:
+                probes_of.setdefault(leg, []).append(point_row(record))
             continue
         speed = plan.speed_of_run(run)
         seq = all_targets if d > 0 else all_targets[::-1]
@@ -246,8 +277,9 @@ def onthefly_passes(
             yield ev.PointMeasured(record, done, total)
         prev_temp = (t_after, temp_after)
         in_place = True
-        if plan.adaptive:
+        if plan.adaptive or plan.probe_target_um > 0:
             measured.setdefault(leg, []).append(np.concatenate([point_row(r) for r in rows]))
+        if plan.adaptive:
             if run % 2 == 0 and planned_left[leg] > 0:  # after every cycle (a direction pair)
                 rule = rules.setdefault(leg, AdaptiveRule.for_plan(plan, (materials or {}).get(leg)))
                 reason = rule.after_cycle(np.concatenate(measured[leg]).astype(POINT_DTYPE), leg)

@@ -17,12 +17,13 @@ import math
 from dataclasses import dataclass
 
 from procedures.engine.errors import PlanError
-from procedures.acquisition.plan_spec import DEFAULT_CYCLES, ONTHEFLY_KINDS, REVERSAL_PROBES, PlanSpec
+from procedures.acquisition.plan_spec import DEFAULT_CYCLES, ONTHEFLY_KINDS, PlanSpec, probe_count
 from procedures.acquisition.plans import (
     ONTHEFLY_OVERRUN_MM,
     ONTHEFLY_SPEEDS_MM_S,
     PAPER_HALF_STROKE_MM,
     PAPER_STEP_MM,
+    PROBE_MIN_PAIRS,
     SweepPlan,
     estimate_duration_s,
     targets_from_file,
@@ -51,12 +52,17 @@ class PlanLimits:
 @dataclass(frozen=True)
 class PlanSize:
     """`points` to measure, `targets` per pass, `rig_s` the estimated time on the rig (s),
-    `file_bytes` the session file's estimated size."""
+    `file_bytes` the session file's estimated size. `probe_pairs`: the reversal probe pairs per leg
+    counted; with an adaptive count (`probes_adaptive`) the most, so points, rig time and size are
+    upper bounds (the sweep stops a leg's probes once its reversal is known; as the adaptive plan's
+    passes are counted at the plan's most cycles)."""
 
     points: int
     targets: int
     rig_s: float
     file_bytes: int
+    probe_pairs: int = 0
+    probes_adaptive: bool = False
 
     @property
     def rig_hours(self) -> float:
@@ -64,7 +70,9 @@ class PlanSize:
 
     def describe(self) -> str:
         """e.g. "18 000 010 points, about 5 500 h on the rig, a 2.1 GB session file"."""
-        return f"{_group(self.points)} points, about {fmt_hours(self.rig_hours)} on the rig, a {fmt_bytes(self.file_bytes)} session file"
+        most = "at most " if self.probes_adaptive else ""
+        return (f"{most}{_group(self.points)} points, {most or 'about '}{fmt_hours(self.rig_hours)} on the rig, "
+                f"a {fmt_bytes(self.file_bytes)} session file")
 
 
 def _group(n: int) -> str:
@@ -124,14 +132,15 @@ def plan_size(spec: PlanSpec) -> PlanSize:
         raise PlanError(f"cycles must be >= 1, got {cycles}")
     onthefly = spec.kind in ONTHEFLY_KINDS
     per_pass = n + (1 if onthefly else 0)  # on the fly: each pass's anchor
-    probes = REVERSAL_PROBES if onthefly else 0
+    probes, target_um = probe_count(spec.kind) if onthefly else (0, 0.0)  # adaptive: the most pairs
     points = len(spec.legs) * (cycles * 2 * per_pass + 2 * probes)
     overrun = max(spec.overrun_mm, ONTHEFLY_OVERRUN_MM) if onthefly else spec.overrun_mm
     rig_s = estimate_duration_s(span_mm + 2 * overrun, n, cycles, len(spec.legs), spec.dwell_s,
                                 1.0 if onthefly else spec.averaging_s,
-                                ONTHEFLY_SPEEDS_MM_S if onthefly else (), STOP_AND_GO_SPEED_MM_S, probes)
+                                ONTHEFLY_SPEEDS_MM_S if onthefly else (), STOP_AND_GO_SPEED_MM_S, probes,
+                                min(PROBE_MIN_PAIRS, probes) if target_um > 0 else 0)
     file_bytes = FILE_FIXED_BYTES + POINT_DTYPE.itemsize * points + PLAN_JSON_BYTES_PER_TARGET * n
-    return PlanSize(points, n, rig_s, file_bytes)
+    return PlanSize(points, n, rig_s, file_bytes, probes, target_um > 0)
 
 
 def check_plan_size(spec: PlanSpec, limits: PlanLimits) -> PlanSize:

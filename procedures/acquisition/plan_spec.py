@@ -34,6 +34,20 @@ REVERSAL_PROBES = 24
 """Reversal probe pairs after each leg's on-the-fly passes (SweepPlan.reversal_probes): the
 table's reversal to about 0.012 um (one standard error) on the simulated legs, whose passes
 scatter by 0.04 um (docs/onthefly.md, "Reversal probes"); about 1.4 min per leg."""
+ADAPTIVE_PROBE_COUNT = True
+"""Plan onthefly-adaptive takes probe pairs until the reversal's standard error reaches
+probe_rule.PROBE_TARGET_UM (12 to 48 pairs; procedures/acquisition/probe_rule.py); False: the fixed
+REVERSAL_PROBES. Plan onthefly always takes the fixed count."""
+
+
+def probe_count(kind: str) -> tuple[int, float]:
+    """(reversal probe pairs, standard error target um) of an on-the-fly plan `kind`: with a target
+    (> 0), the pairs are the most (SweepPlan.probe_target_um)."""
+    if kind == "onthefly-adaptive" and ADAPTIVE_PROBE_COUNT:
+        from procedures.acquisition.probe_rule import PROBE_MAX_PAIRS, PROBE_TARGET_UM
+
+        return PROBE_MAX_PAIRS, PROBE_TARGET_UM
+    return REVERSAL_PROBES, 0.0
 
 
 @dataclass(frozen=True)
@@ -85,10 +99,11 @@ def plan_from_spec(spec: PlanSpec, limits=None) -> SweepPlan:
         check_plan_size(spec, limits)
     cycles = DEFAULT_CYCLES[spec.kind] if spec.cycles is None else spec.cycles
     if spec.kind in ONTHEFLY_KINDS:
+        pairs, target_um = probe_count(spec.kind)
         return onthefly_plan(spec.legs, cycles=cycles, step_mm=spec.step_mm or PAPER_STEP_MM, min_mm=spec.min_mm,
                              max_mm=spec.max_mm, overrun_mm=max(spec.overrun_mm, ONTHEFLY_OVERRUN_MM),
                              adaptive=spec.kind == "onthefly-adaptive", dwell_s=spec.dwell_s,
-                             reversal_probes=REVERSAL_PROBES)
+                             reversal_probes=pairs, probe_target_um=target_um)
     if spec.kind == "paper":
         return paper_plan(spec.legs, cycles=cycles, overrun_mm=spec.overrun_mm, dwell_s=spec.dwell_s,
                           averaging_s=spec.averaging_s)

@@ -30,6 +30,12 @@ PROBE_GAP_MM = 1.0
 PROBE_AVERAGING_S = 0.3
 """Reversal probes: laser averaging per reading, s (0.3 s: the white noise below the pass offsets
 the probes sample, at a third of the anchors' 1 s)."""
+PROBE_MIN_PAIRS = 12
+"""Reversal probes with a target (SweepPlan.probe_target_um): the fewest pairs, and the pairs of one
+climb (or descent) of the stroke. Why 12: the pairs' scatter, from which the standard error is
+judged, is itself known only to 1 / sqrt(2 (n - 1)) of itself, 21 % at 12 pairs (27 % at 8); a
+rule that stopped on a scatter that happened to come out low would stop with too few pairs
+(procedures/acquisition/probe_rule.py)."""
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,13 @@ class SweepPlan:
     each pair is one more sample of the pass-to-pass offsets that decide it, at a few seconds
     each instead of a whole pair of passes. Each reading is a run of its own (run numbers after
     the passes), flagged FLAG_PROBE.
+
+    `probe_target_um` > 0 (the adaptive probe count, procedures/acquisition/probe_rule.py): the
+    sweep takes pairs only until the reversal's standard error reaches it, at least
+    `PROBE_MIN_PAIRS`, at most `reversal_probes` (then the most). The pairs then lie in blocks of
+    `PROBE_MIN_PAIRS`, each spread over the whole stroke, climbing and descending in turn, each
+    block's positions between the last ones' (`probe_up_mm`): wherever the rule stops, the pairs
+    taken cover the stroke. 0: all `reversal_probes` pairs, in one climb.
     """
 
     kind: str
@@ -83,6 +96,7 @@ class SweepPlan:
     reversal_probes: int = 0
     probe_gap_mm: float = PROBE_GAP_MM
     probe_averaging_s: float = PROBE_AVERAGING_S
+    probe_target_um: float = 0.0
 
     def __post_init__(self) -> None:
         t = np.asarray(self.targets_mm, dtype=float)
@@ -113,6 +127,9 @@ class SweepPlan:
             if self.reversal_probes < 1 or not (0 < self.probe_gap_mm < t[-1] - t[0]) or self.probe_averaging_s < 0:
                 raise PlanError(f"reversal probes: a count >= 1, a gap between 0 and the stroke, an averaging >= 0 "
                                 f"(got {self.reversal_probes}, {self.probe_gap_mm:g} mm, {self.probe_averaging_s:g} s)")
+        if not (math.isfinite(self.probe_target_um) and self.probe_target_um >= 0):
+            raise PlanError(f"reversal probes: the standard error to reach must be >= 0 um (0: take every pair), "
+                            f"got {self.probe_target_um!r}")
 
     # -- on-the-fly ----------------------------------------------------------------------
     @property
@@ -147,12 +164,45 @@ class SweepPlan:
         """Whether pass `run` of a leg is a reversal probe (runs after the plan's cycles)."""
         return run > 2 * self.cycles
 
+    @property
+    def probe_block(self) -> int:
+        """Probe pairs per climb (or descent) of the stroke: all of them with a fixed count, else
+        `PROBE_MIN_PAIRS` (SweepPlan)."""
+        n = self.reversal_probes
+        return min(PROBE_MIN_PAIRS, n) if self.probe_target_um > 0 else n
+
     def probe_up_mm(self, k: int) -> float:
         """Where probe pair `k` (0-based) reads approaching upwards: the pairs spread evenly over
-        the stroke, the downward reading `probe_gap_mm` below (so every target lies inside it)."""
+        the stroke, the downward reading `probe_gap_mm` below (so every target lies inside it).
+        In blocks (`probe_block`): block b climbs when b is even and descends when odd, its pairs
+        offset from the block's spacing by (0.5 + van der Corput(b)) mod 1 (0.5, 0, 0.75, 0.25, ...),
+        so every block falls between the ones before it. One block (a fixed count): evenly up the
+        stroke, at (k + 0.5) / n of it."""
         lo, hi = self.targets_mm[0] + self.probe_gap_mm, self.targets_mm[-1]
-        n = self.reversal_probes
-        return float(lo + (hi - lo) * (k + 0.5) / n)
+        size = self.probe_block
+        b, j = divmod(k, size)
+        n = min(size, self.reversal_probes - b * size)  # pairs in this block (the last may be short)
+        if b % 2:
+            j = n - 1 - j  # a descending block
+        vdc, base, x = 0.0, 0.5, b
+        while x:
+            x, bit = divmod(x, 2)
+            vdc += bit * base
+            base /= 2
+        return float(lo + (hi - lo) * (j + (0.5 + vdc) % 1.0) / n)
+
+    def probe_via_mm(self, run: int) -> float | None:
+        """Where probe `run` is approached from when the reading before it in the plan
+        (`before_probe_mm`) lies on the probe's other side (a descending block's upward reading,
+        below the pair before): `probe_gap_mm` short of it, so it is still reached in its
+        direction, after a reversal. None: approached straight from the reading before."""
+        j = run - 2 * self.cycles - 1
+        k, down = divmod(j, 2)
+        target = self.probe_up_mm(k) - (self.probe_gap_mm if down else 0.0)
+        d = -1 if down else 1
+        if (target - self.before_probe_mm(run)) * d > 1e-9:
+            return None
+        return target - d * self.probe_gap_mm
 
     def before_probe_mm(self, run: int) -> float:
         """Where the plan's order leaves the axis before probe `run` (a probe run of a leg), reached
@@ -234,7 +284,8 @@ class SweepPlan:
         the fly: each pass at its own speed, and the return to its start)."""
         span = self.targets_mm[-1] - self.targets_mm[0] + 2 * self.overrun_mm
         return estimate_duration_s(span, len(self.targets_mm), self.cycles, len(self.legs), self.dwell_s,
-                                   self.averaging_s, self.speeds_mm_s, velocity_mm_s, self.reversal_probes)
+                                   self.averaging_s, self.speeds_mm_s, velocity_mm_s, self.reversal_probes,
+                                   self.probe_block)
 
     # -- serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -250,6 +301,8 @@ class SweepPlan:
             del d["speeds_mm_s"], d["adaptive"]
         if not self.reversal_probes:  # stored as before probes existed
             del d["reversal_probes"], d["probe_gap_mm"], d["probe_averaging_s"]
+        if not self.probe_target_um:  # a fixed count: stored as before the adaptive count existed
+            del d["probe_target_um"]
         return d
 
     @classmethod
@@ -269,6 +322,7 @@ class SweepPlan:
                 reversal_probes=int(d.get("reversal_probes", 0)),
                 probe_gap_mm=float(d.get("probe_gap_mm", PROBE_GAP_MM)),
                 probe_averaging_s=float(d.get("probe_averaging_s", PROBE_AVERAGING_S)),
+                probe_target_um=float(d.get("probe_target_um", 0.0)),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise PlanError(f"the stored sweep plan is incomplete or malformed ({exc!r})") from exc
@@ -276,17 +330,20 @@ class SweepPlan:
 
 def estimate_duration_s(travel_mm: float, n_targets: int, cycles: int, n_legs: int, dwell_s: float,
                         averaging_s: float, speeds_mm_s: tuple[float, ...] = (), velocity_mm_s: float = 10.0,
-                        reversal_probes: int = 0) -> float:
+                        reversal_probes: int = 0, probe_block: int = 0) -> float:
     """A plan's rough time on the rig, s, from its figures alone (procedures/acquisition/plan_size.py sizes a
     plan with it before building one): `travel_mm` per pass (targets and overrun); stop-and-go,
     travel at `velocity_mm_s` plus dwell and averaging at every target; on the fly (`speeds_mm_s`),
     each pass at its own speed plus its return and its anchor's dwell and averaging, then the
     `reversal_probes` pairs (a climb through the stroke at the faster speed, two short moves, dwells
-    and readings a pair)."""
+    and readings a pair; in blocks of `probe_block` pairs, a climb or descent each, a descending
+    block's pairs with a third short move: SweepPlan.probe_up_mm)."""
     if speeds_mm_s:
         n = len(speeds_mm_s)
-        per_leg = reversal_probes * 2 * (0.5 + dwell_s + PROBE_AVERAGING_S) + (
-            travel_mm / max(speeds_mm_s) if reversal_probes else 0.0)
+        blocks = -(-reversal_probes // probe_block) if probe_block else 1
+        descending = sum(min(probe_block, reversal_probes - b * probe_block) for b in range(1, blocks, 2))
+        per_leg = reversal_probes * 2 * (0.5 + dwell_s + PROBE_AVERAGING_S) + 0.5 * descending + (
+            blocks * travel_mm / max(speeds_mm_s) if reversal_probes else 0.0)
         for c in range(cycles):  # the speed of cycle c, as SweepPlan.speed_of_run
             rnd, k = divmod(c, n)
             speed = (speeds_mm_s if rnd % 2 == 0 else speeds_mm_s[::-1])[k]
@@ -384,14 +441,15 @@ def onthefly_plan(legs: Iterable[int] = (1,), cycles: int = 6, speeds_mm_s: tupl
                   step_mm: float = PAPER_STEP_MM, min_mm: float = -PAPER_HALF_STROKE_MM,
                   max_mm: float = PAPER_HALF_STROKE_MM, overrun_mm: float = ONTHEFLY_OVERRUN_MM,
                   adaptive: bool = False, dwell_s: float = 1.0, averaging_s: float = 1.0,
-                  reversal_probes: int = 0) -> SweepPlan:
+                  reversal_probes: int = 0, probe_target_um: float = 0.0) -> SweepPlan:
     """On-the-fly capture at the paper's 361 positions (0.5 mm), `cycles` bidirectional passes
     cycling through `speeds_mm_s`; `adaptive` stops a leg's passes once the held-out error of
     its table stops improving (then `cycles` is the most). Nothing stops at the targets; each
     pass ends at rest `overrun_mm` beyond its last target and reads an anchor there after
     `dwell_s` (settling) with `averaging_s` averaging: a static reading sharing the pass's offset,
     from which the speed-dependent error is found (procedures/fit/dynamic.py). `reversal_probes`:
-    stop-and-go reversal pairs after each leg's passes (SweepPlan), which fix the table's reversal."""
+    stop-and-go reversal pairs after each leg's passes (SweepPlan), which fix the table's reversal;
+    `probe_target_um` > 0: only until its standard error reaches it (`reversal_probes` the most)."""
     if len(speeds_mm_s) < 2 or len(set(speeds_mm_s)) < 2:
         raise PlanError("on-the-fly capture needs two different speeds, to separate the speed-dependent error")
     if cycles < len(speeds_mm_s):
@@ -400,7 +458,8 @@ def onthefly_plan(legs: Iterable[int] = (1,), cycles: int = 6, speeds_mm_s: tupl
     kind = "onthefly-adaptive" if adaptive else "onthefly"
     notes = _lead_warning(step_mm, 5.0)
     return SweepPlan(kind, targets, cycles, tuple(legs), overrun_mm, dwell_s, averaging_s, tuple(notes),
-                     tuple(float(v) for v in speeds_mm_s), adaptive, reversal_probes)
+                     tuple(float(v) for v in speeds_mm_s), adaptive, reversal_probes,
+                     probe_target_um=probe_target_um)
 
 
 def targets_from_file(path) -> tuple[float, ...]:

@@ -162,3 +162,18 @@ class PassesStopped(Event):
     heldout_um: tuple[float, ...]
     noise_floor_um: float | None
     skipped_points: int
+
+
+@dataclass(frozen=True)
+class ProbesStopped(Event):
+    """The adaptive probe count (procedures/acquisition/probe_rule.py): `leg` needs no more reversal
+    probe pairs after `pairs`. `reason` says why (the target reached, or the most pairs taken);
+    `stderr_um` is the reversal's standard error then (None: not known), `target_um` the plan's;
+    `skipped_points` were planned, not measured."""
+
+    leg: int
+    pairs: int
+    reason: str
+    stderr_um: float | None
+    target_um: float
+    skipped_points: int

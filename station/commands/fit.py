@@ -9,6 +9,7 @@ from procedures.io.outputs import check_output_file
 from procedures.io.numbers import NotANumber, finite_float
 from procedures.fit.paper import DEFAULT_N_PARAMS
 from procedures.fit.reversal_probes import ProbeReversal
+from procedures.acquisition.probe_rule import recorded_stop
 from procedures.acquisition.plans import parse_legs
 from procedures.io.recording.reader import read_session
 from procedures.engine.states import Outcome
@@ -100,7 +101,8 @@ def run(args) -> int:
             print(f"     note: {s.dropped} point(s) without a finite error were left out")
         probes = getattr(f, "selection", {}).get("reversal_probes")
         if probes:
-            print(f"     {ProbeReversal(**probes).describe()}")
+            why = recorded_stop(session.plan, probes["pairs"], probes["stderr_um"])
+            print(f"     {ProbeReversal(**probes).describe()}" + (f"; probes stopped: {why}" if why else ""))
     print("held-out: each cycle scored by a model fitted without it; held-out ratio = held-out RMS / noise floor;"
           " (ideal) = the held-out ratio a perfect static model would score; held-out range = max - min of the"
           " held-out residuals (figures: docs/figures.md)")

@@ -62,6 +62,7 @@ class SweepState:
     last_record: dict[str, float] = field(default_factory=dict)
     faults: list[ev.Fault] = field(default_factory=list)
     stops: list[ev.PassesStopped] = field(default_factory=list)  # adaptive stopping: why a leg stopped
+    probe_stops: list[ev.ProbesStopped] = field(default_factory=list)  # adaptive probe count: why a leg's probes stopped
     reason: str = ""
     elapsed_s: float = 0.0
     eta_s: float | None = None
@@ -107,6 +108,9 @@ class SweepState:
         elif isinstance(event, ev.PassesStopped):
             self.stops.append(event)
             self.total -= event.skipped_points  # planned, no longer needed: the bar ends full
+        elif isinstance(event, ev.ProbesStopped):
+            self.probe_stops.append(event)
+            self.total -= event.skipped_points
         elif isinstance(event, ev.Paused):
             if self.status != "aborting":
                 self.status = "paused"
