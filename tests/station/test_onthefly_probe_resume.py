@@ -26,10 +26,17 @@ from station.services.config import StationConfig
 from station.services.jobs import run_sweep
 from station.services.wiring import open_rig
 
-PLAN = onthefly_plan((1,), cycles=2, step_mm=5.0, reversal_probes=6)
-FIRST_PROBE = 2 * PLAN.cycles * PLAN.points_per_pass  # plan index of the first probe
-STOP_AFTER = FIRST_PROBE + 3  # the second pair's downward reading: the resume begins with an upward probe
-SEEDS = (0, 4)
+FIXED = onthefly_plan((1,), cycles=2, step_mm=5.0, reversal_probes=6)
+ADAPTIVE = onthefly_plan((1,), cycles=2, step_mm=5.0, reversal_probes=30, probe_target_um=1e-4)
+"""An adaptive count (procedures/acquisition/probe_rule.py) with a target no leg reaches: every pair,
+in blocks of 12 climbing and descending the stroke (a descending block's upward readings are
+approached from below, SweepPlan.probe_via_mm); a resumed sweep, without its passes' fit, takes every
+pair too, so both runs read the same probes."""
+FIRST_PROBE = 2 * FIXED.cycles * FIXED.points_per_pass  # plan index of the first probe
+# the resume begins with an upward probe: after the second pair's downward reading; with the
+# adaptive count after the 14th's, in the descending second block
+CASES = {"fixed": (FIXED, FIRST_PROBE + 3), "adaptive": (ADAPTIVE, FIRST_PROBE + 2 * 14 - 1)}
+RUNS = (("fixed", 0), ("fixed", 4), ("adaptive", 0))
 
 
 def _logged(rig, log: list) -> None:
@@ -59,13 +66,14 @@ def _logged(rig, log: list) -> None:
     axis.move_to, laser.set_averaging, clock.sleep = logged_move, logged_averaging, logged_sleep
 
 
-def _session(tmp_path: Path, seed: int, stop_after: int | None) -> tuple[Path, list, list]:
-    """Record PLAN on the station's simulated rig (plant seed `seed`); with `stop_after`, abort
+def _session(tmp_path: Path, case: str, seed: int, stop_after: int | None) -> tuple[Path, list, list]:
+    """Record the `case`'s plan on the station's simulated rig (plant seed `seed`); with `stop_after`, abort
     once that plan index is recorded and resume on the same rig (the leg keeps its state, as a
     real one does while the station restarts). (file, log of the first run, log of the resumed one)."""
     cfg = StationConfig(operator="test")
     cfg = replace(cfg, sim=replace(cfg.sim, seed=seed))
-    out = tmp_path / f"otf-{seed}-{'resumed' if stop_after is not None else 'whole'}.h5"
+    plan = CASES[case][0]
+    out = tmp_path / f"otf-{case}-{seed}-{'resumed' if stop_after is not None else 'whole'}.h5"
     logs: list[list] = [[], []]
     with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
         control = RunControl()
@@ -78,12 +86,12 @@ def _session(tmp_path: Path, seed: int, stop_after: int | None) -> tuple[Path, l
 
         current = 0
         _logged(rig, logs[0])
-        first = run_sweep(rig, PLAN, out, cfg, sinks=[CallbackSink(on_event)], control=control, index=False)
+        first = run_sweep(rig, plan, out, cfg, sinks=[CallbackSink(on_event)], control=control, index=False)
         if stop_after is not None:
             assert first.outcome == "aborted"
             current = 1
             _logged(rig, logs[1])
-            second = run_sweep(rig, PLAN, out, cfg, resume=True, sinks=[CallbackSink(on_event)], index=False)
+            second = run_sweep(rig, plan, out, cfg, resume=True, sinks=[CallbackSink(on_event)], index=False)
             assert second.outcome == "completed"
         else:
             assert first.outcome == "completed"
@@ -92,12 +100,13 @@ def _session(tmp_path: Path, seed: int, stop_after: int | None) -> tuple[Path, l
 
 @pytest.fixture(scope="module")
 def sessions(tmp_path_factory):
-    """seed -> ((uninterrupted: file, log, []), (resumed: file, log before, log after))."""
+    """(case, seed) -> ((uninterrupted: file, log, []), (resumed: file, log before, log after))."""
     tmp = tmp_path_factory.mktemp("probe-resume")
-    return {seed: (_session(tmp, seed, None), _session(tmp, seed, STOP_AFTER)) for seed in SEEDS}
+    return {(case, seed): (_session(tmp, case, seed, None), _session(tmp, case, seed, CASES[case][1]))
+            for case, seed in RUNS}
 
 
-def _probe_approaches(log: list) -> dict[int, tuple[float, float, float, list]]:
+def _probe_approaches(log: list, plan) -> dict[int, tuple[float, float, float, list]]:
     """Plan index of each probe read in `log` -> (the three last commanded targets before it:
     two moves back, one back, the probe's own; what happened after its move)."""
     out = {}
@@ -108,7 +117,7 @@ def _probe_approaches(log: list) -> dict[int, tuple[float, float, float, list]]:
             moves.append(value)
             since = []
         elif kind == "point":
-            if PLAN.is_probe_run(int(value["run"])):
+            if plan.is_probe_run(int(value["run"])):
                 assert len(moves) >= 3, "a probe read before three moves of its leg"
                 out[int(value["index"])] = (moves[-3], moves[-2], moves[-1], since)
         else:
@@ -127,14 +136,17 @@ def _averaging_at(log: list) -> dict[int, float | None]:
     return out
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-def test_every_probe_follows_a_reversal_the_resumed_ones_too(sessions, seed):
-    (_, whole, _), (_, before, after) = sessions[seed]
+@pytest.mark.parametrize("case,seed", RUNS)
+def test_every_probe_follows_a_reversal_the_resumed_ones_too(sessions, case, seed):
+    (_, whole, _), (_, before, after) = sessions[(case, seed)]
+    PLAN, stop_after = CASES[case]
     probes = {p.index: p for p in PLAN.points() if PLAN.is_probe_run(p.run)}
-    in_whole = _probe_approaches(whole)
-    resumed = {**_probe_approaches(before), **_probe_approaches(after)}
+    in_whole = _probe_approaches(whole, PLAN)
+    resumed = {**_probe_approaches(before, PLAN), **_probe_approaches(after, PLAN)}
     assert sorted(in_whole) == sorted(resumed) == sorted(probes)
-    assert min(_probe_approaches(after)) == STOP_AFTER + 1  # the resume began among the probes
+    assert min(_probe_approaches(after, PLAN)) == stop_after + 1  # the resume began among the probes
+    if case == "adaptive":  # it began with an upward probe below the pair before: approached from below
+        assert PLAN.probe_via_mm(probes[stop_after + 1].run) is not None
     for index, p in probes.items():
         for log in (in_whole, resumed):
             m2, m1, target, since = log[index]
@@ -151,9 +163,10 @@ def test_every_probe_follows_a_reversal_the_resumed_ones_too(sessions, seed):
                 assert averaging[index] == PLAN.probe_averaging_s, index
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-def test_the_resumed_sessions_probe_reversal_agrees_with_an_uninterrupted_runs(sessions, seed):
-    (whole, _, _), (resumed, _, _) = sessions[seed]
+@pytest.mark.parametrize("case,seed", RUNS)
+def test_the_resumed_sessions_probe_reversal_agrees_with_an_uninterrupted_runs(sessions, case, seed):
+    (whole, _, _), (resumed, _, _) = sessions[(case, seed)]
+    PLAN = CASES[case][0]
     got = []
     for path in (whole, resumed):
         session = read_session(path)

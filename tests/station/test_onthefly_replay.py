@@ -81,3 +81,31 @@ def test_an_aborted_onthefly_session_resumes_to_every_point_once(tmp_path: Path)
     assert second.outcome == "completed"
     done = read_session(out)
     assert sorted(done.points["index"].tolist()) == list(range(plan.total_points))  # none twice, none missing
+
+
+def test_an_adaptive_probe_count_replays_to_the_same_count(tmp_path: Path):
+    """The adaptive probe count (procedures/acquisition/probe_rule.py) decides on the recorded
+    readings: a replay takes the same pairs on every leg and stops where the recording did."""
+    from procedures.acquisition.probe_rule import PROBE_TARGET_UM
+    from procedures.engine import events as ev
+    from procedures.engine.runner import CallbackSink
+
+    original = tmp_path / "otf-probes.h5"
+    plan = onthefly_plan((1, 2), cycles=2, step_mm=2.5, reversal_probes=30, probe_target_um=PROBE_TARGET_UM)
+    stops: list[list] = [[], []]
+    with open_sample_rig() as rig:
+        result = run_sweep(rig, plan, original, CFG, sinks=[CallbackSink(
+            lambda e: isinstance(e, ev.ProbesStopped) and stops[0].append((e.leg, e.pairs, e.reason)))])
+    assert result.outcome == "completed"
+    live = read_session(original)
+    assert [leg for leg, _, _ in stops[0]] == [1, 2]
+    assert len(live.points) < plan.total_points  # some pairs were not needed (the sample legs are quiet)
+    out = tmp_path / "replayed.h5"
+    with open_replay_rig(original, None, CFG) as rig:
+        replayed = replay_sweep(rig, live, out, CFG, sinks=[CallbackSink(
+            lambda e: isinstance(e, ev.ProbesStopped) and stops[1].append((e.leg, e.pairs, e.reason)))])
+        assert rig.sim.mismatch is None
+    assert replayed.outcome == "completed" and stops[1] == stops[0]
+    rep = read_session(out)
+    assert compare_sessions(live, rep).identical
+    assert live.points["error_um"].tobytes() == rep.points["error_um"].tobytes()
