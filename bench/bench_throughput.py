@@ -61,7 +61,7 @@ from procedures.engine import events as ev  # noqa: E402
 from procedures.compensation.audit import AuditLog  # noqa: E402
 from procedures.fit import fit  # noqa: E402
 from procedures.metrology.thermal import error_basis  # noqa: E402
-from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec  # noqa: E402
+from procedures.acquisition.plan_spec import REVERSAL_PROBES, PlanSpec, plan_from_spec  # noqa: E402
 from procedures.acquisition.plans import iso230_plan  # noqa: E402
 from procedures.io.recording.reader import read_session  # noqa: E402
 from procedures.compensation.table import make_table  # noqa: E402
@@ -73,9 +73,12 @@ from station.services.jobs import run_sweep  # noqa: E402
 from station.services.table_jobs import push_legs_job, verify_job  # noqa: E402
 from station.services.wiring import open_rig  # noqa: E402
 
-PLANS = ("oracle", "paper", "iso230", "onthefly", "onthefly-adaptive", "onthefly-adaptive-passes")
+PLANS = ("oracle", "paper", "iso230", "onthefly", "onthefly-adaptive", "onthefly-adaptive-24",
+         "onthefly-adaptive-passes")
 """`onthefly-adaptive-passes`: the adaptive plan without reversal probes (its passes decide the
-reversal, at least four cycles: the rule before the probes), for the comparison."""
+reversal, at least four cycles: the rule before the probes), for the comparison;
+`onthefly-adaptive-24`: the adaptive plan with the fixed 24 probe pairs (plan_spec.REVERSAL_PROBES)
+instead of the adaptive count (procedures/acquisition/probe_rule.py)."""
 BAUD = 115200
 LASER_BITS_PER_BYTE = 10  # 8N1
 
@@ -138,10 +141,14 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cyc
     session = None
     if kind == "oracle":  # no sweep: the simulated legs' own error
         model = fit(oracle_points(cfgs, legs))
-        n_points, cycles = 0, [0.0]
+        n_points, cycles, pairs = 0, [0.0], [0]
     else:
         if kind == "onthefly-adaptive-passes":
-            plan = replace(plan_from_spec(PlanSpec(legs=legs, kind="onthefly-adaptive")), reversal_probes=0)
+            plan = replace(plan_from_spec(PlanSpec(legs=legs, kind="onthefly-adaptive")), reversal_probes=0,
+                           probe_target_um=0.0)
+        elif kind == "onthefly-adaptive-24":
+            plan = replace(plan_from_spec(PlanSpec(legs=legs, kind="onthefly-adaptive")),
+                           reversal_probes=REVERSAL_PROBES, probe_target_um=0.0)
         else:
             plan = plan_from_spec(PlanSpec(legs=legs, kind=kind))
         with open_rig(cfg, legs=legs, time_scale=0.0) as rig:
@@ -161,6 +168,8 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cyc
         n_points = int(len(session.points))
         passes = session.points[~is_probe(session.points)]  # the probes are runs of their own
         cycles = [int(passes["run"][passes["leg"] == leg].max()) / 2 for leg in legs]
+        probes = session.points[is_probe(session.points)]
+        pairs = [int(np.count_nonzero(probes["leg"] == leg)) // 2 for leg in legs]
     table = make_table(model)
     # the verification: a fresh rig of the same plant with the verification's own noise seed
     # (the same for every plan), the table pushed, 41 irregular targets x verify_cycles, stop-and-go
@@ -178,7 +187,7 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cyc
     ratios = [r.ratio for _, r in sorted(verified[0].results.items())]
     floors = [r.after.noise_floor_um for _, r in sorted(verified[0].results.items())]
     return {"kind": kind, "seed": seed, "legs": len(legs), "rig_s": rig_s / len(legs), "readout_s": readout_s,
-            "ratios": ratios, "points": n_points / len(legs), "cycles": cycles, "floors": floors,
+            "ratios": ratios, "points": n_points / len(legs), "cycles": cycles, "pairs": pairs, "floors": floors,
             "table_um": table_error_um(table, cfgs, legs), "wall_s": time.monotonic() - wall0}
 
 
@@ -223,17 +232,20 @@ def main(argv=None) -> int:
     print("Calibration throughput on the simulated rig (time scale 0, jerk-limited legs), verification sweep "
           f"with the pushed tables on a fresh rig (the same noise for every plan): 41 irregular targets x "
           f"{args.verify_cycles} cycles, stop-and-go")
-    print(f"{'seed':>4} {'plan':<24} {'legs':>4} {'cycles':>7} {'points/leg':>10} {'rig min/leg':>11} "
+    print(f"{'seed':>4} {'plan':<24} {'legs':>4} {'cycles':>7} {'pairs':>5} {'points/leg':>10} {'rig min/leg':>11} "
           f"{'+readout':>9} {'table um':>8} {'floor um':>8} {'ratio mean':>10} {'ratio max':>9} {'pass':>5}  ratio per leg")
     for r in rows:
         ratios = np.array(r["ratios"], dtype=float)
         ro = f"{r['readout_s'] / 60:9.2f}" if r["readout_s"] else f"{'-':>9}"
         lo, hi = min(r["cycles"]), max(r["cycles"])
         cyc = f"{lo:g}" if lo == hi else f"{lo:g}-{hi:g}"
-        print(f"{r['seed']:>4} {r['kind']:<24} {r['legs']:>4} {cyc:>7} {r['points']:>10.0f} "
+        plo, phi = min(r["pairs"]), max(r["pairs"])
+        prs = f"{plo}" if plo == phi else f"{plo}-{phi}"
+        print(f"{r['seed']:>4} {r['kind']:<24} {r['legs']:>4} {cyc:>7} {prs:>5} {r['points']:>10.0f} "
               f"{r['rig_s'] / 60:>11.2f} {ro} {max(r['table_um']):>8.4f} {np.mean(r['floors']):>8.3f} {np.mean(ratios):>10.3f} {np.max(ratios):>9.3f} "
               f"{int(np.sum(ratios <= 1.1)):>2}/{len(ratios)}  " + " ".join(f"{x:.2f}" for x in ratios))
-    print("rig min/leg: calibration sweep time per leg on the rig clock; +readout: reading the captures back over "
+    print("pairs: reversal probe pairs per leg (the adaptive count's fewest-most); "
+          "rig min/leg: calibration sweep time per leg on the rig clock; +readout: reading the captures back over "
           "a real 115200 baud line, min/leg (add it to rig time for a real instrument); table um: the table's error "
           "against the simulated leg's own at 20 degC, RMS about its mean, worst leg; floor: the verification "
           "sessions' noise floor, mean over legs; ratio = verification residual RMS / its noise floor (pass <= 1.1); "
