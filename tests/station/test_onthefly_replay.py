@@ -83,9 +83,10 @@ def test_an_aborted_onthefly_session_resumes_to_every_point_once(tmp_path: Path)
     assert sorted(done.points["index"].tolist()) == list(range(plan.total_points))  # none twice, none missing
 
 
-def test_an_adaptive_probe_count_replays_to_the_same_count(tmp_path: Path):
+def test_an_adaptive_probe_count_replays_to_the_same_count(tmp_path: Path, capsys):
     """The adaptive probe count (procedures/acquisition/probe_rule.py) decides on the recorded
-    readings: a replay takes the same pairs on every leg and stops where the recording did."""
+    readings: a replay takes the same pairs on every leg and stops where the recording did; `station
+    fit` says on its probe line why they stopped."""
     from procedures.acquisition.probe_rule import PROBE_TARGET_UM
     from procedures.engine import events as ev
     from procedures.engine.runner import CallbackSink
@@ -109,3 +110,12 @@ def test_an_adaptive_probe_count_replays_to_the_same_count(tmp_path: Path):
     rep = read_session(out)
     assert compare_sessions(live, rep).identical
     assert live.points["error_um"].tobytes() == rep.points["error_um"].tobytes()
+    from station.cli import main
+
+    capsys.readouterr()
+    assert main(["fit", str(original), "--out", str(tmp_path / "model.json")]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if "probe pairs" in line]
+    assert len(lines) == 2
+    for (leg, pairs, reason), line in zip(stops[0], lines):
+        assert f"reversal from {pairs} probe pairs" in line and "; probes stopped: " in line, line
+        assert line.split("; probes stopped: ")[1].split(" um")[0] == reason.split(" um")[0], (line, reason)
