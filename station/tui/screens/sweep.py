@@ -329,6 +329,7 @@ class SweepScreen(StationScreen):
         faults = self.query_one("#sweep-faults", Static)
         lines = [f"[cyan]adaptive[/cyan] leg {e.leg}: stopped after {e.cycles} cycles: {e.reason}"
                  for e in getattr(s, "stops", [])[-3:]]
+        lines += [f"[cyan]probes[/cyan] leg {e.leg}: {e.pairs} pairs: {e.reason}" for e in getattr(s, "probe_stops", [])[-3:]]
         lines += [f"[yellow]fault[/yellow] leg {f.leg} run {f.run} {f.target_mm:+.3f} mm: "
                   f"{f.kind} (attempt {f.attempt}{', gave up' if f.gave_up else ''})" for f in s.faults[-3:]]
         faults.update("\n".join(lines))

@@ -48,8 +48,12 @@ async def _run(cfg, size, connected, wait_until):
         await wait_until(pilot, lambda: app.sweep.status == "completed", timeout_s=120, what="the sweep to complete")
         s = app.sweep
         assert len(s.stops) == 1 and s.stops[0].leg == 1
-        # progress counted to the end: the planned total shrank by what the stop made unneeded
-        assert s.done == s.total == plan.total_points - s.stops[0].skipped_points
+        assert len(s.probe_stops) == 1 and s.probe_stops[0].leg == 1  # the adaptive probe count's stop
+        # progress counted to the end: the planned total shrank by what the stops made unneeded
+        assert s.done == s.total == plan.total_points - s.stops[0].skipped_points - s.probe_stops[0].skipped_points
         await pilot.pause()
         shown = str(screen.query_one("#sweep-faults", Static).render())
         assert f"leg 1: stopped after {s.stops[0].cycles} cycles" in shown
+        # the probes' stop came last: shown with the page's next redraw (they are throttled)
+        await wait_until(pilot, lambda: f"leg 1: {s.probe_stops[0].pairs} pairs: " in str(
+            screen.query_one("#sweep-faults", Static).render()), timeout_s=5, what="the probes' stop shown")
