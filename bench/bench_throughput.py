@@ -30,7 +30,11 @@ table's error against the simulated leg's own (only a simulation knows it), and 
 ratio per leg (mean, max, legs passing). Issue 26's goal: the adaptive on-the-fly plan verifies
 every leg of seeds 0-3 within 1.1 x the noise floor in at most 3 min of rig time per leg with the
 read-out; `onthefly-adaptive-passes` is the same plan without its reversal probes (the rule before
-them), for comparison.
+them), `onthefly-adaptive-24` the same plan with the fixed 24 probe pairs instead of the adaptive
+count (procedures/acquisition/probe_rule.py), for comparison. Measured 2026-11-27, seeds 0-3:
+onthefly-adaptive 2.60 min/leg with the read-out (12-29 pairs a leg), every leg <= 1.1 (worst
+1.073), against 2.78 min (worst 1.045) with the fixed 24; hold-out seed 4: 2.40 min, worst 1.063
+(24 pairs: 2.78, 1.038). The column `pairs` gives each plan's probe pairs per leg (fewest-most).
 
     .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans ...] [--jobs 2] [--verify-cycles 20]
 
