@@ -76,8 +76,8 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
     (recovered wherever it stopped) the axis goes back there first, arriving against the probe's
     direction (`SweepPlan.before_probe_mm`), so the probe follows the same reversal over the
     same travel as in an uninterrupted run; and where the reading before lies on the probe's far
-side (a descending block of an adaptive count), it is approached from `probe_gap_mm` short of
-it (`SweepPlan.probe_via_mm`). Returns the count of points done and the probe's record."""
+    side (a descending block of an adaptive count), it is approached from `probe_gap_mm` short of
+    it (`SweepPlan.probe_via_mm`). Returns the count of points done and the probe's record."""
     flags = FLAG_PROBE
     attempt = 0
     while True:
@@ -113,6 +113,24 @@ it (`SweepPlan.probe_via_mm`). Returns the count of points done and the probe's 
     done += 1
     yield ev.PointMeasured(record, done, total)
     return done, record
+
+
+def _judge_probes(plan: SweepPlan, leg: int, rules: dict, measured: dict, probes: list, materials, done_legs: set,
+                  left: int) -> Iterator[ev.Event]:
+    """After a probe pair of `leg`: whether its probes may stop (ProbeRule; its shape from the leg's
+    passes in `measured`, none when resumed among its probes). On a stop `leg` joins `done_legs` and
+    the stop is reported (ProbesStopped, a message; `left` planned points not needed)."""
+    rule = rules.get(leg)
+    if rule is None:
+        rule = rules[leg] = ProbeRule(plan.probe_target_um, plan.reversal_probes, material=(materials or {}).get(leg))
+        rule.shape(np.concatenate(measured[leg]).astype(POINT_DTYPE) if measured.get(leg) else None, leg)
+    reason = rule.after_pair(np.concatenate(probes).astype(POINT_DTYPE), leg)
+    if reason is None:
+        return
+    done_legs.add(leg)
+    yield ev.ProbesStopped(leg, rule.pairs, reason, rule.stderr_um, plan.probe_target_um, left)
+    yield ev.Message(f"leg {leg}: reversal probes stopped: {reason}"
+                     + (f"; {left} planned points not needed" if left else ""), "info")
 
 
 def onthefly_passes(
@@ -177,23 +195,13 @@ def onthefly_passes(
                                              set_averaging=not probing, in_place=in_place)
             probing = in_place = True
             probes_left[leg] -= 1
-            if plan.probe_target_um > 0 and first.direction < 0:  # after every pair
-                rule = probe_rules.get(leg)
-                if rule is None:  # the leg's passes (none when resumed among its probes): the shape
-                    rule = probe_rules[leg] = ProbeRule(plan.probe_target_um, plan.reversal_probes,
-                                                        material=(materials or {}).get(leg))
-                    rule.shape(np.concatenate(measured[leg]).astype(POINT_DTYPE) if measured.get(leg) else None, leg)
+            if plan.probe_target_um > 0:  # the adaptive count (procedures/acquisition/probe_rule.py)
                 probes_of.setdefault(leg, []).append(point_row(record))
-                reason = rule.after_pair(np.concatenate(probes_of[leg]).astype(POINT_DTYPE), leg)
-                if reason is not None:
-                    probes_done.add(leg)
-                    skipped = probes_left[leg]
-                    total -= skipped
-                    yield ev.ProbesStopped(leg, rule.pairs, reason, rule.stderr_um, plan.probe_target_um, skipped)
-                    yield ev.Message(f"leg {leg}: reversal probes stopped: {reason}"
-                                     + (f"; {skipped} planned points not needed" if skipped else ""), "info")
-            elif plan.probe_target_um > 0:
-                probes_of.setdefault(leg, []).append(point_row(record))
+                if first.direction < 0:  # a pair read: judge it
+                    yield from _judge_probes(plan, leg, probe_rules, measured, probes_of[leg], materials,
+                                             probes_done, probes_left[leg])
+                    if leg in probes_done:
+                        total -= probes_left[leg]
             continue
         speed = plan.speed_of_run(run)
         seq = all_targets if d > 0 else all_targets[::-1]
