@@ -58,7 +58,7 @@ def _stage(iso: dict, leg: str, stage: str) -> dict[str, Any]:
                         "limit_um": d.get("limit_um"), "decision": d.get("outcome", decision.NO_TOLERANCE),
                         "reason": d.get("reason", v.get("not_computed", "")), "dominant": d.get("dominant")}
     return {
-        "stage": stage, "session_file": Path(ident["session_file"]).name, "session_sha256": ident["session_sha256"],
+        "stage": stage, "leg": int(leg), "session_file": Path(ident["session_file"]).name, "session_sha256": ident["session_sha256"],
         "session_id": ident["session_id"], "started_utc": ident["started_utc"], "ended_utc": ident["ended_utc"],
         "operator": ident["operator"], "outcome": ident["outcome"], "error_basis": iso["error_basis"]["statement"],
         "environment": L["environment"], "material": L["material"], "test_parameters": iso["test_parameters"],
@@ -71,12 +71,15 @@ def _stage(iso: dict, leg: str, stage: str) -> dict[str, Any]:
 
 def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_utc: str, lab: dict,
             customer: str, as_left: dict | None = None, table: dict | None = None,
-            supersedes: dict | None = None, instrument: dict | None = None) -> dict[str, Any]:
+            supersedes: dict | None = None, instrument: dict | None = None,
+            as_left_leg: int | None = None) -> dict[str, Any]:
     """The certificate of `leg` as a JSON-able dict: `as_found` / `as_left` are ISO 230-2 report
     dicts (iso230_report.build, decided as found / as left); `lab` {name, address, accreditation};
     `table` {file, sha256, bytes} of the compensation table pushed; `supersedes` {report_no,
     revision, sha256_pdf, reason} of the revision this one corrects; `instrument` the laser as the
-    session identity recorded it {model, serial, calibrated_on} (over the config's [metrology])."""
+    session identity recorded it {model, serial, calibrated_on} (over the config's [metrology]).
+    `as_left_leg`: where the as-left session measured the same leg (its serial), when the leg was
+    mounted at another position for the verification (default `leg`)."""
     key = str(leg)
     if key not in as_found["legs"]:
         raise KeyError(f"leg {leg} is not in the as-found session")
@@ -118,13 +121,14 @@ def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_u
         ci["identity_mismatch"] = (f"CHECK THE INSTRUMENT: the laser connected reported itself as '{said}', which does "
                                    f"not name the serial {ci['serial']} whose calibration is stated here.")
     if as_left is not None:
-        if key not in as_left["legs"]:
-            raise KeyError(f"leg {leg} is not in the as-left session")
-        left_serial = as_left["identification"]["leg_identity"].get(key, {}).get("serial")
+        lkey = str(leg if as_left_leg is None else as_left_leg)
+        if lkey not in as_left["legs"]:
+            raise KeyError(f"leg {lkey} is not in the as-left session")
+        left_serial = as_left["identification"]["leg_identity"].get(lkey, {}).get("serial")
         if left_serial != cert["item"]["serial"]:
             raise ValueError(f"the as-left session measured leg {left_serial}, the as-found session "
                              f"{cert['item']['serial']}")
-        cert["as_left"] = _stage(as_left, key, "as_left")
+        cert["as_left"] = _stage(as_left, lkey, "as_left")
     return cert
 
 

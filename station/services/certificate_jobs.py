@@ -132,6 +132,24 @@ def pick_leg(session, leg: int | None) -> int:
     return session.legs[0]
 
 
+def _as_left_leg(as_found, as_left, leg: int) -> int:
+    """Where `as_left` measured the leg `as_found` measured at `leg`, found by its serial: the
+    same position when it holds that serial there, else the one position that does (a leg
+    verified after being remounted elsewhere). InputError when none, or several, do."""
+    serial = as_found.identity.leg(leg).serial
+    holding = [n for n in as_left.legs if as_left.identity.leg(n).serial == serial]
+    if leg in holding:
+        return leg
+    if len(holding) == 1:
+        return holding[0]
+    if holding:
+        raise InputError(f"{as_left.path}: legs {holding} all carry serial {serial}; a session's legs need serials "
+                         "of their own to tell which one is the leg certified")
+    measured = ", ".join(as_left.identity.leg(n).serial or "(no serial)" for n in as_left.legs)
+    raise InputError(f"{as_left.path} measured leg {measured} but {as_found.path} measured leg {serial}: "
+                     "as found and as left must be the same leg")
+
+
 def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: str | os.PathLike | None = None,
                       lab: dict | None = None, customer: str = "", folder: str | os.PathLike,
                       counter_path: str | os.PathLike, revise: str | None = None, reason: str = "",
@@ -151,12 +169,7 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
                          "calibrated: sweep it with --serial LEG=SERIAL (or [legs.N] serial) and certify that session")
     found = session_decisions(as_found, tolerances=tolerances, stage="as_found")
     left = session_decisions(as_left, tolerances=tolerances, stage="as_left") if as_left is not None else None
-    if left is not None:
-        pick_leg(as_left, leg)
-        if as_left.identity.leg(leg).serial != as_found.identity.leg(leg).serial:
-            raise InputError(f"{as_left.path} measured leg {as_left.identity.leg(leg).serial or '(no serial)'} but "
-                             f"{as_found.path} measured leg {as_found.identity.leg(leg).serial or '(no serial)'}: "
-                             "as found and as left must be the same leg")
+    left_leg = _as_left_leg(as_found, as_left, leg) if left is not None else None
     folder.mkdir(parents=True, exist_ok=True)
     issued_utc = issued_utc or certificate.now_utc()
     supersedes = None
@@ -176,13 +189,13 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
     if table_rec is not None and table_leg_sha256:
         table_rec["leg_rows_sha256"] = table_leg_sha256
         if as_left is not None:
-            active = _active_table_sha256(as_left, leg)
+            active = _active_table_sha256(as_left, left_leg)
             table_rec["active_as_left_sha256"] = active
             table_rec["matches_as_left"] = active == table_leg_sha256 if active else None
     try:
         cert = certificate.content(found, leg, report_no=report_no, revision=revision, issued_utc=issued_utc,
                                    lab=lab or {}, customer=customer, as_left=left, table=table_rec,
-                                   supersedes=supersedes, instrument=_instrument(as_found))
+                                   supersedes=supersedes, instrument=_instrument(as_found), as_left_leg=left_leg)
     except (KeyError, ValueError) as exc:
         raise InputError(f"{as_found.path}: {exc}") from None
     stem = f"{report_no}_r{revision}"

@@ -107,6 +107,31 @@ def test_as_left_of_another_leg_refused(sessions, cfg, tmp_path, capsys):
     assert not list((tmp_path / "runs" / "certificates").glob("*.pdf"))
 
 
+def test_as_left_found_by_serial_when_the_leg_was_remounted(sessions, cfg, tmp_path, capsys):
+    """Calibrated at position 1, verified at position 3 (the same serial): the certificate pairs
+    them by serial and states where each session measured the leg."""
+    from procedures.io.recording.reader import read_session
+
+    left = read_session(sessions["left"]).points.copy()
+    left["leg"] = 3
+    moved = write_identified_session(tmp_path / "ver-at-3.h5", left, station_config={"tolerances": TOL})
+    rc, out, err = _issue(capsys, sessions["found"], "--as-left", moved, "--config", cfg)
+    assert rc == 0, err
+    c = json.loads(next((tmp_path / "runs" / "certificates").glob("*.json")).read_text())
+    assert c["item"]["serial"] == "HX-0042" and c["item"]["leg"] == 1
+    assert c["as_found"]["leg"] == 1 and c["as_left"]["leg"] == 3
+    assert c["as_left"]["session_file"] == "ver-at-3.h5"
+    # two positions carrying the one serial: which is the leg is not for the certificate to guess
+    both = read_session(sessions["left"]).points.copy()
+    both = np.concatenate([both, both])
+    both["leg"][: len(both) // 2] = 2
+    both["leg"][len(both) // 2 :] = 3
+    both["index"] = np.arange(len(both))
+    twice = write_identified_session(tmp_path / "ver-twice.h5", both)
+    rc, _, err = _issue(capsys, sessions["found"], "--as-left", twice, "--config", cfg)
+    assert rc == 2 and "legs [2, 3] all carry serial HX-0042" in err
+
+
 def test_several_legs_need_leg(cfg, tmp_path, capsys):
     from tests.tooling import default_legs_points
 
