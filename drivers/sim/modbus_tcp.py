@@ -49,6 +49,10 @@ class NoReply(Exception):
     """Raised by a handler for a request that must get no answer at all."""
 
 
+class FrameError(Exception):
+    """A byte stream that is not Modbus TCP (the connection is closed)."""
+
+
 class RegisterHandler(Protocol):
     """What the server asks the drives. Unit ids are the wire's; a handler raises NoReply for a
     request nobody answers. `function` is the request's function code (23 comes as its write,
@@ -163,10 +167,6 @@ def answer_frames(handler: RegisterHandler, buf: bytes) -> tuple[bytes, bytes]:
             reply = _exception(pdu[0], DEVICE_FAILURE)
         out.append(struct.pack(">HHHB", tid, 0, len(reply) + 1, unit) + reply)
     return b"".join(out), buf
-
-
-class FrameError(Exception):
-    """A byte stream that is not Modbus TCP (the connection is closed)."""
 
 
 class MbapServer:

@@ -28,12 +28,12 @@ from procedures.metrology.thermal import Material, normalise_points
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
-def run(plan: SweepPlan, seed: int, legs: int, without: tuple[str, ...] = ()):
+def run(plan: SweepPlan, seed: int, legs: int, without: tuple[str, ...] = (), laser_class=SerialInterferometer):
     """(points, events, plant configs) of `plan` on a fresh simulated rig with jerk-limited legs."""
     cfgs = [c.with_leg_motion().without(*without) for c in default_leg_configs(seed, legs)]
     with SimRig(time_scale=0.0, seed=seed, legs=legs, configs=cfgs) as rig:
         axes = connect_axes(rig.drive_url, list(plan.legs), clock=rig.clock)
-        laser = SerialInterferometer(rig.laser_port)
+        laser = laser_class(rig.laser_port)
         try:
             events = list(sweep(plan, axes, laser, rig.clock))
         finally:
@@ -205,16 +205,7 @@ def test_the_probes_averaging_is_set_once_per_leg_and_the_anchors_get_theirs_bac
             super().set_averaging(averaging_s)
 
     plan = onthefly_plan((1, 2), cycles=2, step_mm=5.0, reversal_probes=3)
-    cfgs = [c.with_leg_motion() for c in default_leg_configs(0, 2)]
-    with SimRig(time_scale=0.0, seed=0, legs=2, configs=cfgs) as rig:
-        axes = connect_axes(rig.drive_url, [1, 2], clock=rig.clock)
-        laser = Logged(rig.laser_port)
-        try:
-            events = list(sweep(plan, axes, laser, rig.clock))
-        finally:
-            laser.close()
-            for a in axes.values():
-                a.close()
+    _, events, _ = run(plan, seed=0, legs=2, laser_class=Logged)
     assert [e for e in events if isinstance(e, ev.SweepFinished)][0].outcome == "completed"
     a, p = plan.averaging_s, plan.probe_averaging_s
     assert calls == [a, p, a, p]
