@@ -67,14 +67,14 @@ def _date(name: str, text: str | None) -> str | None:
     try:
         return dt.date.fromisoformat(text).isoformat()
     except ValueError:
-        raise PageError(400, f"{name}={text!r}: not a date; give it as YYYY-MM-DD") from None
+        raise PageError(400, f"{name}={text[:40]!r}: not a date; give it as YYYY-MM-DD") from None
 
 
 def _choice(name: str, text: str | None, known: list[str]) -> str | None:
     if text in (None, ""):
         return None
     if text not in known:
-        raise PageError(400, f"{name}={text!r}: unknown {name}; known: {', '.join(known) or 'none'}")
+        raise PageError(400, f"{name}={text[:80]!r}: unknown {name}; known: {', '.join(known) or 'none'}")
     return text
 
 
