@@ -142,8 +142,9 @@ def resolve(host: str) -> list[ipaddress.IPv4Address | ipaddress.IPv6Address]:
     try:
         infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
     except (socket.gaierror, UnicodeError) as exc:
-        raise InputError(f"--host {host}: not an address of this machine ({exc.strerror if hasattr(exc, 'strerror') and exc.strerror else exc}); "
-                         "give 127.0.0.1 (this machine only) or an address of one of its interfaces") from None
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise InputError(f"--host {host}: not an address of this machine ({why}); give 127.0.0.1 (this machine "
+                         "only) or an address of one of its interfaces") from None
     return sorted({ipaddress.ip_address(i[4][0].split("%")[0]) for i in infos}, key=str)
 
 

@@ -411,7 +411,7 @@ def test_station_web_refusals_are_one_line_before_any_url(tmp_path, capsys, runs
         busy.close()
 
 
-def test_station_web_serves_with_login_and_refuses_its_busy_port(tmp_path, runs):
+def test_station_web_serves_with_login_and_refuses_its_busy_port(tmp_path, runs, capsys, monkeypatch):
     """The command as an operator runs it: login forced in the config, the URL printed once it
     listens; a second one on the same port is one line, exit 2, no URL."""
     cfg = tmp_path / "web.toml"
@@ -436,13 +436,44 @@ def test_station_web_serves_with_login_and_refuses_its_busy_port(tmp_path, runs)
                 time.sleep(0.05)
         assert code == 401
         assert get(base + "/", _basic("vera", "pw-for-vera-1"))[0] == 200
-        second = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=60)
-        assert second.returncode == 2 and second.stdout == ""
-        assert second.stderr == f"station web: error: 127.0.0.1:{port}: the port is in use (another `station web`?); " \
-                                "stop it or give another --port\n"
+        from station.cli import main  # the second one in process: the same code, no second start-up
+
+        monkeypatch.chdir(tmp_path)
+        assert main(argv[1:]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err == f"station web: error: 127.0.0.1:{port}: the port is in use (another " \
+                                    "`station web`?); stop it or give another --port\n"
     finally:
         proc.send_signal(signal.SIGINT)
         try:
             proc.wait(15)
         except subprocess.TimeoutExpired:
             proc.kill()
+
+
+@pytest.mark.parametrize("host, ok", [
+    ("127.0.0.1:8800", True), ("localhost:8800", True), ("[::1]:8800", True), ("LOCALHOST.:8800", True),
+    ("127.0.0.1", True),                       # no port: the default of the scheme, still this address
+    ("127.0.0.1:8801", False), ("rebind.test:8800", False), ("evil.example", False), ("", False),
+    ("127.0.0.1:abc", False), ("127.0.0.1:0", False), ("[::1", False), ("[::1]x", False),
+    ("fleet.lab.example", True), ("fleet.lab.example:443", True),  # [web] allowed_hosts: a proxy's name
+    ("10.0.0.7:8800", False),                  # an address, but not the one listened on
+])
+def test_host_rule_on_loopback(host, ok):
+    from station.web.access import allowed_host_names, host_allowed
+
+    access = WebAccess(allowed_hosts=["fleet.lab.example"])
+    names = allowed_host_names("127.0.0.1", access)
+    assert host_allowed(host, names, 8800, wildcard=False, proxy_names=set(access.allowed_hosts)) is ok
+
+
+def test_host_rule_on_every_interface():
+    """Listening on 0.0.0.0 (checked without listening): an address is allowed (a rebinding page
+    is reached by a name), this machine's own name too, another name not."""
+    from station.web.access import allowed_host_names, host_allowed
+
+    names = allowed_host_names("0.0.0.0", WebAccess())
+    assert host_allowed("192.0.2.10:8800", names, 8800, wildcard=True)
+    assert host_allowed(f"{socket.gethostname()}:8800", names, 8800, wildcard=True)
+    assert not host_allowed("rebind.test:8800", names, 8800, wildcard=True)
+    assert not host_allowed("192.0.2.10:9999", names, 8800, wildcard=True)
