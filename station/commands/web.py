@@ -26,21 +26,26 @@ def add_arguments(p) -> None:
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only; "
                    "another address needs [web.users.NAME] in --config, docs/web.md)")
     p.add_argument("--port", type=int, default=8800, help="port (default 8800)")
-    p.add_argument("--hash-password", action="store_true", help="read a password (twice, not echoed) and print "
-                   "its argon2id hash for [web.users.NAME] password_hash; serves nothing")
+    p.add_argument("--hash-password", action="store_true", help="read a password (typed twice, not echoed; or "
+                   "the first line of a pipe) and print its argon2id hash for [web.users.NAME] password_hash; "
+                   "serves nothing")
 
 
 def _hash_password() -> int:
     import getpass
+    import sys
 
     from procedures.engine.errors import InputError
     from station.web.access import hash_password
 
-    first = getpass.getpass("password: ")
+    if sys.stdin.isatty():  # typed: not echoed, asked twice against typos
+        first = getpass.getpass("password: ")
+        if len(first) >= 12 and getpass.getpass("again: ") != first:
+            raise InputError("password: the two entries differ; nothing printed")
+    else:  # piped (a script, a secret store): its first line
+        first = sys.stdin.readline().rstrip("\r\n")
     if len(first) < 12:
         raise InputError("password: give at least 12 characters")
-    if getpass.getpass("again: ") != first:
-        raise InputError("password: the two entries differ; nothing printed")
     print(hash_password(first))
     return 0
 

@@ -477,3 +477,24 @@ def test_host_rule_on_every_interface():
     assert host_allowed(f"{socket.gethostname()}:8800", names, 8800, wildcard=True)
     assert not host_allowed("rebind.test:8800", names, 8800, wildcard=True)
     assert not host_allowed("192.0.2.10:9999", names, 8800, wildcard=True)
+
+
+def test_hash_password_prints_an_argon2id_hash_the_login_accepts(monkeypatch, capsys, tmp_path):
+    import io
+
+    from argon2 import PasswordHasher
+
+    from station.cli import main
+    from station.web.access import parse_web_section
+
+    monkeypatch.setattr(sys, "stdin", io.StringIO("a-long-password\n"))
+    assert main(["web", "--hash-password"]) == 0
+    out, err = capsys.readouterr()
+    h = out.strip()
+    assert out.count("\n") == 1 and h.startswith("$argon2id$") and PasswordHasher().verify(h, "a-long-password")
+    access = parse_web_section(tmp_path / "c.toml", {"users": {"qa": {"password_hash": h, "role": "auditor"}}})
+    assert access.users["qa"].role == "auditor"
+    monkeypatch.setattr(sys, "stdin", io.StringIO("short\n"))
+    assert main(["web", "--hash-password"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == "station web: error: password: give at least 12 characters\n"
