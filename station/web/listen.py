@@ -14,10 +14,11 @@ from station.web.access import WebAccess, is_loopback
 
 
 def check_port(port: int) -> int:
-    """`port` if it is a TCP port 1..65535, else InputError."""
-    if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
-        raise InputError(f"--port {port}: give a TCP port 1..65535 (default 8800)")
-    return port
+    """`port` if it is a TCP port 1..65535 (station/values.PORT: the one rule for ports), else
+    InputError; checked here too since uvicorn would take the value to bind()."""
+    from station.values import PORT  # noqa: PLC0415
+
+    return PORT.parse(port, "--port")
 
 
 def login_needed(host: str, access: WebAccess, config: str | None) -> bool:
