@@ -23,8 +23,7 @@ def add_arguments(p) -> None:
     p.add_argument("--catalog", metavar="URL", help="catalog URL or SQLite file (default: the config's shared "
                    "catalog when set, else its local one)")
     p.add_argument("--config", metavar="C", help="station TOML ([catalog], [tolerances.TYPE], recordings_dir)")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only; "
-                   "another address needs [web.users.NAME] in --config, docs/web.md)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=int, default=8800, help="port (default 8800)")
     p.add_argument("--hash-password", action="store_true", help="read a password (typed twice, not echoed; or "
                    "the first line of a pipe) and print its argon2id hash for [web.users.NAME] password_hash; "
