@@ -69,10 +69,6 @@ def run_of(session, serial: str | None, others: list, raw: bool) -> cmp.StationR
 def run(args) -> int:
     if len(args.sessions) < 2:
         raise InputError("give at least two sessions to compare")
-    if args.serial is not None:
-        from station.services.serials import check_serial  # noqa: PLC0415  (the one serial grammar)
-
-        check_serial(args.serial, "--serial")
     sessions = [read_session(Path(p)) for p in args.sessions]
     runs = [run_of(s, args.serial, [o for o in sessions if o is not s], args.raw) for s in sessions]
     result = cmp.compare(runs)

@@ -30,25 +30,6 @@ def add_arguments(p) -> None:
                    "serves nothing")
 
 
-def _hash_password() -> int:
-    import getpass
-    import sys
-
-    from procedures.engine.errors import InputError
-    from station.web.access import hash_password
-
-    if sys.stdin.isatty():  # typed: not echoed, asked twice against typos
-        first = getpass.getpass("password: ")
-        if len(first) >= 12 and getpass.getpass("again: ") != first:
-            raise InputError("password: the two entries differ; nothing printed")
-    else:  # piped (a script, a secret store): its first line
-        first = sys.stdin.readline().rstrip("\r\n")
-    if len(first) < 12:
-        raise InputError("password: give at least 12 characters")
-    print(hash_password(first))
-    return 0
-
-
 def run(args) -> int:
     if args.hash_password:
         return _hash_password()
@@ -81,4 +62,23 @@ def run(args) -> int:
         uvicorn.Server(uvicorn.Config(app, log_level="warning")).run(sockets=[sock])
     finally:
         sock.close()
+    return 0
+
+
+def _hash_password() -> int:
+    import getpass
+    import sys
+
+    from procedures.engine.errors import InputError
+    from station.web.access import hash_password
+
+    if sys.stdin.isatty():  # typed: not echoed, asked twice against typos
+        first = getpass.getpass("password: ")
+        if len(first) >= 12 and getpass.getpass("again: ") != first:
+            raise InputError("password: the two entries differ; nothing printed")
+    else:  # piped (a script, a secret store): its first line
+        first = sys.stdin.readline().rstrip("\r\n")
+    if len(first) < 12:
+        raise InputError("password: give at least 12 characters")
+    print(hash_password(first))
     return 0
