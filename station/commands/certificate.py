@@ -88,6 +88,9 @@ def run(args) -> int:
     if args.catalog and not args.serial:
         raise InputError("--catalog goes with --serial (a session file names its own sessions)")
     if args.serial:
+        from station.services.serials import check_serial  # noqa: PLC0415  (the one serial grammar)
+
+        check_serial(args.serial, "--serial")
         session, as_left_path, table = _from_catalog(args, cfg)
     else:
         session, as_left_path, table = args.session, args.as_left, args.table

@@ -27,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from station.services.serials import check_serial  # noqa: PLC0415  (the one serial grammar)
+
+    check_serial(args.serial, "SERIAL")
     cfg = load_config(args.config)
     engine, where = reading_engine(catalog_of(cfg), args.local)
     h = history(engine, args.serial, cfg.catalog.calibration_interval_days)

@@ -273,6 +273,7 @@ class StationConfig:
     limits: PlanLimits = field(default_factory=PlanLimits)  # [limits]: the largest plan started without asking
     lab: LabConfig = field(default_factory=LabConfig)
     tolerances: dict[str, Tolerance] = field(default_factory=dict)  # [tolerances.TYPE] (procedures.reporting.decision)
+    web: dict[str, Any] = field(default_factory=dict)  # [web]: users, login, hosts; read by station/web/access.py
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -576,7 +577,11 @@ def load_config(path: str | Path | None) -> StationConfig:
         raise InputError(f"{p}: [sim] laser_offset_um = {cfg.sim.laser_offset_um!r}: must be a finite number of um")
     if "tolerances" in data:
         cfg.tolerances = parse_tolerances(data["tolerances"], str(p))
-    unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs", "tolerances"}
+    if "web" in data:  # its keys are the web view's (station/web/access.parse_web_section checks them)
+        if not isinstance(data["web"], dict):
+            raise InputError(f"{p}: web must be a section ([web] and its keys), got {data['web']!r}")
+        cfg.web = data["web"]
+    unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs", "tolerances", "web"}
     if unknown:
         raise InputError(f"{p}: unknown section(s) {sorted(unknown)}")
     return cfg

@@ -21,18 +21,28 @@ from typing import Iterable, Mapping
 from procedures.engine.errors import InputError
 
 LEG_COUNT = 6
-SERIAL_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._/-]{0,63}")
+# The one serial grammar (sweep --serial, serials files, [legs.N], the TUI, history/certificate/
+# compare, the web view's URLs): no '/' so a serial is one URL path segment and names one file
+# part, and the first character a letter or digit so no serial is '.', '..' or a hidden name. A
+# serial like "A/../HX-0042" would otherwise be a link a browser resolves to another leg's page.
+SERIAL_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+SERIAL_RULE = "1..64 letters, digits, '.', '_' or '-', starting with a letter or digit (e.g. HX-0042)"
 FILE_COLUMNS = ("leg", "serial", "part_number", "leg_type", "screw_lot")
 TEXT_RE = re.compile(r"[^\x00-\x1f\x7f]{1,64}")
 
 
 def check_serial(text: str, where: str) -> str:
-    """`text` if it is a serial number (letters, digits, . _ / -; 1..64 characters, starting with a
-    letter or digit), else InputError naming `where`."""
-    if not SERIAL_RE.fullmatch(text or ""):
-        raise InputError(f"{where}: serial {text!r} is not a serial number: 1..64 letters, digits, '.', '_', "
-                         "'/' or '-', starting with a letter or digit (e.g. HX-0042)")
+    """`text` if it is a serial number (SERIAL_RULE), else InputError naming `where`."""
+    if not is_serial(text):
+        raise InputError(f"{where}: serial {text!r} is not a serial number: {SERIAL_RULE}"
+                         + ("; '/' is not allowed (a serial is one segment of the web view's URLs)"
+                            if isinstance(text, str) and "/" in text else ""))
     return text
+
+
+def is_serial(text: object) -> bool:
+    """Whether `text` follows the serial grammar (SERIAL_RULE)."""
+    return isinstance(text, str) and SERIAL_RE.fullmatch(text) is not None
 
 
 def _leg(text: str, where: str) -> int:
