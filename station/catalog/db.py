@@ -61,9 +61,12 @@ def describe(url: str) -> str:
         return url
 
 
-def make_engine(url: str, connect_timeout_s: float = 2.0) -> Engine:
+def make_engine(url: str, connect_timeout_s: float = 2.0, statement_timeout_s: float = 5.0) -> Engine:
     """An engine for `url` (postgresql:// is taken as psycopg 3). InputError for a URL that is
-    neither SQLite nor PostgreSQL."""
+    neither SQLite nor PostgreSQL. On PostgreSQL every statement of every connection ends after
+    `statement_timeout_s`, and so does its wait for a lock another session holds (lock_timeout:
+    a `LOCK TABLE records` elsewhere costs a station's write at most that, then the record waits
+    in the outbox); only connecting has its own `connect_timeout_s`."""
     try:
         u = sa.engine.make_url(url)
     except Exception:
@@ -84,7 +87,9 @@ def make_engine(url: str, connect_timeout_s: float = 2.0) -> Engine:
         return engine
     if u.get_backend_name() == "postgresql":
         u = u.set(drivername="postgresql+psycopg")
-        return sa.create_engine(u, connect_args={"connect_timeout": max(1, int(round(connect_timeout_s)))},
+        ms = max(1, int(round(statement_timeout_s * 1000)))
+        return sa.create_engine(u, connect_args={"connect_timeout": max(1, int(round(connect_timeout_s))),
+                                                 "options": f"-c statement_timeout={ms} -c lock_timeout={ms}"},
                                 pool_pre_ping=True)
     raise InputError(f"[catalog] url = {describe(url)!r}: only sqlite:/// and postgresql:// catalogs are supported")
 
@@ -105,14 +110,20 @@ def migrate(engine: Engine, revision: str = "head") -> None:
                 f"catalog {describe(str(engine.url))}: schema revision {found!r} was written by a newer station "
                 f"(this one knows up to {head_revision()!r}); update the station software to the version that "
                 f"wrote it, or point [catalog] url at another catalog")
+        if conn.dialect.name == "postgresql" and found != head_revision():
+            # a migration may rewrite every row (0003 classifies them): not bounded by the statement
+            # timeout of ordinary writes; a lock another session holds is still waited for at most
+            # lock_timeout
+            conn.execute(sa.text("SET LOCAL statement_timeout = 0"))
         cfg = alembic_config()
         cfg.attributes["connection"] = conn
         command.upgrade(cfg, revision)
 
 
-def open_engine(url: str, connect_timeout_s: float = 2.0) -> Engine:
-    """An engine for `url`, migrated to head. CatalogUnreachable when a server does not answer."""
-    engine = make_engine(url, connect_timeout_s)
+def open_engine(url: str, connect_timeout_s: float = 2.0, statement_timeout_s: float = 5.0) -> Engine:
+    """An engine for `url`, migrated to head. CatalogUnreachable when a server does not answer
+    (or, PostgreSQL, does not answer within `statement_timeout_s`, e.g. a lock held elsewhere)."""
+    engine = make_engine(url, connect_timeout_s, statement_timeout_s)
     try:
         database = engine.url.database if engine.dialect.name == "sqlite" else None
         if database and database != ":memory:":
