@@ -11,6 +11,7 @@ do not both create the tables.
 from __future__ import annotations
 
 import fcntl
+import threading
 from pathlib import Path
 
 import sqlalchemy as sa
@@ -24,6 +25,10 @@ from sqlalchemy.engine import Engine
 from procedures.engine.errors import InputError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
+# Alembic's `context`/`op` are module-level proxies set and removed around each run: two threads
+# migrating at once (a job opening its local catalog while the backlog thread opens the shared
+# one) tear them down under each other (KeyError 'config'). One migration per process at a time.
+_MIGRATING = threading.Lock()
 _LOCK_KEY = 230_2023  # advisory lock id for migrations on PostgreSQL
 
 
@@ -117,7 +122,8 @@ def migrate(engine: Engine, revision: str = "head") -> None:
             conn.execute(sa.text("SET LOCAL statement_timeout = 0"))
         cfg = alembic_config()
         cfg.attributes["connection"] = conn
-        command.upgrade(cfg, revision)
+        with _MIGRATING:
+            command.upgrade(cfg, revision)
 
 
 def open_engine(url: str, connect_timeout_s: float = 2.0, statement_timeout_s: float = 5.0) -> Engine:
