@@ -93,8 +93,10 @@ def make_engine(url: str, connect_timeout_s: float = 2.0, statement_timeout_s: f
     if u.get_backend_name() == "postgresql":
         u = u.set(drivername="postgresql+psycopg")
         ms = max(1, int(round(statement_timeout_s * 1000)))
+        # the lock wait ends a little before the statement would: the error then names the lock
+        lock_ms = max(1, int(ms * 0.8))
         return sa.create_engine(u, connect_args={"connect_timeout": max(1, int(round(connect_timeout_s))),
-                                                 "options": f"-c statement_timeout={ms} -c lock_timeout={ms}"},
+                                                 "options": f"-c statement_timeout={ms} -c lock_timeout={lock_ms}"},
                                 pool_pre_ping=True)
     raise InputError(f"[catalog] url = {describe(url)!r}: only sqlite:/// and postgresql:// catalogs are supported")
 
