@@ -106,9 +106,7 @@ def _confirm(yes: bool):
 
 
 def run(args) -> int:
-    # the simulated drives keep their tables where push/verify/rollback --sim and the UI find them:
-    # a leg pushed a table is swept compensated here as in the UI (asked first: services.jobs.check_compensation)
-    cfg = load_config(args.config).with_sim_memory()
+    cfg = load_config(args.config)
     cfg.require_devices()
     serials = parse_serial_args(args.serial)
     leg_fields(cfg, serials, args.serials)  # a bad serials file is refused before anything moves
@@ -137,6 +135,10 @@ def run(args) -> int:
     for note in plan.notes:
         print(f"note: {note}")
     resume_hint = resume_command(out, cfg, args.config)
+    # the simulated drives keep their tables where push/verify/rollback --sim and the UI find them
+    # (its folder made only now, when everything was accepted): a leg pushed a table is swept
+    # compensated here as in the UI, asked first (services.jobs.check_compensation)
+    cfg.with_sim_memory()
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:
