@@ -51,6 +51,20 @@ class Rec:
     def uid(self) -> str:
         return f"{self.kind}:{self.key}"
 
+    @property
+    def stage_or_default(self) -> str | None:
+        """`stage`, or for a record made without one (through the API, not from a file) the rule
+        catalog revision 0003 classified older rows by: audit kinds by kind, a session by the plan
+        kind its summary keeps (verification: as left; import: other; else as found)."""
+        if self.stage is not None:
+            return self.stage
+        if self.kind in stages.AUDIT_STAGES:
+            return stages.AUDIT_STAGES[self.kind]
+        if self.kind == "session":
+            plan_kind = (self.summary or {}).get("plan_kind")
+            return {"verification": stages.AS_LEFT, "import": stages.OTHER}.get(plan_kind, stages.AS_FOUND)
+        return None
+
 
 def sha256_of(path: str | os.PathLike) -> str:
     from procedures.io.recording.reader import file_sha256

@@ -60,12 +60,12 @@ def rows_of(rec: Rec, default_station: str | None) -> dict[str, list[dict]]:
         "uid": rec.uid, "kind": rec.kind, "time_utc": rec.time_utc, "station_id": station, "operator": rec.operator,
         "software_version": rec.software_version, "instrument_serial": (rec.instrument or {}).get("serial"),
         "outcome": rec.outcome, "path": rec.path, "sha256": rec.sha256, "source_sha256": rec.source_sha256,
-        "summary": rec.summary or None, "stage": rec.stage, "supersedes": rec.supersedes or None})
+        "summary": rec.summary or None, "stage": rec.stage_or_default, "supersedes": rec.supersedes or None})
     for leg, row in sorted(rec.legs.items()):
         full = {c: None for c in _LEG_COLS}
         full.update({k: v for k, v in row.items() if k in full})
         full.update(uid=rec.uid, leg=leg, kind=rec.kind, time_utc=rec.time_utc, station_id=station, outcome=rec.outcome,
-                    stage=rec.stage)
+                    stage=rec.stage_or_default)
         out["record_legs"].append(full)
         serial = row.get("leg_serial")
         if serial:
@@ -147,6 +147,7 @@ class Catalog:
     _remote_failed_at: float = field(default=-1e18, repr=False)
     last_forward: ForwardResult = field(default_factory=ForwardResult, repr=False)
     _told_waiting: bool = field(default=False, repr=False)
+    _last_error: str = field(default="", repr=False)
 
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -187,9 +188,10 @@ class Catalog:
             waiting = conn.execute(sa.select(sa.func.count()).select_from(Outbox).where(Outbox.uid.in_(uids))).scalar_one()
         if waiting:
             self._told_waiting = True
+            where = db.describe(self.url)
+            why = self.last_forward.error.removeprefix(f"catalog {where}: ")  # CatalogUnreachable names it already
             outbox_log.warning("catalog: %d record(s) of this job wait in the outbox of %s (shared catalog %s: %s); "
-                               "`station catalog sync` forwards them", waiting, self.local, db.describe(self.url),
-                               self.last_forward.error)
+                               "`station catalog sync` forwards them", waiting, self.local, where, why)
 
     def serials_of_source(self, sha256: str) -> dict[int, str]:
         """Leg serials of the session with this sha256 in the local catalog ({} if unknown)."""
@@ -216,7 +218,8 @@ class Catalog:
         if not self.url:
             return result
         if not force and time.monotonic() - self._remote_failed_at < RETRY_AFTER_S:
-            result.left, result.error = self.backlog(), "shared catalog unreachable a moment ago; kept in the backlog"
+            result.left = self.backlog()
+            result.error = "shared catalog unreachable a moment ago" + (f" ({self._last_error})" if self._last_error else "")
             self.last_forward = result
             return result
         try:
@@ -257,6 +260,7 @@ class Catalog:
                 self._remote_engine = None
             text = str(getattr(exc, "orig", None) or exc).strip().splitlines()
             result.error = text[0] if text else type(exc).__name__
+            self._last_error = result.error.removeprefix(f"catalog {db.describe(self.url)}: ")
             log.info("catalog: shared catalog not reachable, %s", result.error)
         result.left = self.backlog()
         self.last_forward = result
