@@ -5,17 +5,18 @@ from __future__ import annotations
 import argparse
 import json
 
-from station.catalog.history import history, row_detail, value_with_u
+from station.catalog.history import history, row_detail, stage_label, value_with_u
 from station.catalog.store import catalog_of, reading_engine
 from station.services.config import load_config
 
 NAME = "history"
 HELP = "a leg's history by serial: calibrations (ISO 230-2 with U), tables, pushes, verifications, drift"
 DESCRIPTION = (
-    "Everything the catalog holds of the leg with this serial number, oldest first: each calibration "
-    "with its ISO 230-2 values E, B, M (um, with expanded uncertainty U, k = 2), each table and which drive it "
-    "was pushed to, each verification and its ratio; the drift of E, B and M in um per month between "
-    "neighbouring calibrations, and the due date ([catalog] calibration_interval_days). docs/catalog.md."
+    "Everything the catalog holds of the leg with this serial number, oldest first, each record with its stage "
+    "(as found, adjustment, as left, other): each calibration with its ISO 230-2 values E, B, M (um, with expanded "
+    "uncertainty U, k = 2), each table and which drive it was pushed to, each verification and its ratio; the "
+    "drift of E, B and M in um per month between neighbouring as-found calibrations (none under [catalog] "
+    "min_drift_interval_days), and the due date ([catalog] calibration_interval_days). docs/catalog.md."
 )
 
 
@@ -32,7 +33,7 @@ def run(args) -> int:
     check_serial(args.serial, "SERIAL")
     cfg = load_config(args.config)
     engine, where = reading_engine(catalog_of(cfg), args.local)
-    h = history(engine, args.serial, cfg.catalog.calibration_interval_days)
+    h = history(engine, args.serial, cfg.catalog.calibration_interval_days, cfg.catalog.min_drift_interval_days)
     if args.json:
         print(json.dumps(h.to_json(), indent=2))
         return 0 if h.rows else 1
@@ -42,16 +43,21 @@ def run(args) -> int:
         return 1
     info = ", ".join(f"{k} {v}" for k, v in h.leg_info.items() if v)
     print(f"leg {args.serial}" + (f" ({info})" if info else ""))
-    print(f"{'time (UTC)':<27} {'kind':<12} {'station':<10} {'outcome':<10} {'E um':>12} {'B um':>12} {'M um':>12}  detail")
+    print(f"{'time (UTC)':<27} {'kind':<12} {'stage':<10} {'station':<10} {'outcome':<10} {'E um':>12} {'B um':>12} "
+          f"{'M um':>12}  detail")
     for r in h.rows:
-        print(f"{r.time_utc:<27} {r.kind:<12} {(r.station_id or '-'):<10} {(r.outcome or '-'):<10} "
+        print(f"{r.time_utc:<27} {r.kind:<12} {stage_label(r.stage):<10} {(r.station_id or '-'):<10} {(r.outcome or '-'):<10} "
               f"{value_with_u(r.figures, 'E'):>12} {value_with_u(r.figures, 'B'):>12} {value_with_u(r.figures, 'M'):>12}  {row_detail(r)}")
+    print(f"{len(h.calibrations)} calibration(s) as found, {len(h.verifications)} verification(s) as left")
     for d in h.drift:
+        if d.refused:
+            print(f"drift {d.from_utc[:10]} -> {d.to_utc[:10]}: not computed ({d.refused})")
+            continue
         rates = ", ".join(f"{n} {v:+.3f}" if v is not None else f"{n} -" for n, v in d.um_per_month.items())
-        print(f"drift {d.from_utc[:10]} -> {d.to_utc[:10]} ({d.months:.1f} months): {rates} um/month")
+        print(f"drift {d.from_utc[:10]} -> {d.to_utc[:10]} ({d.days:.1f} days, {d.months:.2f} months): {rates} um/month")
     if h.due:
-        print(f"last calibration {h.last_calibration_utc}; due {h.due} "
+        print(f"last calibration (as found) {h.last_calibration_utc}; due {h.due} "
               f"(interval {cfg.catalog.calibration_interval_days} days)")
     else:
-        print("never calibrated (no completed session)")
+        print("never calibrated (no completed as-found session)")
     return 0

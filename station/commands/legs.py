@@ -15,8 +15,9 @@ from station.services.config import load_config
 NAME = "legs"
 HELP = "list legs by serial with last calibration and due date (filters: type, station, dates, due)"
 DESCRIPTION = (
-    "Every leg with a serial number in the catalog: type, number of calibrations, the last one (when, which "
-    "station, E and B in um) and its due date ([catalog] calibration_interval_days). docs/catalog.md."
+    "Every leg with a serial number in the catalog: type, number of as-found calibrations and of as-left "
+    "verifications, the last calibration (when, which station, E and B in um) and its due date ([catalog] "
+    "calibration_interval_days). docs/catalog.md."
 )
 
 
@@ -56,11 +57,14 @@ def run(args) -> int:
         print(json.dumps([asdict(r) for r in rows], indent=2))
         return 0
     print(where)
-    print(f"{'serial':<16} {'type':<12} {'cal.':>4}  {'last calibration (UTC)':<27} {'station':<10} {'E um':>7} {'B um':>7}  due")
+    # cal. = as-found calibrations, ver. = as-left verifications (docs/catalog.md, stages)
+    print(f"{'serial':<16} {'type':<12} {'cal.':>4} {'ver.':>4}  {'last calibration (UTC)':<27} {'station':<10} "
+          f"{'E um':>7} {'B um':>7}  due")
     for r in rows:
         e = f"{r.E_um:.2f}" if r.E_um is not None else "-"
         b = f"{r.B_um:.2f}" if r.B_um is not None else "-"
-        print(f"{r.serial:<16} {(r.leg_type or '-'):<12} {r.calibrations:>4}  {(r.last_calibration_utc or 'never'):<27} "
+        print(f"{r.serial:<16} {(r.leg_type or '-'):<12} {r.calibrations:>4} {r.verifications:>4}  "
+              f"{(r.last_calibration_utc or 'never'):<27} "
               f"{(r.station_id or '-'):<10} {e:>7} {b:>7}  {r.due or 'now'}")
     print(f"{len(rows)} leg(s)")
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import shlex
+import sys
 from pathlib import Path
 
 from procedures.engine.errors import InputError
@@ -21,6 +22,7 @@ from station import interrupt
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.services.wiring import open_rig
+from station.commands._table_cli import prompt
 
 NAME = "sweep"
 HELP = "run a calibration sweep (ISO 230-2, the paper's, or on the fly) and record it to HDF5"
@@ -61,6 +63,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "and checked by push")
     p.add_argument("--serials", metavar="FILE", help="CSV leg,serial[,part_number,leg_type,screw_lot] with the legs' "
                                                      "serials (default: [station] serials_file)")
+    p.add_argument("--yes", action="store_true",
+                   help="sweep a leg whose compensation table is active without asking (the session records the "
+                        "tables and is stage 'other', not an as-found calibration); without it the question is asked "
+                        "at the terminal, and refused when stdin is not one")
 
 
 def plan_spec(args) -> PlanSpec:
@@ -89,6 +95,14 @@ def resume_command(out: Path, cfg, config: str | None) -> str:
     """The line that finishes `out`, its paths quoted for the shell (a space in a folder name)."""
     where = "--sim" if config is None else f"--config {shlex.quote(str(config))}"
     return f"resume with: station sweep --resume {shlex.quote(str(out))} {where}"
+
+
+def _confirm(yes: bool):
+    """How a sweep of a compensated leg is confirmed here: --yes; else the question at the
+    terminal; else (no terminal) None: refused in one line naming the legs and --yes."""
+    if yes:
+        return lambda question: True
+    return prompt(False) if sys.stdin is not None and sys.stdin.isatty() else None
 
 
 def run(args) -> int:
@@ -121,12 +135,17 @@ def run(args) -> int:
     for note in plan.notes:
         print(f"note: {note}")
     resume_hint = resume_command(out, cfg, args.config)
+    # the simulated drives keep their tables where push/verify/rollback --sim and the UI find them
+    # (its folder made only now, when everything was accepted): a leg pushed a table is swept
+    # compensated here as in the UI, asked first (services.jobs.check_compensation)
+    cfg.with_sim_memory()
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:
             try:
                 result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
-                                   resume=bool(args.resume), serials=serials, serials_file=args.serials)
+                                   resume=bool(args.resume), serials=serials, serials_file=args.serials,
+                                   confirm_compensated=_confirm(args.yes))
             except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
                 print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))")
                 if out.exists():  # a hint never names a file that was not written

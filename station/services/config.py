@@ -36,7 +36,9 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     [catalog]                   # the index of every record (docs/catalog.md); all optional
     url = ""                    # shared catalog, e.g. "postgresql://station@dbhost/catalog" ("" = local only)
     connect_timeout_s = 2.0     # how long a write waits for the shared catalog before keeping it in the backlog
+    statement_timeout_s = 5.0   # the longest one shared-catalog statement (or its wait for a lock) may take
     calibration_interval_days = 365  # a leg is due this many days after its last calibration
+    min_drift_interval_days = 30.0   # no drift figure from as-found calibrations closer together than this
     [limits]                    # the largest sweep plan started without asking (procedures/acquisition/plan_size.py)
     max_points = 500000         # points measured, all legs
     max_rig_hours = 72.0        # estimated time on the rig
@@ -241,7 +243,13 @@ class CatalogConfig:
 
     url: str = ""
     connect_timeout_s: float = 2.0
+    # every statement on the shared catalog, and its wait for a lock another session holds, ends
+    # after this (PostgreSQL statement_timeout and lock_timeout): then the record waits in the outbox
+    statement_timeout_s: float = 5.0
     calibration_interval_days: int = 365
+    # drift (um/month) between as-found calibrations closer than this is noise over a tiny span:
+    # not computed (station/catalog/history.py)
+    min_drift_interval_days: float = 30.0
 
 
 @dataclass
@@ -391,6 +399,9 @@ _RANGES = {
     ("interferometer", "baudrate"): (0, True, "the serial line's bits per second"),
     ("catalog", "connect_timeout_s"): (0.0, True, "seconds a write waits for the shared catalog"),
     ("catalog", "calibration_interval_days"): (0, True, "days from a leg's calibration to its next"),
+    ("catalog", "statement_timeout_s"): (0.0, True, "seconds one statement on the shared catalog may take"),
+    ("catalog", "min_drift_interval_days"): (0.0, False, "days between as-found calibrations below which no "
+                                                         "drift is computed"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
     ("limits", "max_points"): (0, True, "the most points a sweep plan may have"),
     ("limits", "max_rig_hours"): (0.0, True, "the longest a sweep plan may take on the rig, hours"),

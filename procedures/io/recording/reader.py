@@ -85,6 +85,14 @@ class Session:
     """Leg, drive, station, instrument, operator (schema 1.1, /meta/identity); unknown in 1.0 files."""
 
     @property
+    def stage(self) -> str:
+        """The stage of the leg's life this session records: "as_found", "as_left" or "other"
+        (root attribute `stage`, derived for files before schema 1.2; procedures/io/recording/stage.py)."""
+        from procedures.io.recording.stage import stage_of_session
+
+        return stage_of_session(self)
+
+    @property
     def legs(self) -> list[int]:
         """Leg numbers present in `points`, ascending."""
         return sorted({int(v) for v in self.points["leg"]})
