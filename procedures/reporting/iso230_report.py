@@ -91,10 +91,19 @@ def _test_parameters(plan: dict, legs: list[int], iso: dict) -> dict[str, Any]:
         "dwell_s": plan.get("dwell_s"),
         "averaging_s": plan.get("averaging_s"),
         "overrun_mm": plan.get("overrun_mm"),
-        "approach": ("linear cycle, bidirectional: every pass starts overrun_mm beyond its first target, each target "
-                     "approached in the pass's direction (ISO 230-2 standard test cycle)"
-                     if plan.get("kind") != "import" else "as recorded by the other software (imported)"),
+        "approach": _approach(plan),
     }
+
+
+def _approach(plan: dict) -> str:
+    """The approach in words, with the overrun the plan recorded (never the key's name)."""
+    if plan.get("kind") == "import":
+        return "as recorded by the other software (imported)"
+    over = plan.get("overrun_mm")
+    start = (f"{over:g} mm beyond its first target" if isinstance(over, (int, float)) and not isinstance(over, bool)
+             else "beyond its first target (overrun not recorded in the session)")
+    return (f"linear cycle, bidirectional: every pass starts {start}, each target approached in the pass's "
+            "direction (ISO 230-2 standard test cycle)")
 
 
 def _air_compensation(record: Any) -> str:

@@ -70,7 +70,8 @@ def recs_of(found: Found, catalog: Catalog | None, problems: list[str]) -> Itera
             problems.append(str(exc).splitlines()[0])
     lookup = catalog.serials_of_source if catalog is not None else None
     for path in found.models:
-        rec = readers.model_rec(path, lookup)
+        # a .json that is no model may be a certificate's (station.catalog.certificates)
+        rec = readers.model_rec(path, lookup) or _certificate_rec(path)
         if rec is not None:
             yield rec
     for path in found.tables:
@@ -83,6 +84,12 @@ def recs_of(found: Found, catalog: Catalog | None, problems: list[str]) -> Itera
             yield rec
     for path in found.logs:
         yield from readers.audit_recs(path)
+
+
+def _certificate_rec(path: Path) -> Rec | None:
+    from station.catalog.certificates import certificate_rec_of_json  # noqa: PLC0415
+
+    return certificate_rec_of_json(path)
 
 
 def index(catalog: Catalog, folders: Iterable[str | os.PathLike], forward: bool = True) -> tuple[int, list[str]]:
