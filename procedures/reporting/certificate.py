@@ -418,7 +418,7 @@ def _blocks(c: dict) -> list[tuple]:
         bud = st.get("budget")
         if not bud:
             continue
-        b.append(("h", f"{n}. Uncertainty budget {word}: standard uncertainty contributions u (um, k = 1)"))
+        b.append(("h", f"{n}. Uncertainty budget {word}: contributions u in um (k = 1)"))
         names = list(DECIDED_ORDER)
         rows = []
         for r in bud["rows"]:
@@ -467,9 +467,9 @@ def pdf(c: dict) -> bytes:
 
     issued = c["issued_utc"][:10]
     ident = f"{c['report_no']} rev. {c['revision']}"
-    banner_sim = "SIMULATION: NOT A CALIBRATION OF A REAL ITEM" if c.get("simulated") else ""
+    banner_sim = "SIMULATION: not a calibration of a real item" if c.get("simulated") else ""
     appr = c.get("approval") or {}
-    banner_draft = ("DRAFT, NOT APPROVED: not valid until approved (station certificate approve)"
+    banner_draft = ("DRAFT: not valid until approved"
                     if appr.get("status") != "approved" else "")
 
     class Doc(FPDF):
@@ -483,11 +483,10 @@ def pdf(c: dict) -> bytes:
             self.cell(self.epw / 2, 4, t(f"Page {self.page_no()} of {{nb}}"), align="R",
                       new_x=XPos.LMARGIN, new_y=YPos.NEXT)
             # on every page, so no page taken out of the document can pass for a real or approved one
-            marks = [m for m in (banner_sim, banner_draft) if m]
-            if marks:
+            for mark in (m for m in (banner_sim, banner_draft) if m):
                 self.set_text_color(190, 0, 0)
                 self.set_font(t.family, "B", 9)
-                self.cell(0, 5, t("   ·   ".join(marks)), align="C", new_x=XPos.LMARGIN, new_y=YPos.NEXT)
+                self.cell(0, 4.5, t(mark), align="C", new_x=XPos.LMARGIN, new_y=YPos.NEXT)
                 self.set_text_color(0, 0, 0)
             self.line(self.l_margin, self.get_y() + 1, self.l_margin + self.epw, self.get_y() + 1)
             self.ln(4)
