@@ -402,7 +402,8 @@ def approve(report_no: str, *, by: str, folder: str | os.PathLike, authoriser: d
     config names ([lab] authoriser); the approved document REPORT_rN_approved.pdf/.json is written
     once, read-only, beside the draft (which stays unchanged), recorded in the audit log (action
     "approve") and in the catalog, and the index marks the revision approved."""
-    from procedures.compensation.audit import AuditEntry, AuditLog, new_id  # noqa: PLC0415
+    from procedures.compensation.audit import AuditEntry, AuditError, AuditLog, AuditSink, new_id  # noqa: PLC0415
+    from procedures.engine import events as ev  # noqa: PLC0415
 
     name, role = (authoriser or {}).get("name") or "", (authoriser or {}).get("role") or ""
     if not name:
@@ -442,12 +443,19 @@ def approve(report_no: str, *, by: str, folder: str | os.PathLike, authoriser: d
     try:
         _create_new(json_path, (json.dumps(cert, indent=2, allow_nan=False) + "\n").encode())
         written.append(json_path)
-        AuditLog(audit_path, operator=by, station_id=station_id).append(AuditEntry(
-            "approve", int(cert["item"]["leg"]), "ok",
-            f"certificate {report_no} revision {last['revision']} approved by {name}, {role}",
-            id=audit_id, time_utc=approved_utc.replace("+00:00", "Z"), leg_serial=cert["item"]["serial"], operator=by,
-            details={"report_no": report_no, "revision": last["revision"], "draft_sha256_pdf": last["sha256_pdf"],
-                     "role": role, "pdf": str(pdf_path), "sha256_pdf": hashlib.sha256(pdf_bytes).hexdigest()}))
+        # through the audit sink, the log's one writer (tests/test_layering.py)
+        sink = AuditSink(AuditLog(audit_path, operator=by, station_id=station_id))
+        try:
+            sink.handle(ev.AuditRecord(AuditEntry(
+                "approve", int(cert["item"]["leg"]), "ok",
+                f"certificate {report_no} revision {last['revision']} approved by {name}, {role}",
+                id=audit_id, time_utc=approved_utc.replace("+00:00", "Z"), leg_serial=cert["item"]["serial"],
+                operator=by, details={"report_no": report_no, "revision": last["revision"],
+                                      "draft_sha256_pdf": last["sha256_pdf"], "role": role, "pdf": str(pdf_path),
+                                      "sha256_pdf": hashlib.sha256(pdf_bytes).hexdigest()})))
+        except AuditError as exc:
+            raise InputError(f"{str(exc).split(': ', 1)[-1]}: the approval could not be recorded; nothing was "
+                             "approved") from None
     except BaseException:  # no approved document without its audit entry
         for p in written:
             os.chmod(p, 0o644)
