@@ -422,16 +422,19 @@ def _blocks(c: dict) -> list[tuple]:
         names = list(DECIDED_ORDER)
         rows = []
         for r in bud["rows"]:
+            if r.get("zero_because"):  # listed all the same, with why it is nothing
+                rows.append([r["source"], f"0: {r['zero_because']}"] + ["0"] * len(names))
+                continue
             rows.append([r["source"], r["input"] or "–"] + [_num(r["u_um"].get(k), ".4f") if k in r["u_um"] else "–"
                                                               for k in names])
         rows.append(["combined u_c", ""] + [_num(bud["u_c_um"].get(k), ".4f") for k in names])
         rows.append([f"U (k = {bud['k']:g})", ""] + [_num(bud["U_um"].get(k), ".3f") for k in names])
         b.append(("table", ["source", "input: standard uncertainty, distribution"] + names, rows,
                   "LL" + "R" * len(names)))
-        zero = [f"{r['source']}: 0, because {r['zero_because']}." for r in bud["rows"] if r.get("zero_because")]
         b.append(("p", "A source counts once per value; its places (targets, positions) are summed in quadrature. "
                        "–: the source does not enter that value (at one target, as in B and R, the "
-                       "length-proportional terms cancel). " + " ".join(zero)))
+                       "length-proportional terms cancel). 0: the source is in the model but contributes nothing "
+                       "here, for the reason given."))
         for note in bud.get("notes") or []:
             b.append(("p", f"Note: {note}"))
         n += 1
@@ -595,7 +598,10 @@ def _table(doc, t, header: list[str], rows: list[list[str]], aligns: str) -> Non
                for i in range(len(header))]
     widths = list(natural)
     if sum(widths) > doc.epw:  # shrink only the text columns (left-aligned), never the numbers
-        text_cols = [i for i, a in enumerate(aligns) if a == "L"]
+        # a short text column (a name) keeps its width, so its words never break mid-word; the long
+        # ones (sentences) share what is left and wrap between words
+        text_cols = ([i for i, a in enumerate(aligns) if a == "L" and natural[i] > 40]
+                     or [i for i, a in enumerate(aligns) if a == "L"])
         fixed = sum(w for i, w in enumerate(widths) if i not in text_cols)
         room = max(doc.epw - fixed, 10 * len(text_cols))
         total_text = sum(widths[i] for i in text_cols) or 1
