@@ -23,6 +23,7 @@ STATEMENTS = (
     "Expanded uncertainties U are stated with a coverage factor k = 2 (about 95 % coverage for a normal "
     "distribution), evaluated after the GUM in the manner of ISO/TR 230-9.",
     "This certificate shall not be reproduced except in full without the written approval of the laboratory.",
+    "All results were obtained by the laboratory itself on its own station; no part was provided externally.",
 )
 
 
@@ -142,7 +143,7 @@ def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_u
             customer: str, as_left: dict | None = None, table: dict | None = None,
             supersedes: dict | None = None, instrument: dict | None = None,
             as_left_leg: int | None = None, customer_contact: str = "", simulated: list[str] | None = None,
-            authoriser: dict | None = None, prepared_by: str = "") -> dict[str, Any]:
+            authoriser: dict | None = None, prepared_by: str = "", received: str = "") -> dict[str, Any]:
     """The certificate of `leg` as a JSON-able dict: `as_found` / `as_left` are ISO 230-2 report
     dicts (iso230_report.build, decided as found / as left); `lab` {name, address, accreditation};
     `table` {file, sha256, bytes} of the compensation table pushed; `supersedes` {report_no,
@@ -153,7 +154,7 @@ def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_u
     `simulated`: why any device of either session was simulated (then the certificate says
     SIMULATION on every page and carries no accreditation); `authoriser` {name, role} who is to
     approve it ([lab]); the approval itself is added by `approve` (the certificate is a draft
-    until then); `prepared_by` who issued it."""
+    until then); `prepared_by` who issued it; `received` the date the item was received (ISO)."""
     key = str(leg)
     if key not in as_found["legs"]:
         raise KeyError(f"leg {leg} is not in the as-found session")
@@ -177,7 +178,7 @@ def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_u
                   "software_version": ident["software_version"]},
         "item": {"leg": leg, "serial": li.get("serial", "not recorded"), "part_number": li.get("part_number", "not stated"),
                  "leg_type": li.get("leg_type", "not stated"), "screw_lot": li.get("screw_lot", "not stated"),
-                 "drive": ident["legs"].get(key, "not recorded")},
+                 "drive": ident["legs"].get(key, "not recorded"), "received": received or "not stated"},
         "instrument": {"model": ins["model"], "serial": ins["serial"], "reported_identity": ins["reported_identity"],
                        "calibration_date": ins["calibration_date"], "calibration_due": ins["calibration_due"],
                        "calibration_certificate": "not stated",
@@ -186,7 +187,8 @@ def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_u
                        "resolution_nm": ins["resolution_nm"], "air_compensation": ident["air_compensation"]},
         "method": {"standard": "ISO 230-2:2014, positioning accuracy and repeatability (bidirectional)",
                    "uncertainty": as_found["uncertainty"], "decision_rule": decision.RULE,
-                   "tolerance_source": None, "specification": None},
+                   "tolerance_source": None, "specification": None,
+                   "sampling": "not applicable: the item submitted was calibrated itself, no sample was taken"},
         "as_found": _stage(as_found, key, "as_found"),
         "as_left": None,
         "compensation_table": table,
@@ -332,7 +334,7 @@ def _blocks(c: dict) -> list[tuple]:
     b.append(("kv", [("Item", f"ball-screw leg of a hexapod, serial {item['serial']}"),
                      ("Part number / type", f"{item['part_number']} / {item['leg_type']}"),
                      ("Screw lot", item["screw_lot"]), ("Position on the station", f"leg {item['leg']}"),
-                     ("Drive", item["drive"]),
+                     ("Drive", item["drive"]), ("Received", item.get("received") or "not stated"),
                      ("Condition", f"as received; compensation at the start: {af['compensation_state']}")]))
     b.append(("h", "3. Measuring instrument and traceability"))
     b.append(("kv", [("Laser interferometer", f"{ins['model']}, serial {ins['serial']} (reports itself as "
@@ -364,7 +366,8 @@ def _blocks(c: dict) -> list[tuple]:
                      ("Approach", tp["approach"]),
                      ("Uncertainty", c["method"]["uncertainty"] + "; every contribution in the budget sections below"),
                      ("Decision rule", c["method"]["decision_rule"]),
-                     ("Specification", limits)]))
+                     ("Specification", limits),
+                     ("Sampling", c["method"].get("sampling") or "not applicable")]))
     stages = [("as found", af)] + ([("as left", c["as_left"])] if c.get("as_left") else [])
     n = 5
     for word, st in stages:

@@ -44,6 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="C", help="station TOML: [lab], [station] recordings_dir, [tolerances]")
     p.add_argument("--customer", help="the customer (default [lab] customer; a revision keeps the previous one)")
     p.add_argument("--customer-contact", metavar="TEXT", help="the customer's contact (default [lab] customer_contact)")
+    p.add_argument("--received", metavar="DATE", help="the date the item was received, YYYY-MM-DD")
     p.add_argument("--revise", metavar="REPORT_NO", help="issue the next revision of this certificate")
     p.add_argument("--reason", default="", help="with --revise: what the revision corrects")
 
@@ -141,13 +142,21 @@ def run(args) -> int:
     customer = args.customer if args.customer is not None else (None if args.revise else cfg.lab.customer)
     contact = args.customer_contact if args.customer_contact is not None else (
         None if args.revise else cfg.lab.customer_contact)
+    received = None
+    if args.received is not None:
+        import datetime as dt  # noqa: PLC0415
+
+        try:
+            received = dt.date.fromisoformat(args.received).isoformat()
+        except ValueError:
+            raise InputError(f"--received {args.received!r}: give the date the item was received as YYYY-MM-DD") from None
     issued = issue_certificate(as_found, leg=leg, as_left=as_left, table=table, lab=lab,
                                customer=customer, folder=folder,
                                counter_path=Path(cfg.recordings_dir) / COUNTER_NAME, revise=args.revise,
                                reason=args.reason, tolerances=tolerances, station_id=cfg.station_id,
                                table_leg_sha256=leg_sha, customer_contact=contact,
                                authoriser={"name": cfg.lab.authoriser, "role": cfg.lab.authoriser_role},
-                               prepared_by=cfg.operator, catalog=catalog_for(cfg))
+                               prepared_by=cfg.operator, catalog=catalog_for(cfg), received=received)
     c = issued.content
     print(f"certificate {issued.report_no} revision {issued.revision} (DRAFT until approved): leg {c['item']['leg']} "
           f"serial {c['item']['serial']}, as found {c['as_found']['overall']}"

@@ -254,7 +254,7 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
                       tolerances: dict | None = None, issued_utc: str | None = None,
                       station_id: str = "", table_leg_sha256: str | None = None,
                       customer_contact: str | None = None, authoriser: dict | None = None,
-                      prepared_by: str = "", catalog=None) -> Issued:
+                      prepared_by: str = "", catalog=None, received: str | None = None) -> Issued:
     """Issue a certificate of `leg` from the sessions `as_found` (a calibration) and `as_left` (a
     verification after it), both procedures.io.recording.reader.Session; `table` the compensation
     table pushed (its sha256 is stated); `revise` the report number of a certificate this one
@@ -265,7 +265,8 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
     `table_leg_sha256` the sha256 of the leg's rows of `table` as its holder stores them
     (station.services.table_jobs.expected_tables), checked against the table the as-left session
     found active. `authoriser` {name, role} who approves ([lab]); `catalog` (station.catalog.store.
-    Catalog or None) indexes the PDF and is asked for earlier certificates of the same sessions.
+    Catalog or None) indexes the PDF and is asked for earlier certificates of the same sessions;
+    `received` the date the item was received (None: not given; a revision keeps the previous one).
     The result is a draft until `approve`."""
     folder, counter_path = Path(folder), Path(counter_path)
     leg = pick_leg(as_found, leg)
@@ -307,6 +308,9 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
     if previous is not None:
         if customer is None:
             customer = None if previous.get("customer") in (None, "not stated") else previous["customer"]
+        if received is None:
+            received = None if (previous.get("item") or {}).get("received") in (None, "not stated") else \
+                previous["item"]["received"]
         if customer_contact is None:
             customer_contact = None if previous.get("customer_contact") in (None, "not stated") else \
                 previous["customer_contact"]
@@ -331,7 +335,7 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
                                        lab=lab or {}, customer=customer or "", as_left=left, table=table_rec,
                                        supersedes=supersedes, instrument=instrument, as_left_leg=left_leg,
                                        customer_contact=customer_contact or "", simulated=simulated,
-                                       authoriser=authoriser, prepared_by=prepared_by)
+                                       authoriser=authoriser, prepared_by=prepared_by, received=received or "")
         except (KeyError, ValueError) as exc:
             raise InputError(f"{as_found.path}: {exc}") from None
         cert["as_found"]["kind"] = "as-found calibration"

@@ -118,7 +118,10 @@ def test_second_issue_warns_naming_the_first_wherever_written(sessions, cfg, tmp
 
 
 def test_revise_only_the_same_item_lists_changes_and_keeps_corrections(sessions, cfg, tmp_path, capsys):
-    rc, out, err = _run(capsys, "certificate", sessions["cal"], "--as-left", sessions["ver"], "--config", cfg)
+    rc, _, err = _run(capsys, "certificate", sessions["cal"], "--config", cfg, "--received", "18.11.2026")
+    _one_line_refusal(rc, err, "--received '18.11.2026': give the date the item was received as YYYY-MM-DD")
+    rc, out, err = _run(capsys, "certificate", sessions["cal"], "--as-left", sessions["ver"], "--config", cfg,
+                        "--received", "2026-11-18")
     assert rc == 0, err
     number = out.split()[1]
     folder = tmp_path / "runs" / "certificates"
@@ -142,6 +145,7 @@ def test_revise_only_the_same_item_lists_changes_and_keeps_corrections(sessions,
     assert rc == 0, err
     r3 = json.loads((folder / f"{number}_r3.json").read_text())
     assert r3["customer"] == "ACME GmbH" and r3["customer_contact"] == "J. Doe, qa@acme.example"
+    assert r3["item"]["received"] == "2026-11-18"
     assert any(ch["field"].startswith("as_left") and ch["after"] == "none" for ch in r3["supersedes"]["changes"])
 
 
@@ -199,9 +203,14 @@ def test_real_measurement_traceable_simulated_marked_and_not_accredited(sessions
     assert "HX-SPEC-300 revision C" in text and "[tolerances." not in text and ".toml" not in text
     assert "see JSON" not in text and "Deviation graph as found" in text and "Deviation graph as left" in text
     flat = " ".join(text.split())
-    for source in ("misalignment 0: [metrology] misalignment_mm = 0", "Abbe 0: [metrology] abbe_offset_mm = 0",
-                   "dead path 0: [metrology] dead_path_mm = 0", "laser 0.25 ppm", "repeatability"):
-        assert source in flat, source
+    # every source in the budget tables, a zero one with its reason (cells wrap: words, not lines)
+    for words in ("misalignment", "[metrology] misalignment_mm = 0", "Abbe", "abbe_offset_mm = 0", "dead path",
+                  "dead_path_mm = 0", "laser 0.25 ppm", "repeatability", "combined u_c", "U (k = 2)"):
+        assert words in flat, words
+    (j,) = folder.glob("*_r1.json")
+    rows = {r["source"]: r for r in json.loads(j.read_text())["as_found"]["budget"]["rows"]}
+    assert rows["misalignment"]["zero_because"].startswith("[metrology] misalignment_mm = 0")
+    assert rows["laser"]["u_um"]["E"] > 0 and "zero_because" not in rows["laser"]
     real.rename(real.with_suffix(".seen"))
 
     rc, out, err = _run(capsys, "certificate", sessions["sim_cal"], "--config", cfg)
