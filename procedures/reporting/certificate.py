@@ -245,7 +245,7 @@ def traceability(c: dict) -> dict[str, Any]:
                        "stated")
     if why_not:
         return {"traceable": False, "reasons": why_not,
-                "statement": "NOT TRACEABLE. " + "; ".join(w[0].upper() + w[1:] for w in why_not) + ". The results "
+                "statement": "NOT TRACEABLE. " + "; ".join(why_not)[0].upper() + "; ".join(why_not)[1:] + ". The results "
                              "below are NOT traceable to the SI unit of length and this document cannot serve as "
                              "evidence of conformity."}
     cert_no = ins.get("calibration_certificate") or "not stated"

@@ -214,10 +214,11 @@ def overall(decisions: Iterable[Decision]) -> str:
     return UNDECIDED
 
 
-def stage_of(plan_kind: str | None) -> str:
+def stage_of(plan_kind: str | None, stage: str | None = None) -> str:
     """The stage a session is decided at: "as_left" for a verification sweep (plan kind
-    "verification", after compensation), else "as_found"."""
-    return "as_left" if plan_kind == "verification" else "as_found"
+    "verification", after compensation) or a session whose plan states stage "verification"
+    (an import given its stage), else "as_found"."""
+    return "as_left" if plan_kind == "verification" or stage == "verification" else "as_found"
 
 
 def decide_leg(leg_values: Mapping[str, Any], budget_values: Mapping[str, Any], leg_type: str | None,

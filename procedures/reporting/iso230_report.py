@@ -261,7 +261,7 @@ def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict
             "targets": targets, "budget": budget.to_json(),
         }
     tol = decision.tolerances_from_json(tolerances or (station_config or {}).get("tolerances"))
-    stage = stage or decision.stage_of((plan or {}).get("kind"))
+    stage = stage or decision.stage_of((plan or {}).get("kind"), (plan or {}).get("stage"))
     out["decisions"] = {"stage": stage, "rule": decision.RULE, "legs": decision.decide_report(out, tol, stage)}
     return _json_safe(out)
 

@@ -32,7 +32,7 @@ from station.services.report_jobs import session_decisions
 COUNTER_NAME = "certificate-counter.json"
 FOLDER_NAME = "certificates"
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
-CALIBRATION, VERIFICATION = "calibration", "verification"  # session_stage
+CALIBRATION, VERIFICATION, OTHER = "calibration", "verification", "other"  # session_stage
 
 
 @dataclass(frozen=True)
@@ -153,12 +153,18 @@ def _as_left_leg(as_found, as_left, leg: int) -> int:
 
 
 def session_stage(session) -> str:
-    """Whether `session` is an as-found CALIBRATION or an as-left VERIFICATION, from what a
-    session records today: its plan kind ("verification" is what `station verify` records, as
-    procedures.reporting.decision.stage_of and station.catalog.certificate_sources read it).
-    The one place the certificate decides it: a session stage recorded in the metadata (issue 33
-    part 1) replaces this function's body, nothing else."""
-    return VERIFICATION if decision.stage_of((session.plan or {}).get("kind")) == "as_left" else CALIBRATION
+    """Whether `session` is an as-found CALIBRATION, an as-left VERIFICATION or OTHER, from what a
+    session records today: the stage an import was given (plan "stage", `station import --stage`),
+    else its plan kind ("verification" is what `station verify` records, as
+    procedures.reporting.decision.stage_of and station.catalog.certificate_sources read it; an
+    import of no stated stage is OTHER). The one place the certificate decides it: a session stage
+    recorded in the metadata (issue 33 part 1) replaces this function's body, nothing else."""
+    plan = session.plan or {}
+    if plan.get("stage") in (CALIBRATION, VERIFICATION, OTHER):
+        return plan["stage"]
+    if plan.get("kind") == "import":
+        return OTHER
+    return VERIFICATION if decision.stage_of(plan.get("kind")) == "as_left" else CALIBRATION
 
 
 def simulated_devices(session) -> list[str]:
@@ -168,6 +174,8 @@ def simulated_devices(session) -> list[str]:
     if str(session.attrs.get("rig") or "") == "sim":
         why.append(f"{Path(session.path).name} was recorded on the simulated rig")
     cfg = session.station_config or {}
+    if str(session.attrs.get("rig") or "") == "import":
+        return why  # measured by other software: the config recorded names no device that measured
     for section, key, what in (("drive", "url", "drive"), ("interferometer", "port", "laser")):
         if str((cfg.get(section) or {}).get(key) or "") == "sim" and not why:
             why.append(f"{Path(session.path).name}: the {what} was simulated ([{section}] {key} = \"sim\")")
@@ -273,6 +281,10 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
     if session_stage(as_found) == VERIFICATION:
         raise InputError(f"{as_found.path}: a verification session (as left); a certificate is issued from the leg's "
                          f"as-found calibration session: give that session, with --as-left {Path(as_found.path).name}")
+    if session_stage(as_found) == OTHER:
+        raise InputError(f"{as_found.path}: a session of no stated stage (an import without --stage, or stage "
+                         "other); a certificate is issued from an as-found calibration: re-import it with "
+                         "--stage calibration")
     if not as_found.identity.leg(leg).serial:
         raise InputError(f"{as_found.path}: leg {leg} has no serial recorded; a certificate must identify the item "
                          "calibrated: sweep it with --serial LEG=SERIAL (or [legs.N] serial) and certify that session")
