@@ -183,36 +183,41 @@ def simulated_devices(session) -> list[str]:
 
 
 def _changes(before: dict, after: dict) -> list[dict[str, str]]:
-    """What changed from one revision's content to the next, field by field (dotted names; a
-    table such as the per-target results as one field), leaving out what every revision changes."""
+    """What changed from one revision's content to the next, field by field (dotted names),
+    leaving out what every revision changes. A section added or removed as a whole (the as-left
+    stage, the table) is one row; derived blocks (a budget, the per-target rows, the environment)
+    are one row each, as "changed", since their every figure follows from the session."""
     skip = {"revision", "issued_utc", "supersedes", "approval", "traceability"}
-
-    def flat(d: Any, prefix: str = "") -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        if isinstance(d, dict) and (not prefix or prefix.count(".") < 3):
-            for k, v in d.items():
-                if not prefix and k in skip:
-                    continue
-                out.update(flat(v, f"{prefix}{k}."))
-            if not d and prefix:
-                out[prefix[:-1]] = {}
-            return out
-        out[prefix[:-1]] = d
-        return out
+    whole = {"budget", "targets", "environment", "test_parameters", "material", "notes", "warnings", "statements"}
 
     def show(v: Any) -> str:
         if v is None:
             return "none"
-        if isinstance(v, (list, dict)):
-            text = json.dumps(v, sort_keys=True)
-            return text if len(text) <= 70 else f"{type(v).__name__} of {len(v)} (changed)"
+        if isinstance(v, float):
+            return f"{v:.6g}"
+        if isinstance(v, dict):
+            return f"section of {len(v)} fields" if len(json.dumps(v)) > 70 else json.dumps(v, sort_keys=True)
+        if isinstance(v, list):
+            return f"{len(v)} entries" if len(json.dumps(v)) > 70 else json.dumps(v)
         return str(v)
 
-    a, b = flat(before), flat(after)
-    rows = []
-    for key in sorted(set(a) | set(b)):
-        if a.get(key) != b.get(key):
-            rows.append({"field": key, "before": show(a.get(key)), "after": show(b.get(key))})
+    rows: list[dict[str, str]] = []
+
+    def diff(a: Any, b: Any, name: str) -> None:
+        if a == b:
+            return
+        key = name.rsplit(".", 1)[-1]
+        if isinstance(a, dict) and isinstance(b, dict) and key not in whole:
+            for k in sorted(set(a) | set(b)):
+                if not name and k in skip:
+                    continue
+                diff(a.get(k), b.get(k), f"{name}.{k}" if name else k)
+            return
+        changed = key in whole and a is not None and b is not None
+        rows.append({"field": name, "before": "(changed)" if changed else show(a),
+                     "after": "(changed, see below)" if changed else show(b)})
+
+    diff(before, after, "")
     return rows
 
 
