@@ -85,6 +85,7 @@ class Listed:
     simulated: bool
     as_found_session: str | None
     as_left_session: str | None
+    sha256: str | None = None
 
 
 def issued(engine: Engine, serial: str | None = None) -> list[Listed]:
@@ -92,11 +93,11 @@ def issued(engine: Engine, serial: str | None = None) -> list[Listed]:
     revision with an approved document is "approved" (its approved PDF listed), an older revision
     of a number "superseded", else "draft"."""
     with engine.connect() as conn:
-        rows = conn.execute(sa.select(Record.path, Record.summary, Record.station_id, Record.time_utc)
+        rows = conn.execute(sa.select(Record.path, Record.summary, Record.station_id, Record.sha256)
                             .where(Record.kind == KIND).order_by(Record.time_utc, Record.uid)).all()
     by_rev: dict[tuple[str, int], dict[str, Any]] = {}
     latest: dict[str, int] = {}
-    for path, summary, station, _ in rows:
+    for path, summary, station, sha in rows:
         s = summary or {}
         if serial is not None and s.get("serial") != serial:
             continue
@@ -104,14 +105,14 @@ def issued(engine: Engine, serial: str | None = None) -> list[Listed]:
         latest[key[0]] = max(latest.get(key[0], 0), key[1])
         have = by_rev.get(key)
         if have is None or s.get("status") == "approved":  # the approved document stands for its revision
-            by_rev[key] = {"summary": s, "path": path, "station": station}
+            by_rev[key] = {"summary": s, "path": path, "station": station, "sha256": sha}
     out = []
     for (no, rev), d in sorted(by_rev.items()):
         s = d["summary"]
         status = "superseded" if rev < latest[no] else s.get("status") or "draft"
         out.append(Listed(no, rev, status, str(s.get("serial")), str(s.get("issued_utc")), s.get("approved_by"),
                           s.get("approved_utc"), d["station"], d["path"] or "", bool(s.get("simulated")),
-                          s.get("as_found_session"), s.get("as_left_session")))
+                          s.get("as_found_session"), s.get("as_left_session"), d["sha256"]))
     return out
 
 

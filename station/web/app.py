@@ -266,5 +266,5 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
 
     from station.web import certificates  # noqa: PLC0415  (its routes: station/web/certificates.py)
 
-    certificates.add_routes(app, engine, page, lambda message: PageError(400, message))
+    certificates.add_routes(app, engine, page, PageError)
     return app

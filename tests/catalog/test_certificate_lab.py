@@ -258,3 +258,10 @@ def test_certificates_in_the_shared_postgresql_catalog_and_on_the_web(sessions, 
     page = client.get("/certificates", params={"serial": "HX-0099"})
     assert page.status_code == 200 and number not in page.text and 'id="no-certificates"' in page.text
     assert client.get("/certificates", params={"serial": "../x"}).status_code == 400
+    # the approved PDF itself, as indexed; an unknown or malformed sha256 is no file
+    final = elsewhere / f"{number}_r1_approved.pdf"
+    sha = hashlib.sha256(final.read_bytes()).hexdigest()
+    got = client.get(f"/certificates/pdf/{sha}")
+    assert got.status_code == 200 and got.content == final.read_bytes()
+    assert client.get(f"/certificates/pdf/{'0' * 64}").status_code == 404
+    assert client.get("/certificates/pdf/..%2F..%2Fetc").status_code in (400, 404)
