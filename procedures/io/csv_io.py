@@ -269,6 +269,10 @@ def import_csv(
     limits: PointLimits | None = None,
     accept_implausible: bool = False,
     warnings: list[str] | None = None,
+    identity=None,
+    station_config: dict | None = None,
+    stage: str | None = None,
+    started_utc: str | None = None,
 ) -> Session:
     """Convert an interchange CSV into a session file (rig "import"); return it as read back.
 
@@ -277,6 +281,11 @@ def import_csv(
     file and its SHA-256, and the legs the points hold. Values that look like a unit slip (degF
     in a degC column, nm in the um column: procedures.io.plausibility) are refused the same way
     unless `accept_implausible`; then their warning lines go to `warnings`.
+
+    `identity(legs) -> dict` the session's /meta/identity for the legs the file holds (it may
+    refuse: InputError, nothing written); `station_config` recorded as the session's (its
+    [tolerances] and [metrology] decide and evaluate it); `stage` "calibration" / "verification"
+    / "other" kept in the plan; `started_utc` when the measurement was made (else now).
     """
     csv_path, h5_path = Path(csv_path), Path(h5_path)
     if not csv_path.is_file():
@@ -296,11 +305,15 @@ def import_csv(
         "optional_columns": optional,
         "legs": sorted({int(v) for v in points["leg"]}),
     }
+    if stage:
+        plan["stage"] = stage
+    ident = identity(plan["legs"]) if callable(identity) else identity
     with atomic_path(h5_path) as tmp:
         with SessionWriter.create(
             tmp, session_id=session_id or f"import-{sha[:12]}", operator=operator, rig="import", plan=plan,
-            station_config={}, devices={"source": f"CSV file {csv_path.name}"},
+            station_config=station_config or {}, devices={"source": f"CSV file {csv_path.name}"},
             software_version=software_version or _software_version(), overwrite=True,
+            **({"identity": ident} if ident else {}), **({"started_utc": started_utc} if started_utc else {}),
         ) as writer:
             writer.append_points(points)
             writer.finish("completed")

@@ -90,7 +90,8 @@ def recs_of(found: Found, catalog: Catalog | None, problems: list[str], known: s
             problems.append(str(exc).splitlines()[0])
     lookup = catalog.serials_of_source if catalog is not None else None
     for path in found.models:
-        rec = None if _known("model", path, known) else readers.model_rec(path, lookup)
+        # a .json that is no model may be a certificate's (station.catalog.certificates)
+        rec = None if _known("model", path, known) else (readers.model_rec(path, lookup) or _certificate_rec(path))
         if rec is not None:
             yield rec
     for path in found.tables:
@@ -103,6 +104,12 @@ def recs_of(found: Found, catalog: Catalog | None, problems: list[str], known: s
             yield rec
     for path in found.logs:
         yield from (r for r in readers.audit_recs(path) if known is None or r.uid not in known)
+
+
+def _certificate_rec(path: Path) -> Rec | None:
+    from station.catalog.certificates import certificate_rec_of_json  # noqa: PLC0415
+
+    return certificate_rec_of_json(path)
 
 
 def index(catalog: Catalog, folders: Iterable[str | os.PathLike], forward: bool = True) -> tuple[int, list[str]]:

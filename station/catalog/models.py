@@ -19,7 +19,7 @@ from __future__ import annotations
 from sqlalchemy import JSON, Float, ForeignKey, Index, Integer, String, Text
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-KINDS = ("session", "model", "table", "push", "verification", "rollback", "report")
+KINDS = ("session", "model", "table", "push", "verification", "rollback", "report", "certificate")
 FIGURES = ("E", "A", "B", "R", "M")
 """ISO 230-2 values (bidirectional) kept as columns with their U; all values go in `figures`."""
 
@@ -101,8 +101,15 @@ class ReportRecord(Record):
     __mapper_args__ = {"polymorphic_identity": "report"}
 
 
+class CertificateRecord(Record):
+    """A calibration certificate's PDF (station.catalog.certificates); no migration: `kind` is text."""
+
+    __mapper_args__ = {"polymorphic_identity": "certificate"}
+
+
 RECORD_CLASSES = {cls.__mapper_args__["polymorphic_identity"]: cls for cls in
-                  (SessionRecord, ModelRecord, TableRecord, PushRecord, VerificationRecord, RollbackRecord, ReportRecord)}
+                  (SessionRecord, ModelRecord, TableRecord, PushRecord, VerificationRecord, RollbackRecord, ReportRecord,
+                   CertificateRecord)}
 
 
 class RecordLeg(Base):

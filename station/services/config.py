@@ -54,6 +54,7 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     serial = ""
     calibration_date = ""       # ISO date of its last calibration, YYYY-MM-DD
     calibration_due = ""        # ISO date its calibration expires; "" = not stated (not traceable)
+    calibration_certificate = ""  # its certificate: number and issuing laboratory, e.g. "1234/2026, DAkkS D-K-15000-01-00"
     air_temp_u_c = 0.1          # STANDARD uncertainties (k = 1) of the sensors
     pressure_u_pa = 50.0
     humidity_u_pct = 3.0
@@ -84,6 +85,9 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     address = ""
     accreditation = ""          # e.g. "DAkkS D-K-12345-01-00"; "" = not accredited
     customer = ""               # default customer (station certificate --customer)
+    customer_contact = ""       # the customer's contact: person, address or e-mail (--customer-contact)
+    authoriser = ""             # who approves certificates (station certificate approve N --by NAME)
+    authoriser_role = ""        # the authoriser's function, e.g. "Head of laboratory"
 """
 
 from __future__ import annotations
@@ -170,6 +174,7 @@ class MetrologyConfig:
     serial: str = ""
     calibration_date: str = ""  # ISO date (YYYY-MM-DD) of the instrument's calibration; "" = not stated
     calibration_due: str = ""  # ISO date its calibration expires; "" = not stated: results not traceable
+    calibration_certificate: str = ""  # the instrument's own certificate: number and issuing laboratory (traceability)
     air_temp_u_c: float = MD.AIR_TEMP_U_C
     pressure_u_pa: float = MD.PRESSURE_U_PA
     humidity_u_pct: float = MD.HUMIDITY_U_PCT
@@ -260,6 +265,9 @@ class LabConfig:
     address: str = ""
     accreditation: str = ""
     customer: str = ""
+    customer_contact: str = ""
+    authoriser: str = ""  # the one person `station certificate approve --by` accepts
+    authoriser_role: str = ""
 
 
 @dataclass

@@ -264,4 +264,7 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         return page(request, "compare.html", items=items, total=total, types=types, leg_type=leg_type,
                     serial=serial, plots=plots, page_no=n, pages=pages)
 
+    from station.web import certificates  # noqa: PLC0415  (its routes: station/web/certificates.py)
+
+    certificates.add_routes(app, engine, page, PageError)
     return app

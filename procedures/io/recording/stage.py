@@ -9,8 +9,10 @@ A session's stage is derived from what the session recorded when it was created,
 front end's guess:
 
 - the plan's kind "verification" (`station verify`, the UI's verification): ``as_left``;
-- an import (plan kind "import", rig "import") or a replay (rig "replay"): ``other`` (an import's
-  stage is unknown; a replay re-runs a recording on replay devices, it measures no leg);
+- an import given its stage (`station import --stage`, plan "stage" "calibration" or
+  "verification"): ``as_found`` or ``as_left``;
+- an import of no stated stage (plan kind "import", rig "import") or a replay (rig "replay"):
+  ``other`` (a replay re-runs a recording on replay devices, it measures no leg);
 - a leg with a compensation table active at the start (`devices` `legN_compensation_table`
   enabled with points, or the older text `legN_compensation` "bank B active, N points from ..."):
   ``other``: the compensated leg was measured, which is neither its state as found nor a
@@ -35,6 +37,9 @@ STAGES = (AS_FOUND, ADJUSTMENT, AS_LEFT, OTHER)
 
 LABELS = {AS_FOUND: "as found", ADJUSTMENT: "adjustment", AS_LEFT: "as left", OTHER: "other"}
 """How a stage is printed (history, legs, catalog status)."""
+
+IMPORT_STAGES = {"calibration": AS_FOUND, "verification": AS_LEFT}
+"""The stage of an import, by the plan "stage" `station import --stage` records."""
 
 AUDIT_STAGES = {"push": ADJUSTMENT, "rollback": ADJUSTMENT, "verification": AS_LEFT}
 """The stage of a catalog record of an audit entry, by record kind."""
@@ -70,6 +75,9 @@ def session_stage(plan: Mapping[str, Any] | None, devices: Mapping[str, Any] | N
     kind = (plan or {}).get("kind") if isinstance(plan, Mapping) else None
     if kind == "verification":
         return AS_LEFT
+    stated = (plan or {}).get("stage") if isinstance(plan, Mapping) else None
+    if kind == "import" and stated in IMPORT_STAGES:
+        return IMPORT_STAGES[stated]
     if kind == "import" or rig in ("import", "replay"):
         return OTHER
     if active_tables(devices):
