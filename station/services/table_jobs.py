@@ -50,7 +50,16 @@ from procedures.io.recording.reader import file_sha256, read_session
 from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import ListSink, RunResult, Sink, run
 from procedures.engine.states import Action, AuditOutcome
-from procedures.compensation.table import CompTable, LegTable, make_table, read_table_csv, write_table_csv
+from procedures.compensation.table import (
+    CompTable,
+    LegTable,
+    TableIntegrityError,
+    check_covers_stroke,
+    make_table,
+    read_table_csv,
+    write_table_csv,
+)
+from procedures.io.integrity import UNVERIFIED, unverified_line
 from procedures.compensation.verify import verify_procedure
 from station import __version__
 from station.catalog.store import LOCAL_NAME, Catalog
@@ -135,7 +144,7 @@ def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]
                          "it was made for a platform with another leg count; make the table from a model of these legs")
     if leg not in table.legs:
         raise InputError(f"{path}: the table has no rows for leg {leg} (it has legs {list(table.legs)})")
-    source = {"path": str(path), "leg": leg, "sha256": file_sha256(path)}
+    source = {"path": str(path), "leg": leg, "sha256": file_sha256(path), "integrity": table.integrity}
     if table.serials.get(leg):
         source["leg_serial"] = table.serials[leg]  # checked by the push against the leg's serial
     return table.legs[leg], source
@@ -152,6 +161,9 @@ def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: st
                                                  drive_url=drive_url, sinks=sinks, catalog=catalog,
                                                  accept_implausible=accept_implausible, table_name=table_name,
                                                  override=override)
+    if refusal is None:
+        refusal = _incomplete_refusal({axis.leg: axis}, {axis.leg: table}, {axis.leg: source}, audit=audit,
+                                      drive_url=drive_url, sinks=sinks, catalog=catalog)
     if refusal is not None:
         return refusal
     job = run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=checked[axis.leg],
@@ -170,6 +182,9 @@ def push_legs_job(axes: dict[int, ServoAxis], tables: dict[int, LegTable], *, au
     refusal, warnings, sources = _plausible_push(axes, tables, sources or {}, audit=audit, drive_url=drive_url,
                                                  sinks=sinks, catalog=catalog, accept_implausible=accept_implausible,
                                                  table_name=table_name, override=override)
+    if refusal is None:
+        refusal = _incomplete_refusal(axes, tables, sources, audit=audit, drive_url=drive_url, sinks=sinks,
+                                      catalog=catalog)
     if refusal is not None:
         return refusal
     job = run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources,
@@ -192,6 +207,40 @@ def refusal_job(action: Action, leg: int, reason: BaseException | str, *, audit:
     have), logged and reported like any other."""
     return run_table_job(refused(action, leg, reason, drive_url=drive_url, source=source), audit, sinks,
                          catalog=catalog)
+
+
+# -- integrity: a table file without its record reaches a drive only when it covers the stroke -----------
+
+def unverified_table_line(path: str | Path, tables: Mapping[int, LegTable], integrity: str) -> str | None:
+    """The one warning line for legs of a table file read without an integrity record
+    (`integrity` UNVERIFIED), else None."""
+    if integrity != UNVERIFIED:
+        return None
+    legs = ", ".join(f"leg {leg}: {t.point_count} rows {t.start_mm:+g} .. {t.end_mm:+g} mm step {t.step_mm:g} mm"
+                     for leg, t in tables.items())
+    return unverified_line(path, "table", f"{legs}; whole rows, even steps; the push checks it covers the stroke")
+
+
+def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, Any], *,
+                        audit: AuditLog, drive_url: str, sinks: Iterable[Sink], catalog: Catalog | None):
+    """A refusal job (audit line written, nothing sent to any drive) when a leg's table came from
+    a file without an integrity record and does not cover the leg's stroke by its drive's soft
+    limits (`check_covers_stroke`): a file cut after a whole row. None otherwise; a drive whose
+    limits cannot be read is left to the push, which reads them again and says why."""
+    for leg, table in tables.items():
+        source = sources.get(leg) or {}
+        if source.get("integrity") != UNVERIFIED or leg not in axes:
+            continue
+        try:
+            limits = axes[leg].limits()
+        except DriverError:
+            continue
+        try:
+            check_covers_stroke(table, limits, str(source.get("path") or "the table"))
+        except TableIntegrityError as exc:
+            return refusal_job(Action.PUSH, leg, exc, audit=audit, drive_url=drive_url, source=source, sinks=sinks,
+                               catalog=catalog)
+    return None
 
 
 # -- plausibility: a likely unit slip reaches neither a table file nor a drive unasked ------------------
