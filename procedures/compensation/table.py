@@ -163,6 +163,11 @@ def make_table(model, step_mm: float | None = None, spec: TableSpec | None = Non
         lo, hi = fit.stroke_mm
         span = hi - lo
         step = step_mm if step_mm is not None else _auto_step_mm(span, fit.target_spacing_mm, spec)
+        if step > span + 1e-9:  # `--step 1000` on a 180 mm stroke made a 2-point table ending at +910 mm
+            raise TableValidationError(
+                f"leg {leg}: a {step:g} mm step is longer than the leg's stroke ({lo:+g} .. {hi:+g} mm, {span:g} mm): "
+                f"the table would end at {lo + step:+g} mm, beyond it; use a step of at most {span:g} mm "
+                f"(the recording's spacing is {fit.target_spacing_mm:g} mm); nothing was made")
         n = int(math.ceil(span / step - 1e-9)) + 1
         if n > spec.max_points:  # before evaluating the model on a needlessly fine grid
             need = math.ceil(span / (spec.max_points - 1) / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM

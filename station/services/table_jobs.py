@@ -14,6 +14,7 @@ confirmation dialog).
 
 from __future__ import annotations
 
+import math
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -259,14 +260,53 @@ def implausible_corrections(model, table: CompTable) -> list[Implausible]:
     return found
 
 
+def heldout_worse(model, table: CompTable) -> list[Implausible]:
+    """The legs of `table` whose model made the error worse on the cycles held out of its fit
+    (a negative held-out range reduction, docs/figures.md): a table from it adds error."""
+    found = []
+    for leg in table.legs:
+        stats = model.legs[leg].stats
+        pct = stats.heldout_range_reduction_pct
+        if pct is not None and pct < 0:
+            found.append(Implausible(
+                f"leg {leg}: held-out range reduction (%)", float(pct),
+                f"the model made the leg's error worse on the cycles held out of its fit (held-out range "
+                f"{stats.heldout_range_um:.3f} um against {stats.range_before_um:.3f} um before): a table from it "
+                "adds error; fit again (more cycles, another --method or --params)"))
+    return found
+
+
+def check_table_stroke(model, table: CompTable, soft_limits_mm: tuple[float, float] | None, source: str = "") -> None:
+    """InputError when a leg of `table` ends beyond the drive's soft limits (min_mm, max_mm): a
+    step that does not divide the stroke ends the table up to a step beyond it, where no drive
+    holds a table (the push would refuse it later)."""
+    if soft_limits_mm is None:
+        return
+    lo, hi = soft_limits_mm
+    for leg, t in table.legs.items():
+        if t.start_mm < lo - 1e-6 or t.end_mm > hi + 1e-6:
+            a, b = model.legs[leg].stroke_mm
+            fits = (b - a) / max(1, math.ceil((b - a) / t.step_mm - 1e-9))
+            raise InputError(
+                f"leg {leg}: a {t.step_mm:g} mm step makes the table cover {t.start_mm:+g} .. {t.end_mm:+g} mm, beyond "
+                f"the drive's soft limits {lo:+g} .. {hi:+g} mm{f' ({source})' if source else ''}; use a step that "
+                f"ends within them, e.g. {fits:.6g} mm (a whole number of steps over the {a:+g} .. {b:+g} mm stroke); "
+                "nothing was written")
+
+
 def make_checked_table(model, step_mm: float | None = None, spec: TableSpec | None = None, *,
                        legs: Iterable[int] | None = None, accept_implausible: bool = False,
-                       override: Override = Override()) -> tuple[CompTable, list[str]]:
+                       override: Override = Override(),
+                       soft_limits_mm: tuple[float, float] | None = None) -> tuple[CompTable, list[str]]:
     """The table of `model` (procedures.compensation.table.make_table) and the warning lines of what was
     accepted; ImplausibleError (nothing is made) when its corrections span far more than the
-    recorded error did, unless `accept_implausible`. Both front ends make tables through this."""
+    recorded error did, or its model made a leg worse on held-out data, unless
+    `accept_implausible`; InputError when it ends beyond `soft_limits_mm` (the drive's, when
+    known). Both front ends make tables through this."""
     table = make_table(model, step_mm, spec, legs=legs)
-    return table, settle(implausible_corrections(model, table), accept_implausible, override=override)
+    check_table_stroke(model, table, soft_limits_mm)
+    found = implausible_corrections(model, table) + heldout_worse(model, table)
+    return table, settle(found, accept_implausible, override=override)
 
 
 def check_push_values(tables: Mapping[int, LegTable], table_name: str, limits_um: Mapping[int, float], *,
