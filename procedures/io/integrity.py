@@ -134,7 +134,7 @@ def check_csv_record(path: Path, record: CsvRecord, body: Sequence[str], rows_fo
         how = "edited: same row count, different content"
     raise IntegrityError(
         f"{path}: does not match its integrity record (row {record.line}): the record says {record.rows} {what}, "
-        f"sha256 {_short(record.sha256)}..., the file has {rows_found}, sha256 {_short(sha)}... ({how}); "
+        f"sha256 {_short(record.sha256)}..., the file has {rows_found} {what}, sha256 {_short(sha)}... ({how}); "
         f"{remake}")
 
 
@@ -188,7 +188,7 @@ def check_json_record(path: Path, doc: dict[str, Any], count_key: str, count: in
     how = "edited" if count == rec[count_key] else f"{count_key} {'missing' if count < rec[count_key] else 'added'}"
     raise IntegrityError(
         f"{path}: does not match its integrity record: the record says {rec[count_key]} {count_key}, sha256 "
-        f"{_short(rec['sha256'])}..., the file has {count}, sha256 {_short(sha)}... ({how} after it was written); "
+        f"{_short(rec['sha256'])}..., the file has {count} {count_key}, sha256 {_short(sha)}... ({how} after it was written); "
         f"{remake}")
 
 
