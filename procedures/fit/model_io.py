@@ -7,7 +7,7 @@
      "legs": {"1": {"stroke_mm": [min, max], "target_spacing_mm": ..., "stats": {...},
                     "model": {... method specific ...}}, ...}}
 
-The file ends with its integrity record, `"integrity": {"legs": N, "sha256": ...}`: the hash of
+The file carries its integrity record, `"integrity": {"legs": N, "sha256": ...}`: the hash of
 the document without it, as written (procedures/io/integrity.py). `load_model` refuses a file whose
 record does not match (edited; a cut JSON file is not JSON) naming what differs, and reads a file
 without one (hand-made, or older) as `integrity` "unverified" (the CLI says so in one line).

@@ -74,7 +74,7 @@ def run(args) -> int:
             tables[leg], sources[leg] = load_leg_table(args.table, leg)
         except (InputError, DriverError, OSError) as exc:
             return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
-    unverified = unverified_table_line(args.table, tables, next(iter(sources.values())).get("integrity", ""))
+    unverified = unverified_table_line(args.table, tables, next(iter(sources.values())).get("table_integrity", ""))
     if unverified:  # a file without its integrity record: said once; the push checks it covers the stroke
         print(unverified)
     controller = controller_refusal(cfg, legs, Action.PUSH)

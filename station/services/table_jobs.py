@@ -145,7 +145,7 @@ def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]
                          "it was made for a platform with another leg count; make the table from a model of these legs")
     if leg not in table.legs:
         raise InputError(f"{path}: the table has no rows for leg {leg} (it has legs {list(table.legs)})")
-    source = {"path": str(path), "leg": leg, "sha256": file_sha256(path), "integrity": table.integrity}
+    source = {"path": str(path), "leg": leg, "sha256": file_sha256(path), "table_integrity": table.integrity}
     if table.serials.get(leg):
         source["leg_serial"] = table.serials[leg]  # checked by the push against the leg's serial
     return table.legs[leg], source
@@ -230,9 +230,11 @@ def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegT
     limits cannot be read is left to the push, which reads them again and says why."""
     for leg, table in tables.items():
         source = sources.get(leg) or {}
-        if source.get("integrity") != UNVERIFIED or leg not in axes:
+        if source.get("table_integrity") != UNVERIFIED or leg not in axes:
             continue
         try:
+            if axes[leg].table_spec() is None:
+                continue  # a drive holding no table: the push refuses that, offering the other targets
             limits = axes[leg].limits()
         except DriverError:
             continue

@@ -164,7 +164,7 @@ def _read_leg(path: Path, leg: int) -> LegTable | None:
     cover the drive's stroke), or None when refused."""
     try:
         table, source = load_leg_table(path, leg)
-        if source["integrity"] == UNVERIFIED:
+        if source["table_integrity"] == UNVERIFIED:
             check_covers_stroke(table, SOFT, str(path))
     except (InputError, TableRefused):
         return None
