@@ -373,3 +373,29 @@ def test_a_serials_list_proves_itself(tmp_path):
         read_serials_file_checked(cut)
     cut.write_text(text.split("\n", 1)[1])
     assert read_serials_file_checked(cut)[1] == UNVERIFIED
+
+
+def test_both_front_ends_refuse_a_model_worse_on_held_out_data_unless_accepted(worse_model):
+    """The service the CLI and the UI's Compensation page ("Make anyway") make tables through."""
+    from procedures.io.plausibility import ImplausibleError
+    from station.services.table_jobs import make_checked_table
+
+    model = load_model(worse_model)
+    with pytest.raises(ImplausibleError, match=r"leg 2: held-out range reduction \(%\) = -25") as exc:
+        make_checked_table(model)
+    assert [f.where for f in exc.value.findings] == ["leg 2: held-out range reduction (%)"]
+    table, warnings = make_checked_table(model, accept_implausible=True)
+    assert list(table.legs) == [1, 2] and len(warnings) == 1 and warnings[0].startswith("warning: leg 2: held-out")
+    table, warnings = make_checked_table(model, legs=[1])  # leg 1's model is fine: nothing to ask
+    assert warnings == []
+
+
+@pytest.mark.parametrize("content, words", [
+    (TEXT, "this is a table, not a session"),
+    ("leg,serial\n1,HX-1\n", "this is a serials list, not a session"),
+])
+def test_a_wrong_kind_of_file_given_as_a_session_is_named(tmp_path, capsys, content, words):
+    path = tmp_path / "thing.h5"
+    path.write_text(content)
+    rc, out, err = station(capsys, "fit", str(path), "--out", str(tmp_path / "m.json"))
+    assert rc == 2 and err.count("\n") == 1 and words in err, err
