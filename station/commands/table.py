@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -71,8 +72,6 @@ def _soft_limits(args) -> tuple[float, float] | None:
 def _ask_anyway(exc: ImplausibleError) -> bool:
     """At a terminal, ask before making a table the checks refused (as the UI's "Make anyway"); False
     without one (the refusal stands: --accept-implausible says yes on the command line)."""
-    import sys
-
     if not (hasattr(sys.stdin, "isatty") and sys.stdin.isatty()):
         return False
     print(f"refused: {exc}")
