@@ -78,6 +78,11 @@ def run(args) -> int:
                                        workspace=workspace)
     summary["measured"] = inputs["measured"]
     written = write_report(out, result, summary, inputs, geometry)
+    for kind in ("table", "model"):  # a file without its integrity record: read whole, said once (docs/tables.md)
+        if (inputs.get(kind) or {}).get("integrity") == "unverified":
+            from procedures.io.integrity import unverified_line
+
+            print(unverified_line(inputs[kind]["path"], kind, "every row and field checked"))
     for line in inputs["error_basis"]["lines"]:
         print(line)
     print(f"measured leg error: {MEASUREMENT_LABELS[summary['measured']]}\n")

@@ -36,6 +36,7 @@ from station.services.table_jobs import (
     push_job,
     push_legs_job,
     target_text,
+    unverified_table_line,
 )
 from station.services.wiring import leg_table_spec, open_drive
 
@@ -73,6 +74,9 @@ def run(args) -> int:
             tables[leg], sources[leg] = load_leg_table(args.table, leg)
         except (InputError, DriverError, OSError) as exc:
             return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
+    unverified = unverified_table_line(args.table, tables, next(iter(sources.values())).get("table_integrity", ""))
+    if unverified:  # a file without its integrity record: said once; the push checks it covers the stroke
+        print(unverified)
     controller = controller_refusal(cfg, legs, Action.PUSH)
     if controller:
         return refuse(args, cfg, audit, Action.PUSH, controller[0], InputError(controller[1]), sources[controller[0]])

@@ -14,7 +14,7 @@ from procedures.acquisition.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spe
 from procedures.acquisition.plans import parse_legs, SweepPlan
 from station.services.config import load_config
 from station.services.identity import leg_fields
-from station.services.serials import parse_serial_args
+from station.services.serials import parse_serial_args, serials_unverified_line
 from station.services.jobs import resumable_plan, run_sweep
 from procedures.engine.control import RunControl
 from procedures.engine.states import Outcome
@@ -110,6 +110,9 @@ def run(args) -> int:
     cfg.require_devices()
     serials = parse_serial_args(args.serial)
     leg_fields(cfg, serials, args.serials)  # a bad serials file is refused before anything moves
+    unverified = serials_unverified_line(args.serials or cfg.serials_file)
+    if unverified:  # a list typed by hand: read whole, but nothing proves it (procedures/io/integrity.py)
+        print(unverified)
     check_time_scale(args.time_scale)
     if args.seed is not None:
         cfg.sim.seed = args.seed

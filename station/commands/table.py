@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -11,12 +12,14 @@ import numpy as np
 from procedures.compensation import controllers
 from procedures.engine.errors import InputError
 from procedures.fit import load_model
+from procedures.fit.model_io import unverified_model_line
+from procedures.io.plausibility import ImplausibleError
 from procedures.acquisition.plans import parse_legs
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
 from procedures.io.outputs import check_output_file
 from station.services.config import load_config
 from station.services.table_jobs import make_checked_table, write_table
-from station.services.wiring import drive_table_spec
+from station.services.wiring import drive_soft_limits, drive_table_spec
 
 NAME = "table"
 HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"
@@ -54,7 +57,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
     p.add_argument("--force", action="store_true", help="replace the output file(s) if they exist (default: refused)")
     p.add_argument("--accept-implausible", action="store_true",
-                   help="write a table whose corrections span more than the recorded error did (refused by default)")
+                   help="write a table whose corrections span more than the recorded error did, or whose model made a "
+                        "leg worse on held-out data (refused by default; asked at a terminal)")
+
+
+def _soft_limits(args) -> tuple[float, float] | None:
+    """The soft limits of the drive profile's (--profile, default the built-in one), when it states them."""
+    try:
+        return drive_soft_limits(args.profile)
+    except Exception:  # noqa: BLE001 (a bad profile is refused by drive_table_spec with its own message)
+        return None
+
+
+def _ask_anyway(exc: ImplausibleError) -> bool:
+    """At a terminal, ask before making a table the checks refused (as the UI's "Make anyway"); False
+    without one (the refusal stands: --accept-implausible says yes on the command line)."""
+    if not (hasattr(sys.stdin, "isatty") and sys.stdin.isatty()):
+        return False
+    print(f"refused: {exc}")
+    sys.stdout.write("Make the table anyway? [y/N] ")
+    sys.stdout.flush()
+    if sys.stdin.readline().strip().lower() in ("y", "yes"):
+        return True
+    raise InputError("not confirmed; nothing was written")
 
 
 def output_paths(fmt: str, out: str, legs) -> list[Path]:
@@ -71,6 +96,9 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
 
 def run(args) -> int:
     model = load_model(args.model)
+    unverified = unverified_model_line(args.model, model)
+    if unverified:
+        print(unverified)
     legs = parse_legs(args.legs) if args.legs else None
     if legs is not None:
         missing = [x for x in legs if x not in model.legs]
@@ -95,8 +123,17 @@ def run(args) -> int:
             print(f"note: the drive of {args.profile} holds no compensation table; the table is checked for the "
                   "station's table store (compensation target station, docs/compensation.md); for the "
                   "controller use --format linuxcnc")
-    # the unit-slip check is the service's, as on the UI's Compensation page
-    table, warnings = make_checked_table(model, args.step, limits, legs=legs, accept_implausible=args.accept_implausible)
+    # the unit-slip and held-out checks are the service's, as on the UI's Compensation page; a drive table ends
+    # within the drive's soft limits (the profile's), where the push will check it
+    soft = _soft_limits(args) if args.format == "csv" else None
+    try:
+        table, warnings = make_checked_table(model, args.step, limits, legs=legs, accept_implausible=args.accept_implausible,
+                                             soft_limits_mm=soft)
+    except ImplausibleError as exc:
+        if not _ask_anyway(exc):
+            raise
+        table, warnings = make_checked_table(model, args.step, limits, legs=legs, accept_implausible=True,
+                                             soft_limits_mm=soft)
     if args.format == "csv":
         written = [write_table(table, args.out, load_config(args.config), limits)]
     elif args.format in controllers.FORMATS:

@@ -144,7 +144,11 @@ def test_platform_refuses_a_table_without_its_recording_or_for_other_legs(sessio
     short = tmp_path / "short.csv"
     short.write_text("\n".join(line for line in lines if not line.startswith(("4,", "5,", "6,"))) + "\n")
     rc = main(["platform", str(short), "--recording", str(path), "--out", str(tmp_path / "o")])
-    err = capsys.readouterr().err
+    err = capsys.readouterr().err  # legs cut out of a station's table: its integrity record tells
+    assert rc == 2 and "short.csv: does not match its integrity record" in err and "row(s) missing" in err
+    short.write_text("\n".join(line for line in lines[1:] if not line.startswith(("4,", "5,", "6,"))) + "\n")
+    rc = main(["platform", str(short), "--recording", str(path), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err  # the same made by hand, without the record: a table for another leg count
     assert rc == 2 and "short.csv" in err and "leg count" in err and "Traceback" not in err
     rc = main(["platform", str(path), "--recording", str(path), "--out", str(tmp_path / "o")])
     assert rc == 2 and "--recording goes with" in capsys.readouterr().err

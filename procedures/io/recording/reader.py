@@ -193,6 +193,11 @@ def check_file(path: str | os.PathLike) -> Superblock:
     if sb is None:
         with open(path, "rb") as fh:
             start = fh.read(200)
+        from procedures.io.integrity import file_kind, wrong_kind  # here: read only for a file that is no HDF5
+
+        other = wrong_kind(path, "session", "give the session file (HDF5) a sweep or `station import` wrote")
+        if other and file_kind(path) != "points":  # a table, model, serials list, ... given as a session: named
+            raise InputError(other)
         if b"," in start and b"\0" not in start:
             raise InputError(f"{path}: not an HDF5 file (is it a CSV? use `station import`)")
         raise InputError(f"{path}: not an HDF5 session file (no HDF5 signature); {_COPY_AGAIN}")
