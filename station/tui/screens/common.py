@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 from rich.text import Text
 from textual import events
 from textual.app import ComposeResult
@@ -84,6 +86,31 @@ class StationFooter(Footer):
         self.styles.height = 2 if two_rows else 1
 
 
+class FieldRefusal(Static):
+    """The refusals of the value fields `fields` (ids of station.tui.fields.ValueField), in red
+    under them: what is wrong and what to type, as the command line says it. Hidden while every
+    one of them reads. The page re-checks it on each key typed (StationScreen.on_input_changed)."""
+
+    DEFAULT_CSS = "FieldRefusal { height: auto; color: $error; }"
+
+    def __init__(self, *fields: str, **kwargs) -> None:
+        super().__init__("", markup=False, **kwargs)
+        self.fields = fields
+
+    def on_mount(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        texts = []
+        for wid in self.fields:
+            for field in self.screen.query(f"#{wid}"):
+                refusal = getattr(field, "refusal", "")
+                if refusal and not field.disabled:
+                    texts.append(refusal)
+        self.update("\n".join(texts))
+        self.display = bool(texts)
+
+
 class StationScreen(Screen):
     """A page: header (no clock), page tabs, a line saying what the page is for, body, footer."""
 
@@ -92,6 +119,88 @@ class StationScreen(Screen):
     # Focus a table or button, not a text field, so the letter keys in the footer act at once.
     AUTO_FOCUS = "DataTable, Button"
     BINDINGS = [Binding("escape", "leave_field", "Leave field", show=False)]
+    # Keys that act on the rig (connect, enable, move, start a sweep, push a table): the names of
+    # their actions on this page. Such a key acts only when it is pressed on its own (docs/tui.md,
+    # "Keys"): not within STRAY_HOLD_S after a key this page does not bind (typing meant for a
+    # field: "abc" must not press c) or after a text field lost the focus, and not when another
+    # key follows it within ALONE_S ("hello" must not home a leg; "-25" must not jog). The same
+    # key pressed again and again (+ + + to jog) acts each time. Stop, abort and quit never wait.
+    RIG_KEYS: frozenset[str] = frozenset()
+    STRAY_HOLD_S = 1.0
+    ALONE_S = 0.3
+
+    # -- keys act only when pressed on their own (RIG_KEYS) ----------------------------------------
+    _stray_at = -1e9  # time.monotonic() of the last key typed outside a field that this page does not bind
+    _stray_text = ""  # those keys, for the notification
+    _pending = None  # (key, binding, timer) of a rig key waiting ALONE_S to act
+
+    def _binding_for(self, event: events.Key):
+        for _node, bindings in self._modal_binding_chain:
+            for key in (event.key, *event.aliases):
+                for binding in bindings.key_to_bindings.get(key, ()):
+                    return binding
+        return None
+
+    @staticmethod
+    def _action_name(action: str) -> str:
+        return action.split("(", 1)[0].removeprefix("app.").removeprefix("screen.")
+
+    def on_key(self, event: events.Key) -> None:
+        """Keys that reached the page (a text field keeps what it takes): a rig key waits to see
+        whether it was pressed on its own; any other key typed here counts as stray typing."""
+        now = time.monotonic()
+        binding = self._binding_for(event)
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            key, pending_binding, timer = pending
+            timer.stop()
+            if key == event.key:  # the same key again (+ + +): the first acts now
+                self._run_binding(pending_binding)
+            else:  # another key within ALONE_S: the rig key was part of a word typed here
+                self._stray_at, self._stray_text = now, (self._stray_text + key)[-12:]
+                self._ignored(key, pending_binding, "another key followed it at once")
+        if binding is None:
+            if event.is_printable:
+                if now - self._stray_at > self.STRAY_HOLD_S:
+                    self._stray_text = ""
+                self._stray_at, self._stray_text = now, (self._stray_text + (event.character or ""))[-12:]
+            return
+        if self._action_name(binding.action) not in self.RIG_KEYS:
+            return
+        event.stop()
+        event.prevent_default()  # the app's binding does not run now: it runs from here, or not at all
+        if now - self._stray_at <= self.STRAY_HOLD_S:
+            self._stray_at = now  # still typing
+            self._ignored(event.key, binding, "it came right after typing outside a field"
+                          + (f" ({self._stray_text})" if self._stray_text.strip() else ""))
+            return
+        timer = self.set_timer(self.ALONE_S, lambda: self._alone(event.key))
+        self._pending = (event.key, binding, timer)
+
+    def _alone(self, key: str) -> None:
+        pending = self._pending
+        if pending is not None and pending[0] == key:
+            self._pending = None
+            self._run_binding(pending[1])
+
+    def _run_binding(self, binding) -> None:
+        self.run_worker(self.app.run_action(binding.action, self), group="rig-key", exit_on_error=False)
+
+    def _ignored(self, key: str, binding, why: str) -> None:
+        shown = binding.key_display or key
+        self.notify(f"{shown} ({binding.description}) ignored: {why}. Nothing was done; press {shown} on its own "
+                    "to do it (Esc leaves a text field).", title="Key ignored", severity="warning", timeout=6)
+
+    def on_descendant_blur(self, event: events.DescendantBlur) -> None:
+        from textual.widgets import Input
+
+        if isinstance(event.widget, Input):  # the next letters may still be meant for the field
+            self._stray_at = time.monotonic()
+
+    def on_screen_suspend(self) -> None:
+        pending, self._pending = self._pending, None
+        if pending is not None:  # a dialog or another page came first: the key does nothing
+            pending[2].stop()
 
     def action_leave_field(self) -> None:
         """Leave a text field (Esc) so the letter keys act again."""
@@ -135,6 +244,11 @@ class StationScreen(Screen):
         before, self._fitted = self._fitted, tuple(self.app.size)
         if before is not None and before != self._fitted:
             self.size_changed()
+
+    def on_input_changed(self, event) -> None:
+        # a value field's refusal line follows each key typed (a subclass's own handler runs too)
+        for line in self.query(FieldRefusal).results(FieldRefusal):
+            line.check()
 
     def size_changed(self) -> None:
         """Hook: the terminal has another size (`self.narrow`, `self.short`; e.g. the columns of

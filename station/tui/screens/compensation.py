@@ -18,8 +18,10 @@ from textual.binding import Binding
 from textual.containers import Horizontal, VerticalScroll
 from textual.widgets import Button, DataTable, Input, Label, Static
 
+from station import values
 from station.tui.errors import describe
-from station.tui.screens.common import ConfirmScreen, StationScreen
+from station.tui.fields import ValueField
+from station.tui.screens.common import ConfirmScreen, FieldRefusal, StationScreen
 from station.tui.screens.compensation_controller import (
     UI_OVERRIDE,
     CompensationController,
@@ -33,6 +35,7 @@ from station.tui.screens.compensation_widgets import AuditTail, DriveTable, LegT
 class CompensationScreen(StationScreen):
     MODE = "compensation"
     PAGE_HELP = "table = model resampled on a fixed step (error µm, the drive subtracts it); compare, push, verify"
+    RIG_KEYS = frozenset({"push", "push_all", "rollback", "verify"})  # act only when pressed on their own
     BINDINGS = [
         Binding("t", "make_table", "Make table"),
         Binding("g", "read_drives", "Read drives"),
@@ -51,7 +54,9 @@ class CompensationScreen(StationScreen):
             with Horizontal(classes="controls split-controls"):  # one row, or two on a narrow terminal
                 with Horizontal(classes="control-group"):
                     yield Label("Step mm ")
-                    yield Input("", id="comp-step", placeholder="auto", type="number", compact=True)
+                    yield ValueField("", id="comp-step", kind=values.STEP_MM, where="step", blank=None,
+                                     placeholder="auto", compact=True,
+                                     tooltip="table step, mm (blank: the recording's spacing), as station table --step")
                     yield Button("Make (t)", id="comp-make", compact=True, variant="success")
                     yield Button("Read drives (g)", id="comp-read", compact=True)
                     yield Button("CSV (w)", id="comp-save", compact=True)
@@ -60,6 +65,7 @@ class CompensationScreen(StationScreen):
                     yield Button("All… (U)", id="comp-push-all", compact=True, variant="error")
                     yield Button("Verify (v)", id="comp-verify", compact=True)
                     yield Button("Rollback… (b)", id="comp-rollback", compact=True)
+            yield FieldRefusal("comp-step", id="comp-step-refusal")
             yield LegTablesView(id="comp-table")
             yield Static("", id="comp-status", classes="status")
             yield AuditTail("", id="comp-audit", classes="status")
@@ -107,10 +113,9 @@ class CompensationScreen(StationScreen):
         if a is None:
             self.notify("No model yet: fit one on the Results screen (F3, then f).", severity="warning")
             return
-        text = self.query_one("#comp-step", Input).value.strip()
         refused = None
         try:
-            step = float(text) if text else None
+            step = self.query_one("#comp-step", ValueField).read()  # station table --step's parser
             table, warnings = make_checked_table(a.model, step, self._spec(), accept_implausible=accept_implausible,
                                                  override=UI_OVERRIDE)
             # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s

@@ -32,7 +32,7 @@ from station import values
 from station.tui.errors import describe
 from station.tui.fields import ValueField
 from station.tui.messages import RigStateChanged, SweepChanged
-from station.tui.screens.common import StationScreen
+from station.tui.screens.common import ConfirmScreen, StationScreen
 from station.tui.widgets import set_columns, wrap_items
 
 DRIVE_COLUMNS = ("Leg", "State", "Position mm", "Moving", "Foll. err um", "Load N", "Table", "Fault")
@@ -97,8 +97,10 @@ class RigScreen(StationScreen):
     MODE = "rig"
     snapshot: RigSnapshot | None = None  # the last poll shown
     PAGE_HELP = "drive state per leg, interferometer, environment; select a leg row, then act on it: enable, move, jog; x stops"
+    # the keys that act on the rig act only when pressed on their own (StationScreen.RIG_KEYS)
+    RIG_KEYS = frozenset({"connect", "leg_action", "move", "jog"})
     BINDINGS = [
-        Binding("c", "app.connect", "Connect"),
+        Binding("c", "connect", "Connect"),
         Binding("e", "leg_action('enable')", "Enable"),
         Binding("d", "leg_action('disable')", "Disable"),
         Binding("h", "leg_action('home')", "Home (0 mm)"),
@@ -424,6 +426,20 @@ class RigScreen(StationScreen):
             self.action_jog(1)
         elif event.button.id == "stop":
             self.action_stop_all()
+
+    def action_connect(self) -> None:
+        """Connect; when connected, reconnecting asks first: it closes the connection to every
+        drive and the interferometer (the simulated rig starts afresh, its legs disabled)."""
+        app = self.app
+        if app.rig is None or app.sweep.active:  # not connected: nothing to lose (a sweep: the app refuses)
+            app.action_connect()
+            return
+        sim = getattr(app.rig, "sim", None) is not None
+        question = ("[b]Reconnect to the rig?[/b]\n\nThe connection to the drives and the interferometer is closed "
+                    "and opened again" + ("; the simulated rig starts afresh: its legs disabled, at 0 mm." if sim
+                                          else "; the drives are asked their state anew."))
+        self.app.push_screen(ConfirmScreen(question, yes="Reconnect", no="Cancel"),
+                             lambda yes: app.action_connect() if yes else None)
 
     def action_leg_action(self, action: str) -> None:
         self.app.rig_action(action, (self.selected_leg(),))

@@ -58,6 +58,9 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         await pilot.press("3", "0")
         assert app.screen.query_one("#move-target", Input).value == "30"
         app.screen.query_one("#drives", DataTable).focus()
+        # a rig key right after a field lost the focus is ignored (it may be typing meant for the
+        # field: StationScreen.RIG_KEYS); a moment later it acts
+        await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)
         # a disabled leg is refused, with what to do
         await type_into(pilot, "move-target", "30")
         await pilot.press("m")
@@ -181,7 +184,9 @@ async def _stop(cfg, size, connected, wait_until, notes):
                    for n in notes(app))
         await wait_until(pilot, lambda: "quick-stopped" in motion_text(app), what="the stop shown")
         # enabled again: the quick stop's toast goes (it no longer says what to do)
-        await pilot.press("escape", "e")
+        await pilot.press("escape")  # leave the field; its letters act a moment later (RIG_KEYS)
+        await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)
+        await pilot.press("e")
         await wait_until(pilot, lambda: app.rig.axes[1].status().enabled, what="leg 1 enabled again")
         await wait_until(pilot, lambda: not any("quick-stopped" in n for n in notes(app)), what="the toast cleared")
 
