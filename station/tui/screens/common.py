@@ -68,22 +68,32 @@ class StationFooter(Footer):
             yield widget
         self.fit(keys, force=True)  # Footer.compose has just set its own grid columns
 
+    GUTTER = 2  # cells between two columns of keys, so "h Home (0 mm)" and "r Reset fault" never touch
+
     def fit(self, keys=None, force: bool = False) -> None:
-        """Two rows (a grid of the keys) when one row of the terminal's width would cut keys off
-        (the Rig page's twelve at 80 columns), one row otherwise."""
+        """One row when the keys fit the terminal's width; else a grid of as few rows as fit
+        (two at 80 columns for the Rig page's twelve keys), each column as wide as its widest
+        key and GUTTER cells from the next, so every key is whole and apart from the next."""
         keys = list(self.query("FooterKey")) if keys is None else keys
-        # each key as drawn compact: "k description", a space after it
-        need = sum(len(k.key_display or k.key) + 1 + len(k.description) + 1 for k in keys if hasattr(k, "description"))
+        # each key as drawn compact: "k description"
+        widths = [len(k.key_display or k.key) + 1 + len(k.description) for k in keys if hasattr(k, "description")]
         width = self.app.size.width
-        two_rows = 0 < width < need
-        columns = max(1, -(-len(keys) // 2)) if two_rows else max(1, len(keys))
-        if not force and (two_rows, columns) == getattr(self, "_fitted", None):
+        rows = 1
+        if 0 < width < sum(w + 1 for w in widths):
+            for rows in (2, 3, 4):
+                columns = -(-len(widths) // rows)
+                # the grid fills row by row: column j holds keys j, j + columns, ...
+                need = sum(max(widths[j::columns]) for j in range(columns)) + self.GUTTER * (columns - 1)
+                if need <= width:
+                    break
+        columns = max(1, -(-len(keys) // rows))
+        if not force and (rows, columns) == getattr(self, "_fitted", None):
             return  # as laid out: no new layout (the keys stay where they are)
-        self._fitted = (two_rows, columns)
-        self.set_class(two_rows, "-two-rows")
-        self.styles.layout = "grid" if two_rows else "horizontal"
+        self._fitted = (rows, columns)
+        self.set_class(rows > 1, "-two-rows")
+        self.styles.layout = "grid" if rows > 1 else "horizontal"
         self.styles.grid_size_columns = columns
-        self.styles.height = 2 if two_rows else 1
+        self.styles.height = rows
 
 
 class FieldRefusal(Static):

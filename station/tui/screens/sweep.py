@@ -75,9 +75,11 @@ class SweepScreen(StationScreen):
                     yield ValueField("1", id="dwell", kind=values.TIME_S, where="dwell", blank=1.0, compact=True,
                                      tooltip="settle time per target, s (blank: 1)")
                     yield Label("Serials")
-                    yield Input("", id="serials", placeholder="3=HX-0042 (blank: config)", compact=True,
-                                tooltip="each selected leg's serial, LEG=SERIAL separated by spaces; recorded in "
-                                        "the session and checked by push (like station sweep --serial)")
+                    # a short placeholder: the field is 20-odd cells wide even at 120 columns
+                    yield Input("", id="serials", placeholder="e.g. 3=HX-0042", compact=True,
+                                tooltip="each selected leg's serial, LEG=SERIAL separated by spaces (blank: the "
+                                        "config's serials); recorded in the session and checked by push (like "
+                                        "station sweep --serial)")
                 yield Static("", id="plan-summary")
                 yield Button("Start (s)", id="start", variant="success")
                 with Horizontal(classes="pair"):
@@ -292,7 +294,7 @@ class SweepScreen(StationScreen):
             plot.show([
                 ("approach +1 (up)", trace.up_target_mm, trace.up_error_um, "scatter"),
                 ("approach −1 (down)", trace.down_target_mm, trace.down_error_um, "scatter:x"),
-            ], title=f"leg {leg}: error against position ({trace.count} points)")
+            ], title=f"leg {leg}: error against position ({trace.count} points)", xlim=s.target_span)
 
         bar = self.query_one("#progress", ProgressBar)
         # never indeterminate: its animation would be a moving part on an idle screen
