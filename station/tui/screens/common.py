@@ -194,7 +194,8 @@ class StationScreen(Screen):
             self._run_binding(pending[1])
 
     def _run_binding(self, binding) -> None:
-        self.run_worker(self.app.run_action(binding.action, self), group="rig-key", exit_on_error=False)
+        # from the page's message queue, as a key's binding runs (a dialog it opens is the page's)
+        self.call_later(self.run_action, binding.action)
 
     def _ignored(self, key: str, binding, why: str) -> None:
         shown = binding.key_display or key

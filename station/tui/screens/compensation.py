@@ -147,7 +147,7 @@ class CompensationScreen(StationScreen):
             self.slip_text = f"table refused: {exc}"
         except ValueError as exc:
             self.table = None
-            self.notify(describe(exc, "cannot make the table"), severity="error", timeout=12)
+            self.notify(escape(describe(exc, "cannot make the table")), severity="error", timeout=12)
         self.table_model_id = id(a.model)
         self._show()
         if refused is not None:

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 from textual import work
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, VerticalScroll
@@ -259,7 +260,7 @@ class PlatformScreen(StationScreen):
         try:
             return self.query_one(widget_id, ValueField).read()
         except InputError as exc:
-            self.notify(f"{exc}; nothing run", title="Platform", severity="error", timeout=10)
+            self.notify(escape(f"{exc}; nothing run"), title="Platform", severity="error", timeout=10)
             return None
 
     def _request(self) -> PlatformRequest | None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from textual import work
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
@@ -256,7 +257,7 @@ class ReplayScreen(StationScreen):
         try:  # station.values.SPEED_FACTOR, the kind of station replay --speed
             speed = self.query_one("#replay-speed", ValueField).read()
         except InputError as exc:  # the message names the field and says what to type
-            self.notify(f"{exc}; nothing replayed", title="Replay", severity="error", timeout=10)
+            self.notify(escape(f"{exc}; nothing replayed"), title="Replay", severity="error", timeout=10)
             return
         if self.app.start_replay(self.session_path, speed):
             self.replay_source, self.replayed, self.replayed_path = self.session_path, None, None

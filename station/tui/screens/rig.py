@@ -385,7 +385,7 @@ class RigScreen(StationScreen):
         try:
             move = self.move_request(step_mm)
         except InputError as exc:  # said next to the fields too (move_preview)
-            self.notify(f"{exc}; nothing moved", title=f"move leg {leg}", severity="error", timeout=10)
+            self.notify(escape(f"{exc}; nothing moved"), title=f"move leg {leg}", severity="error", timeout=10)
             if step_mm is None and not self.query_one("#move-target", Input).value.strip():
                 self.query_one("#move-target", Input).focus()  # the digits typed next go there
             return

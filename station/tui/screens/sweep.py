@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
@@ -168,7 +169,7 @@ class SweepScreen(StationScreen):
                 return
             plan = self.build_plan()
         except Exception as exc:
-            summary.update(f"[red]{describe(exc)}[/red]")
+            summary.update(f"[red]{escape(describe(exc))}[/red]")  # typed text is not markup
             return
         if plan.onthefly:
             speeds = " and ".join(f"{v:g}" for v in plan.speeds_mm_s)
@@ -224,7 +225,7 @@ class SweepScreen(StationScreen):
                 return
             plan = self.build_plan()
         except Exception as exc:
-            self.notify(describe(exc), title="Plan", severity="error", timeout=10)
+            self.notify(escape(describe(exc)), title="Plan", severity="error", timeout=10)
             return
         self._start(plan, serials)
 
