@@ -29,6 +29,7 @@ many were acted on and refused) are printed at the end of the module.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import os
 import threading
 import time
@@ -38,7 +39,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from textual.widgets import Input, Static
 
@@ -51,14 +52,15 @@ from station.tui.app import StationApp
 from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.screens.common import ConfirmScreen
 from station.tui.screens.rig import target_kind
+from tests.station.tui.steps import type_keys
 
 pytestmark = pytest.mark.timeout(900)
 
 PROFILE = os.environ.get("TUI_INPUTS_PROFILE", "ci")
-CI_STRINGS = 24
+CI_STRINGS = 8  # generated, per field; plus the EXPLICIT strings, typed into every field in both profiles
 LONG_STRINGS = 400
 STRINGS = LONG_STRINGS if PROFILE == "long" else CI_STRINGS
-TEXT_STRINGS = max(4, STRINGS // 4)  # the path and text fields: only that nothing typed is lost
+TEXT_STRINGS = max(3, STRINGS // 4)  # the path and text fields: only that nothing typed is lost
 SETTINGS = settings(max_examples=STRINGS, deadline=None, derandomize=PROFILE != "long", database=None,
                     suppress_health_check=list(HealthCheck), print_blob=True)
 
@@ -67,7 +69,8 @@ SAMPLE = REPO / "recordings" / "fault-beam-break.h5"
 
 TYPED: Counter = Counter()  # field -> strings typed
 ACTED: Counter = Counter()  # field -> strings acted on (accepted by the CLI's parser)
-REFUSED: Counter = Counter()  # field -> strings refused on the page
+REFUSED: Counter = Counter()  # field -> strings refused on the page (the parser's refusal)
+PLAN_REFUSED: Counter = Counter()  # field -> strings read, but the sweep plan they make is refused
 
 
 # -- the strings ------------------------------------------------------------------------------------
@@ -77,6 +80,9 @@ SPECIAL = ["", " ", "  ", "nan", "NaN", "-nan", "inf", "-inf", "Infinity", "1e99
            "-.5", "1,5", "2,5", "-1,5", "1.000,5", "1,000.5", "1 5", "e5", "5e", "1e+", "9" * 40, "-" + "9" * 40,
            "0.0000001", "999999", "1000000", "1000001", "4294967295", "4294967296", "-1", "95", "-95", "95.0001",
            "abc", "12abc", "1-6", "1,3", "7", "1 - 6", "٣", "0.1", "2.5", "20", "1001", "-1000", "1000"]
+
+# typed into every number field whatever the profile: the reproductions of issue 31 and their kin
+EXPLICIT = ["1,5", "2,5", "", "  ", "nan", "-inf", "1e3", "١٢", "9" * 40, "+5 mm"]
 
 UNICODE_DIGITS = "٠١٢٣٤٥٦٧٨٩０１２３４５６７８９۳߃०"
 ALPHABET = "0123456789" * 3 + ",.-+eE " + "naifINAFmx" + UNICODE_DIGITS + "_½²/"
@@ -132,18 +138,28 @@ class AppThread:
             self.ready.set()
 
     async def _serve(self) -> None:
+        # the requests run here, in the task of run_test (Textual's context: the active app)
         self.loop = asyncio.get_running_loop()
-        self.done = asyncio.Event()
+        self.requests: asyncio.Queue = asyncio.Queue()
         async with self.app.run_test(size=self.size) as pilot:
             self.pilot = pilot
             self.ready.set()
-            await self.done.wait()
+            while True:
+                fn, future = await self.requests.get()
+                if fn is None:
+                    break
+                try:
+                    future.set_result(await fn(pilot))
+                except BaseException as exc:  # the caller raises it
+                    future.set_exception(exc)
 
     def call(self, fn: Callable, timeout_s: float = 120.0) -> Any:
-        return asyncio.run_coroutine_threadsafe(fn(self.pilot), self.loop).result(timeout_s)
+        future: concurrent.futures.Future = concurrent.futures.Future()
+        self.loop.call_soon_threadsafe(self.requests.put_nowait, (fn, future))
+        return future.result(timeout_s)
 
     def close(self) -> None:
-        self.loop.call_soon_threadsafe(self.done.set)
+        self.loop.call_soon_threadsafe(self.requests.put_nowait, (None, None))
         self.thread.join(60)
 
 
@@ -170,7 +186,8 @@ class Recorder:
 def ui(tmp_path_factory, recorded_session):
     cfg = StationConfig(operator="test")
     cfg.recordings_dir = str(tmp_path_factory.mktemp("runs"))
-    app = StationApp(cfg, time_scale=0.0, poll_interval_s=0.1)
+    # status polled every second (the Rig page's soft limits come from it): a busier app is slower to type into
+    app = StationApp(cfg, time_scale=0.0, poll_interval_s=1.0)
     runner = AppThread(app)
     calls: list = []
     rec = Recorder(calls)
@@ -248,9 +265,11 @@ def print_figures() -> None:
     if not TYPED:
         return
     lines = [f"UI inputs by contract ({PROFILE} profile): {len(TYPED)} fields x strings typed = "
-             f"{sum(TYPED.values())} (acted on {sum(ACTED.values())}, refused {sum(REFUSED.values())})"]
+             f"{sum(TYPED.values())} (acted on {sum(ACTED.values())}, refused by the parser {sum(REFUSED.values())}, "
+             f"read but the plan refused {sum(PLAN_REFUSED.values())})"]
     for field in TYPED:
-        lines.append(f"  {field}: {TYPED[field]} typed, {ACTED[field]} acted on, {REFUSED[field]} refused")
+        lines.append(f"  {field}: {TYPED[field]} typed, {ACTED[field]} acted on, {REFUSED[field]} refused"
+                     + (f", {PLAN_REFUSED[field]} plan refused" if PLAN_REFUSED[field] else ""))
     print("\n" + "\n".join(lines))
 
 
@@ -286,10 +305,7 @@ async def type_into(pilot, field_id: str, text: str) -> Input:
     field = screen.query_one(f"#{field_id}", Input)
     field.value = ""
     field.focus()
-    await pilot.pause()
-    if text:
-        await pilot.press(*text)
-    await pilot.pause()
+    await type_keys(pilot, text)
     assert field.value == text, f"#{field_id}: typed {text!r}, the field holds {field.value!r}"
     app.clear_notifications()
     return field
@@ -359,6 +375,8 @@ def test_a_number_field_acts_only_on_what_the_command_line_accepts(ui, field_id)
         text = typeable(text, field_id)
         runner.call(lambda pilot: one_string(pilot, rec, field_id, text))
 
+    for text in EXPLICIT:
+        typed = example(text)(typed)
     typed()
 
 
@@ -379,8 +397,8 @@ async def one_string(pilot, rec: Recorder, field_id: str, text: str) -> None:
         await pilot.press("enter")
     else:
         button = {"f2": "#start", "f4": "#comp-make", "f5": "#replay-run", "f7": "#plat-run"}[PAGE_OF[field_id]]
-        await pilot.click(button)
-    await pilot.pause()
+        app.screen.query_one(button).focus()  # Enter on the page's button (as a click, without the mouse's round trip)
+        await pilot.press("enter")  # (Pilot.press waits until the app has handled it)
     if isinstance(app.screen, ConfirmScreen):  # a plan beyond the config's [limits] asks first: no
         await pilot.press("n")
         await until(pilot, lambda: not isinstance(app.screen, ConfirmScreen), what="the question to close")
@@ -404,6 +422,8 @@ async def one_string(pilot, rec: Recorder, field_id: str, text: str) -> None:
     check = CHECKS[field_id if field_id.startswith("move-") else PAGE_OF[field_id]]
     if check(field_id, value, acted):
         ACTED[field_id] += 1
+    else:  # the value read, but the plan it makes is refused (min above max, beyond [limits]): not started
+        PLAN_REFUSED[field_id] += 1
 
 
 def check_rig(field_id, value, acted) -> bool:
@@ -483,7 +503,8 @@ async def one_legs_string(pilot, rec, text):
     except ValueError as exc:
         legs, ok, refusal = None, False, str(exc)
     rec.take()
-    await pilot.click("#start")
+    app.screen.query_one("#start").focus()
+    await pilot.press("enter")
     await pilot.pause()
     if isinstance(app.screen, ConfirmScreen):
         await pilot.press("n")
@@ -496,6 +517,8 @@ async def one_legs_string(pilot, rec, text):
         return
     if check_sweep("legs", legs, acted):
         ACTED["legs"] += 1
+    else:
+        PLAN_REFUSED["legs"] += 1
 
 
 # -- the text fields keep what is typed ---------------------------------------------------------------
@@ -519,9 +542,7 @@ def test_a_text_field_keeps_every_character_typed(ui, page, field_id):
             field.value = ""
             field.focus()
             await pilot.pause()
-            if text:
-                await pilot.press(*text)
-            await pilot.pause()
+            await type_keys(pilot, text)
             assert field.value == text, f"{page}#{field_id}: typed {text!r}, the field holds {field.value!r}"
             field.value = ""
             TYPED[f"{MODE_OF[page]}#{field_id} (text)"] += 1
