@@ -260,6 +260,11 @@ async def _results_and_compensation(cfg, connected, wait_until, session):
         await wait_until(pilot, lambda: app.sweep.label.startswith("verification"), what="the verification (v)")
         await wait_until(pilot, lambda: not app.sweep.active, 120, "the verification to end")
         await wait_until(pilot, lambda: comp.verify_text, 30, "the verification report")
+        # its verdict on show at the top of the page, without scrolling (the report runs below the fold)
+        await show_page(pilot, "compensation", wait_until)
+        verdict = assert_on_show(app, "#comp-verdict")
+        assert comp.query_one("#comp-body").scroll_y == 0
+        assert "leg 1 verification: " in str(verdict.render()) and "ratio" in str(verdict.render())
 
         await show_page(pilot, "compensation", wait_until)
         await click(pilot, "#comp-rollback")
