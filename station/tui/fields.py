@@ -31,8 +31,8 @@ _REQUIRED = object()  # no default: a blank field is refused
 # field id -> (its kind, the CLI option of the same value). The Rig page's target is narrowed to
 # the selected leg's soft limits once they are read (RigScreen), so its kind is the widest one.
 FIELD_KINDS: dict[str, tuple[Kind, str]] = {
-    "move-target": (values.POSITION_MM, "the Rig page's move target (station sweep --min-mm/--max-mm's kind)"),
-    "move-speed": (values.SPEED_MM_S, "the Rig page's move speed"),
+    "move-target": (values.POSITION_MM, "a position, as station sweep --min-mm/--max-mm (no CLI option moves a leg)"),
+    "move-speed": (values.SPEED_MM_S, "a speed in mm/s (no CLI option moves a leg)"),
     "cycles": (values.COUNT, "station sweep --cycles"),
     "n-targets": (values.COUNT, "station sweep --n-targets"),
     "step": (values.STEP_MM, "station sweep --step"),

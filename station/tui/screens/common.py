@@ -79,7 +79,7 @@ class StationFooter(Footer):
         widths = [len(k.key_display or k.key) + 1 + len(k.description) for k in keys if hasattr(k, "description")]
         width = self.app.size.width
         rows = 1
-        if 0 < width < sum(w + 1 for w in widths):
+        if 0 < width < sum(w + self.GUTTER for w in widths):  # one row: each key GUTTER cells from the next
             for rows in (2, 3, 4):
                 columns = -(-len(widths) // rows)
                 # the grid fills row by row: column j holds keys j, j + columns, ...

@@ -204,10 +204,14 @@ class PlatformScreen(StationScreen):
         with VerticalScroll(id="plat-body"):  # on a short terminal the histograms are below, a scroll away
             with Horizontal(classes="controls", id="plat-inputs"):
                 yield Label("Compensation ")
-                yield Input(placeholder="TABLE.csv or MODEL.json (empty: model on F3)", id="plat-comp",
-                            compact=True)
+                # placeholders short enough for the field at 80 columns; the tooltips say the rest
+                yield Input(placeholder="TABLE.csv or MODEL.json", id="plat-comp", compact=True,
+                            tooltip="a compensation table (TABLE.csv) or a model (MODEL.json); empty: the model on "
+                                    "Results (F3)")
                 yield Label(" Recording ")
-                yield Input(placeholder="FILE.h5 (empty: session on F3)", id="plat-recording", compact=True)
+                yield Input(placeholder="FILE.h5 (empty: on F3)", id="plat-recording", compact=True,
+                            tooltip="the session (FILE.h5) the table or model was made from; empty: the session on "
+                                    "Results (F3)")
             with Horizontal(classes="controls", id="plat-controls"):
                 yield Label("Poses ")
                 yield ValueField(str(DEFAULT_POSES), id="plat-poses", kind=values.POSES, where="poses",
