@@ -180,13 +180,3 @@ LEG = Kind("a leg number", "", 1, 6, integer=True, example="3")
 __all__ = ["Kind", "POSITION_MM", "STEP_MM", "SPEED_MM_S", "TIME_S", "TIME_SCALE", "SPEED_FACTOR",
            "TEMP_C", "AIR_TEMP_C", "PRESSURE_HPA", "HUMIDITY_PCT", "LOAD_N", "ERROR_UM", "TOLERANCE_UM",
            "LEAD_MM", "COUNT", "SEED", "PORT", "PORT_OR_ANY", "LEG"]
-
-
-# -- kinds the terminal UI's fields need beyond the ones above (station/tui/fields.py maps every
-# field to its kind); the command-line options of the same values should use these too.
-
-POSES = Kind("a number of poses", "", 1, 1_000_000, integer=True, example="2000")
-"""Random platform poses (`station platform --poses`, the Platform page): each costs a few hundred
-bytes through the experiment, so a million is a few hundred MB; 1e8 grew to 24 GB (issue 31)."""
-
-__all__ += ["POSES"]

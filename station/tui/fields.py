@@ -17,6 +17,7 @@ the command line's options of the same values.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 from textual.validation import ValidationResult, Validator
@@ -28,20 +29,33 @@ from station.values import Kind
 
 _REQUIRED = object()  # no default: a blank field is refused
 
+
+def _cli_kind(name: str, fallback: Kind) -> Kind:
+    """The kind the command line uses for a value, by its name in station.values (CYCLES,
+    TARGET_COUNT, POSES, REPLAY_SPEED come with the command line's conversion to the kinds, issue
+    31 part 1); `fallback`, the general kind of that value, until they are there."""
+    return getattr(values, name, fallback)
+
+
+# Platform poses: at most a million here (a few hundred MB through the experiment; 1e8 grew to
+# 24 GB, issue 31), whatever the command line's kind allows: the page runs the experiment in this
+# process. A larger count is refused under the field, as one the command line refuses.
+POSES_UI = replace(_cli_kind("POSES", values.COUNT), name="a number of poses").bounded(1, 1_000_000)
+
 # field id -> (its kind, the CLI option of the same value). The Rig page's target is narrowed to
 # the selected leg's soft limits once they are read (RigScreen), so its kind is the widest one.
 FIELD_KINDS: dict[str, tuple[Kind, str]] = {
     "move-target": (values.POSITION_MM, "a position, as station sweep --min-mm/--max-mm (no CLI option moves a leg)"),
     "move-speed": (values.SPEED_MM_S, "a speed in mm/s (no CLI option moves a leg)"),
-    "cycles": (values.COUNT, "station sweep --cycles"),
-    "n-targets": (values.COUNT, "station sweep --n-targets"),
+    "cycles": (_cli_kind("CYCLES", values.COUNT), "station sweep --cycles"),
+    "n-targets": (_cli_kind("TARGET_COUNT", values.COUNT), "station sweep --n-targets"),
     "step": (values.STEP_MM, "station sweep --step"),
     "min-mm": (values.POSITION_MM, "station sweep --min-mm"),
     "max-mm": (values.POSITION_MM, "station sweep --max-mm"),
     "dwell": (values.TIME_S, "station sweep --dwell"),
     "comp-step": (values.STEP_MM, "station table --step"),
-    "replay-speed": (values.SPEED_FACTOR, "station replay --speed"),
-    "plat-poses": (values.POSES, "station platform --poses"),
+    "replay-speed": (_cli_kind("REPLAY_SPEED", values.SPEED_FACTOR), "station replay --speed"),
+    "plat-poses": (POSES_UI, "station platform --poses (at most a million here)"),
     "plat-seed": (values.SEED, "station platform --seed"),
 }
 

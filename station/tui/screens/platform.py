@@ -28,7 +28,7 @@ from textual.widgets import Button, DataTable, Input, Label, Static
 from procedures.engine.errors import InputError
 from station import values
 from station.tui.errors import describe
-from station.tui.fields import ValueField
+from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.screens.common import FieldRefusal, StationScreen
 from station.tui.widgets import XYPlot, columns_fit, set_columns
 
@@ -214,7 +214,7 @@ class PlatformScreen(StationScreen):
                                     "Results (F3)")
             with Horizontal(classes="controls", id="plat-controls"):
                 yield Label("Poses ")
-                yield ValueField(str(DEFAULT_POSES), id="plat-poses", kind=values.POSES, where="poses",
+                yield ValueField(str(DEFAULT_POSES), id="plat-poses", kind=FIELD_KINDS["plat-poses"][0], where="poses",
                                  blank=DEFAULT_POSES, compact=True,
                                  tooltip=f"random poses (blank: {DEFAULT_POSES}), as station platform --poses")
                 yield Label(" Seed ")

@@ -21,10 +21,9 @@ from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Static
 
 from procedures.engine.errors import InputError
-from station import values
 from station.tui import capabilities
 from station.tui.errors import describe
-from station.tui.fields import ValueField
+from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.screens.common import FieldRefusal, StationScreen
 from station.tui.widgets import SessionPicker, fit_columns, sample_folders
 
@@ -82,7 +81,7 @@ class ReplayScreen(StationScreen):
             yield SessionPicker(lambda: [*sample_folders(), self.app.cfg.recordings_dir], id="replay-picker")
             with Horizontal(classes="controls"):
                 yield Label("Speed ")
-                yield ValueField("max", id="replay-speed", kind=values.SPEED_FACTOR, where="speed", blank=None,
+                yield ValueField("max", id="replay-speed", kind=FIELD_KINDS["replay-speed"][0], where="speed", blank=None,
                                  compact=True, tooltip="1 = real time, N = N times faster, max (or blank) = as fast "
                                                        "as possible, as station replay --speed")
                 yield Button("Replay (r)", id="replay-run", compact=True, variant="success")
@@ -254,7 +253,7 @@ class ReplayScreen(StationScreen):
             self.notify(capabilities.missing_text("replay", "Replay through the drivers"),
                         title="Replay", severity="warning", timeout=12)
             return
-        try:  # station.values.SPEED_FACTOR, the kind of station replay --speed
+        try:  # the kind of station replay --speed (station.tui.fields.FIELD_KINDS)
             speed = self.query_one("#replay-speed", ValueField).read()
         except InputError as exc:  # the message names the field and says what to type
             self.notify(escape(f"{exc}; nothing replayed"), title="Replay", severity="error", timeout=10)

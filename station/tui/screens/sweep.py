@@ -23,7 +23,7 @@ from procedures.acquisition.plans import parse_legs
 from station.progress import fmt_duration
 from station import values
 from station.tui.errors import describe
-from station.tui.fields import ValueField
+from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.messages import SweepChanged
 from station.tui.screens.common import ConfirmScreen, StationScreen
 from station.tui.widgets import XYPlot, known_sessions
@@ -57,10 +57,10 @@ class SweepScreen(StationScreen):
                     yield Select(PLANS, value="iso230", allow_blank=False, id="plan", compact=True)
                     yield Label("Cycles")
                     # blank: the plan's standard number (DEFAULT_CYCLES), as --cycles left out
-                    yield ValueField("5", id="cycles", kind=values.COUNT, where="cycles", blank=None, compact=True,
+                    yield ValueField("5", id="cycles", kind=FIELD_KINDS["cycles"][0], where="cycles", blank=None, compact=True,
                                      tooltip="bidirectional cycles (blank: the plan's standard)")
                     yield Label("Targets")
-                    yield ValueField("11", id="n-targets", kind=values.COUNT, where="targets", blank=None, compact=True,
+                    yield ValueField("11", id="n-targets", kind=FIELD_KINDS["n-targets"][0], where="targets", blank=None, compact=True,
                                      tooltip="number of irregularly spaced targets (ISO 230-2; blank: the minimum)")
                     yield Label("Step mm")
                     yield ValueField("", id="step", kind=values.STEP_MM, where="step", blank=None,
