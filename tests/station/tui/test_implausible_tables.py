@@ -30,7 +30,9 @@ def test_an_implausible_table_and_push_are_refused_then_accepted_by_confirmation
 
 
 def _question(app) -> str:
-    return str(app.screen.query_one("#confirm-question").render()) if isinstance(app.screen, ConfirmScreen) else ""
+    # a dialog a rig key opens comes a moment after the key (StationScreen.RIG_KEYS): "" until composed
+    questions = app.screen.query("#confirm-question") if isinstance(app.screen, ConfirmScreen) else []
+    return str(questions.first().render()) if questions else ""
 
 
 def _held(app) -> tuple[int, str]:
