@@ -29,8 +29,8 @@ from typing import Any, Callable
 
 from procedures.engine.errors import InputError
 
-_FLOAT_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
-_INT_RE = re.compile(r"[+-]?\d+")
+_FLOAT_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
+_INT_RE = re.compile(r"[+-]?\d+", re.ASCII)
 
 
 def _num(value: float) -> str:
