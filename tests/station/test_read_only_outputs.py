@@ -171,8 +171,11 @@ def test_the_resume_hint_quotes_a_path_with_spaces():
 
 
 def test_nothing_is_left_behind_by_the_check_itself(tmp_path):
+    from procedures.engine.errors import InputError
     from procedures.io.outputs import check_output_file, check_output_folder
 
     check_output_file(tmp_path / "a.json")
-    check_output_folder(tmp_path / "new" / "report")
+    check_output_folder(tmp_path / "report")
+    with pytest.raises(InputError, match="the folder .*new does not exist; create it first"):
+        check_output_folder(tmp_path / "new" / "report")  # a folder output's parents are never made
     assert list(tmp_path.iterdir()) == [] and os.access(tmp_path, os.W_OK)
