@@ -415,6 +415,9 @@ class PathKind:
     text: bool = False
     max_bytes: int | None = None
     example: str = ""
+    not_this: tuple[tuple[bytes, str], ...] = ()
+    """(a marker in the first lines, what the file is then): a file of another kind given for this
+    one is named for what it is ("a table, not a model"), not reported as damaged."""
 
     def parse(self, text: Any, where: str = "") -> str:
         import os
@@ -463,10 +466,14 @@ class PathKind:
                              f"{self.max_bytes / 1e6:g} MB); give the right file")
         try:
             with open(p, "rb") as f:
-                head = f.read(65536 if self.text else 0)
+                head = f.read(65536 if self.text or self.not_this else 0)
         except PermissionError:
             raise InputError(f"{prefix}{s}: permission denied (this user cannot read it); fix its permissions "
                              "or copy it somewhere readable") from None
+        first_lines = b"\n".join(head.splitlines()[:3])
+        for marker, what in self.not_this:
+            if marker in first_lines:
+                raise InputError(f"{prefix}{s} is {what}")
         if self.text:
             if b"\x00" in head:
                 raise InputError(f"{prefix}{s} is a binary file, not text; give {self.name}")
@@ -479,12 +486,15 @@ class PathKind:
 
     def _writable(self, p, s: str, prefix: str) -> str:
         import os
+        from pathlib import Path
 
         if self.role == "out" and p.is_dir():
             raise InputError(f"{prefix}{s} is a folder; give a file name for {self.name}")
         if self.role == "dir_out" and p.exists() and not p.is_dir():
             raise InputError(f"{prefix}{s} is a file; give a folder for {self.name}")
         folder = p.parent
+        if str(folder) == ".":  # "the folder ." tells nobody where: name it
+            folder = Path(os.path.abspath(folder))
         if not folder.is_dir():
             what = "is a file, not a folder" if folder.exists() else "does not exist"
             raise InputError(f"{prefix}{s}: the folder {folder} {what}; create it first or choose another "
@@ -504,7 +514,10 @@ IN_TEXT = PathKind("a text file", text=True)
 CONFIG = PathKind("a station config (TOML text)", text=True, max_bytes=10_000_000, example="station.toml")
 PROFILE = PathKind("a drive profile (TOML text)", text=True, max_bytes=10_000_000)
 TOML_FILE = PathKind("a TOML file", text=True, max_bytes=10_000_000)
-MODEL = PathKind("a model file (MODEL.json from `station fit`)", text=True, max_bytes=200_000_000)
+MODEL = PathKind("a model file (MODEL.json from `station fit`)", text=True, max_bytes=200_000_000, not_this=(
+    (b"position_mm", "a table CSV, not a model; give the MODEL.json `station fit` wrote (a table is pushed: "
+                     "station push TABLE.csv --leg N)"),
+    (b"\x89HDF", "a session file (HDF5), not a model; fit it first: station fit FILE.h5 --out model.json")))
 TABLE = PathKind("a table CSV (from `station table`)", text=True, max_bytes=200_000_000)
 TABLE_TO_PUSH = PathKind("a table CSV (from `station table`)", role="name")
 AUDIT_TO_READ = PathKind("an audit log", role="name")

@@ -18,6 +18,7 @@ def sweep_args(*argv: str) -> Namespace:
 def test_the_sweep_arguments_become_a_plan_spec(tmp_path):
     assert plan_spec(sweep_args()) == PlanSpec()
     targets = tmp_path / "t.txt"
+    targets.write_text("-10\n0\n10\n")  # --targets names an existing text file (station/values.py)
     args = sweep_args("--legs", "1-3", "--plan", "iso230", "--cycles", "2", "--targets", str(targets),
                       "--dwell", "0.5", "--averaging", "0.2", "--overrun", "1")
     assert plan_spec(args) == PlanSpec(legs=(1, 2, 3), cycles=2, targets_file=targets, dwell_s=0.5,

@@ -157,7 +157,9 @@ def test_a_negative_time_scale_is_one_line(command, value, tmp_path, capsys):
         ["ui", "--time-scale", value]  # refused before the terminal UI starts
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith(f"station {command}: error: --time-scale must be a number >= 0"), err
+    why = "is outside 0 .. 1000" if value == "-1" else "is not a number"
+    assert len(err) == 1 and err[0].startswith(f"station {command}: error: argument --time-scale: '{value}' {why}; "
+                                                "give a time scale as a number (0 .. 1000)"), err
     assert list(tmp_path.iterdir()) == []
 
 
