@@ -157,6 +157,11 @@ TIME_SCALE = Kind("a time scale", "", 0.0, 1000.0, example="0.1")
 SPEED_FACTOR = Kind("a speed factor", "", 0.0, 1e6, lo_open=True, words=(("max", None),), example="10")
 """A replay speed: 1 = real time, N = N times faster, 'max' (None) = as fast as possible."""
 
+REPLAY_SPEED = Kind("a speed factor", "", 0.0, 1e6, lo_open=True,
+                    words=(("max", None), ("fastest", None), ("inf", None)), example="10")
+"""A replay's pace (`station replay --speed`, the Replay page): SPEED_FACTOR with the words the
+replay has always taken for 'as fast as possible' (max, fastest, inf)."""
+
 TEMP_C = Kind("a temperature", "degC", -50.0, 150.0, example="20")
 AIR_TEMP_C = Kind("an air temperature", "degC", -10.0, 50.0, example="20")
 PRESSURE_HPA = Kind("an air pressure", "hPa", 500.0, 1100.0, example="1013.25")
@@ -548,8 +553,12 @@ def _catalog(text: str, where: str) -> str:
         if any(c.isspace() for c in text):
             raise InputError(f"{prefix}{text!r}: a URL holds no blank")
         return text
-    PathKind("a catalog (a SQLite file or a database URL)").parse(text, where)
     from pathlib import Path
+
+    if not Path(text).expanduser().exists():
+        raise InputError(f"{prefix}{text}: no such file; `station catalog sync` creates and fills the local catalog "
+                         "(or give the shared catalog's URL, postgresql://USER@HOST/DB)")
+    PathKind("a catalog (a SQLite file or a database URL)").parse(text, where)
 
     with open(Path(text).expanduser(), "rb") as f:
         head = f.read(16)

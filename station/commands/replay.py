@@ -40,7 +40,7 @@ def parse_speed(text: str) -> float | None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("session", type=V.SESSION.argtype(), metavar="FILE.h5", help="recorded session to replay")
-    p.add_argument("--speed", type=V.SPEED_FACTOR.argtype(), default=None, metavar="1|N|max",
+    p.add_argument("--speed", type=V.REPLAY_SPEED.argtype(), default=None, metavar="1|N|max",
                    help="1 = real time, N = N times faster, max = as fast as possible (default max)")
     p.add_argument("--out", type=V.OUT_FILE.argtype(), metavar="NEW.h5", help="session file to record (default FILE.replay.h5 beside FILE)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")

@@ -47,18 +47,19 @@ from station.cli import build_parser
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / "recordings" / "calibration-6legs.h5"
 LONG = budget.PROFILE != "ci"
-SUBPROCESS_EXAMPLES = 24 * (50 if LONG else 1)
+SUBPROCESS_EXAMPLES = 16 * (50 if LONG else 1)
 """Full-path examples (about 1-2 s each, one per subprocess)."""
-GENERATED_PER_OPTION = 60 * (50 if LONG else 1)
+GENERATED_PER_OPTION = 30 * (50 if LONG else 1)
 """Hypothesis-generated strings per option at the parse level (in-process, well under 1 ms each)."""
 MEMORY_CAP_BYTES = 4 * 1024**3
 """RLIMIT_AS of each subprocess: address space, not resident memory (numpy and BLAS reserve
 hundreds of MB they never touch); a command that grows without bound fails inside it."""
-TIMEOUT_S = 60.0
+TIMEOUT_S = 30.0
 """A command still working after this (a value accepted that asks for long work, e.g. a server)
 is stopped and counted, not failed: its memory stayed within the cap meanwhile."""
-SERVERS = {"sim", "web", "ui"}
-"""Commands that run until stopped (or need a terminal): at the full path only their refusals."""
+SERVERS = {"sim", "web", "ui", "recordings"}
+"""Commands that run until stopped (or need a terminal), or for minutes whatever the value
+(`recordings` regenerates every sample): at the full path only their refusals."""
 RC1_MEANS = {"verify": "a leg did not pass", "compare": "a station flagged", "catalog": "problems found",
              "diagnose": "a self-check trial wrong", "replay": "differs from the recording",
              "sweep": "not completed", "run": "not completed", "push": "cancelled", "rollback": "cancelled"}
@@ -68,6 +69,7 @@ EXEMPT = {("web", "--host"): "the web engineer's host and authentication rule (i
 
 FIGURES: Counter = Counter()
 PEAK_KB: dict[str, int] = {}
+DEBUG_FULL_PATH = os.environ.get("STATION_CONTRACT_SHOW")  # print every full-path run (argv, exit, line)
 
 
 # -- discovery -------------------------------------------------------------------------------------
@@ -99,6 +101,8 @@ def _name(a: argparse.Action) -> str:
 PARSER = build_parser(None)
 COMMANDS = {" ".join(path): p for path, p in _commands(PARSER) if path}
 OPTIONS = [(cmd, a) for cmd, p in COMMANDS.items() for a in _valued(p)]
+FIGURES["parse: commands"] = len(COMMANDS)
+FIGURES["parse: options"] = len(OPTIONS)
 
 
 def test_every_command_and_option_is_found():
@@ -171,6 +175,8 @@ def _within(kind, value) -> str | None:
         if kind.hi is not None and (value >= kind.hi if kind.hi_open else value > kind.hi):
             return f"above {kind.range_text()}: {value!r}"
         return None
+    if isinstance(kind, V.TextKind) and kind.empty_ok and value == "":
+        return None  # "not stated" (an operator, a reason left blank)
     if not isinstance(value, str) or not value.strip() or any(ord(c) < 32 or ord(c) == 127 for c in value):
         return f"empty or control characters: {value!r}"
     if isinstance(kind, V.PathKind):
@@ -223,14 +229,9 @@ def _check_one(cmd: str, action: argparse.Action, text: str) -> None:
 
 
 def test_every_option_with_every_literal_value(place):
-    options = set()
     for cmd, action in OPTIONS:
-        options.add((cmd, _name(action)))
         for text in NUMBERS + _file_values(place):
             _check_one(cmd, action, text)
-    FIGURES["parse: commands"] = len(COMMANDS)
-    FIGURES["parse: options"] = len(options)
-    FIGURES["parse: literal values per option"] = len(NUMBERS) + len(_file_values(place))
 
 
 TEXT = st.one_of(
@@ -266,7 +267,7 @@ def _good(action: argparse.Action, place: Path, files: dict[str, Path], n: int) 
             name = kind.name
             path = (files["model"] if "model" in name else files["table"] if "table" in name else
                     files["targets"] if "targets" in name else files["config"] if "config" in name or "TOML" in name
-                    else SAMPLE)
+                    else files["csv"] if "CSV" in name else SAMPLE)
             return [str(path)] * count
         if kind.role == "in_dir":
             return [str(place)]
@@ -307,7 +308,8 @@ def _argv(cmd: str, target: argparse.Action, text: str, place: Path, files: dict
             argv += _good(pick, place, files, n)
     in_group = {id(a) for g in groups for a in g._group_actions}
     for a in _valued(parser):
-        if a is target or id(a) in in_group or not (a.required or (not a.option_strings and a.nargs not in ("?", "*"))):
+        needed = a.required or (not a.option_strings and a.nargs not in ("?", "*")) or _name(a) == "--out"
+        if a is target or id(a) in in_group or not needed:  # --out: optional to argparse, needed by sweep's run()
             continue
         argv += ([a.option_strings[0]] if a.option_strings else []) + _good(a, place, files, n)
     count = 2 if target.nargs == 2 else 1
@@ -384,6 +386,8 @@ def files(place):
     assert main(["fit", str(SAMPLE), "--legs", "1", "--out", str(made["model"])]) == 0
     made["table"] = place / "table.csv"
     assert main(["table", str(made["model"]), "--out", str(made["table"])]) == 0
+    made["csv"] = place / "export.csv"
+    assert main(["export", str(SAMPLE), "--out", str(made["csv"])]) == 0
     made["catalog"] = place / "catalog.sqlite"
     assert main(["catalog", "rebuild", str(place / "runs"), "--db", str(made["catalog"])]) == 0
     for p in place.rglob("*"):
@@ -392,13 +396,22 @@ def files(place):
 
 
 BAD = ["", "-1", "0", "nan", "inf", "1e400", "99999999999999999999", "abc", "1,5", "BINARY", "MISSING", "FOLDER",
-       "READONLY"]
-"""The issue's list of values for the full path; the file ones are placed per example."""
+       "READONLY", "EMPTY", "TEXT", "SESSION", "LOWEST", "HIGHEST", "HIGHEST", "LOWEST"]
+"""The issue's list of values for the full path; the file ones are placed per example. LOWEST and
+HIGHEST are the option's kind's own bounds, which its parser accepts: they reach the command's
+run() (a plan of 1000 cycles, 100 000 000 poses, the last seed), where the sizes are checked."""
 
 
-def _bad_text(token: str, place: Path) -> str:
+def _bad_text(token: str, action: argparse.Action, place: Path) -> str:
+    kind = getattr(action.type, "kind", None)
+    if token in ("LOWEST", "HIGHEST"):
+        bound = getattr(kind, "lo" if token == "LOWEST" else "hi", None)
+        if bound is None or getattr(kind, "lo_open" if token == "LOWEST" else "hi_open", False):
+            return "5"
+        return str(int(bound)) if getattr(kind, "integer", False) else repr(float(bound))
     return {"BINARY": str(place / "binary.bin"), "MISSING": str(place / "missing.h5"), "FOLDER": str(place / "folder"),
-            "READONLY": str(place / "readonly" / "out")}.get(token, token)
+            "READONLY": str(place / "readonly" / "out"), "EMPTY": str(place / "empty.txt"),
+            "TEXT": str(place / "targets.txt"), "SESSION": str(SAMPLE)}.get(token, token)
 
 
 FULL = [(cmd, a) for cmd, a in OPTIONS if cmd.split()[0] not in SERVERS]
@@ -408,7 +421,7 @@ FULL = [(cmd, a) for cmd, a in OPTIONS if cmd.split()[0] not in SERVERS]
 @given(st.data())
 def _full_path(place, files, data):
     cmd, action = data.draw(st.sampled_from(FULL + [(c, a) for c, a in OPTIONS if c in SERVERS]), label="option")
-    text = _bad_text(data.draw(st.sampled_from(BAD), label="value"), place)
+    text = _bad_text(data.draw(st.sampled_from(BAD), label="value"), action, place)
     if cmd in SERVERS and _convert(action, text)[0] == "accepted":
         FIGURES["subprocess: server accepted, not started"] += 1
         return
@@ -420,6 +433,10 @@ def _full_path(place, files, data):
     if peak_kb > max(PEAK_KB.values(), default=0):
         PEAK_KB[" ".join(argv)[:200]] = peak_kb
     shown = f"station {' '.join(argv)[:300]} (in {cwd.name}) -> rc {rc}\n{err[-2000:]}"
+    if DEBUG_FULL_PATH:
+        sys.__stdout__.write(shown.rstrip() + "\n\n")
+    if rc == 2 and (_name(action) in err or text[:40] in err):
+        FIGURES["subprocess: refused naming the option or value"] += 1
     if "Traceback" in err or "Traceback" in out:
         FIGURES["subprocess: tracebacks"] += 1
         raise AssertionError(f"traceback: {shown}")
@@ -450,7 +467,9 @@ def test_zz_figures(pytestconfig):
              f"({FIGURES['parse: refused']} refused, {FIGURES['parse: accepted']} accepted), "
              f"{FIGURES['parse: tracebacks']} tracebacks, {FIGURES['parse: out-of-range accepted']} out of range accepted",
              f"cli contract: {FIGURES['subprocess: runs']} subprocess runs (exit 0: {FIGURES['subprocess: exit 0']}, "
-             f"1: {FIGURES['subprocess: exit 1']}, 2: {FIGURES['subprocess: exit 2']}, stopped at {TIMEOUT_S:g} s: "
+             f"1: {FIGURES['subprocess: exit 1']}, 2: {FIGURES['subprocess: exit 2']} of which "
+             f"{FIGURES['subprocess: refused naming the option or value']} naming the option or value, stopped at "
+             f"{TIMEOUT_S:g} s: "
              f"{FIGURES['subprocess: stopped at the time limit']}), {FIGURES['subprocess: tracebacks']} tracebacks, "
              f"largest peak memory {peak / 1024:.0f} MB (cap {MEMORY_CAP_BYTES / 1024**3:g} GB of address space)"]
     reporter = pytestconfig.pluginmanager.get_plugin("terminalreporter")
