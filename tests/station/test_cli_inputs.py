@@ -177,3 +177,19 @@ def test_a_read_only_folder_as_an_unprivileged_user_is_named_with_what_to_do(arg
     assert rc == 2 and len(lines) == 1 and "Traceback" not in err, err
     assert str(ro) in lines[0] and "permission denied" in lines[0]
     assert "a folder you can write" in lines[0]
+
+
+def test_the_config_and_the_command_line_bound_a_value_alike(tmp_path, capsys):
+    """[sim] seed and --seed, [metrology] co2_ppm and recorrect --co2-ppm: one kind each, one bound."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[drive]\nurl = "sim"\n[interferometer]\nport = "sim"\n[sim]\nseed = -5\n')
+    assert main(["sweep", "--config", str(cfg), "--out", str(tmp_path / "s.h5")]) == 2
+    assert f"{cfg}: [sim] seed: -5 is outside 0 .. 4294967295" in one_line(capsys)[0]
+    assert main(["sweep", "--sim", "--seed", "-5", "--out", str(tmp_path / "s.h5")]) == 2
+    assert "argument --seed: '-5' is outside 0 .. 4294967295" in one_line(capsys)[0]
+    cfg.write_text('[metrology]\nco2_ppm = 9999.0\n')
+    assert main(["iso230", str(SAMPLE), "--config", str(cfg)]) == 2
+    assert "co2_ppm = 9999.0: must be within 0..5000" in one_line(capsys)[0]
+    assert main(["recorrect", str(SAMPLE), "--out", str(tmp_path / "r.h5"), "--co2-ppm", "9999"]) == 2
+    assert "argument --co2-ppm: '9999' is outside 0 .. 5000 ppm" in one_line(capsys)[0]
+    assert not (tmp_path / "s.h5").exists() and not (tmp_path / "r.h5").exists()
