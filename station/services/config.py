@@ -455,10 +455,8 @@ def _iso_date(p: Path, value: Any, key: str = "calibration_date") -> str:
     if text == "":
         return ""
     try:
-        _dt.date.fromisoformat(text)
-        if len(text) != 10:
-            raise ValueError
-    except ValueError:
+        V.DATE.parse(text)  # the one date rule, as `station legs --since` reads it
+    except InputError:
         raise InputError(f"{p}: [metrology] {key} = {value!r}: not an ISO date; write it as "
                          "YYYY-MM-DD, e.g. 2026-03-14") from None
     return text
