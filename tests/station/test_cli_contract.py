@@ -345,7 +345,8 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
-def run_station(argv: list[str], cwd: Path, env_home: Path) -> tuple[int | None, str, str, int]:
+def run_station(argv: list[str], cwd: Path, env_home: Path, timeout_s: float = TIMEOUT_S
+                ) -> tuple[int | None, str, str, int]:
     """(exit code or None when stopped at TIMEOUT_S, stdout, stderr, peak resident memory kB) of
     `station ARGV` in a child, unprivileged and capped at MEMORY_CAP_BYTES of address space."""
     code = CHILD.format(cap=MEMORY_CAP_BYTES)
@@ -355,7 +356,7 @@ def run_station(argv: list[str], cwd: Path, env_home: Path) -> tuple[int | None,
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen([*_unprivileged(), "-c", code, *argv], cwd=cwd, env=env, stdout=out, stderr=err,
                                 stdin=subprocess.DEVNULL)
-        t_end = time.monotonic() + TIMEOUT_S
+        t_end = time.monotonic() + timeout_s
         status = None
         while status is None:
             pid, st_, usage = os.wait4(proc.pid, os.WNOHANG)

@@ -156,7 +156,7 @@ def test_the_platform_estimate_is_not_below_what_a_run_takes(shared):
     poses = 20_000
     place = shared
     rc, out, err, peak_kb = run_station(["platform", str(SAMPLE), "--poses", str(poses), "--out", str(place / "p")],
-                                        place, place)
+                                        place, place, timeout_s=600)
     assert rc == 0, err
     assert f"platform: {poses} poses: about" in out
     assert peak_kb * 1024 < platform_estimate(poses).memory_bytes, (peak_kb, platform_estimate(poses))
@@ -172,7 +172,7 @@ def test_a_read_only_folder_as_an_unprivileged_user_is_named_with_what_to_do(arg
     assert main(["table", str(model), "--out", str(table)]) == 0
     table.chmod(0o644)
     ro.chmod(0o555)
-    rc, out, err, _ = run_station([a.format(table=table) for a in argv], ro, shared)
+    rc, out, err, _ = run_station([a.format(table=table) for a in argv], ro, shared, timeout_s=600)
     lines = [x for x in err.splitlines() if x.strip()]
     assert rc == 2 and len(lines) == 1 and "Traceback" not in err, err
     assert str(ro) in lines[0] and "permission denied" in lines[0]
