@@ -260,6 +260,18 @@ def _prefix(where: str) -> str:
     return f"{where}: " if where else ""
 
 
+def _expanded(text: str, where: str, name: str):
+    """`text` as a Path with ~ expanded; `~nobody-known/x` is refused (pathlib raises RuntimeError:
+    found by tests/station/test_cli_contract.py's long profile with `--db ~0`)."""
+    from pathlib import Path
+
+    try:
+        return Path(text).expanduser()
+    except RuntimeError:
+        raise InputError(f"{_prefix(where)}{text}: no user {text.split('/')[0][1:]!r} whose home folder '~' could "
+                         f"name; give {name} as a full path") from None
+
+
 @dataclass(frozen=True)
 class TextKind:
     """A name or a label typed as text: 1..`max_len` printable characters (no control character,
@@ -434,7 +446,7 @@ class PathKind:
             raise InputError(f"{prefix}empty; give {self.name}" + (f", e.g. {self.example}" if self.example else ""))
         if _CONTROL_RE.search(s):  # a typed path never holds one: a paste or a slip, refused as typed
             raise InputError(f"{prefix}{s!r} holds a control character; give {self.name}")
-        p = Path(s).expanduser()
+        p = _expanded(s, where, self.name)
         if self.role == "name":
             return s
         try:
@@ -555,12 +567,12 @@ def _catalog(text: str, where: str) -> str:
         return text
     from pathlib import Path
 
-    if not Path(text).expanduser().exists():
+    if not _expanded(text, where, "the catalog").exists():
         raise InputError(f"{prefix}{text}: no such file; `station catalog sync` creates and fills the local catalog "
                          "(or give the shared catalog's URL, postgresql://USER@HOST/DB)")
     PathKind("a catalog (a SQLite file or a database URL)").parse(text, where)
 
-    with open(Path(text).expanduser(), "rb") as f:
+    with open(_expanded(text, where, "the catalog"), "rb") as f:
         head = f.read(16)
     if head != _SQLITE_MAGIC:
         raise InputError(f"{prefix}{text} is not a catalog (not an SQLite file); give the catalog's SQLite file "

@@ -147,7 +147,8 @@ NUMBERS = ["", " ", "-5", "-1", "0", "-0", "0.0", "1", "5", "12.5", "nan", "NaN"
            "1e308", "99999999999999999999", "4294967296", "70000", "1,5", "1.5.2", "0x10", "1_000", "1e-9",
            "abc", "--", "٣", "\u00a0", "1 000", "5mm", "2026-02-30", "2026-03-14", "today", "all", "1-6", "6-1",
            "1,,2", "0-3", "auto", "none", "max", "HX-0042", "3=HX-0042", "A/../HX-0042", "a\x01b", "x" * 5000,
-           "sqlite:///nope.sqlite", "postgresql://u:p@127.0.0.1:5999/x", "ftp://x", "fleet:HX300", "sim:default"]
+           "sqlite:///nope.sqlite", "postgresql://u:p@127.0.0.1:5999/x", "ftp://x", "fleet:HX300", "sim:default",
+           "~0", "~0/x.h5", "~/x.h5"]
 """Literal values tried for every option (the issue's list and the slips seen at the bench)."""
 
 
