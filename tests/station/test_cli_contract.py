@@ -50,8 +50,9 @@ LONG = budget.PROFILE != "ci"
 SUBPROCESS_EXAMPLES = int(os.environ.get("STATION_CONTRACT_RUNS", 16 * (50 if LONG else 1)))
 """Full-path examples (about 1-2 s of CPU each, one per subprocess); STATION_CONTRACT_RUNS=N
 sets another number (the long profile's 800 take about 40 min on a busy 2-core machine)."""
-GENERATED_PER_OPTION = 30 * (50 if LONG else 1)
-"""Hypothesis-generated strings per option at the parse level (in-process, well under 1 ms each)."""
+GENERATED_PER_OPTION = int(os.environ.get("STATION_CONTRACT_STRINGS", 30 * (50 if LONG else 1)))
+"""Hypothesis-generated strings per option at the parse level (in-process, about 1 ms each with
+hypothesis' own work); STATION_CONTRACT_STRINGS=N sets another number."""
 MEMORY_CAP_BYTES = 4 * 1024**3
 """RLIMIT_AS of each subprocess: address space, not resident memory (numpy and BLAS reserve
 hundreds of MB they never touch); a command that grows without bound fails inside it."""
