@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
 from pathlib import Path
@@ -30,11 +32,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        ("sync", "index unindexed files and forward the backlog to the shared catalog"),
                        ("status", "where the catalog is, how many records, backlog, schema revision")):
         q = sub.add_parser(name, help=text, description=text)
-        q.add_argument("--config", metavar="C", help="station TOML ([station] recordings_dir, [catalog])")
+        q.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML ([station] recordings_dir, [catalog])")
         if name in ("rebuild", "check", "sync"):
-            q.add_argument("dirs", nargs="*", metavar="DIR", help="folders of station files (default: recordings_dir)")
+            q.add_argument("dirs", type=V.IN_DIR.argtype(), nargs="*", metavar="DIR", help="folders of station files (default: recordings_dir)")
         if name == "rebuild":
-            q.add_argument("--db", metavar="FILE.sqlite", help="write the rebuilt index to this file instead")
+            q.add_argument("--db", type=V.OUT_FILE.argtype(), metavar="FILE.sqlite", help="write the rebuilt index to this file instead")
         if name in ("check", "status"):
             q.add_argument("--json", action="store_true", help="print JSON")
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 from pathlib import Path
 
@@ -27,26 +29,40 @@ DESCRIPTION = (
 )
 
 
+_SESSION = V.SESSION.argtype()
+
+
+def _session_or_approve(text: str) -> str:
+    """The word `approve` (the approval step: `station certificate approve NUMBER --by NAME`), else a
+    session file read as SESSION.h5 is everywhere."""
+    return text if text == "approve" else _SESSION(text)
+
+
+_session_or_approve.kind = V.SESSION  # the contract test reads the kind behind an option
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     which = p.add_mutually_exclusive_group(required=True)
-    which.add_argument("session", metavar="SESSION.h5", nargs="?", help="the calibration session (as found); "
-                       "or `approve` followed by a report number")
-    p.add_argument("number", metavar="REPORT_NO", nargs="?", help="after `approve`: the certificate to approve")
-    p.add_argument("--by", metavar="NAME", help="with approve: who approves ([lab] authoriser)")
-    which.add_argument("--serial", metavar="SERIAL", help="the leg's serial: its sessions and table found in the "
+    which.add_argument("session", type=_session_or_approve, metavar="SESSION.h5", nargs="?",
+                       help="the calibration session (as found); or `approve` followed by a report number")
+    p.add_argument("number", type=V.REPORT_NO.argtype(), metavar="REPORT_NO", nargs="?",
+                   help="after `approve`: the certificate to approve")
+    p.add_argument("--by", type=V.NAME_TEXT.argtype(), metavar="NAME", help="with approve: who approves ([lab] authoriser)")
+    which.add_argument("--serial", type=V.SERIAL.argtype(), metavar="SERIAL", help="the leg's serial: its sessions and table found in the "
                        "catalog (latest calibration, the latest verification after it, the last table pushed)")
-    p.add_argument("--catalog", metavar="URL", help="with --serial: catalog URL or SQLite file (default: the "
+    p.add_argument("--catalog", type=V.CATALOG.argtype(), metavar="URL", help="with --serial: catalog URL or SQLite file (default: the "
                    "config's shared catalog when set and reachable, else its local one)")
-    p.add_argument("--as-left", metavar="VERIFY_SESSION.h5", help="the verification session (as left)")
-    p.add_argument("--table", metavar="TABLE.csv", help="the compensation table pushed (its sha256 is stated)")
-    p.add_argument("--leg", type=int, metavar="N", help="the leg (needed when the session holds several)")
-    p.add_argument("--out", metavar="DIR", help="certificates folder (default <recordings_dir>/certificates)")
-    p.add_argument("--config", metavar="C", help="station TOML: [lab], [station] recordings_dir, [tolerances]")
-    p.add_argument("--customer", help="the customer (default [lab] customer; a revision keeps the previous one)")
-    p.add_argument("--customer-contact", metavar="TEXT", help="the customer's contact (default [lab] customer_contact)")
-    p.add_argument("--received", metavar="DATE", help="the date the item was received, YYYY-MM-DD")
-    p.add_argument("--revise", metavar="REPORT_NO", help="issue the next revision of this certificate")
-    p.add_argument("--reason", default="", help="with --revise: what the revision corrects")
+    p.add_argument("--as-left", type=V.SESSION.argtype(), metavar="VERIFY_SESSION.h5", help="the verification session (as left)")
+    p.add_argument("--table", type=V.TABLE.argtype(), metavar="TABLE.csv", help="the compensation table pushed (its sha256 is stated)")
+    p.add_argument("--leg", type=V.LEG.argtype(), metavar="N", help="the leg (needed when the session holds several)")
+    p.add_argument("--out", type=V.OUT_DIR.argtype(), metavar="DIR", help="certificates folder (default <recordings_dir>/certificates)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML: [lab], [station] recordings_dir, [tolerances]")
+    p.add_argument("--customer", type=V.NAME_TEXT.argtype(), help="the customer (default [lab] customer; a revision keeps the previous one)")
+    p.add_argument("--customer-contact", type=V.NAME_TEXT.argtype(), metavar="TEXT",
+                   help="the customer's contact (default [lab] customer_contact)")
+    p.add_argument("--received", type=V.DATE.argtype(), metavar="DATE", help="the date the item was received, YYYY-MM-DD")
+    p.add_argument("--revise", type=V.REPORT_NO.argtype(), metavar="REPORT_NO", help="issue the next revision of this certificate")
+    p.add_argument("--reason", type=V.NAME_OR_EMPTY.argtype(), default="", help="with --revise: what the revision corrects")
 
 
 def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:

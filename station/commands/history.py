@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
+
+from procedures.engine.errors import InputError
 
 from station.catalog.history import history, row_detail, stage_label, value_with_u
 from station.catalog.store import catalog_of, reading_engine
@@ -21,26 +25,23 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("serial", metavar="SERIAL", help="the leg's serial number, e.g. HX-0042")
-    p.add_argument("--config", metavar="C", help="station TOML ([catalog] url, calibration_interval_days)")
+    p.add_argument("serial", type=V.SERIAL.argtype(), metavar="SERIAL", help="the leg's serial number, e.g. HX-0042")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML ([catalog] url, calibration_interval_days)")
     p.add_argument("--local", action="store_true", help="read this station's local catalog, not the shared one")
     p.add_argument("--json", action="store_true", help="print JSON")
 
 
 def run(args) -> int:
-    from station.services.serials import check_serial  # noqa: PLC0415  (the one serial grammar)
-
-    check_serial(args.serial, "SERIAL")
     cfg = load_config(args.config)
     engine, where = reading_engine(catalog_of(cfg), args.local)
     h = history(engine, args.serial, cfg.catalog.calibration_interval_days, cfg.catalog.min_drift_interval_days)
+    if not h.rows:  # a serial the catalog never saw: a typo, refused as `station legs --type NOPE` is (exit 2)
+        raise InputError(f"{args.serial}: no records of a leg with this serial in the catalog ({where}); "
+                         "`station legs` lists the serials it knows")
     if args.json:
         print(json.dumps(h.to_json(), indent=2))
-        return 0 if h.rows else 1
+        return 0
     print(where)
-    if not h.rows:
-        print(f"no records of a leg with serial {args.serial!r}")
-        return 1
     info = ", ".join(f"{k} {v}" for k, v in h.leg_info.items() if v)
     print(f"leg {args.serial}" + (f" ({info})" if info else ""))
     print(f"{'time (UTC)':<27} {'kind':<12} {'stage':<10} {'station':<10} {'outcome':<10} {'E um':>12} {'B um':>12} "

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import tempfile
 from pathlib import Path
@@ -28,17 +30,17 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("csv", metavar="FILE.csv", help="interchange CSV to read")
-    p.add_argument("--out", required=True, metavar="FILE.h5", help="session file to write")
-    p.add_argument("--operator", default="", help="operator name stored in the session")
+    p.add_argument("csv", type=V.CSV_IN.argtype(), metavar="FILE.csv", help="interchange CSV to read")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), required=True, metavar="FILE.h5", help="session file to write")
+    p.add_argument("--operator", type=V.NAME_OR_EMPTY.argtype(), default="", help="operator name stored in the session")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
-    p.add_argument("--legs", default="1-6", help="legs the file holds, e.g. 1-6 or 1,3 (default 1-6); "
+    p.add_argument("--legs", type=V.LEGS.argtype(), default="1-6", help="legs the file holds, e.g. 1-6 or 1,3 (default 1-6); "
                    "a point of another leg is refused")
-    p.add_argument("--map", metavar="MAP.toml", help="mapping file for another software's layout (docs/import.md)")
+    p.add_argument("--map", type=V.TOML_FILE.argtype(), metavar="MAP.toml", help="mapping file for another software's layout (docs/import.md)")
     p.add_argument("--accept-implausible", action="store_true",
                    help="keep values that look like a unit slip (a degC value that looks like degF, an um value that "
                         "looks like nm): refused by default, naming line and field")
-    p.add_argument("--profile", metavar="PROFILE.toml",
+    p.add_argument("--profile", type=V.PROFILE.argtype(), metavar="PROFILE.toml",
                    help="drive profile whose soft limits bound target_mm (default: the built-in profile)")
     p.add_argument("--serial", action="append", metavar="[LEG=]SERIAL",
                    help="the leg's serial (LEG=SERIAL for each leg of a file of several; repeat)")

@@ -6,6 +6,8 @@ confirmation prompt, the report) is in station/commands/_table_cli.py. The work 
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 
 from procedures.engine import events as ev
@@ -51,7 +53,7 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("table", metavar="TABLE.csv", help="table CSV from `station table` (it may hold several legs)")
+    p.add_argument("table", type=V.TABLE_TO_PUSH.argtype(), metavar="TABLE.csv", help="table CSV from `station table` (it may hold several legs)")
     add_drive_arguments(p, several=True)
     p.add_argument("--accept-implausible", action="store_true",
                    help="push corrections beyond 100 um (refused by default: most likely nm in the um columns)")

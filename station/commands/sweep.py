@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import math
 import shlex
@@ -35,33 +37,33 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--sim", action="store_true", help="use the simulated rig (default without --config)")
-    where.add_argument("--config", help="station TOML naming the real drives and interferometer")
-    p.add_argument("--out", help="session file to write (FILE.h5)")
+    where.add_argument("--config", type=V.CONFIG.argtype(), help="station TOML naming the real drives and interferometer")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), help="session file to write (FILE.h5)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")
-    p.add_argument("--resume", metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
+    p.add_argument("--resume", type=V.SESSION_TO_RESUME.argtype(), metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
     p.add_argument("--plan", choices=PLAN_KINDS, default="iso230",
                    help="sweep plan (default iso230); onthefly: constant-speed passes captured at every step "
                         "(0.5 mm), onthefly-adaptive: the same, stopping once the table stops improving")
-    p.add_argument("--legs", default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
-    p.add_argument("--cycles", type=int, help="bidirectional cycles (default: 5 iso230, 6 paper, 6 onthefly, "
+    p.add_argument("--legs", type=V.LEGS.argtype(), default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
+    p.add_argument("--cycles", type=V.CYCLES.argtype(), help="bidirectional cycles (default: 5 iso230, 6 paper, 6 onthefly, "
                                                "at most 8 onthefly-adaptive)")
     spacing = p.add_mutually_exclusive_group()
-    spacing.add_argument("--step", type=float, metavar="MM", help="uniform target spacing in mm (on the fly: "
+    spacing.add_argument("--step", type=V.STEP_MM.argtype(), metavar="MM", help="uniform target spacing in mm (on the fly: "
                                                                    "capture spacing, default 0.5)")
-    spacing.add_argument("--targets", metavar="FILE", help="targets in mm, one per line or a target_mm column")
-    p.add_argument("--n-targets", type=int, help="number of irregularly spaced ISO 230-2 targets (default 11)")
-    p.add_argument("--min-mm", type=float, default=-90.0, help="lowest target, mm (default -90)")
-    p.add_argument("--max-mm", type=float, default=90.0, help="highest target, mm (default +90)")
-    p.add_argument("--dwell", type=float, default=1.0, metavar="S", help="settle time per target, s (default 1)")
-    p.add_argument("--averaging", type=float, default=0.1, metavar="S", help="interferometer averaging, s")
-    p.add_argument("--overrun", type=float, default=2.0, metavar="MM", help="overrun before reversing, mm")
-    p.add_argument("--time-scale", type=float, metavar="S",
+    spacing.add_argument("--targets", type=V.TARGETS_FILE.argtype(), metavar="FILE", help="targets in mm, one per line or a target_mm column")
+    p.add_argument("--n-targets", type=V.TARGET_COUNT.argtype(), help="number of irregularly spaced ISO 230-2 targets (default 11)")
+    p.add_argument("--min-mm", type=V.POSITION_MM.argtype(), default=-90.0, help="lowest target, mm (default -90)")
+    p.add_argument("--max-mm", type=V.POSITION_MM.argtype(), default=90.0, help="highest target, mm (default +90)")
+    p.add_argument("--dwell", type=V.TIME_S.argtype(), default=1.0, metavar="S", help="settle time per target, s (default 1)")
+    p.add_argument("--averaging", type=V.TIME_S.argtype(), default=0.1, metavar="S", help="interferometer averaging, s")
+    p.add_argument("--overrun", type=V.OVERRUN_MM.argtype(), default=2.0, metavar="MM", help="overrun before reversing, mm")
+    p.add_argument("--time-scale", type=V.TIME_SCALE.argtype(), metavar="S",
                    help="simulated rig only: real seconds per simulated second (0 = no waiting; default 0)")
-    p.add_argument("--seed", type=int, help="simulated rig only: plant seed")
-    p.add_argument("--serial", action="append", default=[], metavar="LEG=SERIAL",
+    p.add_argument("--seed", type=V.SEED.argtype(), help="simulated rig only: plant seed")
+    p.add_argument("--serial", type=V.LEG_SERIAL.argtype(), action="append", default=[], metavar="LEG=SERIAL",
                    help="the serial number of a leg, e.g. --serial 3=HX-0042 (repeatable); recorded in the session "
                         "and checked by push")
-    p.add_argument("--serials", metavar="FILE", help="CSV leg,serial[,part_number,leg_type,screw_lot] with the legs' "
+    p.add_argument("--serials", type=V.SERIALS_FILE.argtype(), metavar="FILE", help="CSV leg,serial[,part_number,leg_type,screw_lot] with the legs' "
                                                      "serials (default: [station] serials_file)")
     p.add_argument("--yes", action="store_true",
                    help="sweep a leg whose compensation table is active without asking (the session records the "
@@ -133,6 +135,9 @@ def run(args) -> int:
                              f"--resume {args.out} to finish it; nothing was written")
         out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
         plan = build_plan(args, cfg.limits)  # sized (and refused when huge) before anything connects
+        from procedures.acquisition.plan_size import plan_size
+
+        print(f"plan: {plan_size(plan_spec(args)).describe()}")
         if args.force and out.exists():
             out.unlink()  # --force: the new session replaces it (after the plan was accepted)
     for note in plan.notes:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import sys
 from dataclasses import replace
@@ -34,26 +36,26 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.json", help="model written by `station fit`")
-    p.add_argument("--out", required=True, metavar="TABLE.csv|DIR",
+    p.add_argument("model", type=V.MODEL.argtype(), metavar="MODEL.json", help="model written by `station fit`")
+    p.add_argument("--out", type=V.OUT_PATH.argtype(), required=True, metavar="TABLE.csv|DIR",
                    help="CSV file; for --format linuxcnc a directory (joint0.comp, ...) or NAME.comp (NAME_joint0.comp, ...)")
-    p.add_argument("--step", type=float, metavar="MM", help="table step, mm (default: the recording's spacing, "
+    p.add_argument("--step", type=V.STEP_MM.argtype(), metavar="MM", help="table step, mm (default: the recording's spacing, "
                    "coarsened to fit the point limit)")
     p.add_argument("--format", choices=["csv", "linuxcnc", *controllers.FORMATS], default="csv",
                    help="output format (default csv; controllers: docs/controllers.md)")
     p.add_argument("--siemens-mode", choices=["cec", "enc_comp"], default="cec",
                    help="siemens840d: direction-dependent CEC tables (default) or one $AA_ENC_COMP table (mean of both directions)")
-    p.add_argument("--reference-mm", type=float, default=0.0, metavar="MM",
+    p.add_argument("--reference-mm", type=V.POSITION_MM.argtype(), default=0.0, metavar="MM",
                    help="siemens840d: the axis reference point, where the table is made zero (default 0, mid-stroke)")
-    p.add_argument("--axis-name", default="X", help="heidenhain: the axis column's name, as in CfgAxes/axisList (default X)")
+    p.add_argument("--axis-name", type=V.AXIS_NAME.argtype(), default="X", help="heidenhain: the axis column's name, as in CfgAxes/axisList (default X)")
     p.add_argument("--ecmc-direction", choices=["mean", "fwd", "rev"], default="mean",
                    help="ecmc: one table for both directions: their mean (default) or one direction's error")
-    p.add_argument("--comp-type", type=int, choices=[0, 1], default=0,
+    p.add_argument("--comp-type", type=V.BANK_TYPE.argtype(), choices=[0, 1], default=0,
                    help="LinuxCNC COMP_FILE_TYPE: 0 = nominal, actual moving +, actual moving - (default); "
                    "1 = nominal, forward trim, reverse trim")
-    p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
-    p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
-    p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
+    p.add_argument("--profile", type=V.PROFILE.argtype(), metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
+    p.add_argument("--legs", type=V.LEGS.argtype(), help="only these legs, e.g. 1-3 (default: all in the model)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose catalog indexes the file written "
                    "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
     p.add_argument("--force", action="store_true", help="replace the output file(s) if they exist (default: refused)")
     p.add_argument("--accept-implausible", action="store_true",

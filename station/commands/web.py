@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 from pathlib import Path
 
 from station.catalog import db
@@ -20,11 +22,11 @@ DESCRIPTION = (
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--catalog", metavar="URL", help="catalog URL or SQLite file (default: the config's shared "
+    p.add_argument("--catalog", type=V.CATALOG.argtype(), metavar="URL", help="catalog URL or SQLite file (default: the config's shared "
                    "catalog when set, else its local one)")
-    p.add_argument("--config", metavar="C", help="station TOML ([catalog], [tolerances.TYPE], recordings_dir)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML ([catalog], [tolerances.TYPE], recordings_dir)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
-    p.add_argument("--port", type=int, default=8800, help="port (default 8800)")
+    p.add_argument("--port", type=V.PORT.argtype(), default=8800, help="port (default 8800)")
     p.add_argument("--hash-password", action="store_true", help="read a password (typed twice, not echoed; or "
                    "the first line of a pipe) and print its argon2id hash for [web.users.NAME] password_hash; "
                    "serves nothing")

@@ -107,6 +107,7 @@ from procedures.io.numbers import NotANumber, finite_float
 from procedures.metrology import defaults as MD
 from procedures.metrology.thermal import Material
 from procedures.acquisition.plan_size import PlanLimits
+from station import values as V  # one parser per kind of value, as on the command line (issue 31)
 
 
 LEG_COUNT = 6
@@ -419,31 +420,39 @@ _RANGES = {
 }
 
 
-# (section, key) -> (lowest, highest, what the value is): both bounds inclusive; the physical
-# sense of the metrology numbers (a value outside is a typo or a unit mix-up, never a setting)
-_BOUNDS = {
-    ("metrology", "reference_temp_c"): (-10.0, 50.0, "the reference temperature of lengths, degC (ISO 1: 20)"),
-    ("metrology", "wavelength_nm"): (400.0, 1700.0, "the laser's vacuum wavelength in nm (HeNe: 632.991); "
-                                     "the refractive-index equations hold over 400..1700 nm"),
-    ("metrology", "co2_ppm"): (0.0, 5000.0, "CO2 content of the air in ppm (about 450 outdoors)"),
-    ("metrology", "dead_path_mm"): (0.0, 10000.0, "laser-to-zero beam path in mm"),
-    ("metrology", "laser_accuracy_ppm"): (0.0, 100.0, "the laser's stated accuracy in ppm, k = 2"),
-    ("metrology", "laser_resolution_nm"): (0.0, 10000.0, "the laser's resolution in nm"),
-    ("metrology", "air_temp_u_c"): (0.0, 10.0, "standard uncertainty of the air temperature, K"),
-    ("metrology", "pressure_u_pa"): (0.0, 10000.0, "standard uncertainty of the air pressure, Pa"),
-    ("metrology", "humidity_u_pct"): (0.0, 100.0, "standard uncertainty of the relative humidity, %RH (0..100)"),
-    ("metrology", "material_temp_u_c"): (0.0, 10.0, "standard uncertainty of the material temperature, K"),
-    ("metrology", "misalignment_mm"): (0.0, 100.0, "lateral beam offset over the stroke, mm"),
-    ("metrology", "abbe_offset_mm"): (0.0, 1000.0, "Abbe offset between beam and leg axis, mm"),
-    ("metrology", "abbe_angle_u_urad"): (0.0, 10000.0, "standard uncertainty of the angular error, urad"),
-    ("legs", "expansion_um_m_k"): (0.0, 50.0, "the linear expansion coefficient in um/m/K (steel 11.5, "
-                                   "aluminium 23; none above 50)"),
-    ("legs", "expansion_u_um_m_k"): (0.0, 50.0, "the standard uncertainty of the expansion coefficient, um/m/K"),
-    ("legs", "fixed_point_mm"): (-5000.0, 5000.0, "target_mm where the leg is fixed, mm from mid-stroke"),
+# (section, key) -> the kind of station/values.py its command-line option uses (`--seed`, `--time-scale`)
+_KINDS = {
+    ("sim", "seed"): V.SEED,
+    ("sim", "time_scale"): V.TIME_SCALE,
 }
 
 
-def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, float, str] | None) -> float:
+# (section, key) -> (its kind in station/values.py, what the value is): the kind's bounds, both
+# inclusive, are the physical sense of the metrology numbers (a value outside is a typo or a unit
+# mix-up, never a setting), the same ones `station recorrect --co2-ppm` etc. apply (issue 31)
+_BOUNDS = {
+    ("metrology", "reference_temp_c"): (V.REFERENCE_TEMP_C, "the reference temperature of lengths, degC (ISO 1: 20)"),
+    ("metrology", "wavelength_nm"): (V.WAVELENGTH_NM, "the laser's vacuum wavelength in nm (HeNe: 632.991); "
+                                     "the refractive-index equations hold over 400..1700 nm"),
+    ("metrology", "co2_ppm"): (V.CO2_PPM, "CO2 content of the air in ppm (about 450 outdoors)"),
+    ("metrology", "dead_path_mm"): (V.DEAD_PATH_MM, "laser-to-zero beam path in mm"),
+    ("metrology", "laser_accuracy_ppm"): (V.LASER_ACCURACY_PPM, "the laser's stated accuracy in ppm, k = 2"),
+    ("metrology", "laser_resolution_nm"): (V.LASER_RESOLUTION_NM, "the laser's resolution in nm"),
+    ("metrology", "air_temp_u_c"): (V.AIR_TEMP_U_C, "standard uncertainty of the air temperature, K"),
+    ("metrology", "pressure_u_pa"): (V.PRESSURE_U_PA, "standard uncertainty of the air pressure, Pa"),
+    ("metrology", "humidity_u_pct"): (V.HUMIDITY_U_PCT, "standard uncertainty of the relative humidity, %RH (0..100)"),
+    ("metrology", "material_temp_u_c"): (V.MATERIAL_TEMP_U_C, "standard uncertainty of the material temperature, K"),
+    ("metrology", "misalignment_mm"): (V.MISALIGNMENT_MM, "lateral beam offset over the stroke, mm"),
+    ("metrology", "abbe_offset_mm"): (V.ABBE_OFFSET_MM, "Abbe offset between beam and leg axis, mm"),
+    ("metrology", "abbe_angle_u_urad"): (V.ABBE_ANGLE_U_URAD, "standard uncertainty of the angular error, urad"),
+    ("legs", "expansion_um_m_k"): (V.EXPANSION_UM_M_K, "the linear expansion coefficient in um/m/K (steel 11.5, "
+                                   "aluminium 23; none above 50)"),
+    ("legs", "expansion_u_um_m_k"): (V.EXPANSION_UM_M_K, "the standard uncertainty of the expansion coefficient, um/m/K"),
+    ("legs", "fixed_point_mm"): (V.FIXED_POINT_MM, "target_mm where the leg is fixed, mm from mid-stroke"),
+}
+
+
+def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[V.Kind, str] | None) -> float:
     """`value` as a finite float within `bounds`, else InputError naming file, section and key."""
     try:
         v = finite_float(value, text_ok=False)
@@ -452,7 +461,8 @@ def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, floa
             raise InputError(f"{p}: [{where}] {key}: expected a number, got {value!r}") from None
         raise InputError(f"{p}: [{where}] {key} = {value!r}: must be a finite number") from None
     if bounds is not None:
-        low, high, what = bounds
+        kind, what = bounds
+        low, high = kind.lo, kind.hi
         if not low <= v <= high:
             raise InputError(f"{p}: [{where}] {key} = {value!r}: must be within {low:g}..{high:g} ({what})")
     return v
@@ -465,10 +475,8 @@ def _iso_date(p: Path, value: Any, key: str = "calibration_date") -> str:
     if text == "":
         return ""
     try:
-        _dt.date.fromisoformat(text)
-        if len(text) != 10:
-            raise ValueError
-    except ValueError:
+        V.DATE.parse(text)  # the one date rule, as `station legs --since` reads it
+    except InputError:
         raise InputError(f"{p}: [metrology] {key} = {value!r}: not an ISO date; write it as "
                          "YYYY-MM-DD, e.g. 2026-03-14") from None
     return text
@@ -584,6 +592,8 @@ def load_config(path: str | Path | None) -> StationConfig:
                 if not (v > low if strict else v >= low) or v != v or v in (float("inf"), float("-inf")):
                     raise InputError(f"{p}: [{section}] {key} = {value!r}: must be a number {'>' if strict else '>='} "
                                      f"{low:g} ({what})")
+            if (section, key) in _KINDS:  # the same kind as the command-line option of that value
+                _KINDS[section, key].parse(getattr(target, key), f"{p}: [{section}] {key}")
             if (section, key) in (("drive", "url"), ("interferometer", "port")):
                 cfg.named = cfg.named | {f"{section}.{key}"}
     if "metrology" in data:

@@ -175,18 +175,9 @@ _KIND_LIMIT = {"beam_break": "beam_retries", "drive_fault": "drive_retries"}  # 
 def parse_speed(text: str) -> float | None:
     """'max' -> None (as fast as possible); '1' -> real time; '10' -> ten times faster.
     InputError saying what to type otherwise."""
-    t = str(text).strip().lower()
-    if t in ("max", "inf", "fastest"):
-        return None
-    try:
-        value = finite_float(t)
-    except NotANumber as exc:
-        if exc.parsed is None:
-            raise InputError(f"{text!r}: give a speed factor (1 = real time, 10 = ten times faster) or 'max'") from None
-        value = exc.parsed  # NaN or inf: refused below
-    if not (math.isfinite(value) and value > 0):
-        raise InputError(f"{text!r}: the speed factor must be > 0 (or 'max')")
-    return value
+    from station.values import REPLAY_SPEED  # the one parser of a speed factor, as `station replay --speed`
+
+    return REPLAY_SPEED.parse(text)
 
 
 def retry_policy_of(session: Session, base: RetryPolicy = RetryPolicy()) -> RetryPolicy:

@@ -144,7 +144,8 @@ def test_commands_history_legs_check_json(runs, tmp_path, capsys):
     os.remove(runs / "cal1.h5")
     assert main(["catalog", "check", "--config", str(cfg)]) == 1
     assert "missing: session" in capsys.readouterr().out
-    assert main(["history", "NOPE", "--config", str(cfg)]) == 1
+    assert main(["history", "NOPE", "--config", str(cfg)]) == 2  # an unknown serial: one line, as legs --type NOPE
+    assert "NOPE: no records of a leg with this serial in the catalog" in capsys.readouterr().err
 
 
 def test_an_unwritable_catalog_never_fails_the_work(runs, tmp_path, caplog):

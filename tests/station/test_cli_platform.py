@@ -190,7 +190,9 @@ def test_platform_applies_a_model_to_the_recordings_error_on_the_models_basis(tm
         assert main(["fit", str(SAMPLE), "--out", str(model_path), *extra]) == 0
         capsys.readouterr()
         assert main(["platform", str(model_path), "--poses", "300", "--seed", "3", "--out", str(out)]) == 0
-        first = capsys.readouterr().out.splitlines()[0]
+        printed = capsys.readouterr().out.splitlines()
+        assert printed[0] == "platform: 300 poses: about 152 MB of memory and 2 s"  # the size, before the work
+        first = printed[1]
         summary = json.loads((out / "platform_summary.json").read_text())
         assert summary["inputs"]["error_basis"]["basis"] == basis
         assert first == summary["inputs"]["error_basis"]["lines"][0]
