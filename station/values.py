@@ -331,6 +331,27 @@ def _date_or_today(text: str, where: str) -> str:
 DATE_OR_TODAY = TextKind("a date or 'today'", max_len=10, check=_date_or_today, example="2026-03-14")
 
 
+def _date_time(text: str, where: str) -> str:
+    import datetime as _dt
+
+    try:
+        if not re.fullmatch(r"\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}:\d{2})?)?", text):
+            raise ValueError(text)
+        _dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise InputError(f"{_prefix(where)}{text!r} is not a date or time; give YYYY-MM-DD or "
+                         "YYYY-MM-DDTHH:MM[:SS] (UTC), e.g. 2026-03-14T09:30") from None
+    return text
+
+
+DATE_TIME = TextKind("a date or date and time", max_len=35, check=_date_time, example="2026-03-14T09:30")
+"""A day or a moment, ISO 8601 (a time without a zone is UTC); returned as typed, once checked."""
+
+
+def _serial_or_leg_serial(text: str, where: str) -> str:
+    return _leg_serial(text, where) if "=" in text else _serial(text, where)
+
+
 def leg_numbers(text: str, where: str = "", all_word: bool = False, count: int = 6) -> tuple[int, ...]:
     """'3', '1-6', '1,4' (and 'all' when `all_word`) as leg numbers, in order, each once. Stricter
     than reading it loosely: a reversed range (4-2), an empty item (1,,2) and legs beyond `count`
@@ -391,6 +412,8 @@ def _leg_serial(text: str, where: str) -> str:
 
 SERIAL = TextKind("a serial number", max_len=64, check=_serial, example="HX-0042")
 LEG_SERIAL = TextKind("LEG=SERIAL", max_len=80, check=_leg_serial, example="3=HX-0042")
+SERIAL_OR_LEG_SERIAL = TextKind("SERIAL or LEG=SERIAL", max_len=80, check=_serial_or_leg_serial,
+                                example="HX-0042 or 3=HX-0042")
 NAME_TEXT = TextKind("a name", max_len=200, example="ACME Robotics")
 """A label stored or matched as typed (an operator, a customer, a leg type, a station id)."""
 NAME_OR_EMPTY = TextKind("a name", max_len=200, example="ACME Robotics", empty_ok=True)

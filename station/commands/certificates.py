@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
 from dataclasses import asdict
@@ -20,9 +22,9 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--serial", metavar="SERIAL", help="only the certificates of this leg")
-    p.add_argument("--catalog", metavar="URL", help="catalog URL or SQLite file (default: the config's)")
-    p.add_argument("--config", metavar="C", help="station TOML ([catalog] url, [station] recordings_dir)")
+    p.add_argument("--serial", type=V.SERIAL.argtype(), metavar="SERIAL", help="only the certificates of this leg")
+    p.add_argument("--catalog", type=V.CATALOG.argtype(), metavar="URL", help="catalog URL or SQLite file (default: the config's)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML ([catalog] url, [station] recordings_dir)")
     p.add_argument("--local", action="store_true", help="read this station's local catalog, not the shared one")
     p.add_argument("--json", action="store_true", help="print JSON")
 

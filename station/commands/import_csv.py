@@ -42,15 +42,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "looks like nm): refused by default, naming line and field")
     p.add_argument("--profile", type=V.PROFILE.argtype(), metavar="PROFILE.toml",
                    help="drive profile whose soft limits bound target_mm (default: the built-in profile)")
-    p.add_argument("--serial", action="append", metavar="[LEG=]SERIAL",
+    p.add_argument("--serial", type=V.SERIAL_OR_LEG_SERIAL.argtype(), action="append", metavar="[LEG=]SERIAL",
                    help="the leg's serial (LEG=SERIAL for each leg of a file of several; repeat)")
-    p.add_argument("--part-number", metavar="PN", help="the legs' part number")
-    p.add_argument("--leg-type", metavar="TYPE", help="the legs' type ([tolerances.TYPE] decides them)")
-    p.add_argument("--screw-lot", metavar="LOT", help="the legs' screw lot")
-    p.add_argument("--station", metavar="ID", help="the station (or lab) that measured")
-    p.add_argument("--stage", metavar="STAGE", help="calibration (as found), verification (as left) or other")
-    p.add_argument("--measured", metavar="DATE", help="when the measurement was made, YYYY-MM-DD[THH:MM] UTC")
-    p.add_argument("--config", metavar="C", help="station TOML: [legs.N] identity, [station] id, [metrology] laser "
+    p.add_argument("--part-number", type=V.NAME_TEXT.argtype(), metavar="PN", help="the legs' part number")
+    p.add_argument("--leg-type", type=V.NAME_TEXT.argtype(), metavar="TYPE", help="the legs' type ([tolerances.TYPE] decides them)")
+    p.add_argument("--screw-lot", type=V.NAME_TEXT.argtype(), metavar="LOT", help="the legs' screw lot")
+    p.add_argument("--station", type=V.NAME_TEXT.argtype(), metavar="ID", help="the station (or lab) that measured")
+    p.add_argument("--stage", choices=("calibration", "verification", "other"), metavar="STAGE", help="calibration (as found), verification (as left) or other")
+    p.add_argument("--measured", type=V.DATE_TIME.argtype(), metavar="DATE", help="when the measurement was made, YYYY-MM-DD[THH:MM] UTC")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML: [legs.N] identity, [station] id, [metrology] laser "
                    "and uncertainties, [tolerances]; recorded in the session")
 
 

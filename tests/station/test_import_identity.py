@@ -97,8 +97,8 @@ def test_an_import_without_stage_is_not_certified(cfg, tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, message", [
     (("--serial", "3=HX-0042"), "--serial 3=...: the file holds legs [1], not leg 3"),
-    (("--stage", "adjusted"), "--stage 'adjusted': one of calibration, verification, other"),
-    (("--measured", "20.11.2026"), "--measured '20.11.2026': give the date of the measurement"),
+    (("--stage", "adjusted"), "argument --stage: invalid choice: 'adjusted' (choose from 'calibration', 'verification', 'other')"),
+    (("--measured", "20.11.2026"), "argument --measured: '20.11.2026' is not a date or time; give YYYY-MM-DD"),
     (("--serial", "HX 42/../x"), "--serial"),
 ])
 def test_bad_identity_options_are_refused_and_nothing_written(tmp_path, capsys, extra, message):
