@@ -196,7 +196,7 @@ class LegProblem:
             if e.name == "cyclic":
                 specs["cyclic"] = self._search_cyclic(train_groups)
             elif getattr(e, "searched", False):  # a variant with a scanned parameter (the wind-up length)
-                key = (e.name, tuple(train_groups))
+                key = (getattr(e, "search_key", e.name), tuple(train_groups))  # a stacked variant shares its part's
                 if key not in self._cache:
                     groups = self.folds if self.folds is not None else np.zeros(self.leg.n_points, int)
                     self._cache[key] = e.search(self.leg, self.y, np.flatnonzero(np.isin(groups, train_groups)))
@@ -273,9 +273,21 @@ class LegProblem:
             fit.tests[e.name] = (f, p, df2)
             n_extra = getattr(e, "n_extra", 0)
             if n_extra:  # a variant: its extra columns alone
+                for part, sl in (e.part_slices().items() if hasattr(e, "part_slices") else ()):
+                    pidx = idx[sl]  # a stacked variant: each part's extra columns alone too
+                    fit.tests[f"{e.name}+{part}"] = wald_test(gls, pidx, between_pass_share(stats, pidx), n_eff)
                 idx = idx[-n_extra:]
                 fit.tests[e.name + "+"] = wald_test(gls, idx, between_pass_share(stats, idx), n_eff)
         return fit
+
+    def unresolvable(self, e: Effect) -> str | None:
+        """Why the sampling cannot resolve candidate `e`'s scanned parameter on this leg (a wind-up
+        shorter than the target spacing), from the scan on all passes; None when it can."""
+        check = getattr(e, "unresolvable", None)
+        if check is None:
+            return None
+        spec = self._specs((e,), list(range(self.n_groups))).get(e.name)
+        return check(self.leg, spec)
 
 
 @dataclass
@@ -408,3 +420,190 @@ def refine_variants(problem: LegProblem, chosen: tuple[Effect, ...], variants: d
                        f"{problem.cv_rms(tuple(out)):.4f} -> {best_rms:.4f} um")
         out[i] = best
     return tuple(out), log
+
+
+# -- joint selection (issue 35) -----------------------------------------------------------------
+BRANCH_MARGIN = 0.25  # a candidate explaining at least 75 % of the best one's held-out contribution at a step is
+# explored as an alternative path (drift and thermal while a leg warms are that close); the end sets are compared
+MAX_PATHS = 4  # end sets per leg (bounded: each path costs a forward selection)
+MAX_COMBINATIONS = 64  # joint variant choices tried per end set, beyond this one effect at a time
+CLOSE_ALTERNATIVES = 3  # rejected sets reported per leg
+
+
+def label(e: Effect) -> str:
+    """The effect as the report names it, with its variant: `backlash/temperature+position`."""
+    v = getattr(e, "variant", None)
+    return f"{family(e)}/{v}" if v else e.name
+
+
+def _stacked_alone(v: Effect, variants: dict) -> list[tuple[str, Effect]]:
+    """For a stacked variant: (part, the variant without that part) for each of its parts."""
+    parts = getattr(v, "parts", ())
+    if not parts:
+        return []
+    by_variant = {getattr(o, "variant", None): o for o in variants.get(family(v), ())}
+    out = []
+    for p in parts:
+        rest = "+".join(q.variant for q in parts if q is not p)
+        if rest in by_variant:
+            out.append((p.variant, by_variant[rest]))
+    return out
+
+
+def refine_jointly(problem: LegProblem, chosen: tuple[Effect, ...], variants: dict, threshold_um: float, alpha: float,
+                   bonferroni: dict[str, int] | None = None, external: bool = False
+                   ) -> tuple[tuple[Effect, ...], list[str], list[tuple[tuple[Effect, ...], float, str]]]:
+    """Every named effect plain or as one of its variants (stacked ones included), the choices
+    compared as sets on held-out passes (not one effect at a time). A variant counts only when its
+    extra columns are significant on their own and add more than the threshold over the plain
+    effect in that set; a stacked variant also needs each part significant and adding more than
+    the threshold over the variant without it. The valid set with the lowest held-out RMS wins.
+    Returns (effects, log, rejected: (set, held-out RMS, why) for the report)."""
+    import itertools
+
+    options = []
+    for e in chosen:
+        plain = getattr(e, "base", e)
+        opts = [plain] + [v for v in variants.get(plain.name, ())
+                          if v.applicable(problem.leg, external) is None and problem.unresolvable(v) is None]
+        options.append(opts)
+    n_comb = int(np.prod([len(o) for o in options])) if options else 1
+    if n_comb > MAX_COMBINATIONS:
+        out, log = refine_variants(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
+        return out, log, []
+    results = []
+    for combo in itertools.product(*options):
+        rms = problem.cv_rms(combo)
+        why = None
+        for i, v in enumerate(combo):
+            if v is options[i][0]:
+                continue
+            fit = problem.full_fit(combo, bonferroni)
+            if fit.tests[v.name + "+"][1] >= alpha:
+                why = f"{label(v)}: its extra terms are not significant (p = {fit.tests[v.name + '+'][1]:.2g})"
+                break
+            gain = contribution_um(problem.cv_rms(combo[:i] + (options[i][0],) + combo[i + 1:]), rms)
+            if gain <= threshold_um:
+                why = f"{label(v)} adds only {gain:.3g} um over the plain {family(v)}"
+                break
+            for part, alone in _stacked_alone(v, variants):
+                p = fit.tests[f"{v.name}+{part}"][1]
+                gain = contribution_um(problem.cv_rms(combo[:i] + (alone,) + combo[i + 1:]), rms)
+                if p >= alpha or gain <= threshold_um:
+                    why = f"{label(v)}: its {part} part adds only {gain:.3g} um (p = {p:.2g})"
+                    break
+            if why:
+                break
+        results.append((combo, rms, why))
+    valid = [r for r in results if r[2] is None]
+    best = min(valid, key=lambda r: (r[1], sum(e.n_params for e in r[0])))
+    log = []
+    if best[0] != tuple(chosen):
+        log.append(f"variants chosen jointly: {', '.join(label(e) for e in best[0])}: held-out "
+                   f"{problem.cv_rms(tuple(chosen)):.4f} -> {best[1]:.4f} um")
+    rejected = [(c, r, why or "explains less on held-out passes") for c, r, why in results if c != best[0]]
+    return best[0], log, rejected
+
+
+def select_jointly(problem: LegProblem, candidates: list[Effect], variants: dict, threshold_um: float, alpha: float,
+                   bonferroni: dict[str, int] | None = None, external: bool = False
+                   ) -> tuple[tuple[Effect, ...], list[str], list[dict]]:
+    """Effects and their variants chosen as sets (issue 35): forward selection as in
+    `select_effects`, but where another candidate explains nearly as much as the one taken
+    (within BRANCH_MARGIN) that path is followed too; each end set is pruned and its variants
+    chosen jointly (`refine_jointly`); the end sets are then compared on held-out passes: the
+    lowest held-out RMS wins, a set with fewer parameters when the better one adds no more than
+    the threshold over it. Returns (effects, log, close alternatives rejected with their margins)."""
+    log: list[str] = []
+    usable = []
+    for c in candidates:
+        why = problem.unresolvable(c)
+        if why is None:
+            usable.append(c)
+        else:
+            log.append(f"not tried: {label(c)}: {why}")
+    paths: list[tuple[tuple[Effect, ...], list[str]]] = []
+    started: set[frozenset] = set()
+
+    def forward(chosen: tuple[Effect, ...], plog: list[str]) -> None:
+        while True:
+            taken = {family(c) for c in chosen}
+            rest = [c for c in usable if family(c) not in taken]
+            if not rest:
+                break
+            evals = [(c, evaluate(problem, chosen, c, bonferroni)) for c in rest]
+            ok = [(c, ev) for c, ev in evals if ev.qualifies(threshold_um, alpha)]
+            if not ok:
+                sig = {c.name for c, ev in evals if ev.p_value < alpha}
+                pair = _best_pair(problem, chosen, rest, threshold_um, alpha, bonferroni, sig)
+                if pair is None:
+                    break
+                plog.append(f"add {pair[0].name} + {pair[1].name} together (neither helps alone: they partly cancel)")
+                chosen = chosen + pair
+                continue
+            best = max(ev.contribution_um for _, ev in ok)
+            near = [(c, ev) for c, ev in ok if ev.contribution_um >= (1 - PARSIMONY) * best]
+            c, ev = min(near, key=lambda t: (t[0].n_params, -t[1].contribution_um))
+            # a close candidate of another effect: its path is followed too (confounded candidates
+            # are compared as sets, not decided by the order they are tried in)
+            for c2, ev2 in sorted(ok, key=lambda t: -t[1].contribution_um):
+                if family(c2) == family(c) or ev2.contribution_um < (1 - BRANCH_MARGIN) * best:
+                    continue
+                key = frozenset(e.name for e in chosen + (c2,))
+                if key in started or len(started) >= MAX_PATHS - 1:
+                    continue
+                started.add(key)
+                forward(chosen + (c2,), plog + [f"also tried: {c2.name} first instead of {c.name} (held-out "
+                                                f"{ev2.rms_after_um:.4f} against {ev.rms_after_um:.4f} um)"])
+            plog.append(f"add {c.name}: held-out {ev.rms_before_um:.4f} -> {ev.rms_after_um:.4f} um, p={ev.p_value:.2g}")
+            chosen = chosen + (c,)
+        chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
+        plog = plog + prlog
+        if chosen:
+            chosen, vlog, rejected = refine_jointly(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
+            if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
+                chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
+                vlog += prlog
+            plog = plog + vlog
+        else:
+            rejected = []
+        paths.append((chosen, plog, rejected))
+
+    forward((), [])
+    scored = {}
+    for chosen, plog, rejected in paths:
+        key = frozenset(e.name for e in chosen)
+        if key not in scored:
+            scored[key] = (chosen, problem.cv_rms(chosen), plog, rejected)
+    ends = list(scored.values())
+    top = min(ends, key=lambda t: t[1])
+    fewer = [t for t in ends if contribution_um(t[1], top[1]) <= threshold_um]
+    win = min(fewer, key=lambda t: (sum(e.n_params for e in t[0]), t[1]))
+    log += win[2] if len(ends) == 1 else [line for t in ends for line in
+                                          ([f"path ending in {', '.join(label(e) for e in t[0]) or 'nothing'} "
+                                            f"(held-out {t[1]:.4f} um):"] + ["  " + x for x in t[2]])]
+    alternatives = []
+    for chosen, rms, _plog, _rej in ends:
+        if chosen is win[0]:
+            continue
+        why = ("explains less on held-out passes" if rms > win[1] else
+               f"explains at most {contribution_um(win[1], rms):.3g} um more with more parameters (threshold "
+               f"{threshold_um:g} um)")
+        alternatives.append((chosen, rms, why))
+    alternatives += win[3]
+    out, seen = [], {frozenset(e.name for e in win[0])}
+    for chosen, rms, why in sorted(alternatives, key=lambda t: t[1]):
+        key = frozenset(e.name for e in chosen)
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append({"effects": [label(e) for e in chosen], "heldout_rms_after_um": rms,
+                    "worse_by_um": rms - win[1], "margin_um": contribution_um(rms, win[1]) if rms >= win[1] else
+                    -contribution_um(win[1], rms), "reason": why})
+        if len(out) >= CLOSE_ALTERNATIVES:
+            break
+    if len(ends) > 1:
+        log.append(f"sets compared on held-out passes: " + "; ".join(
+            f"{', '.join(label(e) for e in t[0]) or 'nothing'} {t[1]:.4f} um" for t in sorted(ends, key=lambda t: t[1]))
+            + f"; chosen: {', '.join(label(e) for e in win[0]) or 'nothing'}")
+    return win[0], log, out
