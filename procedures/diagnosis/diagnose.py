@@ -226,6 +226,9 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings,
                           "reason": f"fixed by {fixed.pairs} reversal probe pairs before the other effects"})
             continue
         why = e.applicable(leg, twin is not None)
+        guard = getattr(twin, "effect_guard", None)  # a fleet twin: a scale only where the features support it
+        if why is None and guard is not None:
+            why = guard(leg.leg, name)
         if why is None and not can_cv:
             why = "needs at least two cycles to score on held-out passes"
         if why is None:

@@ -74,6 +74,9 @@ def text_report(report: dict) -> str:
         if fl:
             lines.append(f"  FLEET ({fl['siblings']} sibling legs of type {fl['leg_type']}, {fl['basis']}): "
                          + (fl["finding"]["note"] if fl.get("finding") else fl.get("finding_note", "")))
+            if fl.get("duplicates_counted_once"):
+                lines.append("    the same measurement under several names, counted once: " + ", ".join(
+                    f"{k} (same as {v})" for k, v in sorted(fl["duplicates_counted_once"].items())))
             lines.append("    " + ", ".join(f"{r['feature']} {r['sigma']:+.1f}" for r in fl["features"][:4]
                                              if r.get("sigma") is not None) + " sigma")
         g = leg["gap"]

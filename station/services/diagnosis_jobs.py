@@ -23,6 +23,15 @@ def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings:
 
     settings = settings if settings is not None else DiagnosisSettings()
     points, twin, normalised_legs = on_common_basis(session, twin)
+    comparison = getattr(twin, "comparison", None)
+    compared = {}
+    if comparison is not None:  # the fleet twin: how far this leg's features lie from its siblings' (made first:
+        from procedures.diagnosis.fleet import error_map  # the diagnosis names a scale only where they support it)
+
+        import numpy as np
+
+        compared = {int(leg): comparison(int(leg), error_map(points, int(leg)), settings.lead_mm)
+                    for leg in np.unique(points["leg"])}
     report = diagnose(points, twin, settings, recording={"path": str(path), "sha256": session.sha256}, source=str(path))
     if normalised_legs:
         report["twin"]["normalised_legs"] = normalised_legs
@@ -33,14 +42,10 @@ def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings:
             "raw (diagnosis does not normalise: thermal expansion stays a diagnosable effect)",
             f"leg(s) {', '.join(map(str, normalised_legs))} normalised to 20 degC (NDE) like the twin, as both carry "
             "the material temperature (a thermal finding there is expansion beyond the material's nominal), others raw")
-    comparison = getattr(twin, "comparison", None)
-    if comparison is not None:  # the fleet twin: how far this leg's features lie from its siblings'
-        from procedures.diagnosis.fleet import error_map
-
-        report["twin"]["fleet"] = twin.info  # type, basis, siblings per leg, files left out
+    if comparison is not None:
+        report["twin"]["fleet"] = twin.info  # type, basis, siblings per leg, files left out, duplicates
         for leg, rep in report["legs"].items():
-            rep["fleet"] = finite_or_null(comparison(int(leg), error_map(points, int(leg)), settings.lead_mm),
-                                          report["notes"], f"legs.{leg}.fleet")
+            rep["fleet"] = finite_or_null(compared[int(leg)], report["notes"], f"legs.{leg}.fleet")
     return report, temp_lines
 
 

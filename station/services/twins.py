@@ -159,6 +159,12 @@ def fleet_twin(leg_type: str, session, path, engine):
         raw_maps[serial] = error_map(s.points, r.leg)
         if r.leg in n.normalised:
             norm_maps[serial] = error_map(n.points, r.leg)
+    # siblings that are the same measurement under another name (by content, issue 35): counted once,
+    # or the spread shrinks and a leg lies "-352 sigma" off three copies of one session
+    duplicates = _same_content(raw_maps)
+    for serial in duplicates:
+        raw_maps.pop(serial)
+        norm_maps.pop(serial, None)
     here = normalise_session(session.points, session.station_config)
     legs = [int(v) for v in np.unique(session.points["leg"])]
     normalised = all(leg in here.normalised for leg in legs) and len(norm_maps) == len(raw_maps)
@@ -167,17 +173,49 @@ def fleet_twin(leg_type: str, session, path, engine):
     fleet = {}
     for leg in legs:
         own = (ids.get(leg) or {}).get("serial")
-        siblings = {k: v for k, v in maps.items() if k != own}
+        mine = _content_key(error_map(session.points, leg))
+        same_as_this = sorted(k for k, v in raw_maps.items() if k != own and _content_key(v) == mine)
+        for k in same_as_this:  # this very measurement under another serial: not a sibling
+            duplicates[k] = f"this session (leg {leg})"
+        siblings = {k: v for k, v in maps.items() if k != own and k not in same_as_this}
         if len(siblings) < MIN_SIBLINGS:
             raise InputError(f"--twin fleet:{leg_type}: {len(siblings)} sibling leg(s) of type {leg_type} in the catalog "
                              f"for leg {leg}" + (f" (serial {own} and this session left out)" if own else "")
-                             + f"; at least {MIN_SIBLINGS} needed" + (f"; unreadable: {'; '.join(skipped)}" if skipped else ""))
+                             + f"; at least {MIN_SIBLINGS} needed" + (f"; unreadable: {'; '.join(skipped)}" if skipped else "")
+                             + (f"; the same measurement as another counted once: {_dup_text(duplicates)}"
+                                if duplicates else ""))
         x = points["target_mm"][points["leg"] == leg]
         fleet[leg] = fleet_leg(x, siblings)
     n_sib = sorted({fl.n for fl in fleet.values()})
     basis = "normalised to 20 degC" if normalised else "raw (not every session carries the material temperature)"
     description = (f"fleet of type {leg_type}: mean error map per direction of {'/'.join(map(str, n_sib))} sibling legs "
                    f"(their last completed sessions), {basis}")
+    if duplicates:
+        description += f"; duplicates counted once: {_dup_text(duplicates)}"
     info = {"leg_type": leg_type, "basis": "normalised" if normalised else "raw", "skipped": skipped,
-            "siblings": {str(leg): fl.serials for leg, fl in fleet.items()}}
+            "siblings": {str(leg): fl.serials for leg, fl in fleet.items()}, "duplicates": duplicates}
     return make_twin(fleet, leg_type, description, normalised, info)
+
+
+def _content_key(m) -> bytes:
+    """A sibling's measurement by content: its error map (targets, mean error per direction) to
+    1 nm; two files holding the same readings under different names give the same key."""
+    return b"".join(np.round(np.nan_to_num(np.asarray(v, float), nan=1e9), 3).tobytes()
+                    for v in (m.targets_mm, m.up_um, m.down_um))
+
+
+def _same_content(maps: dict) -> dict[str, str]:
+    """serial -> the serial (first in sorted order) whose error map it repeats exactly."""
+    first: dict[bytes, str] = {}
+    out: dict[str, str] = {}
+    for serial in sorted(maps):
+        key = _content_key(maps[serial])
+        if key in first:
+            out[serial] = first[key]
+        else:
+            first[key] = serial
+    return out
+
+
+def _dup_text(duplicates: dict[str, str]) -> str:
+    return ", ".join(f"{k} (same as {v})" for k, v in sorted(duplicates.items()))
