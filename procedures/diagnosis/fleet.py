@@ -115,6 +115,28 @@ def features(x_mm: np.ndarray, up: np.ndarray, down: np.ndarray, lead_mm: float 
     return out
 
 
+def content_key(m: ErrorMap) -> bytes:
+    """A sibling's measurement by content: its error map (targets, mean error per direction) to
+    1 nm; two files holding the same readings under different names give the same key."""
+    return b"".join(np.round(np.nan_to_num(np.asarray(v, float), nan=1e9), 3).tobytes()
+                    for v in (m.targets_mm, m.up_um, m.down_um))
+
+
+def independent_maps(maps: dict[str, ErrorMap]) -> tuple[dict[str, ErrorMap], dict[str, str]]:
+    """(the maps with each measurement once, serial -> the serial whose map it repeats exactly):
+    copies of one session under several names would shrink the siblings' spread and put a leg
+    hundreds of sigma off (issue 35); the first serial in sorted order is kept."""
+    first: dict[bytes, str] = {}
+    dup: dict[str, str] = {}
+    for serial in sorted(maps):
+        key = content_key(maps[serial])
+        if key in first:
+            dup[serial] = first[key]
+        else:
+            first[key] = serial
+    return {k: v for k, v in maps.items() if k not in dup}, dup
+
+
 @dataclass
 class FleetLeg:
     """The siblings of one leg under diagnosis: their serials and maps on this leg's targets."""

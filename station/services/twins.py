@@ -125,7 +125,7 @@ def fleet_twin(leg_type: str, session, path, engine):
     and the leg's own serial left out), read from the files the catalog names. Normalised to
     20 degC when this session and every sibling carry the material temperature, else raw.
     InputError when a leg has fewer than 3 siblings (procedures/diagnosis/fleet.py)."""
-    from procedures.diagnosis.fleet import MIN_SIBLINGS, error_map, fleet_leg
+    from procedures.diagnosis.fleet import MIN_SIBLINGS, content_key, error_map, fleet_leg, independent_maps
     from procedures.diagnosis.fleet import fleet_twin as make_twin
     from procedures.metrology.thermal import normalise_session
     from procedures.io.recording.reader import read_session
@@ -161,10 +161,8 @@ def fleet_twin(leg_type: str, session, path, engine):
             norm_maps[serial] = error_map(n.points, r.leg)
     # siblings that are the same measurement under another name (by content, issue 35): counted once,
     # or the spread shrinks and a leg lies "-352 sigma" off three copies of one session
-    duplicates = _same_content(raw_maps)
-    for serial in duplicates:
-        raw_maps.pop(serial)
-        norm_maps.pop(serial, None)
+    raw_maps, duplicates = independent_maps(raw_maps)
+    norm_maps = {k: v for k, v in norm_maps.items() if k not in duplicates}
     here = normalise_session(session.points, session.station_config)
     legs = [int(v) for v in np.unique(session.points["leg"])]
     normalised = all(leg in here.normalised for leg in legs) and len(norm_maps) == len(raw_maps)
@@ -173,8 +171,8 @@ def fleet_twin(leg_type: str, session, path, engine):
     fleet = {}
     for leg in legs:
         own = (ids.get(leg) or {}).get("serial")
-        mine = _content_key(error_map(session.points, leg))
-        same_as_this = sorted(k for k, v in raw_maps.items() if k != own and _content_key(v) == mine)
+        mine = content_key(error_map(session.points, leg))
+        same_as_this = sorted(k for k, v in raw_maps.items() if k != own and content_key(v) == mine)
         for k in same_as_this:  # this very measurement under another serial: not a sibling
             duplicates[k] = f"this session (leg {leg})"
         siblings = {k: v for k, v in maps.items() if k != own and k not in same_as_this}
@@ -195,26 +193,6 @@ def fleet_twin(leg_type: str, session, path, engine):
     info = {"leg_type": leg_type, "basis": "normalised" if normalised else "raw", "skipped": skipped,
             "siblings": {str(leg): fl.serials for leg, fl in fleet.items()}, "duplicates": duplicates}
     return make_twin(fleet, leg_type, description, normalised, info)
-
-
-def _content_key(m) -> bytes:
-    """A sibling's measurement by content: its error map (targets, mean error per direction) to
-    1 nm; two files holding the same readings under different names give the same key."""
-    return b"".join(np.round(np.nan_to_num(np.asarray(v, float), nan=1e9), 3).tobytes()
-                    for v in (m.targets_mm, m.up_um, m.down_um))
-
-
-def _same_content(maps: dict) -> dict[str, str]:
-    """serial -> the serial (first in sorted order) whose error map it repeats exactly."""
-    first: dict[bytes, str] = {}
-    out: dict[str, str] = {}
-    for serial in sorted(maps):
-        key = _content_key(maps[serial])
-        if key in first:
-            out[serial] = first[key]
-        else:
-            first[key] = serial
-    return out
 
 
 def _dup_text(duplicates: dict[str, str]) -> str:
