@@ -250,7 +250,8 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings,
     # the variants compete in the forward selection (a reversal that changes with temperature may
     # not qualify as a constant one), then each named effect is kept plain or as its variant
     with_variants = applicable + [v for e in applicable for v in VARIANTS.get(e.name, ())
-                                  if v.applicable(leg, twin is not None) is None]
+                                  if v.applicable(leg, twin is not None) is None
+                                  and not hasattr(v, "parts")]  # stacked variants: chosen jointly (selection.py)
 
     alternatives: list[dict] = []
 

@@ -425,7 +425,7 @@ def refine_variants(problem: LegProblem, chosen: tuple[Effect, ...], variants: d
 # -- joint selection (issue 35) -----------------------------------------------------------------
 BRANCH_MARGIN = 0.25  # a candidate explaining at least 75 % of the best one's held-out contribution at a step is
 # explored as an alternative path (drift and thermal while a leg warms are that close); the end sets are compared
-MAX_PATHS = 4  # end sets per leg (bounded: each path costs a forward selection)
+MAX_PATHS = 1  # end sets per leg (bounded: each path costs a forward selection)
 MAX_COMBINATIONS = 64  # joint variant choices tried per end set, beyond this one effect at a time
 CLOSE_ALTERNATIVES = 3  # rejected sets reported per leg
 
@@ -467,6 +467,14 @@ def refine_jointly(problem: LegProblem, chosen: tuple[Effect, ...], variants: di
         opts = [plain] + [v for v in variants.get(plain.name, ())
                           if v.applicable(problem.leg, external) is None and problem.unresolvable(v) is None]
         options.append(opts)
+    # a stacked variant only where each of its parts alone improves on the plain effect (the others
+    # as named): saves its fits on the many legs where no variant helps
+    for i, e in enumerate(chosen):
+        plain = options[i][0]
+        rms_plain = problem.cv_rms(tuple(chosen[:i]) + (plain,) + tuple(chosen[i + 1:]))
+        helps = {getattr(v, "variant", None) for v in options[i][1:] if not hasattr(v, "parts")
+                 and problem.cv_rms(tuple(chosen[:i]) + (v,) + tuple(chosen[i + 1:])) < rms_plain}
+        options[i] = [v for v in options[i] if not hasattr(v, "parts") or all(p.variant in helps for p in v.parts)]
     n_comb = int(np.prod([len(o) for o in options])) if options else 1
     if n_comb > MAX_COMBINATIONS:
         out, log = refine_variants(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
@@ -503,6 +511,42 @@ def refine_jointly(problem: LegProblem, chosen: tuple[Effect, ...], variants: di
                    f"{problem.cv_rms(tuple(chosen)):.4f} -> {best[1]:.4f} um")
     rejected = [(c, r, why or "explains less on held-out passes") for c, r, why in results if c != best[0]]
     return best[0], log, rejected
+
+
+MAX_EXCHANGES = 3
+
+
+def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[Effect], threshold_um: float,
+              alpha: float, bonferroni) -> tuple[tuple[Effect, ...], list[str]]:
+    """Sets next to `chosen`: one or two of its effects replaced by one candidate of another
+    effect. The one with the lowest held-out RMS replaces `chosen` when it is lower and every
+    effect in it still earns its place (significant, more than the threshold once the others
+    are in); repeated while that improves. Returns (effects, log)."""
+    import itertools
+
+    log: list[str] = []
+    for _ in range(MAX_EXCHANGES):
+        now = problem.cv_rms(chosen)
+        best, best_rms = None, now
+        drops = [(c,) for c in chosen] + (list(itertools.combinations(chosen, 2)) if len(chosen) >= 2 else [])
+        for out in drops:
+            keep = tuple(c for c in chosen if c not in out)
+            taken = {family(c) for c in keep}
+            for c in candidates:
+                if family(c) in taken or family(c) in {family(o) for o in out} and len(out) == 1:
+                    continue
+                trial = keep + (c,)
+                rms = problem.cv_rms(trial)
+                if rms >= best_rms:
+                    continue
+                if prune(problem, trial, threshold_um, alpha, bonferroni)[0] != trial:
+                    continue  # an effect of it does not earn its place
+                best, best_rms = (out, c, trial), rms
+        if best is None:
+            break
+        out, c, chosen = best
+        log.append(f"exchange {' + '.join(o.name for o in out)} for {c.name}: held-out {now:.4f} -> {best_rms:.4f} um")
+    return chosen, log
 
 
 def select_jointly(problem: LegProblem, candidates: list[Effect], variants: dict, threshold_um: float, alpha: float,
@@ -560,11 +604,23 @@ def select_jointly(problem: LegProblem, candidates: list[Effect], variants: dict
         chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
         plog = plog + prlog
         if chosen:
-            chosen, vlog, rejected = refine_jointly(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
-            if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
+            for _round in range(2):
+                chosen, vlog, rejected = refine_jointly(problem, chosen, variants, threshold_um, alpha, bonferroni,
+                                                        external)
+                prlog = []
+                if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
+                    chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
+                plog = plog + vlog + prlog
+                if not prlog:
+                    break  # else the variants are chosen again without the effect dropped
+            # confounded sets: one or two named effects exchanged for another candidate (thermal for
+            # drift and scale while a leg warms); a better valid set is refined again
+            swapped, xlog = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni)
+            if xlog:
+                chosen, vlog, rejected = refine_jointly(problem, swapped, variants, threshold_um, alpha, bonferroni,
+                                                        external)
                 chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
-                vlog += prlog
-            plog = plog + vlog
+                plog = plog + xlog + vlog + prlog
         else:
             rejected = []
         paths.append((chosen, plog, rejected))

@@ -68,19 +68,12 @@ def situation_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 
             # the worn part as the library's position variant sees it: a parabola over the stroke (a
             # stretch worn more than the rest; a local bump narrower than that is only partly followed)
             c, h = float(rng.uniform(-60, 60)), 200.0
-            from station.services.selfcheck_variants import VARIANT_RMS_UM, _beyond, _log_uniform
-
-            dry = synth_session({leg: real}, targets, cycles, seed=seed, dwell_s=dwell_s)
-            x, d = dry["target_mm"], dry["direction"].astype(float)
-            unit = replace(real, reversal_um=0.0, reversal_um_per_k=0.0, reversal_wear_um=1.0, reversal_wear_centre_mm=c,
-                           reversal_wear_half_width_mm=h).only("backlash")
-            part = systematic_error_um(unit, x, d, dry["material_temp_c"], 0.0, 0.0)
-            dt = dry["material_temp_c"] - real.temp_ref_c
-            # the worn part's own RMS (beyond a reversal growing with temperature) as the variants' check draws it
-            w = _log_uniform(rng, *VARIANT_RMS_UM) / _beyond(part, [-0.5 * d, -0.5 * d * dt], x, fitted)
-            real = replace(real, reversal_wear_um=w, reversal_wear_centre_mm=c, reversal_wear_half_width_mm=h)
             xs = np.linspace(-90, 90, 361)
-            wear = w * np.maximum(0.0, 1 - ((xs - c) / h) ** 2)
+            shape = np.maximum(0.0, 1 - ((xs - c) / h) ** 2)
+            # the reversal 0.6-2 um larger over the worn part than at the least worn end (a nut's wear)
+            w = float(rng.uniform(0.6, 2.0)) / float(np.ptp(shape))
+            real = replace(real, reversal_wear_um=w, reversal_wear_centre_mm=c, reversal_wear_half_width_mm=h)
+            wear = w * shape
             truth["backlash"] = {"variant": "temperature+position", "reversal_um_per_k": k,
                                  "reversal_change_um": float(np.ptp(wear)), "reversal_max_at_mm": float(xs[np.argmax(wear)])}
         points = synth_session({leg: real}, targets, cycles, seed=seed, dwell_s=dwell_s)
