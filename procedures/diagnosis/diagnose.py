@@ -32,7 +32,7 @@ from procedures.diagnosis.blas import single_threaded_blas
 from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
 from procedures.diagnosis.legdata import LegData, split_legs
 from procedures.diagnosis.probe_reversal import FixedReversal, fixed_reversal, probe_points
-from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate, label, select_jointly
+from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate, select_jointly
 from procedures.diagnosis.variants import VARIANTS
 from procedures.diagnosis.unexplained import unexplained
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin

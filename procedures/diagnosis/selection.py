@@ -423,10 +423,7 @@ def refine_variants(problem: LegProblem, chosen: tuple[Effect, ...], variants: d
 
 
 # -- joint selection (issue 35) -----------------------------------------------------------------
-BRANCH_MARGIN = 0.25  # a candidate explaining at least 75 % of the best one's held-out contribution at a step is
-# explored as an alternative path (drift and thermal while a leg warms are that close); the end sets are compared
-MAX_PATHS = 1  # end sets per leg (bounded: each path costs a forward selection)
-MAX_COMBINATIONS = 64  # joint variant choices tried per end set, beyond this one effect at a time
+MAX_COMBINATIONS = 64  # joint variant choices tried per set, beyond this one effect at a time
 CLOSE_ALTERNATIVES = 3  # rejected sets reported per leg
 
 
@@ -513,18 +510,20 @@ def refine_jointly(problem: LegProblem, chosen: tuple[Effect, ...], variants: di
     return best[0], log, rejected
 
 
-MAX_EXCHANGES = 3
+MAX_EXCHANGES = 3  # rounds of exchanges per leg (each one scores every neighbouring set)
 
 
 def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[Effect], threshold_um: float,
-              alpha: float, bonferroni) -> tuple[tuple[Effect, ...], list[str]]:
+              alpha: float, bonferroni) -> tuple[tuple[Effect, ...], list[str], list[tuple[tuple[Effect, ...], float, str]]]:
     """Sets next to `chosen`: one or two of its effects replaced by one candidate of another
-    effect. The one with the lowest held-out RMS replaces `chosen` when it is lower and every
-    effect in it still earns its place (significant, more than the threshold once the others
-    are in); repeated while that improves. Returns (effects, log)."""
+    effect (confounded candidates: thermal for drift, or for drift and scale, while a leg warms).
+    The one with the lowest held-out RMS replaces `chosen` when it is lower and every effect in it
+    still earns its place (significant, more than the threshold once the others are in); repeated
+    while that improves. Returns (effects, log, the sets scored: (set, held-out RMS, why not))."""
     import itertools
 
     log: list[str] = []
+    scored: dict[frozenset, tuple[tuple[Effect, ...], float, str]] = {}
     for _ in range(MAX_EXCHANGES):
         now = problem.cv_rms(chosen)
         best, best_rms = None, now
@@ -533,31 +532,47 @@ def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[
             keep = tuple(c for c in chosen if c not in out)
             taken = {family(c) for c in keep}
             for c in candidates:
-                if family(c) in taken or family(c) in {family(o) for o in out} and len(out) == 1:
-                    continue
+                if family(c) in taken or (len(out) == 1 and family(c) == family(out[0])):
+                    continue  # a variant of the same effect: refine_jointly's choice
                 trial = keep + (c,)
                 rms = problem.cv_rms(trial)
-                if rms >= best_rms:
-                    continue
-                if prune(problem, trial, threshold_um, alpha, bonferroni)[0] != trial:
-                    continue  # an effect of it does not earn its place
-                best, best_rms = (out, c, trial), rms
+                pruned = prune(problem, trial, threshold_um, alpha, bonferroni)[0]
+                why = (None if pruned == trial else
+                       f"{', '.join(label(e) for e in trial if e not in pruned)} does not earn its place in it")
+                scored.setdefault(frozenset(e.name for e in trial),
+                                  (trial, rms, why or "explains less on held-out passes"))
+                if why is None and rms < best_rms:
+                    best, best_rms = (out, c, trial), rms
         if best is None:
             break
         out, c, chosen = best
         log.append(f"exchange {' + '.join(o.name for o in out)} for {c.name}: held-out {now:.4f} -> {best_rms:.4f} um")
-    return chosen, log
+    return chosen, log, list(scored.values())
+
+
+def _refine(problem, chosen, variants, threshold_um, alpha, bonferroni, external):
+    """Variants chosen jointly, then pruned; again when the prune dropped an effect."""
+    log, rejected = [], []
+    for _round in range(2):
+        chosen, vlog, rejected = refine_jointly(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
+        prlog = []
+        if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
+            chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
+        log += vlog + prlog
+        if not prlog:
+            break  # else the variants are chosen again without the effect dropped
+    return chosen, log, rejected
 
 
 def select_jointly(problem: LegProblem, candidates: list[Effect], variants: dict, threshold_um: float, alpha: float,
                    bonferroni: dict[str, int] | None = None, external: bool = False
                    ) -> tuple[tuple[Effect, ...], list[str], list[dict]]:
-    """Effects and their variants chosen as sets (issue 35): forward selection as in
-    `select_effects`, but where another candidate explains nearly as much as the one taken
-    (within BRANCH_MARGIN) that path is followed too; each end set is pruned and its variants
-    chosen jointly (`refine_jointly`); the end sets are then compared on held-out passes: the
-    lowest held-out RMS wins, a set with fewer parameters when the better one adds no more than
-    the threshold over it. Returns (effects, log, close alternatives rejected with their margins)."""
+    """Effects and their variants chosen as sets on held-out passes (issue 35): the forward
+    selection and pruning of `select_effects` (stacked variants left out of it), then the named
+    effects' variants chosen jointly (`refine_jointly`), then exchanges of confounded effects
+    (`_exchange`, the variants chosen again after one). Candidates whose scanned parameter the
+    sampling cannot resolve (a wind-up shorter than the target spacing) are not tried. Returns
+    (effects, log, the closest sets rejected: effects, held-out RMS, margins, reason)."""
     log: list[str] = []
     usable = []
     for c in candidates:
@@ -566,100 +581,28 @@ def select_jointly(problem: LegProblem, candidates: list[Effect], variants: dict
             usable.append(c)
         else:
             log.append(f"not tried: {label(c)}: {why}")
-    paths: list[tuple[tuple[Effect, ...], list[str]]] = []
-    started: set[frozenset] = set()
-
-    def forward(chosen: tuple[Effect, ...], plog: list[str]) -> None:
-        while True:
-            taken = {family(c) for c in chosen}
-            rest = [c for c in usable if family(c) not in taken]
-            if not rest:
-                break
-            evals = [(c, evaluate(problem, chosen, c, bonferroni)) for c in rest]
-            ok = [(c, ev) for c, ev in evals if ev.qualifies(threshold_um, alpha)]
-            if not ok:
-                sig = {c.name for c, ev in evals if ev.p_value < alpha}
-                pair = _best_pair(problem, chosen, rest, threshold_um, alpha, bonferroni, sig)
-                if pair is None:
-                    break
-                plog.append(f"add {pair[0].name} + {pair[1].name} together (neither helps alone: they partly cancel)")
-                chosen = chosen + pair
-                continue
-            best = max(ev.contribution_um for _, ev in ok)
-            near = [(c, ev) for c, ev in ok if ev.contribution_um >= (1 - PARSIMONY) * best]
-            c, ev = min(near, key=lambda t: (t[0].n_params, -t[1].contribution_um))
-            # a close candidate of another effect: its path is followed too (confounded candidates
-            # are compared as sets, not decided by the order they are tried in)
-            for c2, ev2 in sorted(ok, key=lambda t: -t[1].contribution_um):
-                if family(c2) == family(c) or ev2.contribution_um < (1 - BRANCH_MARGIN) * best:
-                    continue
-                key = frozenset(e.name for e in chosen + (c2,))
-                if key in started or len(started) >= MAX_PATHS - 1:
-                    continue
-                started.add(key)
-                forward(chosen + (c2,), plog + [f"also tried: {c2.name} first instead of {c.name} (held-out "
-                                                f"{ev2.rms_after_um:.4f} against {ev.rms_after_um:.4f} um)"])
-            plog.append(f"add {c.name}: held-out {ev.rms_before_um:.4f} -> {ev.rms_after_um:.4f} um, p={ev.p_value:.2g}")
-            chosen = chosen + (c,)
-        chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
-        plog = plog + prlog
-        if chosen:
-            for _round in range(2):
-                chosen, vlog, rejected = refine_jointly(problem, chosen, variants, threshold_um, alpha, bonferroni,
-                                                        external)
-                prlog = []
-                if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
-                    chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
-                plog = plog + vlog + prlog
-                if not prlog:
-                    break  # else the variants are chosen again without the effect dropped
-            # confounded sets: one or two named effects exchanged for another candidate (thermal for
-            # drift and scale while a leg warms); a better valid set is refined again
-            swapped, xlog = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni)
-            if xlog:
-                chosen, vlog, rejected = refine_jointly(problem, swapped, variants, threshold_um, alpha, bonferroni,
-                                                        external)
-                chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
-                plog = plog + xlog + vlog + prlog
-        else:
-            rejected = []
-        paths.append((chosen, plog, rejected))
-
-    forward((), [])
-    scored = {}
-    for chosen, plog, rejected in paths:
-        key = frozenset(e.name for e in chosen)
-        if key not in scored:
-            scored[key] = (chosen, problem.cv_rms(chosen), plog, rejected)
-    ends = list(scored.values())
-    top = min(ends, key=lambda t: t[1])
-    fewer = [t for t in ends if contribution_um(t[1], top[1]) <= threshold_um]
-    win = min(fewer, key=lambda t: (sum(e.n_params for e in t[0]), t[1]))
-    log += win[2] if len(ends) == 1 else [line for t in ends for line in
-                                          ([f"path ending in {', '.join(label(e) for e in t[0]) or 'nothing'} "
-                                            f"(held-out {t[1]:.4f} um):"] + ["  " + x for x in t[2]])]
-    alternatives = []
-    for chosen, rms, _plog, _rej in ends:
-        if chosen is win[0]:
-            continue
-        why = ("explains less on held-out passes" if rms > win[1] else
-               f"explains at most {contribution_um(win[1], rms):.3g} um more with more parameters (threshold "
-               f"{threshold_um:g} um)")
-        alternatives.append((chosen, rms, why))
-    alternatives += win[3]
-    out, seen = [], {frozenset(e.name for e in win[0])}
-    for chosen, rms, why in sorted(alternatives, key=lambda t: t[1]):
-        key = frozenset(e.name for e in chosen)
+    chosen, flog = select_effects(problem, usable, threshold_um, alpha, bonferroni)
+    log += flog
+    rejected: list[tuple[tuple[Effect, ...], float, str]] = []
+    if chosen:
+        chosen, rlog, rejected = _refine(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
+        swapped, xlog, scored = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni)
+        log += rlog + xlog
+        rejected += scored
+        if xlog:
+            chosen, rlog, again = _refine(problem, swapped, variants, threshold_um, alpha, bonferroni, external)
+            log += rlog
+            rejected += again
+    after = problem.cv_rms(chosen)
+    out, seen = [], {frozenset(e.name for e in chosen)}
+    for effects, rms, why in sorted(rejected, key=lambda t: t[1]):
+        key = frozenset(e.name for e in effects)
         if key in seen:
             continue
         seen.add(key)
-        out.append({"effects": [label(e) for e in chosen], "heldout_rms_after_um": rms,
-                    "worse_by_um": rms - win[1], "margin_um": contribution_um(rms, win[1]) if rms >= win[1] else
-                    -contribution_um(win[1], rms), "reason": why})
+        out.append({"effects": [label(e) for e in effects], "heldout_rms_after_um": rms, "worse_by_um": rms - after,
+                    "margin_um": contribution_um(rms, after) if rms >= after else -contribution_um(after, rms),
+                    "reason": why})
         if len(out) >= CLOSE_ALTERNATIVES:
             break
-    if len(ends) > 1:
-        log.append(f"sets compared on held-out passes: " + "; ".join(
-            f"{', '.join(label(e) for e in t[0]) or 'nothing'} {t[1]:.4f} um" for t in sorted(ends, key=lambda t: t[1]))
-            + f"; chosen: {', '.join(label(e) for e in win[0]) or 'nothing'}")
-    return win[0], log, out
+    return chosen, log, out
