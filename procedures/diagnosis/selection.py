@@ -536,13 +536,14 @@ def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[
                     continue  # a variant of the same effect: refine_jointly's choice
                 trial = keep + (c,)
                 rms = problem.cv_rms(trial)
-                pruned = prune(problem, trial, threshold_um, alpha, bonferroni)[0]
-                why = (None if pruned == trial else
-                       f"{', '.join(label(e) for e in trial if e not in pruned)} does not earn its place in it")
-                scored.setdefault(frozenset(e.name for e in trial),
-                                  (trial, rms, why or "explains less on held-out passes"))
-                if why is None and rms < best_rms:
-                    best, best_rms = (out, c, trial), rms
+                why = "explains less on held-out passes"
+                if rms < best_rms:  # only a better set needs the (costlier) check of each effect's place
+                    pruned = prune(problem, trial, threshold_um, alpha, bonferroni)[0]
+                    if pruned == trial:
+                        best, best_rms = (out, c, trial), rms
+                    else:
+                        why = f"{', '.join(label(e) for e in trial if e not in pruned)} does not earn its place in it"
+                scored.setdefault(frozenset(e.name for e in trial), (trial, rms, why))
         if best is None:
             break
         out, c, chosen = best
