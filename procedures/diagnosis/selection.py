@@ -513,8 +513,12 @@ def refine_jointly(problem: LegProblem, chosen: tuple[Effect, ...], variants: di
 MAX_EXCHANGES = 3  # rounds of exchanges per leg (each one scores every neighbouring set)
 
 
+EXCHANGES_REFINED = 2  # the best exchange sets whose variants are also chosen anew before they are compared
+
+
 def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[Effect], threshold_um: float,
-              alpha: float, bonferroni) -> tuple[tuple[Effect, ...], list[str], list[tuple[tuple[Effect, ...], float, str]]]:
+              alpha: float, bonferroni, refine=None
+              ) -> tuple[tuple[Effect, ...], list[str], list[tuple[tuple[Effect, ...], float, str]]]:
     """Sets next to `chosen`: one or two of its effects replaced by one candidate of another
     effect (confounded candidates: thermal for drift, or for drift and scale, while a leg warms).
     The one with the lowest held-out RMS replaces `chosen` when it is lower and every effect in it
@@ -544,10 +548,25 @@ def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[
                     else:
                         why = f"{', '.join(label(e) for e in trial if e not in pruned)} does not earn its place in it"
                 scored.setdefault(frozenset(e.name for e in trial), (trial, rms, why))
+        if refine is not None:
+            # a confounded exchange may pay only with other variants of the effects kept (thermal for
+            # drift and scale once the reversal also grows with temperature): the best few exchange sets
+            # get their variants chosen anew
+            here = {frozenset(e.name for e in chosen)}
+            tried = sorted((t for t in scored.values() if frozenset(e.name for e in t[0]) not in here),
+                           key=lambda t: t[1])[:EXCHANGES_REFINED]
+            for trial, _rms, _why in tried:
+                again = refine(trial)
+                rms = problem.cv_rms(again)
+                if rms < best_rms and prune(problem, again, threshold_um, alpha, bonferroni)[0] == again:
+                    best, best_rms = (tuple(e for e in chosen if e not in trial), again[-1], again), rms
+                scored.setdefault(frozenset(e.name for e in again), (again, rms, "explains less on held-out passes"))
         if best is None:
             break
-        out, c, chosen = best
-        log.append(f"exchange {' + '.join(o.name for o in out)} for {c.name}: held-out {now:.4f} -> {best_rms:.4f} um")
+        out, c, new = best
+        log.append(f"exchange {', '.join(label(e) for e in chosen)} for {', '.join(label(e) for e in new)}: held-out "
+                   f"{now:.4f} -> {best_rms:.4f} um")
+        chosen = new
     return chosen, log, list(scored.values())
 
 
@@ -586,14 +605,25 @@ def select_jointly(problem: LegProblem, candidates: list[Effect], variants: dict
     log += flog
     rejected: list[tuple[tuple[Effect, ...], float, str]] = []
     if chosen:
-        chosen, rlog, rejected = _refine(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
-        swapped, xlog, scored = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni)
-        log += rlog + xlog
+        # exchanges before the variants are chosen (a variant fitted alongside drift and scale can
+        # keep thermal out) and after (a variant can make another exchange worth it)
+        def refine(effects):
+            return _refine(problem, effects, variants, threshold_um, alpha, bonferroni, external)[0]
+
+        chosen, xlog, scored = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni, refine)
+        log += xlog
         rejected += scored
-        if xlog:
-            chosen, rlog, again = _refine(problem, swapped, variants, threshold_um, alpha, bonferroni, external)
+        for _round in range(2):
+            chosen, rlog, again = _refine(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
             log += rlog
             rejected += again
+            if not rlog:
+                break
+            chosen, xlog, scored = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni, refine)
+            log += xlog
+            rejected += scored
+            if not xlog:
+                break
     after = problem.cv_rms(chosen)
     out, seen = [], {frozenset(e.name for e in chosen)}
     for effects, rms, why in sorted(rejected, key=lambda t: t[1]):
