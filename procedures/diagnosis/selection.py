@@ -514,6 +514,7 @@ MAX_EXCHANGES = 3  # rounds of exchanges per leg (each one scores every neighbou
 
 
 EXCHANGES_REFINED = 2  # the best exchange sets whose variants are also chosen anew before they are compared
+EXCHANGE_REFINE_WITHIN = 2.0  # ... when their held-out RMS is within this factor of the named set's (speed)
 
 
 def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[Effect], threshold_um: float,
@@ -553,8 +554,8 @@ def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[
             # drift and scale once the reversal also grows with temperature): the best few exchange sets
             # get their variants chosen anew
             here = {frozenset(e.name for e in chosen)}
-            tried = sorted((t for t in scored.values() if frozenset(e.name for e in t[0]) not in here),
-                           key=lambda t: t[1])[:EXCHANGES_REFINED]
+            tried = sorted((t for t in scored.values() if frozenset(e.name for e in t[0]) not in here
+                            and t[1] < EXCHANGE_REFINE_WITHIN * now), key=lambda t: t[1])[:EXCHANGES_REFINED]
             for trial, _rms, _why in tried:
                 again = refine(trial)
                 rms = problem.cv_rms(again)
