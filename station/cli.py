@@ -24,7 +24,7 @@ from pathlib import Path
 
 from drivers.errors import DriverError
 from procedures.engine.errors import InputError
-from station import __version__, launch
+from station import __version__, startup_interrupt
 
 
 def _command_specs() -> dict[str, dict[str, str]]:
@@ -72,8 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; its exit code. Ctrl-C at any moment, also while the command's modules
     load (the first fraction of a second), ends with one line and exit code 130."""
     if threading.current_thread() is threading.main_thread():
-        # while the command's modules load, a Ctrl-C is only recorded (station/launch.py says why)
-        signal.signal(signal.SIGINT, launch.record_interrupt)
+        # while the command's modules load, a Ctrl-C is only recorded (station/startup_interrupt.py says why)
+        signal.signal(signal.SIGINT, startup_interrupt.record_interrupt)
     try:
         try:
             return _main(argv)
@@ -84,10 +84,10 @@ def main(argv: list[str] | None = None) -> int:
             if threading.current_thread() is threading.main_thread():
                 # the command has ended: a Ctrl-C from now on (a second one while the first's
                 # abort closes the recording) only counts, it cannot raise out of here
-                signal.signal(signal.SIGINT, launch.record_interrupt)
-            launch.forget()
+                signal.signal(signal.SIGINT, startup_interrupt.record_interrupt)
+            startup_interrupt.forget()
     except KeyboardInterrupt:  # one that landed in the lines just above
-        launch.forget()
+        startup_interrupt.forget()
         return 130
 
 
@@ -105,8 +105,8 @@ def _main(argv: list[str] | None) -> int:
         return 2
     if threading.current_thread() is threading.main_thread():
         # loaded: a Ctrl-C that came meanwhile ends the command here; from now on one raises
-        signal.signal(signal.SIGINT, launch.interrupt_now)
-    if launch.interrupted():
+        signal.signal(signal.SIGINT, startup_interrupt.interrupt_now)
+    if startup_interrupt.interrupted():
         raise KeyboardInterrupt
     try:
         return int(args._run(args) or 0)
