@@ -10,6 +10,7 @@ import sys
 
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditError, AuditLog
+from procedures.compensation.push import TablePlanned
 from procedures.engine.errors import InputError
 from procedures.acquisition.plans import parse_legs
 from procedures.engine.states import Action, AuditOutcome
@@ -89,7 +90,7 @@ class PlanPrinter:
         self.header = header
 
     def handle(self, event: ev.Event) -> None:
-        if isinstance(event, ev.TablePlanned):
+        if isinstance(event, TablePlanned):
             plan = event.plan
             if plan.action == Action.ROLLBACK:
                 print(f"rollback of the push of {plan.details.get('push_time_utc')}")

@@ -8,11 +8,10 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.engine import events as ev
 from procedures.compensation.audit import AuditLog
 from procedures.engine.errors import InputError
 from procedures.io.plausibility import ImplausibleError
-from procedures.compensation.push import PushPlan
+from procedures.compensation.push import OperationFinished, PushPlan
 from procedures.engine.states import Action
 from station.catalog.writer import catalog_for
 from station.commands._table_cli import (
@@ -107,7 +106,7 @@ def run(args) -> int:
     for line in job.warnings:  # found only against the drive's own limit
         if line not in warned:
             print(line)
-    for end in job.of(ev.OperationFinished):
+    for end in job.of(OperationFinished):
         result = end.result
         if end.leg is not None and result is not None:
             print(f"pushed: leg {result.leg} bank {result.bank} active (was bank {result.previous_bank}); "

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.engine import events as ev
 from procedures.engine.errors import InputError
-from procedures.compensation.push import describe_table
+from procedures.compensation.push import TablePlanned, describe_table
 from procedures.engine.states import Action
 from station.catalog.writer import catalog_for
 from station.commands._table_cli import (
@@ -59,7 +58,7 @@ def run(args) -> int:
     if code:
         return code
     result = job.finished.result
-    plan = job.of(ev.TablePlanned)[-1].plan
+    plan = job.of(TablePlanned)[-1].plan
     print(f"rolled back: leg {leg} bank {result.bank} active (was bank {result.previous_bank}): "
           f"{describe_table(plan.table)}; sha256 {result.table_sha256}")
     return 0

@@ -17,7 +17,7 @@ from procedures.io.outputs import check_output_file
 from procedures.acquisition.plans import SweepPlan, iso230_plan
 from procedures.io.recording.reader import read_session
 from procedures.engine.states import Action, AuditOutcome
-from procedures.compensation.verify import ACCEPT_RATIO
+from procedures.compensation.verify import ACCEPT_RATIO, LegChecked, Verified
 from station.commands._table_cli import audit_log, parse_leg_choice, station_config
 from station.commands.sweep import check_time_scale
 from station.progress import ConsoleProgress
@@ -98,7 +98,7 @@ class LegPrinter:
     critical = False
 
     def handle(self, event: ev.Event) -> None:
-        if isinstance(event, ev.LegChecked):
+        if isinstance(event, LegChecked):
             print(f"leg {event.leg}: bank {event.bank} active, {event.description}, sha256 {event.table_sha256[:12]}…")
 
     def close(self, outcome: str) -> None:
@@ -148,7 +148,7 @@ def run(args) -> int:
     end = job.finished
     if end is None or end.outcome == AuditOutcome.REFUSED:
         raise InputError(end.message if end is not None else "the verification ended without an outcome")
-    verified = job.of(ev.Verified)[-1]
+    verified = job.of(Verified)[-1]
     doc = {"session": verified.session, "before": None if before is None else {"path": str(before.path), "sha256": before.sha256},
            "legs": {str(leg): r.to_json() for leg, r in verified.results.items()}}
     print(f"session: {out} ({verified.session['outcome']}, {job.run.points} of {plan.total_points} points)")
