@@ -6,9 +6,6 @@ import argparse
 from pathlib import Path
 
 from procedures.engine.errors import InputError
-from procedures.io.recording.reader import read_session
-from station.services.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
-from station.services.config import load_config
 
 NAME = "certificate"
 HELP = "calibration certificate of a leg (PDF + JSON): report number, as found / as left with U and decisions"
@@ -84,6 +81,10 @@ def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:
 
 
 def run(args) -> int:
+    from procedures.io.recording.reader import read_session
+    from station.services.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     if args.catalog and not args.serial:
         raise InputError("--catalog goes with --serial (a session file names its own sessions)")

@@ -5,9 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from station.catalog.history import history, row_detail, value_with_u
-from station.catalog.store import catalog_of, reading_engine
-from station.services.config import load_config
 
 NAME = "history"
 HELP = "a leg's history by serial: calibrations (ISO 230-2 with U), tables, pushes, verifications, drift"
@@ -27,6 +24,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from station.catalog.history import history, row_detail, value_with_u
+    from station.catalog.store import catalog_of, reading_engine
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     engine, where = reading_engine(catalog_of(cfg), args.local)
     h = history(engine, args.serial, cfg.catalog.calibration_interval_days)

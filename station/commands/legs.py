@@ -8,9 +8,6 @@ import json
 from dataclasses import asdict
 
 from procedures.engine.errors import InputError
-from station.catalog.history import legs
-from station.catalog.store import catalog_of, reading_engine
-from station.services.config import load_config
 
 NAME = "legs"
 HELP = "list legs by serial with last calibration and due date (filters: type, station, dates, due)"
@@ -40,6 +37,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from station.catalog.history import legs
+    from station.catalog.store import catalog_of, reading_engine
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     due = args.due
     if due == "today":

@@ -10,33 +10,9 @@ import argparse
 
 from procedures.compensation.audit import AuditLog
 from procedures.engine.errors import InputError
-from procedures.io.plausibility import ImplausibleError
-from procedures.compensation.push import OperationFinished, PushPlan
 from procedures.engine.states import Action
-from station.catalog.writer import catalog_for
-from station.commands._table_cli import (
-    PlanPrinter,
-    add_drive_arguments,
-    audit_log,
-    drive_text,
-    parse_leg_choice,
-    prompt,
-    refuse,
-    report,
-    station_config,
-    warn_audit_problems,
-)
-from station.services.identity import configured_serials
+from station.commands._table_cli import add_drive_arguments
 from station.services.devices import DriverError
-from station.services.table_jobs import (
-    check_push_values,
-    controller_refusal,
-    load_leg_table,
-    push_job,
-    push_legs_job,
-    target_text,
-)
-from station.services.wiring import leg_table_spec, open_drive
 
 NAME = "push"
 HELP = "write a leg's compensation table to its drive (inactive bank, read back, switch), with an audit entry"
@@ -58,6 +34,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # -- push -----------------------------------------------------------------------------------------
 
 def run(args) -> int:
+    from procedures.compensation.push import OperationFinished
+    from procedures.io.plausibility import ImplausibleError
+    from station.catalog.writer import catalog_for
+    from station.commands._table_cli import (
+        PlanPrinter, audit_log, drive_text, parse_leg_choice, prompt, refuse, report, station_config,
+        warn_audit_problems,
+    )
+    from station.services.identity import configured_serials
+    from station.services.table_jobs import (
+        check_push_values, controller_refusal, load_leg_table, push_job, push_legs_job, target_text,
+    )
+    from station.services.wiring import open_drive
+
     cfg = station_config(args)
     audit = audit_log(args, cfg)
     try:
@@ -132,6 +121,8 @@ def run(args) -> int:
 
 def _configured_limit_um(cfg, leg: int) -> float:
     """What leg `leg`'s table holder takes by the config, without connecting (inf when unknown)."""
+    from station.services.wiring import leg_table_spec
+
     try:
         return leg_table_spec(cfg, leg).max_correction_um
     except InputError:
@@ -140,6 +131,7 @@ def _configured_limit_um(cfg, leg: int) -> float:
 
 def _with_audit_line(ask, audit: AuditLog):
     """A `Confirm` for one plan or several: say where the audit log is, then ask."""
+    from procedures.compensation.push import PushPlan
 
     def confirm(plans) -> bool:
         print(f"audit log: {audit.path}")

@@ -5,23 +5,8 @@ from __future__ import annotations
 import argparse
 
 from procedures.engine.errors import InputError
-from procedures.compensation.push import TablePlanned, describe_table
 from procedures.engine.states import Action
-from station.catalog.writer import catalog_for
-from station.commands._table_cli import (
-    PlanPrinter,
-    add_drive_arguments,
-    audit_log,
-    drive_text,
-    prompt,
-    refuse,
-    report,
-    station_config,
-    warn_audit_problems,
-)
-from station.services.config import LEG_COUNT
-from station.services.table_jobs import controller_refusal, rollback_job, target_text
-from station.services.wiring import open_drive
+from station.commands._table_cli import add_drive_arguments
 
 NAME = "rollback"
 HELP = "restore the table a drive had before the last successful push (from the audit log)"
@@ -37,6 +22,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.compensation.push import TablePlanned, describe_table
+    from station.catalog.writer import catalog_for
+    from station.commands._table_cli import (
+        PlanPrinter, audit_log, drive_text, prompt, refuse, report, station_config, warn_audit_problems,
+    )
+    from station.services.config import LEG_COUNT
+    from station.services.table_jobs import controller_refusal, rollback_job, target_text
+    from station.services.wiring import open_drive
+
     cfg = station_config(args)
     audit = audit_log(args, cfg)
     leg = int(args.leg)

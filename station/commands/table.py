@@ -10,13 +10,7 @@ import numpy as np
 
 from procedures.compensation import controllers
 from procedures.engine.errors import InputError
-from procedures.fit import load_model
-from procedures.acquisition.plans import parse_legs
-from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
 from procedures.io.outputs import check_output_file
-from station.services.config import load_config
-from station.services.table_jobs import make_checked_table, write_table
-from station.services.wiring import drive_table_spec
 
 NAME = "table"
 HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"
@@ -59,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def output_paths(fmt: str, out: str, legs) -> list[Path]:
     """The files `--format fmt --out out` writes for `legs`, known before the table is made."""
+    from procedures.compensation.controllers.linuxcnc import linuxcnc_paths
+
     if fmt == "csv":
         return [Path(out)]
     if fmt == "linuxcnc":
@@ -70,6 +66,13 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
 
 
 def run(args) -> int:
+    from procedures.acquisition.plans import parse_legs
+    from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, write_linuxcnc_comp
+    from procedures.fit import load_model
+    from station.services.config import load_config
+    from station.services.table_jobs import make_checked_table, write_table
+    from station.services.wiring import drive_table_spec
+
     model = load_model(args.model)
     legs = parse_legs(args.legs) if args.legs else None
     if legs is not None:

@@ -4,9 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from station.catalog import db
-from station.catalog.store import LOCAL_NAME
-from station.services.config import load_config
 
 NAME = "web"
 HELP = "the fleet web view: legs, a leg's history, control charts, station comparison (read-only)"
@@ -27,8 +24,10 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
+    from station.catalog import db
+    from station.catalog.store import LOCAL_NAME
+    from station.services.config import load_config
     import uvicorn
-
     from station.web.app import WebSettings, create_app
     from station.web.engine import catalog_url, open_readonly
     from station.web.extensions import decision_tolerances_of, tolerances_of
