@@ -10,7 +10,7 @@ Units are in the field names; `t_s` is on the rig clock (virtual on the simulate
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from procedures.engine.states import FaultKind, Outcome
@@ -81,13 +81,6 @@ class SweepFinished(Event):
     outcome: Outcome  # COMPLETED / ABORTED / FAILED
     points: int
     reason: str = ""
-
-
-@dataclass(frozen=True)
-class Finding(Event):
-    leg: int
-    effect: str
-    parameters: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
