@@ -117,7 +117,7 @@ def test_as_left_found_by_serial_when_the_leg_was_remounted(sessions, cfg, tmp_p
     moved = write_identified_session(tmp_path / "ver-at-3.h5", left, station_config={"tolerances": TOL})
     rc, out, err = _issue(capsys, sessions["found"], "--as-left", moved, "--config", cfg)
     assert rc == 0, err
-    c = json.loads(next((tmp_path / "runs" / "certificates").glob("*.json")).read_text())
+    c = json.loads(next((tmp_path / "runs" / "certificates").glob("*_r1.json")).read_text())
     assert c["item"]["serial"] == "HX-0042" and c["item"]["leg"] == 1
     assert c["as_found"]["leg"] == 1 and c["as_left"]["leg"] == 3
     assert c["as_left"]["session_file"] == "ver-at-3.h5"
