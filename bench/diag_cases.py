@@ -117,7 +117,11 @@ def _fmt(v):
 def _diagnose(src: Path, tree: Path) -> None:
     sys.path.insert(0, str(tree))
     from procedures.diagnosis import diagnose
-    from procedures.diagnosis.twin import ExternalTwin, twin_from_recording
+    from procedures.diagnosis.twin import ExternalTwin
+    try:
+        from procedures.diagnosis.reference_twin import twin_from_recording
+    except ImportError:  # a tree from before the reference twin had a module of its own
+        from procedures.diagnosis.twin import twin_from_recording
 
     meta = json.loads((src / "meta.json").read_text())
     for name, m in meta.items():

@@ -3,7 +3,8 @@ unmodelled effect causes it, and how far it shrinks once that effect is added (d
 
 from procedures.diagnosis.diagnose import DiagnosisSettings, diagnose, to_json
 from procedures.diagnosis.effects import EFFECTS
-from procedures.diagnosis.twin import ExternalTwin, Twin, twin_from_model, twin_from_recording
+from procedures.diagnosis.reference_twin import twin_from_recording
+from procedures.diagnosis.twin import ExternalTwin, Twin, twin_from_model
 
 __all__ = ["DiagnosisSettings", "diagnose", "to_json", "EFFECTS", "ExternalTwin", "Twin",
            "twin_from_model", "twin_from_recording"]

@@ -22,7 +22,7 @@ from procedures.diagnosis.effects import Effect, cyclic_grid
 from procedures.diagnosis.legdata import LegData, per_pass_line_removed
 from procedures.diagnosis.significance import (Gram, GlsFit, between_pass_share, random_intercept_gls, replicate_variance,
                                                solve_gram, wald_test)
-from procedures.diagnosis.twin import _Scan
+from procedures.diagnosis.twin import Scan
 
 PARSIMONY = 0.03  # a simpler effect wins when it explains at least 97 % of what the best explains (held-out
 # scoring already penalises a useless extra parameter, so the margin can be small)
@@ -163,7 +163,7 @@ class LegProblem:
         if "cyc_scan" not in self._cache:
             ux = np.unique(self.leg.x_mm)
             grid = cyclic_grid(self.leg, oversample=2)  # the Gauss-Newton step below refines
-            self._cache["cyc_scan"] = (ux, grid, _Scan(ux, grid, 0.0) if grid.size else None)
+            self._cache["cyc_scan"] = (ux, grid, Scan(ux, grid, 0.0) if grid.size else None)
         ux, grid, scan = self._cache["cyc_scan"]
         if scan is None:
             self._cache[key] = None

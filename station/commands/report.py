@@ -8,7 +8,6 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 
 from procedures.io.outputs import check_output_folder
-from station.commands.fit import _lead
 
 NAME = "report"
 HELP = "plots, a summary before/after compensation and the ISO 230-2 test report with uncertainties (Markdown, JSON, PDF)"

@@ -23,7 +23,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from procedures.diagnosis.selfcheck import Trial
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from procedures.diagnosis.selfcheck import Trial
 
 SITUATIONS = ("warm_reversal", "stacked", "reference_wobble", "fleet_duplicates")
 BASE_SOURCES = ("lead", "longwave", "wobble", "noise", "run_offset")
@@ -37,6 +40,8 @@ def _targets(rng, n_targets: int) -> np.ndarray:
 
 
 def situation_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 5) -> Trial:
+    from procedures.diagnosis.selfcheck import Trial  # scipy: not for `station diagnose --help`
+
     """One session of `physics` (SITUATIONS); deterministic for the seed."""
     from drivers.sim.plant import default_leg_configs, systematic_error_um
     from station.services.synth import synth_session
@@ -85,7 +90,7 @@ def situation_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 
         info = {"legs": [leg], "physics": physics, "rise_k": float(np.ptp(points["material_temp_c"]))}
         return Trial(seed, points, twin, {leg: truth}, true_um, physics, info)
     if physics == "reference_wobble":
-        from procedures.diagnosis.twin import twin_from_recording
+        from procedures.diagnosis.reference_twin import twin_from_recording
 
         targets = _targets(rng, 181)  # 1 mm apart: the 5 mm lead resolved
         here_cfg = replace(cfg, wobble_amplitude_um=float(rng.uniform(0.08, 0.3)))

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.diagnosis.twin import ExternalTwin, twin_from_model, twin_from_recording
+from procedures.diagnosis.reference_twin import twin_from_recording
+from procedures.diagnosis.twin import ExternalTwin, twin_from_model
 from procedures.engine.errors import InputError
 
 

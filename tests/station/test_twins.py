@@ -39,7 +39,7 @@ def test_a_reference_3_k_warmer_is_compared_normalised_to_20_c(tmp_path):
 
     from drivers.sim.plant import default_leg_configs
     from procedures.diagnosis import diagnose
-    from procedures.diagnosis.twin import twin_from_recording
+    from procedures.diagnosis.reference_twin import twin_from_recording
     from procedures.io.recording.reader import read_session
     from station.services.diagnosis_jobs import diagnose_session
     from station.services.synth import synth_session

@@ -80,7 +80,7 @@ def test_the_same_term_sampled_finely_is_found_at_its_own_wavelength_without_a_w
 
 
 def test_a_reference_recorded_3_k_warmer_ties_the_scale_to_the_temperature_difference():
-    from procedures.diagnosis.twin import twin_from_recording
+    from procedures.diagnosis.reference_twin import twin_from_recording
 
     cfg = _leg(add={"thermal"}, heating_k_per_m=0.0)
     targets = np.linspace(-90, 90, 91)

@@ -10,7 +10,7 @@ import pytest
 
 from drivers.sim.plant import default_leg_configs
 from procedures.diagnosis import diagnose
-from procedures.diagnosis.twin import twin_from_recording
+from procedures.diagnosis.reference_twin import twin_from_recording
 from station.services.synth import synth_session
 
 BASE = frozenset({"lead", "longwave", "wobble", "noise", "run_offset", "backlash"})
