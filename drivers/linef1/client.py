@@ -16,7 +16,7 @@ echoing its code (protocol: drivers/linef1/protocol.py, docs/interferometer-prot
   flag (a broken beam) or an unstable laser raises `BeamBreak`; a velocity overflow raises
   `CountLost` (the count is lost: every later reading is refused until `zero` sets the origin
   again). Frames lost inside the window (CRC error, cut frame, a gap in the stream) are counted
-  in `frames_lost`; no sample at all within the window is a `CommTimeout`.
+  in `frames_lost`; fewer than half the window's samples (or none) is a `CommTimeout`.
 - The distance is raw (the instrument applies no air compensation): the station divides it by
   the refractive index of the air sensor's latest values, by the equation it is given
   (procedures/metrology/air.py from the composition root), and `compensation()` says so in the
@@ -49,6 +49,10 @@ NO_IDENTITY_QUERY = "no identity query in the protocol: model and serial as conf
 _POLL_S = 0.02
 _KNOWN_CODES = frozenset((*lf.DATA_FRAMES, *lf.COMMANDS))
 MAX_AVERAGING_S = 10.0
+MIN_SAMPLE_FRACTION = 0.5
+"""A window with fewer of its expected samples (averaging time / stream period) is not a reading:
+`CommTimeout` (a gap in the stream), for the sweep to ask again. With more, frames lost in it only
+flag the reading (`frames_lost`)."""
 
 
 @dataclass(frozen=True)
@@ -231,6 +235,11 @@ class LineF1Interferometer:
                 why = "small signal (beam interrupted)" if not s.signal_good else "laser not stable"
                 raise BeamBreak(f"µLine-F1 on {self.port}, leg {axis}: {why} at t = {s.t_s:.3f} s "
                                 f"(signal level {s.level}).")
+        expected = max(1, math.floor(self._averaging_s / self.period_s + 1e-9))
+        if len(window) < math.ceil(MIN_SAMPLE_FRACTION * expected):
+            # too little of the window left to stand for it: asked again, not averaged
+            raise CommTimeout(f"µLine-F1 on {self.port}: {len(window)} of about {expected} distance frames in the window "
+                              f"{t0:.3f}..{t1:.3f} s (a gap in the stream).")
         n_air = self._air_index()
         values = [s.raw_mm / n_air for s in window]
         mean = math.fsum(values) / len(values)

@@ -1,0 +1,118 @@
+"""A sweep with the µLine-F1 / HPI-3D laser ([interferometer] protocol = "linef1") on the simulated
+rig: real Modbus TCP, the laser's 16-byte frames on a real pty, a real HDF5 session. Faults are
+put into the stream during given points' reading windows (the dwell after arrival, then the
+averaging window): a CRC error, a cut frame, a 1 s gap, a beam break and a velocity overflow.
+Each point is flagged or retried, the session's flags and faults say which, and no point is
+recorded as good that was not (every recorded error within the simulated leg's few um)."""
+
+from __future__ import annotations
+
+import logging
+import re
+
+import numpy as np
+import pytest
+
+from procedures.acquisition.plans import SweepPlan
+from procedures.engine import events as ev
+from procedures.engine.runner import CallbackSink
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.schema import (
+    FLAG_FRAMES_LOST,
+    FLAG_REREFERENCED,
+    FLAG_RETRIED_BEAM,
+    FLAG_RETRIED_DRIVE,
+)
+from station.cli import main
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.wiring import open_rig
+
+DWELL_S = 1.0
+PLAN = SweepPlan("test", (-90.0, -45.0, 0.0, 45.0, 90.0), cycles=2, legs=(1,), dwell_s=DWELL_S, averaging_s=0.2)
+IN_WINDOW_S = DWELL_S + 0.05  # after arrival: inside the reading's window (dwell, then 0.2 s)
+# plan index of the point measured before the one the fault hits -> (kind, options)
+FAULTS = {
+    1: ("crc", {"frames": 1}),
+    3: ("cut", {"frames": 1}),
+    5: ("gap", {"duration_s": 1.0}),
+    7: ("beam", {"duration_s": 0.3}),  # shorter than the sweep's wait before re-reading (0.5 s)
+    11: ("overflow", {}),
+}
+
+
+def linef1_config(tmp_path) -> StationConfig:
+    cfg = StationConfig()
+    cfg.interferometer.protocol = "linef1"
+    cfg.recordings_dir = str(tmp_path)
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def faulted(tmp_path_factory):
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    tmp = tmp_path_factory.mktemp("linef1")
+    cfg = linef1_config(tmp)
+    out = tmp / "faults.h5"
+    with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
+        sim = rig.sim.laser_server
+        pending = dict(FAULTS)
+
+        def on_event(e):
+            if isinstance(e, ev.PointMeasured) and int(e.record["index"]) in pending:
+                kind, opts = pending.pop(int(e.record["index"]))
+                sim.inject(kind, at_rest_after_s=IN_WINDOW_S, **opts)
+
+        result = run_sweep(rig, PLAN, out, cfg, sinks=[CallbackSink(on_event)], index=False)
+        sent = dict(sim.sent)
+        assert not sim.failures and not rig.laser.failures
+    return result, read_session(out), sent
+
+
+def test_the_session_says_which_protocol_and_that_it_has_no_identity_query(faulted):
+    result, session, _ = faulted
+    assert result.outcome == "completed"
+    devices = session.devices
+    assert "no identity query" in devices["interferometer"]
+    assert '"mode": "STATION"' in devices["laser_air_compensation"]
+
+
+def test_each_fault_is_retried_or_flagged_and_the_session_says_which(faulted):
+    _, session, sent = faulted
+    pts, faults = session.points, session.faults
+    assert len(pts) == PLAN.total_points and sorted(pts["index"]) == list(range(PLAN.total_points))
+    flags = {int(i): int(f) for i, f in zip(pts["index"], pts["flags"])}
+    assert sent["crc"] == 1 and sent["cut"] == 1 and sent["gap"] >= 1
+    # CRC error and cut frame: the window's mean is of fewer samples; flagged, not retried
+    assert flags[2] == FLAG_FRAMES_LOST and flags[4] == FLAG_FRAMES_LOST
+    # the 1 s gap: no frame after the window: a timeout, retried (re-approached)
+    assert flags[6] & FLAG_RETRIED_DRIVE
+    # beam break: re-read after the wait
+    assert flags[8] == FLAG_RETRIED_BEAM
+    # overflow: the count is lost; the leg re-referenced (zeroed again) and the point re-measured
+    assert flags[12] == FLAG_RETRIED_BEAM | FLAG_REREFERENCED
+    untouched = [i for i in flags if i not in (2, 4, 6, 8, 12)]
+    assert all(flags[i] == 0 for i in untouched), {i: flags[i] for i in untouched if flags[i]}
+    kinds = {(int(f["index"]), f["kind"].decode()) for f in faults}
+    assert kinds == {(6, "timeout"), (8, "beam_break"), (12, "beam_break")}
+    messages = {int(f["index"]): f["message"].decode() for f in faults}
+    assert "gap in the stream" in messages[6]
+    assert "small signal" in messages[8]
+    assert re.search("velocity overflow", messages[12])
+    assert not any(f["gave_up"] for f in faults)
+
+
+def test_nothing_is_recorded_as_good_that_was_not(faulted):
+    _, session, _ = faulted
+    err = session.points["error_um"]
+    # the simulated leg's error spans a few um; a lost count would add 317 um, a stale reading the
+    # 45 mm between targets
+    assert np.all(np.abs(err) < 10.0), err
+
+
+def test_a_config_naming_an_unknown_protocol_is_refused_in_one_line(tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[interferometer]\nport = "sim"\nprotocol = "lasertex"\n[drive]\nurl = "sim"\n')
+    assert main(["sweep", "--config", str(cfg), "--out", str(tmp_path / "s.h5")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "[interferometer] protocol = 'lasertex': must be one of 'station', 'linef1'" in err[0]
