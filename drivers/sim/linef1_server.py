@@ -69,7 +69,8 @@ class SimLineF1:
     def __init__(self, plants: dict[int, LegPlant], clock: Clock, lock: threading.RLock | None = None,
                  aim: Callable[[], int | None] | None = None, index: Callable[[float, float, float], float] | None = None,
                  air: tuple[float, float, float] = (20.0, 1013.25, 45.0), seed: int = 0, offset_um: float = 0.0,
-                 period_s: float = 1.0 / lf.STREAM_RATE_HZ, max_catch_up_s: float = 2.0, poll_s: float = 0.002):
+                 period_s: float = 1.0 / lf.STREAM_RATE_HZ, max_catch_up_s: float = 2.0, poll_s: float = 0.002,
+                 sensor_noise: bool = True):
         self.plants = dict(plants)
         self.clock = clock
         self.lock = lock if lock is not None else threading.RLock()
@@ -93,6 +94,8 @@ class SimLineF1:
         self._overflow = False  # latched until CLEAR_OVERFLOW
         self._count_lost = False  # until SET_ORIGIN
         self._faults: list[_Fault] = []
+        self.sensor_noise = bool(sensor_noise)  # the air sensor's noise (off: tests comparing two sessions)
+        self._air_offset_c = 0.0  # set_air_sensor_offset: a faulty air temperature sensor
         self._fault_lock = threading.Lock()
         self.commands: Counter = Counter()  # command code (hex) -> times received
         self.sent = Counter()  # "distance", "meteo", "ack", "crc", "cut", "gap" -> frames
@@ -177,6 +180,11 @@ class SimLineF1:
                     self._faults.remove(f)
                 return f
         return None
+
+    def set_air_sensor_offset(self, temp_offset_c: float) -> None:
+        """A faulty air sensor reading `temp_offset_c` too high: the meteo frames report it, the
+        raw distances do not change (they follow the true air), so the station's index is off."""
+        self._air_offset_c = float(temp_offset_c)
 
     def pending_faults(self) -> int:
         with self._fault_lock:
@@ -324,8 +332,9 @@ class SimLineF1:
 
     def _meteo(self, t_s: float) -> bytes:
         temp_c, p_hpa, h = self.air_now(t_s)
-        noise = self._rng.normal(0.0, (0.002, 0.01, 0.05))
-        out = bytearray(lf.meteo_frame(lf.AIR_SENSOR_ID, temp_c + noise[0], h + noise[2], (p_hpa + noise[1]) * 100.0))
+        noise = self._rng.normal(0.0, (0.002, 0.01, 0.05)) if self.sensor_noise else np.zeros(3)
+        out = bytearray(lf.meteo_frame(lf.AIR_SENSOR_ID, temp_c + noise[0] + self._air_offset_c, h + noise[2],
+                                       (p_hpa + noise[1]) * 100.0))
         with self.lock:
             for leg, plant in sorted(self.plants.items()):
                 out += lf.meteo_frame(leg, plant.material_temp_c(t_s))

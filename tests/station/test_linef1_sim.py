@@ -116,3 +116,47 @@ def test_a_config_naming_an_unknown_protocol_is_refused_in_one_line(tmp_path, ca
     assert main(["sweep", "--config", str(cfg), "--out", str(tmp_path / "s.h5")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "[interferometer] protocol = 'lasertex': must be one of 'station', 'linef1'" in err[0]
+
+
+def _quiet_sweep(out, tmp, air_offset_c: float) -> None:
+    """A sweep of leg 1 with the µLine-F1 whose air sensor reads `air_offset_c` too high; no
+    measurement or sensor noise, so two sessions differ only by that sensor."""
+    from drivers.linef1 import LineF1Interferometer
+    from drivers.modbus.client import connect_axes
+    from drivers.sim.plant import default_leg_configs
+    from drivers.sim.rig import SimRig
+    from station.services.laser_wiring import air_index
+    from station.services.wiring import Rig
+
+    cfg = linef1_config(tmp)
+    configs = [c.without("noise", "run_offset") for c in default_leg_configs(0, 6)]
+    sim = SimRig(configs=configs, laser_protocol="linef1", air_index=air_index(cfg)).start()
+    try:
+        sim.laser_server.sensor_noise = False
+        sim.laser_server.set_air_sensor_offset(air_offset_c)
+        axes = connect_axes(sim.drive_url, (1,), sim.profile, clock=sim.clock)
+        laser = LineF1Interferometer(sim.laser_port, clock=sim.clock, index=air_index(cfg))
+        rig = Rig(axes, laser, sim.clock, "sim", "test rig", sim.profile, sim, [])
+        with rig:
+            assert run_sweep(rig, PLAN, out, cfg, index=False).outcome == "completed"
+    finally:
+        sim.stop()
+
+
+def test_recorrect_undoes_a_wrong_air_sensor_on_a_linef1_session(tmp_path, capsys):
+    good, bad, fixed = tmp_path / "good.h5", tmp_path / "bad.h5", tmp_path / "fixed.h5"
+    _quiet_sweep(good, tmp_path, 0.0)
+    _quiet_sweep(bad, tmp_path, 1.0)
+    g, b = read_session(good).points, read_session(bad).points
+    assert np.allclose(b["air_temp_c"] - g["air_temp_c"], 1.0)
+    wrong_um = b["error_um"] - g["error_um"]
+    # the station divided by the index of air 1 K too warm (-0.93 ppm/K): +0.084 um at +90 mm
+    at_end = np.argmax(g["target_mm"])
+    assert 0.075 < wrong_um[at_end] < 0.095
+    assert main(["recorrect", str(bad), "--out", str(fixed), "--equation", "ciddor", "--air-temp-offset-c", "-1"]) == 0
+    f = read_session(fixed).points
+    left_um = f["error_um"] - g["error_um"]
+    with capsys.disabled():
+        print(f"\nlinef1, air sensor +1 K: error off by up to {np.max(np.abs(wrong_um)):.4f} um; after recorrect "
+              f"{np.max(np.abs(left_um)):.6f} um")
+    assert np.max(np.abs(left_um)) < 0.01 * np.max(np.abs(wrong_um))
