@@ -160,3 +160,13 @@ def test_recorrect_undoes_a_wrong_air_sensor_on_a_linef1_session(tmp_path, capsy
         print(f"\nlinef1, air sensor +1 K: error off by up to {np.max(np.abs(wrong_um)):.4f} um; after recorrect "
               f"{np.max(np.abs(left_um)):.6f} um")
     assert np.max(np.abs(left_um)) < 0.01 * np.max(np.abs(wrong_um))
+
+
+def test_a_linef1_session_with_its_faults_replays_identically(faulted, tmp_path, capsys):
+    _, session, _ = faulted
+    out = tmp_path / "replayed.h5"
+    assert main(["replay", str(session.path), "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert f"identical to the recording: {PLAN.total_points} points (all fields), 3 faults, outcome completed" in said
+    replayed = read_session(out).points
+    assert np.array_equal(np.sort(replayed, order="index")["error_um"], np.sort(session.points, order="index")["error_um"])
