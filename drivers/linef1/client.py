@@ -129,6 +129,8 @@ class LineF1Interferometer:
         self.crc_errors = 0  # frames dropped for their CRC or an unknown code
         self.bytes_dropped = 0  # bytes skipped while resynchronising
         self.commands_sent = 0
+        self.bytes_out = 0  # bytes of the commands written
+        self.bytes_in = 0  # bytes received (the streams, echoes, anything dropped)
         self.retried = 0
         self._aimed: int | None = None  # the axis the beam was zeroed on
         self._count_lost = False
@@ -341,6 +343,7 @@ class LineF1Interferometer:
             except (serial.SerialException, OSError) as exc:
                 raise DriverError(f"µLine-F1 on {self.port}: cannot write '{name}': {exc}") from exc
             self.commands_sent += 1
+            self.bytes_out += len(frame)
             deadline = time.monotonic() + self.timeout_s
             with self._cv:
                 while self._acks.get(code, -1) == before:
@@ -377,6 +380,7 @@ class LineF1Interferometer:
             if not chunk:
                 continue
             arrived = self._clock.now()
+            self.bytes_in += len(chunk)
             buf += chunk
             frames: list[tuple[bytes, int]] = []  # (frame, frames lost just before it)
             while len(buf) >= lf.FRAME_BYTES:

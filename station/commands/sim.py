@@ -26,6 +26,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    if args.interferometer_protocol == "linef1" and not args.time_scale > 0:
+        # standalone, nothing else moves the rig's clock: a stream at time scale 0 would never come
+        print(f"station sim: error: --time-scale {args.time_scale:g} with --interferometer-protocol linef1: a "
+              "streaming laser needs a running clock; give a time scale > 0 (1 = real time)")
+        return 2
     sim_cfg = SimConfig(seed=args.seed)  # the station's simulated legs: a real leg's jerk limit
     try:
         rig = start_sim_rig(sim_cfg, args.time_scale, args.port, args.rtu, Path(args.nv) if args.nv else None,

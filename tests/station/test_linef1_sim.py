@@ -170,3 +170,51 @@ def test_a_linef1_session_with_its_faults_replays_identically(faulted, tmp_path,
     assert f"identical to the recording: {PLAN.total_points} points (all fields), 3 faults, outcome completed" in said
     replayed = read_session(out).points
     assert np.array_equal(np.sort(replayed, order="index")["error_um"], np.sort(session.points, order="index")["error_um"])
+
+
+def test_station_sim_serves_the_linef1_laser_to_a_station_config_in_another_process(tmp_path):
+    """`station sim --interferometer-protocol linef1` in its own process, in real time; the station
+    reaches it through a TOML naming the pty and the protocol, on the system clock."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    proc = subprocess.Popen([sys.executable, "-m", "station.cli", "sim", "--port", "0", "--time-scale", "1",
+                             "--interferometer-protocol", "linef1"], cwd=repo, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        where = {}
+        for line in proc.stdout:
+            if m := re.search(r"drives \(Modbus TCP\): (tcp://127\.0\.0\.1:\d+)", line):
+                where["tcp"] = m.group(1)
+            if m := re.search(r"interferometer \(serial, µLine-F1 protocol, 3000000 baud\): (\S+)", line):
+                where["laser"] = m.group(1)
+            if len(where) == 2:
+                break
+        assert len(where) == 2, where
+        cfg = tmp_path / "station.toml"
+        cfg.write_text(f'[drive]\nurl = "{where["tcp"]}"\n[interferometer]\nport = "{where["laser"]}"\n'
+                       'protocol = "linef1"\n[metrology]\nmodel = "HPI-3D"\nserial = "LT-1234"\n')
+        out = tmp_path / "live.h5"
+        r = subprocess.run([sys.executable, "-m", "station.cli", "sweep", "--config", str(cfg), "--legs", "2",
+                            "--cycles", "1", "--n-targets", "3", "--min-mm", "-2", "--max-mm", "2", "--dwell", "0.2",
+                            "--averaging", "0.2", "--out", str(out)], cwd=repo, env=env, capture_output=True,
+                           text=True, timeout=120)
+        assert r.returncode == 0, r.stdout + r.stderr
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=20)
+    s = read_session(out)
+    assert s.outcome == "completed" and len(s.points) == 6 and s.attrs["rig"] == "live"
+    assert s.devices["interferometer"].startswith("Lasertex,HPI-3D,LT-1234,no identity query")
+    assert np.abs(s.points["error_um"]).max() < 10.0  # the leg the drive moved, air-compensated by the station
+
+
+def test_station_sim_refuses_a_streaming_laser_at_time_scale_0(capsys):
+    assert main(["sim", "--time-scale", "0", "--interferometer-protocol", "linef1"]) == 2
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1 and "a streaming laser needs a running clock" in out[0]
