@@ -57,3 +57,34 @@ def sim_rig_laser_options(cfg) -> dict:
     return {}
 
 
+
+
+class _RecordedStationCompensation:
+    """A replay's interferometer client whose `compensation()` is the recording's record where the
+    station applied the index itself (a µLine-F1 session, mode STATION): the replay instrument
+    speaks the station's protocol, whose COMP? cannot say that. Everything else is the client's."""
+
+    def __init__(self, laser, record: dict):
+        self._laser = laser
+        self._record = record
+
+    def compensation(self) -> dict:
+        return dict(self._record)
+
+    def __getattr__(self, name):
+        return getattr(self._laser, name)
+
+
+def replay_laser(laser, recorded_compensation: str | None):
+    """The interferometer a replay sweeps with: `laser`, answering the recorded compensation record
+    itself when that record says the station applied the index (mode STATION), so the replayed
+    session records the same text and `station recorrect` works on it too."""
+    import json
+
+    try:
+        record = json.loads(recorded_compensation or "")
+    except ValueError:
+        return laser
+    if isinstance(record, dict) and str(record.get("mode", "")).upper() == "STATION":
+        return _RecordedStationCompensation(laser, record)
+    return laser

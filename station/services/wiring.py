@@ -14,7 +14,7 @@ from typing import Any
 from drivers.clock import SystemClock
 from drivers.interfaces import Clock, Interferometer, ServoAxis, TableSpec
 from drivers.interferometer.client import SerialInterferometer
-from station.services.laser_wiring import open_laser, sim_rig_laser_options
+from station.services.laser_wiring import open_laser, replay_laser, sim_rig_laser_options
 from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
 from procedures.engine.errors import InputError
@@ -302,6 +302,7 @@ def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationCo
         # replay answers, however loaded the machine (drivers/replay/clock.py)
         axes = connect_axes(replay.drive_url, legs, profile, timeout_s=REPLAY_DRIVE_TIMEOUT_S, retries=0)
         laser = SerialInterferometer(replay.laser_port, timeout_s=REPLAY_LASER_TIMEOUT_S, clock=replay.timeout_clock)
+        laser = replay_laser(laser, session.devices.get("laser_air_compensation"))  # a µLine-F1 session's record
     except Exception:
         replay.stop()
         raise

@@ -168,8 +168,11 @@ def test_a_linef1_session_with_its_faults_replays_identically(faulted, tmp_path,
     assert main(["replay", str(session.path), "--out", str(out)]) == 0
     said = capsys.readouterr().out
     assert f"identical to the recording: {PLAN.total_points} points (all fields), 3 faults, outcome completed" in said
-    replayed = read_session(out).points
-    assert np.array_equal(np.sort(replayed, order="index")["error_um"], np.sort(session.points, order="index")["error_um"])
+    replayed = read_session(out)
+    assert np.array_equal(np.sort(replayed.points, order="index")["error_um"],
+                          np.sort(session.points, order="index")["error_um"])
+    # the station applied the index: the replayed session says so too, so recorrect works on it
+    assert replayed.devices["laser_air_compensation"] == session.devices["laser_air_compensation"]
 
 
 def test_station_sim_serves_the_linef1_laser_to_a_station_config_in_another_process(tmp_path):
