@@ -211,7 +211,8 @@ class LineF1Interferometer:
         # command clears the latched small-signal flag: the window judges the beam by itself.
         after = max(origin, self._command(lf.CMD_CLEAR_SMALL_SIGNAL))
         t0 = self._clock.now()
-        self._clock.sleep(self._averaging_s)
+        # at least one stream period: a streaming laser has no reading sooner (AVG 0 = the next sample)
+        self._clock.sleep(max(self._averaging_s, self.period_s))
         t1 = self._clock.now()
         deadline = time.monotonic() + self.timeout_s
         with self._cv:

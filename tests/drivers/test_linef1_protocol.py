@@ -72,9 +72,10 @@ def test_crc8_is_the_catalogued_crc8_nrsc5_and_fits_the_known_frames():
 class HandInstrument:
     """The instrument's side of a pty, played by the test: reads 8-byte commands, records them,
     echoes each (unless told to stay silent for the next n), then sends what is queued for
-    after that command."""
+    after that command, once the client's clock has moved on (a frame of the window it opened)."""
 
-    def __init__(self):
+    def __init__(self, clock):
+        self.clock = clock
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
         self.port = os.ttyname(self.slave)
@@ -85,8 +86,9 @@ class HandInstrument:
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
-    def queue_after(self, command: bytes, frames: bytes) -> None:
-        self.after.setdefault(command, queue.Queue()).put(frames)
+    def queue_after(self, command: bytes, frames: bytes, later: bool = True) -> None:
+        """Send `frames` after the echo of `command`; `later`: once the client's clock moved on."""
+        self.after.setdefault(command, queue.Queue()).put((frames, later))
 
     def send(self, data: bytes) -> None:
         os.write(self.master, data)
@@ -103,11 +105,14 @@ class HandInstrument:
                 if self.silent:
                     self.silent -= 1
                     continue
-                out = dev_frame(cmd[1], cmd[2], [0] * 12)
+                os.write(self.master, dev_frame(cmd[1], cmd[2], [0] * 12))
                 q = self.after.get(cmd)
                 if q is not None and not q.empty():
-                    out += q.get()
-                os.write(self.master, out)
+                    frames, later = q.get()
+                    echoed_at, deadline = self.clock.now(), time.monotonic() + 2.0
+                    while later and self.clock.now() <= echoed_at and time.monotonic() < deadline:
+                        time.sleep(0.001)
+                    os.write(self.master, frames)
 
     def close(self) -> None:
         self._stop.set()
@@ -122,10 +127,10 @@ MATERIAL_3 = dev_frame(0xB0, 0x0A, [0x03, 0xFF, 0x6A, 0x00, 0x50, 0x60, 0x00, 0x
 
 @pytest.fixture(scope="module")
 def rig():
-    inst = HandInstrument()
-    # the meteo stream's first frames come with the echo of "meteo on"
-    inst.queue_after(KNOWN_COMMANDS["meteo on"], AIR + MATERIAL_3)
     clock = VirtualClock(0.0)
+    inst = HandInstrument(clock)
+    # the meteo stream's first frames come with the echo of "meteo on"
+    inst.queue_after(KNOWN_COMMANDS["meteo on"], AIR + MATERIAL_3, later=False)
     laser = LineF1Interferometer(inst.port, clock=clock, timeout_s=0.3, retries=1,
                                  index=lambda t, p, h: 1.0002)  # a round index: raw / 1.0002
     yield inst, laser, clock
