@@ -8,6 +8,7 @@ import shlex
 from pathlib import Path
 
 from procedures.engine.errors import InputError
+from station.services.laser_wiring import check_plan_for_laser
 from procedures.io.outputs import check_appendable, check_output_file
 from procedures.acquisition.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
 from procedures.acquisition.plans import parse_legs, SweepPlan
@@ -118,6 +119,7 @@ def run(args) -> int:
         plan = build_plan(args, cfg.limits)  # sized (and refused when huge) before anything connects
         if args.force and out.exists():
             out.unlink()  # --force: the new session replaces it (after the plan was accepted)
+    check_plan_for_laser(plan, cfg)  # before anything connects or is written
     for note in plan.notes:
         print(f"note: {note}")
     resume_hint = resume_command(out, cfg, args.config)
