@@ -133,6 +133,7 @@ class LineF1Interferometer:
         self.bytes_in = 0  # bytes received (the streams, echoes, anything dropped)
         self.retried = 0
         self._aimed: int | None = None  # the axis the beam was zeroed on
+        self.velocity_m_s: float | None = None  # the last velocity frame's (the velocity stream is not used)
         self._count_lost = False
         self._stop = threading.Event()
         self._closed = False
@@ -264,15 +265,6 @@ class LineF1Interferometer:
         return Environment(air_temp_c=air.temp_c, air_pressure_hpa=air.pressure_pa / 100.0,
                            humidity_pct=air.humidity_pct, material_temp_c=tuple(temps))
 
-    def samples_between(self, t0_s: float, t1_s: float) -> list[tuple[float, float, bool]]:
-        """(t_s, position_mm air-compensated, valid) of every sample since the origin stamped within
-        t0_s..t1_s: for time-aligning the stream with a moving drive (on the fly)."""
-        n_air = self._air_index()
-        with self._cv:
-            origin = self._origin_seq
-            rows = [s for s in self._samples if origin is not None and s.seq > origin and t0_s <= s.t_s <= t1_s]
-        return [(s.t_s, s.raw_mm / n_air, s.signal_good and s.stable and not s.overflow) for s in rows]
-
     def close(self) -> None:
         """Stop the streams (best effort), the reader and release the port. Safe to call twice."""
         if self._closed:
@@ -302,10 +294,6 @@ class LineF1Interferometer:
         if isinstance(axis, bool) or not isinstance(axis, int) or not 1 <= axis <= self.axes:
             raise ValueError(f"interferometer axis must be an integer in 1..{self.axes}, got {axis!r}")
         return axis
-
-    def _latest_sample(self) -> _Sample | None:
-        with self._cv:
-            return self._samples[-1] if self._samples else None
 
     def _air(self) -> lf.MeteoFrame:
         deadline = time.monotonic() + self.timeout_s
@@ -430,11 +418,14 @@ class LineF1Interferometer:
                     last_t = t_s
                     if lost:
                         self._losses.append((t_s, lost))
-                    d = lf.decode_distance(data) if code == lf.FRAME_DISTANCE else lf.decode_velocity(data)
-                    raw_mm = d.distance_m * 1000.0 if d.distance_m is not None else math.nan
-                    self._samples.append(_Sample(self._seq, t_s, raw_mm, d.overflow, d.laser_stable, d.signal_good, d.level))
+                    if code == lf.FRAME_VELOCITY:  # not asked for by the station; kept, not a position
+                        self.velocity_m_s = lf.decode_velocity(data).velocity_m_s
+                        continue
+                    d = lf.decode_distance(data)
+                    self._samples.append(_Sample(self._seq, t_s, d.distance_m * 1000.0, d.overflow, d.laser_stable,
+                                                 d.signal_good, d.level))
                     if d.overflow and self._origin_seq is not None:
-                        self._count_lost = True
+                        self._count_lost = True  # the count is lost whenever it happens (moving or not)
                 elif code == lf.FRAME_METEO:
                     if lost:
                         self._losses.append((arrived, lost))
