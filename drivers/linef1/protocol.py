@@ -75,13 +75,24 @@ class LineF1Error(ValueError):
     """A frame that does not fit the layout (wrong length, start byte, CRC, value out of range)."""
 
 
+def _crc_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ CRC_POLY) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table.append(crc)
+    return tuple(table)
+
+
+_CRC_TABLE = _crc_table()  # a byte at a time: 25 frames a second on both sides of the line
+
+
 def crc8(data: bytes) -> int:
     """CRC-8: polynomial 0x31, initial 0xFF, MSB first, no reflection, no final XOR."""
     crc = CRC_INIT
     for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ CRC_POLY) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        crc = _CRC_TABLE[crc ^ byte]
     return crc
 
 

@@ -14,8 +14,9 @@ simulated rig to the drives: the operator sets the laser up on the leg being pre
 Virtual time: frames are due at multiples of `period_s`; the serving thread wakes every
 `poll_s` real seconds and writes every frame due since the last, in time order (at time scale 0 the
 clock jumps, e.g. a whole move within one request; frames older than `max_catch_up_s` before
-now are skipped then). The plant is read when a frame is written, so a frame due during a move
-that happened within one jump sees the leg where it arrived: fine at rest, where readings are made.
+now are skipped then). The plant is read once for the frames written together (each with a noise
+draw of its own), so a frame due during a move that happened within one jump sees the leg where it
+arrived: fine at rest, where readings are made.
 
 Faults on demand (`inject`): CRC errors, cut frames, a gap in the stream, a broken beam (small
 signal, latched until cleared), a velocity overflow (latched; the count is lost until the origin
@@ -275,9 +276,12 @@ class SimLineF1:
         if self._distance_on and self._next_t is not None:
             if self._next_t < now - self.max_catch_up_s:
                 self._next_t = self._grid(now - self.max_catch_up_s)
+            due = []
             while self._next_t <= now:
-                out += self._distance(self._next_t)
+                due.append(self._next_t)
                 self._next_t += self.period_s
+            if due:
+                out += self._distances(due)
         if self._meteo_on and self._next_meteo_t is not None:
             if self._next_meteo_t < now - self.max_catch_up_s:
                 self._next_meteo_t = math.floor(now)
@@ -286,7 +290,15 @@ class SimLineF1:
                 self._next_meteo_t = math.floor(self._next_meteo_t) + 1.0
         return bytes(out)
 
-    def _distance(self, t_s: float) -> bytes:
+    def _distances(self, times_s: list[float]) -> bytes:
+        """The frames due at `times_s`: the plant read once for the batch (drivers.sim.plant
+        LegPlant.measured_positions_mm), each frame with its own noise and faults."""
+        with self.lock:
+            plant = self.plants.get(self.leg) if self.leg is not None else None
+            measured = plant.measured_positions_mm(times_s) if plant is not None else [0.0] * len(times_s)
+            return b"".join(self._distance(t, float(m)) for t, m in zip(times_s, measured))
+
+    def _distance(self, t_s: float, measured_mm: float) -> bytes:
         with self.lock:
             rest = self._rest_since()
             if self._active("gap", t_s, rest) is not None:
@@ -299,7 +311,7 @@ class SimLineF1:
             plant = self.plants.get(self.leg) if self.leg is not None else None
             good = plant is not None and not self._small_signal  # no leg set up yet: no signal
             if good:
-                disp_mm = plant.measured_position_mm(t_s, 0.0) - self._datum_mm + self.offset_mm
+                disp_mm = measured_mm - self._datum_mm + self.offset_mm
                 if self._count_lost:
                     disp_mm += LOST_COUNT_MM
                 # raw optical distance since the origin: n L (the index's change times the zero's

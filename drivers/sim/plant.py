@@ -348,6 +348,15 @@ class LegPlant:
             noise = float(self._rng.normal(0.0, self.cfg.noise_um / math.sqrt(n_eff)))
         return self.true_position_mm(t_s) + (self._pass_offset_um + noise - self._zero_um) / 1000.0
 
+    def measured_positions_mm(self, times_s) -> np.ndarray:
+        """`measured_position_mm(t, 0)` at each of `times_s` (ascending, a short span at rest,
+        e.g. a streaming laser's frames since its last batch): the systematic error taken once,
+        at the last time, each sample with a noise draw of its own (no averaging)."""
+        base = self.true_position_mm(float(times_s[-1])) + (self._pass_offset_um - self._zero_um) / 1000.0
+        if "noise" in self.cfg.enabled and self.cfg.noise_um > 0:
+            return base + self._rng.normal(0.0, self.cfg.noise_um, size=len(times_s)) / 1000.0
+        return np.full(len(times_s), base)
+
     def zero_here(self, t_s: float) -> None:
         """Set the interferometer zero so that the current true position reads as x_mm."""
         self._zero_um = self.error_um(t_s) + self._pass_offset_um

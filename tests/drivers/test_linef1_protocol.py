@@ -105,11 +105,12 @@ class HandInstrument:
                 if self.silent:
                     self.silent -= 1
                     continue
+                echoed_at = self.clock.now()  # before the echo: the client moves its clock on once it has it
                 os.write(self.master, dev_frame(cmd[1], cmd[2], [0] * 12))
                 q = self.after.get(cmd)
                 if q is not None and not q.empty():
                     frames, later = q.get()
-                    echoed_at, deadline = self.clock.now(), time.monotonic() + 2.0
+                    deadline = time.monotonic() + 2.0
                     while later and self.clock.now() <= echoed_at and time.monotonic() < deadline:
                         time.sleep(0.001)
                     os.write(self.master, frames)
