@@ -232,3 +232,44 @@ def test_an_on_the_fly_plan_with_the_linef1_laser_is_refused_before_anything_is_
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "on-the-fly plan needs a laser with a capture input" in err[0]
     assert not out.exists()
+
+
+@pytest.mark.skipif(not __import__("os").environ.get("STATION_LINEF1_README"),
+                    reason="the README's whole calibration with the µLine-F1 (about 10 min): set STATION_LINEF1_README=1")
+def test_the_readme_calibration_with_the_linef1_laser_verifies_every_leg(tmp_path):
+    """The README's calibration block, run as written but with a config naming `protocol = "linef1"`
+    where it says `--sim`: every leg verifies at or below 1.1 (a long profile: the default run
+    keeps the station protocol's version, tests/station/test_readme_calibration.py)."""
+    import os
+    import pty
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from procedures.compensation.verify import ACCEPT_RATIO
+    from test_readme_calibration import readme_commands
+
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "lf.toml").write_text('[station]\nrecordings_dir = "runs"\n[drive]\nurl = "sim"\n'
+                                      '[interferometer]\nport = "sim"\nprotocol = "linef1"\n')
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+           "STATION_LOCK_DIR": str(tmp_path / "locks"), "STATION_SIM_NOISE_SEED": "1"}
+    verify = ""
+    for command in readme_commands():
+        command = command.replace("--sim", "--config lf.toml")
+        master, slave = pty.openpty()
+        try:
+            os.write(master, b"y\n")
+            r = subprocess.run(command, shell=True, cwd=tmp_path, env=env, stdin=slave, capture_output=True,
+                               text=True, timeout=1800)
+        finally:
+            os.close(slave)
+            os.close(master)
+        assert r.returncode == 0, f"{command}: {r.stdout[-2000:]}\n{r.stderr}"
+        if command.startswith("station verify"):
+            verify = r.stdout
+    ratios = {int(leg): float(v) for leg, v in re.findall(
+        r"Leg (\d): compensated error.*?verification ratio \(residual RMS / noise floor\): ([0-9.]+) -> PASS",
+        verify, re.S)}
+    assert sorted(ratios) == [1, 2, 3, 4, 5, 6], verify
+    assert all(0.5 < v <= ACCEPT_RATIO for v in ratios.values()), ratios
