@@ -278,7 +278,9 @@ class LineF1Interferometer:
         with self._cv:
             self._closed = True
             self._cv.notify_all()
-        self._thread.join(timeout=2.0)
+        # the reader notices within a poll slice; its descriptor is closed only after it ended, so
+        # it can never read from a descriptor number given to another port meanwhile
+        self._thread.join(timeout=10.0)
         if self._serial.is_open:
             self._serial.close()
 

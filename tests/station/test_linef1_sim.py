@@ -234,6 +234,7 @@ def test_an_on_the_fly_plan_with_the_linef1_laser_is_refused_before_anything_is_
     assert not out.exists()
 
 
+@pytest.mark.timeout(3600)
 @pytest.mark.skipif(not __import__("os").environ.get("STATION_LINEF1_README"),
                     reason="the README's whole calibration with the µLine-F1 (about 10 min): set STATION_LINEF1_README=1")
 def test_the_readme_calibration_with_the_linef1_laser_verifies_every_leg(tmp_path):
