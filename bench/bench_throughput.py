@@ -68,6 +68,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 # would find them gone)
 os.environ.setdefault("STATION_CATALOG", "off")
 
+from drivers.errors import DriverError  # noqa: E402
 from procedures.engine import events as ev  # noqa: E402
 from procedures.compensation.audit import AuditLog  # noqa: E402
 from procedures.fit import fit  # noqa: E402
@@ -218,7 +219,7 @@ def run_seed(seed: int, plans: tuple[str, ...], legs: int, paper_legs: int, veri
                 n = paper_legs if kind == "paper" else legs
                 try:
                     rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp), verify_cycles, laser))
-                except SystemExit as exc:
+                except (SystemExit, DriverError) as exc:  # e.g. a port another program holds: the others still run
                     print(f"  seed {seed} {kind} {laser}: NOT measured: {exc}", file=sys.stderr, flush=True)
                     continue
                 print(f"  seed {seed} {kind} {laser}: done in {rows[-1]['wall_s']:.0f} s wall", file=sys.stderr,
