@@ -237,3 +237,14 @@ def test_a_silent_stream_is_a_timeout_and_another_leg_is_refused(rig):
     with pytest.raises(Exception, match="one beam, zeroed on leg 3; leg 2 was not zeroed"):
         laser.read(2)
     assert "no identity query" in laser.identity()
+
+
+def test_a_velocity_frame_decodes_in_100_nm_per_s_with_the_same_flags():
+    # -1.5 mm/s = -15000 counts of 100 nm/s = 0xFFFFC568; overflow, small signal, level 7
+    frame = dev_frame(0xB0, 0x16, [0xFF, 0xFF, 0xC5, 0x68, 0, 0, 0, 0, 0, 0x08, 0x01, 0x07])
+    assert lf.frame_ok(frame)
+    v = lf.decode_velocity(frame[3:15])
+    assert v.velocity_m_s == pytest.approx(-1.5e-3) and v.distance_m is None
+    assert v.overflow and v.laser_stable and not v.signal_good and v.level == 7
+    m = lf.decode_meteo(MATERIAL_3[3:15])
+    assert (m.sensor_id, m.temp_c, m.humidity_pct, m.battery, m.link, m.pressure_pa) == (3, -1.5, 0.0, 0x50, 0x60, 0.0)
