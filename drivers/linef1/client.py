@@ -226,7 +226,12 @@ class LineF1Interferometer:
                     raise CommTimeout(f"µLine-F1 on {self.port}: no distance frame for {self.timeout_s:g} s after the "
                                       f"window {t0:.3f}..{t1:.3f} s (a gap in the stream).")
                 self._cv.wait(min(left, _POLL_S))
-            ordered = [s for s in self._samples if s.seq > after]
+            ordered = []  # the samples after the window's opening echo, in order (newest last)
+            for s in reversed(self._samples):
+                if s.seq <= after:
+                    break
+                ordered.append(s)
+            ordered.reverse()
             losses = [n for t, n in self._losses if t0 - self.period_s <= t <= t1 + self.period_s]
         window = [s for s in ordered if t0 <= s.t_s <= t1] or [next(s for s in ordered if s.t_s >= t1)]
         for s in window:
