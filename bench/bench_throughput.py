@@ -41,7 +41,12 @@ Two lasers (`--lasers`, default both): the station's own interferometer (`statio
 the station compensating for the air; each reading the mean of its window's samples). The
 µLine-F1 has no capture input described publicly, so the on-the-fly plans are measured with the
 station's laser only (a linef1 row says "NOT measured" for them); the stop-and-go plans with both,
-the verification with the laser the calibration used.
+the verification with the laser the calibration used. Measured 2026-11-29, seeds 0-3, six legs:
+rig time per leg is the same with both lasers (iso230 5.56 min: a streamed reading takes its
+averaging time, as a `POS?` does); the oracle's verification ratio 0.984-0.996 per leg with the
+µLine-F1 against 0.98-1.02 with the station's laser (its noise floor 0.053-0.060 um against
+0.059-0.065: a window's mean of 25 Hz samples); iso230's tables verify at 4.3-6.4 (station's laser
+4.0-5.7): that plan's 21 targets do not resolve the screw's lead, with either laser.
 
     .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans ...] [--lasers station linef1] [--jobs 2] [--verify-cycles 20]
 
