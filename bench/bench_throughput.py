@@ -46,7 +46,7 @@ rig time per leg is the same with both lasers (iso230 5.56 min: a streamed readi
 averaging time, as a `POS?` does); the oracle's verification ratio 0.984-0.996 per leg with the
 µLine-F1 against 0.98-1.02 with the station's laser (its noise floor 0.053-0.060 um against
 0.059-0.065: a window's mean of 25 Hz samples); iso230's tables verify at 4.3-6.4 (station's laser
-4.0-5.7): that plan's 21 targets do not resolve the screw's lead, with either laser.
+4.0-5.7): that plan's 11 targets do not resolve the screw's lead, with either laser.
 
     .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans ...] [--lasers station linef1] [--jobs 2] [--verify-cycles 20]
 
