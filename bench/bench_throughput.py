@@ -41,12 +41,15 @@ Two lasers (`--lasers`, default both): the station's own interferometer (`statio
 the station compensating for the air; each reading the mean of its window's samples). The
 µLine-F1 has no capture input described publicly, so the on-the-fly plans are measured with the
 station's laser only (a linef1 row says "NOT measured" for them); the stop-and-go plans with both,
-the verification with the laser the calibration used. Measured 2026-11-29, seeds 0-3, six legs:
-rig time per leg is the same with both lasers (iso230 5.56 min: a streamed reading takes its
-averaging time, as a `POS?` does); the oracle's verification ratio 0.984-0.996 per leg with the
-µLine-F1 against 0.98-1.02 with the station's laser (its noise floor 0.053-0.060 um against
-0.059-0.065: a window's mean of 25 Hz samples); iso230's tables verify at 4.3-6.4 (station's laser
-4.0-5.7): that plan's 11 targets do not resolve the screw's lead, with either laser.
+the verification with the laser the calibration used. Measured 2026-11-29, seeds 0-3, six legs
+(the µLine-F1's noise held per 0.1 s as the plant's): rig time per leg the same with both lasers
+(iso230 5.56 min, paper 93.5 min: a streamed reading takes its averaging time, as a `POS?` does);
+oracle ratio per leg 0.98-1.01 with the µLine-F1 (noise floor 0.056-0.058 um) against 0.98-1.02
+with the station's laser (0.059-0.065 um); paper: the µLine-F1 21 of 24 legs at or below 1.1
+(worst 1.232, table error 0.021-0.038 um worst leg) against the station's laser 23 of 24 (worst
+1.114, 0.013-0.035 um), a difference not explained yet; iso230 4.0-7.0 with either laser (its 11
+targets do not resolve the screw's lead). The README's calibration (1 mm step, 8 cycles) with the
+µLine-F1 verifies every leg at or below 1.1 (tests/station/test_linef1_sim.py, STATION_LINEF1_README=1).
 
     .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans ...] [--lasers station linef1] [--jobs 2] [--verify-cycles 20]
 
