@@ -49,10 +49,38 @@ def _command_specs() -> dict[str, dict[str, str]]:
     return specs
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a refusal is one line (`station CMD: error: ...; see station CMD --help`) with
+    exit 2, not the usage block followed by the error: the line that says what to do is the one a
+    technician reads, and scripts grep one line (issue 31)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}; see `{self.prog} --help`\n")
+
+
+def _os_error_line(exc: OSError) -> str:
+    """An OSError as one line naming the path and what to do (not "[Errno 13] ...", not a bare
+    "runs: permission denied" that leaves a user guessing which folder and why)."""
+    path = exc.filename or ""
+    why = (exc.strerror or str(exc)).lower()
+    if isinstance(exc, PermissionError) or exc.errno == 30:  # EACCES/EPERM, EROFS
+        where = os.path.abspath(path) if path else "a file"
+        try:
+            import pwd
+
+            user = pwd.getpwuid(os.getuid()).pw_name
+        except (ImportError, KeyError):
+            user = str(os.getuid())
+        return (f"{where}: {why} (user {user}); run the station from a folder you can write (its recordings, "
+                "audit log and catalog go to recordings_dir, default runs/ in the current folder), give --config "
+                "with [station] recordings_dir = a folder you can write, or fix the permissions")
+    return f"{path}: {why}" if path else why
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The full parser lists every command; arguments are added for `command` only (or for
     all when None)."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="station",
         description="Calibration station for the ball-screw legs of Gough-Stewart platforms.",
     )
@@ -99,7 +127,10 @@ def _main(argv: list[str] | None) -> int:
         argv = ["ui"] if "ui" in specs else ["--help"]
     command = argv[0] if argv[0] in specs else None
     parser = build_parser(command) if command else build_parser("")
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # a refused argument (2) or --help (0): an exit code like any other
+        return exc.code if isinstance(exc.code, int) else 2
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
@@ -115,7 +146,7 @@ def _main(argv: list[str] | None) -> int:
             raise
         message = str(exc)
         if isinstance(exc, OSError) and exc.filename and exc.strerror:
-            message = f"{exc.filename}: {exc.strerror.lower()}"  # not "[Errno 2] ..."
+            message = _os_error_line(exc)  # not "[Errno 2] ..."
         message = "; ".join(part.strip() for part in message.splitlines() if part.strip())  # one line
         print(f"station {args.command}: error: {message}", file=sys.stderr)
         return 2
@@ -126,6 +157,11 @@ def _main(argv: list[str] | None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as exc:  # a read-only file system, a full disk: one line naming the path, exit 2
+        if os.environ.get("STATION_DEBUG"):
+            raise
+        print(f"station {args.command}: error: {_os_error_line(exc)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -94,23 +94,25 @@ def lab_config(folder) -> "Path":
 
 
 def write_identified_session(path, points, *, station_id="bench-1", serial="HX-0042", leg_type="HX300",
-                             plan=None, station_config=None, calibration_due="2099-01-01", started_utc=None):
+                             plan=None, station_config=None, calibration_due="2099-01-01", started_utc=None,
+                             rig="sim", devices=None, part_number="HX-L-300"):
     """A completed session file at `path` holding `points`, with an identity (station, the serial
     and leg type of every leg, a laser in calibration unless `calibration_due` = None) written
-    through the real SessionWriter. Returns the path."""
+    through the real SessionWriter; `rig` as the runner records it ("sim", "live"), `devices` what
+    the devices reported. Returns the path."""
     import numpy as np
 
     from procedures.io.recording.identity import InstrumentIdentity, LegIdentity, SessionIdentity, StationIdentity
     from procedures.io.recording.writer import SessionWriter
 
-    legs = {int(leg): LegIdentity(serial=serial, part_number="HX-L-300", leg_type=leg_type)
+    legs = {int(leg): LegIdentity(serial=serial, part_number=part_number, leg_type=leg_type)
             for leg in np.unique(points["leg"])}
     ident = SessionIdentity(station=StationIdentity(id=station_id, host="host-" + station_id), operator="test",
                             software_version="test", legs=legs,
                             instrument=InstrumentIdentity("LI-6", "SIM-0001", calibration_due, "2026-01-10",
                                                           calibration_due is not None))
-    with SessionWriter.create(path, session_id=path.stem, operator="test", rig="sim", plan=plan or {"kind": "test"},
-                              station_config=station_config or {}, devices={}, software_version="test",
+    with SessionWriter.create(path, session_id=path.stem, operator="test", rig=rig, plan=plan or {"kind": "test"},
+                              station_config=station_config or {}, devices=devices or {}, software_version="test",
                               identity=ident.to_json(), started_utc=started_utc) as w:
         w.append_points(points)
         w.finish("completed")

@@ -9,7 +9,10 @@ Formats
   rows sorted by leg then position, a fixed step per leg. Before the header, optional comment
   lines (`#`); `# leg_serial: 3=HX-0042` names the serial of the leg the table was made for
   (from the model's identity), which a push checks (procedures/compensation/push.py). Tables without it
-  are read as before.
+  are read as before. The first line is the integrity record (procedures/io/integrity.py):
+  `# integrity: table rows=N sha256=...`; a table whose record does not match (cut, edited) is
+  refused; one without a record (made by hand) only when complete (`CompTable.integrity`
+  "unverified": whole rows, even steps here; the stroke covered at the push, `check_covers_stroke`).
 - LinuxCNC COMP_FILEs and the other controllers' formats: procedures/compensation/controllers/ (one module
   each, LinuxCNC's in linuxcnc.py).
 
@@ -29,11 +32,21 @@ from typing import Iterable, Iterator, Mapping
 import numpy as np
 
 from drivers.errors import TableRefused
-from drivers.interfaces import TableBank, TableSpec
+from drivers.interfaces import DriveLimits, TableBank, TableSpec
 from procedures.io.atomic import write_files_atomic
 from procedures.engine.errors import InputError
 from procedures.io.recording.identity import model_leg_serials
 from procedures.io.numbers import parse_finite
+from procedures.io.integrity import (
+    UNVERIFIED,
+    VERIFIED,
+    IntegrityError,
+    check_csv_record,
+    last_line_whole,
+    split_csv_record,
+    with_csv_record,
+    wrong_kind,
+)
 
 CSV_HEADER = ("leg", "position_mm", "error_fwd_um", "error_rev_um")
 SPACING_TOL_MM = 1e-5  # positions are written to 1e-6 mm: steps may differ by rounding only
@@ -101,6 +114,7 @@ class CompTable:
 
     legs: Mapping[int, LegTable]
     serials: Mapping[int, str] = field(default_factory=dict)  # leg -> serial of the leg the table was made for
+    integrity: str = ""  # read from a file: "verified" (its record matched) or "unverified" (it had none)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "legs", MappingProxyType({k: self.legs[k] for k in sorted(self.legs)}))
@@ -149,6 +163,11 @@ def make_table(model, step_mm: float | None = None, spec: TableSpec | None = Non
         lo, hi = fit.stroke_mm
         span = hi - lo
         step = step_mm if step_mm is not None else _auto_step_mm(span, fit.target_spacing_mm, spec)
+        if step > span + 1e-9:  # `--step 1000` on a 180 mm stroke made a 2-point table ending at +910 mm
+            raise TableValidationError(
+                f"leg {leg}: a {step:g} mm step is longer than the leg's stroke ({lo:+g} .. {hi:+g} mm, {span:g} mm): "
+                f"the table would end at {lo + step:+g} mm, beyond it; use a step of at most {span:g} mm "
+                f"(the recording's spacing is {fit.target_spacing_mm:g} mm); nothing was made")
         n = int(math.ceil(span / step - 1e-9)) + 1
         if n > spec.max_points:  # before evaluating the model on a needlessly fine grid
             need = math.ceil(span / (spec.max_points - 1) / _STEP_QUANTUM_MM - 1e-9) * _STEP_QUANTUM_MM
@@ -216,12 +235,19 @@ SERIAL_COMMENT = "# leg_serial:"
 """A comment line before the CSV header: `# leg_serial: LEG=SERIAL`, one per leg that has one."""
 
 
+INTEGRITY_KIND = "table"
+REMAKE = "make the table again (`station table MODEL.json --out TABLE.csv`) or restore the file from where it came"
+
+
 def table_csv_text(table: CompTable) -> str:
+    """The CSV, its integrity record first (procedures/io/integrity.py)."""
     lines = [f"{SERIAL_COMMENT} {leg}={serial}" for leg, serial in table.serials.items()]
     lines.append(",".join(CSV_HEADER))
+    rows = 0
     for leg, x, f, r in table.rows():
         lines.append(f"{leg},{x:.6f},{f:.4f},{r:.4f}")
-    return "\n".join(lines) + "\n"
+        rows += 1
+    return with_csv_record(INTEGRITY_KIND, "\n".join(lines) + "\n", rows)
 
 
 def write_table_csv(table: CompTable, path: str | os.PathLike, spec: TableSpec | None = None,
@@ -253,12 +279,15 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
-        raise TableValidationError(f"{path}: not a text file (a table is CSV with the header {','.join(CSV_HEADER)})") from None
+        raise TableValidationError(wrong_kind(path, INTEGRITY_KIND, _NOT_A_TABLE) or
+                                   f"{path}: not a text file (a table is CSV with the header {','.join(CSV_HEADER)})") from None
     lines = text.splitlines()
+    integrity = _check_integrity(path, text, lines)
     serials, head = _comment_lines(lines, path)
     if head >= len(lines) or [c.strip() for c in lines[head].split(",")] != list(CSV_HEADER):
         found = lines[head][:80] if head < len(lines) else "(empty file)"
-        raise TableValidationError(f"{path}, row {head + 1}: header is {found!r}, expected {','.join(CSV_HEADER)!r}")
+        raise TableValidationError(wrong_kind(path, INTEGRITY_KIND, _NOT_A_TABLE) or
+                                   f"{path}, row {head + 1}: header is {found!r}, expected {','.join(CSV_HEADER)!r}")
     data: dict[int, dict[str, list]] = {}
     last_leg = None
     for row, raw in enumerate(lines[head + 1:], start=head + 2):
@@ -322,7 +351,62 @@ def read_table_csv(path: str | os.PathLike, spec: TableSpec | None = None,
     for leg, (row, _) in serials.items():
         if leg not in legs:
             raise TableValidationError(f"{path}, row {row}: names the serial of leg {leg}, which the table has no rows for")
-    return CompTable(legs, {leg: serial for leg, (_, serial) in serials.items()})
+    return CompTable(legs, {leg: serial for leg, (_, serial) in serials.items()}, integrity)
+
+
+_NOT_A_TABLE = "give the table CSV `station table` wrote (station table MODEL.json --out TABLE.csv)"
+
+
+def _check_integrity(path: Path, text: str, lines: list[str]) -> str:
+    """VERIFIED when the file's record matches it; UNVERIFIED when it has none and its last row is
+    whole (a row cut mid-field can still read as numbers); TableValidationError (an
+    IntegrityError) naming what differs otherwise. Before any row is parsed: a cut file is then
+    named as cut, not by the half row it ends with."""
+    try:
+        record, body = split_csv_record(path, lines, INTEGRITY_KIND, REMAKE)
+        if record is None:
+            last_line_whole(path, text, REMAKE)
+            return UNVERIFIED
+        check_csv_record(path, record, body, _data_rows(body), "table rows", REMAKE)
+    except IntegrityError as exc:
+        if not isinstance(exc, TableValidationError):
+            raise TableIntegrityError(str(exc)) from None
+        raise
+    return VERIFIED
+
+
+def _data_rows(lines: list[str]) -> int:
+    """Rows after the header (the first line that is not a comment), blank lines not counted."""
+    for i, line in enumerate(lines):
+        if not line.lstrip().startswith("#"):
+            return sum(1 for x in lines[i + 1:] if x.strip())
+    return 0
+
+
+class TableIntegrityError(TableValidationError, IntegrityError):
+    """A table file that does not match its integrity record, or without one and not whole."""
+
+
+STROKE_MARGIN_MM = 5.0
+"""How far inside its soft limits a leg's working stroke ends: the room the drive profiles keep
+for the ISO 230-2 overrun before each reversal (drivers/modbus/profiles/default.toml: +/-95 mm
+soft limits around the +/-90 mm stroke). A table without an integrity record must reach it."""
+
+
+def check_covers_stroke(table: LegTable, limits: DriveLimits, where: str) -> None:
+    """TableIntegrityError when `table` (read from a file without a record) does not cover the
+    leg's stroke, its drive's soft `limits` less STROKE_MARGIN_MM at each end: a file cut after
+    a whole row reads as a shorter table, whose end value the drive would hold over the rest of
+    the stroke."""
+    lo, hi = limits.min_mm + STROKE_MARGIN_MM, limits.max_mm - STROKE_MARGIN_MM
+    tol = 1e-6  # positions are written to 1e-6 mm
+    if table.start_mm <= lo + tol and table.end_mm >= hi - tol:
+        return
+    raise TableIntegrityError(
+        f"{where}, leg {table.leg}: covers {table.start_mm:+.3f} .. {table.end_mm:+.3f} mm, not the leg's stroke "
+        f"{lo:+.3f} .. {hi:+.3f} mm (its drive's soft limits {limits.min_mm:+.3f} .. {limits.max_mm:+.3f} mm less "
+        f"{STROKE_MARGIN_MM:g} mm), and the file has no integrity record to show it is whole: it may be cut short; "
+        f"{REMAKE}")
 
 
 def _comment_lines(lines: list[str], path: Path) -> tuple[dict[int, tuple[int, str]], int]:

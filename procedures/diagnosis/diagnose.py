@@ -32,8 +32,7 @@ from procedures.diagnosis.blas import single_threaded_blas
 from procedures.diagnosis.effects import EFFECTS, Cyclic, Effect
 from procedures.diagnosis.legdata import LegData, split_legs
 from procedures.diagnosis.probe_reversal import FixedReversal, fixed_reversal, probe_points
-from procedures.diagnosis.selection import (LegProblem, contribution_um, evaluate, prune, refine_variants,
-                                            select_effects)
+from procedures.diagnosis.selection import LegProblem, contribution_um, evaluate, select_jointly
 from procedures.diagnosis.variants import VARIANTS
 from procedures.diagnosis.unexplained import unexplained
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
@@ -227,6 +226,9 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings,
                           "reason": f"fixed by {fixed.pairs} reversal probe pairs before the other effects"})
             continue
         why = e.applicable(leg, twin is not None)
+        guard = getattr(twin, "effect_guard", None)  # a fleet twin: a scale only where the features support it
+        if why is None and guard is not None:
+            why = guard(leg.leg, name)
         if why is None and not can_cv:
             why = "needs at least two cycles to score on held-out passes"
         if why is None:
@@ -248,16 +250,18 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings,
     # the variants compete in the forward selection (a reversal that changes with temperature may
     # not qualify as a constant one), then each named effect is kept plain or as its variant
     with_variants = applicable + [v for e in applicable for v in VARIANTS.get(e.name, ())
-                                  if v.applicable(leg, twin is not None) is None]
+                                  if v.applicable(leg, twin is not None) is None
+                                  and not hasattr(v, "parts")]  # stacked variants: chosen jointly (selection.py)
+
+    alternatives: list[dict] = []
 
     def select(problem):
-        chosen, log = select_effects(problem, with_variants, s.threshold_um, s.alpha, bonf)
-        if chosen:  # an effect that changes with conditions or position: named as its variant when that earns it
-            chosen, vlog = refine_variants(problem, chosen, VARIANTS, s.threshold_um, s.alpha, bonf, twin is not None)
-            if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
-                chosen, plog = prune(problem, chosen, s.threshold_um, s.alpha, bonf)
-                vlog += plog
-            log += vlog
+        # effects and their variants chosen as sets on held-out passes (issue 35): confounded
+        # candidates (drift and thermal while a leg warms, the reversal's variants) are compared
+        # jointly, and the close alternatives rejected are kept for the report
+        chosen, log, alts = select_jointly(problem, with_variants, VARIANTS, s.threshold_um, s.alpha, bonf,
+                                           twin is not None)
+        alternatives[:] = alts
         return chosen, log
 
     chosen, log = select(problem)
@@ -371,6 +375,11 @@ def _diagnose_leg(leg: LegData, twin: Twin | None, s: DiagnosisSettings,
     order = {n: i for i, n in enumerate(s.effects)}
     rep["candidates"] = sorted(cands, key=lambda c: order[c["effect"]])
     rep["selection_log"] = log
+    rep["alternatives"] = alternatives
+    if alternatives:
+        a = alternatives[0]
+        rep["alternatives_note"] = (f"closest alternative rejected: {', '.join(a['effects']) or 'nothing'}, held-out "
+                                    f"{a['heldout_rms_after_um']:.3f} um against {after_all:.3f} um ({a['reason']})")
     rep["cannot_conclude"] = cannot
     return rep, findings
 

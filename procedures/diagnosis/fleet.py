@@ -115,6 +115,28 @@ def features(x_mm: np.ndarray, up: np.ndarray, down: np.ndarray, lead_mm: float 
     return out
 
 
+def content_key(m: ErrorMap) -> bytes:
+    """A sibling's measurement by content: its error map (targets, mean error per direction) to
+    1 nm; two files holding the same readings under different names give the same key."""
+    return b"".join(np.round(np.nan_to_num(np.asarray(v, float), nan=1e9), 3).tobytes()
+                    for v in (m.targets_mm, m.up_um, m.down_um))
+
+
+def independent_maps(maps: dict[str, ErrorMap]) -> tuple[dict[str, ErrorMap], dict[str, str]]:
+    """(the maps with each measurement once, serial -> the serial whose map it repeats exactly):
+    copies of one session under several names would shrink the siblings' spread and put a leg
+    hundreds of sigma off (issue 35); the first serial in sorted order is kept."""
+    first: dict[bytes, str] = {}
+    dup: dict[str, str] = {}
+    for serial in sorted(maps):
+        key = content_key(maps[serial])
+        if key in first:
+            dup[serial] = first[key]
+        else:
+            first[key] = serial
+    return {k: v for k, v in maps.items() if k not in dup}, dup
+
+
 @dataclass
 class FleetLeg:
     """The siblings of one leg under diagnosis: their serials and maps on this leg's targets."""
@@ -195,11 +217,29 @@ class FleetTwin(ExternalTwin):
     fleet: dict[int, FleetLeg] = field(default_factory=dict)
     leg_type: str = ""
     normalised: bool = False
+    comparisons: dict[int, dict] = field(default_factory=dict)  # leg -> `comparison`, once made
 
     def comparison(self, leg: int, this: ErrorMap, lead_mm: float | None) -> dict:
         out = compare(self.fleet[leg], this, self.leg_type, lead_mm)
         out["basis"] = "normalised to 20 degC" if self.normalised else "raw"
+        if self.info.get("duplicates"):
+            out["duplicates_counted_once"] = dict(self.info["duplicates"])
+        self.comparisons[leg] = out
         return out
+
+    def effect_guard(self, leg: int, effect: str) -> str | None:
+        """Why `effect` is not tried against this fleet on `leg` (None: it is): a scale is named
+        only when the feature comparison supports it (this leg's scale stands out from its
+        siblings'); else the siblings' own spread of slopes is all the diagnosis would see
+        (issue 35: 120 and 463 ppm named on real data where no feature stood out)."""
+        if effect != "scale" or leg not in self.comparisons:
+            return None
+        row = next((r for r in self.comparisons[leg]["features"] if r["feature"] == "scale"), None)
+        if row is not None and row["stands_out"]:
+            return None
+        sigma = f"{row['sigma']:+.1f} sigma" if row and row.get("sigma") is not None else "no spread to compare"
+        return (f"the scale of this leg does not stand out from its {self.fleet[leg].n} siblings' ({sigma}): against a "
+                "fleet a slope is named only when the feature comparison supports it")
 
 
 def fleet_twin(fleet: dict[int, FleetLeg], leg_type: str, description: str, normalised: bool,

@@ -196,7 +196,7 @@ class LegProblem:
             if e.name == "cyclic":
                 specs["cyclic"] = self._search_cyclic(train_groups)
             elif getattr(e, "searched", False):  # a variant with a scanned parameter (the wind-up length)
-                key = (e.name, tuple(train_groups))
+                key = (getattr(e, "search_key", e.name), tuple(train_groups))  # a stacked variant shares its part's
                 if key not in self._cache:
                     groups = self.folds if self.folds is not None else np.zeros(self.leg.n_points, int)
                     self._cache[key] = e.search(self.leg, self.y, np.flatnonzero(np.isin(groups, train_groups)))
@@ -273,9 +273,21 @@ class LegProblem:
             fit.tests[e.name] = (f, p, df2)
             n_extra = getattr(e, "n_extra", 0)
             if n_extra:  # a variant: its extra columns alone
+                for part, sl in (e.part_slices().items() if hasattr(e, "part_slices") else ()):
+                    pidx = idx[sl]  # a stacked variant: each part's extra columns alone too
+                    fit.tests[f"{e.name}+{part}"] = wald_test(gls, pidx, between_pass_share(stats, pidx), n_eff)
                 idx = idx[-n_extra:]
                 fit.tests[e.name + "+"] = wald_test(gls, idx, between_pass_share(stats, idx), n_eff)
         return fit
+
+    def unresolvable(self, e: Effect) -> str | None:
+        """Why the sampling cannot resolve candidate `e`'s scanned parameter on this leg (a wind-up
+        shorter than the target spacing), from the scan on all passes; None when it can."""
+        check = getattr(e, "unresolvable", None)
+        if check is None:
+            return None
+        spec = self._specs((e,), list(range(self.n_groups))).get(e.name)
+        return check(self.leg, spec)
 
 
 @dataclass
@@ -408,3 +420,221 @@ def refine_variants(problem: LegProblem, chosen: tuple[Effect, ...], variants: d
                        f"{problem.cv_rms(tuple(out)):.4f} -> {best_rms:.4f} um")
         out[i] = best
     return tuple(out), log
+
+
+# -- joint selection (issue 35) -----------------------------------------------------------------
+MAX_COMBINATIONS = 64  # joint variant choices tried per set, beyond this one effect at a time
+CLOSE_ALTERNATIVES = 3  # rejected sets reported per leg
+
+
+def label(e: Effect) -> str:
+    """The effect as the report names it, with its variant: `backlash/temperature+position`."""
+    v = getattr(e, "variant", None)
+    return f"{family(e)}/{v}" if v else e.name
+
+
+def _stacked_alone(v: Effect, variants: dict) -> list[tuple[str, Effect]]:
+    """For a stacked variant: (part, the variant without that part) for each of its parts."""
+    parts = getattr(v, "parts", ())
+    if not parts:
+        return []
+    by_variant = {getattr(o, "variant", None): o for o in variants.get(family(v), ())}
+    out = []
+    for p in parts:
+        rest = "+".join(q.variant for q in parts if q is not p)
+        if rest in by_variant:
+            out.append((p.variant, by_variant[rest]))
+    return out
+
+
+def refine_jointly(problem: LegProblem, chosen: tuple[Effect, ...], variants: dict, threshold_um: float, alpha: float,
+                   bonferroni: dict[str, int] | None = None, external: bool = False
+                   ) -> tuple[tuple[Effect, ...], list[str], list[tuple[tuple[Effect, ...], float, str]]]:
+    """Every named effect plain or as one of its variants (stacked ones included), the choices
+    compared as sets on held-out passes (not one effect at a time). A variant counts only when its
+    extra columns are significant on their own and add more than the threshold over the plain
+    effect in that set; a stacked variant also needs each part significant and adding more than
+    the threshold over the variant without it. The valid set with the lowest held-out RMS wins.
+    Returns (effects, log, rejected: (set, held-out RMS, why) for the report)."""
+    import itertools
+
+    options = []
+    for e in chosen:
+        plain = getattr(e, "base", e)
+        opts = [plain] + [v for v in variants.get(plain.name, ())
+                          if v.applicable(problem.leg, external) is None and problem.unresolvable(v) is None]
+        options.append(opts)
+    # a stacked variant only where each of its parts alone improves on the plain effect (the others
+    # as named): saves its fits on the many legs where no variant helps
+    for i, e in enumerate(chosen):
+        plain = options[i][0]
+        rms_plain = problem.cv_rms(tuple(chosen[:i]) + (plain,) + tuple(chosen[i + 1:]))
+        helps = {getattr(v, "variant", None) for v in options[i][1:] if not hasattr(v, "parts")
+                 and problem.cv_rms(tuple(chosen[:i]) + (v,) + tuple(chosen[i + 1:])) < rms_plain}
+        options[i] = [v for v in options[i] if not hasattr(v, "parts") or all(p.variant in helps for p in v.parts)]
+    n_comb = int(np.prod([len(o) for o in options])) if options else 1
+    if n_comb > MAX_COMBINATIONS:
+        out, log = refine_variants(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
+        return out, log, []
+    results = []
+    for combo in itertools.product(*options):
+        rms = problem.cv_rms(combo)
+        why = None
+        for i, v in enumerate(combo):
+            if v is options[i][0]:
+                continue
+            fit = problem.full_fit(combo, bonferroni)
+            if fit.tests[v.name + "+"][1] >= alpha:
+                why = f"{label(v)}: its extra terms are not significant (p = {fit.tests[v.name + '+'][1]:.2g})"
+                break
+            gain = contribution_um(problem.cv_rms(combo[:i] + (options[i][0],) + combo[i + 1:]), rms)
+            if gain <= threshold_um:
+                why = f"{label(v)} adds only {gain:.3g} um over the plain {family(v)}"
+                break
+            for part, alone in _stacked_alone(v, variants):
+                p = fit.tests[f"{v.name}+{part}"][1]
+                gain = contribution_um(problem.cv_rms(combo[:i] + (alone,) + combo[i + 1:]), rms)
+                if p >= alpha or gain <= threshold_um:
+                    why = f"{label(v)}: its {part} part adds only {gain:.3g} um (p = {p:.2g})"
+                    break
+            if why:
+                break
+        results.append((combo, rms, why))
+    valid = [r for r in results if r[2] is None]
+    best = min(valid, key=lambda r: (r[1], sum(e.n_params for e in r[0])))
+    log = []
+    if best[0] != tuple(chosen):
+        log.append(f"variants chosen jointly: {', '.join(label(e) for e in best[0])}: held-out "
+                   f"{problem.cv_rms(tuple(chosen)):.4f} -> {best[1]:.4f} um")
+    rejected = [(c, r, why or "explains less on held-out passes") for c, r, why in results if c != best[0]]
+    return best[0], log, rejected
+
+
+MAX_EXCHANGES = 3  # rounds of exchanges per leg (each one scores every neighbouring set)
+
+
+EXCHANGES_REFINED = 2  # the best exchange sets whose variants are also chosen anew before they are compared
+EXCHANGE_REFINE_WITHIN = 2.0  # ... when their held-out RMS is within this factor of the named set's (speed)
+
+
+def _exchange(problem: LegProblem, chosen: tuple[Effect, ...], candidates: list[Effect], threshold_um: float,
+              alpha: float, bonferroni, refine=None
+              ) -> tuple[tuple[Effect, ...], list[str], list[tuple[tuple[Effect, ...], float, str]]]:
+    """Sets next to `chosen`: one or two of its effects replaced by one candidate of another
+    effect (confounded candidates: thermal for drift, or for drift and scale, while a leg warms).
+    The one with the lowest held-out RMS replaces `chosen` when it is lower and every effect in it
+    still earns its place (significant, more than the threshold once the others are in); repeated
+    while that improves. Returns (effects, log, the sets scored: (set, held-out RMS, why not))."""
+    import itertools
+
+    log: list[str] = []
+    scored: dict[frozenset, tuple[tuple[Effect, ...], float, str]] = {}
+    for _ in range(MAX_EXCHANGES):
+        now = problem.cv_rms(chosen)
+        best, best_rms = None, now
+        drops = [(c,) for c in chosen] + (list(itertools.combinations(chosen, 2)) if len(chosen) >= 2 else [])
+        for out in drops:
+            keep = tuple(c for c in chosen if c not in out)
+            taken = {family(c) for c in keep}
+            for c in candidates:
+                if family(c) in taken or (len(out) == 1 and family(c) == family(out[0])):
+                    continue  # a variant of the same effect: refine_jointly's choice
+                trial = keep + (c,)
+                rms = problem.cv_rms(trial)
+                why = "explains less on held-out passes"
+                if rms < best_rms:  # only a better set needs the (costlier) check of each effect's place
+                    pruned = prune(problem, trial, threshold_um, alpha, bonferroni)[0]
+                    if pruned == trial:
+                        best, best_rms = (out, c, trial), rms
+                    else:
+                        why = f"{', '.join(label(e) for e in trial if e not in pruned)} does not earn its place in it"
+                scored.setdefault(frozenset(e.name for e in trial), (trial, rms, why))
+        if refine is not None:
+            # a confounded exchange may pay only with other variants of the effects kept (thermal for
+            # drift and scale once the reversal also grows with temperature): the best few exchange sets
+            # get their variants chosen anew
+            here = {frozenset(e.name for e in chosen)}
+            tried = sorted((t for t in scored.values() if frozenset(e.name for e in t[0]) not in here
+                            and t[1] < EXCHANGE_REFINE_WITHIN * now), key=lambda t: t[1])[:EXCHANGES_REFINED]
+            for trial, _rms, _why in tried:
+                again = refine(trial)
+                rms = problem.cv_rms(again)
+                if rms < best_rms and prune(problem, again, threshold_um, alpha, bonferroni)[0] == again:
+                    best, best_rms = (tuple(e for e in chosen if e not in trial), again[-1], again), rms
+                scored.setdefault(frozenset(e.name for e in again), (again, rms, "explains less on held-out passes"))
+        if best is None:
+            break
+        out, c, new = best
+        log.append(f"exchange {', '.join(label(e) for e in chosen)} for {', '.join(label(e) for e in new)}: held-out "
+                   f"{now:.4f} -> {best_rms:.4f} um")
+        chosen = new
+    return chosen, log, list(scored.values())
+
+
+def _refine(problem, chosen, variants, threshold_um, alpha, bonferroni, external):
+    """Variants chosen jointly, then pruned; again when the prune dropped an effect."""
+    log, rejected = [], []
+    for _round in range(2):
+        chosen, vlog, rejected = refine_jointly(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
+        prlog = []
+        if vlog:  # a variant can make another effect redundant (a wind-up's ends look like a scale error)
+            chosen, prlog = prune(problem, chosen, threshold_um, alpha, bonferroni)
+        log += vlog + prlog
+        if not prlog:
+            break  # else the variants are chosen again without the effect dropped
+    return chosen, log, rejected
+
+
+def select_jointly(problem: LegProblem, candidates: list[Effect], variants: dict, threshold_um: float, alpha: float,
+                   bonferroni: dict[str, int] | None = None, external: bool = False
+                   ) -> tuple[tuple[Effect, ...], list[str], list[dict]]:
+    """Effects and their variants chosen as sets on held-out passes (issue 35): the forward
+    selection and pruning of `select_effects` (stacked variants left out of it), then the named
+    effects' variants chosen jointly (`refine_jointly`), then exchanges of confounded effects
+    (`_exchange`, the variants chosen again after one). Candidates whose scanned parameter the
+    sampling cannot resolve (a wind-up shorter than the target spacing) are not tried. Returns
+    (effects, log, the closest sets rejected: effects, held-out RMS, margins, reason)."""
+    log: list[str] = []
+    usable = []
+    for c in candidates:
+        why = problem.unresolvable(c)
+        if why is None:
+            usable.append(c)
+        else:
+            log.append(f"not tried: {label(c)}: {why}")
+    chosen, flog = select_effects(problem, usable, threshold_um, alpha, bonferroni)
+    log += flog
+    rejected: list[tuple[tuple[Effect, ...], float, str]] = []
+    if chosen:
+        # exchanges before the variants are chosen (a variant fitted alongside drift and scale can
+        # keep thermal out) and after (a variant can make another exchange worth it)
+        def refine(effects):
+            return _refine(problem, effects, variants, threshold_um, alpha, bonferroni, external)[0]
+
+        chosen, xlog, scored = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni, refine)
+        log += xlog
+        rejected += scored
+        for _round in range(2):
+            chosen, rlog, again = _refine(problem, chosen, variants, threshold_um, alpha, bonferroni, external)
+            log += rlog
+            rejected += again
+            if not rlog:
+                break
+            chosen, xlog, scored = _exchange(problem, chosen, usable, threshold_um, alpha, bonferroni, refine)
+            log += xlog
+            rejected += scored
+            if not xlog:
+                break
+    after = problem.cv_rms(chosen)
+    out, seen = [], {frozenset(e.name for e in chosen)}
+    for effects, rms, why in sorted(rejected, key=lambda t: t[1]):
+        key = frozenset(e.name for e in effects)
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append({"effects": [label(e) for e in effects], "heldout_rms_after_um": rms, "worse_by_um": rms - after,
+                    "margin_um": contribution_um(rms, after) if rms >= after else -contribution_um(after, rms),
+                    "reason": why})
+        if len(out) >= CLOSE_ALTERNATIVES:
+            break
+    return chosen, log, out

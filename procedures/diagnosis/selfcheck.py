@@ -88,6 +88,11 @@ def evaluate_trial(trial: Trial, settings: DiagnosisSettings, param_tolerance: f
         got = named.get(leg, {})
         missed = sorted(set(true) - set(got))
         wrong = sorted(set(got) - set(true))
+        fleet_cmp = (getattr(trial.twin, "comparisons", None) or {}).get(leg)
+        if fleet_cmp is not None and trial.info.get("expected_duplicates") is not None:
+            # a clean leg against a fleet: its own differences from the siblings' mean are real gaps; what
+            # must not happen is a feature standing out from its siblings
+            wrong = [f"fleet feature {fleet_cmp['finding']['feature']}"] if fleet_cmp.get("finding") else []
         params = []
         wrong_variant = []
         half = 0.5 * (leg_rep["stroke_mm"][1] - leg_rep["stroke_mm"][0])
@@ -107,13 +112,18 @@ def evaluate_trial(trial: Trial, settings: DiagnosisSettings, param_tolerance: f
         # one-sided: doing better than the oracle on held-out passes is luck, not a fault
         gap_ok = ratio is not None and ratio <= 1 + gap_tolerance
         leg_ok = not missed and not wrong and not wrong_variant and all(p["ok"] for p in params) and gap_ok
+        expected_dup = trial.info.get("expected_duplicates")
+        dup_ok = None
+        if expected_dup is not None:  # a fleet with copies of one session: each counted once, named
+            dup_ok = (getattr(trial.twin, "info", None) or {}).get("duplicates") == expected_dup
+            leg_ok = leg_ok and dup_ok
         ok &= leg_ok
         legs.append({"leg": leg, "true": sorted(true), "named": sorted(got), "missed": missed, "wrong": wrong,
                      "wrong_variant": wrong_variant,
                      "variants": {e: got[e].get("variant") for e in got},
                      "parameters": params, "heldout_after_um": after, "oracle_after_um": oracle.get(leg),
                      "heldout_before_um": (leg_rep.get("combined") or {}).get("heldout_rms_before_um"),
-                     "gap_ratio": ratio, "gap_ok": gap_ok, "ok": leg_ok})
+                     "gap_ratio": ratio, "gap_ok": gap_ok, "duplicates_ok": dup_ok, "ok": leg_ok})
     return {"seed": trial.seed, "label": trial.label, "twin": "fitted" if trial.twin is None else trial.twin.kind,
             "info": trial.info, "legs": legs, "ok": bool(ok)}
 
@@ -149,7 +159,8 @@ def summarise(results: list[dict]) -> dict:
             for e in leg["missed"]:
                 per[e]["missed"] += 1
             for e in leg["wrong"]:
-                per[e]["named_wrongly"] += 1
+                if e in per:
+                    per[e]["named_wrongly"] += 1
             for p in leg["parameters"]:
                 per[p["effect"]]["params_checked"] += 1
                 per[p["effect"]]["params_ok"] += p["ok"]
@@ -225,6 +236,8 @@ def format_self_check(result: dict) -> str:
                     if not p["ok"] and p["fitted"] is not None]
             if not leg["gap_ok"]:
                 why.append(f"gap ratio {leg['gap_ratio']}")
+            if leg.get("duplicates_ok") is False:
+                why.append("duplicate siblings not counted once")
             lines.append(f"  seed {r['seed']} ({r['twin']} twin, {r['label']}) leg {leg['leg']}: {'; '.join(why)}")
     return "\n".join(lines)
 
@@ -240,7 +253,7 @@ def summarise_by_physics(results: list[dict]) -> dict:
         d["ok"] += r["ok"]
         for leg in r["legs"]:
             d["name_and_variant_right"] += not leg["missed"] and not leg["wrong"] and not leg["wrong_variant"]
-            d["named_on_clean"] += bool(not leg["true"] and leg["named"])
+            d["named_on_clean"] += bool(not leg["true"] and leg["wrong"])
             for p in leg["parameters"]:
                 if p["rel_error"] is not None:
                     d["params"].setdefault(p["parameter"], []).append(100 * p["rel_error"])
@@ -264,7 +277,7 @@ def format_by_physics(summary: dict, param_tolerance: float, gap_tolerance: floa
     for name, d in summary.items():
         gap = ("-" if d["gap_ratio_median"] is None else f"{d['gap_ratio_median']:.3f}/{d['gap_ratio_max']:.3f}")
         params = "; ".join(f"{k} {v['median_pct']:.1f}/{v['max_pct']:.1f} ({v['n']})" for k, v in d["params"].items())
-        if name == "clean":
+        if not d["params"]:  # nothing withheld (clean, a shared wobble, a fleet with copies): nothing may be named
             params = f"named on clean legs: {d['named_on_clean']}"
         lines.append(f"{name:<21} {d['sessions']:>8} {d['ok']:>6} {d['name_and_variant_right']:>12} {gap:>19} "
                      f"{d['gap_ok']:>3}/{d['gap_checked']:<3}  {params}")

@@ -42,7 +42,8 @@ def text_report(report: dict) -> str:
     if report["findings"]:
         lines.append("FINDINGS")
         for f in report["findings"]:
-            variant = f" ({VARIANT_WORDS.get(f['variant'], f['variant'])})" if f.get("variant") else ""
+            variant = (f" ({' and '.join(VARIANT_WORDS.get(v, v) for v in f['variant'].split('+'))})"
+                       if f.get("variant") else "")
             lines.append(f"  leg {f['leg']}: {f['effect']}{variant}: {_param_line(f)}")
             how = ""
             if f.get("added_with"):
@@ -51,7 +52,7 @@ def text_report(report: dict) -> str:
                 how = f" (on top of {', '.join(f['added_to'])})"
             lines.append(f"      held-out gap {f['heldout_rms_before_um']:.3g} -> {f['heldout_rms_after_um']:.3g} um RMS{how} "
                          f"({f['shrink_pct']:.0f} % smaller), p = {f['p_value']:.2g}")
-            for extra in ("sampling", "temperature_difference"):
+            for extra in ("sampling", "temperature_difference", "material"):
                 if (f.get(extra) or {}).get("note"):
                     lines.append(f"      NOTE: {f[extra]['note']}")
     else:
@@ -73,6 +74,9 @@ def text_report(report: dict) -> str:
         if fl:
             lines.append(f"  FLEET ({fl['siblings']} sibling legs of type {fl['leg_type']}, {fl['basis']}): "
                          + (fl["finding"]["note"] if fl.get("finding") else fl.get("finding_note", "")))
+            if fl.get("duplicates_counted_once"):
+                lines.append("    the same measurement under several names, counted once: " + ", ".join(
+                    f"{k} (same as {v})" for k, v in sorted(fl["duplicates_counted_once"].items())))
             lines.append("    " + ", ".join(f"{r['feature']} {r['sigma']:+.1f}" for r in fl["features"][:4]
                                              if r.get("sigma") is not None) + " sigma")
         g = leg["gap"]
@@ -132,6 +136,9 @@ def text_report(report: dict) -> str:
             lines.append(f"  all named effects ({', '.join(comb['effects'])}): held-out gap "
                          f"{comb['heldout_rms_before_um']:.3g} -> {comb['heldout_rms_after_um']:.3g} um "
                          f"({comb['shrink_pct']:.0f} % smaller)")
+        for a in leg.get("alternatives") or []:
+            lines.append(f"  rejected alternative: {', '.join(a['effects']) or 'nothing'}: held-out "
+                         f"{a['heldout_rms_after_um']:.3g} um ({a['worse_by_um']:+.3g} um against the named; {a['reason']})")
         lines.append("  candidates:")
         for c in leg["candidates"]:
             extra = c.get("reason") or (f"explains {c['heldout_contribution_um']:.3g} um held out"

@@ -20,6 +20,13 @@ variant (`variant`), with the variant's parameters:
   with the square of position as the leg warms. Extra column dT * (x/1000)^2;
   `expansion_gradient_ppm_per_k_per_m` = 2 x its coefficient (the change of the local expansion
   per K per metre along the screw), `expansion_ppm_per_k` the slope at mid-stroke.
+- stacked variants (issue 35): two variants of one effect at once, e.g. backlash /
+  temperature+position (a reversal growing with temperature on a nut worn over a stretch): the
+  effect's columns, then each part's extra columns; the parameters of both parts. Each part must
+  earn its place over the other part alone (selection.py).
+
+A wind-up shorter than the target spacing is not resolvable (`BacklashWindup.unresolvable`): only
+the first target of each pass sees it, so it cannot be told from an offset of that target.
 """
 
 from __future__ import annotations
@@ -127,6 +134,14 @@ def since_first_target_mm(leg: LegData) -> np.ndarray:
 class BacklashWindup(Variant):
     searched = True
 
+    def unresolvable(self, leg: LegData, spec) -> str | None:
+        """Why a wind-up of `spec` mm cannot be named on this leg (None when it can): shorter than
+        the target spacing, only the first target of each pass would see it."""
+        if spec is not None and spec < leg.spacing_mm:
+            return (f"a wind-up of {spec:.3g} mm is shorter than the {leg.spacing_mm:.3g} mm target spacing: only the "
+                    "first target of each pass sees it, so it cannot be told from an offset of that target")
+        return None
+
     def extra(self, leg, spec=None):
         return (leg.direction * np.exp(-since_first_target_mm(leg) / spec))[:, None]
 
@@ -187,10 +202,77 @@ class ThermalGradient(Variant):
         return p, se
 
 
+class Stacked(Variant):
+    """Two variants of one effect at once: the effect's columns, then each part's extra columns
+    (`parts`, in that order). Searched (the wind-up length) when a part is: the search is the
+    part's and shares its cache (`search_key`)."""
+
+    def __init__(self, *parts: Variant):
+        base = parts[0].base
+        # n_extra: the extra columns (their Wald test); n_params counts the wind-up's length too
+        super().__init__(base, "+".join(p.variant for p in parts), sum(_extra_columns(p) for p in parts))
+        object.__setattr__(self, "n_params", base.n_params + sum(p.n_extra for p in parts))
+        object.__setattr__(self, "parts", parts)
+        searched = [p for p in parts if getattr(p, "searched", False)]
+        object.__setattr__(self, "searched", bool(searched))
+        if searched:
+            object.__setattr__(self, "search_key", searched[0].name)
+            object.__setattr__(self, "search", searched[0].search)
+
+    def applicable(self, leg, external_twin):
+        for p in self.parts:
+            why = p.applicable(leg, external_twin)
+            if why is not None:
+                return why
+        return None
+
+    def unresolvable(self, leg, spec):
+        for p in self.parts:
+            why = getattr(p, "unresolvable", None)
+            if why is not None and why(leg, spec) is not None:
+                return why(leg, spec)
+        return None
+
+    def extra(self, leg, spec=None):
+        return np.column_stack([p.extra(leg, spec if getattr(p, "searched", False) else None) for p in self.parts])
+
+    def part_slices(self) -> dict[str, slice]:
+        """Each part's extra columns within this variant's columns (the effect's own come first)."""
+        out, k = {}, _base_columns(self.base)
+        for p in self.parts:
+            out[p.variant] = slice(k, k + _extra_columns(p))
+            k += _extra_columns(p)
+        return out
+
+    def parameters(self, coef, cov, spec=None, leg=None, resid_um=None):
+        nb = _base_columns(self.base)
+        params, se = {}, {}
+        for p, sl in zip(self.parts, self.part_slices().values()):
+            idx = list(range(nb)) + list(range(sl.start, sl.stop))
+            pp, ps = p.parameters(coef[idx], cov[np.ix_(idx, idx)], spec if getattr(p, "searched", False) else None,
+                                  leg, resid_um)
+            for k, v in pp.items():
+                params.setdefault(k, v)
+            for k, v in ps.items():
+                se.setdefault(k, v)
+        return params, se
+
+
+def _extra_columns(v: Variant) -> int:
+    return 1 if getattr(v, "searched", False) else v.n_extra  # the wind-up: one column, its length a parameter
+
+
+def _base_columns(effect: Effect) -> int:
+    """How many columns the plain effect has (its parameters' columns, not its free parameters)."""
+    return {"thermal": 2, "load": 2, "speed": 2, "cyclic": 2}.get(effect.name, 1)
+
+
+_TEMPERATURE = BacklashTemperature(EFFECTS["backlash"], "temperature", 1)
+_POSITION = BacklashPosition(EFFECTS["backlash"], "position", 2)
+_WINDUP = BacklashWindup(EFFECTS["backlash"], "windup", 2)
+
 VARIANTS: dict[str, tuple[Variant, ...]] = {
-    "backlash": (BacklashTemperature(EFFECTS["backlash"], "temperature", 1),
-                 BacklashPosition(EFFECTS["backlash"], "position", 2),
-                 BacklashWindup(EFFECTS["backlash"], "windup", 2)),
+    "backlash": (_TEMPERATURE, _POSITION, _WINDUP, Stacked(_TEMPERATURE, _POSITION), Stacked(_TEMPERATURE, _WINDUP)),
     "thermal": (ThermalGradient(EFFECTS["thermal"], "gradient", 1),),
 }
 """Variants tried for each named effect (the wind-up counts its length as a parameter)."""

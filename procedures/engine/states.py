@@ -30,6 +30,7 @@ class Action(StrEnum):
     PUSH = "push"
     ROLLBACK = "rollback"
     VERIFY = "verify"
+    APPROVE = "approve"  # a calibration certificate approved (station certificate approve)
 
 
 class AuditOutcome(StrEnum):

@@ -138,6 +138,9 @@ class LegErrorModel:
         # station, operator, software version, per leg serial/part number/type of the session it
         # was fitted to (procedures.io.recording.identity.model_identity); {} in older model files
         self.identity = dict(identity or {})
+        # read from a file: "verified" (its integrity record matched) or "unverified" (it had none;
+        # procedures/io/integrity.py); "" for a model made in memory
+        self.integrity = ""
 
     def leg(self, leg: int) -> LegFit:
         try:

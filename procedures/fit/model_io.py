@@ -7,6 +7,11 @@
      "legs": {"1": {"stroke_mm": [min, max], "target_spacing_mm": ..., "stats": {...},
                     "model": {... method specific ...}}, ...}}
 
+The file carries its integrity record, `"integrity": {"legs": N, "sha256": ...}`: the hash of
+the document without it, as written (procedures/io/integrity.py). `load_model` refuses a file whose
+record does not match (edited; a cut JSON file is not JSON) naming what differs, and reads a file
+without one (hand-made, or older) as `integrity` "unverified" (the CLI says so in one line).
+
 The content is deterministic: the same points and options give the same file apart from
 `source` and `created_utc` (keys sorted, floats written with Python's round-trip repr).
 A file that is not JSON, is another format, or lacks or mistypes a field is refused with a
@@ -29,6 +34,7 @@ from procedures.engine.errors import SchemaError
 from procedures.fit.bidirectional import bidirectional_from_json
 from procedures.fit.model import FORMAT, METHODS, VERSION, FitStats, LegErrorModel, LegFit
 from procedures.fit.paper import paper_from_json
+from procedures.io.integrity import IntegrityError, check_json_record, json_record, unverified_line, wrong_kind
 from procedures.io.ranges import LEG_NUMBERS, SESSION_BOUNDS
 
 MAX_SAMPLES = 100_000  # paper model: samples of the stroke (the paper's sweep has 361)
@@ -68,7 +74,21 @@ def model_to_json(model: LegErrorModel, source_path: str | os.PathLike | None = 
     identity = identity if identity is not None else model.identity
     if identity:
         doc["identity"] = identity
-    return json.dumps(_clean(doc), indent=2, sort_keys=True, allow_nan=False) + "\n"
+    doc = _clean(doc)
+    doc[INTEGRITY_KEY] = json_record(doc, "legs", len(doc["legs"]))  # the hash of all of the above
+    return json.dumps(doc, indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+INTEGRITY_KEY = "integrity"
+REMAKE = "fit the recording again (`station fit SESSION.h5 --out MODEL.json`) or restore the file from where it came"
+_NOT_A_MODEL = "give the model JSON `station fit` wrote (station fit SESSION.h5 --out MODEL.json)"
+
+
+def unverified_model_line(path: str | os.PathLike, model: LegErrorModel) -> str | None:
+    """The one warning line for a model file read without an integrity record, else None."""
+    if model.integrity != "unverified":
+        return None
+    return unverified_line(path, "model", f"legs {', '.join(map(str, model.legs))}, every field checked")
 
 
 def save_model(model: LegErrorModel, path: str | os.PathLike, source_path: str | os.PathLike | None = None,
@@ -238,8 +258,12 @@ def load_model(path: str | os.PathLike) -> LegErrorModel:
     try:
         doc = json.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
-        raise SchemaError(f"{path}: not a text file (a model file is JSON written by `station fit`)") from None
+        raise SchemaError(wrong_kind(path, "model", _NOT_A_MODEL) or
+                          f"{path}: not a text file (a model file is JSON written by `station fit`)") from None
     except json.JSONDecodeError as exc:
+        other = wrong_kind(path, "model", _NOT_A_MODEL)  # a table given where a model is expected, ...
+        if other:
+            raise SchemaError(other) from None
         raise SchemaError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); "
                           "the file is truncated or corrupt: fit the recording again") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
@@ -275,6 +299,12 @@ def load_model(path: str | os.PathLike) -> LegErrorModel:
     for key, leg in identity.get("legs", {}).items():
         if not isinstance(leg, dict) or not all(v is None or isinstance(v, str) for v in leg.values()):
             raise c.fail(f"identity.legs.{key}", "expected {\"serial\": text or null, ...}")
-    return LegErrorModel(method, legs, source={"path": source.get("path", ""), "sha256": source.get("sha256", "")},
-                         options=options if isinstance(options, dict) else {},
-                         created_utc=str(doc.get("created_utc", "")), identity=identity)
+    try:  # last: an edited field no model has is named by its own check above
+        integrity = check_json_record(path, doc, "legs", len(legs_doc), REMAKE)
+    except IntegrityError as exc:
+        raise SchemaError(str(exc)) from None
+    model = LegErrorModel(method, legs, source={"path": source.get("path", ""), "sha256": source.get("sha256", "")},
+                          options=options if isinstance(options, dict) else {},
+                          created_utc=str(doc.get("created_utc", "")), identity=identity)
+    model.integrity = integrity
+    return model

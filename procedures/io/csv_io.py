@@ -31,7 +31,7 @@ import numpy as np
 from procedures.io.atomic import atomic_path
 from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_file
-from procedures.io.plausibility import check_points, settle
+from procedures.io.plausibility import check_points, settle_measured
 from procedures.io.numbers import NotANumber, finite_float
 from procedures.io.ranges import LEG_NUMBERS, PointLimits
 from procedures.io.recording.columns import read_point_column, write_point_column
@@ -269,14 +269,24 @@ def import_csv(
     limits: PointLimits | None = None,
     accept_implausible: bool = False,
     warnings: list[str] | None = None,
+    identity=None,
+    station_config: dict | None = None,
+    stage: str | None = None,
+    started_utc: str | None = None,
 ) -> Session:
     """Convert an interchange CSV into a session file (rig "import"); return it as read back.
 
     The whole CSV is checked first (see read_csv_points; `limits`: the physical ranges); on any
     problem InputError is raised and no file is created. The plan metadata names the source
     file and its SHA-256, and the legs the points hold. Values that look like a unit slip (degF
-    in a degC column, nm in the um column: procedures.io.plausibility) are refused the same way
-    unless `accept_implausible`; then their warning lines go to `warnings`.
+    in a degC column, nm in the um column: procedures.io.plausibility) are imported with a warning
+    line each in `warnings`; only a physically impossible one (an error larger than the travel the
+    targets span) is refused the same way, unless `accept_implausible`.
+
+    `identity(legs) -> dict` the session's /meta/identity for the legs the file holds (it may
+    refuse: InputError, nothing written); `station_config` recorded as the session's (its
+    [tolerances] and [metrology] decide and evaluate it); `stage` "calibration" / "verification"
+    / "other" kept in the plan; `started_utc` when the measurement was made (else now).
     """
     csv_path, h5_path = Path(csv_path), Path(h5_path)
     if not csv_path.is_file():
@@ -285,7 +295,7 @@ def import_csv(
     extra: dict[str, np.ndarray] = {}
     lines: list[int] = []
     points, optional = read_csv_points(csv_path, limits, extra, lines)
-    notes = settle(check_points(points, str(csv_path), lines), accept_implausible)
+    notes = settle_measured(check_points(points, str(csv_path), lines), accept_implausible)
     if warnings is not None:
         warnings.extend(notes)
     sha = hashlib.sha256(csv_path.read_bytes()).hexdigest()
@@ -296,11 +306,15 @@ def import_csv(
         "optional_columns": optional,
         "legs": sorted({int(v) for v in points["leg"]}),
     }
+    if stage:
+        plan["stage"] = stage
+    ident = identity(plan["legs"]) if callable(identity) else identity
     with atomic_path(h5_path) as tmp:
         with SessionWriter.create(
             tmp, session_id=session_id or f"import-{sha[:12]}", operator=operator, rig="import", plan=plan,
-            station_config={}, devices={"source": f"CSV file {csv_path.name}"},
+            station_config=station_config or {}, devices={"source": f"CSV file {csv_path.name}"},
             software_version=software_version or _software_version(), overwrite=True,
+            **({"identity": ident} if ident else {}), **({"started_utc": started_utc} if started_utc else {}),
         ) as writer:
             writer.append_points(points)
             writer.finish("completed")

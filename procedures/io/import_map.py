@@ -45,6 +45,7 @@ import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from procedures.io.csv_io import EXTRA_COLUMNS, OPTIONAL_COLUMNS
 from procedures.engine.errors import InputError
@@ -61,6 +62,9 @@ _SECTIONS = {
     "units": {"target", "error"},
     "convention": {"error", "forward", "reverse"},
     "defaults": {"leg"},
+    # who and what was measured (station/services/import_identity.py checks the values)
+    "identity": {"serial", "part_number", "leg_type", "screw_lot", "station", "stage", "measured_utc",
+                 "laser_model", "laser_serial", "laser_calibrated_on", "laser_calibration_due"},
 }
 
 
@@ -79,6 +83,7 @@ class ImportMap:
     forward: tuple[str, ...] = ("+", "+1", "1", "fwd", "forward", "up", "pos", "positive")
     reverse: tuple[str, ...] = ("-", "-1", "rev", "reverse", "backward", "down", "neg", "negative")
     default_leg: int | None = None
+    identity: dict[str, Any] = field(default_factory=dict)  # [identity] as written
 
 
 def _bad(path, key: str, reason: str) -> InputError:
@@ -166,7 +171,8 @@ def load_map(path: str | os.PathLike) -> ImportMap:
         raise _bad(path, "defaults.leg", "missing: the file has no leg column (columns.leg), so name the leg here")
     return ImportMap(path, DELIMITERS[delimiter], decimal, skip, header, comment, dict(cols),
                      text("units", "target", "mm"), text("units", "error", "um"),
-                     1.0 if convention == "measured-nominal" else -1.0, words["forward"], words["reverse"], leg)
+                     1.0 if convention == "measured-nominal" else -1.0, words["forward"], words["reverse"], leg,
+                     dict(data.get("identity", {})))
 
 
 @dataclass(frozen=True)

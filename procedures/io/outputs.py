@@ -2,8 +2,8 @@
 output of every front end (issue 22, item 4).
 
 - An output that exists is refused, naming it, unless the user said `force` (`--force`).
-- The folder it goes into must exist (nothing is created behind the user's back; a folder
-  output's own parents excepted) and must take a new file: a real file is created there and
+- The folder it goes into must exist (nothing is created behind the user's back: a folder
+  output is created itself, never its parents, as a file's folder is never made) and must take a new file: a real file is created there and
   removed again, so a read-only folder, a full or read-only file system, or a folder only root
   could write (for a user who is not root) are all told apart from a good one by the system
   itself, not by guessing from permission bits.
@@ -70,9 +70,10 @@ def check_output_file(path: str | Path, *, force: bool = False, option: str = "-
 
 
 def check_output_folder(path: str | Path, *, force: bool = False, option: str = "--out") -> Path:
-    """`path` as a Path once a folder of results can be written there: not there (its nearest
-    existing ancestor writable; the folder and its parents are created by the writer), or there
-    and `force` (then writable itself). InputError (one line) otherwise."""
+    """`path` as a Path once a folder of results can be written there: not there (its parent
+    there and writable; the writer creates the folder, never its parents: `report --out
+    missing/sub` is refused as `fit --out missing/m.json` is), or there and `force` (then writable
+    itself). InputError (one line) otherwise."""
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise InputError(f"{option} {p}: is a file; give a folder; {NOTHING_WRITTEN}")
@@ -82,10 +83,11 @@ def check_output_folder(path: str | Path, *, force: bool = False, option: str = 
                              f"{option}; {NOTHING_WRITTEN}")
         _probe(p, option, p)
         return p
-    ancestor = _existing_ancestor(p.parent)
-    if not ancestor.is_dir():
-        raise InputError(f"{option} {p}: {ancestor} is a file, not a folder; {NOTHING_WRITTEN}")
-    _probe(ancestor, option, p)
+    if not p.parent.is_dir():
+        what = "is a file, not a folder" if p.parent.exists() else "does not exist"
+        raise InputError(f"{option} {p}: the folder {p.parent} {what}; create it first or choose another "
+                         f"{option}; {NOTHING_WRITTEN}")
+    _probe(p.parent, option, p)
     return p
 
 

@@ -7,6 +7,12 @@ ever spanned comes from an extrapolated model, or a model of something else. Suc
 refused, naming where it is (file, line, field) and the slip it looks like, unless the user
 states that it is right (`--accept-implausible`); then it is kept, with a warning line.
 
+Measured data (`station import`, issue 35) are refused only when physically impossible for the
+declared axis (`Implausible.impossible`: an error larger than the travel the targets span; the
+physical ranges of procedures/io/ranges.py refuse the rest of the impossible): uncompensated axes
+and screws of low accuracy grades do reach hundreds of micrometres, so an unusual value is
+imported with a warning line giving the figure that made it suspicious (`settle_measured`).
+
 Front-end independent: `station import` (procedures.io.csv_io), and `station table`, `station push`
 and the terminal UI's Compensation page (through station.services.table_jobs) call the same checks
 and `settle`; each front end says how its user accepts the values (`Override`).
@@ -29,8 +35,9 @@ kelvin with travel); 50..104 degF is 10..40 degC, so a degC column reading above
 likely holds degF (68 degF = 20 degC)."""
 
 NM_FROM_UM = 100.0
-"""A ball-screw leg's positioning error is micrometres to tens of micrometres; an error column
-whose values go beyond 100 um most likely holds nm (0.5 um = 500 nm)."""
+"""A precision ball-screw leg's positioning error is micrometres to tens of micrometres; an error
+column whose values go beyond 100 um may hold nm (0.5 um = 500 nm), or come from an uncompensated
+axis or a screw of a low accuracy grade (they reach hundreds of um): suspicious, not impossible."""
 
 CORRECTION_SPAN_FACTOR = 1.5
 """A table may correct a little more than the recorded error spanned (the model smooths and
@@ -66,6 +73,7 @@ class Implausible:
     where: str
     value: float
     slip: str
+    impossible: bool = False  # physically impossible for the declared axis: refused even for measured data
 
     def text(self) -> str:
         return f"{self.where} = {self.value:g}: {self.slip}"
@@ -81,9 +89,28 @@ def nm_slip(value_um: float) -> str:
             f"micrometres to tens of micrometres, not {NM_FROM_UM:g} um and more)")
 
 
+def large_error(value_um: float, span_mm: float) -> str:
+    """The warning of a measured error beyond NM_FROM_UM: the figure, and both readings of it."""
+    return (f"{abs(value_um):g} um is beyond {NM_FROM_UM:g} um: possible for an uncompensated axis or a screw of a low "
+            f"accuracy grade, unusual for a precision leg; if the column holds nm it is {value_um / 1000.0:g} um "
+            f"(targets span {span_mm:g} mm)")
+
+
+def impossible_error(value_um: float, span_mm: float) -> str:
+    return (f"an error of {abs(value_um) / 1000.0:g} mm is larger than the {span_mm:g} mm the targets span: no axis is "
+            "off by more than its travel; is the column in um (not nm), and are the targets in mm?")
+
+
+def fahrenheit_warning(value_c: float) -> str:
+    return (f"{value_c:g} degC is above {FAHRENHEIT_FROM_C:g} degC, rare for a workshop or a leg; if the column holds "
+            f"degF it is {(value_c - 32.0) * 5.0 / 9.0:.1f} degC")
+
+
 def check_points(points: np.ndarray, source: str, lines: Sequence[int] | None = None) -> list[Implausible]:
     """The first implausible value of each field of `points` (POINT_DTYPE rows from `source`;
-    `lines`: each row's line in the file, to name it): temperatures in degF, errors in nm."""
+    `lines`: each row's line in the file, to name it): temperatures in degF, errors in nm (the
+    largest error, so the warning gives the extreme figure); an error larger than the travel
+    the targets span is `impossible` (named before any other error)."""
     found: list[Implausible] = []
 
     def where(row: int, field: str) -> str:
@@ -97,13 +124,25 @@ def check_points(points: np.ndarray, source: str, lines: Sequence[int] | None = 
             hits = np.flatnonzero(np.isfinite(values) & (values > FAHRENHEIT_FROM_C))
             if hits.size:
                 row = int(hits[0])
-                found.append(Implausible(where(row, field), float(values[row]), fahrenheit_slip(float(values[row]))))
+                found.append(Implausible(where(row, field), float(values[row]), fahrenheit_warning(float(values[row]))))
     if "error_um" in names:
         values = np.asarray(points["error_um"], float)
-        hits = np.flatnonzero(np.isfinite(values) & (np.abs(values) > NM_FROM_UM))
+        targets = np.asarray(points["target_mm"], float) if "target_mm" in names else np.zeros(0)
+        targets = targets[np.isfinite(targets)]
+        span_mm = float(np.ptp(targets)) if targets.size else 0.0
+        ok = np.isfinite(values)
+        if span_mm > 0:
+            hits = np.flatnonzero(ok & (np.abs(values) / 1000.0 > span_mm))
+            if hits.size:
+                row = int(hits[0])
+                found.append(Implausible(where(row, "error_um"), float(values[row]),
+                                         impossible_error(float(values[row]), span_mm), impossible=True))
+                return found
+        hits = np.flatnonzero(ok & (np.abs(values) > NM_FROM_UM))
         if hits.size:
-            row = int(hits[0])
-            found.append(Implausible(where(row, "error_um"), float(values[row]), nm_slip(float(values[row]))))
+            row = int(hits[np.argmax(np.abs(values[hits]))])
+            found.append(Implausible(where(row, "error_um"), float(values[row]),
+                                     large_error(float(values[row]), span_mm)))
     return found
 
 
@@ -147,3 +186,13 @@ def settle(found: Sequence[Implausible], accept: bool, what: str = "nothing was 
         raise ImplausibleError(f"{found[0].text()}{more}; correct it, or {override.how} if the values are right"
                                + (f"; {what}" if what else ""), found)
     return [f"warning: {f.text()} (kept: {override.kept})" for f in found]
+
+
+def settle_measured(found: Sequence[Implausible], accept: bool, what: str = "nothing was written",
+                    override: Override = Override()) -> list[str]:
+    """Measured data (`station import`): refuse only the `impossible` values (as `settle`, which
+    `accept` overrides); every other one is kept with a warning line giving its figure."""
+    impossible = [f for f in found if f.impossible]
+    out = settle(impossible, accept, what, override)
+    return out + [f"warning: {f.text()} (imported as it is; check the unit if it should not be)"
+                  for f in found if not f.impossible]

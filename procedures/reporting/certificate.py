@@ -16,12 +16,14 @@ from typing import Any
 from procedures.reporting import decision
 
 TITLE = "Calibration certificate"
+DECIDED_ORDER = decision.DECIDED
 DEJAVU = Path("/usr/share/fonts/truetype/dejavu")
 STATEMENTS = (
     "The results relate only to the item calibrated, at the time and under the conditions stated.",
     "Expanded uncertainties U are stated with a coverage factor k = 2 (about 95 % coverage for a normal "
     "distribution), evaluated after the GUM in the manner of ISO/TR 230-9.",
     "This certificate shall not be reproduced except in full without the written approval of the laboratory.",
+    "All results were obtained by the laboratory itself on its own station; no part was provided externally.",
 )
 
 
@@ -66,53 +68,141 @@ def _stage(iso: dict, leg: str, stage: str) -> dict[str, Any]:
         "values": values, "overall": dec["overall"], "decision_reason": dec.get("reason", ""),
         "tolerance_source": dec.get("tolerance_source"), "leg_type": dec.get("leg_type"),
         "notes": list(L["notes"]), "targets": _per_target(L),
+        "specification": dec.get("specification"),
+        "budget": budget_rows(L.get("budget") or {}),
     }
+
+
+# -- the uncertainty budget, every contribution ---------------------------------------------------------
+
+# every source the model knows (procedures.metrology.uncertainty._Model), in the order a reader checks them
+SOURCES = ("laser", "air temperature", "air pressure", "humidity", "misalignment", "material temperature",
+           "expansion coefficient", "Abbe", "dead path", "resolution", "repeatability", "near-equal extremes")
+
+
+def _why_zero(source: str, inputs: dict, dn_range_ppm: float | None) -> str:
+    """Why `source` contributes nothing to any value, from the inputs the budget used."""
+    g = inputs.get
+    if source == "misalignment":
+        return ("[metrology] misalignment_mm = 0: no lateral beam walk-off stated for this set-up, so no cosine "
+                "error is taken" if not g("misalignment_mm") else "no stroke to misalign over")
+    if source == "Abbe":
+        if not g("abbe_offset_mm"):
+            return "[metrology] abbe_offset_mm = 0: the beam is stated on the leg's axis, so an angle makes no Abbe error"
+        return "[metrology] abbe_angle_u_urad = 0: no angular error of the leg stated"
+    if source == "dead path":
+        if not g("dead_path_mm"):
+            return "[metrology] dead_path_mm = 0: the laser was zeroed at the interferometer, no dead path"
+        return ("the air's refractive index did not change during the test (recorded range "
+                f"{dn_range_ppm or 0:.3g} ppm), so the dead path {g('dead_path_mm'):g} mm adds nothing")
+    if source == "resolution":
+        return "[metrology] laser_resolution_nm = 0"
+    if source == "expansion coefficient":
+        return "the material was at the reference temperature (or not recorded): the coefficient's error has no effect"
+    if source == "near-equal extremes":
+        return "each extreme is set by one target clearly above the others"
+    if source == "repeatability":
+        return "fewer than 2 approaches per target: no scatter estimated"
+    return "its stated standard uncertainty is 0"
+
+
+def budget_rows(budget: dict) -> dict[str, Any]:
+    """The budget of one leg (procedures.metrology.uncertainty.LegBudget.to_json) as the certificate
+    states it: one row per source with its contribution u (um, k = 1) to each decided value, the
+    several places of one source (targets, positions) summed in quadrature as the budget does; a
+    source that contributes nothing to any value stays listed with the reason; u_c and U (k = 2)."""
+    values = budget.get("values") or {}
+    inputs = budget.get("inputs") or {}
+    rows = []
+    for src in SOURCES:
+        u = {}
+        what = None
+        for name in DECIDED_ORDER:
+            cs = [c for c in (values.get(name) or {}).get("contributions", []) if c["source"] == src]
+            if cs:
+                u[name] = sum(c["u_um"] ** 2 for c in cs) ** 0.5
+                what = what or cs[0]
+        total = max(u.values(), default=0.0)
+        row = {"source": src, "u_um": u,
+               "input": (f"{what['u_input']:.3g} {what['unit']}, {what['distribution']}" if what and src not in
+                         ("repeatability", "near-equal extremes") else
+                         ("s / sqrt(n) and s / sqrt(2 (n - 1)) per target, type A" if src == "repeatability" and what
+                          else (what or {}).get("distribution", ""))),
+               "quantity": (what or {}).get("quantity", "")}
+        if total <= 0:
+            row["zero_because"] = _why_zero(src, inputs, budget.get("refractive_index_range_ppm"))
+        rows.append(row)
+    combined = {n: (values.get(n) or {}).get("u_um") for n in DECIDED_ORDER}
+    expanded = {n: (values.get(n) or {}).get("U_um") for n in DECIDED_ORDER}
+    return {"rows": rows, "u_c_um": combined, "U_um": expanded, "k": budget.get("k", 2.0),
+            "notes": list(budget.get("notes") or []),
+            "formed": {n: (values.get(n) or {}).get("formed", "") for n in DECIDED_ORDER}}
 
 
 def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_utc: str, lab: dict,
             customer: str, as_left: dict | None = None, table: dict | None = None,
             supersedes: dict | None = None, instrument: dict | None = None,
-            as_left_leg: int | None = None) -> dict[str, Any]:
+            as_left_leg: int | None = None, customer_contact: str = "", simulated: list[str] | None = None,
+            authoriser: dict | None = None, prepared_by: str = "", received: str = "") -> dict[str, Any]:
     """The certificate of `leg` as a JSON-able dict: `as_found` / `as_left` are ISO 230-2 report
     dicts (iso230_report.build, decided as found / as left); `lab` {name, address, accreditation};
     `table` {file, sha256, bytes} of the compensation table pushed; `supersedes` {report_no,
-    revision, sha256_pdf, reason} of the revision this one corrects; `instrument` the laser as the
-    session identity recorded it {model, serial, calibrated_on} (over the config's [metrology]).
-    `as_left_leg`: where the as-left session measured the same leg (its serial), when the leg was
-    mounted at another position for the verification (default `leg`)."""
+    revision, sha256_pdf, reason, changes} of the revision this one corrects; `instrument` the
+    laser as the session identity recorded it {model, serial, calibrated_on, certificate} (over the
+    config's [metrology]). `as_left_leg`: where the as-left session measured the same leg (its
+    serial), when the leg was mounted at another position for the verification (default `leg`).
+    `simulated`: why any device of either session was simulated (then the certificate says
+    SIMULATION on every page and carries no accreditation); `authoriser` {name, role} who is to
+    approve it ([lab]); the approval itself is added by `approve` (the certificate is a draft
+    until then); `prepared_by` who issued it; `received` the date the item was received (ISO)."""
     key = str(leg)
     if key not in as_found["legs"]:
         raise KeyError(f"leg {leg} is not in the as-found session")
     ident = as_found["identification"]
     ins = ident["instrument"]
     li = ident["leg_identity"].get(key, {})
+    simulated = list(simulated or [])
+    accreditation = lab.get("accreditation") or "not accredited"
+    if simulated and lab.get("accreditation"):
+        # an accreditation number vouches for a real measurement: never on a simulated one
+        accreditation = "not stated: the measurement was simulated (no accredited result)"
     cert = {
         "title": TITLE, "report_no": report_no, "revision": revision, "issued_utc": issued_utc,
         "supersedes": supersedes,
+        "simulated": simulated,
         "laboratory": {"name": lab.get("name") or "not stated", "address": lab.get("address") or "not stated",
-                       "accreditation": lab.get("accreditation") or "not accredited"},
+                       "accreditation": accreditation},
         "customer": customer or "not stated",
+        "customer_contact": customer_contact or "not stated",
         "place": {"station": ident["station"]["id"], "host": ident["station"]["host"], "rig": ident["rig"],
                   "software_version": ident["software_version"]},
         "item": {"leg": leg, "serial": li.get("serial", "not recorded"), "part_number": li.get("part_number", "not stated"),
                  "leg_type": li.get("leg_type", "not stated"), "screw_lot": li.get("screw_lot", "not stated"),
-                 "drive": ident["legs"].get(key, "not recorded")},
+                 "drive": ident["legs"].get(key, "not recorded"), "received": received or "not stated"},
         "instrument": {"model": ins["model"], "serial": ins["serial"], "reported_identity": ins["reported_identity"],
                        "calibration_date": ins["calibration_date"], "calibration_due": ins["calibration_due"],
+                       "calibration_certificate": "not stated",
                        "traceable": bool(ins["traceable"]), "warnings": list(ins["calibration_warnings"]),
                        "wavelength_nm": ins["wavelength_nm"], "laser_accuracy_ppm_k2": ins["laser_accuracy_ppm_k2"],
                        "resolution_nm": ins["resolution_nm"], "air_compensation": ident["air_compensation"]},
         "method": {"standard": "ISO 230-2:2014, positioning accuracy and repeatability (bidirectional)",
                    "uncertainty": as_found["uncertainty"], "decision_rule": decision.RULE,
-                   "tolerance_source": None},
+                   "tolerance_source": None, "specification": None,
+                   "sampling": "not applicable: the item submitted was calibrated itself, no sample was taken"},
         "as_found": _stage(as_found, key, "as_found"),
         "as_left": None,
         "compensation_table": table,
         "statements": list(STATEMENTS),
-        "approval": {"prepared_by": "", "approved_by": "", "operator": ident["operator"]},
+        "approval": {"prepared_by": prepared_by or ident["operator"] or "not recorded",
+                     "authoriser": (authoriser or {}).get("name") or "not stated",
+                     "authoriser_role": (authoriser or {}).get("role") or "not stated",
+                     "status": "draft", "approved_by": None, "approved_role": None, "approved_utc": None,
+                     "audit_id": None, "operator": ident["operator"]},
     }
     cert["method"]["tolerance_source"] = cert["as_found"]["tolerance_source"]
-    for key_from, key_to in (("model", "model"), ("serial", "serial"), ("calibrated_on", "calibration_date")):
+    cert["method"]["specification"] = cert["as_found"]["specification"]
+    for key_from, key_to in (("model", "model"), ("serial", "serial"), ("calibrated_on", "calibration_date"),
+                             ("certificate", "calibration_certificate")):
         if (instrument or {}).get(key_from):
             cert["instrument"][key_to] = instrument[key_from]
     ci = cert["instrument"]
@@ -129,7 +219,42 @@ def content(as_found: dict, leg: int, *, report_no: str, revision: int, issued_u
             raise ValueError(f"the as-left session measured leg {left_serial}, the as-found session "
                              f"{cert['item']['serial']}")
         cert["as_left"] = _stage(as_left, lkey, "as_left")
+        lins = as_left["identification"]["instrument"]
+        if not lins["traceable"]:  # the as-left laser counts as much as the as-found one
+            ci["traceable"] = False
+            ci["warnings"] += [f"as left: {w}" for w in lins["calibration_warnings"]] or \
+                ["as left: the laser's calibration due date is not stated"]
+    cert["traceability"] = traceability(cert)
     return cert
+
+
+def traceability(c: dict) -> dict[str, Any]:
+    """Whether the certificate may say its results are traceable to the SI, and the sentence it
+    says: only when the instrument was in calibration on the day, its identity matches the serial
+    whose calibration is stated, and nothing was simulated; otherwise the sentence says why not,
+    so it can never stand under a warning that contradicts it."""
+    ins = c["instrument"]
+    why_not = []
+    if c.get("simulated"):
+        why_not.append("the measurement was simulated (" + "; ".join(c["simulated"]) + ")")
+    if not ins["traceable"]:
+        why_not.append("the laser interferometer was not in calibration on the day of the measurement ("
+                       + ("; ".join(ins["warnings"]) or "no calibration due date stated") + ")")
+    if ins.get("identity_mismatch"):
+        why_not.append(f"the laser connected did not identify itself as serial {ins['serial']}, whose calibration is "
+                       "stated")
+    if why_not:
+        return {"traceable": False, "reasons": why_not,
+                "statement": "NOT TRACEABLE. " + "; ".join(why_not)[0].upper() + "; ".join(why_not)[1:] + ". The results "
+                             "below are NOT traceable to the SI unit of length and this document cannot serve as "
+                             "evidence of conformity."}
+    cert_no = ins.get("calibration_certificate") or "not stated"
+    chain = (f"the laser interferometer {ins['model']} serial {ins['serial']}, calibrated on {ins['calibration_date']} "
+             f"(certificate {cert_no}), due {ins['calibration_due']}, in calibration on the day of the measurement; "
+             "its vacuum wavelength realises the metre")
+    return {"traceable": True, "reasons": [],
+            "statement": f"The results are traceable to the SI unit of length, the metre, through {chain}. The air "
+                         f"refractive index is compensated from the air sensors ({ins['air_compensation']})."}
 
 
 # -- the PDF ------------------------------------------------------------------------------------------
@@ -179,63 +304,78 @@ def _rng(r: Any, spec: str = ".2f") -> str:
 
 def _blocks(c: dict) -> list[tuple]:
     """The certificate as blocks: ("h", heading) / ("p", text) / ("kv", [(key, value)]) /
-    ("table", header, rows, aligns) / ("box", text) / ("sign", ...). A heading is kept with the
-    block after it."""
+    ("table", header, rows, aligns) / ("box", text) / ("graph", stage) / ("sign", approval). A
+    heading is kept with the block after it."""
     b: list[tuple] = []
     lab, item, ins = c["laboratory"], c["item"], c["instrument"]
     af = c["as_found"]
+    if c.get("simulated"):
+        b.append(("box", "SIMULATION. At least one device of this measurement was simulated ("
+                         + "; ".join(c["simulated"]) + "). This document certifies no real item and carries no "
+                         "accreditation."))
     if c.get("supersedes"):
         s = c["supersedes"]
         b.append(("box", f"This revision {c['revision']} supersedes revision {s['revision']} of certificate "
                          f"{s['report_no']} (PDF sha256 {s['sha256_pdf'][:16]}…), which is withdrawn. "
                          f"Reason: {s['reason']}"))
+        changes = s.get("changes") or []
+        b.append(("h", f"Changes from revision {s['revision']}"))
+        if changes:
+            b.append(("table", ["field", f"revision {s['revision']}", f"revision {c['revision']}"],
+                      [[ch["field"], str(ch["before"]), str(ch["after"])] for ch in changes], "LLL"))
+        else:
+            b.append(("p", "No field of the certificate changed (the revision re-issues the same content)."))
     b.append(("h", "1. Laboratory and customer"))
     b.append(("kv", [("Laboratory", lab["name"]), ("Address", lab["address"]), ("Accreditation", lab["accreditation"]),
                      ("Place of calibration", f"station {c['place']['station']} (host {c['place']['host']}, "
                                               f"{c['place']['rig']} rig), software {c['place']['software_version']}"),
-                     ("Customer", c["customer"])]))
+                     ("Customer", c["customer"]), ("Customer contact", c.get("customer_contact") or "not stated")]))
     b.append(("h", "2. Item calibrated"))
     b.append(("kv", [("Item", f"ball-screw leg of a hexapod, serial {item['serial']}"),
                      ("Part number / type", f"{item['part_number']} / {item['leg_type']}"),
                      ("Screw lot", item["screw_lot"]), ("Position on the station", f"leg {item['leg']}"),
-                     ("Drive", item["drive"]),
+                     ("Drive", item["drive"]), ("Received", item.get("received") or "not stated"),
                      ("Condition", f"as received; compensation at the start: {af['compensation_state']}")]))
     b.append(("h", "3. Measuring instrument and traceability"))
     b.append(("kv", [("Laser interferometer", f"{ins['model']}, serial {ins['serial']} (reports itself as "
                                               f"'{ins['reported_identity']}')"),
                      ("Calibrated on / due", f"{ins['calibration_date']} / {ins['calibration_due']}"),
+                     ("Its certificate", ins.get("calibration_certificate") or "not stated"),
                      ("Wavelength, accuracy", f"{ins['wavelength_nm']:.3f} nm vacuum, {ins['laser_accuracy_ppm_k2']:g} ppm "
                                               f"(k = 2), resolution {ins['resolution_nm']:g} nm"),
                      ("Air compensation", ins["air_compensation"])]))
     if ins.get("identity_mismatch"):
         b.append(("box", ins["identity_mismatch"]))
-    if not ins["traceable"]:
-        b.append(("box", "NOT TRACEABLE. The laser interferometer was not in calibration on the day of the "
-                         "measurement (" + ("; ".join(ins["warnings"]) or "no calibration due date stated") +
-                         "). The results below are NOT traceable to the SI unit of length and this document "
-                         "cannot serve as evidence of conformity."))
-    else:
-        b.append(("p", "The laser interferometer was in calibration on the day of the measurement: the results "
-                       "are traceable to the SI unit of length through its calibration."))
+    tr = c.get("traceability") or traceability(c)
+    b.append(("box", tr["statement"]) if not tr["traceable"] else ("p", tr["statement"]))
     b.append(("h", "4. Method"))
     tp = af["test_parameters"]
+    spec = c["method"].get("specification")
+    if spec:
+        limits = f"{spec} (limits for type {item['leg_type']})"
+    elif c["method"]["tolerance_source"]:
+        limits = (f"limits for type {item['leg_type']} set by the laboratory; no specification identifier stated "
+                  "(spec / spec_revision in [tolerances.TYPE])")
+    else:
+        limits = "none stated for this leg type: no conformity decision"
     b.append(("kv", [("Standard", c["method"]["standard"]),
                      ("Test", f"{af['n_targets']} targets from {min(tp['targets_mm'], default=0):g} to "
                               f"{max(tp['targets_mm'], default=0):g} mm, {af['n_cycles']} approaches per target and "
                               f"direction; feed {tp['feed_statement']}; dwell "
                               + (f"{tp['dwell_s']:g} s" if tp.get("dwell_s") is not None else "not recorded")),
                      ("Approach", tp["approach"]),
-                     ("Uncertainty", c["method"]["uncertainty"]),
+                     ("Uncertainty", c["method"]["uncertainty"] + "; every contribution in the budget sections below"),
                      ("Decision rule", c["method"]["decision_rule"]),
-                     ("Tolerances", c["method"]["tolerance_source"] or "none stated for this leg type: no "
-                                                                        "conformity decision")]))
+                     ("Specification", limits),
+                     ("Sampling", c["method"].get("sampling") or "not applicable")]))
     stages = [("as found", af)] + ([("as left", c["as_left"])] if c.get("as_left") else [])
     n = 5
     for word, st in stages:
         b.append(("h", f"{n}. Environment and conditions, {word}"))
         e = st["environment"]
         b.append(("kv", [("Session", f"{st['session_file']} (sha256 {st['session_sha256'][:16]}…), "
-                                     f"{st['outcome']}"),
+                                     f"{st['outcome']}; leg position {st['leg']}"
+                                     + (f"; {st['kind']}" if st.get("kind") else "")),
                          ("Date of measurement", f"{_when(st['started_utc'])} to {_when(st['ended_utc'])} (UTC)"),
                          ("Operator", st["operator"] or "not recorded"),
                          ("Air temperature", f"{_rng(e['air_temp_c'])} degC"),
@@ -264,6 +404,10 @@ def _blocks(c: dict) -> list[tuple]:
             b.append(("p", f"Note: {note}"))
         n += 1
     for word, st in stages:
+        b.append(("h", f"{n}. Deviation graph {word}"))
+        b.append(("graph", st, word))
+        n += 1
+    for word, st in stages:
         b.append(("h", f"{n}. Per-target results {word} (um)"))
         rows = [[f"{t['target_mm']:.3f}", _signed(t.get("x_up_um")), _num(t.get("s_up_um")), _num(t.get("U_up_um")),
                  _signed(t.get("x_down_um")), _num(t.get("s_down_um")), _num(t.get("U_down_um")), _signed(t["B_i_um"])]
@@ -272,6 +416,30 @@ def _blocks(c: dict) -> list[tuple]:
         b.append(("p", "x: mean positional deviation (measured − target) at the target, ↑ approached in the positive "
                        "direction, ↓ in the negative; s: estimator of the standard deviation of the approaches; U(x): "
                        "expanded uncertainty of the mean (k = 2); B_i = x↑ − x↓: reversal value at the target."))
+        n += 1
+    for word, st in stages:
+        bud = st.get("budget")
+        if not bud:
+            continue
+        b.append(("h", f"{n}. Uncertainty budget {word}: contributions u in um (k = 1)"))
+        names = list(DECIDED_ORDER)
+        rows = []
+        for r in bud["rows"]:
+            if r.get("zero_because"):  # listed all the same, with why it is nothing
+                rows.append([r["source"], f"0: {r['zero_because']}"] + ["0"] * len(names))
+                continue
+            rows.append([r["source"], r["input"] or "–"] + [_num(r["u_um"].get(k), ".4f") if k in r["u_um"] else "–"
+                                                              for k in names])
+        rows.append(["combined u_c", ""] + [_num(bud["u_c_um"].get(k), ".4f") for k in names])
+        rows.append([f"U (k = {bud['k']:g})", ""] + [_num(bud["U_um"].get(k), ".3f") for k in names])
+        b.append(("table", ["source", "input: standard uncertainty, distribution"] + names, rows,
+                  "LL" + "R" * len(names)))
+        b.append(("p", "A source counts once per value; its places (targets, positions) are summed in quadrature. "
+                       "–: the source does not enter that value (at one target, as in B and R, the "
+                       "length-proportional terms cancel). 0: the source is in the model but contributes nothing "
+                       "here, for the reason given."))
+        for note in bud.get("notes") or []:
+            b.append(("p", f"Note: {note}"))
         n += 1
     b.append(("h", f"{n}. Compensation table"))
     t = c.get("compensation_table")
@@ -291,7 +459,7 @@ def _blocks(c: dict) -> list[tuple]:
         b.append(("p", s))
     n += 1
     b.append(("h", f"{n}. Approval"))
-    b.append(("sign", c["approval"]["operator"]))
+    b.append(("sign", c["approval"]))
     b.append(("end", f"End of certificate {c['report_no']} revision {c['revision']}"))
     return b
 
@@ -305,6 +473,10 @@ def pdf(c: dict) -> bytes:
 
     issued = c["issued_utc"][:10]
     ident = f"{c['report_no']} rev. {c['revision']}"
+    banner_sim = "SIMULATION: not a calibration of a real item" if c.get("simulated") else ""
+    appr = c.get("approval") or {}
+    banner_draft = ("DRAFT: not valid until approved"
+                    if appr.get("status") != "approved" else "")
 
     class Doc(FPDF):
         def header(self):
@@ -316,6 +488,12 @@ def pdf(c: dict) -> bytes:
             self.cell(self.epw / 2, 4, t(f"Certificate {ident}, issued {issued}"))
             self.cell(self.epw / 2, 4, t(f"Page {self.page_no()} of {{nb}}"), align="R",
                       new_x=XPos.LMARGIN, new_y=YPos.NEXT)
+            # on every page, so no page taken out of the document can pass for a real or approved one
+            for mark in (m for m in (banner_sim, banner_draft) if m):
+                self.set_text_color(190, 0, 0)
+                self.set_font(t.family, "B", 9)
+                self.cell(0, 4.5, t(mark), align="C", new_x=XPos.LMARGIN, new_y=YPos.NEXT)
+                self.set_text_color(0, 0, 0)
             self.line(self.l_margin, self.get_y() + 1, self.l_margin + self.epw, self.get_y() + 1)
             self.ln(4)
 
@@ -364,6 +542,8 @@ def pdf(c: dict) -> bytes:
             _box(doc, t, blk[1])
         elif kind == "sign":
             _sign(doc, t, blk[1])
+        elif kind == "graph":
+            _graph(doc, t, blk[1], blk[2])
         elif kind == "end":
             doc.ln(4)
             doc.set_font(t.family, "B", 9)
@@ -386,6 +566,8 @@ def _height(doc, t, blk, first_only: bool = False) -> float:
         return 6 + 4.6 * _lines(doc, t, blk[1], doc.epw - 8)
     if blk[0] == "sign":
         return 40
+    if blk[0] == "graph":
+        return GRAPH_H + 14
     return 4.3 * max(1, _lines(doc, t, blk[1] if len(blk) > 1 else "", doc.epw))
 
 
@@ -419,7 +601,10 @@ def _table(doc, t, header: list[str], rows: list[list[str]], aligns: str) -> Non
                for i in range(len(header))]
     widths = list(natural)
     if sum(widths) > doc.epw:  # shrink only the text columns (left-aligned), never the numbers
-        text_cols = [i for i, a in enumerate(aligns) if a == "L"]
+        # a short text column (a name) keeps its width, so its words never break mid-word; the long
+        # ones (sentences) share what is left and wrap between words
+        text_cols = ([i for i, a in enumerate(aligns) if a == "L" and natural[i] > 40]
+                     or [i for i, a in enumerate(aligns) if a == "L"])
         fixed = sum(w for i, w in enumerate(widths) if i not in text_cols)
         room = max(doc.epw - fixed, 10 * len(text_cols))
         total_text = sum(widths[i] for i in text_cols) or 1
@@ -434,7 +619,7 @@ def _table(doc, t, header: list[str], rows: list[list[str]], aligns: str) -> Non
         doc.add_page()
     doc.set_font(t.family, "", size)
     align = {"L": "LEFT", "R": "RIGHT", "C": "CENTER"}
-    with doc.table(col_widths=widths, width=sum(widths), align="LEFT", line_height=4.6, first_row_as_headings=True,
+    with doc.table(col_widths=widths, width=min(sum(widths), doc.epw), align="LEFT", line_height=4.6, first_row_as_headings=True,
                    headings_style=FontFace(emphasis="BOLD", fill_color=(230, 230, 230)),
                    text_align=tuple(align[a] for a in aligns), repeat_headings=1) as table:
         for r in [header] + rows:
@@ -461,30 +646,104 @@ def _box(doc, t, text: str) -> None:
     doc.ln(2)
 
 
-def _sign(doc, t, operator: str) -> None:
+def _sign(doc, t, approval: dict) -> None:
+    """Who measured, who prepared (issued) the certificate, and who approved it: name, function and
+    time of the electronic approval (`station certificate approve`); a draft says it awaits the
+    authoriser named in the config."""
     from fpdf.enums import XPos, YPos
 
     if doc.get_y() + 40 > doc.page_break_trigger:
         doc.add_page()
+    a = approval
+    rows = [("Measurement performed by", f"{a.get('operator') or 'not recorded'} (operator recorded in the session)"),
+            ("Prepared (issued) by", a.get("prepared_by") or "not recorded")]
+    if a.get("status") == "approved":
+        rows.append(("Approved by", f"{a['approved_by']}, {a.get('approved_role') or 'function not stated'}"))
+        rows.append(("Approved on", f"{_when(a['approved_utc'])} UTC, electronically (`station certificate approve`; "
+                                    f"audit entry {a.get('audit_id') or 'not recorded'})"))
+        rows.append(("Validity", "This approved document is the certificate. It is not signed by hand: any change "
+                                 "makes another document (its sha256 is in the laboratory's catalog)."))
+    else:
+        rows.append(("Approved by", f"NOT YET APPROVED. To be approved by {a.get('authoriser') or 'not stated'}, "
+                                    f"{a.get('authoriser_role') or 'function not stated'} ([lab] authoriser)"))
+        rows.append(("Validity", "This draft is not a valid certificate until it is approved."))
+    _kv(doc, t, rows)
+    doc.set_y(doc.get_y() + 2)
+    doc.set_x(doc.l_margin)
     doc.set_font(t.family, "", 8.5)
-    doc.multi_cell(0, 4.3, t(f"Measurement performed by: {operator or 'not recorded'} (operator recorded in the session)."),
-                   new_x=XPos.LMARGIN, new_y=YPos.NEXT)
-    doc.ln(3)
-    half = doc.epw / 2 - 4
-    for label in ("Prepared by", "Approved by"):
-        x = doc.l_margin if label == "Prepared by" else doc.l_margin + half + 8
-        y = doc.get_y()
-        doc.set_xy(x, y)
-        doc.set_font(t.family, "B", 8.5)
-        doc.cell(half, 5, t(label))
-        for i, what in enumerate(("name, function", "date", "signature")):
-            yy = y + 12 + i * 9
-            doc.line(x, yy, x + half, yy)
-            doc.set_xy(x, yy + 0.5)
-            doc.set_font(t.family, "", 7)
-            doc.cell(half, 3.5, t(what))
-        doc.set_xy(doc.l_margin, y)
-    doc.set_y(doc.get_y() + 12 + 3 * 9)
+    doc.cell(0, 4, "", new_x=XPos.LMARGIN, new_y=YPos.NEXT)
+
+
+GRAPH_H = 62.0
+
+
+def _graph(doc, t, st: dict, word: str) -> None:
+    """The ISO 230-2 graph of one stage: the mean deviation at each target, up and down, with the
+    x ± 2s band of each direction (dashed), drawn in vectors on the page."""
+    from fpdf.enums import XPos, YPos
+
+    rows = st["targets"]
+    xs = [r["target_mm"] for r in rows]
+    series = []
+    for d, colour in (("up", (0, 70, 170)), ("down", (190, 40, 0))):
+        mean = [(r["target_mm"], r.get(f"x_{d}_um"), r.get(f"s_{d}_um") or 0.0) for r in rows
+                if r.get(f"x_{d}_um") is not None]
+        series.append((d, colour, mean))
+    ys = [v for _, _, m in series for _, x, sd in m for v in (x - 2 * sd, x + 2 * sd)]
+    if len(xs) < 2 or not ys:
+        doc.set_font(t.family, "", 8.5)
+        doc.multi_cell(0, 4.3, t("Not drawn: fewer than two targets."), new_x=XPos.LMARGIN, new_y=YPos.NEXT)
+        return
+    if doc.get_y() + GRAPH_H + 14 > doc.page_break_trigger:
+        doc.add_page()
+    x0, y0 = doc.l_margin + 14, doc.get_y() + 2
+    w, h = doc.epw - 16, GRAPH_H - 10
+    lo, hi = min(ys + [0.0]), max(ys + [0.0])
+    pad = 0.08 * ((hi - lo) or 1.0)
+    lo, hi = lo - pad, hi + pad
+    xl, xh = min(xs), max(xs)
+
+    def px(v):
+        return x0 + (v - xl) / ((xh - xl) or 1.0) * w
+
+    def py(v):
+        return y0 + h - (v - lo) / ((hi - lo) or 1.0) * h
+
+    doc.set_line_width(0.2)
+    doc.set_draw_color(0, 0, 0)
+    doc.rect(x0, y0, w, h)
+    doc.set_font(t.family, "", 6.5)
+    for i in range(5):  # y ticks
+        v = lo + (hi - lo) * i / 4
+        doc.set_draw_color(215, 215, 215)
+        doc.line(x0, py(v), x0 + w, py(v))
+        doc.set_xy(doc.l_margin, py(v) - 1.5)
+        doc.cell(13, 3, t(f"{v:.2f}"), align="R")
+    for i in range(5):  # x ticks
+        v = xl + (xh - xl) * i / 4
+        doc.set_xy(px(v) - 10, y0 + h + 0.5)
+        doc.cell(20, 3, t(f"{v:g}"), align="C")
+    doc.set_draw_color(120, 120, 120)
+    if lo < 0 < hi:
+        doc.line(x0, py(0.0), x0 + w, py(0.0))
+    for d, colour, m in series:
+        doc.set_draw_color(*colour)
+        doc.set_line_width(0.45)
+        doc.polyline([(px(p), py(x)) for p, x, _ in m])
+        doc.set_line_width(0.2)
+        with doc.local_context():
+            doc.set_dash_pattern(dash=1.2, gap=0.8)
+            for sign in (1, -1):
+                doc.polyline([(px(p), py(x + sign * 2 * sd)) for p, x, sd in m])
+        for p, x, _ in m:
+            doc.rect(px(p) - 0.5, py(x) - 0.5, 1, 1)  # the measured mean itself
+    doc.set_draw_color(0, 0, 0)
+    doc.set_xy(x0, y0 + h + 4)
+    doc.set_font(t.family, "", 7.5)
+    doc.multi_cell(w, 3.6, t(f"Mean positional deviation (um) against the target (mm), {word}: blue ↑ positive "
+                             "direction, red ↓ negative direction, solid the mean x, dashed x ± 2s."),
+                   new_x=XPos.LMARGIN, new_y=YPos.NEXT, align="C")
+    doc.ln(2)
 
 
 def now_utc() -> str:

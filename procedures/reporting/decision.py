@@ -21,6 +21,10 @@ Tolerances come from the station config, one section per leg type (parse_toleran
     E_um = 3.0
     [tolerances.HX300.as_found]   # (optional) as-found-only limits
     R_um = 4.0
+
+A section may name the specification its limits come from (`spec = "HX-SPEC-300"`,
+`spec_revision = "C"`): a certificate states the specification by that identifier and revision
+rather than by the config file it was read from.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ UNDECIDED = "cannot decide"
 NO_TOLERANCE = "no tolerance stated"
 NOT_COMPUTED = "not computed"
 SLACK_UM = 1e-9
+SPEC_KEYS = ("spec", "spec_revision")  # [tolerances.TYPE] text keys: the specification the limits come from
 RULE = ("ISO 14253-1: conforms when value + U <= limit, does not conform when value - U > limit, "
         "otherwise cannot decide (U expanded, k = 2)")
 
@@ -51,6 +56,15 @@ class Tolerance:
     as_found: dict[str, float] = field(default_factory=dict)
     as_left: dict[str, float] = field(default_factory=dict)
     source: str = ""  # where it was read: "FILE [tolerances.TYPE]"
+    spec: str = ""  # the specification's identifier ("" = not stated), e.g. a drawing or standard number
+    spec_revision: str = ""
+
+    @property
+    def specification(self) -> str:
+        """The specification as a certificate names it: "ID revision R", "" when none is stated."""
+        if not self.spec:
+            return ""
+        return f"{self.spec} revision {self.spec_revision}" if self.spec_revision else f"{self.spec} (revision not stated)"
 
     def limits(self, stage: str) -> dict[str, float]:
         if stage not in STAGES:
@@ -59,7 +73,7 @@ class Tolerance:
 
     def to_json(self) -> dict[str, Any]:
         return {"leg_type": self.leg_type, "as_found_um": dict(self.as_found), "as_left_um": dict(self.as_left),
-                "source": self.source}
+                "source": self.source, "spec": self.spec, "spec_revision": self.spec_revision}
 
 
 def _limit(where: str, key: str, value: Any) -> float:
@@ -76,6 +90,8 @@ def _keys(where: str, table: Any) -> dict[str, float]:
         raise InputError(f"{where} must be a table of keys")
     out = {}
     for key, value in table.items():
+        if key in SPEC_KEYS:
+            continue  # text, read by parse_tolerances
         name = key[:-3] if key.endswith("_um") else None
         if name not in DECIDED:
             raise InputError(f"{where} {key}: unknown key (known: {', '.join(n + '_um' for n in DECIDED)}, "
@@ -99,7 +115,18 @@ def parse_tolerances(table: Any, path: str) -> dict[str, Tolerance]:
         if not stages["as_found"] and not stages["as_left"]:
             raise InputError(f"{where}: states no limit; give at least one of "
                              f"{', '.join(n + '_um' for n in DECIDED)}")
-        out[str(leg_type)] = Tolerance(str(leg_type), stages["as_found"], stages["as_left"], f"{path} [tolerances.{leg_type}]")
+        spec = {}
+        for key in SPEC_KEYS:
+            value = body.get(key, "")
+            if not isinstance(value, str):
+                raise InputError(f"{where} {key}: expected text (the specification's identifier or revision), "
+                                 f"got {value!r}")
+            spec[key] = value.strip()
+        if spec["spec_revision"] and not spec["spec"]:
+            raise InputError(f"{where} spec_revision = {spec['spec_revision']!r} without spec: name the specification "
+                             "(spec = \"...\") whose revision it is")
+        out[str(leg_type)] = Tolerance(str(leg_type), stages["as_found"], stages["as_left"],
+                                       f"{path} [tolerances.{leg_type}]", **spec)
     return out
 
 
@@ -110,7 +137,8 @@ def tolerances_from_json(d: Mapping[str, Any] | None) -> dict[str, Tolerance]:
         if isinstance(t, dict):
             out[str(leg_type)] = Tolerance(str(leg_type), {k: float(v) for k, v in (t.get("as_found_um") or {}).items()},
                                            {k: float(v) for k, v in (t.get("as_left_um") or {}).items()},
-                                           str(t.get("source", "")))
+                                           str(t.get("source", "")), str(t.get("spec") or ""),
+                                           str(t.get("spec_revision") or ""))
     return out
 
 
@@ -186,10 +214,11 @@ def overall(decisions: Iterable[Decision]) -> str:
     return UNDECIDED
 
 
-def stage_of(plan_kind: str | None) -> str:
+def stage_of(plan_kind: str | None, stage: str | None = None) -> str:
     """The stage a session is decided at: "as_left" for a verification sweep (plan kind
-    "verification", after compensation), else "as_found"."""
-    return "as_left" if plan_kind == "verification" else "as_found"
+    "verification", after compensation) or a session whose plan states stage "verification"
+    (an import given its stage), else "as_found"."""
+    return "as_left" if plan_kind == "verification" or stage == "verification" else "as_found"
 
 
 def decide_leg(leg_values: Mapping[str, Any], budget_values: Mapping[str, Any], leg_type: str | None,
@@ -199,7 +228,8 @@ def decide_leg(leg_values: Mapping[str, Any], budget_values: Mapping[str, Any], 
     {stage, leg_type, tolerance_source, overall, reason, values: {name: Decision.to_json()}}."""
     tol = tolerances.get(leg_type) if leg_type else None
     out: dict[str, Any] = {"stage": stage, "leg_type": leg_type or None, "rule": RULE,
-                           "tolerance_source": tol.source if tol else None}
+                           "tolerance_source": tol.source if tol else None,
+                           "specification": (tol.specification or None) if tol else None}
     if tol is None:
         out.update(overall=NO_TOLERANCE, values={},
                    reason=("the leg has no leg type recorded ([legs.N] leg_type)" if not leg_type else

@@ -91,10 +91,19 @@ def _test_parameters(plan: dict, legs: list[int], iso: dict) -> dict[str, Any]:
         "dwell_s": plan.get("dwell_s"),
         "averaging_s": plan.get("averaging_s"),
         "overrun_mm": plan.get("overrun_mm"),
-        "approach": ("linear cycle, bidirectional: every pass starts overrun_mm beyond its first target, each target "
-                     "approached in the pass's direction (ISO 230-2 standard test cycle)"
-                     if plan.get("kind") != "import" else "as recorded by the other software (imported)"),
+        "approach": _approach(plan),
     }
+
+
+def _approach(plan: dict) -> str:
+    """The approach in words, with the overrun the plan recorded (never the key's name)."""
+    if plan.get("kind") == "import":
+        return "as recorded by the other software (imported)"
+    over = plan.get("overrun_mm")
+    start = (f"{over:g} mm beyond its first target" if isinstance(over, (int, float)) and not isinstance(over, bool)
+             else "beyond its first target (overrun not recorded in the session)")
+    return (f"linear cycle, bidirectional: every pass starts {start}, each target approached in the pass's "
+            "direction (ISO 230-2 standard test cycle)")
 
 
 def _air_compensation(record: Any) -> str:
@@ -252,7 +261,7 @@ def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict
             "targets": targets, "budget": budget.to_json(),
         }
     tol = decision.tolerances_from_json(tolerances or (station_config or {}).get("tolerances"))
-    stage = stage or decision.stage_of((plan or {}).get("kind"))
+    stage = stage or decision.stage_of((plan or {}).get("kind"), (plan or {}).get("stage"))
     out["decisions"] = {"stage": stage, "rule": decision.RULE, "legs": decision.decide_report(out, tol, stage)}
     return _json_safe(out)
 

@@ -1,8 +1,8 @@
 """What a certificate of a leg is made from, found in the catalog by the leg's serial
 (`station certificate --serial`, docs/certificate.md):
 
-- as found: the leg's latest completed *calibration* session (a session whose plan is not a
-  verification);
+- as found: the leg's latest completed *calibration* session (stage "as_found"; a session of
+  stage "other", e.g. a sweep of the compensated leg or an import, is never one);
 - as left: the latest completed *verification* session of the same leg recorded after it (a
   session whose plan kind is "verification", or, for records indexed before the plan kind was
   kept, one a `station verify` audit entry names), when there is one;
@@ -43,18 +43,22 @@ class CertificateSources:
     pushed_table_sha256: str | None  # the last push's table file sha256 (also when the file is not indexed)
 
 
-def _sessions(conn: sa.Connection, serial: str) -> list[tuple[Source, bool]]:
-    """Completed sessions of the leg, oldest first, each with whether it is a verification."""
+def _sessions(conn: sa.Connection, serial: str) -> list[tuple[Source, bool | None]]:
+    """Completed sessions of the leg, oldest first, each with whether it is a verification (True),
+    a calibration (False) or neither (None: stage "other", e.g. a sweep of the compensated leg,
+    an import: never certified as found)."""
     verified = set(conn.execute(sa.select(Record.sha256).join(RecordLeg, RecordLeg.uid == Record.uid).where(
         RecordLeg.leg_serial == serial, Record.kind == "verification", Record.sha256.is_not(None))).scalars())
-    rows = conn.execute(sa.select(Record.path, Record.time_utc, Record.sha256, Record.summary, RecordLeg.leg)
+    rows = conn.execute(sa.select(Record.path, Record.time_utc, Record.sha256, Record.summary, RecordLeg.leg, Record.stage)
                         .join(RecordLeg, RecordLeg.uid == Record.uid)
                         .where(RecordLeg.leg_serial == serial, Record.kind == "session", Record.outcome == "completed")
                         .order_by(Record.time_utc, Record.uid))
     out = []
-    for path, time_utc, sha, summary, leg in rows:
+    for path, time_utc, sha, summary, leg, stage in rows:
         kind = (summary or {}).get("plan_kind")
         is_verification = kind == "verification" if kind else sha in verified
+        if stage is not None:  # the stage (catalog revision 0003) decides
+            is_verification = {"as_left": True, "as_found": False}.get(stage)
         out.append((Source(path or "", time_utc, sha, int(leg)), is_verification))
     return out
 
@@ -67,7 +71,7 @@ def certificate_sources(engine: Engine, serial: str) -> CertificateSources:
         known = sessions or conn.execute(sa.select(RecordLeg.uid).where(RecordLeg.leg_serial == serial).limit(1)).first()
         if not known:
             raise InputError(f"no leg with serial {serial!r} in the catalog; `station legs` lists the serials it holds")
-        calibrations = [s for s, verification in sessions if not verification]
+        calibrations = [s for s, verification in sessions if verification is False]
         if not calibrations:
             raise InputError(f"leg {serial}: the catalog holds no completed calibration session of it "
                              f"(`station history {serial}` lists its records); sweep it, then certify")

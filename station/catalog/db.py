@@ -11,6 +11,7 @@ do not both create the tables.
 from __future__ import annotations
 
 import fcntl
+import threading
 from pathlib import Path
 
 import sqlalchemy as sa
@@ -24,6 +25,10 @@ from sqlalchemy.engine import Engine
 from procedures.engine.errors import InputError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
+# Alembic's `context`/`op` are module-level proxies set and removed around each run: two threads
+# migrating at once (a job opening its local catalog while the backlog thread opens the shared
+# one) tear them down under each other (KeyError 'config'). One migration per process at a time.
+_MIGRATING = threading.Lock()
 _LOCK_KEY = 230_2023  # advisory lock id for migrations on PostgreSQL
 
 
@@ -61,9 +66,12 @@ def describe(url: str) -> str:
         return url
 
 
-def make_engine(url: str, connect_timeout_s: float = 2.0) -> Engine:
+def make_engine(url: str, connect_timeout_s: float = 2.0, statement_timeout_s: float = 5.0) -> Engine:
     """An engine for `url` (postgresql:// is taken as psycopg 3). InputError for a URL that is
-    neither SQLite nor PostgreSQL."""
+    neither SQLite nor PostgreSQL. On PostgreSQL every statement of every connection ends after
+    `statement_timeout_s`, and so does its wait for a lock another session holds (lock_timeout:
+    a `LOCK TABLE records` elsewhere costs a station's write at most that, then the record waits
+    in the outbox); only connecting has its own `connect_timeout_s`."""
     try:
         u = sa.engine.make_url(url)
     except Exception:
@@ -84,7 +92,11 @@ def make_engine(url: str, connect_timeout_s: float = 2.0) -> Engine:
         return engine
     if u.get_backend_name() == "postgresql":
         u = u.set(drivername="postgresql+psycopg")
-        return sa.create_engine(u, connect_args={"connect_timeout": max(1, int(round(connect_timeout_s)))},
+        ms = max(1, int(round(statement_timeout_s * 1000)))
+        # the lock wait ends a little before the statement would: the error then names the lock
+        lock_ms = max(1, int(ms * 0.8))
+        return sa.create_engine(u, connect_args={"connect_timeout": max(1, int(round(connect_timeout_s))),
+                                                 "options": f"-c statement_timeout={ms} -c lock_timeout={lock_ms}"},
                                 pool_pre_ping=True)
     raise InputError(f"[catalog] url = {describe(url)!r}: only sqlite:/// and postgresql:// catalogs are supported")
 
@@ -105,14 +117,21 @@ def migrate(engine: Engine, revision: str = "head") -> None:
                 f"catalog {describe(str(engine.url))}: schema revision {found!r} was written by a newer station "
                 f"(this one knows up to {head_revision()!r}); update the station software to the version that "
                 f"wrote it, or point [catalog] url at another catalog")
+        if conn.dialect.name == "postgresql" and found != head_revision():
+            # a migration may rewrite every row (0003 classifies them): not bounded by the statement
+            # timeout of ordinary writes; a lock another session holds is still waited for at most
+            # lock_timeout
+            conn.execute(sa.text("SET LOCAL statement_timeout = 0"))
         cfg = alembic_config()
         cfg.attributes["connection"] = conn
-        command.upgrade(cfg, revision)
+        with _MIGRATING:
+            command.upgrade(cfg, revision)
 
 
-def open_engine(url: str, connect_timeout_s: float = 2.0) -> Engine:
-    """An engine for `url`, migrated to head. CatalogUnreachable when a server does not answer."""
-    engine = make_engine(url, connect_timeout_s)
+def open_engine(url: str, connect_timeout_s: float = 2.0, statement_timeout_s: float = 5.0) -> Engine:
+    """An engine for `url`, migrated to head. CatalogUnreachable when a server does not answer
+    (or, PostgreSQL, does not answer within `statement_timeout_s`, e.g. a lock held elsewhere)."""
+    engine = make_engine(url, connect_timeout_s, statement_timeout_s)
     try:
         database = engine.url.database if engine.dialect.name == "sqlite" else None
         if database and database != ":memory:":

@@ -61,40 +61,69 @@ def scan(folders: Iterable[str | os.PathLike]) -> Found:
     return found
 
 
-def recs_of(found: Found, catalog: Catalog | None, problems: list[str]) -> Iterator[Rec]:
-    """Records of the files in `found`; a file that cannot be read is named in `problems`."""
+def indexed_uids(catalog: Catalog) -> set[str]:
+    """Every uid the local index holds."""
+    with catalog.engine.connect() as conn:
+        return set(conn.execute(sa.select(Record.uid)).scalars())
+
+
+def _known(kind: str, path: Path, known: set[str] | None) -> bool:
+    """True when the file's content (its sha256) is indexed already: not read again."""
+    if known is None:
+        return False
+    hashed = path / readers.REPORT_FILE if kind == "report" else path
+    try:
+        return f"{kind}:{readers.sha256_of(hashed)}" in known
+    except OSError:
+        return False
+
+
+def recs_of(found: Found, catalog: Catalog | None, problems: list[str], known: set[str] | None = None) -> Iterator[Rec]:
+    """Records of the files in `found`; a file that cannot be read is named in `problems`.
+    Files whose content `known` holds (uids) are skipped: a session's figures take seconds."""
     for path in found.sessions:
+        if _known("session", path, known):
+            continue
         try:
             yield readers.session_rec(path)
         except InputError as exc:
             problems.append(str(exc).splitlines()[0])
     lookup = catalog.serials_of_source if catalog is not None else None
     for path in found.models:
-        rec = readers.model_rec(path, lookup)
+        # a .json that is no model may be a certificate's (station.catalog.certificates)
+        rec = None if _known("model", path, known) else (readers.model_rec(path, lookup) or _certificate_rec(path))
         if rec is not None:
             yield rec
     for path in found.tables:
-        rec = readers.table_rec(path)
+        rec = None if _known("table", path, known) else readers.table_rec(path)
         if rec is not None:
             yield rec
     for folder in found.reports:
-        rec = readers.report_rec(folder, lookup)
+        rec = None if _known("report", folder, known) else readers.report_rec(folder, lookup)
         if rec is not None:
             yield rec
     for path in found.logs:
-        yield from readers.audit_recs(path)
+        yield from (r for r in readers.audit_recs(path) if known is None or r.uid not in known)
+
+
+def _certificate_rec(path: Path) -> Rec | None:
+    from station.catalog.certificates import certificate_rec_of_json  # noqa: PLC0415
+
+    return certificate_rec_of_json(path)
 
 
 def index(catalog: Catalog, folders: Iterable[str | os.PathLike], forward: bool = True) -> tuple[int, list[str]]:
-    """Index every record file under `folders` (already indexed ones are skipped by their key).
-    (records seen, problems)."""
+    """Index every record file under `folders` that is not indexed yet (indexed content is
+    skipped by its key, unread; a file rewritten in place retires its earlier record).
+    (records indexed now, problems)."""
     problems: list[str] = []
     found = scan(folders)
+    known = indexed_uids(catalog) if catalog.local.exists() else set()
     count = 0
     # sessions first, committed, so models and reports can look up their serials
     for group in (Found(sessions=found.sessions), Found(models=found.models, tables=found.tables, reports=found.reports,
                                                         logs=found.logs)):
-        recs = list(recs_of(group, catalog, problems))
+        recs = list(recs_of(group, catalog, problems, known))
         count += len(recs)
         catalog.ingest(recs, forward=False)
     if forward:

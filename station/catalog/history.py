@@ -2,9 +2,15 @@
 values with U over time, which table went to which drive, drift of E, B and M per month between
 calibrations) and the list of legs with their last calibration and due date.
 
-A *calibration* is a completed session record of the leg; its due date is the last calibration
-plus `[catalog] calibration_interval_days`. Drift between neighbouring calibrations is
-(value_now - value_before) / months between them (a month = 30.4375 days), um/month.
+Every record carries the stage of the leg's life it belongs to (`stage`,
+procedures/io/recording/stage.py): as found, adjustment (push, rollback), as left (verification),
+other (a sweep of a compensated leg, an import, a replay). A *calibration* is a completed
+as-found session of the leg; a *verification* a completed as-left one (its session and its audit
+entry count once); the due date is the last calibration plus `[catalog]
+calibration_interval_days`. Drift is computed between neighbouring calibrations only, over their
+real span: (value_now - value_before) / months between them (a month = 30.4375 days), um/month,
+and not at all when they are closer than `[catalog] min_drift_interval_days` (a figure over
+minutes is noise divided by nearly nothing).
 """
 
 from __future__ import annotations
@@ -17,9 +23,25 @@ import sqlalchemy as sa
 import sqlalchemy.orm  # noqa: F401  (sa.orm.aliased)
 from sqlalchemy.engine import Engine
 
+from procedures.io.recording.stage import AS_FOUND, AS_LEFT, LABELS, STAGES
 from station.catalog.models import FIGURES, Leg, Record, RecordLeg
 
 MONTH_DAYS = 30.4375
+MIN_DRIFT_INTERVAL_DAYS = 30.0  # [catalog] min_drift_interval_days (station/services/config.py)
+
+
+def stage_label(stage: str | None) -> str:
+    """How a record's stage is printed ("as found", ...; "-" for models, tables, reports)."""
+    return LABELS.get(stage or "", "-")
+
+
+def stage_filter(column, stage: str):
+    """A WHERE clause keeping `stage` ("as_found", "adjustment", "as_left", "other") on a `stage`
+    column of records or record_legs: what the web's pages and charts per stage ask (33.2).
+    ValueError for an unknown stage."""
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r} (one of {', '.join(STAGES)})")
+    return column == stage
 DRIFT_FIGURES = ("E", "B", "M")
 
 
@@ -48,6 +70,7 @@ class HistoryRow:
     figures: dict[str, dict[str, float | None]]
     verification_ratio: float | None = None
     operator: str | None = None
+    stage: str | None = None
 
 
 def value_with_u(figures: dict, name: str) -> str:
@@ -69,10 +92,15 @@ def row_detail(r: "HistoryRow") -> str:
 
 @dataclass
 class Drift:
+    """Drift between two neighbouring as-found calibrations; `refused` says why no figure was
+    computed (closer than the minimum interval), with every rate None then."""
+
     from_utc: str
     to_utc: str
     months: float
     um_per_month: dict[str, float | None]
+    days: float = 0.0
+    refused: str = ""
 
 
 @dataclass
@@ -86,16 +114,34 @@ class History:
 
     @property
     def calibrations(self) -> list[HistoryRow]:
-        return [r for r in self.rows if r.kind == "session" and r.outcome == "completed"]
+        """Completed as-found sessions: the leg as it was found, before any adjustment."""
+        return [r for r in self.rows if r.kind == "session" and r.outcome == "completed" and r.stage == AS_FOUND]
+
+    @property
+    def verifications(self) -> list[HistoryRow]:
+        """Completed as-left verifications, once each: the session where the catalog holds it,
+        else the verification's audit entry (both name the session's sha256)."""
+        out: dict[str, HistoryRow] = {}
+        for r in self.rows:
+            if r.stage == AS_LEFT and r.outcome == "completed" and r.kind in ("session", "verification"):
+                key = r.sha256 or f"{r.kind}@{r.time_utc}"
+                if key not in out or r.kind == "session":
+                    out[key] = r
+        return sorted(out.values(), key=lambda r: r.time_utc)
 
     def to_json(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["counts"] = {"calibrations": len(self.calibrations), "verifications": len(self.verifications)}
+        return d
 
 
-def history(engine: Engine, serial: str, interval_days: int = 365) -> History:
-    """Everything the catalog holds of the leg with serial `serial`, oldest first."""
+def history(engine: Engine, serial: str, interval_days: int = 365,
+            min_drift_days: float = MIN_DRIFT_INTERVAL_DAYS) -> History:
+    """Everything the catalog holds of the leg with serial `serial`, oldest first; drift between
+    neighbouring as-found calibrations at least `min_drift_days` apart."""
     cols = [RecordLeg.time_utc, RecordLeg.kind, RecordLeg.leg, RecordLeg.station_id, Record.outcome, Record.path,
-            Record.sha256, RecordLeg.drive, RecordLeg.table_sha256, RecordLeg.verification_ratio, Record.operator]
+            Record.sha256, RecordLeg.drive, RecordLeg.table_sha256, RecordLeg.verification_ratio, Record.operator,
+            Record.stage]
     cols += [getattr(RecordLeg, f"{n}{s}") for n in FIGURES for s in ("_um", "_U_um")]
     # a push's or rollback's "started" entry is the same operation as its final one: not a row of its own
     q = (sa.select(*cols).join(Record, Record.uid == RecordLeg.uid)
@@ -112,18 +158,33 @@ def history(engine: Engine, serial: str, interval_days: int = 365) -> History:
             out.rows.append(HistoryRow(time_utc=m["time_utc"], kind=m["kind"], leg=m["leg"], station_id=m["station_id"],
                                        outcome=m["outcome"], path=m["path"], sha256=m["sha256"], drive=m["drive"],
                                        table_sha256=m["table_sha256"], figures=figures,
-                                       verification_ratio=m["verification_ratio"], operator=m["operator"]))
+                                       verification_ratio=m["verification_ratio"], operator=m["operator"],
+                                       stage=m["stage"]))
     cals = out.calibrations
-    for a, b in zip(cals, cals[1:]):
-        months = (parse_utc(b.time_utc) - parse_utc(a.time_utc)).total_seconds() / 86400.0 / MONTH_DAYS
-        rate: dict[str, float | None] = {}
-        for n in DRIFT_FIGURES:
-            va, vb = (a.figures.get(n) or {}).get("value_um"), (b.figures.get(n) or {}).get("value_um")
-            rate[n] = (vb - va) / months if (va is not None and vb is not None and months > 0) else None
-        out.drift.append(Drift(a.time_utc, b.time_utc, months, rate))
+    out.drift = drift_between(cals, min_drift_days)
     if cals:
         out.last_calibration_utc = cals[-1].time_utc
         out.due = due_of(out.last_calibration_utc, interval_days)
+    return out
+
+
+def drift_between(cals: list[HistoryRow], min_days: float = MIN_DRIFT_INTERVAL_DAYS) -> list[Drift]:
+    """Drift of E, B, M between neighbouring as-found calibrations `cals` (oldest first), over
+    their real span; refused (rates None, `refused` saying why) under `min_days`."""
+    out = []
+    for a, b in zip(cals, cals[1:]):
+        days = (parse_utc(b.time_utc) - parse_utc(a.time_utc)).total_seconds() / 86400.0
+        months = days / MONTH_DAYS
+        rate: dict[str, float | None] = {n: None for n in DRIFT_FIGURES}
+        refused = ""
+        if days < min_days:
+            refused = (f"calibrations {days:.2f} days apart, under the minimum interval of {min_days:g} days "
+                       "([catalog] min_drift_interval_days)")
+        else:
+            for n in DRIFT_FIGURES:
+                va, vb = (a.figures.get(n) or {}).get("value_um"), (b.figures.get(n) or {}).get("value_um")
+                rate[n] = (vb - va) / months if (va is not None and vb is not None) else None
+        out.append(Drift(a.time_utc, b.time_utc, months, rate, days, refused))
     return out
 
 
@@ -138,31 +199,38 @@ class LegRow:
     due: str | None
     E_um: float | None = None
     B_um: float | None = None
+    verifications: int = 0  # completed as-left sessions
 
 
 def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = None, since: str | None = None,
          until: str | None = None, due_by: str | None = None, interval_days: int = 365) -> list[LegRow]:
-    """Every leg with a serial: its last completed calibration (filtered by `since`/`until` on
-    that time, `station` that made it, `leg_type`), and its due date; `due_by` (an ISO date)
-    keeps the legs due on or before it (or never calibrated)."""
+    """Every leg with a serial: its count of as-found calibrations and as-left verifications, its
+    last completed as-found calibration (filtered by `since`/`until` on that time, `station` that
+    made it, `leg_type`), and its due date; `due_by` (an ISO date) keeps the legs due on or before
+    it (or never calibrated)."""
     # per leg a few index seeks (ix_record_legs_calibrations: serial, kind, outcome, time) for its
     # last completed calibration and their count; filters on the legs table cut the seeks.
     # PostgreSQL: LATERAL joins (one seek each); SQLite, which has none: scalar subqueries.
     r = sa.orm.aliased(RecordLeg)
-    is_cal = sa.and_(r.leg_serial == Leg.serial, r.kind == "session", r.outcome == "completed")
+    # ix_record_legs_stage: serial, stage, outcome, time
+    is_cal = sa.and_(r.leg_serial == Leg.serial, r.stage == AS_FOUND, r.outcome == "completed", r.kind == "session")
+    is_ver = sa.and_(r.leg_serial == Leg.serial, r.stage == AS_LEFT, r.outcome == "completed", r.kind == "session")
     count = sa.select(sa.func.count().label("n")).select_from(r).where(is_cal)
+    count_ver = sa.select(sa.func.count().label("nv")).select_from(r).where(is_ver)
     if engine.dialect.name == "postgresql":
         latest = (sa.select(r.time_utc.label("last"), r.station_id, r.E_um, r.B_um).where(is_cal)
                   .order_by(r.time_utc.desc()).limit(1).lateral("latest"))
         n = count.lateral("n")
-        inner = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, n.c.n, latest.c.last, latest.c.station_id,
-                           latest.c.E_um, latest.c.B_um)
-                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(n, sa.true()))
+        nv = count_ver.lateral("nv")
+        inner = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, n.c.n, nv.c.nv, latest.c.last,
+                           latest.c.station_id, latest.c.E_um, latest.c.B_um)
+                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(n, sa.true()).outerjoin(nv, sa.true()))
     else:
         def last_of(column):
             return sa.select(column).where(is_cal).order_by(r.time_utc.desc()).limit(1).scalar_subquery()
 
         inner = sa.select(Leg.serial, Leg.leg_type, Leg.part_number, count.scalar_subquery().label("n"),
+                          count_ver.scalar_subquery().label("nv"),
                           sa.select(sa.func.max(r.time_utc)).where(is_cal).scalar_subquery().label("last"),
                           last_of(r.station_id).label("station_id"), last_of(r.E_um).label("E_um"),
                           last_of(r.B_um).label("B_um"))
@@ -185,7 +253,8 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
         for x in conn.execute(q):
             rows[x.serial] = LegRow(serial=x.serial, leg_type=x.leg_type, part_number=x.part_number,
                                     calibrations=int(x.n or 0), last_calibration_utc=x.last, station_id=x.station_id,
-                                    due=due_of(x.last, interval_days), E_um=x.E_um, B_um=x.B_um)
+                                    due=due_of(x.last, interval_days), E_um=x.E_um, B_um=x.B_um,
+                                    verifications=int(x.nv or 0))
     return list(rows.values())
 
 

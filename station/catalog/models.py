@@ -19,7 +19,7 @@ from __future__ import annotations
 from sqlalchemy import JSON, Float, ForeignKey, Index, Integer, String, Text
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-KINDS = ("session", "model", "table", "push", "verification", "rollback", "report")
+KINDS = ("session", "model", "table", "push", "verification", "rollback", "report", "certificate")
 FIGURES = ("E", "A", "B", "R", "M")
 """ISO 230-2 values (bidirectional) kept as columns with their U; all values go in `figures`."""
 
@@ -64,6 +64,12 @@ class Record(Base):
     sha256: Mapped[str | None] = mapped_column(String(64), index=True)
     source_sha256: Mapped[str | None] = mapped_column(String(64))
     summary: Mapped[dict | None] = mapped_column(JSON)
+    # added by revision 0003: the stage of the leg's life (procedures/io/recording/stage.py:
+    # as_found, adjustment, as_left, other; None for models, tables, reports), and the uids of
+    # the records this one replaced at the same path (a file rewritten in place: a resumed
+    # session, `fit --force`), retired wherever this record goes
+    stage: Mapped[str | None] = mapped_column(String(16))
+    supersedes: Mapped[list | None] = mapped_column(JSON)
     __mapper_args__ = {"polymorphic_on": "kind"}
 
 
@@ -95,8 +101,15 @@ class ReportRecord(Record):
     __mapper_args__ = {"polymorphic_identity": "report"}
 
 
+class CertificateRecord(Record):
+    """A calibration certificate's PDF (station.catalog.certificates); no migration: `kind` is text."""
+
+    __mapper_args__ = {"polymorphic_identity": "certificate"}
+
+
 RECORD_CLASSES = {cls.__mapper_args__["polymorphic_identity"]: cls for cls in
-                  (SessionRecord, ModelRecord, TableRecord, PushRecord, VerificationRecord, RollbackRecord, ReportRecord)}
+                  (SessionRecord, ModelRecord, TableRecord, PushRecord, VerificationRecord, RollbackRecord, ReportRecord,
+                   CertificateRecord)}
 
 
 class RecordLeg(Base):
@@ -127,11 +140,15 @@ class RecordLeg(Base):
     # verification) and the record's outcome (leg lists need no join)
     verification_ratio: Mapped[float | None] = mapped_column(Float)
     outcome: Mapped[str | None] = mapped_column(String(32))
+    stage: Mapped[str | None] = mapped_column(String(16))  # revision 0003: the record's stage, copied in
 
 
 # revision 0002: history reads by serial and time; leg lists the last completed calibration per serial
 Index("ix_record_legs_serial_time", RecordLeg.leg_serial, RecordLeg.time_utc)
 Index("ix_record_legs_calibrations", RecordLeg.leg_serial, RecordLeg.kind, RecordLeg.outcome, RecordLeg.time_utc)
+# revision 0003: a leg's as-found calibrations by stage; a file's records by kind and path (retiring)
+Index("ix_record_legs_stage", RecordLeg.leg_serial, RecordLeg.stage, RecordLeg.outcome, RecordLeg.time_utc)
+Index("ix_records_kind_path", Record.kind, Record.path)
 
 
 class Outbox(Base):

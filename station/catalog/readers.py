@@ -18,6 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+from procedures.io.recording import stage as stages
 from station.catalog import identity as ident
 from station.catalog.models import FIGURES
 
@@ -41,12 +42,28 @@ class Rec:
     sha256: str | None = None
     source_sha256: str | None = None
     summary: dict = field(default_factory=dict)
+    stage: str | None = None  # procedures/io/recording/stage.py; None for models, tables, reports
+    supersedes: list[str] | None = None  # uids of records this file replaced at its path (store.write_recs)
     legs: dict[int, dict] = field(default_factory=dict)
     leg_info: dict[str, dict] = field(default_factory=dict)  # serial -> part_number, leg_type, screw_lot
 
     @property
     def uid(self) -> str:
         return f"{self.kind}:{self.key}"
+
+    @property
+    def stage_or_default(self) -> str | None:
+        """`stage`, or for a record made without one (through the API, not from a file) the rule
+        catalog revision 0003 classified older rows by: audit kinds by kind, a session by the plan
+        kind its summary keeps (verification: as left; import: other; else as found)."""
+        if self.stage is not None:
+            return self.stage
+        if self.kind in stages.AUDIT_STAGES:
+            return stages.AUDIT_STAGES[self.kind]
+        if self.kind == "session":
+            plan_kind = (self.summary or {}).get("plan_kind")
+            return {"verification": stages.AS_LEFT, "import": stages.OTHER}.get(plan_kind, stages.AS_FOUND)
+        return None
 
 
 def sha256_of(path: str | os.PathLike) -> str:
@@ -160,7 +177,8 @@ def session_rec(path: str | os.PathLike) -> Rec:
     attrs = session.attrs
     rec = Rec(kind="session", key=session.sha256, time_utc=utc_text(attrs.get("started_utc"), _mtime_utc(path)),
               operator=ident.text(attrs.get("operator")), software_version=ident.text(attrs.get("software_version")),
-              outcome=session.outcome, path=_abs(path), sha256=session.sha256)
+              outcome=session.outcome, path=_abs(path), sha256=session.sha256,
+              stage=session.stage)  # recorded in the file (schema 1.2) or derived from it (older files)
     rec.summary = {"session_id": ident.text(attrs.get("session_id")), "rig": ident.text(attrs.get("rig")),
                    "ended_utc": ident.text(attrs.get("ended_utc")), "points": int(session.points.size),
                    "schema_version": session.schema_version,
@@ -300,6 +318,7 @@ def report_rec(folder: str | os.PathLike, serials_of_source: SerialLookup | None
 # -- audit entries ----------------------------------------------------------------------------------
 
 AUDIT_KINDS = {"push": "push", "verify": "verification", "rollback": "rollback"}
+AUDIT_STAGES_OF_KIND = stages.AUDIT_STAGES
 
 
 def audit_rec(d: Any, log_path: str | os.PathLike) -> Rec | None:
@@ -320,7 +339,8 @@ def audit_rec(d: Any, log_path: str | os.PathLike) -> Rec | None:
     rec = Rec(kind=kind, key=ident.text(entry.id), time_utc=utc_text(entry.time_utc, "1970-01-01T00:00:00Z"),
               operator=ident.text(entry.operator), outcome=ident.text(entry.outcome), path=_abs(log_path),
               sha256=ident.text(source.get("sha256")) or ident.text(details.get("session_sha256")),
-              station_id=ident.text(d.get("station_id")), station_host=ident.text(entry.host))
+              station_id=ident.text(d.get("station_id")), station_host=ident.text(entry.host),
+              stage=AUDIT_STAGES_OF_KIND[kind])
     rec.summary = {"op_id": ident.text(entry.op_id), "message": (ident.text(entry.message) or "")[:500],
                    "bank": entry.bank if isinstance(entry.bank, int) and not isinstance(entry.bank, bool) else None,
                    "drive_url": ident.text(entry.drive_url)}

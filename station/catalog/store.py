@@ -30,6 +30,7 @@ from station.catalog.models import Instrument, Leg, Outbox, Record, RecordLeg, S
 from station.catalog.readers import Rec
 
 log = logging.getLogger(__name__)
+outbox_log = logging.getLogger("station.catalog.outbox")  # the one line a job says when its records wait
 
 LOCAL_NAME = "catalog.sqlite"
 RETRY_AFTER_S = 30.0
@@ -59,11 +60,12 @@ def rows_of(rec: Rec, default_station: str | None) -> dict[str, list[dict]]:
         "uid": rec.uid, "kind": rec.kind, "time_utc": rec.time_utc, "station_id": station, "operator": rec.operator,
         "software_version": rec.software_version, "instrument_serial": (rec.instrument or {}).get("serial"),
         "outcome": rec.outcome, "path": rec.path, "sha256": rec.sha256, "source_sha256": rec.source_sha256,
-        "summary": rec.summary or None})
+        "summary": rec.summary or None, "stage": rec.stage_or_default, "supersedes": rec.supersedes or None})
     for leg, row in sorted(rec.legs.items()):
         full = {c: None for c in _LEG_COLS}
         full.update({k: v for k, v in row.items() if k in full})
-        full.update(uid=rec.uid, leg=leg, kind=rec.kind, time_utc=rec.time_utc, station_id=station, outcome=rec.outcome)
+        full.update(uid=rec.uid, leg=leg, kind=rec.kind, time_utc=rec.time_utc, station_id=station, outcome=rec.outcome,
+                    stage=rec.stage_or_default)
         out["record_legs"].append(full)
         serial = row.get("leg_serial")
         if serial:
@@ -73,18 +75,54 @@ def rows_of(rec: Rec, default_station: str | None) -> dict[str, list[dict]]:
     return out
 
 
+FILE_KINDS = ("session", "model", "table", "report")
+"""Records of one file each (path = the file, or a report's folder): a file rewritten in place
+retires the record of its earlier content (audit entries share their log's path: never)."""
+
+
+def retire_replaced(conn: sa.Connection, rec: Rec) -> list[str]:
+    """Delete the records of `rec`'s kind at `rec`'s path with another uid (the file's earlier
+    content: a resumed session, a model written again with --force) from this catalog and its
+    outbox; the uids retired, also kept in `rec.supersedes` so the shared catalog retires them
+    when `rec` is forwarded."""
+    if rec.kind not in FILE_KINDS or not rec.path:
+        return []
+    old = list(conn.execute(sa.select(Record.uid).where(Record.kind == rec.kind, Record.path == rec.path,
+                                                         Record.uid != rec.uid)).scalars())
+    if old:
+        conn.execute(sa.delete(RecordLeg).where(RecordLeg.uid.in_(old)))
+        conn.execute(sa.delete(Record).where(Record.uid.in_(old)))
+        conn.execute(sa.delete(Outbox).where(Outbox.uid.in_(old)))
+        rec.supersedes = sorted(set(rec.supersedes or ()) | set(old))
+    return old
+
+
 def write_recs(conn: sa.Connection, recs: Iterable[Rec], default_station: str | None, queue: bool) -> list[str]:
-    """Insert `recs` on `conn` (one transaction is the caller's); the uids given."""
+    """Insert `recs` on `conn` (one transaction is the caller's); the uids given. Records already
+    there are left as they are and not queued again (a sync of an indexed folder forwards
+    nothing twice); a record that replaces others at its path (retire_replaced) is queued so the
+    shared catalog retires them too."""
+    recs = list(recs)
     merged: dict[str, list[dict]] = {k: [] for k in ("stations", "legs", "instruments", "records", "record_legs")}
-    uids = []
+    uids = [rec.uid for rec in recs]
+    existing: set[str] = set()
+    for i in range(0, len(uids), BATCH):
+        existing.update(conn.execute(sa.select(Record.uid).where(Record.uid.in_(uids[i:i + BATCH]))).scalars())
+    to_queue = []
     for rec in recs:
-        uids.append(rec.uid)
+        retired = retire_replaced(conn, rec)
+        if rec.uid in existing:
+            if retired:  # the same content indexed before under this path: it now stands for the file
+                conn.execute(sa.update(Record).where(Record.uid == rec.uid).values(supersedes=rec.supersedes))
+                to_queue.append(rec.uid)
+            continue
+        to_queue.append(rec.uid)
         for name, rows in rows_of(rec, default_station).items():
             merged[name].extend(rows)
     for table in (Station, Leg, Instrument, Record, RecordLeg):
         insert_ignore(conn, table.__table__, merged[table.__tablename__])
     if queue:
-        insert_ignore(conn, Outbox.__table__, [{"uid": u} for u in uids])
+        insert_ignore(conn, Outbox.__table__, [{"uid": u} for u in dict.fromkeys(to_queue)])
     return uids
 
 
@@ -103,10 +141,13 @@ class Catalog:
     url: str = ""
     station_id: str | None = None
     connect_timeout_s: float = 2.0
+    statement_timeout_s: float = 5.0
     _local_engine: Engine | None = field(default=None, repr=False)
     _remote_engine: Engine | None = field(default=None, repr=False)
     _remote_failed_at: float = field(default=-1e18, repr=False)
     last_forward: ForwardResult = field(default_factory=ForwardResult, repr=False)
+    _told_waiting: bool = field(default=False, repr=False)
+    _last_error: str = field(default="", repr=False)
 
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -134,7 +175,23 @@ class Catalog:
             uids = write_recs(conn, recs, self.station_id, queue=bool(self.url))
         if forward and self.url:
             self.forward()
+            self._say_waiting(uids)
         return uids
+
+    def _say_waiting(self, uids: list[str]) -> None:
+        """One line (a warning: the command line prints it on stderr, the UI logs it) when records
+        this process wrote stay in the outbox, once per catalog object: the job is done and its
+        files are the records, but the shared catalog does not hold them yet."""
+        if self._told_waiting or not self.last_forward.error:
+            return
+        with self.engine.connect() as conn:
+            waiting = conn.execute(sa.select(sa.func.count()).select_from(Outbox).where(Outbox.uid.in_(uids))).scalar_one()
+        if waiting:
+            self._told_waiting = True
+            where = db.describe(self.url)
+            why = self.last_forward.error.removeprefix(f"catalog {where}: ")  # CatalogUnreachable names it already
+            outbox_log.warning("catalog: %d record(s) of this job wait in the outbox of %s (shared catalog %s: %s); "
+                               "`station catalog sync` forwards them", waiting, self.local, where, why)
 
     def serials_of_source(self, sha256: str) -> dict[int, str]:
         """Leg serials of the session with this sha256 in the local catalog ({} if unknown)."""
@@ -148,7 +205,7 @@ class Catalog:
         """The shared catalog's engine (migrated). db.CatalogUnreachable when it does not answer."""
         with self._lock:
             if self._remote_engine is None:
-                self._remote_engine = db.open_engine(self.url, self.connect_timeout_s)
+                self._remote_engine = db.open_engine(self.url, self.connect_timeout_s, self.statement_timeout_s)
             return self._remote_engine
 
     def backlog(self) -> int:
@@ -161,7 +218,8 @@ class Catalog:
         if not self.url:
             return result
         if not force and time.monotonic() - self._remote_failed_at < RETRY_AFTER_S:
-            result.left, result.error = self.backlog(), "shared catalog unreachable a moment ago; kept in the backlog"
+            result.left = self.backlog()
+            result.error = "shared catalog unreachable a moment ago" + (f" ({self._last_error})" if self._last_error else "")
             self.last_forward = result
             return result
         try:
@@ -182,9 +240,14 @@ class Catalog:
                         Instrument: [dict(r._mapping) for r in lc.execute(
                             sa.select(Instrument.__table__).where(Instrument.serial.in_(instruments)))],
                     }
+                # records a file rewritten in place replaced, retired here as they were locally
+                retired = sorted({u for r in records for u in (r.get("supersedes") or ())} - set(uids))
                 with remote.begin() as rc:
                     for table, rows in extra.items():
                         insert_ignore(rc, table.__table__, rows)
+                    if retired:
+                        rc.execute(sa.delete(RecordLeg).where(RecordLeg.uid.in_(retired)))
+                        rc.execute(sa.delete(Record).where(Record.uid.in_(retired)))
                     insert_ignore(rc, Record.__table__, records)
                     insert_ignore(rc, RecordLeg.__table__, legs)
                 with self.engine.begin() as lc:
@@ -197,6 +260,7 @@ class Catalog:
                 self._remote_engine = None
             text = str(getattr(exc, "orig", None) or exc).strip().splitlines()
             result.error = text[0] if text else type(exc).__name__
+            self._last_error = result.error.removeprefix(f"catalog {db.describe(self.url)}: ")
             log.info("catalog: shared catalog not reachable, %s", result.error)
         result.left = self.backlog()
         self.last_forward = result
@@ -207,7 +271,7 @@ def catalog_of(cfg) -> Catalog:
     """The catalog of a station configuration (station.services.config.StationConfig)."""
     c = cfg.catalog
     return Catalog(local=Path(cfg.recordings_dir) / LOCAL_NAME, url=c.url, station_id=cfg.station_id,
-                   connect_timeout_s=c.connect_timeout_s)
+                   connect_timeout_s=c.connect_timeout_s, statement_timeout_s=c.statement_timeout_s)
 
 
 def reading_engine(catalog: Catalog, local: bool = False) -> tuple[Engine, str]:

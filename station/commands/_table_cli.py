@@ -5,6 +5,8 @@ is station.services.table_jobs, as in the terminal UI. (Not a command: cli.py sk
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import sys
 
@@ -23,18 +25,18 @@ from station.services.wiring import drive_url_of
 def add_drive_arguments(p: argparse.ArgumentParser, several: bool = False) -> None:
     """--leg, where the drive is (--sim | --drive URL | --config C), --profile, --audit, --yes."""
     if several:
-        p.add_argument("--leg", required=True, metavar="N|1-6|all",
+        p.add_argument("--leg", required=True, metavar="N|1-6|all", type=V.LEGS_AUDITED.argtype(),
                        help=f"leg number (1..{LEG_COUNT}), or several (1-6, 1,4, all): one confirmation for all")
     else:
-        p.add_argument("--leg", type=int, required=True, metavar="N", help=f"leg number (1..{LEG_COUNT})")
+        p.add_argument("--leg", type=V.LEG.argtype(), required=True, metavar="N", help=f"leg number (1..{LEG_COUNT})")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sim", action="store_true",
                        help=f"the simulated drive; its table memory is <recordings_dir>/{SIM_NV_NAME} "
                             "(runs/ by default; config [sim] nv_path overrides)")
-    where.add_argument("--drive", metavar="URL", help="the drive's bus: tcp://HOST:PORT or rtu:///dev/ttyUSB0?baud=115200")
-    where.add_argument("--config", metavar="C", help="station TOML naming the drives ([drive] url, profile, timeout)")
-    p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile (default: the config's, or the built-in one)")
-    p.add_argument("--audit", metavar="FILE", help="audit log (default <recordings_dir>/audit.jsonl, i.e. runs/audit.jsonl)")
+    where.add_argument("--drive", type=V.DRIVE_URL.argtype(), metavar="URL", help="the drive's bus: tcp://HOST:PORT or rtu:///dev/ttyUSB0?baud=115200")
+    where.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML naming the drives ([drive] url, profile, timeout)")
+    p.add_argument("--profile", type=V.PROFILE.argtype(), metavar="PROFILE.toml", help="drive profile (default: the config's, or the built-in one)")
+    p.add_argument("--audit", type=V.LOG_FILE.argtype(), metavar="FILE", help="audit log (default <recordings_dir>/audit.jsonl, i.e. runs/audit.jsonl)")
     p.add_argument("--yes", action="store_true", help="do not ask for confirmation (needed when stdin is not a terminal)")
 
 

@@ -4,6 +4,8 @@ module only presents them."""
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
 import sys
@@ -39,13 +41,13 @@ MAX_PROBLEMS_SHOWN = 10
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--audit", metavar="FILE", help=f"audit log (default <recordings_dir>/{AUDIT_NAME}, i.e. runs/{AUDIT_NAME})")
-    p.add_argument("--config", metavar="C", help="station TOML whose recordings_dir holds the audit log")
-    p.add_argument("--leg", type=int, metavar="N", help="only this leg")
-    p.add_argument("--action", choices=ACTIONS, help="only this action")
-    p.add_argument("--since", metavar="YYYY-MM-DD", help="only operations begun on or after this day (UTC)")
-    p.add_argument("--last", type=int, metavar="N", help="only the last N operations (after the other filters)")
-    p.add_argument("--op", metavar="OP_ID", help="show one operation in full (its id or first characters, column 'op')")
+    p.add_argument("--audit", type=V.AUDIT_TO_READ.argtype(), metavar="FILE", help=f"audit log (default <recordings_dir>/{AUDIT_NAME}, i.e. runs/{AUDIT_NAME})")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose recordings_dir holds the audit log")
+    p.add_argument("--leg", type=V.LEG.argtype(), metavar="N", help="only this leg")
+    p.add_argument("--action", choices=[str(a.value) for a in ACTIONS], help="only this action")
+    p.add_argument("--since", type=V.DATE.argtype(), metavar="YYYY-MM-DD", help="only operations begun on or after this day (UTC)")
+    p.add_argument("--last", type=V.COUNT.argtype(), metavar="N", help="only the last N operations (after the other filters)")
+    p.add_argument("--op", type=V.OP_ID.argtype(), metavar="OP_ID", help="show one operation in full (its id or first characters, column 'op')")
     p.add_argument("--json", action="store_true", help="print strict JSON instead of text")
 
 

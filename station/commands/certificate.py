@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 from pathlib import Path
 
@@ -21,25 +23,46 @@ DESCRIPTION = (
     "STATION-YYYYMMDD-NNNN from <recordings_dir>/certificate-counter.json (never reused); files are never "
     "overwritten: --revise REPORT_NO --reason TEXT issues the next revision and marks the old one superseded in "
     "REPORT_NO.index.json. --serial SERIAL instead of SESSION.h5 finds the leg's latest calibration, the latest "
-    "verification after it and the last table pushed since in the catalog (--catalog URL). docs/certificate.md."
+    "verification after it and the last table pushed since in the catalog (--catalog URL). A certificate is a DRAFT "
+    "until `station certificate approve REPORT_NO --by NAME` ([lab] authoriser) writes the approved document, "
+    "recorded in the audit log and the catalog. docs/certificate.md."
 )
+
+
+_SESSION = V.SESSION.argtype()
+
+
+def _session_or_approve(text: str) -> str:
+    """The word `approve` (the approval step: `station certificate approve NUMBER --by NAME`), else a
+    session file read as SESSION.h5 is everywhere."""
+    return text if text == "approve" else _SESSION(text)
+
+
+_session_or_approve.kind = V.SESSION  # the contract test reads the kind behind an option
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     which = p.add_mutually_exclusive_group(required=True)
-    which.add_argument("session", metavar="SESSION.h5", nargs="?", help="the calibration session (as found)")
-    which.add_argument("--serial", metavar="SERIAL", help="the leg's serial: its sessions and table found in the "
+    which.add_argument("session", type=_session_or_approve, metavar="SESSION.h5", nargs="?",
+                       help="the calibration session (as found); or `approve` followed by a report number")
+    p.add_argument("number", type=V.REPORT_NO.argtype(), metavar="REPORT_NO", nargs="?",
+                   help="after `approve`: the certificate to approve")
+    p.add_argument("--by", type=V.NAME_TEXT.argtype(), metavar="NAME", help="with approve: who approves ([lab] authoriser)")
+    which.add_argument("--serial", type=V.SERIAL.argtype(), metavar="SERIAL", help="the leg's serial: its sessions and table found in the "
                        "catalog (latest calibration, the latest verification after it, the last table pushed)")
-    p.add_argument("--catalog", metavar="URL", help="with --serial: catalog URL or SQLite file (default: the "
+    p.add_argument("--catalog", type=V.CATALOG.argtype(), metavar="URL", help="with --serial: catalog URL or SQLite file (default: the "
                    "config's shared catalog when set and reachable, else its local one)")
-    p.add_argument("--as-left", metavar="VERIFY_SESSION.h5", help="the verification session (as left)")
-    p.add_argument("--table", metavar="TABLE.csv", help="the compensation table pushed (its sha256 is stated)")
-    p.add_argument("--leg", type=int, metavar="N", help="the leg (needed when the session holds several)")
-    p.add_argument("--out", metavar="DIR", help="certificates folder (default <recordings_dir>/certificates)")
-    p.add_argument("--config", metavar="C", help="station TOML: [lab], [station] recordings_dir, [tolerances]")
-    p.add_argument("--customer", help="the customer (default [lab] customer)")
-    p.add_argument("--revise", metavar="REPORT_NO", help="issue the next revision of this certificate")
-    p.add_argument("--reason", default="", help="with --revise: what the revision corrects")
+    p.add_argument("--as-left", type=V.SESSION.argtype(), metavar="VERIFY_SESSION.h5", help="the verification session (as left)")
+    p.add_argument("--table", type=V.TABLE.argtype(), metavar="TABLE.csv", help="the compensation table pushed (its sha256 is stated)")
+    p.add_argument("--leg", type=V.LEG.argtype(), metavar="N", help="the leg (needed when the session holds several)")
+    p.add_argument("--out", type=V.OUT_DIR.argtype(), metavar="DIR", help="certificates folder (default <recordings_dir>/certificates)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML: [lab], [station] recordings_dir, [tolerances]")
+    p.add_argument("--customer", type=V.NAME_TEXT.argtype(), help="the customer (default [lab] customer; a revision keeps the previous one)")
+    p.add_argument("--customer-contact", type=V.NAME_TEXT.argtype(), metavar="TEXT",
+                   help="the customer's contact (default [lab] customer_contact)")
+    p.add_argument("--received", type=V.DATE.argtype(), metavar="DATE", help="the date the item was received, YYYY-MM-DD")
+    p.add_argument("--revise", type=V.REPORT_NO.argtype(), metavar="REPORT_NO", help="issue the next revision of this certificate")
+    p.add_argument("--reason", type=V.NAME_OR_EMPTY.argtype(), default="", help="with --revise: what the revision corrects")
 
 
 def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:
@@ -83,11 +106,37 @@ def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:
             args.table or (found.table.path if found.table else None))
 
 
+def _approve(args, cfg) -> int:
+    from station.catalog.writer import catalog_for  # noqa: PLC0415
+    from station.services.certificate_jobs import approve  # noqa: PLC0415
+    from station.services.config import AUDIT_NAME  # noqa: PLC0415
+
+    if not args.number or not args.by:
+        raise InputError("usage: station certificate approve REPORT_NO --by NAME (the [lab] authoriser)")
+    folder = Path(args.out) if args.out else Path(cfg.recordings_dir) / FOLDER_NAME
+    done = approve(args.number, by=args.by, folder=folder,
+                   authoriser={"name": cfg.lab.authoriser, "role": cfg.lab.authoriser_role},
+                   audit_path=Path(cfg.recordings_dir) / AUDIT_NAME, catalog=catalog_for(cfg),
+                   station_id=cfg.station_id)
+    a = done.content["approval"]
+    print(f"certificate {done.report_no} revision {done.revision} approved by {a['approved_by']}, "
+          f"{a['approved_role'] or 'function not stated'} at {a['approved_utc']} (audit entry {a['audit_id']})")
+    print(f"wrote {done.pdf}\nwrote {done.json}\nindex {done.index}")
+    return 0
+
+
 def run(args) -> int:
     cfg = load_config(args.config)
+    if args.session == "approve" and not Path("approve").exists():
+        return _approve(args, cfg)
+    if args.number or args.by:
+        raise InputError("REPORT_NO and --by go with `station certificate approve REPORT_NO --by NAME`")
     if args.catalog and not args.serial:
         raise InputError("--catalog goes with --serial (a session file names its own sessions)")
     if args.serial:
+        from station.services.serials import check_serial  # noqa: PLC0415  (the one serial grammar)
+
+        check_serial(args.serial, "--serial")
         session, as_left_path, table = _from_catalog(args, cfg)
     else:
         session, as_left_path, table = args.session, args.as_left, args.table
@@ -103,21 +152,45 @@ def run(args) -> int:
         from station.services.wiring import leg_table_spec  # noqa: PLC0415
 
         leg_sha = expected_tables(table, (leg,), leg_table_spec(cfg, leg))[leg]
+    from station.catalog.writer import catalog_for  # noqa: PLC0415
+
+    # a revision keeps the customer an earlier revision corrected unless given again
+    customer = args.customer if args.customer is not None else (None if args.revise else cfg.lab.customer)
+    contact = args.customer_contact if args.customer_contact is not None else (
+        None if args.revise else cfg.lab.customer_contact)
+    received = None
+    if args.received is not None:
+        import datetime as dt  # noqa: PLC0415
+
+        try:
+            received = dt.date.fromisoformat(args.received).isoformat()
+        except ValueError:
+            raise InputError(f"--received {args.received!r}: give the date the item was received as YYYY-MM-DD") from None
     issued = issue_certificate(as_found, leg=leg, as_left=as_left, table=table, lab=lab,
-                               customer=args.customer or cfg.lab.customer, folder=folder,
+                               customer=customer, folder=folder,
                                counter_path=Path(cfg.recordings_dir) / COUNTER_NAME, revise=args.revise,
                                reason=args.reason, tolerances=tolerances, station_id=cfg.station_id,
-                               table_leg_sha256=leg_sha)
+                               table_leg_sha256=leg_sha, customer_contact=contact,
+                               authoriser={"name": cfg.lab.authoriser, "role": cfg.lab.authoriser_role},
+                               prepared_by=cfg.operator, catalog=catalog_for(cfg), received=received)
     c = issued.content
-    print(f"certificate {issued.report_no} revision {issued.revision}: leg {c['item']['leg']} "
+    print(f"certificate {issued.report_no} revision {issued.revision} (DRAFT until approved): leg {c['item']['leg']} "
           f"serial {c['item']['serial']}, as found {c['as_found']['overall']}"
           + (f", as left {c['as_left']['overall']}" if c["as_left"] else ""))
-    if not c["instrument"]["traceable"]:
-        print("warning: the laser was not in calibration on the day of the measurement: the certificate says "
+    if issued.earlier:
+        print(f"warning: these sessions are already certified: {'; '.join(issued.earlier)}; this is another number "
+              f"for the same measurement (a correction is `--revise {issued.earlier[0].split(' ')[0]} --reason ...`)")
+    if c.get("simulated"):
+        print("warning: SIMULATION: " + "; ".join(c["simulated"]) + "; the certificate says so on every page and "
+              "states no accreditation")
+    if not c["traceability"]["traceable"]:
+        print("warning: " + c["traceability"]["statement"].split(". The results")[0] + "; the certificate says "
               "NOT TRACEABLE")
     if (c["compensation_table"] or {}).get("matches_as_left") is False:
         print("warning: the table active in the as-left session is NOT the --table given; the certificate says so")
     if c["supersedes"]:
-        print(f"supersedes revision {c['supersedes']['revision']} (kept; marked superseded in {issued.index})")
+        print(f"supersedes revision {c['supersedes']['revision']} (kept; marked superseded in {issued.index}); "
+              f"{len(c['supersedes'].get('changes') or [])} field(s) changed")
     print(f"wrote {issued.pdf}\nwrote {issued.json}\nindex {issued.index}")
+    print(f"approve it: station certificate approve {issued.report_no} --by NAME")
     return 0

@@ -3,6 +3,8 @@ per target and direction E_n with both stations' U; a station flagged beyond cha
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
 from pathlib import Path
@@ -10,6 +12,7 @@ from pathlib import Path
 from procedures.reporting import compare as cmp
 from procedures.engine.errors import InputError
 from procedures.io.atomic import write_bytes_atomic  # never half a file
+from procedures.io.outputs import check_output_folder
 from procedures.io.recording.reader import read_session
 from station.services.report_jobs import session_decisions
 
@@ -25,9 +28,10 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("sessions", nargs="+", metavar="FILE.h5", help="two or more sessions of the reference leg")
-    p.add_argument("--serial", help="the reference leg's serial (default: the one serial every session holds)")
-    p.add_argument("--out", required=True, metavar="DIR", help="folder for compare.md/.json/.png (created)")
+    p.add_argument("sessions", type=V.SESSION.argtype(), nargs="+", metavar="FILE.h5", help="two or more sessions of the reference leg")
+    p.add_argument("--serial", type=V.SERIAL.argtype(), help="the reference leg's serial (default: the one serial every session holds)")
+    p.add_argument("--out", type=V.OUT_DIR.argtype(), required=True, metavar="DIR", help="folder for compare.md/.json/.png (created; its parent must exist)")
+    p.add_argument("--force", action="store_true", help="replace compare.md/.json/.png in an existing --out (default: refused)")
     p.add_argument("--raw", action="store_true", help="compare the raw error (default: normalised to 20 degC)")
 
 
@@ -69,11 +73,11 @@ def run_of(session, serial: str | None, others: list, raw: bool) -> cmp.StationR
 def run(args) -> int:
     if len(args.sessions) < 2:
         raise InputError("give at least two sessions to compare")
+    out = check_output_folder(args.out, force=args.force)  # before reading: never overwrites unasked
     sessions = [read_session(Path(p)) for p in args.sessions]
     runs = [run_of(s, args.serial, [o for o in sessions if o is not s], args.raw) for s in sessions]
     result = cmp.compare(runs)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(exist_ok=True)
     files = [out / "compare.json", out / "compare.md", out / "compare.png"]
     write_bytes_atomic(files[0], (json.dumps(result, indent=2, allow_nan=False) + "\n").encode())
     write_bytes_atomic(files[1], cmp.markdown(result).encode())

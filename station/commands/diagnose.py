@@ -10,6 +10,8 @@ station/services/selfcheck.py.
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
 import sys
@@ -38,34 +40,34 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", nargs="?", metavar="FILE.h5", help="session recording (station sweep / station import)")
-    p.add_argument("--twin", metavar="TWIN",
+    p.add_argument("file", type=V.SESSION.argtype(), nargs="?", metavar="FILE.h5", help="session recording (station sweep / station import)")
+    p.add_argument("--twin", type=V.TWIN.argtype(), metavar="TWIN",
                    help="MODEL.json (station fit), REFERENCE.h5 (a twin fitted on another recording), or "
                         "sim:CONFIG.toml / sim:default (the simulated plant's systematic error), or fleet:TYPE (the "
                         "legs of that type in the catalog: their mean error map, and how many sigma this leg lies "
                         "from them)")
-    p.add_argument("--config", metavar="C", help="station TOML whose catalog --twin fleet:TYPE reads (docs/catalog.md)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose catalog --twin fleet:TYPE reads (docs/catalog.md)")
     p.add_argument("--local", action="store_true", help="--twin fleet:TYPE: read the local catalog, not the shared one")
-    p.add_argument("--json", metavar="OUT", help="write the report (or the self-check results) as JSON")
+    p.add_argument("--json", type=V.OUT_FILE.argtype(), metavar="OUT", help="write the report (or the self-check results) as JSON")
     p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
-    p.add_argument("--threshold-um", type=float, default=0.1,
+    p.add_argument("--threshold-um", type=V.THRESHOLD_UM.argtype(), default=0.1,
                    help="name an effect only if it explains more than this on held-out passes, um (default 0.1)")
-    p.add_argument("--alpha", type=float, default=1e-3, help="significance level against pass scatter (default 0.001)")
-    p.add_argument("--lead-mm", type=float, default=5.0, help="screw lead marked in the spectrum, mm (default 5)")
-    p.add_argument("--motor-turn-mm", type=float, default=None,
+    p.add_argument("--alpha", type=V.ALPHA.argtype(), default=1e-3, help="significance level against pass scatter (default 0.001)")
+    p.add_argument("--lead-mm", type=V.LEAD_MM.argtype(), default=5.0, help="screw lead marked in the spectrum, mm (default 5)")
+    p.add_argument("--motor-turn-mm", type=V.MOTOR_TURN_MM.argtype(), default=None,
                    help="travel per motor turn, mm (lead / gear ratio): a periodic finding that may be its alias at "
                         "the plan's step is flagged, as the lead and its harmonics always are")
-    p.add_argument("--effects", help="candidate effects to try, comma separated (default all)")
+    p.add_argument("--effects", type=V.WORD_LIST.argtype(), help="candidate effects to try, comma separated (default all)")
     p.add_argument("--holdout", choices=["cycle", "pass"], default="cycle",
                    help="unit held out in cross-validation (default cycle: an upward and a downward pass)")
     p.add_argument("--self-check", action="store_true", help="check the diagnosis on simulated withheld effects")
-    p.add_argument("--seeds", type=int, default=20,
+    p.add_argument("--seeds", type=V.SEEDS.argtype(), default=20,
                    help="self-check: number of sessions (default 20; with --variants: per physics)")
-    p.add_argument("--variants", nargs="?", const=",".join(VARIANT_PHYSICS), metavar="PHYSICS",
+    p.add_argument("--variants", type=V.WORD_LIST.argtype(), nargs="?", const=",".join(VARIANT_PHYSICS), metavar="PHYSICS",
                    help="self-check the effect variants instead: sessions with physics outside the plain library "
                         f"(comma separated, default all: {', '.join(VARIANT_PHYSICS)})")
-    p.add_argument("--first-seed", type=int, default=0, help="self-check: first seed (default 0)")
-    p.add_argument("--magnitude-um", type=float, nargs=2, metavar=("MIN", "MAX"),
+    p.add_argument("--first-seed", type=V.SEED.argtype(), default=0, help="self-check: first seed (default 0)")
+    p.add_argument("--magnitude-um", type=V.CONTRIBUTION_UM.argtype(), nargs=2, metavar=("MIN", "MAX"),
                    default=SELF_CHECK_CONTRIBUTION_UM,
                    help="self-check: RMS contribution of a withheld effect, drawn log-uniform in "
                         f"[MIN, MAX] um (default {SELF_CHECK_CONTRIBUTION_UM[0]:g} {SELF_CHECK_CONTRIBUTION_UM[1]:g})")
@@ -89,8 +91,10 @@ def run(args) -> int:
     if args.self_check:
         if args.file:
             raise InputError("--self-check makes its own sessions; drop FILE.h5")
-        if args.seeds < 1:
-            raise InputError("--seeds must be at least 1")
+        from station.services.sizing import selfcheck_estimate
+
+        per = len(args.variants.split(",")) if args.variants else 1
+        print(f"self-check: {selfcheck_estimate(args.seeds * per).describe()}", file=sys.stderr, flush=True)
         return _self_check(args, settings)
     if not args.file:
         raise InputError("name a session file (FILE.h5), or use --self-check")

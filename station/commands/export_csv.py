@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 from pathlib import Path
 
@@ -18,8 +20,8 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("h5", metavar="FILE.h5", help="session file to read")
-    p.add_argument("--out", required=True, metavar="FILE.csv", help="CSV file to write")
+    p.add_argument("h5", type=V.SESSION.argtype(), metavar="FILE.h5", help="session file to read")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), required=True, metavar="FILE.csv", help="CSV file to write")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
 
 

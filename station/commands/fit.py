@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 
 from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_file
-from procedures.io.numbers import NotANumber, finite_float
 from procedures.fit.paper import DEFAULT_N_PARAMS
 from procedures.fit.reversal_probes import ProbeReversal
 from procedures.acquisition.probe_rule import recorded_stop
@@ -26,33 +27,20 @@ DESCRIPTION = (
 )
 
 
-def _lead(text: str) -> float | str | None:
-    t = text.strip().lower()
-    if t == "auto":
-        return "auto"
-    if t in ("none", "off", "0"):
-        return None
-    try:
-        value = finite_float(t)
-    except NotANumber:
-        raise argparse.ArgumentTypeError(f"{text!r}: give the screw lead in mm, 'auto' or 'none'") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: the screw lead must be > 0 mm")
-    return value
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", metavar="FILE.h5", help="recorded session")
-    p.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
+    p.add_argument("session", type=V.SESSION.argtype(), metavar="FILE.h5", help="recorded session")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), required=True, metavar="MODEL.json", help="model file to write")
     p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--method", choices=["default", "paper"], default="default",
                    help="default: bidirectional, size by cross-validation; paper: Algorithm 1 of the seed paper")
-    p.add_argument("--params", type=int, default=DEFAULT_N_PARAMS, metavar="N",
-                   help=f"paper method: number of cosine terms kept (default {DEFAULT_N_PARAMS}, as the paper)")
-    p.add_argument("--lead-mm", type=_lead, default="auto", metavar="MM|auto|none",
-                   help="default method: screw lead for the once-per-revolution terms (default auto: look for it in the data)")
-    p.add_argument("--legs", help="fit only these legs, e.g. 1-3 or 2,5 (default: all in the session)")
-    p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
+    p.add_argument("--params", type=V.COSINE_TERMS.argtype(), default=None, metavar="N",
+                   help=f"--method paper only: number of cosine terms kept (default {DEFAULT_N_PARAMS}, as the paper; "
+                        "at most what the recording's targets give)")
+    p.add_argument("--lead-mm", type=V.LEAD_OR_AUTO_MM.argtype(), default="auto", metavar="MM|auto|none",
+                   help="default method: screw lead for the once-per-revolution terms, mm (> 0); auto (default): look "
+                        "for it in the data; none: no once-per-revolution terms")
+    p.add_argument("--legs", type=V.LEGS.argtype(), help="fit only these legs, e.g. 1-3 or 2,5 (default: all in the session)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose catalog indexes the file written "
                    "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
     p.add_argument("--raw", action="store_true",
                    help="fit the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
@@ -63,9 +51,11 @@ def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
 
 
 def run(args) -> int:
-
-    if args.params < 1:
-        raise InputError(f"--params must be >= 1, got {args.params}")
+    if args.params is not None and args.method != "paper":  # never silently ignored
+        raise InputError(f"--params {args.params}: the number of cosine terms applies to --method paper only "
+                         "(the default method sizes itself by cross-validation); drop --params or add --method paper")
+    params_given = args.params is not None
+    args.params = DEFAULT_N_PARAMS if args.params is None else args.params
     out = check_output_file(args.out, force=args.force)  # before the fit (procedures/io/outputs.py)
     session = read_session(args.session)
     if session.points.size == 0:
@@ -74,6 +64,12 @@ def run(args) -> int:
     analysis = analyse_session(session, args.raw, fit_method=args.method,
                                fit_options={"legs": legs, "n_params": args.params, "lead_mm": args.lead_mm})
     model = analysis.model
+    if params_given:  # the paper method keeps at most the terms the targets give: more is refused, not ignored
+        for leg, f in model.legs.items():
+            most = (int(getattr(f, "n_samples", 0)) + 1) // 2 - 1
+            if args.params > most:
+                raise InputError(f"--params {args.params}: leg {leg} has {f.n_samples} targets per pass, which give "
+                                 f"at most {most} cosine terms; give --params 1..{most}; nothing was written")
     save_session_model(model, out, session, load_config(args.config))
     for line in analysis.basis_lines:
         print(line)

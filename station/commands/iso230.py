@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
 from pathlib import Path
@@ -27,12 +29,12 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("h5", metavar="FILE.h5", help="session file (import a CSV first with `station import`)")
-    p.add_argument("--json", metavar="OUT", help="also write the values as JSON to OUT")
+    p.add_argument("h5", type=V.SESSION.argtype(), metavar="FILE.h5", help="session file (import a CSV first with `station import`)")
+    p.add_argument("--json", type=V.OUT_FILE.argtype(), metavar="OUT", help="also write the values as JSON to OUT")
     p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
     p.add_argument("--raw", action="store_true",
                    help="evaluate the raw error (default: normalised to 20 degC material temperature, docs/metrology.md)")
-    p.add_argument("--config", metavar="C", help="station TOML whose [tolerances.TYPE] decide (default: the "
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose [tolerances.TYPE] decide (default: the "
                    "tolerances the session's config recorded)")
 
 

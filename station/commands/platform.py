@@ -8,6 +8,8 @@ which the terminal UI's Platform page uses too.
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import math
 
@@ -33,28 +35,28 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("source", metavar="FILE.h5|MODEL.json|TABLE.csv",
+    p.add_argument("source", type=V.IN_FILE.argtype(), metavar="FILE.h5|MODEL.json|TABLE.csv",
                    help="a session file, a model file from `station fit`, or a table from `station table`")
-    p.add_argument("--out", required=True, metavar="DIR", help="directory for the report and figures (created)")
+    p.add_argument("--out", type=V.OUT_DIR.argtype(), required=True, metavar="DIR", help="directory for the report and figures (created)")
     p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
-    p.add_argument("--poses", type=int, default=2000, metavar="N", help="random poses (default 2000)")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
-    p.add_argument("--recording", metavar="FILE.h5", help="the session giving the measured errors (needed with "
+    p.add_argument("--poses", type=V.POSES.argtype(), default=2000, metavar="N", help="random poses (default 2000)")
+    p.add_argument("--seed", type=V.SEED.argtype(), default=0, metavar="S", help="random seed (default 0)")
+    p.add_argument("--recording", type=V.SESSION.argtype(), metavar="FILE.h5", help="the session giving the measured errors (needed with "
                    "TABLE.csv; with MODEL.json the default is the recording named in the model)")
     p.add_argument("--measured", choices=["pass", "mean"], default=None,
                    help="the measurement of the main tables: 'mean' = the systematic error, mean of all passes per "
                    "direction (the paper's setting; default with MODEL.json or TABLE.csv), 'pass' = one recorded pass per "
                    "pose and leg (the only one with FILE.h5 alone); with a model or table the other is reported beside it")
-    p.add_argument("--profile", metavar="PROFILE.toml",
+    p.add_argument("--profile", type=V.PROFILE.argtype(), metavar="PROFILE.toml",
                    help="with TABLE.csv: drive profile whose table limits the table is checked against (default: built-in)")
     p.add_argument("--raw", action="store_true",
                    help="use the recording's raw error, not normalised to 20 degC (for a table made from a model "
                         "fitted with `station fit --raw`); refused with a MODEL.json fitted to the normalised error")
-    p.add_argument("--geometry", metavar="FILE.toml", help="platform geometry (default: the paper-like positioner, docs/platform.md)")
-    p.add_argument("--xy-mm", type=float, default=60.0, help="workspace half-range in x and y about home, mm (default 60)")
-    p.add_argument("--z-mm", type=float, default=60.0, help="workspace half-range in z about home, mm (default 60)")
-    p.add_argument("--tilt-deg", type=float, default=3.0, help="workspace half-range of rx and ry, degrees (default 3)")
-    p.add_argument("--yaw-deg", type=float, default=0.0, help="workspace half-range of rz, degrees (default 0)")
+    p.add_argument("--geometry", type=V.TOML_FILE.argtype(), metavar="FILE.toml", help="platform geometry (default: the paper-like positioner, docs/platform.md)")
+    p.add_argument("--xy-mm", type=V.HALF_RANGE_MM.argtype(), default=60.0, help="workspace half-range in x and y about home, mm (default 60)")
+    p.add_argument("--z-mm", type=V.HALF_RANGE_MM.argtype(), default=60.0, help="workspace half-range in z about home, mm (default 60)")
+    p.add_argument("--tilt-deg", type=V.TILT_DEG.argtype(), default=3.0, help="workspace half-range of rx and ry, degrees (default 3)")
+    p.add_argument("--yaw-deg", type=V.YAW_DEG.argtype(), default=0.0, help="workspace half-range of rz, degrees (default 0)")
 
 
 def run(args) -> int:
@@ -62,13 +64,15 @@ def run(args) -> int:
     from procedures.platform.geometry import default_geometry, load_geometry
     from procedures.platform.report import pose_table_markdown, reduction_lines
 
-    if args.poses < 1:
-        raise InputError(f"--poses must be at least 1, got {args.poses}.")
+    from station.services.sizing import check_platform_poses
+
+    size = check_platform_poses(args.poses)  # sized first: refused before anything is read or allocated
     for name in ("xy_mm", "z_mm", "tilt_deg", "yaw_deg"):
         value = getattr(args, name)
         if not (math.isfinite(value) and value >= 0):
             raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
     out = check_output_folder(args.out, force=args.force)  # before the poses are computed
+    print(f"platform: {size.describe()}", flush=True)
     geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
     errors, other_errors, inputs = load_errors(args.source, recording=args.recording, measured=args.measured,
                                                profile=args.profile, raw=args.raw)
@@ -78,6 +82,11 @@ def run(args) -> int:
                                        workspace=workspace)
     summary["measured"] = inputs["measured"]
     written = write_report(out, result, summary, inputs, geometry)
+    for kind in ("table", "model"):  # a file without its integrity record: read whole, said once (docs/tables.md)
+        if (inputs.get(kind) or {}).get("integrity") == "unverified":
+            from procedures.io.integrity import unverified_line
+
+            print(unverified_line(inputs[kind]["path"], kind, "every row and field checked"))
     for line in inputs["error_basis"]["lines"]:
         print(line)
     print(f"measured leg error: {MEASUREMENT_LABELS[summary['measured']]}\n")

@@ -6,6 +6,8 @@ confirmation prompt, the report) is in station/commands/_table_cli.py. The work 
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 
 from procedures.engine import events as ev
@@ -36,6 +38,7 @@ from station.services.table_jobs import (
     push_job,
     push_legs_job,
     target_text,
+    unverified_table_line,
 )
 from station.services.wiring import leg_table_spec, open_drive
 
@@ -50,7 +53,7 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("table", metavar="TABLE.csv", help="table CSV from `station table` (it may hold several legs)")
+    p.add_argument("table", type=V.TABLE_TO_PUSH.argtype(), metavar="TABLE.csv", help="table CSV from `station table` (it may hold several legs)")
     add_drive_arguments(p, several=True)
     p.add_argument("--accept-implausible", action="store_true",
                    help="push corrections beyond 100 um (refused by default: most likely nm in the um columns)")
@@ -73,6 +76,9 @@ def run(args) -> int:
             tables[leg], sources[leg] = load_leg_table(args.table, leg)
         except (InputError, DriverError, OSError) as exc:
             return refuse(args, cfg, audit, Action.PUSH, leg, exc, source)
+    unverified = unverified_table_line(args.table, tables, next(iter(sources.values())).get("table_integrity", ""))
+    if unverified:  # a file without its integrity record: said once; the push checks it covers the stroke
+        print(unverified)
     controller = controller_refusal(cfg, legs, Action.PUSH)
     if controller:
         return refuse(args, cfg, audit, Action.PUSH, controller[0], InputError(controller[1]), sources[controller[0]])

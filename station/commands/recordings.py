@@ -9,6 +9,8 @@ lists them. What each sample is and how it is made: station/services/samples.py.
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 from pathlib import Path
 
@@ -29,8 +31,8 @@ HELP = "regenerate the sample sessions of recordings/ on the simulated rig (dete
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", default="recordings", metavar="DIR", help="directory to write (default recordings)")
-    p.add_argument("--only", metavar="NAMES", help=f"comma-separated subset of {', '.join(SAMPLES)} "
+    p.add_argument("--out", type=V.OUT_DIR.argtype(), default="recordings", metavar="DIR", help="directory to write (default recordings)")
+    p.add_argument("--only", type=V.WORD_LIST.argtype(), metavar="NAMES", help=f"comma-separated subset of {', '.join(SAMPLES)} "
                    "(verification needs calibration in the same run)")
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 from pathlib import Path
 
@@ -24,23 +26,23 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", metavar="SESSION.h5", help="recorded session (not changed)")
-    p.add_argument("--out", required=True, metavar="NEW.h5", help="the re-corrected session file to write")
+    p.add_argument("session", type=V.SESSION.argtype(), metavar="SESSION.h5", help="recorded session (not changed)")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), required=True, metavar="NEW.h5", help="the re-corrected session file to write")
     p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")
     p.add_argument("--equation", choices=EQUATIONS, default="ciddor", help="refractive-index equation (default ciddor)")
     air = p.add_mutually_exclusive_group()
-    air.add_argument("--air-temp-offset-c", type=float, default=0.0, metavar="K",
+    air.add_argument("--air-temp-offset-c", type=V.TEMP_OFFSET_K.argtype(), default=0.0, metavar="K",
                      help="add this to every recorded air temperature (a sensor found reading low by K: +K)")
-    air.add_argument("--air-temp-c", type=float, metavar="C", help="use this air temperature for every point")
-    p.add_argument("--pressure-pa", type=float, metavar="PA", help="use this air pressure (Pa) for every point")
-    p.add_argument("--humidity-pct", type=float, metavar="RH", help="use this relative humidity (%%RH) for every point")
-    p.add_argument("--co2-ppm", type=float, metavar="PPM",
+    air.add_argument("--air-temp-c", type=V.AIR_TEMP_C.argtype(), metavar="C", help="use this air temperature for every point")
+    p.add_argument("--pressure-pa", type=V.PRESSURE_PA.argtype(), metavar="PA", help="use this air pressure (Pa) for every point")
+    p.add_argument("--humidity-pct", type=V.HUMIDITY_PCT.argtype(), metavar="RH", help="use this relative humidity (%%RH) for every point")
+    p.add_argument("--co2-ppm", type=V.CO2_PPM.argtype(), metavar="PPM",
                    help="CO2 where the session has no reading (default: the config's [metrology] co2_ppm, 450)")
-    p.add_argument("--dead-path-mm", type=float, metavar="MM",
+    p.add_argument("--dead-path-mm", type=V.DEAD_PATH_MM.argtype(), metavar="MM",
                    help="laser dead path (default: the config's [metrology] dead_path_mm, 0)")
-    p.add_argument("--wavelength-nm", type=float, metavar="NM",
+    p.add_argument("--wavelength-nm", type=V.WAVELENGTH_NM.argtype(), metavar="NM",
                    help="the laser's vacuum wavelength (default: the config's [metrology] wavelength_nm, 632.991)")
-    p.add_argument("--config", metavar="C", help="station TOML whose [metrology] gives the defaults")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose [metrology] gives the defaults")
 
 
 def run(args) -> int:

@@ -8,6 +8,8 @@ FLAG_REPLAYED. Afterwards the new session is compared with the original, field b
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 from pathlib import Path
 
@@ -37,10 +39,10 @@ def parse_speed(text: str) -> float | None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", metavar="FILE.h5", help="recorded session to replay")
-    p.add_argument("--speed", type=parse_speed, default=None, metavar="1|N|max",
+    p.add_argument("session", type=V.SESSION.argtype(), metavar="FILE.h5", help="recorded session to replay")
+    p.add_argument("--speed", type=V.REPLAY_SPEED.argtype(), default=None, metavar="1|N|max",
                    help="1 = real time, N = N times faster, max = as fast as possible (default max)")
-    p.add_argument("--out", metavar="NEW.h5", help="session file to record (default FILE.replay.h5 beside FILE)")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), metavar="NEW.h5", help="session file to record (default FILE.replay.h5 beside FILE)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")
 
 

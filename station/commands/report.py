@@ -3,13 +3,14 @@ its ISO 230-2 test report with the expanded uncertainty of every value (Markdown
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 
 from procedures.fit import load_model
 from procedures.io.outputs import check_output_folder
 from procedures.io.recording.reader import read_session
 from station.catalog.writer import catalog_for
-from station.commands.fit import _lead
 from station.services.config import load_config
 from station.services.report_jobs import report_lines, session_report
 
@@ -28,16 +29,16 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", metavar="FILE.h5", help="recorded session")
-    p.add_argument("--out", required=True, metavar="DIR", help="directory for the report files (created)")
+    p.add_argument("session", type=V.SESSION.argtype(), metavar="FILE.h5", help="recorded session")
+    p.add_argument("--out", type=V.OUT_DIR.argtype(), required=True, metavar="DIR", help="directory for the report files (created)")
     p.add_argument("--force", action="store_true", help="replace the output if it exists (default: refused)")
-    p.add_argument("--model", metavar="MODEL.json", help="model to compensate with (default: fit the default model)")
-    p.add_argument("--lead-mm", type=_lead, default="auto", metavar="MM|auto|none",
-                   help="screw lead to mark (and to fit with, without --model); default auto")
+    p.add_argument("--model", type=V.MODEL.argtype(), metavar="MODEL.json", help="model to compensate with (default: fit the default model)")
+    p.add_argument("--lead-mm", type=V.LEAD_OR_AUTO_MM.argtype(), default="auto", metavar="MM|auto|none",
+                   help="screw lead to mark (and to fit with, without --model), mm (> 0); default auto; none: no lead")
     p.add_argument("--raw", action="store_true",
                    help="use the raw error, not normalised to 20 degC (as `station fit --raw`); refused with a "
                         "--model fitted to the normalised error")
-    p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose catalog indexes the file written "
                    "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
 
 

@@ -7,6 +7,8 @@ non-interactive main job; `station` with no arguments starts the terminal UI.
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 
 from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
@@ -27,10 +29,10 @@ HELP = "headless calibration sweep on the simulated rig, then its ISO 230-2 eval
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--legs", default="1", help="legs to sweep (default 1)")
-    p.add_argument("--cycles", type=int, default=5, help="bidirectional cycles (default 5)")
-    p.add_argument("--out", help="session file (default runs/run-YYYYmmdd-HHMMSS.h5)")
-    p.add_argument("--time-scale", type=float, default=0.0, help="real s per simulated s (default 0: no waiting)")
+    p.add_argument("--legs", type=V.LEGS.argtype(), default="1", help="legs to sweep (default 1)")
+    p.add_argument("--cycles", type=V.CYCLES.argtype(), default=5, help="bidirectional cycles (default 5)")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), help="session file (default runs/run-YYYYmmdd-HHMMSS.h5)")
+    p.add_argument("--time-scale", type=V.TIME_SCALE.argtype(), default=0.0, help="real s per simulated s (default 0: no waiting)")
 
 
 def run(args) -> int:

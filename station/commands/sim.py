@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import signal
 import threading
@@ -15,11 +17,11 @@ HELP = "start the simulated rig (Modbus drives + serial interferometer) and prin
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--port", type=int, default=5020, help="Modbus TCP port on 127.0.0.1 (default 5020; 0 = any free)")
+    p.add_argument("--port", type=V.PORT_OR_ANY.argtype(), default=5020, help="Modbus TCP port on 127.0.0.1 (default 5020; 0 = any free)")
     p.add_argument("--rtu", action="store_true", help="also serve Modbus RTU on a pseudo-terminal")
-    p.add_argument("--time-scale", type=float, default=1.0, help="real seconds per simulated second (default 1)")
-    p.add_argument("--seed", type=int, default=0, help="plant seed")
-    p.add_argument("--nv", metavar="FILE", help="file for the drives' table memory (EEPROM)")
+    p.add_argument("--time-scale", type=V.TIME_SCALE.argtype(), default=1.0, help="real seconds per simulated second (default 1)")
+    p.add_argument("--seed", type=V.SEED.argtype(), default=0, help="plant seed")
+    p.add_argument("--nv", type=V.LOG_FILE.argtype(), metavar="FILE", help="file for the drives' table memory (EEPROM)")
     p.add_argument("--interferometer-protocol", choices=("station", "linef1"), default="station",
                    help="the simulated laser's protocol: the station's own (default) or linef1, a µLine-F1 / "
                         "HPI-3D streaming raw distance at 25 Hz (docs/interferometer-protocol.md)")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import math
 import shlex
+import sys
 from pathlib import Path
 
 from procedures.engine.errors import InputError
@@ -14,7 +17,7 @@ from procedures.acquisition.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spe
 from procedures.acquisition.plans import parse_legs, SweepPlan
 from station.services.config import load_config
 from station.services.identity import leg_fields
-from station.services.serials import parse_serial_args
+from station.services.serials import parse_serial_args, serials_unverified_line
 from station.services.jobs import resumable_plan, run_sweep
 from procedures.engine.control import RunControl
 from procedures.engine.states import Outcome
@@ -22,6 +25,7 @@ from station import interrupt
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 from station.services.wiring import open_rig
+from station.commands._table_cli import prompt
 
 NAME = "sweep"
 HELP = "run a calibration sweep (ISO 230-2, the paper's, or on the fly) and record it to HDF5"
@@ -34,34 +38,38 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--sim", action="store_true", help="use the simulated rig (default without --config)")
-    where.add_argument("--config", help="station TOML naming the real drives and interferometer")
-    p.add_argument("--out", help="session file to write (FILE.h5)")
+    where.add_argument("--config", type=V.CONFIG.argtype(), help="station TOML naming the real drives and interferometer")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), help="session file to write (FILE.h5)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists (default: refused)")
-    p.add_argument("--resume", metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
+    p.add_argument("--resume", type=V.SESSION_TO_RESUME.argtype(), metavar="FILE.h5", help="finish an interrupted session (its plan is reused)")
     p.add_argument("--plan", choices=PLAN_KINDS, default="iso230",
                    help="sweep plan (default iso230); onthefly: constant-speed passes captured at every step "
                         "(0.5 mm), onthefly-adaptive: the same, stopping once the table stops improving")
-    p.add_argument("--legs", default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
-    p.add_argument("--cycles", type=int, help="bidirectional cycles (default: 5 iso230, 6 paper, 6 onthefly, "
+    p.add_argument("--legs", type=V.LEGS.argtype(), default="1", help="legs, e.g. 1-6 or 1,3 (default 1)")
+    p.add_argument("--cycles", type=V.CYCLES.argtype(), help="bidirectional cycles (default: 5 iso230, 6 paper, 6 onthefly, "
                                                "at most 8 onthefly-adaptive)")
     spacing = p.add_mutually_exclusive_group()
-    spacing.add_argument("--step", type=float, metavar="MM", help="uniform target spacing in mm (on the fly: "
+    spacing.add_argument("--step", type=V.STEP_MM.argtype(), metavar="MM", help="uniform target spacing in mm (on the fly: "
                                                                    "capture spacing, default 0.5)")
-    spacing.add_argument("--targets", metavar="FILE", help="targets in mm, one per line or a target_mm column")
-    p.add_argument("--n-targets", type=int, help="number of irregularly spaced ISO 230-2 targets (default 11)")
-    p.add_argument("--min-mm", type=float, default=-90.0, help="lowest target, mm (default -90)")
-    p.add_argument("--max-mm", type=float, default=90.0, help="highest target, mm (default +90)")
-    p.add_argument("--dwell", type=float, default=1.0, metavar="S", help="settle time per target, s (default 1)")
-    p.add_argument("--averaging", type=float, default=0.1, metavar="S", help="interferometer averaging, s")
-    p.add_argument("--overrun", type=float, default=2.0, metavar="MM", help="overrun before reversing, mm")
-    p.add_argument("--time-scale", type=float, metavar="S",
+    spacing.add_argument("--targets", type=V.TARGETS_FILE.argtype(), metavar="FILE", help="targets in mm, one per line or a target_mm column")
+    p.add_argument("--n-targets", type=V.TARGET_COUNT.argtype(), help="number of irregularly spaced ISO 230-2 targets (default 11)")
+    p.add_argument("--min-mm", type=V.POSITION_MM.argtype(), default=-90.0, help="lowest target, mm (default -90)")
+    p.add_argument("--max-mm", type=V.POSITION_MM.argtype(), default=90.0, help="highest target, mm (default +90)")
+    p.add_argument("--dwell", type=V.TIME_S.argtype(), default=1.0, metavar="S", help="settle time per target, s (default 1)")
+    p.add_argument("--averaging", type=V.TIME_S.argtype(), default=0.1, metavar="S", help="interferometer averaging, s")
+    p.add_argument("--overrun", type=V.OVERRUN_MM.argtype(), default=2.0, metavar="MM", help="overrun before reversing, mm")
+    p.add_argument("--time-scale", type=V.TIME_SCALE.argtype(), metavar="S",
                    help="simulated rig only: real seconds per simulated second (0 = no waiting; default 0)")
-    p.add_argument("--seed", type=int, help="simulated rig only: plant seed")
-    p.add_argument("--serial", action="append", default=[], metavar="LEG=SERIAL",
+    p.add_argument("--seed", type=V.SEED.argtype(), help="simulated rig only: plant seed")
+    p.add_argument("--serial", type=V.LEG_SERIAL.argtype(), action="append", default=[], metavar="LEG=SERIAL",
                    help="the serial number of a leg, e.g. --serial 3=HX-0042 (repeatable); recorded in the session "
                         "and checked by push")
-    p.add_argument("--serials", metavar="FILE", help="CSV leg,serial[,part_number,leg_type,screw_lot] with the legs' "
+    p.add_argument("--serials", type=V.SERIALS_FILE.argtype(), metavar="FILE", help="CSV leg,serial[,part_number,leg_type,screw_lot] with the legs' "
                                                      "serials (default: [station] serials_file)")
+    p.add_argument("--yes", action="store_true",
+                   help="sweep a leg whose compensation table is active without asking (the session records the "
+                        "tables and is stage 'other', not an as-found calibration); without it the question is asked "
+                        "at the terminal, and refused when stdin is not one")
 
 
 def plan_spec(args) -> PlanSpec:
@@ -92,11 +100,22 @@ def resume_command(out: Path, cfg, config: str | None) -> str:
     return f"resume with: station sweep --resume {shlex.quote(str(out))} {where}"
 
 
+def _confirm(yes: bool):
+    """How a sweep of a compensated leg is confirmed here: --yes; else the question at the
+    terminal; else (no terminal) None: refused in one line naming the legs and --yes."""
+    if yes:
+        return lambda question: True
+    return prompt(False) if sys.stdin is not None and sys.stdin.isatty() else None
+
+
 def run(args) -> int:
     cfg = load_config(args.config)
     cfg.require_devices()
     serials = parse_serial_args(args.serial)
     leg_fields(cfg, serials, args.serials)  # a bad serials file is refused before anything moves
+    unverified = serials_unverified_line(args.serials or cfg.serials_file)
+    if unverified:  # a list typed by hand: read whole, but nothing proves it (procedures/io/integrity.py)
+        print(unverified)
     check_time_scale(args.time_scale)
     if args.seed is not None:
         cfg.sim.seed = args.seed
@@ -117,18 +136,26 @@ def run(args) -> int:
                              f"--resume {args.out} to finish it; nothing was written")
         out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
         plan = build_plan(args, cfg.limits)  # sized (and refused when huge) before anything connects
+        from procedures.acquisition.plan_size import plan_size
+
+        print(f"plan: {plan_size(plan_spec(args)).describe()}")
         if args.force and out.exists():
             out.unlink()  # --force: the new session replaces it (after the plan was accepted)
     check_plan_for_laser(plan, cfg)  # before anything connects or is written
     for note in plan.notes:
         print(f"note: {note}")
     resume_hint = resume_command(out, cfg, args.config)
+    # the simulated drives keep their tables where push/verify/rollback --sim and the UI find them
+    # (its folder made only now, when everything was accepted): a leg pushed a table is swept
+    # compensated here as in the UI, asked first (services.jobs.check_compensation)
+    cfg.with_sim_memory()
     with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
         print(f"rig: {rig.description}")
         with abort_on_sigint(RunControl()) as control:
             try:
                 result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
-                                   resume=bool(args.resume), serials=serials, serials_file=args.serials)
+                                   resume=bool(args.resume), serials=serials, serials_file=args.serials,
+                                   confirm_compensated=_confirm(args.yes))
             except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
                 print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))")
                 if out.exists():  # a hint never names a file that was not written

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -11,12 +14,14 @@ import numpy as np
 from procedures.compensation import controllers
 from procedures.engine.errors import InputError
 from procedures.fit import load_model
+from procedures.fit.model_io import unverified_model_line
+from procedures.io.plausibility import ImplausibleError
 from procedures.acquisition.plans import parse_legs
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
 from procedures.io.outputs import check_output_file
 from station.services.config import load_config
 from station.services.table_jobs import make_checked_table, write_table
-from station.services.wiring import drive_table_spec
+from station.services.wiring import drive_soft_limits, drive_table_spec
 
 NAME = "table"
 HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"
@@ -31,30 +36,52 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.json", help="model written by `station fit`")
-    p.add_argument("--out", required=True, metavar="TABLE.csv|DIR",
+    p.add_argument("model", type=V.MODEL.argtype(), metavar="MODEL.json", help="model written by `station fit`")
+    p.add_argument("--out", type=V.OUT_PATH.argtype(), required=True, metavar="TABLE.csv|DIR",
                    help="CSV file; for --format linuxcnc a directory (joint0.comp, ...) or NAME.comp (NAME_joint0.comp, ...)")
-    p.add_argument("--step", type=float, metavar="MM", help="table step, mm (default: the recording's spacing, "
+    p.add_argument("--step", type=V.STEP_MM.argtype(), metavar="MM", help="table step, mm (default: the recording's spacing, "
                    "coarsened to fit the point limit)")
     p.add_argument("--format", choices=["csv", "linuxcnc", *controllers.FORMATS], default="csv",
                    help="output format (default csv; controllers: docs/controllers.md)")
     p.add_argument("--siemens-mode", choices=["cec", "enc_comp"], default="cec",
                    help="siemens840d: direction-dependent CEC tables (default) or one $AA_ENC_COMP table (mean of both directions)")
-    p.add_argument("--reference-mm", type=float, default=0.0, metavar="MM",
+    p.add_argument("--reference-mm", type=V.POSITION_MM.argtype(), default=0.0, metavar="MM",
                    help="siemens840d: the axis reference point, where the table is made zero (default 0, mid-stroke)")
-    p.add_argument("--axis-name", default="X", help="heidenhain: the axis column's name, as in CfgAxes/axisList (default X)")
+    p.add_argument("--axis-name", type=V.AXIS_NAME.argtype(), default="X", help="heidenhain: the axis column's name, as in CfgAxes/axisList (default X)")
     p.add_argument("--ecmc-direction", choices=["mean", "fwd", "rev"], default="mean",
                    help="ecmc: one table for both directions: their mean (default) or one direction's error")
-    p.add_argument("--comp-type", type=int, choices=[0, 1], default=0,
+    p.add_argument("--comp-type", type=V.BANK_TYPE.argtype(), choices=[0, 1], default=0,
                    help="LinuxCNC COMP_FILE_TYPE: 0 = nominal, actual moving +, actual moving - (default); "
                    "1 = nominal, forward trim, reverse trim")
-    p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
-    p.add_argument("--legs", help="only these legs, e.g. 1-3 (default: all in the model)")
-    p.add_argument("--config", metavar="C", help="station TOML whose catalog indexes the file written "
+    p.add_argument("--profile", type=V.PROFILE.argtype(), metavar="PROFILE.toml", help="drive profile whose table limits apply (default: built-in)")
+    p.add_argument("--legs", type=V.LEGS.argtype(), help="only these legs, e.g. 1-3 (default: all in the model)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML whose catalog indexes the file written "
                    "(default: the built-in config: <runs>/catalog.sqlite; docs/catalog.md)")
     p.add_argument("--force", action="store_true", help="replace the output file(s) if they exist (default: refused)")
     p.add_argument("--accept-implausible", action="store_true",
-                   help="write a table whose corrections span more than the recorded error did (refused by default)")
+                   help="write a table whose corrections span more than the recorded error did, or whose model made a "
+                        "leg worse on held-out data (refused by default; asked at a terminal)")
+
+
+def _soft_limits(args) -> tuple[float, float] | None:
+    """The soft limits of the drive profile's (--profile, default the built-in one), when it states them."""
+    try:
+        return drive_soft_limits(args.profile)
+    except Exception:  # noqa: BLE001 (a bad profile is refused by drive_table_spec with its own message)
+        return None
+
+
+def _ask_anyway(exc: ImplausibleError) -> bool:
+    """At a terminal, ask before making a table the checks refused (as the UI's "Make anyway"); False
+    without one (the refusal stands: --accept-implausible says yes on the command line)."""
+    if not (hasattr(sys.stdin, "isatty") and sys.stdin.isatty()):
+        return False
+    print(f"refused: {exc}")
+    sys.stdout.write("Make the table anyway? [y/N] ")
+    sys.stdout.flush()
+    if sys.stdin.readline().strip().lower() in ("y", "yes"):
+        return True
+    raise InputError("not confirmed; nothing was written")
 
 
 def output_paths(fmt: str, out: str, legs) -> list[Path]:
@@ -71,6 +98,9 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
 
 def run(args) -> int:
     model = load_model(args.model)
+    unverified = unverified_model_line(args.model, model)
+    if unverified:
+        print(unverified)
     legs = parse_legs(args.legs) if args.legs else None
     if legs is not None:
         missing = [x for x in legs if x not in model.legs]
@@ -95,8 +125,17 @@ def run(args) -> int:
             print(f"note: the drive of {args.profile} holds no compensation table; the table is checked for the "
                   "station's table store (compensation target station, docs/compensation.md); for the "
                   "controller use --format linuxcnc")
-    # the unit-slip check is the service's, as on the UI's Compensation page
-    table, warnings = make_checked_table(model, args.step, limits, legs=legs, accept_implausible=args.accept_implausible)
+    # the unit-slip and held-out checks are the service's, as on the UI's Compensation page; a drive table ends
+    # within the drive's soft limits (the profile's), where the push will check it
+    soft = _soft_limits(args) if args.format == "csv" else None
+    try:
+        table, warnings = make_checked_table(model, args.step, limits, legs=legs, accept_implausible=args.accept_implausible,
+                                             soft_limits_mm=soft)
+    except ImplausibleError as exc:
+        if not _ask_anyway(exc):
+            raise
+        table, warnings = make_checked_table(model, args.step, limits, legs=legs, accept_implausible=True,
+                                             soft_limits_mm=soft)
     if args.format == "csv":
         written = [write_table(table, args.out, load_config(args.config), limits)]
     elif args.format in controllers.FORMATS:

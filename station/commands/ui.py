@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import logging
 from pathlib import Path
@@ -21,9 +23,9 @@ DEFAULT_SIM_TIME_SCALE = 0.02
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", help="station TOML naming the real drives and interferometer (default: simulated rig)")
-    p.add_argument("--replay", metavar="FILE.h5", help="start on a recorded session (Replay screen)")
-    p.add_argument("--time-scale", type=float, metavar="S",
+    p.add_argument("--config", type=V.CONFIG.argtype(), help="station TOML naming the real drives and interferometer (default: simulated rig)")
+    p.add_argument("--replay", type=V.SESSION.argtype(), metavar="FILE.h5", help="start on a recorded session (Replay screen)")
+    p.add_argument("--time-scale", type=V.TIME_SCALE.argtype(), metavar="S",
                    help=f"simulated rig only: real seconds per simulated second (0 = no waiting; "
                         f"default {DEFAULT_SIM_TIME_SCALE:g}, or the config's [sim] time_scale)")
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from station import values as V  # one parser per kind of value (issue 31)
+
 import argparse
 import json
 import os
@@ -37,23 +39,23 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--leg", required=True, metavar="N", help="leg(s) to verify: 2, 1-3, 1,4 or all")
+    p.add_argument("--leg", type=V.LEG_CHOICE.argtype(), required=True, metavar="N", help="leg(s) to verify: 2, 1-3, 1,4 or all")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sim", action="store_true",
                        help="the simulated rig, with the drive table memory `station push --sim` wrote")
-    where.add_argument("--config", metavar="C", help="station TOML naming the drives and the interferometer")
-    p.add_argument("--out", required=True, metavar="FILE.h5", help="session file for the verification sweep")
-    p.add_argument("--before", metavar="FILE.h5", help="the calibration session: its plan is repeated and its "
+    where.add_argument("--config", type=V.CONFIG.argtype(), metavar="C", help="station TOML naming the drives and the interferometer")
+    p.add_argument("--out", type=V.OUT_FILE.argtype(), required=True, metavar="FILE.h5", help="session file for the verification sweep")
+    p.add_argument("--before", type=V.SESSION.argtype(), metavar="FILE.h5", help="the calibration session: its plan is repeated and its "
                    "figures are the 'before' column")
-    p.add_argument("--table", metavar="TABLE.csv", help="refuse unless each leg's active table is this table's rows")
-    p.add_argument("--cycles", type=int, help="without --before: ISO 230-2 cycles (default 5)")
-    p.add_argument("--audit", metavar="FILE", help="audit log (default <recordings_dir>/audit.jsonl)")
-    p.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    p.add_argument("--table", type=V.TABLE.argtype(), metavar="TABLE.csv", help="refuse unless each leg's active table is this table's rows")
+    p.add_argument("--cycles", type=V.CYCLES.argtype(), help="without --before: ISO 230-2 cycles (default 5)")
+    p.add_argument("--audit", type=V.LOG_FILE.argtype(), metavar="FILE", help="audit log (default <recordings_dir>/audit.jsonl)")
+    p.add_argument("--json", type=V.OUT_FILE.argtype(), metavar="FILE", help="also write the figures as JSON")
     p.add_argument("--force", action="store_true", help="replace --out / --json if they exist (default: refused)")
-    p.add_argument("--profile", metavar="PROFILE.toml", help="drive profile (default: the config's, or the built-in one)")
-    p.add_argument("--time-scale", type=float, metavar="S", help="simulated rig only: real seconds per simulated second")
-    p.add_argument("--seed", type=int, help="simulated rig only: plant seed (as for `station sweep`)")
-    p.add_argument("--noise-seed", type=int, metavar="N",
+    p.add_argument("--profile", type=V.PROFILE.argtype(), metavar="PROFILE.toml", help="drive profile (default: the config's, or the built-in one)")
+    p.add_argument("--time-scale", type=V.TIME_SCALE.argtype(), metavar="S", help="simulated rig only: real seconds per simulated second")
+    p.add_argument("--seed", type=V.SEED.argtype(), help="simulated rig only: plant seed (as for `station sweep`)")
+    p.add_argument("--noise-seed", type=V.SEED.argtype(), metavar="N",
                    help="simulated rig only: seed of the measurement noise (default: a new one, so the verification "
                         "does not repeat the calibration's noise; printed for reproduction)")
     p.add_argument("--raw", action="store_true",
@@ -79,8 +81,8 @@ def default_noise_seed() -> int:
 
 def _plan(args, legs: tuple[int, ...], before) -> SweepPlan:
     if before is None:
-        return iso230_plan(legs, cycles=args.cycles or 5)
-    if args.cycles:
+        return iso230_plan(legs, cycles=5 if args.cycles is None else args.cycles)
+    if args.cycles is not None:
         raise InputError("--cycles applies without --before only (the calibration's plan is repeated as it was)")
     try:
         plan = SweepPlan.from_dict(before.plan)
@@ -123,6 +125,13 @@ def run(args) -> int:
     if args.json:
         check_output_file(args.json, force=args.force, option="--json")
     before = read_session(args.before) if args.before else None
+    if before is None:  # sized first against the config's [limits], as `station sweep` sizes its plan
+        from procedures.acquisition.plan_size import check_plan_size
+        from procedures.acquisition.plan_spec import PlanSpec
+
+        size = check_plan_size(PlanSpec(legs=legs, kind="iso230", cycles=5 if args.cycles is None else args.cycles),
+                               cfg.limits)
+        print(f"plan: {size.describe()}")
     plan = _plan(args, legs, before)
     expected: dict[int, str] = {}
     if args.table:

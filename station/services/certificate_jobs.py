@@ -20,18 +20,20 @@ import json
 import os
 import re
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from procedures.reporting import certificate
+from procedures.reporting import certificate, decision
 from procedures.engine.errors import InputError
+from procedures.io.recording.stage import AS_FOUND, AS_LEFT, stage_of_session
 from procedures.io.atomic import write_bytes_atomic  # the index is whole or old
 from station.services.report_jobs import session_decisions
 
 COUNTER_NAME = "certificate-counter.json"
 FOLDER_NAME = "certificates"
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
+CALIBRATION, VERIFICATION, OTHER = "calibration", "verification", "other"  # session_stage
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,7 @@ class Issued:
     json: Path
     index: Path
     content: dict[str, Any]
+    earlier: list[str] = field(default_factory=list)  # certificates already made from the same sessions
 
 
 def _create_new(path: Path, data: bytes) -> None:
@@ -150,54 +153,222 @@ def _as_left_leg(as_found, as_left, leg: int) -> int:
                      "as found and as left must be the same leg")
 
 
+def session_stage(session) -> str:
+    """Whether `session` is an as-found CALIBRATION, an as-left VERIFICATION or OTHER: the stage the
+    session records (procedures/io/recording/stage.py: the root attribute `stage`, derived for older
+    files; an import's stated `--stage`; a sweep of a compensated leg is OTHER)."""
+    return {AS_FOUND: CALIBRATION, AS_LEFT: VERIFICATION}.get(stage_of_session(session), OTHER)
+
+
+def simulated_devices(session) -> list[str]:
+    """Why a session's measurement was not of a real item: the simulated rig, or a simulated
+    drive or laser in its recorded config ([drive] url / [interferometer] port = "sim")."""
+    why = []
+    if str(session.attrs.get("rig") or "") == "sim":
+        why.append(f"{Path(session.path).name} was recorded on the simulated rig")
+    cfg = session.station_config or {}
+    if str(session.attrs.get("rig") or "") == "import":
+        return why  # measured by other software: the config recorded names no device that measured
+    for section, key, what in (("drive", "url", "drive"), ("interferometer", "port", "laser")):
+        if str((cfg.get(section) or {}).get(key) or "") == "sim" and not why:
+            why.append(f"{Path(session.path).name}: the {what} was simulated ([{section}] {key} = \"sim\")")
+    return why
+
+
+def _changes(before: dict, after: dict) -> list[dict[str, str]]:
+    """What changed from one revision's content to the next, field by field (dotted names),
+    leaving out what every revision changes. A section added or removed as a whole (the as-left
+    stage, the table) is one row; derived blocks (a budget, the per-target rows, the environment)
+    are one row each, as "changed", since their every figure follows from the session."""
+    skip = {"revision", "issued_utc", "supersedes", "approval", "traceability"}
+    whole = {"budget", "targets", "environment", "test_parameters", "material", "notes", "warnings", "statements"}
+
+    def show(v: Any) -> str:
+        if v is None:
+            return "none"
+        if isinstance(v, float):
+            return f"{v:.6g}"
+        if isinstance(v, dict):
+            return f"section of {len(v)} fields" if len(json.dumps(v)) > 70 else json.dumps(v, sort_keys=True)
+        if isinstance(v, list):
+            return f"{len(v)} entries" if len(json.dumps(v)) > 70 else json.dumps(v)
+        return str(v)
+
+    rows: list[dict[str, str]] = []
+
+    def diff(a: Any, b: Any, name: str) -> None:
+        if a == b:
+            return
+        key = name.rsplit(".", 1)[-1]
+        if isinstance(a, dict) and isinstance(b, dict) and key not in whole:
+            for k in sorted(set(a) | set(b)):
+                if not name and k in skip:
+                    continue
+                diff(a.get(k), b.get(k), f"{name}.{k}" if name else k)
+            return
+        changed = key in whole and a is not None and b is not None
+        rows.append({"field": name, "before": "(changed)" if changed else show(a),
+                     "after": "(changed, see below)" if changed else show(b)})
+
+    diff(before, after, "")
+    return rows
+
+
+def _earlier(folder: Path, catalog, found_sha: str, left_sha: str | None, skip_no: str | None) -> list[str]:
+    """Certificates already issued from the same sessions, "REPORT revision N (where)": in the
+    certificates folder's indexes and in the station's catalog (wherever they were written)."""
+    seen: dict[tuple[str, int], str] = {}
+    for index_path in sorted(folder.glob("*.index.json")):
+        try:
+            index = json.loads(index_path.read_text())
+            revisions = list(index["revisions"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        for r in revisions:
+            if (isinstance(r, dict) and r.get("as_found_session") == found_sha
+                    and (r.get("as_left_session") or None) == (left_sha or None)):
+                seen[(str(index.get("report_no")), int(r.get("revision") or 0))] = str(folder / str(r.get("pdf")))
+    if catalog is not None and catalog.local.exists():
+        from station.catalog.certificates import for_sessions  # noqa: PLC0415
+
+        try:
+            for c in for_sessions(catalog.engine, found_sha, left_sha):
+                seen.setdefault((c.report_no, c.revision), c.path)
+        except Exception:  # noqa: BLE001  a catalog that cannot be read does not stop a certificate
+            pass
+    return [f"{no} revision {rev} ({where})" for (no, rev), where in sorted(seen.items()) if no != skip_no]
+
+
+def _register(catalog, cert: dict, pdf_path: Path, pdf_sha: str, json_path: Path) -> None:
+    """Index the certificate PDF in the station's catalog (off: nothing); never fails the issue:
+    the files are the record and `station catalog sync` / `rebuild` index them later."""
+    if catalog is None:
+        return
+    from station.catalog.certificates import certificate_rec  # noqa: PLC0415
+
+    try:
+        catalog.ingest([certificate_rec(cert, pdf_path, pdf_sha, json_path)])
+    except Exception as exc:  # noqa: BLE001
+        import logging  # noqa: PLC0415
+
+        logging.getLogger(__name__).warning("catalog %s: certificate %s not indexed (%s)", catalog.local, pdf_path, exc)
+
+
 def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: str | os.PathLike | None = None,
-                      lab: dict | None = None, customer: str = "", folder: str | os.PathLike,
+                      lab: dict | None = None, customer: str | None = None, folder: str | os.PathLike,
                       counter_path: str | os.PathLike, revise: str | None = None, reason: str = "",
                       tolerances: dict | None = None, issued_utc: str | None = None,
-                      station_id: str = "", table_leg_sha256: str | None = None) -> Issued:
-    """Issue a certificate of `leg` from the sessions `as_found` (and `as_left`, a verification),
-    both procedures.io.recording.reader.Session; `table` the compensation table pushed (its sha256 is
-    stated); `revise` the report number of a certificate this one corrects (`reason` says why).
-    `tolerances` {type: Tolerance.to_json()} (None: the sessions' recorded ones); `station_id`
-    names the issuing station in the report number when the session does not record one;
+                      station_id: str = "", table_leg_sha256: str | None = None,
+                      customer_contact: str | None = None, authoriser: dict | None = None,
+                      prepared_by: str = "", catalog=None, received: str | None = None) -> Issued:
+    """Issue a certificate of `leg` from the sessions `as_found` (a calibration) and `as_left` (a
+    verification after it), both procedures.io.recording.reader.Session; `table` the compensation
+    table pushed (its sha256 is stated); `revise` the report number of a certificate this one
+    corrects (`reason` says why; only for the same item: serial and part number). `customer` /
+    `customer_contact` None: not given (a revision keeps the previous revision's). `tolerances`
+    {type: Tolerance.to_json()} (None: the sessions' recorded ones); `station_id` names the
+    issuing station in the report number when the session does not record one;
     `table_leg_sha256` the sha256 of the leg's rows of `table` as its holder stores them
-    (station.services.table_jobs.expected_tables), checked against the table the as-left session found active."""
+    (station.services.table_jobs.expected_tables), checked against the table the as-left session
+    found active. `authoriser` {name, role} who approves ([lab]); `catalog` (station.catalog.store.
+    Catalog or None) indexes the PDF and is asked for earlier certificates of the same sessions;
+    `received` the date the item was received (None: not given; a revision keeps the previous one).
+    The result is a draft until `approve`."""
     folder, counter_path = Path(folder), Path(counter_path)
     leg = pick_leg(as_found, leg)
+    if session_stage(as_found) == VERIFICATION:
+        raise InputError(f"{as_found.path}: a verification session (as left); a certificate is issued from the leg's "
+                         f"as-found calibration session: give that session, with --as-left {Path(as_found.path).name}")
+    if session_stage(as_found) == OTHER:
+        raise InputError(f"{as_found.path}: a session of no stated stage (an import without --stage, or stage "
+                         "other); a certificate is issued from an as-found calibration: re-import it with "
+                         "--stage calibration")
     if not as_found.identity.leg(leg).serial:
         raise InputError(f"{as_found.path}: leg {leg} has no serial recorded; a certificate must identify the item "
                          "calibrated: sweep it with --serial LEG=SERIAL (or [legs.N] serial) and certify that session")
-    found = session_decisions(as_found, tolerances=tolerances, stage="as_found")
-    left = session_decisions(as_left, tolerances=tolerances, stage="as_left") if as_left is not None else None
-    left_leg = _as_left_leg(as_found, as_left, leg) if left is not None else None
-    folder.mkdir(parents=True, exist_ok=True)
-    issued_utc = issued_utc or certificate.now_utc()
-    supersedes = None
+    if as_left is not None:
+        start_found, start_left = str(as_found.attrs.get("started_utc") or ""), str(as_left.attrs.get("started_utc") or "")
+        if start_found and start_left and start_left < start_found:
+            raise InputError(f"{as_left.path} was measured ({start_left}) before {as_found.path} ({start_found}): "
+                             "the as-left session comes after the as-found calibration")
+    item = as_found.identity.leg(leg)
+    previous = None
     if revise:
         index = read_index(folder, revise)
         if not reason:
             raise InputError("--revise needs --reason: a corrected certificate says what was corrected")
         last = index["revisions"][-1]
-        report_no, revision = revise, int(last["revision"]) + 1
-        supersedes = {"report_no": revise, "revision": last["revision"], "sha256_pdf": last["sha256_pdf"],
-                      "reason": reason}
-    else:
-        station = as_found.identity.station.id or station_id or "station"
-        report_no = next_report_no(counter_path, station, _dt.date.fromisoformat(issued_utc[:10]))
-        index, revision = {"report_no": report_no, "revisions": []}, 1
+        try:
+            previous = json.loads((folder / last["json"]).read_text())
+        except (OSError, ValueError, KeyError) as exc:
+            raise InputError(f"{folder / str(last.get('json'))}: cannot read the revision to correct ({exc})") from None
+        was = previous.get("item") or {}
+        now = {"serial": item.serial, "part_number": item.part_number or "not stated"}
+        if (was.get("serial"), was.get("part_number")) != (now["serial"], now["part_number"]):
+            raise InputError(f"--revise {revise}: that certificate is of serial {was.get('serial')} part number "
+                             f"{was.get('part_number')}, these sessions measured serial {now['serial']} part number "
+                             f"{now['part_number']}; a revision corrects the same item: issue a new certificate "
+                             "(without --revise)")
+    found = session_decisions(as_found, tolerances=tolerances, stage="as_found")
+    left = session_decisions(as_left, tolerances=tolerances, stage="as_left") if as_left is not None else None
+    left_leg = _as_left_leg(as_found, as_left, leg) if left is not None else None
+    folder.mkdir(parents=True, exist_ok=True)
+    issued_utc = issued_utc or certificate.now_utc()
+    # a correction made in an earlier revision stays unless this one corrects it again
+    if previous is not None:
+        if customer is None:
+            customer = None if previous.get("customer") in (None, "not stated") else previous["customer"]
+        if received is None:
+            received = None if (previous.get("item") or {}).get("received") in (None, "not stated") else \
+                previous["item"]["received"]
+        if customer_contact is None:
+            customer_contact = None if previous.get("customer_contact") in (None, "not stated") else \
+                previous["customer_contact"]
     table_rec = table_record(table)
+    if table_rec is None and previous is not None and previous.get("compensation_table"):
+        table_rec = dict(previous["compensation_table"])
     if table_rec is not None and table_leg_sha256:
         table_rec["leg_rows_sha256"] = table_leg_sha256
         if as_left is not None:
             active = _active_table_sha256(as_left, left_leg)
             table_rec["active_as_left_sha256"] = active
             table_rec["matches_as_left"] = active == table_leg_sha256 if active else None
-    try:
-        cert = certificate.content(found, leg, report_no=report_no, revision=revision, issued_utc=issued_utc,
-                                   lab=lab or {}, customer=customer, as_left=left, table=table_rec,
-                                   supersedes=supersedes, instrument=_instrument(as_found), as_left_leg=left_leg)
-    except (KeyError, ValueError) as exc:
-        raise InputError(f"{as_found.path}: {exc}") from None
+    simulated = simulated_devices(as_found) + (simulated_devices(as_left) if as_left is not None else [])
+    instrument = _instrument(as_found)
+    cal_cert = ((as_found.station_config or {}).get("metrology") or {}).get("calibration_certificate")
+    if cal_cert:
+        instrument = {**(instrument or {}), "certificate": cal_cert}
+
+    def build(report_no: str, revision: int, supersedes: dict | None) -> dict:
+        try:
+            cert = certificate.content(found, leg, report_no=report_no, revision=revision, issued_utc=issued_utc,
+                                       lab=lab or {}, customer=customer or "", as_left=left, table=table_rec,
+                                       supersedes=supersedes, instrument=instrument, as_left_leg=left_leg,
+                                       customer_contact=customer_contact or "", simulated=simulated,
+                                       authoriser=authoriser, prepared_by=prepared_by, received=received or "")
+        except (KeyError, ValueError) as exc:
+            raise InputError(f"{as_found.path}: {exc}") from None
+        cert["as_found"]["kind"] = "as-found calibration"
+        if cert["as_left"] is not None:
+            cert["as_left"]["kind"] = ("as-left verification" if session_stage(as_left) == VERIFICATION else
+                                       "as left: a sweep recorded after the calibration (not a `station verify`)")
+        return cert
+
+    if revise:
+        last = index["revisions"][-1]
+        report_no, revision = revise, int(last["revision"]) + 1
+        supersedes = {"report_no": revise, "revision": last["revision"], "sha256_pdf": last["sha256_pdf"],
+                      "reason": reason}
+        cert = build(report_no, revision, supersedes)
+        supersedes["changes"] = _changes(previous, cert)
+    else:
+        build("pending", 1, None)  # everything checked before a number is used up
+        station = as_found.identity.station.id or station_id or "station"
+        report_no = next_report_no(counter_path, station, _dt.date.fromisoformat(issued_utc[:10]))
+        index, revision = {"report_no": report_no, "revisions": []}, 1
+        cert = build(report_no, revision, None)
+    earlier = _earlier(folder, catalog, cert["as_found"]["session_sha256"],
+                       (cert["as_left"] or {}).get("session_sha256"), report_no)
     stem = f"{report_no}_r{revision}"
     pdf_path, json_path = folder / f"{stem}.pdf", folder / f"{stem}.json"
     pdf_bytes = certificate.pdf(cert)
@@ -209,13 +380,105 @@ def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: 
         pdf_path.unlink()
         raise
     for r in index["revisions"]:
-        if r["status"] == "issued":
+        if r["status"] in ("issued", "approved"):
             r.update(status="superseded", superseded_by=revision, superseded_utc=issued_utc, reason=reason)
+    pdf_sha = hashlib.sha256(pdf_bytes).hexdigest()
     index["revisions"].append({"revision": revision, "status": "issued", "issued_utc": issued_utc,
                                "pdf": pdf_path.name, "json": json_path.name,
-                               "sha256_pdf": hashlib.sha256(pdf_bytes).hexdigest(), "serial": cert["item"]["serial"],
+                               "sha256_pdf": pdf_sha, "serial": cert["item"]["serial"],
+                               "part_number": cert["item"]["part_number"],
                                "as_found_session": cert["as_found"]["session_sha256"],
                                "as_left_session": (cert["as_left"] or {}).get("session_sha256")})
     index_path = _index_path(folder, report_no)
     write_bytes_atomic(index_path, (json.dumps(index, indent=2) + "\n").encode())
-    return Issued(report_no, revision, pdf_path, json_path, index_path, cert)
+    _register(catalog, cert, pdf_path, pdf_sha, json_path)
+    return Issued(report_no, revision, pdf_path, json_path, index_path, cert, earlier)
+
+
+def find_folder(report_no: str, folder: Path, catalog=None) -> Path:
+    """The folder holding certificate `report_no`'s index: `folder`, else where the catalog says
+    its PDF was written. InputError when neither knows it."""
+    if _index_path(folder, report_no).is_file():
+        return folder
+    if catalog is not None and catalog.local.exists():
+        from station.catalog.certificates import find  # noqa: PLC0415
+
+        for c in find(catalog.engine, report_no):
+            where = Path(c.path).parent
+            if _index_path(where, report_no).is_file():
+                return where
+    raise InputError(f"no certificate {report_no} in {folder} nor in the catalog; `station certificates` lists them")
+
+
+def approve(report_no: str, *, by: str, folder: str | os.PathLike, authoriser: dict, audit_path: str | os.PathLike,
+            catalog=None, station_id: str | None = None, approved_utc: str | None = None) -> Issued:
+    """Approve the current revision of certificate `report_no`: `by` must be the authoriser the
+    config names ([lab] authoriser); the approved document REPORT_rN_approved.pdf/.json is written
+    once, read-only, beside the draft (which stays unchanged), recorded in the audit log (action
+    "approve") and in the catalog, and the index marks the revision approved."""
+    from procedures.compensation.audit import AuditEntry, AuditError, AuditLog, AuditSink, new_id  # noqa: PLC0415
+    from procedures.engine import events as ev  # noqa: PLC0415
+
+    name, role = (authoriser or {}).get("name") or "", (authoriser or {}).get("role") or ""
+    if not name:
+        raise InputError("no authoriser in the config: set [lab] authoriser (and authoriser_role) to the person who "
+                         "approves certificates")
+    if by.strip() != name:
+        raise InputError(f"--by {by!r}: certificates are approved by the laboratory's authoriser {name!r} ([lab] "
+                         "authoriser in the config)")
+    folder = find_folder(report_no, Path(folder), catalog)
+    index = read_index(folder, report_no)
+    last = index["revisions"][-1]
+    if last.get("status") == "approved":
+        raise InputError(f"certificate {report_no} revision {last['revision']} is already approved by "
+                         f"{last.get('approved_by')} ({last.get('approved_utc')}): {folder / last['approved_pdf']}")
+    if last.get("status") != "issued":
+        raise InputError(f"certificate {report_no} revision {last['revision']} is {last.get('status')}; only the "
+                         "current revision is approved")
+    draft_json = folder / last["json"]
+    try:
+        cert = json.loads(draft_json.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{draft_json}: cannot read the certificate ({exc})") from None
+    if hashlib.sha256((folder / last["pdf"]).read_bytes()).hexdigest() != last["sha256_pdf"]:
+        raise InputError(f"{folder / last['pdf']}: its sha256 is not the one issued; the draft was changed: "
+                         "approve nothing, issue a revision")
+    approved_utc = approved_utc or certificate.now_utc()
+    stem = f"{report_no}_r{last['revision']}_approved"
+    pdf_path, json_path = folder / f"{stem}.pdf", folder / f"{stem}.json"
+    if pdf_path.exists():
+        raise InputError(f"{pdf_path}: exists; an approved certificate is never written twice")
+    audit_id = new_id()  # named in the document, so the entry is written once the document is
+    cert["approval"].update(status="approved", approved_by=name, approved_role=role, approved_utc=approved_utc,
+                            audit_id=audit_id)
+    pdf_bytes = certificate.pdf(cert)
+    _create_new(pdf_path, pdf_bytes)
+    written = [pdf_path]
+    try:
+        _create_new(json_path, (json.dumps(cert, indent=2, allow_nan=False) + "\n").encode())
+        written.append(json_path)
+        # through the audit sink, the log's one writer (tests/test_layering.py)
+        sink = AuditSink(AuditLog(audit_path, operator=by, station_id=station_id))
+        try:
+            sink.handle(ev.AuditRecord(AuditEntry(
+                "approve", int(cert["item"]["leg"]), "ok",
+                f"certificate {report_no} revision {last['revision']} approved by {name}, {role}",
+                id=audit_id, time_utc=approved_utc.replace("+00:00", "Z"), leg_serial=cert["item"]["serial"],
+                operator=by, details={"report_no": report_no, "revision": last["revision"],
+                                      "draft_sha256_pdf": last["sha256_pdf"], "role": role, "pdf": str(pdf_path),
+                                      "sha256_pdf": hashlib.sha256(pdf_bytes).hexdigest()})))
+        except AuditError as exc:
+            raise InputError(f"{str(exc).split(': ', 1)[-1]}: the approval could not be recorded; nothing was "
+                             "approved") from None
+    except BaseException:  # no approved document without its audit entry
+        for p in written:
+            os.chmod(p, 0o644)
+            p.unlink()
+        raise
+    sha = hashlib.sha256(pdf_bytes).hexdigest()
+    last.update(status="approved", approved_by=name, approved_role=role, approved_utc=approved_utc,
+                approved_pdf=pdf_path.name, approved_json=json_path.name, approved_sha256_pdf=sha, audit_id=audit_id)
+    index_path = _index_path(folder, report_no)
+    write_bytes_atomic(index_path, (json.dumps(index, indent=2) + "\n").encode())
+    _register(catalog, cert, pdf_path, sha, json_path)
+    return Issued(report_no, int(last["revision"]), pdf_path, json_path, index_path, cert)

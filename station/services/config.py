@@ -37,7 +37,9 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     [catalog]                   # the index of every record (docs/catalog.md); all optional
     url = ""                    # shared catalog, e.g. "postgresql://station@dbhost/catalog" ("" = local only)
     connect_timeout_s = 2.0     # how long a write waits for the shared catalog before keeping it in the backlog
+    statement_timeout_s = 5.0   # the longest one shared-catalog statement (or its wait for a lock) may take
     calibration_interval_days = 365  # a leg is due this many days after its last calibration
+    min_drift_interval_days = 30.0   # no drift figure from as-found calibrations closer together than this
     [limits]                    # the largest sweep plan started without asking (procedures/acquisition/plan_size.py)
     max_points = 500000         # points measured, all legs
     max_rig_hours = 72.0        # estimated time on the rig
@@ -53,6 +55,7 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     serial = ""
     calibration_date = ""       # ISO date of its last calibration, YYYY-MM-DD
     calibration_due = ""        # ISO date its calibration expires; "" = not stated (not traceable)
+    calibration_certificate = ""  # its certificate: number and issuing laboratory, e.g. "1234/2026, DAkkS D-K-15000-01-00"
     air_temp_u_c = 0.1          # STANDARD uncertainties (k = 1) of the sensors
     pressure_u_pa = 50.0
     humidity_u_pct = 3.0
@@ -83,6 +86,9 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     address = ""
     accreditation = ""          # e.g. "DAkkS D-K-12345-01-00"; "" = not accredited
     customer = ""               # default customer (station certificate --customer)
+    customer_contact = ""       # the customer's contact: person, address or e-mail (--customer-contact)
+    authoriser = ""             # who approves certificates (station certificate approve N --by NAME)
+    authoriser_role = ""        # the authoriser's function, e.g. "Head of laboratory"
 """
 
 from __future__ import annotations
@@ -102,6 +108,7 @@ from procedures.io.numbers import NotANumber, finite_float
 from procedures.metrology import defaults as MD
 from procedures.metrology.thermal import Material
 from procedures.acquisition.plan_size import PlanLimits
+from station import values as V  # one parser per kind of value, as on the command line (issue 31)
 
 
 LEG_COUNT = 6
@@ -174,6 +181,7 @@ class MetrologyConfig:
     serial: str = ""
     calibration_date: str = ""  # ISO date (YYYY-MM-DD) of the instrument's calibration; "" = not stated
     calibration_due: str = ""  # ISO date its calibration expires; "" = not stated: results not traceable
+    calibration_certificate: str = ""  # the instrument's own certificate: number and issuing laboratory (traceability)
     air_temp_u_c: float = MD.AIR_TEMP_U_C
     pressure_u_pa: float = MD.PRESSURE_U_PA
     humidity_u_pct: float = MD.HUMIDITY_U_PCT
@@ -247,7 +255,13 @@ class CatalogConfig:
 
     url: str = ""
     connect_timeout_s: float = 2.0
+    # every statement on the shared catalog, and its wait for a lock another session holds, ends
+    # after this (PostgreSQL statement_timeout and lock_timeout): then the record waits in the outbox
+    statement_timeout_s: float = 5.0
     calibration_interval_days: int = 365
+    # drift (um/month) between as-found calibrations closer than this is noise over a tiny span:
+    # not computed (station/catalog/history.py)
+    min_drift_interval_days: float = 30.0
 
 
 @dataclass
@@ -258,6 +272,9 @@ class LabConfig:
     address: str = ""
     accreditation: str = ""
     customer: str = ""
+    customer_contact: str = ""
+    authoriser: str = ""  # the one person `station certificate approve --by` accepts
+    authoriser_role: str = ""
 
 
 @dataclass
@@ -279,6 +296,7 @@ class StationConfig:
     limits: PlanLimits = field(default_factory=PlanLimits)  # [limits]: the largest plan started without asking
     lab: LabConfig = field(default_factory=LabConfig)
     tolerances: dict[str, Tolerance] = field(default_factory=dict)  # [tolerances.TYPE] (procedures.reporting.decision)
+    web: dict[str, Any] = field(default_factory=dict)  # [web]: users, login, hosts; read by station/web/access.py
     source: str = "built-in defaults"
     named: frozenset[str] = frozenset()  # "drive.url", "interferometer.port": the devices the file names
 
@@ -396,6 +414,9 @@ _RANGES = {
     ("interferometer", "baudrate"): (0, True, "the serial line's bits per second"),
     ("catalog", "connect_timeout_s"): (0.0, True, "seconds a write waits for the shared catalog"),
     ("catalog", "calibration_interval_days"): (0, True, "days from a leg's calibration to its next"),
+    ("catalog", "statement_timeout_s"): (0.0, True, "seconds one statement on the shared catalog may take"),
+    ("catalog", "min_drift_interval_days"): (0.0, False, "days between as-found calibrations below which no "
+                                                         "drift is computed"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
     ("limits", "max_points"): (0, True, "the most points a sweep plan may have"),
     ("limits", "max_rig_hours"): (0.0, True, "the longest a sweep plan may take on the rig, hours"),
@@ -405,31 +426,39 @@ _RANGES = {
 }
 
 
-# (section, key) -> (lowest, highest, what the value is): both bounds inclusive; the physical
-# sense of the metrology numbers (a value outside is a typo or a unit mix-up, never a setting)
-_BOUNDS = {
-    ("metrology", "reference_temp_c"): (-10.0, 50.0, "the reference temperature of lengths, degC (ISO 1: 20)"),
-    ("metrology", "wavelength_nm"): (400.0, 1700.0, "the laser's vacuum wavelength in nm (HeNe: 632.991); "
-                                     "the refractive-index equations hold over 400..1700 nm"),
-    ("metrology", "co2_ppm"): (0.0, 5000.0, "CO2 content of the air in ppm (about 450 outdoors)"),
-    ("metrology", "dead_path_mm"): (0.0, 10000.0, "laser-to-zero beam path in mm"),
-    ("metrology", "laser_accuracy_ppm"): (0.0, 100.0, "the laser's stated accuracy in ppm, k = 2"),
-    ("metrology", "laser_resolution_nm"): (0.0, 10000.0, "the laser's resolution in nm"),
-    ("metrology", "air_temp_u_c"): (0.0, 10.0, "standard uncertainty of the air temperature, K"),
-    ("metrology", "pressure_u_pa"): (0.0, 10000.0, "standard uncertainty of the air pressure, Pa"),
-    ("metrology", "humidity_u_pct"): (0.0, 100.0, "standard uncertainty of the relative humidity, %RH (0..100)"),
-    ("metrology", "material_temp_u_c"): (0.0, 10.0, "standard uncertainty of the material temperature, K"),
-    ("metrology", "misalignment_mm"): (0.0, 100.0, "lateral beam offset over the stroke, mm"),
-    ("metrology", "abbe_offset_mm"): (0.0, 1000.0, "Abbe offset between beam and leg axis, mm"),
-    ("metrology", "abbe_angle_u_urad"): (0.0, 10000.0, "standard uncertainty of the angular error, urad"),
-    ("legs", "expansion_um_m_k"): (0.0, 50.0, "the linear expansion coefficient in um/m/K (steel 11.5, "
-                                   "aluminium 23; none above 50)"),
-    ("legs", "expansion_u_um_m_k"): (0.0, 50.0, "the standard uncertainty of the expansion coefficient, um/m/K"),
-    ("legs", "fixed_point_mm"): (-5000.0, 5000.0, "target_mm where the leg is fixed, mm from mid-stroke"),
+# (section, key) -> the kind of station/values.py its command-line option uses (`--seed`, `--time-scale`)
+_KINDS = {
+    ("sim", "seed"): V.SEED,
+    ("sim", "time_scale"): V.TIME_SCALE,
 }
 
 
-def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, float, str] | None) -> float:
+# (section, key) -> (its kind in station/values.py, what the value is): the kind's bounds, both
+# inclusive, are the physical sense of the metrology numbers (a value outside is a typo or a unit
+# mix-up, never a setting), the same ones `station recorrect --co2-ppm` etc. apply (issue 31)
+_BOUNDS = {
+    ("metrology", "reference_temp_c"): (V.REFERENCE_TEMP_C, "the reference temperature of lengths, degC (ISO 1: 20)"),
+    ("metrology", "wavelength_nm"): (V.WAVELENGTH_NM, "the laser's vacuum wavelength in nm (HeNe: 632.991); "
+                                     "the refractive-index equations hold over 400..1700 nm"),
+    ("metrology", "co2_ppm"): (V.CO2_PPM, "CO2 content of the air in ppm (about 450 outdoors)"),
+    ("metrology", "dead_path_mm"): (V.DEAD_PATH_MM, "laser-to-zero beam path in mm"),
+    ("metrology", "laser_accuracy_ppm"): (V.LASER_ACCURACY_PPM, "the laser's stated accuracy in ppm, k = 2"),
+    ("metrology", "laser_resolution_nm"): (V.LASER_RESOLUTION_NM, "the laser's resolution in nm"),
+    ("metrology", "air_temp_u_c"): (V.AIR_TEMP_U_C, "standard uncertainty of the air temperature, K"),
+    ("metrology", "pressure_u_pa"): (V.PRESSURE_U_PA, "standard uncertainty of the air pressure, Pa"),
+    ("metrology", "humidity_u_pct"): (V.HUMIDITY_U_PCT, "standard uncertainty of the relative humidity, %RH (0..100)"),
+    ("metrology", "material_temp_u_c"): (V.MATERIAL_TEMP_U_C, "standard uncertainty of the material temperature, K"),
+    ("metrology", "misalignment_mm"): (V.MISALIGNMENT_MM, "lateral beam offset over the stroke, mm"),
+    ("metrology", "abbe_offset_mm"): (V.ABBE_OFFSET_MM, "Abbe offset between beam and leg axis, mm"),
+    ("metrology", "abbe_angle_u_urad"): (V.ABBE_ANGLE_U_URAD, "standard uncertainty of the angular error, urad"),
+    ("legs", "expansion_um_m_k"): (V.EXPANSION_UM_M_K, "the linear expansion coefficient in um/m/K (steel 11.5, "
+                                   "aluminium 23; none above 50)"),
+    ("legs", "expansion_u_um_m_k"): (V.EXPANSION_UM_M_K, "the standard uncertainty of the expansion coefficient, um/m/K"),
+    ("legs", "fixed_point_mm"): (V.FIXED_POINT_MM, "target_mm where the leg is fixed, mm from mid-stroke"),
+}
+
+
+def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[V.Kind, str] | None) -> float:
     """`value` as a finite float within `bounds`, else InputError naming file, section and key."""
     try:
         v = finite_float(value, text_ok=False)
@@ -438,7 +467,8 @@ def _number(p: Path, where: str, key: str, value: Any, bounds: tuple[float, floa
             raise InputError(f"{p}: [{where}] {key}: expected a number, got {value!r}") from None
         raise InputError(f"{p}: [{where}] {key} = {value!r}: must be a finite number") from None
     if bounds is not None:
-        low, high, what = bounds
+        kind, what = bounds
+        low, high = kind.lo, kind.hi
         if not low <= v <= high:
             raise InputError(f"{p}: [{where}] {key} = {value!r}: must be within {low:g}..{high:g} ({what})")
     return v
@@ -451,10 +481,8 @@ def _iso_date(p: Path, value: Any, key: str = "calibration_date") -> str:
     if text == "":
         return ""
     try:
-        _dt.date.fromisoformat(text)
-        if len(text) != 10:
-            raise ValueError
-    except ValueError:
+        V.DATE.parse(text)  # the one date rule, as `station legs --since` reads it
+    except InputError:
         raise InputError(f"{p}: [metrology] {key} = {value!r}: not an ISO date; write it as "
                          "YYYY-MM-DD, e.g. 2026-03-14") from None
     return text
@@ -570,6 +598,8 @@ def load_config(path: str | Path | None) -> StationConfig:
                 if not (v > low if strict else v >= low) or v != v or v in (float("inf"), float("-inf")):
                     raise InputError(f"{p}: [{section}] {key} = {value!r}: must be a number {'>' if strict else '>='} "
                                      f"{low:g} ({what})")
+            if (section, key) in _KINDS:  # the same kind as the command-line option of that value
+                _KINDS[section, key].parse(getattr(target, key), f"{p}: [{section}] {key}")
             if (section, key) in (("drive", "url"), ("interferometer", "port")):
                 cfg.named = cfg.named | {f"{section}.{key}"}
     if "metrology" in data:
@@ -585,7 +615,11 @@ def load_config(path: str | Path | None) -> StationConfig:
         raise InputError(f"{p}: [sim] laser_offset_um = {cfg.sim.laser_offset_um!r}: must be a finite number of um")
     if "tolerances" in data:
         cfg.tolerances = parse_tolerances(data["tolerances"], str(p))
-    unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs", "tolerances"}
+    if "web" in data:  # its keys are the web view's (station/web/access.parse_web_section checks them)
+        if not isinstance(data["web"], dict):
+            raise InputError(f"{p}: web must be a section ([web] and its keys), got {data['web']!r}")
+        cfg.web = data["web"]
+    unknown = set(data) - {"station", *_SECTIONS, "metrology", "legs", "tolerances", "web"}
     if unknown:
         raise InputError(f"{p}: unknown section(s) {sorted(unknown)}")
     return cfg

@@ -23,24 +23,59 @@ def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings:
 
     settings = settings if settings is not None else DiagnosisSettings()
     points, twin, normalised_legs = on_common_basis(session, twin)
+    comparison = getattr(twin, "comparison", None)
+    compared = {}
+    if comparison is not None:  # the fleet twin: how far this leg's features lie from its siblings' (made first:
+        from procedures.diagnosis.fleet import error_map  # the diagnosis names a scale only where they support it)
+
+        import numpy as np
+
+        compared = {int(leg): comparison(int(leg), error_map(points, int(leg)), settings.lead_mm)
+                    for leg in np.unique(points["leg"])}
     report = diagnose(points, twin, settings, recording={"path": str(path), "sha256": session.sha256}, source=str(path))
     if normalised_legs:
         report["twin"]["normalised_legs"] = normalised_legs
+        thermal_beyond_material(report, session, normalised_legs)
     temp_lines, report["material_temperature"] = diagnosis_temperature_note(session.points, session.station_config)
     if normalised_legs:
         temp_lines[0] = temp_lines[0].replace(
             "raw (diagnosis does not normalise: thermal expansion stays a diagnosable effect)",
             f"leg(s) {', '.join(map(str, normalised_legs))} normalised to 20 degC (NDE) like the twin, as both carry "
             "the material temperature (a thermal finding there is expansion beyond the material's nominal), others raw")
-    comparison = getattr(twin, "comparison", None)
-    if comparison is not None:  # the fleet twin: how far this leg's features lie from its siblings'
-        from procedures.diagnosis.fleet import error_map
-
-        report["twin"]["fleet"] = twin.info  # type, basis, siblings per leg, files left out
+    if comparison is not None:
+        report["twin"]["fleet"] = twin.info  # type, basis, siblings per leg, files left out, duplicates
         for leg, rep in report["legs"].items():
-            rep["fleet"] = finite_or_null(comparison(int(leg), error_map(points, int(leg)), settings.lead_mm),
-                                          report["notes"], f"legs.{leg}.fleet")
+            rep["fleet"] = finite_or_null(compared[int(leg)], report["notes"], f"legs.{leg}.fleet")
     return report, temp_lines
+
+
+MATERIAL_LIKE = (0.5, 2.0)  # a leg expanding within these factors of its assumed material expands like it
+
+
+def thermal_beyond_material(report: dict, session: Any, legs: list[int]) -> None:
+    """On legs compared normalised to 20 degC, a thermal finding is the expansion beyond the
+    assumed material's (issue 35): say so in words and figures (`material` on the finding: the
+    assumed and the measured total expansion, ppm/K). Sign: measured = assumed + found."""
+    from procedures.metrology.thermal import normalise_session
+
+    materials = normalise_session(session.points, session.station_config).materials
+    for f in report["findings"]:
+        if f["effect"] != "thermal" or f["leg"] not in legs or f["leg"] not in materials:
+            continue
+        assumed = float(materials[f["leg"]].expansion_um_m_k)
+        beyond = f["parameters"]["expansion_ppm_per_k"]
+        total = assumed + beyond
+        what = "steel" if abs(assumed - 11.5) < 1e-9 else "material"
+        note = (f"compared normalised to 20 degC, so this is the expansion beyond the assumed {what}: assumed "
+                f"{assumed:.3g}, measured {total:.3g} ppm/K ({beyond:+.3g} ppm/K beyond it)")
+        lo, hi = MATERIAL_LIKE
+        if not lo * assumed <= total <= hi * assumed:
+            note += (f": does not expand like the assumed {what}: check the material setting or where the sensor sits "
+                     "(a sensor away from the screw, or on a part that does not warm with it)")
+        else:
+            note += f": expands like {what}, {'more' if beyond > 0 else 'less'} than assumed"
+        f["material"] = {"assumed_ppm_per_k": assumed, "measured_ppm_per_k": total, "beyond_assumed_ppm_per_k": beyond,
+                         "note": note}
 
 
 def on_common_basis(session: Any, twin: Any) -> tuple[Any, Any, list[int]]:

@@ -9,6 +9,7 @@ from typing import Any, Iterable, Mapping
 
 from drivers.errors import DriverError
 from procedures.compensation.audit import AuditLog
+from procedures.engine.errors import InputError
 from procedures.io.recording.identity import (
     DriveIdentity,
     LegIdentity,
@@ -27,7 +28,27 @@ def leg_fields(cfg: StationConfig, entered: Mapping[int, Mapping[str, str]] | No
     [station] serials_file), then `entered` (--serial, the Sweep page)."""
     path = serials_file or cfg.serials_file
     from_file = read_serials_file(path) if path else {}
-    return merged_leg_identity(cfg.leg_identity, from_file, entered or {})
+    merged = merged_leg_identity(cfg.leg_identity, from_file, entered or {})
+    _one_leg_per_serial(merged, [(cfg.leg_identity, f"[legs.N] of {cfg.source}"), (from_file, f"the serials file {path}"),
+                                 (entered or {}, "--serial")])
+    return merged
+
+
+def _one_leg_per_serial(merged: Mapping[int, Mapping[str, str]], sources) -> None:
+    """A serial names one leg: two legs given one serial (a copied row, a typo) are refused naming
+    both legs and where each got it, before anything is recorded."""
+    first: dict[str, int] = {}
+    for leg in sorted(merged):
+        serial = merged[leg].get("serial")
+        if not serial:
+            continue
+        if serial in first:
+            other = first[serial]
+            whence = {src for ident, src in sources for lg in (other, leg)
+                      if (ident.get(lg) or {}).get("serial") == serial}
+            raise InputError(f"serial {serial} is given to both leg {other} and leg {leg} (by {' and '.join(sorted(whence))}); "
+                             "a serial names one leg: correct it and run again; nothing was recorded")
+        first[serial] = leg
 
 
 def configured_serials(cfg: StationConfig) -> dict[int, str]:

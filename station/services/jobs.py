@@ -30,6 +30,70 @@ from station.services.identity import session_identity
 from station.services.wiring import Rig
 
 
+class CompensatedSweepRefused(InputError):
+    """A calibration sweep of a leg whose compensation table is active, not confirmed (nothing moved)."""
+
+
+def active_tables_now(rig: Rig, legs: Iterable[int]) -> dict[int, str]:
+    """leg -> the compensation table it applies now (procedures.acquisition.sweep.table_state),
+    for the legs of `legs` that have one active; a leg whose state cannot be read is left out
+    (the session then records "unknown (...)")."""
+    from procedures.acquisition.sweep import table_state
+
+    out = {}
+    for leg in legs:
+        if leg in rig.axes:
+            active, text = table_state(rig.axes[leg])
+            if active:
+                out[int(leg)] = text
+    return out
+
+
+def compensated_question(tables: Mapping[int, str]) -> str:
+    """The question both front ends ask before sweeping legs with an active table (the CLI at the
+    terminal or by --yes, the UI in a dialog)."""
+    which = "; ".join(f"leg {leg}: {text}" for leg, text in sorted(tables.items()))
+    return (f"A compensation table is active ({which}). A calibration measures the leg as found, with no table: "
+            "roll the table back first (station rollback, or the Compensation page). Sweep the compensated leg "
+            "anyway? The session records the active tables and is stage 'other', not an as-found calibration.")
+
+
+def compensated_refusal(tables: Mapping[int, str]) -> str:
+    legs = ", ".join(str(leg) for leg in sorted(tables))
+    return (f"leg(s) {legs}: a compensation table is active ({'; '.join(tables[k] for k in sorted(tables))}); "
+            "a calibration measures the leg as found: roll the table back first (station rollback --leg N), or "
+            "confirm the sweep of the compensated leg (station sweep --yes), recorded as stage 'other'; nothing moved")
+
+
+def check_compensation(rig: Rig, plan: SweepPlan, out: Path, resume: bool,
+                       confirm: Callable[[str], bool] | None) -> None:
+    """The one decision on a sweep of a compensated leg, for every front end (docs/compensation.md):
+    a new session on legs with an active table starts only when `confirm(question)` says yes
+    (the session then records the tables in its devices and is stage "other",
+    procedures/io/recording/stage.py); `confirm` None = nobody to ask: refused. A resumed session
+    goes on only with the tables it was started with (active or not on each leg): its points
+    would otherwise mix two states of the leg. CompensatedSweepRefused (nothing moved)."""
+    if plan.kind == "verification":  # the as-left sweep measures the compensated leg by design
+        return
+    now = active_tables_now(rig, plan.legs)
+    if resume:
+        from procedures.io.recording.stage import active_tables
+
+        recorded = active_tables(read_session(out).devices)
+        changed = sorted(leg for leg in plan.legs if (leg in now) != (leg in recorded))
+        if changed:
+            states = "; ".join(f"leg {leg}: {'table active now' if leg in now else 'no table active now'}, "
+                               f"{'one' if leg in recorded else 'none'} when the session started" for leg in changed)
+            raise CompensatedSweepRefused(f"{out}: cannot be resumed: {states}; its points would mix two states "
+                                          "of the leg: restore the table state it was started with, or sweep a new "
+                                          "session; nothing moved")
+        return
+    if not now:
+        return
+    if confirm is None or not confirm(compensated_question(now)):
+        raise CompensatedSweepRefused(compensated_refusal(now))
+
+
 def run_sweep(
     rig: Rig,
     plan: SweepPlan,
@@ -42,6 +106,7 @@ def run_sweep(
     serials: Mapping[int, Mapping[str, str]] | None = None,
     serials_file: str | None = None,
     index: bool = True,
+    confirm_compensated: Callable[[str], bool] | None = None,
 ) -> RunResult:
     """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`), and index the
     session in the station's catalog (`index` False: not, e.g. the sample sessions, which are
@@ -50,9 +115,13 @@ def run_sweep(
     `serials`: leg -> identity fields entered for this session (--serial, the Sweep page), on
     top of `serials_file` / [station] serials_file and [legs.N] (station/services/serials.py). The session
     records the identity (station/services/identity.py); the laser's calibration warnings are said at the
-    start of every session, a resumed one too."""
+    start of every session, a resumed one too.
+
+    `confirm_compensated(question) -> bool`: asked before a leg whose compensation table is
+    active is swept (check_compensation; None: such a sweep is refused, CompensatedSweepRefused)."""
     control = control or RunControl()
     out = Path(out)
+    check_compensation(rig, plan, out, resume, confirm_compensated)  # before anything is written or moves
     done: frozenset[int] = frozenset()
     session_id = uuid.uuid4().hex[:12]
     if resume:
@@ -106,18 +175,9 @@ _KIND_LIMIT = {"beam_break": "beam_retries", "drive_fault": "drive_retries"}  # 
 def parse_speed(text: str) -> float | None:
     """'max' -> None (as fast as possible); '1' -> real time; '10' -> ten times faster.
     InputError saying what to type otherwise."""
-    t = str(text).strip().lower()
-    if t in ("max", "inf", "fastest"):
-        return None
-    try:
-        value = finite_float(t)
-    except NotANumber as exc:
-        if exc.parsed is None:
-            raise InputError(f"{text!r}: give a speed factor (1 = real time, 10 = ten times faster) or 'max'") from None
-        value = exc.parsed  # NaN or inf: refused below
-    if not (math.isfinite(value) and value > 0):
-        raise InputError(f"{text!r}: the speed factor must be > 0 (or 'max')")
-    return value
+    from station.values import REPLAY_SPEED  # the one parser of a speed factor, as `station replay --speed`
+
+    return REPLAY_SPEED.parse(text)
 
 
 def retry_policy_of(session: Session, base: RetryPolicy = RetryPolicy()) -> RetryPolicy:

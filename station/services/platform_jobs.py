@@ -99,7 +99,8 @@ def model_errors(model, session, recording_path, model_path, *, measured: str | 
     `model_label` then names it in the description)."""
     check_model_legs(model, model_path or model_label or "the model")
     inputs = {
-        "model": {"path": None if model_path is None else str(model_path), "method": model.method, "source": model.source},
+        "model": {"path": None if model_path is None else str(model_path), "method": model.method, "source": model.source,
+                  "integrity": getattr(model, "integrity", "")},  # "" for a model in memory (the UI's)
         "recording": {"path": str(recording_path), "sha256": session.sha256},
         "recording_is_the_models_own": not held_out,
     }
@@ -126,7 +127,8 @@ def _table_errors(src: Path, recording, profile, measured: str | None, raw: bool
 
     inputs = {
         "table": {"path": str(src), "sha256": file_sha256(src),
-                  "step_mm": {str(leg): t.step_mm for leg, t in table.legs.items()}},
+                  "step_mm": {str(leg): t.step_mm for leg, t in table.legs.items()},
+                  "integrity": table.integrity},  # "unverified": a file without its record (docs/tables.md)
         "recording": {"path": str(rec_path), "sha256": session.sha256},
     }
     return _both_measurements(session, predicted_um, f"{rec_path} with table {src}",

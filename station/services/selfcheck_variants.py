@@ -9,7 +9,9 @@ change from pass to pass (a confounder), with one physics:
 - `backlash_position`: a reversal larger over the most-used part of the stroke (nut wear);
 - `windup`: lost motion winding up over a few millimetres after each reversal;
 - `thermal_gradient`: thermal expansion growing along the screw (error ~ position^2 while warming);
-- `clean`: none of them (and no other effect): nothing may be named.
+- `clean`: none of them (and no other effect): nothing may be named;
+- issue 35's situations (warm_reversal, stacked, reference_wobble, fleet_duplicates): made in
+  station/services/selfcheck_stacked.py.
 
 The twin is fitted on the session (even seeds) or the plant without the withheld effect (odd
 seeds). The truth carries the effect's name, its variant and the checked parameters.
@@ -22,8 +24,10 @@ from dataclasses import replace
 import numpy as np
 
 from procedures.diagnosis.selfcheck import Trial
+from station.services.selfcheck_stacked import SITUATIONS  # issue 35's situations (selfcheck_stacked.py)
 
-PHYSICS = ("backlash_temperature", "backlash_position", "windup", "thermal_gradient", "clean")
+VARIANT_PHYSICS = ("backlash_temperature", "backlash_position", "windup", "thermal_gradient", "clean")
+PHYSICS = VARIANT_PHYSICS + SITUATIONS
 BASE_SOURCES = ("lead", "longwave", "wobble", "noise", "run_offset")
 OVERRUN_MM = 2.0  # synth_session's overrun before each reversal: the wind-up's travel before the first target
 VARIANT_RMS_UM = (0.3, 1.5)  # RMS of the variant's own part (beyond the plain effect), log-uniform
@@ -67,6 +71,10 @@ def variant_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 5)
     from station.services.synth import synth_session
     from station.services.twins import plant_twin
 
+    if physics in SITUATIONS:
+        from station.services.selfcheck_stacked import situation_trial
+
+        return situation_trial(seed, physics, n_targets, cycles)
     if physics not in PHYSICS:
         raise ValueError(f"unknown physics {physics!r}; known: {', '.join(PHYSICS)}")
     rng = np.random.default_rng(20_000 + 7 * seed + PHYSICS.index(physics))

@@ -14,6 +14,7 @@ confirmation dialog).
 
 from __future__ import annotations
 
+import math
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,7 +51,16 @@ from procedures.io.recording.reader import file_sha256, read_session
 from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import ListSink, RunResult, Sink, run
 from procedures.engine.states import Action, AuditOutcome
-from procedures.compensation.table import CompTable, LegTable, make_table, read_table_csv, write_table_csv
+from procedures.compensation.table import (
+    CompTable,
+    LegTable,
+    TableIntegrityError,
+    check_covers_stroke,
+    make_table,
+    read_table_csv,
+    write_table_csv,
+)
+from procedures.io.integrity import UNVERIFIED, unverified_line
 from procedures.compensation.verify import verify_procedure
 from station import __version__
 from station.catalog.store import LOCAL_NAME, Catalog
@@ -135,7 +145,7 @@ def load_leg_table(path: str | Path, leg: int) -> tuple[LegTable, dict[str, Any]
                          "it was made for a platform with another leg count; make the table from a model of these legs")
     if leg not in table.legs:
         raise InputError(f"{path}: the table has no rows for leg {leg} (it has legs {list(table.legs)})")
-    source = {"path": str(path), "leg": leg, "sha256": file_sha256(path)}
+    source = {"path": str(path), "leg": leg, "sha256": file_sha256(path), "table_integrity": table.integrity}
     if table.serials.get(leg):
         source["leg_serial"] = table.serials[leg]  # checked by the push against the leg's serial
     return table.legs[leg], source
@@ -152,6 +162,9 @@ def push_job(axis: ServoAxis, table: LegTable, *, audit: AuditLog, drive_url: st
                                                  drive_url=drive_url, sinks=sinks, catalog=catalog,
                                                  accept_implausible=accept_implausible, table_name=table_name,
                                                  override=override)
+    if refusal is None:
+        refusal = _incomplete_refusal({axis.leg: axis}, {axis.leg: table}, {axis.leg: source}, audit=audit,
+                                      drive_url=drive_url, sinks=sinks, catalog=catalog)
     if refusal is not None:
         return refusal
     job = run_table_job(push_procedure(axis, table, confirm=confirm, drive_url=drive_url, source=checked[axis.leg],
@@ -170,6 +183,9 @@ def push_legs_job(axes: dict[int, ServoAxis], tables: dict[int, LegTable], *, au
     refusal, warnings, sources = _plausible_push(axes, tables, sources or {}, audit=audit, drive_url=drive_url,
                                                  sinks=sinks, catalog=catalog, accept_implausible=accept_implausible,
                                                  table_name=table_name, override=override)
+    if refusal is None:
+        refusal = _incomplete_refusal(axes, tables, sources, audit=audit, drive_url=drive_url, sinks=sinks,
+                                      catalog=catalog)
     if refusal is not None:
         return refusal
     job = run_table_job(push_legs_procedure(axes, tables, confirm=confirm, drive_url=drive_url, sources=sources,
@@ -194,6 +210,42 @@ def refusal_job(action: Action, leg: int, reason: BaseException | str, *, audit:
                          catalog=catalog)
 
 
+# -- integrity: a table file without its record reaches a drive only when it covers the stroke -----------
+
+def unverified_table_line(path: str | Path, tables: Mapping[int, LegTable], integrity: str) -> str | None:
+    """The one warning line for legs of a table file read without an integrity record
+    (`integrity` UNVERIFIED), else None."""
+    if integrity != UNVERIFIED:
+        return None
+    legs = ", ".join(f"leg {leg}: {t.point_count} rows {t.start_mm:+g} .. {t.end_mm:+g} mm step {t.step_mm:g} mm"
+                     for leg, t in tables.items())
+    return unverified_line(path, "table", f"{legs}; whole rows, even steps; the push checks it covers the stroke")
+
+
+def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, Any], *,
+                        audit: AuditLog, drive_url: str, sinks: Iterable[Sink], catalog: Catalog | None):
+    """A refusal job (audit line written, nothing sent to any drive) when a leg's table came from
+    a file without an integrity record and does not cover the leg's stroke by its drive's soft
+    limits (`check_covers_stroke`): a file cut after a whole row. None otherwise; a drive whose
+    limits cannot be read is left to the push, which reads them again and says why."""
+    for leg, table in tables.items():
+        source = sources.get(leg) or {}
+        if source.get("table_integrity") != UNVERIFIED or leg not in axes:
+            continue
+        try:
+            if axes[leg].table_spec() is None:
+                continue  # a drive holding no table: the push refuses that, offering the other targets
+            limits = axes[leg].limits()
+        except DriverError:
+            continue
+        try:
+            check_covers_stroke(table, limits, str(source.get("path") or "the table"))
+        except TableIntegrityError as exc:
+            return refusal_job(Action.PUSH, leg, exc, audit=audit, drive_url=drive_url, source=source, sinks=sinks,
+                               catalog=catalog)
+    return None
+
+
 # -- plausibility: a likely unit slip reaches neither a table file nor a drive unasked ------------------
 
 def implausible_corrections(model, table: CompTable) -> list[Implausible]:
@@ -210,14 +262,53 @@ def implausible_corrections(model, table: CompTable) -> list[Implausible]:
     return found
 
 
+def heldout_worse(model, table: CompTable) -> list[Implausible]:
+    """The legs of `table` whose model made the error worse on the cycles held out of its fit
+    (a negative held-out range reduction, docs/figures.md): a table from it adds error."""
+    found = []
+    for leg in table.legs:
+        stats = model.legs[leg].stats
+        pct = stats.heldout_range_reduction_pct
+        if pct is not None and pct < 0:
+            found.append(Implausible(
+                f"leg {leg}: held-out range reduction (%)", float(pct),
+                f"the model made the leg's error worse on the cycles held out of its fit (held-out range "
+                f"{stats.heldout_range_um:.3f} um against {stats.range_before_um:.3f} um before): a table from it "
+                "adds error; fit again (more cycles, another --method or --params)"))
+    return found
+
+
+def check_table_stroke(model, table: CompTable, soft_limits_mm: tuple[float, float] | None, source: str = "") -> None:
+    """InputError when a leg of `table` ends beyond the drive's soft limits (min_mm, max_mm): a
+    step that does not divide the stroke ends the table up to a step beyond it, where no drive
+    holds a table (the push would refuse it later)."""
+    if soft_limits_mm is None:
+        return
+    lo, hi = soft_limits_mm
+    for leg, t in table.legs.items():
+        if t.start_mm < lo - 1e-6 or t.end_mm > hi + 1e-6:
+            a, b = model.legs[leg].stroke_mm
+            fits = (b - a) / max(1, math.ceil((b - a) / t.step_mm - 1e-9))
+            raise InputError(
+                f"leg {leg}: a {t.step_mm:g} mm step makes the table cover {t.start_mm:+g} .. {t.end_mm:+g} mm, beyond "
+                f"the drive's soft limits {lo:+g} .. {hi:+g} mm{f' ({source})' if source else ''}; use a step that "
+                f"ends within them, e.g. {fits:.6g} mm (a whole number of steps over the {a:+g} .. {b:+g} mm stroke); "
+                "nothing was written")
+
+
 def make_checked_table(model, step_mm: float | None = None, spec: TableSpec | None = None, *,
                        legs: Iterable[int] | None = None, accept_implausible: bool = False,
-                       override: Override = Override()) -> tuple[CompTable, list[str]]:
+                       override: Override = Override(),
+                       soft_limits_mm: tuple[float, float] | None = None) -> tuple[CompTable, list[str]]:
     """The table of `model` (procedures.compensation.table.make_table) and the warning lines of what was
     accepted; ImplausibleError (nothing is made) when its corrections span far more than the
-    recorded error did, unless `accept_implausible`. Both front ends make tables through this."""
+    recorded error did, or its model made a leg worse on held-out data, unless
+    `accept_implausible`; InputError when it ends beyond `soft_limits_mm` (the drive's, when
+    known). Both front ends make tables through this."""
     table = make_table(model, step_mm, spec, legs=legs)
-    return table, settle(implausible_corrections(model, table), accept_implausible, override=override)
+    check_table_stroke(model, table, soft_limits_mm)
+    found = implausible_corrections(model, table) + heldout_worse(model, table)
+    return table, settle(found, accept_implausible, override=override)
 
 
 def check_push_values(tables: Mapping[int, LegTable], table_name: str, limits_um: Mapping[int, float], *,

@@ -125,7 +125,7 @@ def fleet_twin(leg_type: str, session, path, engine):
     and the leg's own serial left out), read from the files the catalog names. Normalised to
     20 degC when this session and every sibling carry the material temperature, else raw.
     InputError when a leg has fewer than 3 siblings (procedures/diagnosis/fleet.py)."""
-    from procedures.diagnosis.fleet import MIN_SIBLINGS, error_map, fleet_leg
+    from procedures.diagnosis.fleet import MIN_SIBLINGS, content_key, error_map, fleet_leg, independent_maps
     from procedures.diagnosis.fleet import fleet_twin as make_twin
     from procedures.metrology.thermal import normalise_session
     from procedures.io.recording.reader import read_session
@@ -159,6 +159,10 @@ def fleet_twin(leg_type: str, session, path, engine):
         raw_maps[serial] = error_map(s.points, r.leg)
         if r.leg in n.normalised:
             norm_maps[serial] = error_map(n.points, r.leg)
+    # siblings that are the same measurement under another name (by content, issue 35): counted once,
+    # or the spread shrinks and a leg lies "-352 sigma" off three copies of one session
+    raw_maps, duplicates = independent_maps(raw_maps)
+    norm_maps = {k: v for k, v in norm_maps.items() if k not in duplicates}
     here = normalise_session(session.points, session.station_config)
     legs = [int(v) for v in np.unique(session.points["leg"])]
     normalised = all(leg in here.normalised for leg in legs) and len(norm_maps) == len(raw_maps)
@@ -167,17 +171,29 @@ def fleet_twin(leg_type: str, session, path, engine):
     fleet = {}
     for leg in legs:
         own = (ids.get(leg) or {}).get("serial")
-        siblings = {k: v for k, v in maps.items() if k != own}
+        mine = content_key(error_map(session.points, leg))
+        same_as_this = sorted(k for k, v in raw_maps.items() if k != own and content_key(v) == mine)
+        for k in same_as_this:  # this very measurement under another serial: not a sibling
+            duplicates[k] = f"this session (leg {leg})"
+        siblings = {k: v for k, v in maps.items() if k != own and k not in same_as_this}
         if len(siblings) < MIN_SIBLINGS:
             raise InputError(f"--twin fleet:{leg_type}: {len(siblings)} sibling leg(s) of type {leg_type} in the catalog "
                              f"for leg {leg}" + (f" (serial {own} and this session left out)" if own else "")
-                             + f"; at least {MIN_SIBLINGS} needed" + (f"; unreadable: {'; '.join(skipped)}" if skipped else ""))
+                             + f"; at least {MIN_SIBLINGS} needed" + (f"; unreadable: {'; '.join(skipped)}" if skipped else "")
+                             + (f"; the same measurement as another counted once: {_dup_text(duplicates)}"
+                                if duplicates else ""))
         x = points["target_mm"][points["leg"] == leg]
         fleet[leg] = fleet_leg(x, siblings)
     n_sib = sorted({fl.n for fl in fleet.values()})
     basis = "normalised to 20 degC" if normalised else "raw (not every session carries the material temperature)"
     description = (f"fleet of type {leg_type}: mean error map per direction of {'/'.join(map(str, n_sib))} sibling legs "
                    f"(their last completed sessions), {basis}")
+    if duplicates:
+        description += f"; duplicates counted once: {_dup_text(duplicates)}"
     info = {"leg_type": leg_type, "basis": "normalised" if normalised else "raw", "skipped": skipped,
-            "siblings": {str(leg): fl.serials for leg, fl in fleet.items()}}
+            "siblings": {str(leg): fl.serials for leg, fl in fleet.items()}, "duplicates": duplicates}
     return make_twin(fleet, leg_type, description, normalised, info)
+
+
+def _dup_text(duplicates: dict[str, str]) -> str:
+    return ", ".join(f"{k} (same as {v})" for k, v in sorted(duplicates.items()))

@@ -469,8 +469,11 @@ class StationApp(App):
                         outcome = "aborted"
                         return
                 if job is None:
+                    # the decision on a compensated leg is the services' (check_compensation, as for
+                    # `station sweep`); the UI only asks its question, in a dialog
                     result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self, run)], control=control,
-                                       resume=resume, serials=serials)
+                                       resume=resume, serials=serials,
+                                       confirm_compensated=lambda question: self._ask_from_worker(question, control))
                 else:
                     ended = job(rig, [TuiBridge(self, run)], control)
                     result = ended.run
@@ -484,6 +487,22 @@ class StationApp(App):
         finally:
             idle.set()
             self.post_message(SweepEnded(outcome, points, error, result=ended, run=run))
+
+    def _ask_from_worker(self, question: str, control: RunControl) -> bool:
+        """Ask `question` in a dialog from a worker thread and wait for the answer (False when
+        the job is aborted meanwhile, e.g. by quitting; "Cancel" is the default)."""
+        answered = threading.Event()
+        answer: list[bool] = []
+
+        def show() -> None:
+            self.push_screen(ConfirmScreen(question, yes="Sweep the compensated leg", no="Cancel"),
+                             lambda yes: (answer.append(bool(yes)), answered.set()))
+
+        self.call_from_thread(show)
+        while not answered.wait(0.1):
+            if control.aborted:
+                return False
+        return answer[0]
 
     def start_replay(self, source: Path, speed: float | None) -> bool:
         """Replay `source` through the replay devices and the sweep procedure (station.services.jobs.

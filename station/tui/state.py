@@ -67,6 +67,9 @@ class SweepState:
     elapsed_s: float = 0.0
     eta_s: float | None = None
     result: Any = None  # what the job returned when it ended (a verification's JobOutcome)
+    # lowest and highest target of the plan (mm, from SweepStarted): the live plot's x axis spans
+    # it from the first point on (plotext alone would centre it on the first target: -45..-135)
+    target_span: tuple[float, float] | None = None
     _eta: Eta = field(default_factory=Eta)
 
     @property
@@ -90,6 +93,9 @@ class SweepState:
             self.legs = tuple(event.legs)
             self.total = event.total_points
             self.done = self.resumed_points = event.resumed_points
+            targets = (event.plan or {}).get("targets_mm") or []
+            if len(targets):
+                self.target_span = (float(min(targets)), float(max(targets)))
             if self.status != "aborting":
                 self.status = "running"
         elif isinstance(event, ev.LegStarted):

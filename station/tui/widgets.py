@@ -19,12 +19,16 @@ class XYPlot(PlotextPlot):
         self.ylabel_text = ylabel
         self.drawn_points = 0
         self.drawn_series: list[str] = []
+        self.drawn_xlim: tuple[float, float] | None = None  # the x axis span set by show(xlim=...)
 
     def on_mount(self) -> None:
         super().on_mount()
         self.show([])
 
-    def show(self, series: Sequence[tuple[str, Sequence[float], Sequence[float], str]], title: str | None = None) -> None:
+    def show(self, series: Sequence[tuple[str, Sequence[float], Sequence[float], str]], title: str | None = None,
+             xlim: tuple[float, float] | None = None) -> None:
+        """Draw `series`; `xlim` (lo, hi): the x axis spans at least that (e.g. a leg's whole
+        stroke from its first point on), else plotext fits it to the points."""
         plt = self.plt
         plt.clear_data()
         plt.clear_figure()
@@ -43,6 +47,14 @@ class XYPlot(PlotextPlot):
                 plt.scatter(list(x), list(y), label=label, marker=marker)
             n += len(x)
             names.append(label)
+        self.drawn_xlim = None
+        if xlim is not None and n:
+            xs = [float(v) for _, x, _, _ in series for v in x]
+            lo, hi = min(xlim[0], *xs), max(xlim[1], *xs)
+            if hi > lo:
+                pad = 0.02 * (hi - lo)  # the end targets' markers off the frame
+                plt.xlim(lo - pad, hi + pad)
+                self.drawn_xlim = (lo - pad, hi + pad)
         self.drawn_points = n
         self.drawn_series = names
         self.refresh()

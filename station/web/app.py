@@ -3,16 +3,20 @@
 Pages: `/` the fleet (legs, filters, pages), `/leg/SERIAL` a leg's history with plots, tables
 pushed and certificates, `/charts?type=T` control charts per leg type, `/compare` the station
 comparison. GET only; every error is an HTML page (400 bad query, 404 unknown serial or page,
-405 another method, 500 one line), never a traceback.
+405 another method, 503 catalog unreachable naming what to check, 500 one line), never a traceback
+nor a driver's message. Who may connect, and the security headers: station/web/access.py.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import logging
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import urlencode
+from urllib.parse import quote, urlencode
+
+import sqlalchemy as sa
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -23,12 +27,17 @@ from sqlalchemy.engine import Engine
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from station.catalog.history import history, legs, parse_utc
+from station.services.serials import SERIAL_RULE, is_serial
 from station.web import queries, svg
 from station.web.extensions import CHART_FIGURES, certificates_of
 
 log = logging.getLogger(__name__)
 HERE = Path(__file__).parent
 PAGE_SIZE = 50
+# the highest page number asked for: 10^6 pages of 50 legs is far beyond any fleet, and a bound
+# keeps the offset inside every database's integer (20 digits overflowed SQLite: a 500)
+MAX_PAGE = 1_000_000
+PAGE_RE = re.compile(r"[1-9][0-9]{0,6}")  # ASCII digits only: int() also takes "+1", "1_0", "١"
 CHART_POINTS = 2000  # the most recent calibrations drawn per chart (statistics use all)
 
 
@@ -48,6 +57,7 @@ class WebSettings:
     runs_dir: Path | None = None
     interval_days: int = 365
     where: str = ""  # which catalog, shown in the footer
+    check_hint: str = "check the catalog's server and --catalog / [catalog] url"  # the 503 page's advice
     page_size: int = PAGE_SIZE
 
 
@@ -57,27 +67,31 @@ def _date(name: str, text: str | None) -> str | None:
     try:
         return dt.date.fromisoformat(text).isoformat()
     except ValueError:
-        raise PageError(400, f"{name}={text!r}: not a date; give it as YYYY-MM-DD") from None
+        raise PageError(400, f"{name}={text[:40]!r}: not a date; give it as YYYY-MM-DD") from None
 
 
 def _choice(name: str, text: str | None, known: list[str]) -> str | None:
     if text in (None, ""):
         return None
     if text not in known:
-        raise PageError(400, f"{name}={text!r}: unknown {name}; known: {', '.join(known) or 'none'}")
+        raise PageError(400, f"{name}={text[:80]!r}: unknown {name}; known: {', '.join(known) or 'none'}")
     return text
 
 
 def _page(text: str | None) -> int:
     if text in (None, ""):
         return 1
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise PageError(400, f"page={text!r}: give a page number 1, 2, ...")
-    return n
+    if not PAGE_RE.fullmatch(text) or int(text) > MAX_PAGE:
+        raise PageError(400, f"page={text[:40]!r}: give a page number 1, 2, ... (at most {MAX_PAGE})")
+    return int(text)
+
+
+def _serial(text: str, what: str = "serial") -> str:
+    """`text` if it follows the station's serial grammar (station/services/serials.py), else 400:
+    a serial with '/' or '..' could name another leg's URL, so none is looked up."""
+    if not is_serial(text):
+        raise PageError(400, f"{what} {text[:80]!r} is not a serial number: {SERIAL_RULE}")
+    return text
 
 
 def _x(time_utc: str) -> float:
@@ -122,14 +136,20 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
     s = settings or WebSettings()
     app = FastAPI(title="station fleet", docs_url=None, redoc_url=None, openapi_url=None)
     templates = Jinja2Templates(directory=str(HERE / "templates"))
+    # a path segment: '/' encoded too (Jinja's urlencode keeps it, so "A/../HX-0042" would be a
+    # link the browser resolves to /leg/HX-0042)
+    templates.env.filters["segment"] = lambda v: quote(str(v), safe="")
+    templates.env.tests["serial"] = is_serial
     app.mount("/static", StaticFiles(directory=str(HERE / "static")), name="static")
 
     def page(request: Request, name: str, status_code: int = 200, **context) -> HTMLResponse:
-        context.update(where=s.where)
+        context.update(where=s.where, user=getattr(request.state, "web_user", None),
+                       role=getattr(request.state, "web_role", None))
         return templates.TemplateResponse(request, name, context, status_code=status_code)
 
     def error_page(request: Request, status: int, message: str) -> HTMLResponse:
-        titles = {400: "Bad request", 404: "Not found", 405: "Method not allowed", 500: "Error"}
+        titles = {400: "Bad request", 403: "Forbidden", 404: "Not found", 405: "Method not allowed", 500: "Error",
+                  503: "Catalog unreachable"}
         return page(request, "error.html", status, status=status, title=titles.get(status, "Error"), message=message)
 
     @app.exception_handler(PageError)
@@ -145,11 +165,19 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
     async def _validation_error(request: Request, exc: RequestValidationError):
         return error_page(request, 400, "; ".join(str(e.get("msg")) for e in exc.errors()))
 
+    @app.exception_handler(sa.exc.DBAPIError)
+    async def _database_error(request: Request, exc: sa.exc.DBAPIError):
+        # the driver's text names hosts, users and SQL: the log has it, the page says what to check
+        if isinstance(exc, (sa.exc.OperationalError, sa.exc.InterfaceError)) or exc.connection_invalidated:
+            log.warning("web: %s: catalog unreachable: %s", request.url.path, str(exc.orig).strip().splitlines()[:1])
+            return error_page(request, 503, f"the catalog ({s.where.removeprefix('catalog: ')}) does not answer; "
+                                            f"{s.check_hint}. This page works again once it answers.")
+        return await _unexpected(request, exc)
+
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception):
         log.exception("web: %s", request.url.path)
-        return error_page(request, 500, f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''} "
-                                        "(the server log has the details)")
+        return error_page(request, 500, f"an unexpected error ({type(exc).__name__}); the server log has the details")
 
     @app.get("/", response_class=HTMLResponse)
     def fleet(request: Request, type: str | None = None, station: str | None = None, since: str | None = None,
@@ -182,6 +210,7 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
 
     @app.get("/leg/{serial}", response_class=HTMLResponse)
     def leg(request: Request, serial: str):
+        _serial(serial)
         h = history(engine, serial, s.interval_days)
         if not h.rows and not h.leg_info:
             raise PageError(404, f"no leg with serial {serial!r} in the catalog")
@@ -197,7 +226,12 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
                     figures=CHART_FIGURES)
 
     @app.get("/leg/{serial}/certificate/{name}")
-    def certificate(serial: str, name: str):
+    def certificate(request: Request, serial: str, name: str):
+        _serial(serial)
+        role = getattr(request.state, "web_role", None)
+        if role is not None and role != "auditor":
+            raise PageError(403, f"certificates are downloaded by an auditor; {request.state.web_user} is a {role} "
+                                 "([web.users.NAME] role in the station config)")
         for c in certificates_of(s.runs_dir, serial):
             if c.pdf_name == name:
                 return FileResponse(c.pdf_path, media_type="application/pdf", filename=name)
@@ -217,6 +251,8 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
     def compare(request: Request, type: str | None = None, serial: str | None = None):
         types, _ = queries.filter_values(engine)
         leg_type = _choice("type", type, types)
+        if serial:
+            _serial(serial, "serial=")
         n = _page(request.query_params.get("page"))
         items, total = queries.compared_serials(engine, leg_type, serial or None, s.page_size, (n - 1) * s.page_size)
         if serial and not items:
@@ -228,4 +264,7 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         return page(request, "compare.html", items=items, total=total, types=types, leg_type=leg_type,
                     serial=serial, plots=plots, page_no=n, pages=pages)
 
+    from station.web import certificates  # noqa: PLC0415  (its routes: station/web/certificates.py)
+
+    certificates.add_routes(app, engine, page, PageError)
     return app

@@ -113,7 +113,8 @@ def test_serial_picks_latest_calibration_later_verification_and_last_push(fleet,
     rc, out2, err = _certify(capsys, fleet["files"]["cal"], "--as-left", fleet["files"]["ver"],
                              "--table", fleet["files"]["table"], "--config", cfg)
     assert rc == 0, err
-    second = json.loads(next((tmp_path / "runs" / "certificates").glob("*-0002_r1.json")).read_text())
+    (second_file,) = (tmp_path / "runs" / "certificates").glob("*-0002_r1.json")  # exactly the one meant
+    second = json.loads(second_file.read_text())
     for key in ("item", "as_found", "as_left", "compensation_table", "instrument"):
         assert second[key] == c[key], key
 

@@ -50,7 +50,8 @@ def test_ingest_twice_is_once_and_keeps_file_times(runs):
     cat = Catalog(local=runs / "catalog.sqlite", station_id="ST-A")
     n1, problems = files.index(cat, [runs])
     n2, _ = files.index(cat, [runs])
-    assert problems == [] and n1 == n2 == 5  # 3 sessions + 2 audit entries
+    # 3 sessions + 2 audit entries; the second pass reads and queues nothing it indexed already
+    assert problems == [] and n1 == 5 and n2 == 0
     assert _count(cat.engine) == 5
     times = dict(cat.engine.connect().execute(sa.text("SELECT path, time_utc FROM records WHERE kind='session'")).all())
     assert times[str((runs / "cal2.h5").resolve())] == "2026-04-11T09:30:00.000000Z"
@@ -143,7 +144,8 @@ def test_commands_history_legs_check_json(runs, tmp_path, capsys):
     os.remove(runs / "cal1.h5")
     assert main(["catalog", "check", "--config", str(cfg)]) == 1
     assert "missing: session" in capsys.readouterr().out
-    assert main(["history", "NOPE", "--config", str(cfg)]) == 1
+    assert main(["history", "NOPE", "--config", str(cfg)]) == 2  # an unknown serial: one line, as legs --type NOPE
+    assert "NOPE: no records of a leg with this serial in the catalog" in capsys.readouterr().err
 
 
 def test_an_unwritable_catalog_never_fails_the_work(runs, tmp_path, caplog):

@@ -37,9 +37,9 @@ def _config(tmp: Path, name: str, seed: int, url: str) -> Path:
     return cfg
 
 
-def _sweep(cfg: Path, out: Path) -> float:
+def _sweep(cfg: Path, out: Path, *extra: str) -> float:
     return _station("sweep", "--config", str(cfg), "--out", str(out), "--legs", "1", "--cycles", "2",
-                    "--n-targets", "5", "--dwell", "0.1")
+                    "--n-targets", "5", "--dwell", "0.1", *extra)
 
 
 def _parallel(*jobs) -> list:
@@ -89,7 +89,7 @@ def test_two_stations_one_shared_catalog_through_an_outage(tmp_path, pg_cluster,
     finally:
         pg_cluster.start()
     # the next write forwards the backlog by itself; `catalog sync` catches up the rest
-    _sweep(cfgs["a"], runs["a"] / "after.h5")
+    _sweep(cfgs["a"], runs["a"] / "after.h5", "--yes")  # leg 1 has station a's table now: a compensated sweep
     for name in cfgs:
         _station("catalog", "sync", "--config", str(cfgs[name]))
 

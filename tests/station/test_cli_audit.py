@@ -186,9 +186,9 @@ def test_since_a_later_day_shows_none(capsys, log):
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--since", "last week"], "--since last week: not a date; give it as YYYY-MM-DD"),
-    (["--last", "0"], "--last 0: give a number of operations, 1 or more"),
-    (["--leg", "9"], "--leg 9: leg numbers run from 1 to 6"),
+    (["--since", "last week"], "argument --since: 'last week' is not a date; give it as YYYY-MM-DD"),
+    (["--last", "0"], "argument --last: '0' is outside 1 .. 1000000; give a count as a whole number"),
+    (["--leg", "9"], "argument --leg: '9' is outside 1 .. 6; give a leg number"),
     (["--op", "zzzz"], "--op zzzz: no operation with that id in the audit log"),
 ])
 def test_bad_arguments_are_one_line(capsys, log, argv, words):

@@ -4,6 +4,7 @@ keeps the old files and marks them superseded; the PDF is valid, paged "x of y",
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import os
 import shutil
 import stat
@@ -42,6 +43,13 @@ def _issue(capsys, *argv) -> tuple[int, str, str]:
     rc = main(["certificate", *map(str, argv)])
     out, err = capsys.readouterr()
     return rc, out, err
+
+
+def _written_json(out: str) -> Path:
+    """The certificate JSON a run printed ("wrote X.json"); never a glob of the folder, whose order
+    is the file system's and which also holds the number index."""
+    (line,) = [ln for ln in out.splitlines() if ln.startswith("wrote ") and ln.endswith(".json")]
+    return Path(line[len("wrote "):])
 
 
 def test_certificate_content_numbering_and_revision(sessions, cfg, tmp_path, capsys):
@@ -117,7 +125,8 @@ def test_as_left_found_by_serial_when_the_leg_was_remounted(sessions, cfg, tmp_p
     moved = write_identified_session(tmp_path / "ver-at-3.h5", left, station_config={"tolerances": TOL})
     rc, out, err = _issue(capsys, sessions["found"], "--as-left", moved, "--config", cfg)
     assert rc == 0, err
-    c = json.loads(next((tmp_path / "runs" / "certificates").glob("*.json")).read_text())
+    # the certificate the command says it wrote: the folder also holds the number index (.index.json)
+    c = json.loads(_written_json(out).read_text())
     assert c["item"]["serial"] == "HX-0042" and c["item"]["leg"] == 1
     assert c["as_found"]["leg"] == 1 and c["as_left"]["leg"] == 3
     assert c["as_left"]["session_file"] == "ver-at-3.h5"

@@ -34,6 +34,7 @@ def synthetic(tmp_path_factory):
 
 def _result(tmp_path, capsys, *paths, rc: int):
     out = tmp_path / "out"
+    tmp_path.mkdir(exist_ok=True)  # --out's parent must exist (a folder output's parents are never made)
     assert main(["compare", *map(str, paths), "--out", str(out)]) == rc
     printed = capsys.readouterr().out
     assert {p.name for p in out.iterdir()} == {"compare.json", "compare.md", "compare.png"}

@@ -135,4 +135,4 @@ def test_self_check_of_the_variants_prints_a_row_per_physics_and_writes_json(tmp
 
 def test_motor_turn_must_be_positive(backlash_session, capsys):
     assert main(["diagnose", str(backlash_session), "--motor-turn-mm", "0"]) == 2
-    assert "motor_turn_mm must be positive" in capsys.readouterr().err
+    assert "argument --motor-turn-mm: '0' is outside >0 .. 100 mm" in capsys.readouterr().err

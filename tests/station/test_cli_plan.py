@@ -18,6 +18,7 @@ def sweep_args(*argv: str) -> Namespace:
 def test_the_sweep_arguments_become_a_plan_spec(tmp_path):
     assert plan_spec(sweep_args()) == PlanSpec()
     targets = tmp_path / "t.txt"
+    targets.write_text("-10\n0\n10\n")  # --targets names an existing text file (station/values.py)
     args = sweep_args("--legs", "1-3", "--plan", "iso230", "--cycles", "2", "--targets", str(targets),
                       "--dwell", "0.5", "--averaging", "0.2", "--overrun", "1")
     assert plan_spec(args) == PlanSpec(legs=(1, 2, 3), cycles=2, targets_file=targets, dwell_s=0.5,
@@ -30,8 +31,10 @@ def test_the_sweep_arguments_become_a_plan_spec(tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["--plan", "paper", "--step", "1"], "plan paper has fixed targets (361 at 0.5 mm); drop the step/targets or use plan iso230"),
-    (["--cycles", "0"], "cycles must be >= 1, got 0"),
-    (["--legs", "7"], "legs '7': leg numbers run from 1 to 6"),
+    (["--cycles", "0"], "argument --cycles: '0' is outside 1 .. 1000; give a number of cycles as a whole number "
+                        "(1 .. 1000), e.g. 5; see `station sweep --help`"),
+    (["--legs", "7"], "argument --legs: '7': leg numbers run from 1 to 6; give a leg number 1..6, a range (1-6), a "
+                      "list (1,4); see `station sweep --help`"),
 ])
 def test_a_bad_plan_is_one_line_and_exit_2_before_anything_is_written(argv, message, tmp_path, capsys):
     out = tmp_path / "o.h5"

@@ -144,7 +144,11 @@ def test_platform_refuses_a_table_without_its_recording_or_for_other_legs(sessio
     short = tmp_path / "short.csv"
     short.write_text("\n".join(line for line in lines if not line.startswith(("4,", "5,", "6,"))) + "\n")
     rc = main(["platform", str(short), "--recording", str(path), "--out", str(tmp_path / "o")])
-    err = capsys.readouterr().err
+    err = capsys.readouterr().err  # legs cut out of a station's table: its integrity record tells
+    assert rc == 2 and "short.csv: does not match its integrity record" in err and "row(s) missing" in err
+    short.write_text("\n".join(line for line in lines[1:] if not line.startswith(("4,", "5,", "6,"))) + "\n")
+    rc = main(["platform", str(short), "--recording", str(path), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err  # the same made by hand, without the record: a table for another leg count
     assert rc == 2 and "short.csv" in err and "leg count" in err and "Traceback" not in err
     rc = main(["platform", str(path), "--recording", str(path), "--out", str(tmp_path / "o")])
     assert rc == 2 and "--recording goes with" in capsys.readouterr().err
@@ -186,7 +190,9 @@ def test_platform_applies_a_model_to_the_recordings_error_on_the_models_basis(tm
         assert main(["fit", str(SAMPLE), "--out", str(model_path), *extra]) == 0
         capsys.readouterr()
         assert main(["platform", str(model_path), "--poses", "300", "--seed", "3", "--out", str(out)]) == 0
-        first = capsys.readouterr().out.splitlines()[0]
+        printed = capsys.readouterr().out.splitlines()
+        assert printed[0] == "platform: 300 poses: about 152 MB of memory and 2 s"  # the size, before the work
+        first = printed[1]
         summary = json.loads((out / "platform_summary.json").read_text())
         assert summary["inputs"]["error_basis"]["basis"] == basis
         assert first == summary["inputs"]["error_basis"]["lines"][0]

@@ -157,7 +157,9 @@ def test_a_negative_time_scale_is_one_line(command, value, tmp_path, capsys):
         ["ui", "--time-scale", value]  # refused before the terminal UI starts
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith(f"station {command}: error: --time-scale must be a number >= 0"), err
+    why = "is outside 0 .. 1000" if value == "-1" else "is not a number"
+    assert len(err) == 1 and err[0].startswith(f"station {command}: error: argument --time-scale: '{value}' {why}; "
+                                                "give a time scale as a number (0 .. 1000)"), err
     assert list(tmp_path.iterdir()) == []
 
 
@@ -171,8 +173,11 @@ def test_the_resume_hint_quotes_a_path_with_spaces():
 
 
 def test_nothing_is_left_behind_by_the_check_itself(tmp_path):
+    from procedures.engine.errors import InputError
     from procedures.io.outputs import check_output_file, check_output_folder
 
     check_output_file(tmp_path / "a.json")
-    check_output_folder(tmp_path / "new" / "report")
+    check_output_folder(tmp_path / "report")
+    with pytest.raises(InputError, match="the folder .*new does not exist; create it first"):
+        check_output_folder(tmp_path / "new" / "report")  # a folder output's parents are never made
     assert list(tmp_path.iterdir()) == [] and os.access(tmp_path, os.W_OK)

@@ -221,7 +221,7 @@ def test_cli_refuses_to_overwrite_and_checks_the_speed(recorded, tmp_path, capsy
     assert "is the recording being replayed" in capsys.readouterr().err
     assert parse_speed("max") is None and parse_speed("1") == 1.0 and parse_speed("10") == 10.0
     for bad in ("0", "-2", "fast", "nan"):
-        with pytest.raises(argparse.ArgumentTypeError, match="speed"):
+        with pytest.raises(argparse.ArgumentTypeError, match="speed factor"):
             parse_speed(bad)
 
 

@@ -21,9 +21,12 @@ def test_the_command_uses_the_shared_job_and_comparison():
 def test_one_speed_parser_for_both_front_ends_with_the_same_message():
     assert jobs.parse_speed("max") is None and jobs.parse_speed(" MAX ") is None and jobs.parse_speed("fastest") is None
     assert jobs.parse_speed("1") == 1.0 and jobs.parse_speed("2.5") == 2.5
-    for bad, message in [("fast", "'fast': give a speed factor (1 = real time, 10 = ten times faster) or 'max'"),
-                         ("0", "'0': the speed factor must be > 0 (or 'max')"),
-                         ("nan", "'nan': the speed factor must be > 0 (or 'max')")]:
+    tail = "give a speed factor as a number or 'max' or 'fastest' or 'inf' (>0 .. 1000000), e.g. 10"
+    for bad, message in [("fast", f"'fast' is not a number; {tail}"),
+                         ("0", f"'0' is outside >0 .. 1000000; {tail}"),
+                         ("nan", f"'nan' is not a number; {tail}"),
+                         ("1,5", "'1,5': a comma is not a decimal separator here (it could mean 1.5 or 15); write 1.5 "
+                                 "with a decimal point")]:
         with pytest.raises(InputError) as ui:  # what the Replay screen shows
             jobs.parse_speed(bad)
         with pytest.raises(argparse.ArgumentTypeError) as cli:  # what argparse prints for --speed

@@ -108,7 +108,7 @@ def test_station_target_push_verify_rollback_and_kill(capsys, tmp_path):
     killed = tmp_path / "killed.h5"
     proc = subprocess.Popen(
         [sys.executable, "-m", "station.cli", "sweep", "--config", cfg, "--legs", "1", "--cycles", "5",
-         "--n-targets", "21", "--time-scale", "0", "--out", str(killed)],
+         "--n-targets", "21", "--time-scale", "0", "--out", str(killed), "--yes"],  # leg 1 compensated: confirmed
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env={**os.environ, "PYTHONPATH": str(REPO)})
     progressed = threading.Event()

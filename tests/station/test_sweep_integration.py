@@ -227,13 +227,18 @@ def test_a_sweep_with_a_table_active_warns_and_records_the_table_state(rig, tmp_
     events = ListSink()
     cfg = StationConfig()
     cfg.metrology.calibration_due = "2999-01-01"  # a laser in calibration: the table's is the only warning
-    result = run_sweep(rig, PLAN, tmp_path / "t.h5", cfg, sinks=[events])
+    asked = []
+    # a calibration sweep of a compensated leg is asked first (services.jobs.check_compensation)
+    result = run_sweep(rig, PLAN, tmp_path / "t.h5", cfg, sinks=[events],
+                       confirm_compensated=lambda question: asked.append(question) or True)
     assert result.outcome == "completed"
+    assert len(asked) == 1 and asked[0].startswith("A compensation table is active (leg 1: bank")
     warnings = [m for m in events.of(ev.Message) if m.level == "warning"]
     assert len(warnings) == 1 and warnings[0].text.startswith("leg 1: a compensation table is active")
     devices = read_session(tmp_path / "t.h5").devices
     assert devices["leg1_compensation"].startswith(f"bank {bank} active, 11 points from -90.000 mm every 18 mm")
     assert "empty" in devices["leg3_compensation"]
+    assert read_session(tmp_path / "t.h5").attrs["stage"] == "other"  # not an as-found calibration
 
 
 def test_fit_warns_when_the_recording_was_made_with_a_table_active(rig, tmp_path, capsys):
@@ -245,7 +250,8 @@ def test_fit_warns_when_the_recording_was_made_with_a_table_active(rig, tmp_path
     axis.write_table(bank, TableBank(-90.0, 18.0, tuple([0.5] * 11), tuple([1.5] * 11)))
     axis.activate_table(bank)
     plan = SweepPlan("test", tuple(float(x) for x in np.linspace(-60, 60, 9)), cycles=3, legs=(1, 3))
-    assert run_sweep(rig, plan, tmp_path / "w.h5", StationConfig()).outcome == "completed"
+    assert run_sweep(rig, plan, tmp_path / "w.h5", StationConfig(),
+                     confirm_compensated=lambda question: True).outcome == "completed"
     assert main(["fit", str(tmp_path / "w.h5"), "--out", str(tmp_path / "m.json")]) == 0
     out = capsys.readouterr().out
     assert "warning: leg 3 was recorded with a compensation table active" in out

@@ -19,15 +19,27 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-class Server:
-    """uvicorn serving `app` on 127.0.0.1:port in a thread (stopped by `stop`)."""
+# a name Chromium resolves to 127.0.0.1 (--host-resolver-rules), as a DNS-rebinding attacker's
+# name would: pages reached by it must be refused by the Host check
+REBIND_NAME = "rebind.test"
 
-    def __init__(self, app) -> None:
+
+class Server:
+    """uvicorn serving `app` on 127.0.0.1 (a free port) in a thread (stopped by `stop`), behind the
+    same guard as `station web` (station/web/access.Guard: Host check, security headers, and the
+    login when `login`), on a socket bound as `station web` binds it (station/web/listen.bind)."""
+
+    def __init__(self, app, access=None, login: bool = False) -> None:
         import uvicorn
 
-        self.port = free_port()
-        self.server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="warning"))
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        from station.web.access import Guard, WebAccess
+        from station.web.listen import bind
+
+        self.sock = bind("127.0.0.1", 0)
+        self.port = self.sock.getsockname()[1]
+        guarded = Guard(app, host="127.0.0.1", port=self.port, access=access or WebAccess(), login=login)
+        self.server = uvicorn.Server(uvicorn.Config(guarded, log_level="warning"))
+        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
         self.thread.start()
         deadline = time.monotonic() + 15
         while not self.server.started:
@@ -39,6 +51,7 @@ class Server:
     def stop(self) -> None:
         self.server.should_exit = True
         self.thread.join(10)
+        self.sock.close()
 
 
 def chromium(profile: Path, downloads: Path):
@@ -51,7 +64,8 @@ def chromium(profile: Path, downloads: Path):
     opts.binary_location = CHROMIUM
     for arg in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                "--disable-dev-shm-usage", "--window-size=1300,1700", f"--user-data-dir={profile}"):
+                "--disable-dev-shm-usage", "--window-size=1300,1700", f"--user-data-dir={profile}",
+                f"--host-resolver-rules=MAP {REBIND_NAME} 127.0.0.1"):
         opts.add_argument(arg)
     opts.add_experimental_option("prefs", {"download.default_directory": str(downloads),
                                            "download.prompt_for_download": False,

@@ -3,13 +3,38 @@ written through the catalog's own API, a certificate and tolerances beside it.""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from station.catalog.store import Catalog
 from station.web.app import WebSettings, create_app
-from station.web.engine import open_readonly
+from station.web.engine import open_readonly, what_to_check
 from station.web.extensions import decision_tolerances_of, tolerances_of
 from tests.web import fleet
+from tests.web.browser import CHROMIUM, DRIVER, chromium
+
+
+def need_browser() -> None:
+    """Skip (naming why) without Chromium and chromedriver; under CI=true a failure."""
+    if CHROMIUM and DRIVER:
+        return
+    reason = "headless Chromium not installed: apt-get install chromium chromium-driver"
+    if os.environ.get("CI") == "true":
+        pytest.fail(reason)
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    """One headless Chromium per test module."""
+    need_browser()
+    downloads = tmp_path_factory.mktemp("downloads")
+    driver = chromium(tmp_path_factory.mktemp("chromium-profile"), downloads)
+    driver.set_page_load_timeout(20)
+    driver.downloads = downloads
+    yield driver
+    driver.quit()
 
 
 @pytest.fixture(scope="module")
@@ -29,5 +54,5 @@ def web_app(url: str, runs_dir, page_size: int = 2):
     engine = open_readonly(url)
     settings = WebSettings(tolerances=tolerances_of(runs_dir / "station.toml"), runs_dir=runs_dir,
                            decision_tolerances=decision_tolerances_of(runs_dir / "station.toml"),
-                           where=f"catalog: {url}", page_size=page_size)
+                           where=f"catalog: {url}", page_size=page_size, check_hint=what_to_check(url))
     return create_app(engine, settings), engine

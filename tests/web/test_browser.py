@@ -20,28 +20,8 @@ import pytest
 from station.catalog import db
 from station.catalog.store import write_recs
 from tests.web import fleet
-from tests.web.browser import CHROMIUM, DRIVER, Server, chromium
-from tests.web.conftest import web_app
-
-
-def _need_browser() -> None:
-    if CHROMIUM and DRIVER:
-        return
-    reason = "headless Chromium not installed: apt-get install chromium chromium-driver"
-    if os.environ.get("CI") == "true":
-        pytest.fail(reason)
-    pytest.skip(reason)
-
-
-@pytest.fixture(scope="module")
-def browser(tmp_path_factory):
-    _need_browser()
-    downloads = tmp_path_factory.mktemp("downloads")
-    driver = chromium(tmp_path_factory.mktemp("chromium-profile"), downloads)
-    driver.set_page_load_timeout(20)
-    driver.downloads = downloads
-    yield driver
-    driver.quit()
+from tests.web.browser import Server
+from tests.web.conftest import need_browser as _need_browser, web_app
 
 
 @pytest.fixture(scope="module", params=["sqlite", "postgresql"])

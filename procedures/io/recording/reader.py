@@ -85,6 +85,14 @@ class Session:
     """Leg, drive, station, instrument, operator (schema 1.1, /meta/identity); unknown in 1.0 files."""
 
     @property
+    def stage(self) -> str:
+        """The stage of the leg's life this session records: "as_found", "as_left" or "other"
+        (root attribute `stage`, derived for files before schema 1.2; procedures/io/recording/stage.py)."""
+        from procedures.io.recording.stage import stage_of_session
+
+        return stage_of_session(self)
+
+    @property
     def legs(self) -> list[int]:
         """Leg numbers present in `points`, ascending."""
         return sorted({int(v) for v in self.points["leg"]})
@@ -185,6 +193,11 @@ def check_file(path: str | os.PathLike) -> Superblock:
     if sb is None:
         with open(path, "rb") as fh:
             start = fh.read(200)
+        from procedures.io.integrity import file_kind, wrong_kind  # here: read only for a file that is no HDF5
+
+        other = wrong_kind(path, "session", "give the session file (HDF5) a sweep or `station import` wrote")
+        if other and file_kind(path) != "points":  # a table, model, serials list, ... given as a session: named
+            raise InputError(other)
         if b"," in start and b"\0" not in start:
             raise InputError(f"{path}: not an HDF5 file (is it a CSV? use `station import`)")
         raise InputError(f"{path}: not an HDF5 session file (no HDF5 signature); {_COPY_AGAIN}")

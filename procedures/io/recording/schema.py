@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-SCHEMA_VERSION = "1.1"  # major.minor; readers refuse another major (1.1 added /meta identity)
+SCHEMA_VERSION = "1.2"  # major.minor; readers refuse another major (1.1 added /meta identity, 1.2 the root stage)
 
 # (name, numpy type, unit) -- the unit goes into the `units_<name>` attribute
 POINT_FIELDS: list[tuple[str, str, str]] = [
@@ -89,6 +89,10 @@ ROOT_ATTRS = (
 """Root attributes of a session file, all strings. `ended_utc` and `outcome` are "" while the
 session is open or when it was cut short; `resumed_utc` is a JSON list of the UTC times at which
 the session was resumed ("[]" when never)."""
+
+OPTIONAL_ROOT_ATTRS = ("stage",)
+"""Root attributes added in 1.2: `stage`, the stage of the leg's life ("as_found", "as_left",
+"other"; procedures/io/recording/stage.py). A file without it reads it derived."""
 
 META_ATTRS = ("plan", "station_config", "devices")
 """Attributes of the /meta group: JSON text."""

@@ -32,6 +32,7 @@ import numpy as np
 
 from procedures.engine.errors import InputError, SchemaError
 from procedures.io.recording.journal import Journal
+from procedures.io.recording.stage import STAGES, session_stage
 from procedures.io.recording.schema import (
     FAULT_DTYPE,
     FAULT_UNITS,
@@ -421,6 +422,7 @@ class SessionWriter:
         fsync: bool = False,
         overwrite: bool = False,
         identity: dict | None = None,
+        stage: str | None = None,
     ) -> "SessionWriter":
         """Create a new session file at `path` and return a writer in SWMR mode.
 
@@ -428,6 +430,8 @@ class SessionWriter:
         JSON-able dicts stored as JSON text in /meta, and so is `identity` (the
         `SessionIdentity.to_json()` object, procedures/io/recording/identity.py) when given. Refuses an existing `path` unless
         `overwrite` (a finished six-hour session must not vanish under a repeated command).
+        `stage` (root attribute, schema 1.2): the stage of the leg's life the session records
+        (procedures/io/recording/stage.py); None: derived from `plan`, `devices` and `rig`.
         """
         path = Path(path)
         if path.exists() and not overwrite:
@@ -446,7 +450,12 @@ class SessionWriter:
             "ended_utc": "",
             "outcome": "",
             "resumed_utc": "[]",
+            # from what the session is created with (plan kind, tables active at the start, rig):
+            # kept across resumes, since a resume copies the root attributes
+            "stage": stage if stage is not None else session_stage(plan, devices, rig),
         }
+        if root["stage"] not in STAGES:
+            raise InputError(f"{path}: unknown stage {root['stage']!r} (one of {', '.join(STAGES)})")
         meta = {
             "plan": to_json_text("plan", plan),
             "station_config": to_json_text("station_config", station_config),

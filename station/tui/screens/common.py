@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 from rich.text import Text
 from textual import events
 from textual.app import ComposeResult
@@ -66,22 +68,57 @@ class StationFooter(Footer):
             yield widget
         self.fit(keys, force=True)  # Footer.compose has just set its own grid columns
 
+    GUTTER = 2  # cells between two columns of keys, so "h Home (0 mm)" and "r Reset fault" never touch
+
     def fit(self, keys=None, force: bool = False) -> None:
-        """Two rows (a grid of the keys) when one row of the terminal's width would cut keys off
-        (the Rig page's twelve at 80 columns), one row otherwise."""
+        """One row when the keys fit the terminal's width; else a grid of as few rows as fit
+        (two at 80 columns for the Rig page's twelve keys), each column as wide as its widest
+        key and GUTTER cells from the next, so every key is whole and apart from the next."""
         keys = list(self.query("FooterKey")) if keys is None else keys
-        # each key as drawn compact: "k description", a space after it
-        need = sum(len(k.key_display or k.key) + 1 + len(k.description) + 1 for k in keys if hasattr(k, "description"))
+        # each key as drawn compact: "k description"
+        widths = [len(k.key_display or k.key) + 1 + len(k.description) for k in keys if hasattr(k, "description")]
         width = self.app.size.width
-        two_rows = 0 < width < need
-        columns = max(1, -(-len(keys) // 2)) if two_rows else max(1, len(keys))
-        if not force and (two_rows, columns) == getattr(self, "_fitted", None):
+        rows = 1
+        if 0 < width < sum(w + self.GUTTER for w in widths):  # one row: each key GUTTER cells from the next
+            for rows in (2, 3, 4):
+                columns = -(-len(widths) // rows)
+                # the grid fills row by row: column j holds keys j, j + columns, ...
+                need = sum(max(widths[j::columns]) for j in range(columns)) + self.GUTTER * (columns - 1)
+                if need <= width:
+                    break
+        columns = max(1, -(-len(keys) // rows))
+        if not force and (rows, columns) == getattr(self, "_fitted", None):
             return  # as laid out: no new layout (the keys stay where they are)
-        self._fitted = (two_rows, columns)
-        self.set_class(two_rows, "-two-rows")
-        self.styles.layout = "grid" if two_rows else "horizontal"
+        self._fitted = (rows, columns)
+        self.set_class(rows > 1, "-two-rows")
+        self.styles.layout = "grid" if rows > 1 else "horizontal"
         self.styles.grid_size_columns = columns
-        self.styles.height = 2 if two_rows else 1
+        self.styles.height = rows
+
+
+class FieldRefusal(Static):
+    """The refusals of the value fields `fields` (ids of station.tui.fields.ValueField), in red
+    under them: what is wrong and what to type, as the command line says it. Hidden while every
+    one of them reads. The page re-checks it on each key typed (StationScreen.on_input_changed)."""
+
+    DEFAULT_CSS = "FieldRefusal { height: auto; color: $error; }"
+
+    def __init__(self, *fields: str, **kwargs) -> None:
+        super().__init__("", markup=False, **kwargs)
+        self.fields = fields
+
+    def on_mount(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        texts = []
+        for wid in self.fields:
+            for field in self.screen.query(f"#{wid}"):
+                refusal = getattr(field, "refusal", "")
+                if refusal and not field.disabled:
+                    texts.append(refusal)
+        self.update("\n".join(texts))
+        self.display = bool(texts)
 
 
 class StationScreen(Screen):
@@ -92,6 +129,89 @@ class StationScreen(Screen):
     # Focus a table or button, not a text field, so the letter keys in the footer act at once.
     AUTO_FOCUS = "DataTable, Button"
     BINDINGS = [Binding("escape", "leave_field", "Leave field", show=False)]
+    # Keys that act on the rig (connect, enable, move, start a sweep, push a table): the names of
+    # their actions on this page. Such a key acts only when it is pressed on its own (docs/tui.md,
+    # "Keys"): not within STRAY_HOLD_S after a key this page does not bind (typing meant for a
+    # field: "abc" must not press c) or after a text field lost the focus, and not when another
+    # key follows it within ALONE_S ("hello" must not home a leg; "-25" must not jog). The same
+    # key pressed again and again (+ + + to jog) acts each time. Stop, abort and quit never wait.
+    RIG_KEYS: frozenset[str] = frozenset()
+    STRAY_HOLD_S = 1.0
+    ALONE_S = 0.3
+
+    # -- keys act only when pressed on their own (RIG_KEYS) ----------------------------------------
+    _stray_at = -1e9  # time.monotonic() of the last key typed outside a field that this page does not bind
+    _stray_text = ""  # those keys, for the notification
+    _pending = None  # (key, binding, timer) of a rig key waiting ALONE_S to act
+
+    def _binding_for(self, event: events.Key):
+        for _node, bindings in self._modal_binding_chain:
+            for key in (event.key, *event.aliases):
+                for binding in bindings.key_to_bindings.get(key, ()):
+                    return binding
+        return None
+
+    @staticmethod
+    def _action_name(action: str) -> str:
+        return action.split("(", 1)[0].removeprefix("app.").removeprefix("screen.")
+
+    def on_key(self, event: events.Key) -> None:
+        """Keys that reached the page (a text field keeps what it takes): a rig key waits to see
+        whether it was pressed on its own; any other key typed here counts as stray typing."""
+        now = time.monotonic()
+        binding = self._binding_for(event)
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            key, pending_binding, timer = pending
+            timer.stop()
+            if key == event.key:  # the same key again (+ + +): the first acts now
+                self._run_binding(pending_binding)
+            else:  # another key within ALONE_S: the rig key was part of a word typed here
+                self._stray_at, self._stray_text = now, (self._stray_text + key)[-12:]
+                self._ignored(key, pending_binding, "another key followed it at once")
+        if binding is None:
+            if event.is_printable:
+                if now - self._stray_at > self.STRAY_HOLD_S:
+                    self._stray_text = ""
+                self._stray_at, self._stray_text = now, (self._stray_text + (event.character or ""))[-12:]
+            return
+        if self._action_name(binding.action) not in self.RIG_KEYS:
+            return
+        event.stop()
+        event.prevent_default()  # the app's binding does not run now: it runs from here, or not at all
+        if now - self._stray_at <= self.STRAY_HOLD_S:
+            self._stray_at = now  # still typing
+            self._ignored(event.key, binding, "it came right after typing outside a field"
+                          + (f" ({self._stray_text})" if self._stray_text.strip() else ""))
+            return
+        timer = self.set_timer(self.ALONE_S, lambda: self._alone(event.key))
+        self._pending = (event.key, binding, timer)
+
+    def _alone(self, key: str) -> None:
+        pending = self._pending
+        if pending is not None and pending[0] == key:
+            self._pending = None
+            self._run_binding(pending[1])
+
+    def _run_binding(self, binding) -> None:
+        # from the page's message queue, as a key's binding runs (a dialog it opens is the page's)
+        self.call_later(self.run_action, binding.action)
+
+    def _ignored(self, key: str, binding, why: str) -> None:
+        shown = binding.key_display or key
+        self.notify(f"{shown} ({binding.description}) ignored: {why}. Nothing was done; press {shown} on its own "
+                    "to do it (Esc leaves a text field).", title="Key ignored", severity="warning", timeout=6)
+
+    def on_descendant_blur(self, event: events.DescendantBlur) -> None:
+        from textual.widgets import Input
+
+        if isinstance(event.widget, Input):  # the next letters may still be meant for the field
+            self._stray_at = time.monotonic()
+
+    def on_screen_suspend(self) -> None:
+        pending, self._pending = self._pending, None
+        if pending is not None:  # a dialog or another page came first: the key does nothing
+            pending[2].stop()
 
     def action_leave_field(self) -> None:
         """Leave a text field (Esc) so the letter keys act again."""
@@ -135,6 +255,11 @@ class StationScreen(Screen):
         before, self._fitted = self._fitted, tuple(self.app.size)
         if before is not None and before != self._fitted:
             self.size_changed()
+
+    def on_input_changed(self, event) -> None:
+        # a value field's refusal line follows each key typed (a subclass's own handler runs too)
+        for line in self.query(FieldRefusal).results(FieldRefusal):
+            line.check()
 
     def size_changed(self) -> None:
         """Hook: the terminal has another size (`self.narrow`, `self.short`; e.g. the columns of

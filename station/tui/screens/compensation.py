@@ -18,8 +18,10 @@ from textual.binding import Binding
 from textual.containers import Horizontal, VerticalScroll
 from textual.widgets import Button, DataTable, Input, Label, Static
 
+from station import values
 from station.tui.errors import describe
-from station.tui.screens.common import ConfirmScreen, StationScreen
+from station.tui.fields import ValueField
+from station.tui.screens.common import ConfirmScreen, FieldRefusal, StationScreen
 from station.tui.screens.compensation_controller import (
     UI_OVERRIDE,
     CompensationController,
@@ -30,9 +32,26 @@ from station.tui.screens.compensation_controller import (
 from station.tui.screens.compensation_widgets import AuditTail, DriveTable, LegTablesView, TablePlots
 
 
+def verdict_line(leg: int, result) -> str:
+    """One line: the verification's verdict for `leg` (procedures.compensation.verify's
+    LegVerification `result`): pass or above the limit, the ratio, the range reduction."""
+    from procedures.compensation.verify import ACCEPT_RATIO
+
+    ratio = result.ratio
+    if ratio is None:
+        head = f"[yellow b]leg {leg} verification: no verdict[/yellow b] (no repeat passes)"
+    elif result.passed:
+        head = f"[green b]leg {leg} verification: PASS[/green b], ratio {ratio:.3f} (limit {ACCEPT_RATIO:g})"
+    else:
+        head = f"[red b]leg {leg} verification: ABOVE the limit[/red b], ratio {ratio:.3f} (limit {ACCEPT_RATIO:g})"
+    red = result.range_reduction_pct
+    return head + (f", range reduction {red:.1f} %" if red is not None else "") + "; report below"
+
+
 class CompensationScreen(StationScreen):
     MODE = "compensation"
     PAGE_HELP = "table = model resampled on a fixed step (error µm, the drive subtracts it); compare, push, verify"
+    RIG_KEYS = frozenset({"push", "push_all", "rollback", "verify"})  # act only when pressed on their own
     BINDINGS = [
         Binding("t", "make_table", "Make table"),
         Binding("g", "read_drives", "Read drives"),
@@ -48,10 +67,15 @@ class CompensationScreen(StationScreen):
         yield from self.compose_header()
         with VerticalScroll(id="comp-body"):  # a verification report can push the plots below, a scroll away
             yield Static("", id="comp-source", classes="status")
+            # the last verification's verdict, on top: its report (below the table) runs past the
+            # bottom of an 80x24 terminal
+            yield Static("", id="comp-verdict", classes="status")
             with Horizontal(classes="controls split-controls"):  # one row, or two on a narrow terminal
                 with Horizontal(classes="control-group"):
                     yield Label("Step mm ")
-                    yield Input("", id="comp-step", placeholder="auto", type="number", compact=True)
+                    yield ValueField("", id="comp-step", kind=values.STEP_MM, where="step", blank=None,
+                                     placeholder="auto", compact=True,
+                                     tooltip="table step, mm (blank: the recording's spacing), as station table --step")
                     yield Button("Make (t)", id="comp-make", compact=True, variant="success")
                     yield Button("Read drives (g)", id="comp-read", compact=True)
                     yield Button("CSV (w)", id="comp-save", compact=True)
@@ -60,6 +84,7 @@ class CompensationScreen(StationScreen):
                     yield Button("All… (U)", id="comp-push-all", compact=True, variant="error")
                     yield Button("Verify (v)", id="comp-verify", compact=True)
                     yield Button("Rollback… (b)", id="comp-rollback", compact=True)
+            yield FieldRefusal("comp-step", id="comp-step-refusal")
             yield LegTablesView(id="comp-table")
             yield Static("", id="comp-status", classes="status")
             yield AuditTail("", id="comp-audit", classes="status")
@@ -73,6 +98,7 @@ class CompensationScreen(StationScreen):
         self.drive_tables: dict[int, DriveTable] = {}
         self.plot_leg: int | None = None
         self.verify_text = ""
+        self.verdict_text = ""  # the last verification's verdict, one line (verdict_line)
         self.slip_text = ""  # a unit-slip refusal, or the warnings of what the user accepted
         self._show()
 
@@ -107,10 +133,9 @@ class CompensationScreen(StationScreen):
         if a is None:
             self.notify("No model yet: fit one on the Results screen (F3, then f).", severity="warning")
             return
-        text = self.query_one("#comp-step", Input).value.strip()
         refused = None
         try:
-            step = float(text) if text else None
+            step = self.query_one("#comp-step", ValueField).read()  # station table --step's parser
             table, warnings = make_checked_table(a.model, step, self._spec(), accept_implausible=accept_implausible,
                                                  override=UI_OVERRIDE)
             # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s
@@ -122,7 +147,7 @@ class CompensationScreen(StationScreen):
             self.slip_text = f"table refused: {exc}"
         except ValueError as exc:
             self.table = None
-            self.notify(describe(exc, "cannot make the table"), severity="error", timeout=12)
+            self.notify(escape(describe(exc, "cannot make the table")), severity="error", timeout=12)
         self.table_model_id = id(a.model)
         self._show()
         if refused is not None:
@@ -269,6 +294,7 @@ class CompensationScreen(StationScreen):
         verified = job.of(ev.Verified)[-1]
         result = verified.results[message.leg]
         self.verify_text = verified.report + _as_left_text(verified.session.get("path"))
+        self.verdict_text = verdict_line(message.leg, result)
         line = next((e.entry.message for e in job.of(ev.AuditRecord) if e.entry.leg == message.leg), "")
         self.notify(line, title="Verify", severity="information" if result.passed else "warning", timeout=12)
         self._show()
@@ -305,6 +331,9 @@ class CompensationScreen(StationScreen):
         else:
             src.update(f"model: [b]{a.method}[/b] fitted on {a.path.name}"
                        + (f" (saved {a.model_path.name})" if a.model_path else "") + self._targets_text())
+        verdict = self.query_one("#comp-verdict", Static)
+        verdict.update(self.verdict_text)
+        verdict.display = bool(self.verdict_text)
         self.query_one(LegTablesView).show(self.table, self.drive_tables)
         self.query_one("#comp-status", Static).update("\n".join(t for t in (escape(self.slip_text), self.verify_text.rstrip()) if t))
         self._show_audit()

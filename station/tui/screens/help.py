@@ -80,7 +80,8 @@ def key_lines(app, bindings: list[Binding]) -> list[str]:
         if not b.description:
             continue
         shown = key_display(app, b)
-        group = keys.setdefault((b.action, b.description), [])
+        # the longer words of a key whose footer label is short (Results: t "Raw/20 °C")
+        group = keys.setdefault((b.action, b.tooltip or b.description), [])
         if shown not in group:
             group.append(shown)
     return [_item(" / ".join(k), desc) for (_, desc), k in keys.items()]

@@ -18,14 +18,18 @@ from typing import Any
 
 import numpy as np
 from textual import work
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Static
 
+from procedures.engine.errors import InputError
+from station import values
 from station.tui.errors import describe
-from station.tui.screens.common import StationScreen
+from station.tui.fields import FIELD_KINDS, ValueField
+from station.tui.screens.common import FieldRefusal, StationScreen
 from station.tui.widgets import XYPlot, columns_fit, set_columns
 
 DEFAULT_POSES = 2000
@@ -200,17 +204,26 @@ class PlatformScreen(StationScreen):
         with VerticalScroll(id="plat-body"):  # on a short terminal the histograms are below, a scroll away
             with Horizontal(classes="controls", id="plat-inputs"):
                 yield Label("Compensation ")
-                yield Input(placeholder="TABLE.csv or MODEL.json (empty: model on F3)", id="plat-comp",
-                            compact=True)
+                # placeholders short enough for the field at 80 columns; the tooltips say the rest
+                yield Input(placeholder="TABLE.csv or MODEL.json", id="plat-comp", compact=True,
+                            tooltip="a compensation table (TABLE.csv) or a model (MODEL.json); empty: the model on "
+                                    "Results (F3)")
                 yield Label(" Recording ")
-                yield Input(placeholder="FILE.h5 (empty: session on F3)", id="plat-recording", compact=True)
+                yield Input(placeholder="FILE.h5 (empty: on F3)", id="plat-recording", compact=True,
+                            tooltip="the session (FILE.h5) the table or model was made from; empty: the session on "
+                                    "Results (F3)")
             with Horizontal(classes="controls", id="plat-controls"):
                 yield Label("Poses ")
-                yield Input(str(DEFAULT_POSES), id="plat-poses", type="integer", compact=True)
+                yield ValueField(str(DEFAULT_POSES), id="plat-poses", kind=FIELD_KINDS["plat-poses"][0], where="poses",
+                                 blank=DEFAULT_POSES, compact=True,
+                                 tooltip=f"random poses (blank: {DEFAULT_POSES}), as station platform --poses")
                 yield Label(" Seed ")
-                yield Input(str(DEFAULT_SEED), id="plat-seed", type="integer", compact=True)
+                yield ValueField(str(DEFAULT_SEED), id="plat-seed", kind=values.SEED, where="seed",
+                                 blank=DEFAULT_SEED, compact=True,
+                                 tooltip=f"random seed (blank: {DEFAULT_SEED}), as station platform --seed")
                 yield Button("Run (p)", id="plat-run", compact=True, variant="success")
                 yield Button("Write report (w)", id="plat-write", compact=True)
+            yield FieldRefusal("plat-poses", "plat-seed", id="plat-refusal")
             yield Static("", id="plat-status", classes="status")
             yield DataTable(id="plat-table", cursor_type="none", zebra_stripes=True)
             yield DataTable(id="plat-legs", cursor_type="row", zebra_stripes=True)
@@ -245,24 +258,19 @@ class PlatformScreen(StationScreen):
         event.stop()
         self.action_run()
 
-    def _number(self, widget_id: str, name: str, default: int, least: int) -> int | None:
-        text = self.query_one(widget_id, Input).value.strip()
-        if not text:
-            return default
+    def _number(self, widget_id: str) -> int | None:
+        """The value of the ValueField `widget_id` (its kind's parser, the command line's), or None
+        after saying (in a notification; under the fields too) what is wrong and what to type."""
         try:
-            value = int(text)
-        except ValueError:
-            value = None
-        if value is None or value < least:
-            self.notify(f"{name} must be a whole number of at least {least}, got {text!r}.", title="Platform",
-                        severity="error", timeout=10)
+            return self.query_one(widget_id, ValueField).read()
+        except InputError as exc:
+            self.notify(escape(f"{exc}; nothing run"), title="Platform", severity="error", timeout=10)
             return None
-        return value
 
     def _request(self) -> PlatformRequest | None:
         """The run the fields ask for, or None (after saying what is missing)."""
-        poses = self._number("#plat-poses", "Poses", DEFAULT_POSES, 1)
-        seed = self._number("#plat-seed", "Seed", DEFAULT_SEED, 0)
+        poses = self._number("#plat-poses")
+        seed = self._number("#plat-seed")
         if poses is None or seed is None:
             return None
         comp_text = self.query_one("#plat-comp", Input).value.strip()

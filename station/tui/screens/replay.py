@@ -13,15 +13,18 @@ from __future__ import annotations
 from pathlib import Path
 
 from textual import work
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Static
 
+from procedures.engine.errors import InputError
 from station.tui import capabilities
 from station.tui.errors import describe
-from station.tui.screens.common import StationScreen
+from station.tui.fields import FIELD_KINDS, ValueField
+from station.tui.screens.common import FieldRefusal, StationScreen
 from station.tui.widgets import SessionPicker, fit_columns, sample_folders
 
 
@@ -78,11 +81,13 @@ class ReplayScreen(StationScreen):
             yield SessionPicker(lambda: [*sample_folders(), self.app.cfg.recordings_dir], id="replay-picker")
             with Horizontal(classes="controls"):
                 yield Label("Speed ")
-                yield Input("max", id="replay-speed", compact=True,
-                            tooltip="1 = real time, N = N times faster, max = as fast as possible")
+                yield ValueField("max", id="replay-speed", kind=FIELD_KINDS["replay-speed"][0], where="speed", blank=None,
+                                 compact=True, tooltip="1 = real time, N = N times faster, max (or blank) = as fast "
+                                                       "as possible, as station replay --speed")
                 yield Button("Replay (r)", id="replay-run", compact=True, variant="success")
                 yield Button("Open in Results (o)", id="replay-results", compact=True)
                 yield Button("Diagnose (d)", id="replay-diagnose", compact=True)
+            yield FieldRefusal("replay-speed", id="replay-speed-refusal")
             yield Static("choose a session above (sample sessions live in recordings/)", id="replay-info", classes="status")
             yield DataTable(id="replay-faults", cursor_type="row", zebra_stripes=True)
         yield from self.compose_footer()
@@ -248,12 +253,10 @@ class ReplayScreen(StationScreen):
             self.notify(capabilities.missing_text("replay", "Replay through the drivers"),
                         title="Replay", severity="warning", timeout=12)
             return
-        from station.services.jobs import parse_speed
-
-        try:
-            speed = parse_speed(self.query_one("#replay-speed", Input).value)
-        except Exception as exc:  # InputError: the message says what to type
-            self.notify(f"Speed {exc}", title="Replay", severity="error", timeout=10)
+        try:  # the kind of station replay --speed (station.tui.fields.FIELD_KINDS)
+            speed = self.query_one("#replay-speed", ValueField).read()
+        except InputError as exc:  # the message names the field and says what to type
+            self.notify(escape(f"{exc}; nothing replayed"), title="Replay", severity="error", timeout=10)
             return
         if self.app.start_replay(self.session_path, speed):
             self.replay_source, self.replayed, self.replayed_path = self.session_path, None, None

@@ -46,8 +46,11 @@ COLUMNS = [
       "A", "E", "M", "B", "R"), None),
     (("Leg", "Points", "Cycles", "Noise floor", "Held-out RMS", "Ratio", "Range → held-out",
       "A", "E", "M", "B", "R"), None),
-    (("Leg", "A", "E", "M", "B", "R", "HO RMS", "Noise", "Ratio", "Range → HO", "Points", "Cycles"),
-     (0, 7, 8, 9, 10, 11, 4, 3, 5, 6, 1, 2)),
+    # 80 columns: the range before → held-out range on two lines (cell 12), beside the ISO figures,
+    # so it is whole on screen with the held-out RMS, noise floor and ratio (points, cycles: a
+    # sideways scroll away)
+    (("Leg", "A", "E", "M", "B", "R", "Range→HO", "HO RMS", "Noise", "Ratio", "Points", "Cycles"),
+     (0, 7, 8, 9, 10, 11, 12, 4, 3, 5, 1, 2)),
 ]
 METHODS = [("default (bidirectional, cross-validated)", "default"), ("paper (Fourier, Algorithm 1)", "paper")]
 
@@ -177,8 +180,8 @@ class ResultsScreen(StationScreen):
         Binding("ctrl+o", "open_session", "Open", key_display="^o"),
         Binding("f", "fit", "Fit"),
         Binding("m", "toggle_method", "Method"),
-        # the footer has no room left at 80 columns (it would push Quit out): the status names the key
-        Binding("t", "toggle_basis", "Error raw / normalised to 20 °C (--raw)", show=False),
+        # short in the footer (two rows at 80 columns), the help gives the tooltip's words
+        Binding("t", "toggle_basis", "Raw/20 °C", tooltip="Error raw / normalised to 20 °C (--raw)"),
         Binding("l", "next_leg", "Next leg"),
         Binding("w", "save_model", "Save model"),
         Binding("r", "write_report", "Report"),
@@ -506,11 +509,12 @@ class ResultsScreen(StationScreen):
                 _fmt(ratio, ".2f") if ratio is not None else "n/a",
                 f"{st.range_before_um:.2f} → {_fmt(st.heldout_range_um, '.2f')}",
                 *(_with_u(iso.get(k), iso_u.get(k)) for k in "AEMBR"),
+                f"{st.range_before_um:.2f} →\n{_fmt(st.heldout_range_um, '.2f')}",  # cell 12: the narrow table's
             )
         # two-line cells (value over ±U): the columns are as wide as their widest line
         widths = [[_widest_line(c) for c in cells] for cells in rows.values()]
         order = fit_columns(table, COLUMNS, widths, self.app.size.width - 2)
-        height = 2 if any("\n" in c for cells in rows.values() for c in cells) else 1
+        height = 2 if any("\n" in cells[i] for cells in rows.values() for i in order) else 1
         for leg, cells in rows.items():
             table.add_row(*(cells[i] for i in order), key=str(leg), height=height)
         self._show_plots()

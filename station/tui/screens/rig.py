@@ -15,21 +15,24 @@ page checks what it can first (the numbers typed, the soft limits of the last po
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from rich.markup import escape
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Select, Static
 
 from station.services.devices import DriveLimits, DriveStatus, Environment, Reading
+from procedures.engine.errors import InputError
+from station import values
 from station.tui.errors import describe
+from station.tui.fields import ValueField
 from station.tui.messages import RigStateChanged, SweepChanged
-from station.tui.screens.common import StationScreen
+from station.tui.screens.common import ConfirmScreen, StationScreen
 from station.tui.widgets import set_columns, wrap_items
 
 DRIVE_COLUMNS = ("Leg", "State", "Position mm", "Moving", "Foll. err um", "Load N", "Table", "Fault")
@@ -50,9 +53,19 @@ JOG_STEPS_MM = (0.1, 1.0, 10.0)
 MOTION_ACTIONS = frozenset({"move", "jog", "next_step", "leg_action"})
 
 
-class MoveField(Input):
-    """A number field of the move bar. It does not claim the x key (a number has no x), so
-    Stop all (x, a priority key of the page) acts while the technician types a target."""
+def target_kind(lim: DriveLimits | None, leg: int = 0) -> values.Kind:
+    """A motion target's kind: a position (station.values.POSITION_MM, the command line's)
+    within leg `leg`'s soft limits `lim` when they have been read (the refusal names them)."""
+    if lim is None:
+        return values.POSITION_MM
+    kind = values.POSITION_MM.bounded(max(lim.min_mm, values.POSITION_MM.lo), min(lim.max_mm, values.POSITION_MM.hi))
+    return replace(kind, name=f"a position within leg {leg}'s soft limits")
+
+
+class MoveField(ValueField):
+    """A number field of the move bar (a ValueField: read by the kind's parser, every character
+    typed kept). It does not claim the x key (a number has no x), so Stop all (x, a priority key
+    of the page) acts while the technician types a target."""
 
     def check_consume_key(self, key: str, character: str | None) -> bool:
         return key != "x" and super().check_consume_key(key, character)
@@ -84,8 +97,10 @@ class RigScreen(StationScreen):
     MODE = "rig"
     snapshot: RigSnapshot | None = None  # the last poll shown
     PAGE_HELP = "drive state per leg, interferometer, environment; select a leg row, then act on it: enable, move, jog; x stops"
+    # the keys that act on the rig act only when pressed on their own (StationScreen.RIG_KEYS)
+    RIG_KEYS = frozenset({"connect", "leg_action", "move", "jog"})
     BINDINGS = [
-        Binding("c", "app.connect", "Connect"),
+        Binding("c", "connect", "Connect"),
         Binding("e", "leg_action('enable')", "Enable"),
         Binding("d", "leg_action('disable')", "Disable"),
         Binding("h", "leg_action('home')", "Home (0 mm)"),
@@ -108,11 +123,13 @@ class RigScreen(StationScreen):
                 with Horizontal(id="move-to", classes="move-group"):
                     yield Label("leg 1", id="move-leg")
                     yield Label(" to ")
-                    yield MoveField("", id="move-target", type="number", placeholder="target", compact=True,
-                                tooltip="target position, mm (0 = mid-stroke); Enter moves")
+                    yield MoveField("", id="move-target", kind=values.POSITION_MM, where="leg 1 target", blank=None,
+                                    placeholder="target", compact=True,
+                                    tooltip="target position, mm (0 = mid-stroke, a decimal point: 1.5); Enter moves")
                     yield Label(" mm at ")
-                    yield MoveField("", id="move-speed", type="number", placeholder="default", compact=True,
-                                tooltip="speed, mm/s; blank: a safe fraction of the drive's maximum")
+                    yield MoveField("", id="move-speed", kind=values.SPEED_MM_S, where="speed", blank=None,
+                                    placeholder="default", compact=True,
+                                    tooltip="speed, mm/s; blank: a safe fraction of the drive's maximum")
                     yield Label(" mm/s ")
                     yield Button("Move (m)", id="move", compact=True, variant="primary")
                 with Horizontal(id="move-jog", classes="move-group"):
@@ -272,31 +289,63 @@ class RigScreen(StationScreen):
             self._show_snapshot(self.snapshot)
 
     def _show_motion(self) -> None:
-        """The move bar's leg, default speed and the line under it: the selected leg's soft
-        limits and speeds, the move under way, or how the last one ended."""
+        """The move bar's leg, default speed and the line under it: what Enter would do (the
+        target typed, with the leg's soft limits, before anything moves) or why it is refused,
+        the move under way, or the leg's soft limits and how the last move ended."""
         from station.services.rig_session import JOG_SPEED_FRACTION
 
         app = self.app
         leg = self.selected_leg()
         self.query_one("#move-leg", Label).update(f"[b]leg {leg}[/b]")
         lim = self.snapshot.limits.get(leg) if self.snapshot is not None else None
-        speed = self.query_one("#move-speed", Input)
+        speed = self.query_one("#move-speed", MoveField)
+        target = self.query_one("#move-target", MoveField)
+        # the target's kind: a position within this leg's soft limits once they are read (the
+        # worker checks them on the drive again before it moves)
+        target.set_kind(target_kind(lim, leg), f"leg {leg} target")
         if lim is not None:
             speed.placeholder = f"{JOG_SPEED_FRACTION * lim.max_velocity_mm_s:g}"
-            limits = (f"leg {leg}: soft limits {lim.min_mm:+.3f} .. {lim.max_mm:+.3f} mm, max {lim.max_velocity_mm_s:g} "
+            limits_short = f"soft limits {lim.min_mm:+.3f} .. {lim.max_mm:+.3f} mm"
+            limits = (f"leg {leg}: {limits_short}, max {lim.max_velocity_mm_s:g} "
                       f"mm/s (blank speed: {JOG_SPEED_FRACTION * lim.max_velocity_mm_s:g} mm/s)")
         else:
             speed.placeholder = "default"
+            limits_short = "soft limits not read yet: the drive checks them before it moves"
             limits = (f"leg {leg}: soft limits not read yet (blank speed: {JOG_SPEED_FRACTION:.0%} of the drive's "
                       "maximum)")
+        preview = self.move_preview(leg, limits_short)
         if app.rig_motion:
             moving = "; ".join(f"leg {n} moving {m.describe()}" for n, m in app.rig_motion.items())
             text = f"[yellow b]{moving}…[/yellow b]  x stops it"
+        elif preview:
+            text = preview + (f"\n[dim]last move:[/dim] {app.rig_motion_text}" if app.rig_motion_text else "")
         elif app.rig_motion_text:
             text = f"{limits}\n[dim]last move:[/dim] {app.rig_motion_text}"
         else:
             text = limits
         self.query_one("#move-status", Static).update(text)
+
+    def move_preview(self, leg: int, limits_text: str) -> str:
+        """The line shown while a target is typed: what Enter (or m) would do, "leg 1 → +1.500 mm
+        at 5 mm/s (soft limits -95.000 .. +95.000 mm)", or the refusal of the target or speed
+        typed (red, the parser's message naming the field and what to type). '' when both are
+        blank."""
+        target = self.query_one("#move-target", MoveField)
+        speed = self.query_one("#move-speed", MoveField)
+        if not target.value.strip() and not speed.value.strip():
+            return ""
+        refused = [r for r in (target.refusal, speed.refusal) if r]
+        if refused:
+            return "[red]" + escape("; ".join(refused)) + "[/red]"
+        position, mm_s = target.read(), speed.read()
+        at = f"at {mm_s:g} mm/s" if mm_s is not None else "at the default speed"
+        if position is None:
+            return f"leg {leg}: type a target in mm to move it {at} ({limits_text})"
+        return f"[b]leg {leg} → {position:+.3f} mm[/b] {at} ({limits_text}): Enter or m moves it"
+
+    def on_input_changed(self, event: Input.Changed) -> None:
+        if event.input.id in ("move-target", "move-speed"):
+            self._show_motion()
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         if event.data_table.id == "drives":
@@ -307,41 +356,25 @@ class RigScreen(StationScreen):
         table = self.query_one("#drives", DataTable)
         return self.app.legs[max(table.cursor_row, 0)]
 
-    def _number(self, wid: str, what: str) -> float | None:
-        """The number in field `wid` (None if blank); ValueError naming `what` otherwise."""
-        text = self.query_one(f"#{wid}", Input).value.strip()
-        if not text:
-            return None
-        try:
-            value = float(text)
-        except ValueError:
-            raise ValueError(f"{what}: {text!r} is not a number") from None
-        if not math.isfinite(value):
-            raise ValueError(f"{what}: {text!r} is not a finite number")
-        return value
-
     def move_request(self, step_mm: float | None = None):
-        """The MoveRequest the fields ask for (a jog by `step_mm` when given), checked as far as
-        the page can (numbers, speed > 0, the target within the last poll's soft limits);
-        ValueError saying what is wrong. The worker checks the target against the drive again."""
+        """The MoveRequest the fields ask for (a jog by `step_mm` when given), read by the
+        fields' parsers (the command line's: station.values; the target within the last poll's
+        soft limits); InputError saying what is wrong. The worker checks the target against the
+        drive again."""
         from station.services.rig_session import MoveRequest
 
+        self._show_motion()  # the target's kind for the leg selected now
         leg = self.selected_leg()
-        speed = self._number("move-speed", "speed")
-        if speed is not None and speed <= 0:
-            raise ValueError(f"speed: {speed:g} mm/s; type a speed > 0 mm/s, or leave it blank for the default")
+        speed = self.query_one("#move-speed", MoveField).read()
         lim = self.snapshot.limits.get(leg) if self.snapshot is not None else None
         if speed is not None and lim is not None and speed > lim.max_velocity_mm_s:
             self.notify(f"{speed:g} mm/s is above the drive's maximum: leg {leg} moves at "
                         f"{lim.max_velocity_mm_s:g} mm/s.", title=f"move leg {leg}", severity="warning")
         if step_mm is not None:
             return MoveRequest(step_mm=step_mm, speed_mm_s=speed)
-        target = self._number("move-target", "target")
+        target = self.query_one("#move-target", MoveField).read()
         if target is None:
-            raise ValueError("type a target position in mm (0 = mid-stroke), then press Enter or m")
-        if lim is not None and not lim.min_mm <= target <= lim.max_mm:
-            raise ValueError(f"leg {leg}: {target:+.3f} mm is beyond the drive's soft limits {lim.min_mm:+.3f} .. "
-                             f"{lim.max_mm:+.3f} mm; nothing moved")
+            raise InputError("type a target position in mm (0 = mid-stroke), then press Enter or m")
         return MoveRequest(target_mm=target, speed_mm_s=speed)
 
     def _start_move(self, step_mm: float | None = None) -> None:
@@ -351,8 +384,8 @@ class RigScreen(StationScreen):
         leg = self.selected_leg()
         try:
             move = self.move_request(step_mm)
-        except ValueError as exc:
-            self.notify(str(exc), title=f"move leg {leg}", severity="error", timeout=10)
+        except InputError as exc:  # said next to the fields too (move_preview)
+            self.notify(escape(f"{exc}; nothing moved"), title=f"move leg {leg}", severity="error", timeout=10)
             if step_mm is None and not self.query_one("#move-target", Input).value.strip():
                 self.query_one("#move-target", Input).focus()  # the digits typed next go there
             return
@@ -393,6 +426,20 @@ class RigScreen(StationScreen):
             self.action_jog(1)
         elif event.button.id == "stop":
             self.action_stop_all()
+
+    def action_connect(self) -> None:
+        """Connect; when connected, reconnecting asks first: it closes the connection to every
+        drive and the interferometer (the simulated rig starts afresh, its legs disabled)."""
+        app = self.app
+        if app.rig is None or app.sweep.active:  # not connected: nothing to lose (a sweep: the app refuses)
+            app.action_connect()
+            return
+        sim = getattr(app.rig, "sim", None) is not None
+        question = ("[b]Reconnect to the rig?[/b]\n\nThe connection to the drives and the interferometer is closed "
+                    "and opened again" + ("; the simulated rig starts afresh: its legs disabled, at 0 mm." if sim
+                                          else "; the drives are asked their state anew."))
+        self.app.push_screen(ConfirmScreen(question, yes="Reconnect", no="Cancel"),
+                             lambda yes: app.action_connect() if yes else None)
 
     def action_leg_action(self, action: str) -> None:
         self.app.rig_action(action, (self.selected_leg(),))

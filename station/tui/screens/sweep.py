@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
@@ -20,7 +21,9 @@ from procedures.acquisition.plan_size import PlanSize, fmt_bytes, plan_size
 from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
 from procedures.acquisition.plans import parse_legs
 from station.progress import fmt_duration
+from station import values
 from station.tui.errors import describe
+from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.messages import SweepChanged
 from station.tui.screens.common import ConfirmScreen, StationScreen
 from station.tui.widgets import XYPlot, known_sessions
@@ -34,6 +37,7 @@ class SweepScreen(StationScreen):
     MODE = "sweep"
     AUTO_FOCUS = "#start"
     PAGE_HELP = "choose legs and plan, start; error = measured − commanded (µm)"
+    RIG_KEYS = frozenset({"start", "pause_sweep", "resume_session"})  # act only when pressed on their own
     BINDINGS = [
         Binding("s", "start", "Start"),
         Binding("p", "app.pause_sweep", "Pause/Resume"),
@@ -52,23 +56,31 @@ class SweepScreen(StationScreen):
                     yield Label("Plan")
                     yield Select(PLANS, value="iso230", allow_blank=False, id="plan", compact=True)
                     yield Label("Cycles")
-                    yield Input("5", id="cycles", type="integer", compact=True, tooltip="bidirectional cycles")
+                    # blank: the plan's standard number (DEFAULT_CYCLES), as --cycles left out
+                    yield ValueField("5", id="cycles", kind=FIELD_KINDS["cycles"][0], where="cycles", blank=None, compact=True,
+                                     tooltip="bidirectional cycles (blank: the plan's standard)")
                     yield Label("Targets")
-                    yield Input("11", id="n-targets", type="integer", compact=True,
-                                tooltip="number of irregularly spaced targets (ISO 230-2)")
+                    yield ValueField("11", id="n-targets", kind=FIELD_KINDS["n-targets"][0], where="targets", blank=None, compact=True,
+                                     tooltip="number of irregularly spaced targets (ISO 230-2; blank: the minimum)")
                     yield Label("Step mm")
-                    yield Input("", id="step", placeholder="blank: irregular", type="number", compact=True,
-                                tooltip="uniform spacing instead of irregular targets")
+                    yield ValueField("", id="step", kind=values.STEP_MM, where="step", blank=None,
+                                     placeholder="blank: irregular", compact=True,
+                                     tooltip="uniform spacing instead of irregular targets, mm (a decimal point: 2.5)")
                     yield Label("Min mm")
-                    yield Input("-90", id="min-mm", type="number", compact=True)
+                    yield ValueField("-90", id="min-mm", kind=values.POSITION_MM, where="min mm", blank=-90.0,
+                                     compact=True, tooltip="lowest target, mm (blank: -90)")
                     yield Label("Max mm")
-                    yield Input("90", id="max-mm", type="number", compact=True)
+                    yield ValueField("90", id="max-mm", kind=values.POSITION_MM, where="max mm", blank=90.0,
+                                     compact=True, tooltip="highest target, mm (blank: +90)")
                     yield Label("Dwell s")
-                    yield Input("1", id="dwell", type="number", compact=True, tooltip="settle time per target")
+                    yield ValueField("1", id="dwell", kind=values.TIME_S, where="dwell", blank=1.0, compact=True,
+                                     tooltip="settle time per target, s (blank: 1)")
                     yield Label("Serials")
-                    yield Input("", id="serials", placeholder="3=HX-0042 (blank: config)", compact=True,
-                                tooltip="each selected leg's serial, LEG=SERIAL separated by spaces; recorded in "
-                                        "the session and checked by push (like station sweep --serial)")
+                    # a short placeholder: the field is 20-odd cells wide even at 120 columns
+                    yield Input("", id="serials", placeholder="e.g. 3=HX-0042", compact=True,
+                                tooltip="each selected leg's serial, LEG=SERIAL separated by spaces (blank: the "
+                                        "config's serials); recorded in the session and checked by push (like "
+                                        "station sweep --serial)")
                 yield Static("", id="plan-summary")
                 yield Button("Start (s)", id="start", variant="success")
                 with Horizontal(classes="pair"):
@@ -105,24 +117,18 @@ class SweepScreen(StationScreen):
         def val(wid: str) -> str:
             return self.query_one(f"#{wid}", Input).value.strip()
 
-        def num(wid: str, kind=float, default=None):
-            text = val(wid)
-            if not text:
-                return default
-            try:
-                return kind(text)
-            except ValueError:
-                raise ValueError(f"{wid.replace('-', ' ')}: {text!r} is not a {'whole ' if kind is int else ''}number") from None
+        def num(wid: str):
+            # the field's kind's parser (station.values, the command line's): InputError naming it
+            return self.query_one(f"#{wid}", ValueField).read()
 
         kind = self.query_one("#plan", Select).value
-        cycles, step_mm, n_targets = num("cycles", int), num("step"), num("n-targets", int)
-        min_mm, max_mm, dwell_s = num("min-mm", float, -90.0), num("max-mm", float, 90.0), num("dwell", float, 1.0)
-        return PlanSpec(
-            legs=parse_legs(val("legs") or "1"), kind=kind, cycles=cycles,
-            n_targets=None if kind in ONTHEFLY else n_targets,  # on the fly: evenly spaced, by the step
-            step_mm=None if kind == "paper" else step_mm,  # the paper plan has fixed targets; the ISO fields do not apply
-            min_mm=min_mm, max_mm=max_mm, dwell_s=dwell_s,
-        )
+        legs = parse_legs(val("legs") or "1")
+        cycles, dwell_s = num("cycles"), num("dwell")
+        n_targets = None if kind in ONTHEFLY else num("n-targets")  # on the fly: evenly spaced, by the step
+        step_mm = None if kind == "paper" else num("step")  # the paper plan has fixed targets
+        min_mm, max_mm = num("min-mm"), num("max-mm")
+        return PlanSpec(legs=legs, kind=kind, cycles=cycles, n_targets=n_targets, step_mm=step_mm,
+                        min_mm=min_mm, max_mm=max_mm, dwell_s=dwell_s)
 
     def build_plan(self):
         """The plan from the form, built exactly as `station sweep` builds it."""
@@ -163,7 +169,7 @@ class SweepScreen(StationScreen):
                 return
             plan = self.build_plan()
         except Exception as exc:
-            summary.update(f"[red]{describe(exc)}[/red]")
+            summary.update(f"[red]{escape(describe(exc))}[/red]")  # typed text is not markup
             return
         if plan.onthefly:
             speeds = " and ".join(f"{v:g}" for v in plan.speeds_mm_s)
@@ -219,7 +225,7 @@ class SweepScreen(StationScreen):
                 return
             plan = self.build_plan()
         except Exception as exc:
-            self.notify(describe(exc), title="Plan", severity="error", timeout=10)
+            self.notify(escape(describe(exc)), title="Plan", severity="error", timeout=10)
             return
         self._start(plan, serials)
 
@@ -289,7 +295,7 @@ class SweepScreen(StationScreen):
             plot.show([
                 ("approach +1 (up)", trace.up_target_mm, trace.up_error_um, "scatter"),
                 ("approach −1 (down)", trace.down_target_mm, trace.down_error_um, "scatter:x"),
-            ], title=f"leg {leg}: error against position ({trace.count} points)")
+            ], title=f"leg {leg}: error against position ({trace.count} points)", xlim=s.target_span)
 
         bar = self.query_one("#progress", ProgressBar)
         # never indeterminate: its animation would be a moving part on an idle screen

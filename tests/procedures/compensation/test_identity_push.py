@@ -106,13 +106,13 @@ def test_table_csv_carries_the_serial_and_old_tables_still_read(tmp_path):
     table = CompTable({1: _table(1, 1.0), 3: _table(3, 2.0)}, {3: "HX-0042"})
     path = write_table_csv(table, tmp_path / "t.csv")
     text = path.read_text()
-    assert text.splitlines()[0] == "# leg_serial: 3=HX-0042"
+    assert text.splitlines()[0].startswith("# integrity: table rows=") and text.splitlines()[1] == "# leg_serial: 3=HX-0042"
     back = read_table_csv(path)
     assert dict(back.serials) == {3: "HX-0042"}
     assert back.legs[3].error_fwd_um == pytest.approx(table.legs[3].error_fwd_um, abs=1e-4)  # written to 1e-4 um
-    assert back.legs[3].rows[0] == 3 + 31  # rows counted in the file: comment, header, leg 1's 31 rows
-    old = tmp_path / "old.csv"
-    old.write_text("\n".join(text.splitlines()[1:]) + "\n")
+    assert back.legs[3].rows[0] == 4 + 31  # rows counted in the file: record, comment, header, leg 1's 31 rows
+    old = tmp_path / "old.csv"  # before serials and the integrity record
+    old.write_text("\n".join(text.splitlines()[2:]) + "\n")
     assert dict(read_table_csv(old).serials) == {}
 
 

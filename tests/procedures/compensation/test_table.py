@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
+import re
+
 import numpy as np
 import pytest
 
@@ -71,7 +74,9 @@ def test_correction_beyond_the_drive_limit_is_refused(model):
 def test_csv_format_and_round_trip(model, tmp_path):
     table = make_table(model)
     path = write_table_csv(table, tmp_path / "t.csv")
-    lines = path.read_text().splitlines()
+    record, *lines = path.read_text().splitlines()
+    assert re.fullmatch(r"# integrity: table rows=242 sha256=[0-9a-f]{64}", record)  # first: procedures/io/integrity.py
+    assert hashlib.sha256(("\n".join(lines) + "\n").encode()).hexdigest() == record[-64:]
     assert lines[0] == "leg,position_mm,error_fwd_um,error_rev_um" == ",".join(CSV_HEADER)
     assert len(lines) == 1 + 2 * 121
     assert lines[1].startswith("1,-90.000000,") and lines[-1].startswith("2,90.000000,")

@@ -15,12 +15,12 @@ import pytest
 from procedures.diagnosis import DiagnosisSettings
 from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, evaluate_trial,
                                             format_by_physics, run_self_check, summarise_by_physics)
-from station.services.selfcheck_variants import PHYSICS, variant_trial
+from station.services.selfcheck_variants import VARIANT_PHYSICS, variant_trial
 
 SEEDS = int(os.environ.get("STATION_DIAG_VARIANT_SEEDS", "10"))
 
 
-@pytest.fixture(scope="module", params=PHYSICS)
+@pytest.fixture(scope="module", params=VARIANT_PHYSICS)  # issue 35's situations: test_diagnosis_situations.py
 def physics_result(request):
     res = run_self_check([variant_trial(s, request.param) for s in range(SEEDS)], DiagnosisSettings(), None,
                          VARIANT_PARAM_TOLERANCE, VARIANT_GAP_TOLERANCE)

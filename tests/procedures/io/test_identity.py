@@ -54,7 +54,7 @@ def test_identity_round_trips_through_a_session_file(tmp_path):
     ident = _identity()
     path = _write(tmp_path / "s.h5", ident.to_json())
     with h5py.File(path, "r") as f:
-        assert f.attrs["schema_version"] == SCHEMA_VERSION == "1.1"
+        assert f.attrs["schema_version"] == SCHEMA_VERSION == "1.2"
         stored = json.loads(f["meta"].attrs["identity"])
         assert read_identity(f) == ident  # from an open file too
     assert stored["legs"]["3"]["drive"]["source"] == "modbus-device-id"

@@ -21,3 +21,20 @@ async def connect_and_fit(pilot, wait_until, connected, path) -> None:
     await connected(pilot)
     await open_session(pilot, wait_until, "f3", path)
     await wait_until(pilot, lambda: pilot.app.analysis is not None, 60, "the fit")
+
+
+async def type_keys(pilot, text: str) -> None:
+    """Type `text` key by key as Pilot.press does (each character a Key event sent through the
+    app's driver, the way a terminal sends them), without waiting for the app to go idle between
+    keys: a typist's burst (Pilot.press waits after each key, so on a busy machine its keys can be
+    a second apart). Then wait until the app has handled them all."""
+    from textual import events
+    from textual.app import _character_to_key  # the key names Pilot.press gives characters
+
+    app = pilot.app
+    for char in text:
+        key = _character_to_key(char) if not char.isalnum() else char
+        event = events.Key(key, char)
+        event.set_sender(app)
+        app._driver.send_message(event)
+    await pilot.pause()

@@ -119,7 +119,8 @@ async def _compensation(path, cfg, size, wait_until, notes, connected):
         await pilot.press("w")
         csv = path.with_name("two-legs.default.table.csv")
         await wait_until(pilot, csv.exists, what="the table CSV")
-        assert csv.read_text().splitlines()[0] == "leg,position_mm,error_fwd_um,error_rev_um"
+        record, header = csv.read_text().splitlines()[:2]  # the integrity record first, as `station table` writes
+        assert record.startswith("# integrity: table rows=") and header == "leg,position_mm,error_fwd_um,error_rev_um"
         csv.unlink()
 
 
@@ -148,7 +149,7 @@ async def _push(path, cfg, size, wait_until, notes, connected):
         audit_path = Path(cfg.recordings_dir) / "audit.jsonl"
         # 1) cancel at the confirmation: nothing is written, the cancellation is logged
         await pilot.press("u")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the push confirmation")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the push confirmation")
         question = str(app.screen.query_one("#confirm-question").render())
         assert "leg 1" in question and axis.identity() in question  # names the leg and the drive
         await pilot.press("n")
@@ -156,7 +157,7 @@ async def _push(path, cfg, size, wait_until, notes, connected):
         assert axis.active_bank() == bank0 and table_sha256(axis.read_table(bank0)) == empty_sha
         # 2) confirm: the table lands in the other bank, is active, and the push is audited with its backup
         await pilot.press("u")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the push confirmation")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the push confirmation")
         await pilot.press("y")
         await wait_until(pilot, lambda: any("pushed and active" in n for n in notes(app)), 30, "the push")
         pushed = comp.table.legs[1]
@@ -196,7 +197,7 @@ async def _push(path, cfg, size, wait_until, notes, connected):
         await pilot.press("f4")
         await wait_until(pilot, lambda: app.screen is comp, what="the Compensation screen")
         await pilot.press("b")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the rollback confirmation")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the rollback confirmation")
         await pilot.press("y")
         await wait_until(pilot, lambda: any("rolled back" in n for n in notes(app)), 30, "the rollback")
         assert table_sha256(axis.read_table(axis.active_bank())) == empty_sha

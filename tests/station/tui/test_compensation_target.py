@@ -44,7 +44,7 @@ async def _station_target(path, cfg, size, wait_until, notes, connected):
         drive_sha = table_sha256(drive1.read_table(drive1.active_bank()))
         # push leg 1: the confirmation names the target, the table lands in the station's store
         await pilot.press("u")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the push confirmation")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the push confirmation")
         question = str(app.screen.query_one("#confirm-question").render())
         assert "compensation target station" in question and "target:   station" in question
         await pilot.press("y")
@@ -59,7 +59,7 @@ async def _station_target(path, cfg, size, wait_until, notes, connected):
             ("push", "started", "station"), ("push", "ok", "station")]
         # roll back: the store's previous (empty) table is active again
         await pilot.press("b")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the rollback confirmation")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the rollback confirmation")
         await pilot.press("y")
         await wait_until(pilot, lambda: any("rolled back" in n for n in notes(app)), 30, "the rollback")
         leg1 = json.loads(store.read_text())["legs"]["1"]

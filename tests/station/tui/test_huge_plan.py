@@ -38,7 +38,7 @@ async def huge_plan_asked(pilot, connected, wait_until) -> None:
                      what="the plan's size in the summary")
     app.screen.query_one("#start").focus()
     await pilot.press("s")
-    await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+    await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the question")
 
 
 def test_the_sweep_page_asks_with_the_figures_and_abort_ends_it_at_any_moment(cfg, size, connected, wait_until, notes):
@@ -60,7 +60,7 @@ async def _asks_then_aborts(cfg, size, connected, wait_until, notes):
         # started, then aborted at once: while its plan is being built (a fraction of a second
         # here; tests/procedures/acquisition/test_plan_size.py aborts the building itself) or just after
         await pilot.press("s")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the question")
         await pilot.press("y")
         await wait_until(pilot, lambda: app.sweep.active, what="the sweep to start")
         t0 = time.monotonic()
@@ -80,7 +80,7 @@ async def _asks_then_aborts(cfg, size, connected, wait_until, notes):
         # started again and left to run: aborted while it measures
         app.clear_notifications()
         await pilot.press("s")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the question")
         await pilot.press("y")
         await wait_until(pilot, lambda: app.sweep.done >= 5, 60, "the huge sweep's first points")
         t0 = time.monotonic()
@@ -111,7 +111,7 @@ async def _quits(cfg, size, connected, wait_until, when):
             await wait_until(pilot, lambda: app.sweep.active, what="the sweep to start")
         sim = app.rig.sim
         await pilot.press("ctrl+q")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the quit question")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the quit question")
         if when == "running":
             assert "station sweep --resume" in confirm_text(app)
         t0 = time.monotonic()

@@ -30,7 +30,9 @@ def test_an_implausible_table_and_push_are_refused_then_accepted_by_confirmation
 
 
 def _question(app) -> str:
-    return str(app.screen.query_one("#confirm-question").render()) if isinstance(app.screen, ConfirmScreen) else ""
+    # a dialog a rig key opens comes a moment after the key (StationScreen.RIG_KEYS): "" until composed
+    questions = app.screen.query("#confirm-question") if isinstance(app.screen, ConfirmScreen) else []
+    return str(questions.first().render()) if questions else ""
 
 
 def _held(app) -> tuple[int, str]:
@@ -94,3 +96,25 @@ async def _implausible(path, cfg, size, wait_until, notes, connected):
         entries = read_entries(audit_path)[0]
         assert [(e.leg, e.outcome) for e in entries] == [(1, "refused"), (1, "started"), (1, "ok")]
         assert "looks like nm" in entries[-1].source["implausible_accepted"][0]
+
+
+def test_a_table_from_a_model_worse_on_held_out_data_asks_first(recorded_session, cfg, size, wait_until, notes,
+                                                                 connected):
+    """As `station table` asks at a terminal (issue 31): a negative held-out range reduction."""
+    asyncio.run(_worse_held_out(recorded_session, cfg, size, wait_until, connected))
+
+
+async def _worse_held_out(path, cfg, size, wait_until, connected):
+    app = StationApp(cfg, time_scale=0.0)
+    async with app.run_test(size=size) as pilot:
+        await connect_and_fit(pilot, wait_until, connected, path)
+        leg = app.analysis.model.legs[1]
+        leg.stats = replace(leg.stats, heldout_range_um=leg.stats.range_before_um * 1.25)  # a reduction of -25 %
+        await pilot.press("f4")
+        await wait_until(pilot, lambda: "Make this table anyway?" in _question(app), 30, "the table's refusal")
+        comp = next(s for s in app.screen_stack if getattr(s, "MODE", "") == "compensation")
+        assert "leg 1: held-out range reduction (%) = -25: the model made the leg's error worse" in _question(app)
+        assert comp.table is None
+        await pilot.press("y")
+        await wait_until(pilot, lambda: comp.table is not None, 30, "the accepted table")
+        assert "(kept: confirmed in the dialog)" in str(comp.query_one("#comp-status", Static).render())

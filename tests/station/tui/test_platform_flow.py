@@ -208,7 +208,9 @@ async def _errors(tmp_path, cfg, size, wait_until, notes, synth_session_file):
         await press_and_expect("give a compensation table", "the wrong-file notice")
         screen.query_one("#plat-comp", Input).value = ""
         screen.query_one("#plat-poses", Input).value = "0"
-        await press_and_expect("Poses must be a whole number of at least 1", "the poses notice")
+        # refused by the kind of `station platform --poses` (station.values.POSES), under the fields too
+        await press_and_expect("poses: '0' is outside 1 .. 1000000", "the poses notice")
+        assert "poses: '0' is outside 1 .. 1000000" in str(screen.query_one("#plat-refusal").render())
         # w before any run
         count = len(notes(app))
         await pilot.press("w")

@@ -58,6 +58,9 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         await pilot.press("3", "0")
         assert app.screen.query_one("#move-target", Input).value == "30"
         app.screen.query_one("#drives", DataTable).focus()
+        # a rig key right after a field lost the focus is ignored (it may be typing meant for the
+        # field: StationScreen.RIG_KEYS); a moment later it acts
+        await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)
         # a disabled leg is refused, with what to do
         await type_into(pilot, "move-target", "30")
         await pilot.press("m")
@@ -106,8 +109,9 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         # beyond the soft limits: refused before anything moves, naming the limits
         await type_into(pilot, "move-target", "96")
         await pilot.press("m")
-        await wait_until(pilot, lambda: any("+96.000 mm is beyond the drive's soft limits -95.000 .. +95.000 mm" in n
-                                            for n in notes(app)), what="the refusal beyond the limits")
+        await wait_until(pilot, lambda: any("leg 1 target: '96' is outside -95 .. 95 mm" in n and "soft limits" in n
+                                            and "nothing moved" in n for n in notes(app)),
+                         what="the refusal beyond the limits")
         await type_into(pilot, "move-target", "90")
         await pilot.press("m")
         await wait_until(pilot, lambda: any("leg 1 at +90.0000 mm" in n for n in notes(app)), what="the move to 90 mm")
@@ -118,7 +122,7 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         # a bad speed is refused on the page
         await type_into(pilot, "move-speed", "0")
         await pilot.press("m")
-        await wait_until(pilot, lambda: any("type a speed > 0 mm/s" in n for n in notes(app)), what="the speed refusal")
+        await wait_until(pilot, lambda: any("speed: '0' is outside >0 .. 1000 mm/s" in n for n in notes(app)), what="the speed refusal")
         await type_into(pilot, "move-speed", "")
 
         # a leg in fault is refused: reset it first
@@ -129,7 +133,9 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
                                             for n in notes(app)), what="the refusal of a leg in fault")
         # another leg: the move acts on the selected row
         await select_leg(pilot, 2)
-        await wait_until(pilot, lambda: "leg 2: soft limits" in motion_text(app), what="leg 2 selected")
+        # the target typed (0) is shown for the leg selected now, with its soft limits, before it moves
+        await wait_until(pilot, lambda: "leg 2 → +0.000 mm" in motion_text(app)
+                         and "soft limits -95.000 .. +95.000 mm" in motion_text(app), what="leg 2 selected")
         await pilot.press("e")
         await wait_until(pilot, lambda: app.rig.axes[2].status().enabled, what="leg 2 enabled")
         await type_into(pilot, "move-target", "-12.5")
@@ -178,7 +184,9 @@ async def _stop(cfg, size, connected, wait_until, notes):
                    for n in notes(app))
         await wait_until(pilot, lambda: "quick-stopped" in motion_text(app), what="the stop shown")
         # enabled again: the quick stop's toast goes (it no longer says what to do)
-        await pilot.press("escape", "e")
+        await pilot.press("escape")  # leave the field; its letters act a moment later (RIG_KEYS)
+        await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)
+        await pilot.press("e")
         await wait_until(pilot, lambda: app.rig.axes[1].status().enabled, what="leg 1 enabled again")
         await wait_until(pilot, lambda: not any("quick-stopped" in n for n in notes(app)), what="the toast cleared")
 

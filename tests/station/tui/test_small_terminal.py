@@ -239,7 +239,7 @@ async def _results_and_compensation(cfg, connected, wait_until, session):
         await wait_until(pilot, lambda: comp.table is not made, what="the table (Make button)")
 
         await pilot.press("u")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the push confirmation (u)")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the push confirmation (u)")
         await pilot.pause()
         for selector in ("#confirm-yes", "#confirm-no", "#confirm-scroll"):
             assert_on_show(app, selector)
@@ -248,7 +248,7 @@ async def _results_and_compensation(cfg, connected, wait_until, session):
         app.clear_notifications()
         await pilot.pause()
         await click(pilot, "#comp-push")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the push confirmation (button)")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the push confirmation (button)")
         await pilot.pause()
         await click(pilot, "#confirm-yes")
         await wait_until(pilot, lambda: app.screen is comp and app.rig.axes[1].status().active_bank == 1, 30,
@@ -260,10 +260,15 @@ async def _results_and_compensation(cfg, connected, wait_until, session):
         await wait_until(pilot, lambda: app.sweep.label.startswith("verification"), what="the verification (v)")
         await wait_until(pilot, lambda: not app.sweep.active, 120, "the verification to end")
         await wait_until(pilot, lambda: comp.verify_text, 30, "the verification report")
+        # its verdict on show at the top of the page, without scrolling (the report runs below the fold)
+        await show_page(pilot, "compensation", wait_until)
+        verdict = assert_on_show(app, "#comp-verdict")
+        assert comp.query_one("#comp-body").scroll_y == 0
+        assert "leg 1 verification: " in str(verdict.render()) and "ratio" in str(verdict.render())
 
         await show_page(pilot, "compensation", wait_until)
         await click(pilot, "#comp-rollback")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the rollback confirmation")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the rollback confirmation")
         await pilot.pause()
         assert_on_show(app, "#confirm-yes")
         await pilot.press("y")

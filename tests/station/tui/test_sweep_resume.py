@@ -51,6 +51,7 @@ async def open_resume(pilot, wait_until) -> ResumeScreen:
     app = pilot.app
     await pilot.press("r")
     await wait_until(pilot, lambda: isinstance(app.screen, ResumeScreen), what="the resume dialog")
+    await pilot.pause(0.1)  # r acts a moment after it is pressed (StationScreen.RIG_KEYS): let the dialog settle
     return app.screen
 
 

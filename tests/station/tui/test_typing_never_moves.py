@@ -93,6 +93,7 @@ async def _type_everywhere(cfg, size, connected, wait_until):
                     await enable_all(pilot, wait_until)
             if mode == "sweep":  # the Resume dialog's path field
                 await pilot.press("escape")
+                await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)  # r on its own (RIG_KEYS), not right after a field
                 await pilot.press("r")
                 await wait_until(pilot, lambda: app.screen.query("#resume-path"), what="the Resume dialog")
                 for field in fields_of(app.screen):

@@ -16,8 +16,10 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys):
     assert main(["ui", "--time-scale", "-1"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err == [
-        f"station ui: error: --replay {tmp_path / 'none.h5'}: no such file (give a session .h5 file)",
-        f"station ui: error: {tmp_path / 'none.toml'}: config file not found",
-        "station ui: error: --time-scale must be a number >= 0 (real seconds per simulated second; 0 = no waiting), "
-        "got -1",
+        f"station ui: error: argument --replay: {tmp_path / 'none.h5'}: no such file or directory; give a session file "
+        "(FILE.h5); see `station ui --help`",
+        f"station ui: error: argument --config: {tmp_path / 'none.toml'}: no such file or directory; give a station "
+        "config (TOML text); see `station ui --help`",
+        "station ui: error: argument --time-scale: '-1' is outside 0 .. 1000; give a time scale as a number "
+        "(0 .. 1000), e.g. 0.1; see `station ui --help`",
     ]
