@@ -77,7 +77,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("STATION_CATALOG", "off")
 
 from drivers.errors import DriverError  # noqa: E402
-from procedures.engine import events as ev  # noqa: E402
+from procedures.compensation.verify import Verified  # noqa: E402
 from procedures.compensation.audit import AuditLog  # noqa: E402
 from procedures.fit import fit  # noqa: E402
 from procedures.metrology.thermal import error_basis  # noqa: E402
@@ -205,7 +205,7 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cyc
             raise SystemExit(f"{kind} seed {seed}: push failed: {pushed.finished}")
         vplan = iso230_plan(legs, n_targets=41, cycles=verify_cycles, seed=7)
         job = verify_job(rig, vplan, work / f"verify-{kind}-{seed}-{laser}.h5", cfg, audit=audit, before=session)
-    verified = [e for e in job.events if isinstance(e, ev.Verified)]
+    verified = [e for e in job.events if isinstance(e, Verified)]
     if not verified:
         raise SystemExit(f"{kind} seed {seed}: no verification result ({job.finished})")
     ratios = [r.ratio for _, r in sorted(verified[0].results.items())]

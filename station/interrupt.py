@@ -17,7 +17,7 @@ import sys
 import threading
 
 from procedures.engine.control import RunControl
-from station import launch
+from station import startup_interrupt
 
 REASON = "interrupted (Ctrl-C)"
 
@@ -51,7 +51,7 @@ def abort_on_sigint(control: RunControl):
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGINT, handler)
-    if launch.interrupted() and not control.aborted:
+    if startup_interrupt.interrupted() and not control.aborted:
         # a Ctrl-C came on the way here (after the modules loaded) and its KeyboardInterrupt was
         # lost (it landed in a finaliser, say): abort now, before anything moves
         handler(signal.SIGINT, None)

@@ -146,3 +146,41 @@ def slipped_model(model, peak_um: float = 180.0):
         worst = max(float(np.max(np.abs(fit.predict_um(x, d)))) for d in (1, -1))
         legs[leg] = _ScaledFit(fit, peak_um / worst)
     return LegErrorModel(model.method, legs, model.source, model.options, model.created_utc, model.identity)
+
+
+def imported_names(module: str) -> dict[str, str]:
+    """Name -> "source.module.name" for every `from M import name [as alias]` anywhere in `module`
+    (at the top or inside a function: the commands import what a run needs inside run(), so
+    that `--help` loads nothing heavy). For asserting that a front end uses a shared object
+    without importing the front end's heavy dependencies to compare identities."""
+    import ast
+    import importlib.util
+
+    spec = importlib.util.find_spec(module)
+    tree = ast.parse(open(spec.origin, encoding="utf-8").read())
+    package = module if spec.origin.endswith("__init__.py") else module.rsplit(".", 1)[0]
+    out: dict[str, str] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                source = f"{base}.{node.module}" if node.module else base
+            else:
+                source = node.module or ""
+            for alias in node.names:
+                out[alias.asname or alias.name] = f"{source}.{alias.name}"
+    return out
+
+
+def defines(module: str, name: str) -> bool:
+    """`module`'s source defines `name` itself (a def, class or assignment at its top level)."""
+    import ast
+    import importlib.util
+
+    tree = ast.parse(open(importlib.util.find_spec(module).origin, encoding="utf-8").read())
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and node.name == name:
+            return True
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
+            return True
+    return False

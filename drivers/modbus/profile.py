@@ -410,16 +410,6 @@ class DriveProfile:
         f = self.faults.get(code)
         return f"0x{code:04X} {f.name}: {f.text}" if f else f"0x{code:04X} (not in profile {self.name})"
 
-    def decode_block(self, block: str, words: Sequence[int]) -> dict[str, Any]:
-        """Values of the registers of `block` from the words read at its start (all of its span,
-        gaps included: for contiguous blocks)."""
-        b = self.blocks[block]
-        out = {}
-        for n in b.names:
-            r = self.registers[n]
-            out[n] = r.decode(words[r.address - b.start : r.end - b.start])
-        return out
-
     def sw_bit(self, statusword: int, name: str) -> bool:
         return bool(statusword >> self.statusword_bits[name] & 1)
 

@@ -16,10 +16,10 @@ from types import MappingProxyType
 from drivers.modbus.profile import DriveProfile
 from drivers.replay.clock import DeviceClock
 from drivers.replay.plant import ReplayPlant
-from drivers.sim.drive_server import SimDriveServer, _DriveModel
+from drivers.sim.drive_server import SimDriveServer, DriveModel
 
 
-class _ReplayDriveModel(_DriveModel):
+class _ReplayDriveModel(DriveModel):
     """A simulated drive whose arrivals are checked against the recording."""
 
     plant: ReplayPlant

@@ -137,7 +137,7 @@ class _Motion:
 _NOTHING = object()
 
 
-class _DriveModel:
+class DriveModel:
     """One simulated drive (one unit id): its registers and its behaviour.
 
     Not thread-safe by itself: the server calls it under the shared rig lock.
@@ -732,7 +732,7 @@ class SimDriveServer:
         self.profile = profile
         self.lock = lock or threading.RLock()
         self.nv_path = Path(nv_path) if nv_path else None
-        self._models = {leg: _DriveModel(leg, plant, clock, profile) for leg, plant in sorted(plants.items())}
+        self._models = {leg: DriveModel(leg, plant, clock, profile) for leg, plant in sorted(plants.items())}
         if self.nv_path and self.nv_path.exists():
             self._load_nv()
         self._loop: asyncio.AbstractEventLoop | None = None

@@ -489,12 +489,3 @@ def _write_all(fd: int | None, data: bytes) -> None:
         except OSError:
             return
         view = view[n:]
-
-
-def counts_of(*schedules: FaultSchedule) -> Counter[str]:
-    """The faults injected by several schedules, per kind."""
-    total: Counter[str] = Counter()
-    for s in schedules:
-        total.update(s.counts)
-    return total
-

@@ -48,6 +48,11 @@ class PlanLimits:
     max_points: int = 500_000
     max_rig_hours: float = 72.0
 
+    def check(self, spec: PlanSpec) -> PlanSize:
+        """`check_plan_size(spec, self)`: what `plan_from_spec` calls, so the plan's builder
+        needs no import of its sizing (this module imports plan_spec)."""
+        return check_plan_size(spec, self)
+
 
 @dataclass(frozen=True)
 class PlanSize:

@@ -91,12 +91,10 @@ class PlanSpec:
 
 def plan_from_spec(spec: PlanSpec, limits=None) -> SweepPlan:
     """The sweep plan `spec` asks for (PlanError with what to change when it is not a valid one).
-    `limits` (a plan_size.PlanLimits, e.g. the config's [limits]): the plan is sized first and
+    `limits` (a plan_size.PlanLimits, e.g. the config's [limits]; its `check(spec)`): the plan is sized first and
     refused beyond them, before anything is built (procedures/acquisition/plan_size.py)."""
     if limits is not None:
-        from procedures.acquisition.plan_size import check_plan_size  # it imports this module
-
-        check_plan_size(spec, limits)
+        limits.check(spec)
     cycles = DEFAULT_CYCLES[spec.kind] if spec.cycles is None else spec.cycles
     if spec.kind in ONTHEFLY_KINDS:
         pairs, target_um = probe_count(spec.kind)

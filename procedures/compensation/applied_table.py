@@ -18,16 +18,32 @@ import json
 from typing import Any
 
 from drivers.errors import DriverError
-from drivers.interfaces import ServoAxis
-from procedures.compensation.push import _target_details, table_sha256
+from drivers.interfaces import ServoAxis, table_sha256
 
 DEVICES_KEY = "leg{leg}_compensation_table"
 """The `devices` key of a leg's applied table in a session file."""
 
 
+def compensation_target(axis: ServoAxis) -> str:
+    """Where `axis`'s table is applied: "station" for the station-side wrapper (its
+    `compensation_target` attribute), else "drive"."""
+    return str(getattr(axis, "compensation_target", "drive"))
+
+
+def target_details(axis: ServoAxis) -> dict[str, Any]:
+    """The details naming the target (and the station's store file, where it applies): the start of
+    what a session records here, and of every audit entry of a push (procedures/compensation/push.py)."""
+    target = compensation_target(axis)
+    d: dict[str, Any] = {"target": target}
+    store = getattr(getattr(axis, "store", None), "path", None)
+    if target == "station" and store is not None:
+        d["store"] = str(store)
+    return d
+
+
 def applied_table(axis: ServoAxis) -> dict[str, Any]:
     """The table `axis` applies now (module docstring)."""
-    d = _target_details(axis)
+    d = target_details(axis)
     try:
         st = axis.status()
         d.update(enabled=bool(st.table_enabled), bank=int(st.active_bank))

@@ -129,6 +129,14 @@ class AuditEntry:
 
 
 @dataclass(frozen=True)
+class AuditRecord(ev.Event):
+    """An entry for the audit log (an AuditEntry). Procedures yield these; the
+    audit sink (AuditSink) is the only writer of the log."""
+
+    entry: AuditEntry
+
+
+@dataclass(frozen=True)
 class AuditProblem:
     """A line of the log that could not be read as an entry."""
 
@@ -264,7 +272,7 @@ class AuditSink:
         self.problems: list[str] = []
 
     def handle(self, event: ev.Event) -> None:
-        if not isinstance(event, ev.AuditRecord):
+        if not isinstance(event, AuditRecord):
             return
         entry = event.entry
         try:

@@ -47,7 +47,8 @@ from typing import Any, Callable, Iterator
 from drivers.errors import DriverError, TableError, TableRefused
 from drivers.interfaces import ServoAxis, TableBank, TableSpec, table_sha256
 from procedures.engine import events as ev
-from procedures.compensation.audit import AuditEntry, AuditLog, AuditSink, AuditStopped, new_id
+from procedures.compensation.applied_table import compensation_target, target_details as _target_details
+from procedures.compensation.audit import AuditEntry, AuditLog, AuditRecord, AuditSink, AuditStopped, new_id
 from procedures.engine.errors import InputError
 from procedures.engine.runner import ListSink, run
 from procedures.engine.states import Action, AuditOutcome
@@ -140,22 +141,6 @@ def _short(sha: str) -> str:
     return sha[:12]
 
 
-def compensation_target(axis: ServoAxis) -> str:
-    """Where `axis`'s table is applied: "station" for the station-side wrapper (its
-    `compensation_target` attribute), else "drive"."""
-    return str(getattr(axis, "compensation_target", "drive"))
-
-
-def _target_details(axis: ServoAxis) -> dict[str, Any]:
-    """The audit details naming the target (and the station's store file, where it applies)."""
-    target = compensation_target(axis)
-    d: dict[str, Any] = {"target": target}
-    store = getattr(getattr(axis, "store", None), "path", None)
-    if target == "station" and store is not None:
-        d["store"] = str(store)
-    return d
-
-
 # -- plans and results -------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -231,13 +216,49 @@ class PushResult:
     table_enabled: bool
     op_id: str
 
-    def event(self) -> ev.TablePushed:
-        return ev.TablePushed(self.leg, self.bank, self.table_sha256, self.drive)
+    def event(self) -> TablePushed:
+        return TablePushed(self.leg, self.bank, self.table_sha256, self.drive)
 
 
 Confirm = Callable[[PushPlan], bool]
 """Asks the operator to confirm a plan (front ends: a prompt, a dialog). May raise InputError
 when nobody can answer (no terminal): that refuses the operation."""
+
+
+# -- events ----------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class TablePlanned(ev.Event):
+    """A push or rollback read the drive and checked the table (a PushPlan):
+    what will be written and what it replaces. Nothing is written yet; the procedure asks for
+    confirmation next."""
+
+    plan: PushPlan
+
+
+@dataclass(frozen=True)
+class TablePushed(ev.Event):
+    """A push or rollback switched `leg`'s drive to `bank`, which holds the table hashed `table_sha256`."""
+
+    leg: int
+    bank: int
+    table_sha256: str
+    drive: str
+
+
+@dataclass(frozen=True)
+class OperationFinished(ev.Event):
+    """A push, rollback or verification ended. `action`: procedures.engine.states.Action; `outcome`:
+    procedures.engine.states.AuditOutcome (ok / refused / cancelled / failed for a push or rollback;
+    refused / completed / aborted / failed for a verification). `message` says what happened
+    and, after a failed push, which table is active. `result`: a push's PushResult; a
+    verification's figures per leg (procedures.compensation.verify.LegVerification, which imports this module)."""
+
+    action: str
+    leg: int | None
+    outcome: str
+    message: str
+    result: PushResult | dict | None = None
 
 
 # -- reading the drive ---------------------------------------------------------------------------
@@ -395,11 +416,11 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
         except (PushRefused, TableRefused) as exc:
             yield from refused(Action.PUSH, leg, exc, drive=_identity(axes[leg]), drive_url=drive_url,
                                source=sources.get(leg), details=_target_details(axes[leg]))
-            yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED,
+            yield OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED,
                                        f"{_message(exc)}; nothing was written to any leg")
             return
     for plan in plans:
-        yield ev.TablePlanned(plan)
+        yield TablePlanned(plan)
     if confirm is not None:
         try:
             ok = confirm(plans)
@@ -407,31 +428,31 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
             for plan in plans:
                 yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source,
                                details={"target": plan.target})
-            yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED, _message(exc))
+            yield OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED, _message(exc))
             return
         if not ok:
             for plan in plans:
                 yield from refused(plan.action, plan.leg, "cancelled at the confirmation; nothing written", drive=plan.drive,
                                    drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED,
                                details={"target": plan.target})
-            yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.CANCELLED, "cancelled; nothing was written")
+            yield OperationFinished(Action.PUSH, None, AuditOutcome.CANCELLED, "cancelled; nothing was written")
             return
     done: list[int] = []
     for plan in plans:
-        end: ev.OperationFinished | None = None
+        end: OperationFinished | None = None
         for event in _apply(axes[plan.leg], plan):
-            if isinstance(event, ev.OperationFinished):
+            if isinstance(event, OperationFinished):
                 end = event
             yield event
         if end is None or end.outcome != AuditOutcome.OK:
             left = [p.leg for p in plans if p.leg != plan.leg and p.leg not in done]
-            yield ev.OperationFinished(Action.PUSH, None, end.outcome if end else AuditOutcome.FAILED,
+            yield OperationFinished(Action.PUSH, None, end.outcome if end else AuditOutcome.FAILED,
                                        f"{end.message if end else 'no outcome'}"
                                        + (f" Pushed before it: legs {done}." if done else "")
                                        + (f" Not attempted: legs {left} (their tables are unchanged)." if left else ""))
             return
         done.append(plan.leg)
-    yield ev.OperationFinished(Action.PUSH, None, AuditOutcome.OK, f"pushed legs {done}: each has its new table active")
+    yield OperationFinished(Action.PUSH, None, AuditOutcome.OK, f"pushed legs {done}: each has its new table active")
 
 
 def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | None = None,
@@ -456,9 +477,9 @@ def refused(action: Action, leg: int, reason: BaseException | str, *, drive: str
     text = _message(reason) if isinstance(reason, BaseException) else str(reason)
     if outcome == AuditOutcome.REFUSED and "written" not in text:
         text += ". Nothing was written to the drive."
-    yield ev.AuditRecord(AuditEntry(action, leg, outcome, text, drive, drive_url, source=source,
+    yield AuditRecord(AuditEntry(action, leg, outcome, text, drive, drive_url, source=source,
                                     details=dict(details or {})))
-    yield ev.OperationFinished(action, leg, outcome, text)
+    yield OperationFinished(action, leg, outcome, text)
 
 
 def _identity(axis: ServoAxis) -> str:
@@ -470,7 +491,7 @@ def _identity(axis: ServoAxis) -> str:
 
 
 def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None) -> Iterator[ev.Event]:
-    yield ev.TablePlanned(plan)
+    yield TablePlanned(plan)
     if confirm is not None:
         try:
             ok = confirm(plan)
@@ -494,12 +515,12 @@ def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
                 details=dict(plan.details), op_id=op_id, backup=table_to_json(plan.backup, prev))
     verb = "rollback" if plan.action == Action.ROLLBACK else "push"
     # the audit sink has this on disk before the runner resumes us: a crash can never lose the backup
-    yield ev.AuditRecord(AuditEntry(outcome=AuditOutcome.STARTED,
+    yield AuditRecord(AuditEntry(outcome=AuditOutcome.STARTED,
                                     message=f"{verb} to bank {bank} started; backup of bank {prev} recorded", **base))
 
     def finish(outcome: AuditOutcome, text: str) -> Iterator[ev.Event]:
-        yield ev.AuditRecord(AuditEntry(outcome=outcome, message=text, **base))
-        yield ev.OperationFinished(plan.action, leg, outcome, text)
+        yield AuditRecord(AuditEntry(outcome=outcome, message=text, **base))
+        yield OperationFinished(plan.action, leg, outcome, text)
 
     # the drive may have changed since the plan was made (another station, the drive panel)
     try:
@@ -550,9 +571,9 @@ def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
     text = f"{verb} ok: bank {bank} active on leg {leg} ({describe_table(plan.table)}){note}"
     result = PushResult(plan.action, leg, plan.drive, bank, prev, plan.table_sha256, plan.backup_sha256,
                         plan.table.point_count, plan.table_enabled, op_id)
-    yield ev.AuditRecord(AuditEntry(outcome=AuditOutcome.OK, message=text, **base))
+    yield AuditRecord(AuditEntry(outcome=AuditOutcome.OK, message=text, **base))
     yield result.event()
-    yield ev.OperationFinished(plan.action, leg, AuditOutcome.OK, text, result)
+    yield OperationFinished(plan.action, leg, AuditOutcome.OK, text, result)
 
 
 def _previous_still_active(axis: ServoAxis, prev: int, backup_sha: str) -> bool | None:
@@ -603,9 +624,9 @@ def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str, bac
 
 # -- for scripts and tests: run a procedure, return its result or raise ------------------------------
 
-def finished(events: list[ev.Event]) -> ev.OperationFinished | None:
+def finished(events: list[ev.Event]) -> OperationFinished | None:
     """The `OperationFinished` among `events` (the last one), if any."""
-    done = [e for e in events if isinstance(e, ev.OperationFinished)]
+    done = [e for e in events if isinstance(e, OperationFinished)]
     return done[-1] if done else None
 
 

@@ -36,7 +36,7 @@ import numpy as np
 from drivers.errors import DriverError
 from drivers.interfaces import Clock, Interferometer, ServoAxis
 from procedures.engine import events as ev
-from procedures.compensation.audit import AuditEntry
+from procedures.compensation.audit import AuditEntry, AuditRecord
 from procedures.engine.control import RunControl
 from procedures.engine.errors import InputError
 from procedures.fit.data import split_legs
@@ -45,7 +45,7 @@ from procedures.fit.noise import estimate_noise_floor
 from procedures.reporting.iso230 import LegIso230, evaluate_leg
 from procedures.metrology.thermal import normalise_session
 from procedures.acquisition.plans import SweepPlan
-from procedures.compensation.push import compensation_target, describe_table, drive_table_spec, PushRefused, refused, table_sha256
+from procedures.compensation.push import compensation_target, describe_table, drive_table_spec, OperationFinished, PushRefused, refused, table_sha256
 from procedures.engine.states import Action, AuditOutcome, Outcome
 from procedures.acquisition.sweep import sweep
 
@@ -258,6 +258,27 @@ def next_step(r: LegVerification) -> str:
 # -- the procedure ---------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
+class LegChecked(ev.Event):
+    """A verification found `leg`'s table active and fit to verify: `bank`, `table_sha256`,
+    `description` (points, span, largest correction)."""
+
+    leg: int
+    drive: str
+    bank: int
+    table_sha256: str
+    description: str
+
+
+@dataclass(frozen=True)
+class Verified(ev.Event):
+    """A verification's figures (a LegVerification per leg), after its sweep."""
+
+    results: dict[int, LegVerification]
+    report: str
+    session: dict[str, Any]
+
+
+@dataclass(frozen=True)
 class ActiveTable:
     """What one leg's drive applies before a verification (read from the drive)."""
 
@@ -324,16 +345,16 @@ def verify_procedure(
             problem = (f"leg {leg}: {holder}'s active table (sha256 {sha[:12]}…) is not the leg's rows of {expected_source} "
                        f"(sha256 {expected[leg][:12]}…); push it first")
         if problem:
-            yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome.REFUSED, problem, identity, drive_url,
+            yield AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome.REFUSED, problem, identity, drive_url,
                                             table_sha256=sha, bank=bank, details={"target": target}))
-            yield ev.OperationFinished(Action.VERIFY, leg, AuditOutcome.REFUSED, problem)
+            yield OperationFinished(Action.VERIFY, leg, AuditOutcome.REFUSED, problem)
             return
         active[leg] = ActiveTable(leg, identity, bank, sha, f"{describe_table(table)}; target {target}", target)
-        yield ev.LegChecked(leg, identity, bank, sha, active[leg].description)
+        yield LegChecked(leg, identity, bank, sha, active[leg].description)
 
     def log_all(outcome: str, message: str, details: dict[str, Any] | None = None) -> Iterator[ev.Event]:
         for leg, a in active.items():
-            yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, outcome, message, a.drive, drive_url,
+            yield AuditRecord(AuditEntry(Action.VERIFY, leg, outcome, message, a.drive, drive_url,
                                             table_sha256=a.table_sha256, bank=a.bank,
                                             details={"target": a.target, **(details or {})}))
 
@@ -355,20 +376,20 @@ def verify_procedure(
         text = (f"the verification sweep did not complete ({outcome}: {finished.reason if finished is not None else ''}); "
                 f"no point measured on leg(s) {unmeasured}, so no figures")
         yield from log_all(AuditOutcome(str(outcome)), text, {"session": str(out)})
-        yield ev.OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, {})
+        yield OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, {})
         return
     after_points, before_points, basis, basis_doc = error_basis(session, before, normalise)
     results = verify(after_points, before_points, list(active),
                      after_source=str(out), before_source=str(before.path) if before is not None else "")
     doc = {"path": str(out), "sha256": session.sha256, "outcome": str(outcome),
            "reason": finished.reason if finished is not None else "", "error_basis": basis_doc}
-    yield ev.Verified(results, "\n".join(basis) + "\n" + format_report(results), doc)
+    yield Verified(results, "\n".join(basis) + "\n" + format_report(results), doc)
     for leg, r in results.items():
         a = active[leg]
         details = {"target": a.target, "session": str(out), "session_sha256": session.sha256, **r.to_json()}
         if before is not None:
             details["before_session"] = {"path": str(before.path), "sha256": before.sha256}
-        yield ev.AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome(str(outcome)), summary_line(outcome, r),
+        yield AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome(str(outcome)), summary_line(outcome, r),
                                         a.drive, drive_url, table_sha256=a.table_sha256, bank=a.bank, details=details))
     failed = [leg for leg, r in results.items() if not r.passed]
     if outcome != Outcome.COMPLETED:
@@ -377,7 +398,7 @@ def verify_procedure(
         text = f"leg(s) {failed}: residual RMS above {ACCEPT_RATIO:g} x the noise floor (or no floor)"
     else:
         text = f"leg(s) {sorted(results)}: residual RMS within {ACCEPT_RATIO:g} x the noise floor"
-    yield ev.OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, results)
+    yield OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, results)
 
 
 def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:

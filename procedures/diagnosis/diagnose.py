@@ -38,7 +38,6 @@ from procedures.diagnosis.unexplained import unexplained
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
 from procedures.engine.errors import InputError
-from procedures.engine.events import Finding
 from procedures.fit.noise import noise_floor
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE
 
@@ -466,11 +465,6 @@ def _diagnose(points, twin, s: DiagnosisSettings, recording, source) -> dict:
     out = finite_or_null(report, extra)
     out["notes"].extend(extra)
     return out
-
-
-def finding_events(report: dict) -> list[Finding]:
-    """The report's findings as `procedures.engine.events.Finding` events (for sinks and front ends)."""
-    return [Finding(leg=f["leg"], effect=f["effect"], parameters=dict(f["parameters"])) for f in report["findings"]]
 
 
 def finite_or_null(obj, notes: list[str], path: str = ""):

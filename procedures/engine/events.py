@@ -1,19 +1,19 @@
 """Events a procedure yields. Frozen dataclasses; front ends and sinks only present them.
 
+The base class, the sweep's lifecycle and what every run may yield (pause, message, fault). An
+event carrying a procedure's own payload lives beside that payload (procedures.compensation:
+`AuditRecord` in audit.py, `TablePlanned`, `TablePushed`, `OperationFinished` in push.py,
+`LegChecked`, `Verified` in verify.py), so the engine imports no domain.
+
 Units are in the field names; `t_s` is on the rig clock (virtual on the simulated rig).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 from procedures.engine.states import FaultKind, Outcome
-
-if TYPE_CHECKING:  # the payload types import this module (their procedures yield these events)
-    from procedures.compensation.audit import AuditEntry
-    from procedures.compensation.push import PushPlan, PushResult
-    from procedures.compensation.verify import LegVerification
 
 
 @dataclass(frozen=True)
@@ -81,73 +81,6 @@ class SweepFinished(Event):
     outcome: Outcome  # COMPLETED / ABORTED / FAILED
     points: int
     reason: str = ""
-
-
-@dataclass(frozen=True)
-class TablePushed(Event):
-    leg: int
-    bank: int
-    table_sha256: str
-    drive: str
-
-
-@dataclass(frozen=True)
-class Finding(Event):
-    leg: int
-    effect: str
-    parameters: dict[str, float] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class AuditRecord(Event):
-    """An entry for the audit log (a procedures.compensation.audit.AuditEntry). Procedures yield these; the
-    audit sink (procedures.compensation.audit.AuditSink) is the only writer of the log."""
-
-    entry: AuditEntry
-
-
-@dataclass(frozen=True)
-class TablePlanned(Event):
-    """A push or rollback read the drive and checked the table (a procedures.compensation.push.PushPlan):
-    what will be written and what it replaces. Nothing is written yet; the procedure asks for
-    confirmation next."""
-
-    plan: PushPlan
-
-
-@dataclass(frozen=True)
-class LegChecked(Event):
-    """A verification found `leg`'s table active and fit to verify: `bank`, `table_sha256`,
-    `description` (points, span, largest correction)."""
-
-    leg: int
-    drive: str
-    bank: int
-    table_sha256: str
-    description: str
-
-
-@dataclass(frozen=True)
-class Verified(Event):
-    """A verification's figures (procedures.compensation.verify.LegVerification per leg), after its sweep."""
-
-    results: dict[int, LegVerification]
-    report: str
-    session: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class OperationFinished(Event):
-    """A push, rollback or verification ended. `action`: procedures.engine.states.Action; `outcome`:
-    procedures.engine.states.AuditOutcome (ok / refused / cancelled / failed for a push or rollback;
-    refused / completed / aborted / failed for a verification). `message` says what happened
-    and, after a failed push, which table is active. `result`: a push's PushResult."""
-
-    action: str
-    leg: int | None
-    outcome: str
-    message: str
-    result: PushResult | None = None
 
 
 @dataclass(frozen=True)

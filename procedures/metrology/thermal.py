@@ -53,15 +53,9 @@ class Material:
 
 def nde_correction_um(target_mm, material_temp_c, material: Any, reference_temp_c: float = REFERENCE_TEMP_C):
     """The thermal expansion of the leg at `target_mm`, um (positive = longer than at the
-    reference temperature): what `normalised_error_um` subtracts. Vectorised."""
+    reference temperature): what normalising an error to it subtracts. Vectorised."""
     return (float(material.expansion_um_m_k) * (np.asarray(material_temp_c, dtype=float) - reference_temp_c)
             * (np.asarray(target_mm, dtype=float) - float(material.fixed_point_mm)) * 1e-3)
-
-
-def normalised_error_um(error_um, target_mm, material_temp_c, material: Any,
-                        reference_temp_c: float = REFERENCE_TEMP_C):
-    """error_20_um = error_um - nde_correction_um(...) (module docstring)."""
-    return np.asarray(error_um, dtype=float) - nde_correction_um(target_mm, material_temp_c, material, reference_temp_c)
 
 
 def _material(d: Any) -> Material | None:

@@ -653,9 +653,3 @@ def table_budget(positions_mm: Iterable[float], s_um: float, n: int, inputs: Unc
         u = math.sqrt(v.var)
         out.append({"position_mm": float(p), "u_um": u, "U_um": K_COVERAGE * u})
     return out
-
-
-def session_budget(iso_results: dict, points: np.ndarray, inputs_of=None) -> dict[int, LegBudget]:
-    """leg -> LegBudget for procedures.reporting.iso230.evaluate's result; `inputs_of(leg)` gives the leg's
-    UncertaintyInputs (default: UncertaintyInputs())."""
-    return {leg: leg_budget(r, points, inputs_of(leg) if inputs_of else None) for leg, r in iso_results.items()}

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.engine.errors import InputError
+from procedures.platform.kinematics import FkStatus, forward_kinematics
 
 GEOMETRY_FORMAT = "station.platform.geometry/1"
 DEFAULT_GEOMETRY_PATH = Path(__file__).with_name("geometries") / "default.toml"
@@ -102,8 +103,6 @@ class Geometry:
     def _solve_home(self) -> np.ndarray:
         # Start above the base at the height that gives leg 1 its mid-stroke length when the
         # platform is level and centred, then let forward kinematics settle all six legs.
-        from procedures.platform.kinematics import FkStatus, forward_kinematics
-
         d = self.base_joints_mm - self.platform_joints_mm
         horiz2 = d[:, 0] ** 2 + d[:, 1] ** 2
         if np.any(horiz2 >= self.mid_stroke_mm**2):

@@ -19,10 +19,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Protocol
 
 import numpy as np
-
-from procedures.platform.geometry import Geometry
 
 POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "rx_rad", "ry_rad", "rz_rad")
 DEFAULT_TOL_MM = 1e-10  # leg-length residual at which FK stops; far below any leg error (um)
@@ -30,6 +29,22 @@ _BLOCK = 4096  # poses per vectorised block (cache-sized)
 CHORD_MM = 0.1  # leg residual below which a pose keeps its Jacobian's inverse (chord steps)
 DEFAULT_SINGULAR_RCOND = 1e-5  # smallest/largest singular value of the scaled Jacobian;
 # below it 1 um of leg error moves the pose by more than 0.1 mm: the pose is not worth reporting
+
+
+class Joints(Protocol):
+    """What the kinematics reads of a platform (procedures.platform.geometry.Geometry is one):
+    stated here, not imported, because a Geometry solves its home pose with `forward_kinematics`
+    while it is built (the geometry module imports this one)."""
+
+    base_joints_mm: np.ndarray
+    platform_joints_mm: np.ndarray
+    mid_stroke_mm: np.ndarray
+    stroke_min_mm: np.ndarray
+    stroke_max_mm: np.ndarray
+    home_pose_mm_rad: np.ndarray
+
+    @property
+    def platform_radius_mm(self) -> float: ...
 
 
 class FkStatus(IntEnum):
@@ -102,7 +117,7 @@ def _rotation_parts(angles_t: np.ndarray):
     return r, (-sc, cc)
 
 
-def _legs_t(geometry: Geometry, poses_t: np.ndarray, jacobian: bool):
+def _legs_t(geometry: Joints, poses_t: np.ndarray, jacobian: bool):
     """Leg lengths (6 legs, N) for poses (6 components, N) and, if asked, the Jacobian
     dL/dpose as (N, 6 legs, 6 components). Poses along the last axis: every operation is on
     contiguous (6, N) arrays and no reduction runs over a short axis (2-3x faster than
@@ -134,13 +149,13 @@ def _legs_t(geometry: Geometry, poses_t: np.ndarray, jacobian: bool):
     return lengths, jt.transpose(2, 1, 0)
 
 
-def _legs(geometry: Geometry, poses: np.ndarray, jacobian: bool):
+def _legs(geometry: Joints, poses: np.ndarray, jacobian: bool):
     """Leg lengths (N, 6) and, if asked, the Jacobian dL/dpose (N, 6 legs, 6 pose components)."""
     lengths, jac = _legs_t(geometry, poses.T, jacobian)
     return lengths.T, (None if jac is None else np.ascontiguousarray(jac))
 
 
-def inverse_kinematics(geometry: Geometry, poses_mm_rad) -> np.ndarray:
+def inverse_kinematics(geometry: Joints, poses_mm_rad) -> np.ndarray:
     """Leg lengths, mm, for poses (N, 6) or one pose (6,) in POSE_FIELDS order. Closed form.
 
     Returns (N, 6) lengths (joint-centre distances, leg i in column i-1), or (6,) for one pose.
@@ -151,7 +166,7 @@ def inverse_kinematics(geometry: Geometry, poses_mm_rad) -> np.ndarray:
     return lengths[0] if single else lengths
 
 
-def length_jacobian(geometry: Geometry, poses_mm_rad) -> np.ndarray:
+def length_jacobian(geometry: Joints, poses_mm_rad) -> np.ndarray:
     """dL_i / dpose_c, (N, 6, 6) (or (6, 6) for one pose): rows legs, columns POSE_FIELDS.
 
     Units: mm/mm for the x, y, z columns, mm/rad for the angle columns.
@@ -161,18 +176,18 @@ def length_jacobian(geometry: Geometry, poses_mm_rad) -> np.ndarray:
     return jac[0] if single else jac
 
 
-def leg_positions_mm(geometry: Geometry, lengths_mm) -> np.ndarray:
+def leg_positions_mm(geometry: Joints, lengths_mm) -> np.ndarray:
     """Leg positions relative to mid-stroke (the drives' and recordings' coordinate), mm."""
     return np.asarray(lengths_mm, dtype=float) - geometry.mid_stroke_mm
 
 
-def in_stroke(geometry: Geometry, lengths_mm) -> np.ndarray:
+def in_stroke(geometry: Joints, lengths_mm) -> np.ndarray:
     """True per leg (same shape as `lengths_mm`) where the length is within the stroke limits."""
     pos = leg_positions_mm(geometry, lengths_mm)
     return (pos >= geometry.stroke_min_mm) & (pos <= geometry.stroke_max_mm)
 
 
-def reachable(geometry: Geometry, poses_mm_rad) -> np.ndarray:
+def reachable(geometry: Joints, poses_mm_rad) -> np.ndarray:
     """True per pose where every leg length (by IK) lies within its stroke."""
     lengths = np.atleast_2d(inverse_kinematics(geometry, poses_mm_rad))
     ok = np.all(in_stroke(geometry, lengths), axis=1)
@@ -196,7 +211,7 @@ def _inverses(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return inv, ok
 
 
-def _rcond(geometry: Geometry, jac: np.ndarray, inv: np.ndarray | None = None, ok: np.ndarray | None = None) -> np.ndarray:
+def _rcond(geometry: Joints, jac: np.ndarray, inv: np.ndarray | None = None, ok: np.ndarray | None = None) -> np.ndarray:
     """Reciprocal 1-norm condition number 1 / (|J|_1 |J^-1|_1) of the scaled Jacobian, 0 where
     J cannot be inverted. Angle columns are divided by the platform radius: a small rotation
     moves the joints by about radius * angle, so the scaled columns are all lengths.
@@ -235,7 +250,7 @@ def _newton_steps(jac: np.ndarray, residual: np.ndarray) -> tuple[np.ndarray, np
 
 
 def forward_kinematics(
-    geometry: Geometry,
+    geometry: Joints,
     lengths_mm,
     initial_poses_mm_rad=None,
     tol_mm: float = DEFAULT_TOL_MM,

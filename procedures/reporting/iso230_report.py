@@ -46,7 +46,7 @@ def _range(v: np.ndarray) -> list[float] | None:
     return [float(v.min()), float(v.max())] if v.size else None
 
 
-def _normalised(points: np.ndarray, station_config: dict) -> tuple[np.ndarray, dict[str, Any]]:
+def normalised_points(points: np.ndarray, station_config: dict) -> tuple[np.ndarray, dict[str, Any]]:
     """The points whose error_um is normalised to the reference temperature, and what was done."""
     try:
         from procedures.metrology.thermal import normalise_session
@@ -210,7 +210,7 @@ def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict
                               "statement": "Deviations NOT normalised to 20 degC (raw error asked for: --raw, or a model "
                                            "fitted to the raw error): the values hold at the recorded temperature."}
     else:
-        pts, basis = _normalised(points, station_config or {})
+        pts, basis = normalised_points(points, station_config or {})
     iso = iso230.evaluate(pts)
     legs = sorted(iso)
     metrology = (station_config or {}).get("metrology") or {}
@@ -263,14 +263,14 @@ def build(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict
     tol = decision.tolerances_from_json(tolerances or (station_config or {}).get("tolerances"))
     stage = stage or decision.stage_of((plan or {}).get("kind"), (plan or {}).get("stage"))
     out["decisions"] = {"stage": stage, "rule": decision.RULE, "legs": decision.decide_report(out, tol, stage)}
-    return _json_safe(out)
+    return json_safe(out)
 
 
-def _json_safe(v: Any) -> Any:
+def json_safe(v: Any) -> Any:
     if isinstance(v, dict):
-        return {str(k): _json_safe(x) for k, x in v.items()}
+        return {str(k): json_safe(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_json_safe(x) for x in v]
+        return [json_safe(x) for x in v]
     if isinstance(v, np.generic):
         v = v.item()
     if isinstance(v, float) and not math.isfinite(v):

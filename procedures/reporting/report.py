@@ -43,7 +43,7 @@ from procedures.fit.data import LegData, split_legs
 from procedures.fit.figures import range_um, reduction_pct, rms_about_mean_um
 from procedures.fit.noise import estimate_noise_floor
 from procedures.reporting.iso230 import MEANINGS as ISO_MEANINGS
-from procedures.reporting.iso230_report import _json_safe  # JSON with NaN/inf as null, numpy scalars as numbers
+from procedures.reporting.iso230_report import json_safe  # JSON with NaN/inf as null, numpy scalars as numbers
 
 UP_COLOR = "tab:blue"
 DOWN_COLOR = "tab:red"
@@ -320,7 +320,7 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
             "error_basis": basis,
             "legs": rows,
         }
-        result.summary = _json_safe(summary)
+        result.summary = json_safe(summary)
         write_text_atomic(work / "summary.json", json.dumps(result.summary, indent=2, sort_keys=True) + "\n")
         result.files.append(out / "summary.json")
         write_text_atomic(work / "summary.md", _markdown(result.summary, title or f"Report: {source_path or 'session'}"))

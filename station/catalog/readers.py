@@ -153,10 +153,10 @@ def session_iso(session) -> dict[int, dict]:
     (normalised to 20 degC where the session allows): {leg: {"E": {"value_um", "U_um"}, ...}}.
     The leg-level budget only: the report's per-target U is not needed here and costs most."""
     from procedures.reporting import iso230
-    from procedures.reporting.iso230_report import VALUE_ORDER, _normalised
+    from procedures.reporting.iso230_report import VALUE_ORDER, normalised_points
     from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
 
-    pts, _ = _normalised(session.points, session.station_config or {})
+    pts, _ = normalised_points(session.points, session.station_config or {})
     out: dict[int, dict] = {}
     for leg, r in iso230.evaluate(pts).items():
         budget = leg_budget(r, pts, UncertaintyInputs.from_record(session.station_config or {}, leg))

@@ -9,17 +9,19 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditError, AuditLog
 from procedures.engine.errors import InputError
-from procedures.acquisition.plans import parse_legs
 from procedures.engine.states import Action, AuditOutcome
-from station.catalog.writer import catalog_for
-from station.services.identity import station_audit_log
 from station.services.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
-from station.services.table_jobs import JobOutcome, OperationFailed, refusal_job
-from station.services.wiring import drive_url_of
+
+if TYPE_CHECKING:
+    from station.services.table_jobs import JobOutcome
+
+# The drive's, the catalog's and the jobs' modules are imported inside the functions that use
+# them: `station push --help` and an argument error load none of them (issue 32).
 
 
 def add_drive_arguments(p: argparse.ArgumentParser, several: bool = False) -> None:
@@ -59,6 +61,8 @@ def station_config(args, interferometer: bool = False) -> StationConfig:
 
 
 def audit_log(args, cfg: StationConfig) -> AuditLog:
+    from station.services.identity import station_audit_log
+
     return station_audit_log(cfg, getattr(args, "audit", None))
 
 
@@ -91,7 +95,9 @@ class PlanPrinter:
         self.header = header
 
     def handle(self, event: ev.Event) -> None:
-        if isinstance(event, ev.TablePlanned):
+        from procedures.compensation.push import TablePlanned
+
+        if isinstance(event, TablePlanned):
             plan = event.plan
             if plan.action == Action.ROLLBACK:
                 print(f"rollback of the push of {plan.details.get('push_time_utc')}")
@@ -123,6 +129,8 @@ def warn_audit_problems(audit: AuditLog) -> None:
 
 def report(job: JobOutcome, audit: AuditLog) -> int:
     """Print how a push or rollback ended; the exit code (0 ok, 1 cancelled, else an error)."""
+    from station.services.table_jobs import OperationFailed
+
     for problem in job.audit_problems:
         print(f"warning: {problem}", file=sys.stderr)
     end = job.finished
@@ -141,12 +149,18 @@ def report(job: JobOutcome, audit: AuditLog) -> int:
 def refuse(args, cfg: StationConfig, audit: AuditLog, action: Action, leg: int, exc: BaseException,
            source: dict | None = None) -> int:
     """A refusal found before the drive is opened: logged through the audit sink, then reported."""
+    from station.catalog.writer import catalog_for
+    from station.services.table_jobs import refusal_job
+    from station.services.wiring import drive_url_of
+
     job = refusal_job(action, leg, exc, audit=audit, drive_url=drive_url_of(cfg), source=source, catalog=catalog_for(cfg))
     return report(job, audit)
 
 
 def parse_leg_choice(text: str) -> tuple[int, ...]:
     """"3", "1-6", "1,4" or "all" as leg numbers; InputError naming what is wrong."""
+    from procedures.acquisition.plans import parse_legs
+
     if str(text).strip().lower() == "all":
         return tuple(range(1, LEG_COUNT + 1))
     try:

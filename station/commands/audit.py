@@ -25,8 +25,7 @@ from procedures.compensation.audit_view import (
     read_audit,
     select,
 )
-from station.commands._table_cli import audit_log
-from station.services.config import AUDIT_NAME, LEG_COUNT, load_config
+from station.services.config import AUDIT_NAME
 
 NAME = "audit"
 HELP = "show the audit log: every push, verify and rollback, and which table each leg should hold"
@@ -52,6 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from station.commands._table_cli import audit_log
+    from station.services.config import LEG_COUNT, load_config
+
     cfg = load_config(args.config)
     path = audit_log(args, cfg).path
     if args.leg is not None:

@@ -9,9 +9,6 @@ import json
 from pathlib import Path
 
 from procedures.engine.errors import InputError
-from station.catalog import db, files
-from station.catalog.store import Catalog, catalog_of
-from station.services.config import load_config
 
 NAME = "catalog"
 HELP = "the index of every session, model, table, push, verification and report: rebuild, check, sync"
@@ -42,6 +39,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from station.catalog import db, files
+    from station.catalog.store import Catalog, catalog_of
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     catalog = catalog_of(cfg)
     if args.action == "rebuild" and args.db:

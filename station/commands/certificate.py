@@ -8,9 +8,6 @@ import argparse
 from pathlib import Path
 
 from procedures.engine.errors import InputError
-from procedures.io.recording.reader import read_session
-from station.services.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
-from station.services.config import load_config
 
 NAME = "certificate"
 HELP = "calibration certificate of a leg (PDF + JSON): report number, as found / as left with U and decisions"
@@ -109,6 +106,7 @@ def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:
 def _approve(args, cfg) -> int:
     from station.catalog.writer import catalog_for  # noqa: PLC0415
     from station.services.certificate_jobs import approve  # noqa: PLC0415
+    from station.services.certificate_jobs import FOLDER_NAME  # noqa: PLC0415
     from station.services.config import AUDIT_NAME  # noqa: PLC0415
 
     if not args.number or not args.by:
@@ -126,6 +124,10 @@ def _approve(args, cfg) -> int:
 
 
 def run(args) -> int:
+    from procedures.io.recording.reader import read_session
+    from station.services.certificate_jobs import COUNTER_NAME, FOLDER_NAME, issue_certificate, pick_leg
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     if args.session == "approve" and not Path("approve").exists():
         return _approve(args, cfg)

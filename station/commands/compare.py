@@ -8,13 +8,13 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from procedures.reporting import compare as cmp
 from procedures.engine.errors import InputError
 from procedures.io.atomic import write_bytes_atomic  # never half a file
-from procedures.io.outputs import check_output_folder
-from procedures.io.recording.reader import read_session
-from station.services.report_jobs import session_decisions
+
+if TYPE_CHECKING:
+    from procedures.reporting import compare as cmp
 
 NAME = "compare"
 HELP = "station comparison: sessions of one reference leg from several stations, E_n per target, bias flagged"
@@ -59,6 +59,9 @@ def _leg_of(session, serial: str | None, others: list) -> tuple[int, str]:
 
 def run_of(session, serial: str | None, others: list, raw: bool) -> cmp.StationRun:
     """One session as a StationRun of its reference leg (the ISO 230-2 report's targets with U)."""
+    from procedures.reporting import compare as cmp
+    from station.services.report_jobs import session_decisions
+
     leg, serial = _leg_of(session, serial, others)
     iso = session_decisions(session, raw)
     L = iso["legs"].get(str(leg))
@@ -71,6 +74,10 @@ def run_of(session, serial: str | None, others: list, raw: bool) -> cmp.StationR
 
 
 def run(args) -> int:
+    from procedures.io.outputs import check_output_folder
+    from procedures.io.recording.reader import read_session
+    from procedures.reporting import compare as cmp
+
     if len(args.sessions) < 2:
         raise InputError("give at least two sessions to compare")
     out = check_output_folder(args.out, force=args.force)  # before reading: never overwrites unasked

@@ -16,15 +16,15 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from procedures.diagnosis import DiagnosisSettings, to_json
-from procedures.diagnosis.selfcheck import format_self_check, run_self_check
-from procedures.diagnosis.text_report import text_report
 from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_file
 from station.services.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
-from station.services.twins import load_twin
-from station.services.selfcheck import SELF_CHECK_CONTRIBUTION_UM, selfcheck_trial
+from station.services.selfcheck import SELF_CHECK_CONTRIBUTION_UM
+
+if TYPE_CHECKING:
+    from procedures.diagnosis import DiagnosisSettings
 
 NAME = "diagnose"
 HELP = "diagnose the gap between the twin and a recording (where, which effect, how far)"
@@ -74,6 +74,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _settings(args) -> DiagnosisSettings:
+    from procedures.diagnosis import DiagnosisSettings
+
     effects = None
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
@@ -85,6 +87,10 @@ def _settings(args) -> DiagnosisSettings:
 
 
 def run(args) -> int:
+    from procedures.diagnosis import to_json
+    from procedures.diagnosis.text_report import text_report
+    from station.services.twins import load_twin
+
     settings = _settings(args)
     if args.json:  # before the (long) diagnosis or self-check
         check_output_file(args.json, force=args.force, option="--json")
@@ -128,6 +134,9 @@ def _catalog_engine(args):
 
 # -- self-check -----------------------------------------------------------------------------------
 def _self_check(args, settings: DiagnosisSettings) -> int:
+    from procedures.diagnosis.selfcheck import format_self_check, run_self_check
+    from station.services.selfcheck import selfcheck_trial
+
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     if args.variants:
         return _variant_check(args, settings, seeds)
@@ -150,7 +159,7 @@ def _variant_check(args, settings: DiagnosisSettings, seeds) -> int:
     """The variants' self-check: --seeds sessions per physics (station/services/selfcheck_variants.py),
     parameters within 15 %, gap within 25 % of the oracle's."""
     from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, format_by_physics,
-                                                summarise_by_physics)
+                                                format_self_check, run_self_check, summarise_by_physics)
     from station.services.selfcheck_variants import variant_trial
 
     physics = [p.strip() for p in args.variants.split(",") if p.strip()]

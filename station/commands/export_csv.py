@@ -7,9 +7,7 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 from pathlib import Path
 
-from procedures.io.csv_io import export_csv
 from procedures.io.outputs import check_output_file
-from station.services.report_jobs import export_lines
 
 NAME = "export"
 HELP = "write a session file's points as an interchange CSV"
@@ -26,6 +24,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.io.csv_io import export_csv
+    from station.services.report_jobs import export_lines
+
     check_output_file(args.out, force=args.force)
     summary = export_csv(Path(args.h5), Path(args.out), overwrite=args.force)
     for line in export_lines(summary):

@@ -9,13 +9,7 @@ import argparse
 from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_file
 from procedures.fit.paper import DEFAULT_N_PARAMS
-from procedures.fit.reversal_probes import ProbeReversal
-from procedures.acquisition.probe_rule import recorded_stop
-from procedures.acquisition.plans import parse_legs
-from procedures.io.recording.reader import read_session
 from procedures.engine.states import Outcome
-from station.services.config import load_config
-from station.services.analysis import analyse_session, save_session_model
 
 NAME = "fit"
 HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"
@@ -51,6 +45,13 @@ def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
 
 
 def run(args) -> int:
+    from procedures.acquisition.plans import parse_legs
+    from procedures.acquisition.probe_rule import recorded_stop
+    from procedures.fit.reversal_probes import ProbeReversal
+    from procedures.io.recording.reader import read_session
+    from station.services.analysis import analyse_session, save_session_model
+    from station.services.config import load_config
+
     if args.params is not None and args.method != "paper":  # never silently ignored
         raise InputError(f"--params {args.params}: the number of cosine terms applies to --method paper only "
                          "(the default method sizes itself by cross-validation); drop --params or add --method paper")

@@ -7,11 +7,6 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 import json
 
-from procedures.engine.errors import InputError
-
-from station.catalog.history import history, row_detail, stage_label, value_with_u
-from station.catalog.store import catalog_of, reading_engine
-from station.services.config import load_config
 
 NAME = "history"
 HELP = "a leg's history by serial: calibrations (ISO 230-2 with U), tables, pushes, verifications, drift"
@@ -32,6 +27,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.engine.errors import InputError
+    from station.catalog.history import history, row_detail, stage_label, value_with_u
+    from station.catalog.store import catalog_of, reading_engine
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     engine, where = reading_engine(catalog_of(cfg), args.local)
     h = history(engine, args.serial, cfg.catalog.calibration_interval_days, cfg.catalog.min_drift_interval_days)

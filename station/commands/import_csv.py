@@ -7,21 +7,25 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from procedures.io.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv
 from procedures.io.outputs import check_output_file
-from procedures.acquisition.plans import parse_legs
-from procedures.io.ranges import MAX_ERROR_UM, PointLimits
 from station import __version__
+
+if TYPE_CHECKING:
+    from procedures.io.ranges import PointLimits
 
 NAME = "import"
 HELP = "convert an interchange CSV (leg, run, direction, target_mm, error_um, ...), or another layout through --map, to a session file"
+# A plain string, so `station import --help` shows it without loading the CSV reader (h5py);
+# tests/station/test_cli_startup.py holds it to REQUIRED_COLUMNS, OPTIONAL_COLUMNS and MAX_ERROR_UM.
 DESCRIPTION = (
     "Convert measurements in the interchange CSV format to an HDF5 session file. Required columns: "
-    f"{', '.join(REQUIRED_COLUMNS)}; optional: {', '.join(OPTIONAL_COLUMNS)} (a missing optional column "
+    "leg, run, direction, target_mm, error_um; optional: time_s, material_temp_c, air_temp_c, air_pressure_hpa, "
+    "humidity_pct, load_n, speed_mm_s (a missing optional column "
     "means 'not measured'). The whole file is checked first; on any problem nothing is written. "
     "Values are checked against physical ranges: legs (--legs), targets within the drive profile's soft "
-    f"limits, |error_um| <= {MAX_ERROR_UM:g} um, temperatures, pressure, humidity and load a workshop sees. "
+    "limits, |error_um| <= 1000 um, temperatures, pressure, humidity and load a workshop sees. "
     "Other laser software's CSV: --map MAP.toml says which columns hold what, their units, the sign of "
     "the error, how directions and runs are told (docs/import.md; examples in docs/import-maps/). Identity, so "
     "the session is decided and certified like a recorded one: --serial, --part-number, --leg-type, --screw-lot, "
@@ -56,6 +60,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def import_limits(legs: str = "1-6", profile: str | None = None) -> PointLimits:
     """The physical ranges of an import: the legs given, the drive profile's soft limits."""
+    from procedures.acquisition.plans import parse_legs
+    from procedures.io.ranges import PointLimits
     from station.services.wiring import drive_soft_limits
 
     return PointLimits(legs=parse_legs(legs), stroke_mm=drive_soft_limits(profile))
@@ -83,6 +89,8 @@ def _identity(args, mapping) -> dict:
 
 
 def run(args) -> int:
+    from procedures.io.csv_io import import_csv
+
     check_output_file(args.out, force=args.force, suffixes=(".h5",))
     limits = import_limits(args.legs, args.profile)
     warnings: list[str] = []
@@ -116,6 +124,7 @@ def run(args) -> int:
 def _import_mapped(args, limits, warnings):
     """Convert through the map, then import the interchange CSV; its problems are reported in
     terms of the source file (its lines and column names)."""
+    from procedures.io.csv_io import import_csv
     from procedures.engine.errors import InputError
     from procedures.io.import_map import convert, load_map, source_message
 

@@ -12,10 +12,6 @@ from procedures.io.atomic import write_text_atomic
 from procedures.reporting.decision import decision_lines
 from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_file
-from procedures.reporting.iso230 import dumps, format_table
-from procedures.io.recording.reader import read_session
-from station.services.report_jobs import iso_lines, session_decisions
-from station.services.analysis import analyse_session
 
 NAME = "iso230"
 HELP = "ISO 230-2 values (E, M, A, B, R; up, down, both) of each leg in a session file"
@@ -39,6 +35,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.io.recording.reader import read_session
+    from procedures.reporting.iso230 import dumps, format_table
+    from station.services.analysis import analyse_session
+    from station.services.report_jobs import iso_lines, session_decisions
+
     if args.json:
         check_output_file(args.json, force=args.force, option="--json")
     session = read_session(Path(args.h5))

@@ -10,9 +10,6 @@ import json
 from dataclasses import asdict
 
 from procedures.engine.errors import InputError
-from station.catalog.history import legs
-from station.catalog.store import catalog_of, reading_engine
-from station.services.config import load_config
 
 NAME = "legs"
 HELP = "list legs by serial with last calibration and due date (filters: type, station, dates, due)"
@@ -39,6 +36,8 @@ def _refuse_unknown(engine, where: str, args, interval_days: int) -> None:
     """A --type or --station the catalog has never seen is a typo, not an empty answer: refused in
     one line (exit 2) naming the known ones, as `station history` refuses an unknown serial and the
     web view answers 400. A known one that matches nothing with the other filters lists 0 legs."""
+    from station.catalog.history import legs
+
     every = legs(engine, interval_days=interval_days)
     for given, name, option, of in ((args.leg_type, "type", "--type", lambda r: r.leg_type),
                                     (args.station, "station", "--station", lambda r: r.station_id)):
@@ -49,6 +48,10 @@ def _refuse_unknown(engine, where: str, args, interval_days: int) -> None:
 
 
 def run(args) -> int:
+    from station.catalog.history import legs
+    from station.catalog.store import catalog_of, reading_engine
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     due = args.due
     if due == "today":

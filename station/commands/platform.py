@@ -15,7 +15,6 @@ import math
 
 from procedures.engine.errors import InputError
 from procedures.io.outputs import check_output_folder
-from station.services.platform_jobs import load_errors, write_report
 
 NAME = "platform"
 HELP = "pose errors of the platform from leg errors, before and after compensation (paper's Table 2)"
@@ -60,6 +59,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from station.services.platform_jobs import load_errors, write_report
     from procedures.platform.experiment import MEASUREMENT_LABELS, Workspace, run_measurements
     from procedures.platform.geometry import default_geometry, load_geometry
     from procedures.platform.report import pose_table_markdown, reduction_lines

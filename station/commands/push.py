@@ -10,37 +10,11 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
 
-from procedures.engine import events as ev
 from procedures.compensation.audit import AuditLog
 from procedures.engine.errors import InputError
-from procedures.io.plausibility import ImplausibleError
-from procedures.compensation.push import PushPlan
 from procedures.engine.states import Action
-from station.catalog.writer import catalog_for
-from station.commands._table_cli import (
-    PlanPrinter,
-    add_drive_arguments,
-    audit_log,
-    drive_text,
-    parse_leg_choice,
-    prompt,
-    refuse,
-    report,
-    station_config,
-    warn_audit_problems,
-)
-from station.services.identity import configured_serials
+from station.commands._table_cli import add_drive_arguments
 from station.services.devices import DriverError
-from station.services.table_jobs import (
-    check_push_values,
-    controller_refusal,
-    load_leg_table,
-    push_job,
-    push_legs_job,
-    target_text,
-    unverified_table_line,
-)
-from station.services.wiring import leg_table_spec, open_drive
 
 NAME = "push"
 HELP = "write a leg's compensation table to its drive (inactive bank, read back, switch), with an audit entry"
@@ -62,6 +36,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # -- push -----------------------------------------------------------------------------------------
 
 def run(args) -> int:
+    from procedures.compensation.push import OperationFinished
+    from procedures.io.plausibility import ImplausibleError
+    from station.catalog.writer import catalog_for
+    from station.commands._table_cli import (
+        PlanPrinter, audit_log, drive_text, parse_leg_choice, prompt, refuse, report, station_config,
+        warn_audit_problems,
+    )
+    from station.services.identity import configured_serials
+    from station.services.table_jobs import (
+        check_push_values, controller_refusal, load_leg_table, push_job, push_legs_job, target_text,
+        unverified_table_line,
+    )
+    from station.services.wiring import open_drive
+
     cfg = station_config(args)
     audit = audit_log(args, cfg)
     try:
@@ -113,7 +101,7 @@ def run(args) -> int:
     for line in job.warnings:  # found only against the drive's own limit
         if line not in warned:
             print(line)
-    for end in job.of(ev.OperationFinished):
+    for end in job.of(OperationFinished):
         result = end.result
         if end.leg is not None and result is not None:
             print(f"pushed: leg {result.leg} bank {result.bank} active (was bank {result.previous_bank}); "
@@ -139,6 +127,8 @@ def run(args) -> int:
 
 def _configured_limit_um(cfg, leg: int) -> float:
     """What leg `leg`'s table holder takes by the config, without connecting (inf when unknown)."""
+    from station.services.wiring import leg_table_spec
+
     try:
         return leg_table_spec(cfg, leg).max_correction_um
     except InputError:
@@ -147,6 +137,7 @@ def _configured_limit_um(cfg, leg: int) -> float:
 
 def _with_audit_line(ask, audit: AuditLog):
     """A `Confirm` for one plan or several: say where the audit log is, then ask."""
+    from procedures.compensation.push import PushPlan
 
     def confirm(plans) -> bool:
         print(f"audit log: {audit.path}")

@@ -16,15 +16,7 @@ from pathlib import Path
 
 from procedures.io.atomic import atomic_paths
 from procedures.engine.errors import InputError
-from station.services.samples import (
-    FILES,
-    SAMPLES,
-    make_calibration,
-    make_fault,
-    make_verification,
-    open_sample_rig,
-    sample_config,
-)
+from station.services.samples import FILES, SAMPLES
 
 NAME = "recordings"
 HELP = "regenerate the sample sessions of recordings/ on the simulated rig (deterministic)"
@@ -55,6 +47,8 @@ def run(args) -> int:
 
 
 def _make(wanted, targets: dict[str, Path]) -> None:
+    from station.services.samples import make_calibration, make_fault, make_verification, open_sample_rig, sample_config
+
     cfg = sample_config()
     if "calibration" in wanted:
         with open_sample_rig() as rig:

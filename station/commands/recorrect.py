@@ -10,8 +10,6 @@ from pathlib import Path
 from procedures.io.outputs import check_output_file
 
 from procedures.metrology.air import EQUATIONS
-from procedures.metrology.recorrect import RecorrectOptions, recorrect_session
-from station.services.config import load_config
 
 NAME = "recorrect"
 HELP = "re-correct a session's laser readings for the air refractive index (Ciddor/Edlen) into a new file"
@@ -46,6 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.metrology.recorrect import RecorrectOptions, recorrect_session
+    from station.services.config import load_config
+
     out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
     if args.force and out.exists() and out.resolve() != Path(args.session).resolve():
         out.unlink()  # --force: the re-corrected session replaces it

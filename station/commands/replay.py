@@ -14,10 +14,6 @@ import argparse
 from pathlib import Path
 
 from procedures.engine.errors import InputError
-from procedures.io.recording.reader import read_session
-from procedures.io.replay_compare import Comparison, compare_sessions  # noqa: F401  (re-exported)
-from station.services import jobs
-from station.services.jobs import ReplayRecorderSink, replay_sweep, retry_policy_of  # noqa: F401  (re-exported)
 
 NAME = "replay"
 HELP = "replay a recorded session through the same drivers and record it again (--speed 1|N|max)"
@@ -32,6 +28,8 @@ DESCRIPTION = (
 
 def parse_speed(text: str) -> float | None:
     """station.services.jobs.parse_speed for argparse: its message as an ArgumentTypeError."""
+    from station.services import jobs
+
     try:
         return jobs.parse_speed(text)
     except InputError as exc:
@@ -49,6 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # -- the command -----------------------------------------------------------------------------------
 
 def run(args) -> int:
+    from procedures.io.recording.reader import read_session
     from procedures.io.outputs import check_output_file
     from station.services.config import load_config
     from station.progress import ConsoleProgress

@@ -7,12 +7,8 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
 
-from procedures.fit import load_model
 from procedures.io.outputs import check_output_folder
-from procedures.io.recording.reader import read_session
-from station.catalog.writer import catalog_for
-from station.services.config import load_config
-from station.services.report_jobs import report_lines, session_report
+from station.commands.fit import _lead
 
 NAME = "report"
 HELP = "plots, a summary before/after compensation and the ISO 230-2 test report with uncertainties (Markdown, JSON, PDF)"
@@ -43,6 +39,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.fit import load_model
+    from procedures.io.recording.reader import read_session
+    from station.catalog.writer import catalog_for
+    from station.services.config import load_config
+    from station.services.report_jobs import report_lines, session_report
+
     check_output_folder(args.out, force=args.force)  # before reading and fitting (procedures/io/outputs.py)
     session = read_session(args.session)
     model = load_model(args.model) if args.model else None

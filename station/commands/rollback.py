@@ -4,25 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.engine import events as ev
 from procedures.engine.errors import InputError
-from procedures.compensation.push import describe_table
 from procedures.engine.states import Action
-from station.catalog.writer import catalog_for
-from station.commands._table_cli import (
-    PlanPrinter,
-    add_drive_arguments,
-    audit_log,
-    drive_text,
-    prompt,
-    refuse,
-    report,
-    station_config,
-    warn_audit_problems,
-)
-from station.services.config import LEG_COUNT
-from station.services.table_jobs import controller_refusal, rollback_job, target_text
-from station.services.wiring import open_drive
+from station.commands._table_cli import add_drive_arguments
 
 NAME = "rollback"
 HELP = "restore the table a drive had before the last successful push (from the audit log)"
@@ -38,6 +22,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.compensation.push import TablePlanned, describe_table
+    from station.catalog.writer import catalog_for
+    from station.commands._table_cli import (
+        PlanPrinter, audit_log, drive_text, prompt, refuse, report, station_config, warn_audit_problems,
+    )
+    from station.services.config import LEG_COUNT
+    from station.services.table_jobs import controller_refusal, rollback_job, target_text
+    from station.services.wiring import open_drive
+
     cfg = station_config(args)
     audit = audit_log(args, cfg)
     leg = int(args.leg)
@@ -59,7 +52,7 @@ def run(args) -> int:
     if code:
         return code
     result = job.finished.result
-    plan = job.of(ev.TablePlanned)[-1].plan
+    plan = job.of(TablePlanned)[-1].plan
     print(f"rolled back: leg {leg} bank {result.bank} active (was bank {result.previous_bank}): "
           f"{describe_table(plan.table)}; sha256 {result.table_sha256}")
     return 0

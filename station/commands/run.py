@@ -11,18 +11,11 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
 
-from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
 from procedures.io.outputs import check_output_file
-from procedures.acquisition.plans import parse_legs
-from station.commands.sweep import check_time_scale
-from station.services.config import load_config
-from station.services.jobs import run_sweep
-from station.services.sessions import default_session_path
 from procedures.engine.control import RunControl
 from procedures.engine.states import Outcome
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
-from station.services.wiring import open_rig
 
 NAME = "run"
 HELP = "headless calibration sweep on the simulated rig, then its ISO 230-2 evaluation"
@@ -36,6 +29,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
+    from procedures.acquisition.plans import parse_legs
+    from station.commands.sweep import check_time_scale
+    from station.services.config import load_config
+    from station.services.jobs import run_sweep
+    from station.services.sessions import default_session_path
+    from station.services.wiring import open_rig
+
     cfg = load_config(None)
     plan = plan_from_spec(PlanSpec(legs=parse_legs(args.legs), kind="iso230", cycles=args.cycles), cfg.limits)
     check_time_scale(args.time_scale)
@@ -49,7 +50,6 @@ def run(args) -> int:
         return 1
     from procedures.reporting.iso230 import evaluate, format_table
     from procedures.io.recording.reader import read_session
-
     from procedures.metrology.thermal import error_basis
     from station.services.report_jobs import iso_lines, session_iso230
 

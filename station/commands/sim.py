@@ -9,8 +9,6 @@ import signal
 import threading
 from pathlib import Path
 
-from station.services.config import SimConfig
-from station.services.wiring import start_sim_rig
 
 NAME = "sim"
 HELP = "start the simulated rig (Modbus drives + serial interferometer) and print where to reach it"
@@ -33,6 +31,9 @@ def run(args) -> int:
         print(f"station sim: error: --time-scale {args.time_scale:g} with --interferometer-protocol linef1: a "
               "streaming laser needs a running clock; give a time scale > 0 (1 = real time)")
         return 2
+    from station.services.config import SimConfig
+    from station.services.wiring import start_sim_rig
+
     sim_cfg = SimConfig(seed=args.seed)  # the station's simulated legs: a real leg's jerk limit
     try:
         rig = start_sim_rig(sim_cfg, args.time_scale, args.port, args.rtu, Path(args.nv) if args.nv else None,

@@ -10,22 +10,17 @@ import shlex
 import sys
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from procedures.engine.errors import InputError
-from station.services.laser_wiring import check_plan_for_laser
-from procedures.io.outputs import check_appendable, check_output_file
-from procedures.acquisition.plan_spec import PLAN_KINDS, PlanSpec, plan_from_spec
-from procedures.acquisition.plans import parse_legs, SweepPlan
-from station.services.config import load_config
-from station.services.identity import leg_fields
-from station.services.serials import parse_serial_args, serials_unverified_line
-from station.services.jobs import resumable_plan, run_sweep
-from procedures.engine.control import RunControl
-from procedures.engine.states import Outcome
-from station import interrupt
-from station.interrupt import abort_on_sigint
-from station.progress import ConsoleProgress
-from station.services.wiring import open_rig
-from station.commands._table_cli import prompt
+from procedures.acquisition.plan_spec import PLAN_KINDS
+
+if TYPE_CHECKING:
+    from procedures.acquisition.plan_spec import PlanSpec
+    from procedures.acquisition.plans import SweepPlan
+
+# What a run needs is imported inside the functions (the recorder, the catalog, the rig's
+# drivers): `station sweep --help`, an argument error and a refusal load none of it.
 
 NAME = "sweep"
 HELP = "run a calibration sweep (ISO 230-2, the paper's, or on the fly) and record it to HDF5"
@@ -74,6 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def plan_spec(args) -> PlanSpec:
     """The plan `station sweep` is asked for (not for --resume, which reuses the file's plan)."""
+    from procedures.acquisition.plan_spec import PlanSpec
+    from procedures.acquisition.plans import parse_legs
+
     return PlanSpec(
         legs=parse_legs(args.legs), kind=args.plan, cycles=args.cycles, n_targets=args.n_targets, step_mm=args.step,
         targets_file=Path(args.targets) if args.targets else None, min_mm=args.min_mm, max_mm=args.max_mm,
@@ -84,6 +82,8 @@ def plan_spec(args) -> PlanSpec:
 def build_plan(args, limits=None) -> SweepPlan:
     """The plan asked for; with `limits` (the config's [limits]) sized first and refused beyond
     them before anything is built (procedures/acquisition/plan_size.py)."""
+    from procedures.acquisition.plan_spec import plan_from_spec
+
     return plan_from_spec(plan_spec(args), limits)
 
 
@@ -103,12 +103,19 @@ def resume_command(out: Path, cfg, config: str | None) -> str:
 def _confirm(yes: bool):
     """How a sweep of a compensated leg is confirmed here: --yes; else the question at the
     terminal; else (no terminal) None: refused in one line naming the legs and --yes."""
+    from station.commands._table_cli import prompt
+
     if yes:
         return lambda question: True
     return prompt(False) if sys.stdin is not None and sys.stdin.isatty() else None
 
 
 def run(args) -> int:
+    from procedures.io.outputs import check_appendable, check_output_file
+    from station.services.config import load_config
+    from station.services.identity import leg_fields
+    from station.services.serials import parse_serial_args, serials_unverified_line
+
     cfg = load_config(args.config)
     cfg.require_devices()
     serials = parse_serial_args(args.serial)
@@ -127,6 +134,8 @@ def run(args) -> int:
         out = check_appendable(args.resume)
         if args.out and Path(args.out) != out:
             raise InputError("--resume appends to the session it names; drop --out")
+        from station.services.jobs import resumable_plan
+
         plan = resumable_plan(out)
     else:
         if not args.out:
@@ -141,10 +150,20 @@ def run(args) -> int:
         print(f"plan: {plan_size(plan_spec(args)).describe()}")
         if args.force and out.exists():
             out.unlink()  # --force: the new session replaces it (after the plan was accepted)
+    from station.services.laser_wiring import check_plan_for_laser
+
     check_plan_for_laser(plan, cfg)  # before anything connects or is written
     for note in plan.notes:
         print(f"note: {note}")
     resume_hint = resume_command(out, cfg, args.config)
+    from procedures.engine.control import RunControl
+    from procedures.engine.states import Outcome
+    from station import interrupt
+    from station.interrupt import abort_on_sigint
+    from station.progress import ConsoleProgress
+    from station.services.jobs import run_sweep
+    from station.services.wiring import open_rig
+
     # the simulated drives keep their tables where push/verify/rollback --sim and the UI find them
     # (its folder made only now, when everything was accepted): a leg pushed a table is swept
     # compensated here as in the UI, asked first (services.jobs.check_compensation)

@@ -8,20 +8,16 @@ import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from procedures.compensation import controllers
 from procedures.engine.errors import InputError
-from procedures.fit import load_model
-from procedures.fit.model_io import unverified_model_line
-from procedures.io.plausibility import ImplausibleError
-from procedures.acquisition.plans import parse_legs
-from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, linuxcnc_paths, write_linuxcnc_comp
 from procedures.io.outputs import check_output_file
-from station.services.config import load_config
-from station.services.table_jobs import make_checked_table, write_table
-from station.services.wiring import drive_soft_limits, drive_table_spec
+
+if TYPE_CHECKING:
+    from procedures.io.plausibility import ImplausibleError
 
 NAME = "table"
 HELP = "make a compensation table (CSV for the drives, or LinuxCNC COMP_FILEs) from a model"
@@ -65,6 +61,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _soft_limits(args) -> tuple[float, float] | None:
     """The soft limits of the drive profile's (--profile, default the built-in one), when it states them."""
+    from station.services.wiring import drive_soft_limits
+
     try:
         return drive_soft_limits(args.profile)
     except Exception:  # noqa: BLE001 (a bad profile is refused by drive_table_spec with its own message)
@@ -86,6 +84,8 @@ def _ask_anyway(exc: ImplausibleError) -> bool:
 
 def output_paths(fmt: str, out: str, legs) -> list[Path]:
     """The files `--format fmt --out out` writes for `legs`, known before the table is made."""
+    from procedures.compensation.controllers.linuxcnc import linuxcnc_paths
+
     if fmt == "csv":
         return [Path(out)]
     if fmt == "linuxcnc":
@@ -97,6 +97,15 @@ def output_paths(fmt: str, out: str, legs) -> list[Path]:
 
 
 def run(args) -> int:
+    from procedures.acquisition.plans import parse_legs
+    from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, write_linuxcnc_comp
+    from procedures.fit import load_model
+    from procedures.fit.model_io import unverified_model_line
+    from procedures.io.plausibility import ImplausibleError
+    from station.services.config import load_config
+    from station.services.table_jobs import make_checked_table, write_table
+    from station.services.wiring import drive_table_spec
+
     model = load_model(args.model)
     unverified = unverified_model_line(args.model, model)
     if unverified:

@@ -9,8 +9,6 @@ import logging
 from pathlib import Path
 
 from procedures.engine.errors import InputError
-from station.commands.sweep import check_time_scale
-from station.services.config import load_config
 
 NAME = "ui"
 HELP = "the terminal UI: rig status, sweeps, results, compensation, replay, diagnosis"
@@ -31,6 +29,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from station.commands.sweep import check_time_scale
+    from station.services.config import load_config
+
     cfg = load_config(args.config)
     cfg.require_devices()
     time_scale = args.time_scale

@@ -6,9 +6,6 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 from pathlib import Path
 
-from station.catalog import db
-from station.catalog.store import LOCAL_NAME
-from station.services.config import load_config
 
 NAME = "web"
 HELP = "the fleet web view: legs, a leg's history, control charts, station comparison (read-only)"
@@ -35,6 +32,9 @@ def add_arguments(p) -> None:
 def run(args) -> int:
     if args.hash_password:
         return _hash_password()
+    from station.catalog import db
+    from station.catalog.store import LOCAL_NAME
+    from station.services.config import load_config
     import uvicorn
 
     from station.web.access import Guard, parse_web_section

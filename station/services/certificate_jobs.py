@@ -416,8 +416,9 @@ def approve(report_no: str, *, by: str, folder: str | os.PathLike, authoriser: d
     config names ([lab] authoriser); the approved document REPORT_rN_approved.pdf/.json is written
     once, read-only, beside the draft (which stays unchanged), recorded in the audit log (action
     "approve") and in the catalog, and the index marks the revision approved."""
-    from procedures.compensation.audit import AuditEntry, AuditError, AuditLog, AuditSink, new_id  # noqa: PLC0415
-    from procedures.engine import events as ev  # noqa: PLC0415
+    from procedures.compensation.audit import (  # noqa: PLC0415
+        AuditEntry, AuditError, AuditLog, AuditRecord, AuditSink, new_id,
+    )
 
     name, role = (authoriser or {}).get("name") or "", (authoriser or {}).get("role") or ""
     if not name:
@@ -460,7 +461,7 @@ def approve(report_no: str, *, by: str, folder: str | os.PathLike, authoriser: d
         # through the audit sink, the log's one writer (tests/test_layering.py)
         sink = AuditSink(AuditLog(audit_path, operator=by, station_id=station_id))
         try:
-            sink.handle(ev.AuditRecord(AuditEntry(
+            sink.handle(AuditRecord(AuditEntry(
                 "approve", int(cert["item"]["leg"]), "ok",
                 f"certificate {report_no} revision {last['revision']} approved by {name}, {role}",
                 id=audit_id, time_utc=approved_utc.replace("+00:00", "Z"), leg_serial=cert["item"]["serial"],

@@ -383,12 +383,6 @@ class StationConfig:
                              "(e.g. url = \"tcp://HOST:502\", port = \"/dev/ttyUSB1\"), or \"sim\" for the "
                              "simulated rig (or use --sim instead of --config)")
 
-    def rig_text(self) -> str:
-        """Which rig this config drives, for the first line a live command prints."""
-        drive = "SIMULATED drives" if self.drive.url == "sim" else f"drives at {self.drive.url}"
-        laser = "SIMULATED interferometer" if self.interferometer.port == "sim" else f"interferometer at {self.interferometer.port}"
-        return f"{drive}, {laser} (config: {self.source})"
-
 
 def _hostname() -> str:
     import socket

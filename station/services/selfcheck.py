@@ -5,11 +5,13 @@ simulated plant here, so procedures/diagnosis never imports the simulator."""
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from procedures.diagnosis.selfcheck import Trial
-from station.services.twins import plant_twin
+if TYPE_CHECKING:
+    from procedures.diagnosis.selfcheck import Trial
+
 
 FITTED_TWIN_EFFECTS = ("backlash", "thermal", "load", "drift")
 SIM_TWIN_EFFECTS = FITTED_TWIN_EFFECTS + ("scale", "cyclic")
@@ -34,6 +36,8 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
     two effects present in the plant but withheld from the twin, at a random magnitude (RMS
     contribution log-uniform in SELF_CHECK_CONTRIBUTION_UM). Odd seeds use the simulated plant
     as twin, even seeds the twin fitted on the session."""
+    from procedures.diagnosis.selfcheck import Trial
+    from station.services.twins import plant_twin
     from drivers.sim.plant import default_leg_configs
     from station.services.synth import synth_session
 

@@ -20,11 +20,15 @@ seeds). The truth carries the effect's name, its variant and the checked paramet
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from procedures.diagnosis.selfcheck import Trial
 from station.services.selfcheck_stacked import SITUATIONS  # issue 35's situations (selfcheck_stacked.py)
+
+if TYPE_CHECKING:
+    from procedures.diagnosis.selfcheck import Trial
+
 
 VARIANT_PHYSICS = ("backlash_temperature", "backlash_position", "windup", "thermal_gradient", "clean")
 PHYSICS = VARIANT_PHYSICS + SITUATIONS
@@ -67,6 +71,7 @@ def _beyond(part: np.ndarray, cols: list[np.ndarray], x: np.ndarray, fitted: boo
 
 def variant_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 5) -> Trial:
     """One session with `physics` (PHYSICS) withheld from the twin; deterministic for the seed."""
+    from procedures.diagnosis.selfcheck import Trial
     from drivers.sim.plant import default_leg_configs, systematic_error_um
     from station.services.synth import synth_session
     from station.services.twins import plant_twin

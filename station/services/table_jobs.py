@@ -31,6 +31,7 @@ from procedures.engine.errors import InputError
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import (
     Confirm,
+    OperationFinished,
     finished,
     push_legs_procedure,
     push_procedure,
@@ -76,7 +77,7 @@ class JobOutcome:
     exception, which the runner re-raised), every event, and audit entries that could not be
     stored (the refusal or failure they describe is still reported)."""
 
-    finished: ev.OperationFinished | None
+    finished: OperationFinished | None
     events: list[ev.Event] = field(default_factory=list)
     audit_problems: list[str] = field(default_factory=list)
     run: RunResult | None = None

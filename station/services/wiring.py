@@ -177,11 +177,6 @@ def compensation_axes(cfg: StationConfig, axes: dict[int, ServoAxis]) -> dict[in
     return out
 
 
-def compensation_target_of(axis: ServoAxis) -> str:
-    """"station" for a leg the station compensates, else "drive" (what the axis itself holds)."""
-    return getattr(axis, "compensation_target", "drive")
-
-
 def drive_url_of(cfg: StationConfig) -> str:
     """How the config reaches the drives, as the audit log records it ("sim (memory file)" or the URL)."""
     if cfg.drive.url == "sim":

@@ -51,8 +51,9 @@ def test_station_run_builds_the_iso230_plan_through_the_spec(monkeypatch):
         seen["legs"] = legs
         raise RuntimeError("stop")
 
-    monkeypatch.setattr(run_command, "open_rig", fake_open_rig)
-    monkeypatch.setattr(run_command, "plan_from_spec",
+    # where `station run` imports them from when it runs (inside run(), so --help loads neither)
+    monkeypatch.setattr("station.services.wiring.open_rig", fake_open_rig)
+    monkeypatch.setattr("procedures.acquisition.plan_spec.plan_from_spec",
                         lambda spec, limits: seen.setdefault("plan", plan_from_spec(spec, limits)))
     with pytest.raises(RuntimeError, match="stop"):
         run_command.run(Namespace(legs="2,4", cycles=3, out=None, time_scale=0.0))

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from procedures.compensation.audit import read_entries
-from procedures.io.recording.identity import read_identity
+from procedures.io.recording.reader import read_identity
 from procedures.compensation.table import read_table_csv
 from station.cli import main
 

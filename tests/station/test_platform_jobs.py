@@ -4,12 +4,15 @@
 import numpy as np
 
 from station.services import platform_jobs
-from station.commands import platform as platform_command
+from tests.tooling import defines, imported_names
 
 
 def test_the_command_and_the_ui_share_the_inputs_and_the_report():
-    assert platform_command.load_errors is platform_jobs.load_errors
-    assert platform_command.write_report is platform_jobs.write_report
+    # by the command's imports (inside run(): `station platform --help` loads none of it), no copy of its own
+    names = imported_names("station.commands.platform")
+    for name in ("load_errors", "write_report"):
+        assert names[name] == f"station.services.platform_jobs.{name}" == f"{getattr(platform_jobs, name).__module__}.{name}"
+        assert not defines("station.commands.platform", name)
 
 
 def test_a_model_held_in_memory_is_measured_on_its_own_basis(tmp_path):

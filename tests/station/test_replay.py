@@ -29,7 +29,9 @@ from procedures.engine.runner import CallbackSink
 from procedures.compensation.table import make_table, table_csv_text
 from station.cli import main
 from station.services.samples import FAULT_AFTER_INDEX, FAULT_LEG, FILES, open_sample_rig
-from station.commands.replay import compare_sessions, parse_speed, replay_sweep, retry_policy_of
+from procedures.io.replay_compare import compare_sessions
+from station.commands.replay import parse_speed
+from station.services.jobs import replay_sweep, retry_policy_of
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep
 from station.services.wiring import open_replay_rig

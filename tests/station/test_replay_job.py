@@ -6,16 +6,17 @@ import argparse
 import pytest
 
 from procedures.engine.errors import InputError
-from procedures.io import replay_compare
 from station.services import jobs
 from station.commands import replay as replay_command
+from tests.tooling import defines, imported_names
 
 
 def test_the_command_uses_the_shared_job_and_comparison():
-    assert replay_command.replay_sweep is jobs.replay_sweep
-    assert replay_command.retry_policy_of is jobs.retry_policy_of
-    assert replay_command.compare_sessions is replay_compare.compare_sessions
-    assert replay_command.Comparison is replay_compare.Comparison
+    # by its imports (inside run(): `station replay --help` loads neither), and no copy of its own
+    assert imported_names("station.commands.replay")["replay_and_compare"] == "station.services.jobs.replay_and_compare"
+    assert imported_names("station.services.jobs")["compare_sessions"] == "procedures.io.replay_compare.compare_sessions"
+    for name in ("replay_and_compare", "replay_sweep", "retry_policy_of", "compare_sessions", "Comparison"):
+        assert not defines("station.commands.replay", name)
 
 
 def test_one_speed_parser_for_both_front_ends_with_the_same_message():

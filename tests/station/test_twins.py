@@ -5,13 +5,16 @@ import pytest
 
 from procedures.diagnosis.twin import ExternalTwin
 from procedures.engine.errors import InputError
-from station.services import selfcheck, twins
-from station.commands import diagnose as diagnose_command
+from station.services import twins
+from tests.tooling import defines, imported_names
 
 
 def test_the_command_and_the_self_check_use_the_shared_twins():
-    assert diagnose_command.load_twin is twins.load_twin
-    assert selfcheck.plant_twin is twins.plant_twin
+    # by their imports (inside the functions: `station diagnose --help` loads no diagnosis), no copy of their own
+    assert imported_names("station.commands.diagnose")["load_twin"] == "station.services.twins.load_twin"
+    assert imported_names("station.services.selfcheck")["plant_twin"] == "station.services.twins.plant_twin"
+    assert not defines("station.commands.diagnose", "load_twin") and not defines("station.services.selfcheck", "plant_twin")
+    assert twins.load_twin.__module__ == twins.plant_twin.__module__ == "station.services.twins"
 
 
 def test_the_simulated_plant_as_a_twin(tmp_path):

@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
 
@@ -234,15 +232,3 @@ def identity_of_meta(meta_attrs: Mapping[str, Any], where: str) -> SessionIdenti
     except ValueError as exc:
         raise SchemaError(f"{where}: attribute /meta/identity is not valid JSON ({exc})") from None
     return identity_from_json(value, f"{where}: /meta/identity")
-
-
-def read_identity(source: str | os.PathLike | Any) -> SessionIdentity:
-    """The identity of a session: `source` is a path or an open h5py File. A file without one
-    (schema 1.0, an import) gives `SessionIdentity.unknown()`."""
-    if isinstance(source, (str, os.PathLike)):
-        from procedures.io.recording.reader import open_h5  # the guarded open (damaged files refused)
-
-        with open_h5(Path(source)) as f:
-            return read_identity(f)
-    meta = source["meta"] if "meta" in source else None
-    return identity_of_meta(meta.attrs if meta is not None else {}, str(getattr(source, "filename", "session")))

@@ -609,3 +609,13 @@ class LiveReader:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def read_identity(source: str | os.PathLike | Any) -> SessionIdentity:
+    """The identity of a session: `source` is a path or an open h5py File. A file without one
+    (schema 1.0, an import) gives `SessionIdentity.unknown()`."""
+    if isinstance(source, (str, os.PathLike)):
+        with open_h5(Path(source)) as f:  # the guarded open (damaged files refused)
+            return read_identity(f)
+    meta = source["meta"] if "meta" in source else None
+    return identity_of_meta(meta.attrs if meta is not None else {}, str(getattr(source, "filename", "session")))

@@ -285,17 +285,18 @@ class CompensationScreen(StationScreen):
             self.app.switch_mode("sweep")
 
     def on_verification_done(self, message: VerificationDone) -> None:
-        from procedures.engine import events as ev
+        from procedures.compensation.audit import AuditRecord
+        from procedures.compensation.verify import Verified
 
         self._show_audit()
         job = message.job
-        if job is None or not job.of(ev.Verified):
+        if job is None or not job.of(Verified):
             return  # refused or broken off: the Sweep page said why
-        verified = job.of(ev.Verified)[-1]
+        verified = job.of(Verified)[-1]
         result = verified.results[message.leg]
         self.verify_text = verified.report + _as_left_text(verified.session.get("path"))
         self.verdict_text = verdict_line(message.leg, result)
-        line = next((e.entry.message for e in job.of(ev.AuditRecord) if e.entry.leg == message.leg), "")
+        line = next((e.entry.message for e in job.of(AuditRecord) if e.entry.leg == message.leg), "")
         self.notify(line, title="Verify", severity="information" if result.passed else "warning", timeout=12)
         self._show()
 

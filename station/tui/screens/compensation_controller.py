@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from textual.message import Message
 
@@ -16,13 +16,31 @@ from procedures.compensation.audit import AuditLog
 from procedures.compensation.push import PushPlan
 from procedures.engine.states import Action, AuditOutcome
 from procedures.io.plausibility import Override
+from station.services.config import StationConfig
 from station.tui.errors import describe
 from station.tui.messages import Notice
 from station.tui.screens.common import ConfirmScreen
 from station.tui.screens.compensation_widgets import DriveTable
+from station.tui.state import SweepState
 
-if TYPE_CHECKING:  # pragma: no cover
-    from station.tui.app import StationApp
+
+class StationHost(Protocol):
+    """What the controller uses of the app (station.tui.app.StationApp is one): stated here, not
+    imported, because the app imports the compensation page that holds this controller."""
+
+    cfg: StationConfig
+    sweep: SweepState
+    hide_volatile: bool
+
+    @property
+    def rig(self): ...  # station.services.wiring.Rig once connected, else None (as the app's)
+
+    @property
+    def rig_lock(self) -> threading.Lock: ...
+
+    def post_message(self, message: Message) -> bool: ...
+
+    def start_sweep(self, plan, out, label: str = "sweep", on_done=None, job=None) -> bool: ...
 
 
 UI_OVERRIDE = Override(how="confirm it in the dialog that follows", kept="confirmed in the dialog")
@@ -66,7 +84,7 @@ class CompensationController:
         self.screen = screen
 
     @property
-    def app(self) -> "StationApp":
+    def app(self) -> StationHost:
         return self.screen.app
 
     def audit(self) -> AuditLog:

@@ -11,8 +11,7 @@ import pytest
 
 from drivers.sim.plant import PlantConfig
 from station.services.synth import synth_session
-from procedures.diagnosis import DiagnosisSettings, diagnose, finding_events, to_json
-from procedures.engine.events import Finding
+from procedures.diagnosis import DiagnosisSettings, diagnose, to_json
 from procedures.engine.errors import InputError, SchemaError
 from station.services.twins import plant_twin
 
@@ -38,8 +37,7 @@ def test_backlash_is_named_on_its_leg_only_with_the_reversal():
     assert 0 < f["uncertainty"]["reversal_um"] < 0.1
     assert f["heldout_rms_after_um"] < 0.3 * f["heldout_rms_before_um"]
     assert report["legs"]["1"]["dominant"].startswith("the gap is mostly a direction-dependent offset")
-    (event,) = finding_events(report)
-    assert isinstance(event, Finding) and (event.leg, event.effect) == (1, "backlash")
+    assert [(f["leg"], f["effect"]) for f in report["findings"]] == [(1, "backlash")]
     assert report["legs"]["2"]["combined"]["effects"] == []
     # the clean leg's gap is at the plant's noise (white 0.03 um + pass offsets 0.04 um); with no
     # effect named, the repeat scatter after effects is the noise floor (of station fit)

@@ -23,9 +23,8 @@ from procedures.io.recording.identity import (
     instrument_identity,
     model_identity,
     model_leg_serials,
-    read_identity,
 )
-from procedures.io.recording.reader import read_session
+from procedures.io.recording.reader import read_identity, read_session
 from procedures.io.recording.schema import SCHEMA_VERSION
 from procedures.io.recording.writer import SessionWriter
 

@@ -9,7 +9,7 @@ import asyncio
 import pytest
 from textual.widgets import Input
 
-from procedures.io.recording.identity import read_identity
+from procedures.io.recording.reader import read_identity
 from station.tui.app import StationApp
 
 pytestmark = pytest.mark.timeout(120)
