@@ -36,7 +36,22 @@ onthefly-adaptive 2.60 min/leg with the read-out (12-29 pairs a leg), every leg 
 1.073), against 2.78 min (worst 1.045) with the fixed 24; hold-out seed 4: 2.40 min, worst 1.063
 (24 pairs: 2.78, 1.038). The column `pairs` gives each plan's probe pairs per leg (fewest-most).
 
-    .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans ...] [--jobs 2] [--verify-cycles 20]
+Two lasers (`--lasers`, default both): the station's own interferometer (`station`) and the
+µLine-F1 / HPI-3D (`linef1`, [interferometer] protocol = "linef1": a 25 Hz stream of raw distance,
+the station compensating for the air; each reading the mean of its window's samples). The
+µLine-F1 has no capture input described publicly, so the on-the-fly plans are measured with the
+station's laser only (a linef1 row says "NOT measured" for them); the stop-and-go plans with both,
+the verification with the laser the calibration used. Measured 2026-11-29, seeds 0-3, six legs
+(the µLine-F1's noise held per 0.1 s as the plant's): rig time per leg the same with both lasers
+(iso230 5.56 min, paper 93.5 min: a streamed reading takes its averaging time, as a `POS?` does);
+oracle ratio per leg 0.98-1.01 with the µLine-F1 (noise floor 0.056-0.058 um) against 0.98-1.02
+with the station's laser (0.059-0.065 um); paper: the µLine-F1 21 of 24 legs at or below 1.1
+(worst 1.232, table error 0.021-0.038 um worst leg) against the station's laser 23 of 24 (worst
+1.114, 0.013-0.035 um), a difference not explained yet; iso230 4.0-7.0 with either laser (its 11
+targets do not resolve the screw's lead). The README's calibration (1 mm step, 8 cycles) with the
+µLine-F1 verifies every leg at or below 1.1 (tests/station/test_linef1_sim.py, STATION_LINEF1_README=1).
+
+    .venv/bin/python bench/bench_throughput.py [--seeds 0 1 2 3] [--plans ...] [--lasers station linef1] [--jobs 2] [--verify-cycles 20]
 
 Seeds run in parallel processes with `--jobs` (the figures are on the rig's clock, not the wall's).
 """
@@ -61,6 +76,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 # would find them gone)
 os.environ.setdefault("STATION_CATALOG", "off")
 
+from drivers.errors import DriverError  # noqa: E402
 from procedures.compensation.verify import Verified  # noqa: E402
 from procedures.compensation.audit import AuditLog  # noqa: E402
 from procedures.fit import fit  # noqa: E402
@@ -83,13 +99,15 @@ PLANS = ("oracle", "paper", "iso230", "onthefly", "onthefly-adaptive", "onthefly
 reversal, at least four cycles: the rule before the probes), for the comparison;
 `onthefly-adaptive-24`: the adaptive plan with the fixed 24 probe pairs (plan_spec.REVERSAL_PROBES)
 instead of the adaptive count (procedures/acquisition/probe_rule.py)."""
+LASERS = ("station", "linef1")
 BAUD = 115200
 LASER_BITS_PER_BYTE = 10  # 8N1
 
 
-def config(seed: int) -> StationConfig:
+def config(seed: int, laser: str = "station") -> StationConfig:
     cfg = StationConfig(operator="bench")
     cfg.sim.seed = seed
+    cfg.interferometer.protocol = laser
     plain = cfg.sim.leg_configs
     cfg.sim.leg_configs = lambda: [c.with_leg_motion() for c in plain()]  # a real drive's jerk limit
     return cfg
@@ -136,11 +154,13 @@ def table_error_um(table, cfgs, legs) -> list[float]:
     return out
 
 
-def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cycles: int) -> dict:
-    cfg = config(seed)
+def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cycles: int, laser: str = "station") -> dict:
+    if laser == "linef1" and kind.startswith("onthefly"):
+        raise SystemExit("the µLine-F1 has no capture input (none described publicly): on-the-fly plans need one")
+    cfg = config(seed, laser)
     cfgs = cfg.sim.leg_configs()
     wall0 = time.monotonic()
-    cal = work / f"{kind}-{seed}.h5"
+    cal = work / f"{kind}-{seed}-{laser}.h5"
     rig_s = readout_s = 0.0
     session = None
     if kind == "oracle":  # no sweep: the simulated legs' own error
@@ -178,37 +198,40 @@ def run_plan(kind: str, seed: int, legs: tuple[int, ...], work: Path, verify_cyc
     # the verification: a fresh rig of the same plant with the verification's own noise seed
     # (the same for every plan), the table pushed, 41 irregular targets x verify_cycles, stop-and-go
     with open_rig(cfg, legs=legs, time_scale=0.0, noise_seed=VERIFY_NOISE_SEED + seed) as rig:
-        audit = AuditLog(work / f"audit-{kind}-{seed}.jsonl", operator="bench")
+        audit = AuditLog(work / f"audit-{kind}-{seed}-{laser}.jsonl", operator="bench")
         pushed = push_legs_job(rig.axes, dict(table.legs), audit=audit, drive_url=rig.description, sources=None,
                                confirm=None)
         if not pushed.ok:
             raise SystemExit(f"{kind} seed {seed}: push failed: {pushed.finished}")
         vplan = iso230_plan(legs, n_targets=41, cycles=verify_cycles, seed=7)
-        job = verify_job(rig, vplan, work / f"verify-{kind}-{seed}.h5", cfg, audit=audit, before=session)
+        job = verify_job(rig, vplan, work / f"verify-{kind}-{seed}-{laser}.h5", cfg, audit=audit, before=session)
     verified = [e for e in job.events if isinstance(e, Verified)]
     if not verified:
         raise SystemExit(f"{kind} seed {seed}: no verification result ({job.finished})")
     ratios = [r.ratio for _, r in sorted(verified[0].results.items())]
     floors = [r.after.noise_floor_um for _, r in sorted(verified[0].results.items())]
-    return {"kind": kind, "seed": seed, "legs": len(legs), "rig_s": rig_s / len(legs), "readout_s": readout_s,
+    return {"kind": kind, "seed": seed, "laser": laser, "legs": len(legs), "rig_s": rig_s / len(legs), "readout_s": readout_s,
             "ratios": ratios, "points": n_points / len(legs), "cycles": cycles, "pairs": pairs, "floors": floors,
             "table_um": table_error_um(table, cfgs, legs), "wall_s": time.monotonic() - wall0}
 
 
-def run_seed(seed: int, plans: tuple[str, ...], legs: int, paper_legs: int, verify_cycles: int) -> list[dict]:
-    """Every plan of `plans` on plant seed `seed` (a process of its own with --jobs): their rows;
-    a plan that fails is reported and left out, the others still run."""
+def run_seed(seed: int, plans: tuple[str, ...], legs: int, paper_legs: int, verify_cycles: int,
+             lasers: tuple[str, ...] = ("station",)) -> list[dict]:
+    """Every plan of `plans` with every laser of `lasers` on plant seed `seed` (a process of its own
+    with --jobs): their rows; a plan that fails is reported and left out, the others still run."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for kind in plans:
-            n = paper_legs if kind == "paper" else legs
-            try:
-                rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp), verify_cycles))
-            except SystemExit as exc:
-                print(f"  seed {seed} {kind}: NOT measured: {exc}", file=sys.stderr, flush=True)
-                continue
-            print(f"  seed {seed} {kind}: done in {rows[-1]['wall_s']:.0f} s wall", file=sys.stderr, flush=True)
+            for laser in lasers:
+                n = paper_legs if kind == "paper" else legs
+                try:
+                    rows.append(run_plan(kind, seed, tuple(range(1, n + 1)), Path(tmp), verify_cycles, laser))
+                except (SystemExit, DriverError) as exc:  # e.g. a port another program holds: the others still run
+                    print(f"  seed {seed} {kind} {laser}: NOT measured: {exc}", file=sys.stderr, flush=True)
+                    continue
+                print(f"  seed {seed} {kind} {laser}: done in {rows[-1]['wall_s']:.0f} s wall", file=sys.stderr,
+                      flush=True)
     return rows
 
 
@@ -222,11 +245,13 @@ def main(argv=None) -> int:
     ap.add_argument("--verify-cycles", type=int, default=VERIFY_CYCLES,
                     help=f"cycles of the verification sweep (41 targets; default {VERIFY_CYCLES}; 5 is ISO 230-2's, "
                          "whose ratio scatters too much to tell 1.1 from 1.0: see the module docstring)")
+    ap.add_argument("--lasers", nargs="+", choices=LASERS, default=list(LASERS),
+                    help="the lasers: the station's own and the µLine-F1 (linef1; stop-and-go plans only); default both")
     ap.add_argument("--jobs", type=int, default=1, help="seeds measured in parallel processes (default 1)")
     args = ap.parse_args(argv)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     work = partial(run_seed, plans=tuple(args.plans), legs=args.legs, paper_legs=args.paper_legs,
-                   verify_cycles=args.verify_cycles)
+                   verify_cycles=args.verify_cycles, lasers=tuple(args.lasers))
     if args.jobs > 1:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
             per_seed = list(pool.map(work, args.seeds))
@@ -236,7 +261,7 @@ def main(argv=None) -> int:
     print("Calibration throughput on the simulated rig (time scale 0, jerk-limited legs), verification sweep "
           f"with the pushed tables on a fresh rig (the same noise for every plan): 41 irregular targets x "
           f"{args.verify_cycles} cycles, stop-and-go")
-    print(f"{'seed':>4} {'plan':<24} {'legs':>4} {'cycles':>7} {'pairs':>5} {'points/leg':>10} {'rig min/leg':>11} "
+    print(f"{'seed':>4} {'plan':<24} {'laser':<7} {'legs':>4} {'cycles':>7} {'pairs':>5} {'points/leg':>10} {'rig min/leg':>11} "
           f"{'+readout':>9} {'table um':>8} {'floor um':>8} {'ratio mean':>10} {'ratio max':>9} {'pass':>5}  ratio per leg")
     for r in rows:
         ratios = np.array(r["ratios"], dtype=float)
@@ -245,7 +270,7 @@ def main(argv=None) -> int:
         cyc = f"{lo:g}" if lo == hi else f"{lo:g}-{hi:g}"
         plo, phi = min(r["pairs"]), max(r["pairs"])
         prs = f"{plo}" if plo == phi else f"{plo}-{phi}"
-        print(f"{r['seed']:>4} {r['kind']:<24} {r['legs']:>4} {cyc:>7} {prs:>5} {r['points']:>10.0f} "
+        print(f"{r['seed']:>4} {r['kind']:<24} {r['laser']:<7} {r['legs']:>4} {cyc:>7} {prs:>5} {r['points']:>10.0f} "
               f"{r['rig_s'] / 60:>11.2f} {ro} {max(r['table_um']):>8.4f} {np.mean(r['floors']):>8.3f} {np.mean(ratios):>10.3f} {np.max(ratios):>9.3f} "
               f"{int(np.sum(ratios <= 1.1)):>2}/{len(ratios)}  " + " ".join(f"{x:.2f}" for x in ratios))
     print("pairs: reversal probe pairs per leg (the adaptive count's fewest-most); "
@@ -255,8 +280,17 @@ def main(argv=None) -> int:
           "sessions' noise floor, mean over legs; ratio = verification residual RMS / its noise floor (pass <= 1.1); "
           "oracle: the table of the simulated legs' own error, no sweep (what the verification gives a perfect "
           "table)")
+    for seed in args.seeds:  # both lasers, plan by plan (stop-and-go plans)
+        for kind in args.plans:
+            pair = {r["laser"]: r for r in rows if r["seed"] == seed and r["kind"] == kind}
+            if len(pair) == 2 and kind != "oracle":
+                a, b = pair["station"], pair["linef1"]
+                print(f"lasers, seed {seed} {kind}: rig min/leg station {a['rig_s'] / 60:.2f}, linef1 {b['rig_s'] / 60:.2f}; "
+                      f"verification ratio per leg station " + " ".join(f"{x:.3f}" for x in a["ratios"])
+                      + ", linef1 " + " ".join(f"{x:.3f}" for x in b["ratios"])
+                      + f"; worst {max(a['ratios']):.3f} / {max(b['ratios']):.3f}")
     for seed in args.seeds:
-        by = {r["kind"]: r for r in rows if r["seed"] == seed}
+        by = {r["kind"]: r for r in rows if r["seed"] == seed and r["laser"] == "station"}
         if "onthefly-adaptive" not in by:
             continue
         a, iso = by["onthefly-adaptive"], by.get("iso230")
@@ -269,7 +303,7 @@ def main(argv=None) -> int:
         if "paper" in by:
             line += f"; {by['paper']['rig_s'] / max(total, 1e-9):.1f}x faster than the paper plan"
         print(line)
-    adaptive = [r for r in rows if r["kind"] == "onthefly-adaptive"]
+    adaptive = [r for r in rows if r["kind"] == "onthefly-adaptive" and r["laser"] == "station"]
     if adaptive:
         every = np.concatenate([r["ratios"] for r in adaptive])
         mean_min = np.mean([(r["rig_s"] + r["readout_s"]) / 60 for r in adaptive])

@@ -36,6 +36,13 @@ class BeamBreak(DriverError):
     hint = "Clear the beam path and re-align the optics, then retry."
 
 
+class CountLost(BeamBreak):
+    """The interferometer lost its fringe count (a velocity overflow): every position is invalid
+    until its origin is set again (the sweep re-references the leg: procedures/acquisition/sweep.py)."""
+
+    hint = "The leg is taken back to its reference and the laser zeroed there before the point is measured again."
+
+
 class DriveFault(DriverError):
     """The drive reports a fault. `code` is the drive's fault code."""
 

@@ -348,6 +348,29 @@ class LegPlant:
             noise = float(self._rng.normal(0.0, self.cfg.noise_um / math.sqrt(n_eff)))
         return self.true_position_mm(t_s) + (self._pass_offset_um + noise - self._zero_um) / 1000.0
 
+    NOISE_SLOT_S = 0.1
+    """The measurement noise's correlation time: `measured_position_mm` averages it as
+    sqrt(averaging / 0.1 s), i.e. one independent value per 0.1 s."""
+
+    def measured_positions_mm(self, times_s) -> np.ndarray:
+        """What an ideal-but-noisy interferometer samples at each of `times_s` (ascending, a short
+        span at rest, e.g. a streaming laser's frames since its last batch), unaveraged: the
+        systematic error taken once, at the last time; the noise one value per 0.1 s slot
+        (NOISE_SLOT_S), so the mean of the samples over a window has the noise a reading averaged
+        over it has (`measured_position_mm`)."""
+        base = self.true_position_mm(float(times_s[-1])) + (self._pass_offset_um - self._zero_um) / 1000.0
+        if not ("noise" in self.cfg.enabled and self.cfg.noise_um > 0):
+            return np.full(len(times_s), base)
+        slots = np.floor(np.asarray(times_s, dtype=float) / self.NOISE_SLOT_S + 1e-9).astype(np.int64)
+        noise = np.empty(len(slots))
+        held = getattr(self, "_noise_slot", None)  # (slot, um) of the last sample, kept across batches
+        for i, slot in enumerate(slots):
+            if held is None or held[0] != slot:
+                held = (int(slot), float(self._rng.normal(0.0, self.cfg.noise_um)))
+            noise[i] = held[1]
+        self._noise_slot = held
+        return base + noise / 1000.0
+
     def zero_here(self, t_s: float) -> None:
         """Set the interferometer zero so that the current true position reads as x_mm."""
         self._zero_um = self.error_um(t_s) + self._pass_offset_um

@@ -32,6 +32,10 @@ class SimRig:
     tcp_port: int = 0
     rtu: bool = False
     laser_offset_um: float = 0.0  # a bias on every laser reading (station.services.config [sim] laser_offset_um)
+    # the simulated laser's protocol: "station" (docs/interferometer-protocol.md, the default) or
+    # "linef1" (the µLine-F1's stream, drivers/sim/linef1_server.py; no position-compare trigger)
+    laser_protocol: str = "station"
+    air_index: object = None  # linef1: the air's index (temp_c, pressure_pa, humidity_pct) -> n
     clock: VirtualClock = field(init=False)
     plants: dict[int, LegPlant] = field(init=False)
     drive_url: str = field(init=False, default="")
@@ -45,13 +49,30 @@ class SimRig:
         self.lock = threading.RLock()
         self.profile = self.profile or DriveProfile.load()
         self.drive_server = SimDriveServer(self.plants, self.clock, self.profile, nv_path=self.nv_path, lock=self.lock)
-        self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed,
-                                            offset_um=self.laser_offset_um)
-        # the drives' position-compare outputs wired to the laser's trigger inputs (on-the-fly capture)
         self.trigger_line = TriggerLine()
-        self.trigger_line.connect(self.laser_server.trigger)
+        if self.laser_protocol == "linef1":
+            from drivers.sim.linef1_server import SimLineF1
+
+            # one beam, set up by the operator on the leg being prepared (enabled) when zeroed
+            self.laser_server = SimLineF1(self.plants, self.clock, lock=self.lock, aim=self._enabled_leg,
+                                          index=self.air_index, seed=self.seed, offset_um=self.laser_offset_um)
+        elif self.laser_protocol == "station":
+            self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed,
+                                                offset_um=self.laser_offset_um)
+            # the drives' position-compare outputs wired to the laser's trigger inputs (on-the-fly capture)
+            self.trigger_line.connect(self.laser_server.trigger)
+        else:
+            raise ValueError(f"simulated laser protocol must be 'station' or 'linef1', got {self.laser_protocol!r}")
         self.drive_server.connect_trigger(self.trigger_line)
         self._started = False
+
+    def _enabled_leg(self) -> int | None:
+        """The leg the laser is set up on when zeroed: the enabled one (the last if it still is)."""
+        from drivers.states import DriveState
+
+        on = [leg for leg, m in self.drive_server._models.items() if m.state == DriveState.OPERATION_ENABLED]
+        last = getattr(self.laser_server, "leg", None)
+        return last if last in on else (on[0] if on else None)
 
     def start(self) -> "SimRig":
         port = self.drive_server.start_tcp("127.0.0.1", self.tcp_port)

@@ -24,12 +24,14 @@ from procedures.acquisition.passes import (  # noqa: F401  (RetryPolicy, SweepFa
     RetryPolicy,
     SweepFailed,
     point_record,
+    prepare_leg,
     retry_after,
     start_leg,
     stop_all,
 )
 from procedures.acquisition.plans import PlanPoint, SweepPlan
-from procedures.io.recording.schema import FLAG_RETRIED_BEAM
+from procedures.io.recording.schema import FLAG_FRAMES_LOST, FLAG_REREFERENCED, FLAG_RETRIED_BEAM
+from drivers.errors import CountLost
 from procedures.engine.states import Outcome
 
 
@@ -131,11 +133,16 @@ def sweep(
             contiguous = prev is not None and prev.leg == p.leg and prev.run == p.run and prev.index == p.index - 1
             record = None
             attempt = 0
+            rereference = False
             while record is None:
                 yield from control.checkpoint()
                 attempt += 1
                 try:
                     axis = axes[p.leg]
+                    if rereference:  # the laser lost its count: zero it again at the leg's reference
+                        prepare_leg(axis, laser, p.leg, clock, plan)
+                        rereference, contiguous = False, False
+                        flags |= FLAG_REREFERENCED
                     if not contiguous:
                         axis.move_to(p.approach_mm(plan.overrun_mm))
                     status = axis.move_to(p.target_mm)
@@ -147,7 +154,9 @@ def sweep(
                         env_t = clock.now()
                     record = point_record(p, reading, env, drive_position_mm=status.position_mm,
                                           time_s=clock.now() - t_start, material_temp_c=env.material_temp_of(p.leg),
-                                          load_n=status.load_n, flags=flags)
+                                          load_n=status.load_n,
+                                          # a streaming laser's window that lost frames is said so
+                                          flags=flags | (FLAG_FRAMES_LOST if getattr(reading, "frames_lost", 0) else 0))
                 except Aborted:
                     raise
                 except DriverError as exc:
@@ -156,6 +165,7 @@ def sweep(
                     # a beam break: the axis did not move, only re-read; else re-approach so the
                     # point keeps its direction
                     contiguous = flag == FLAG_RETRIED_BEAM
+                    rereference = isinstance(exc, CountLost)
             done += 1
             prev = p
             yield ev.PointMeasured(record, done, total)

@@ -15,7 +15,8 @@ A TOML file selected with `--config`; without it the station runs on the simulat
 
     [interferometer]
     port = "sim"                # or "/dev/ttyUSB1"
-    baudrate = 115200
+    protocol = "station"        # or "linef1": a µLine-F1 / HPI-3D (docs/interferometer-protocol.md)
+    baudrate = 115200           # linef1: 3000000 unless another rate is given
     timeout_s = 0.5
 
     [sim]
@@ -127,11 +128,16 @@ class DriveConfig:
     timeout_s: float = 1.0
 
 
+LASER_PROTOCOLS = ("station", "linef1")
+"""The interferometer protocols a station speaks: its own (the default) and the µLine-F1 / HPI-3D's."""
+
+
 @dataclass
 class LaserConfig:
     port: str = "sim"
     baudrate: int = 115200
     timeout_s: float = 0.5
+    protocol: str = "station"  # LASER_PROTOCOLS
 
 
 @dataclass
@@ -596,6 +602,9 @@ def load_config(path: str | Path | None) -> StationConfig:
         cfg.legs, cfg.leg_overrides, cfg.leg_identity = _load_legs(p, data["legs"])
         cfg.legs_from_file = True
     cfg.compensation.check(str(p))
+    if cfg.interferometer.protocol not in LASER_PROTOCOLS:
+        raise InputError(f"{p}: [interferometer] protocol = {cfg.interferometer.protocol!r}: must be one of "
+                         f"{', '.join(repr(x) for x in LASER_PROTOCOLS)}")
     if not math.isfinite(cfg.sim.laser_offset_um):
         raise InputError(f"{p}: [sim] laser_offset_um = {cfg.sim.laser_offset_um!r}: must be a finite number of um")
     if "tolerances" in data:

@@ -19,7 +19,7 @@ import numpy as np
 from procedures.metrology.thermal import recorded_materials
 from procedures.acquisition.plans import SweepPlan
 from procedures.io.recording.reader import Session, read_session
-from procedures.io.recording.schema import FLAG_REPLAYED
+from procedures.io.recording.schema import FLAG_FRAMES_LOST, FLAG_REPLAYED, FLAG_REREFERENCED
 from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import RunResult, Sink, run
 from procedures.acquisition.sweep import RetryPolicy, sweep
@@ -224,13 +224,24 @@ def env_unchanged_at(points: np.ndarray) -> frozenset[int]:
     return frozenset(int(i) for i in pts["index"][1:][same])
 
 
+STREAM_FLAGS = FLAG_FRAMES_LOST | FLAG_REREFERENCED
+"""What a streaming laser (the µLine-F1) said of a reading that the replay instrument, speaking
+the station's line protocol, cannot say again: taken from the recorded point (docs/replay.md)."""
+
+
 class ReplayRecorderSink(RecorderSink):
-    """The recorder sink, with FLAG_REPLAYED set on every point it writes."""
+    """The recorder sink, with FLAG_REPLAYED set on every point it writes, and the recorded
+    point's STREAM_FLAGS (`stream_flags`: plan index -> those bits of the recording)."""
+
+    def __init__(self, *args, stream_flags: dict[int, int] | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.stream_flags = stream_flags or {}
 
     def handle(self, event: ev.Event) -> None:
         if isinstance(event, ev.PointMeasured):
             record = dict(event.record)
-            record["flags"] = int(record.get("flags", 0)) | FLAG_REPLAYED
+            record["flags"] = (int(record.get("flags", 0)) | FLAG_REPLAYED
+                               | self.stream_flags.get(int(record["index"]), 0))
             event = ev.PointMeasured(record, event.done, event.total)
         super().handle(event)
 
@@ -262,7 +273,9 @@ def replay_sweep(
     # the replayed legs are the recorded ones: the new file names them as the recording did
     recorder = ReplayRecorderSink(out, operator=cfg.operator, rig="replay", station_config=cfg.to_dict(),
                                   software_version=__version__,
-                                  identity=session.identity.to_json() if session.identity.recorded else None)
+                                  identity=session.identity.to_json() if session.identity.recorded else None,
+                                  stream_flags={int(i): int(f) & STREAM_FLAGS for i, f in
+                                                zip(session.points["index"], session.points["flags"]) if int(f) & STREAM_FLAGS})
     # t0_s=0: recorded times are seconds since the session start, so `now - 0` is bit-exact
     # the materials the recorded run's adaptive rule used (its station_config.leg_materials), so
     # it stops where the recording did; a session that recorded none: this config's

@@ -14,6 +14,7 @@ from typing import Any
 from drivers.clock import SystemClock
 from drivers.interfaces import Clock, Interferometer, ServoAxis, TableSpec
 from drivers.interferometer.client import SerialInterferometer
+from station.services.laser_wiring import open_laser, replay_laser, sim_rig_laser_options
 from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
 from procedures.engine.errors import InputError
@@ -71,10 +72,10 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         # the plant is always cfg.sim.seed's; only the noise follows noise_seed
         seed = cfg.sim.seed if noise_seed is None else int(noise_seed)
         sim = SimRig(time_scale=scale, seed=seed, configs=cfg.sim.leg_configs(), nv_path=nv, profile=profile,
-                     laser_offset_um=cfg.sim.laser_offset_um).start()
+                     laser_offset_um=cfg.sim.laser_offset_um, **sim_rig_laser_options(cfg)).start()
         try:
             axes = _connect_legs(cfg, sim.drive_url, legs, profile, clock=sim.clock)
-            laser = SerialInterferometer(sim.laser_port, timeout_s=cfg.interferometer.timeout_s)
+            laser = open_laser(cfg, sim.laser_port, sim.clock, sim=True)
         except Exception:
             sim.stop()
             raise
@@ -82,8 +83,7 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         return Rig(axes, laser, sim.clock, "sim", desc, profile, sim, [sim.stop])
     axes = _connect_legs(cfg, cfg.drive.url, legs, profile)
     try:
-        laser = SerialInterferometer(cfg.interferometer.port, baudrate=cfg.interferometer.baudrate,
-                                     timeout_s=cfg.interferometer.timeout_s)
+        laser = open_laser(cfg, cfg.interferometer.port)
     except Exception:
         _close_axes(axes)
         raise
@@ -215,13 +215,17 @@ def station_store_table_spec(where: str) -> TableSpec:
     return station_table_spec(where)
 
 
-def start_sim_rig(cfg_sim, time_scale: float, tcp_port: int, rtu: bool, nv_path: Path | None):
+def start_sim_rig(cfg_sim, time_scale: float, tcp_port: int, rtu: bool, nv_path: Path | None,
+                  laser_protocol: str = "station"):
     """The simulated rig served standalone (`station sim`): started SimRig with the station's
-    simulated legs (`cfg_sim`, a SimConfig); the caller stops it. OSError when the port is taken."""
+    simulated legs (`cfg_sim`, a SimConfig) and its laser speaking `laser_protocol` ("station" or
+    "linef1"); the caller stops it. OSError when the port is taken."""
     from drivers.sim.rig import SimRig
 
+    cfg = StationConfig()
+    cfg.interferometer.protocol = laser_protocol
     rig = SimRig(time_scale=time_scale, seed=cfg_sim.seed, tcp_port=tcp_port, rtu=rtu, nv_path=nv_path,
-                 configs=cfg_sim.leg_configs())
+                 configs=cfg_sim.leg_configs(), **sim_rig_laser_options(cfg))
     rig.start()
     return rig
 
@@ -293,6 +297,7 @@ def open_replay_rig(path: str | Path, speed: float | None = None, cfg: StationCo
         # replay answers, however loaded the machine (drivers/replay/clock.py)
         axes = connect_axes(replay.drive_url, legs, profile, timeout_s=REPLAY_DRIVE_TIMEOUT_S, retries=0)
         laser = SerialInterferometer(replay.laser_port, timeout_s=REPLAY_LASER_TIMEOUT_S, clock=replay.timeout_clock)
+        laser = replay_laser(laser, session.devices.get("laser_air_compensation"))  # a µLine-F1 session's record
     except Exception:
         replay.stop()
         raise

@@ -55,6 +55,8 @@ FLAG_IMPORTED = 4  # came from CSV: commanded/drive/measured positions are deriv
 FLAG_REPLAYED = 8  # came from a replay device
 FLAG_ANCHOR = 16  # on the fly: the pass's anchor, read at rest where the pass ends (docs/onthefly.md)
 FLAG_PROBE = 32  # on the fly: a reversal probe, a stop-and-go reading right after a reversal (docs/onthefly.md)
+FLAG_FRAMES_LOST = 64  # a streaming laser (uLine-F1) lost frames in the reading's window (CRC, cut, gap): fewer samples
+FLAG_REREFERENCED = 128  # the laser lost its count (velocity overflow): the leg was re-zeroed at its reference first
 
 FAULT_FIELDS: list[tuple[str, str, str]] = [
     ("index", "<i8", "1"),  # plan index of the point the fault hit
