@@ -28,6 +28,8 @@ many were acted on and refused) are printed at the end of the module.
 
 from __future__ import annotations
 
+import argparse
+
 import asyncio
 import concurrent.futures
 import os
@@ -327,14 +329,26 @@ def expected(field_id: str, text: str, kind, where: str) -> tuple[bool, Any, str
         return False, None, str(exc)
 
 
+def _option_defaults(command: str) -> dict[str, Any]:
+    """dest -> the value `station COMMAND` acts on when the option is left out: its default, read
+    by the option's own type as argparse does with a text default. Read from the parser, not by
+    parsing a command line: the positional files (a session, a model) are checked to exist."""
+    parser = build_parser(command)
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
+    out: dict[str, Any] = {}
+    for a in sub._actions:
+        d = a.default
+        out[a.dest] = a.type(d) if isinstance(d, str) and a.type is not None else d
+    return out
+
+
 def _cli_defaults() -> dict[str, Any]:
-    sweep = build_parser("sweep").parse_args(["sweep", "--sim"])
-    platform = build_parser("platform").parse_args(["platform", "x.h5", "--out", "d"])
-    replay = build_parser("replay").parse_args(["replay", "x.h5"])
-    table = build_parser("table").parse_args(["table", "m.json", "--out", "t.csv"])
-    return {"cycles": sweep.cycles, "n-targets": sweep.n_targets, "step": sweep.step, "min-mm": sweep.min_mm,
-            "max-mm": sweep.max_mm, "dwell": sweep.dwell, "plat-poses": platform.poses, "plat-seed": platform.seed,
-            "replay-speed": replay.speed, "comp-step": table.step, "move-speed": None}
+    sweep, platform = _option_defaults("sweep"), _option_defaults("platform")
+    replay, table = _option_defaults("replay"), _option_defaults("table")
+    return {"cycles": sweep["cycles"], "n-targets": sweep["n_targets"], "step": sweep["step"],
+            "min-mm": sweep["min_mm"], "max-mm": sweep["max_mm"], "dwell": sweep["dwell"],
+            "plat-poses": platform["poses"], "plat-seed": platform["seed"], "replay-speed": replay["speed"],
+            "comp-step": table["step"], "move-speed": None}
 
 
 CLI_DEFAULTS = _cli_defaults()
