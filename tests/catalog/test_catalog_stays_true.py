@@ -156,7 +156,7 @@ def test_a_lock_held_elsewhere_costs_a_job_the_timeout_then_the_outbox(tmp_path,
         t0 = time.monotonic()
         # another model than m0 (a file's record is keyed by its content: the same content is one record)
         rc, out, err = _main(capsys, "fit", runs / "cal.h5", "--out", runs / "m2.json", "--config", cfg,
-                             "--method", "paper", "--params", "7")
+                             "--method", "paper", "--params", "2")
         locked_s = time.monotonic() - t0
         assert rc == 0, err
         # the write waited for the lock at most the statement timeout (plus the fit itself)

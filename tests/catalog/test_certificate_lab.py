@@ -119,7 +119,7 @@ def test_second_issue_warns_naming_the_first_wherever_written(sessions, cfg, tmp
 
 def test_revise_only_the_same_item_lists_changes_and_keeps_corrections(sessions, cfg, tmp_path, capsys):
     rc, _, err = _run(capsys, "certificate", sessions["cal"], "--config", cfg, "--received", "18.11.2026")
-    _one_line_refusal(rc, err, "--received '18.11.2026': give the date the item was received as YYYY-MM-DD")
+    _one_line_refusal(rc, err, "argument --received: '18.11.2026' is not a date; give it as YYYY-MM-DD")
     rc, out, err = _run(capsys, "certificate", sessions["cal"], "--as-left", sessions["ver"], "--config", cfg,
                         "--received", "2026-11-18")
     assert rc == 0, err

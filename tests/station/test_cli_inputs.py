@@ -59,7 +59,7 @@ def model(tmp_path_factory) -> Path:
     (["web", "--port", "-1"], "argument --port: '-1' is outside 1 .. 65535"),
     (["sweep", "--sim", "--out", "{tmp}/s.h5", "--step", "1,5"], "'1,5': a comma is not a decimal separator here"),
     (["sweep", "--sim", "--out", "{tmp}/s.h5", "--min-mm", "nan"], "'nan' is not a number"),
-    (["audit", "--action", "x"], "invalid choice: 'x' (choose from 'push', 'rollback', 'verify')"),
+    (["audit", "--action", "x"], "invalid choice: 'x' (choose from 'push', 'rollback', 'verify', 'approve')"),
     (["report", str(SAMPLE), "--out", "{tmp}/missing/sub"], "the folder {tmp}/missing does not exist; create it first"),
     (["legs", "--since", "03/04/2026"], "argument --since: '03/04/2026' is not a date; give it as YYYY-MM-DD"),
 ])

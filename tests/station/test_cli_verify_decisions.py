@@ -27,6 +27,9 @@ def test_verify_prints_and_writes_the_as_left_decisions(capsys):
         '[drive]\nurl = "sim"\n[interferometer]\nport = "sim"\n[legs.3]\nserial = "HX-0042"\nleg_type = "HX300"\n'
         # as found nothing could fail; as left E is held to 0.001 um: no leg is proven to conform
         "[tolerances.HX300]\nE_um = 1000\nR_um = 1000\n[tolerances.HX300.as_left]\nE_um = 0.001\n")
+    # the leg as found, before any table: what a certificate is issued from
+    assert main(["sweep", "--config", "station.toml", "--legs", "3", "--step", "15", "--cycles", "2",
+                 "--time-scale", "0", "--out", "c.h5"]) == 0
     assert main(["push", "t.csv", "--leg", "3", "--config", "station.toml", "--yes"]) == 0
     capsys.readouterr()
     main(["verify", "--leg", "3", "--config", "station.toml", "--cycles", "2", "--noise-seed", "5",
@@ -40,12 +43,12 @@ def test_verify_prints_and_writes_the_as_left_decisions(capsys):
     assert leg["values"]["E"]["limit_um"] == 0.001 and leg["values"]["E"]["outcome"] == "does not conform"
     assert leg["values"]["R"]["limit_um"] == 1000 and leg["values"]["R"]["outcome"] == "conforms"
     # a certificate of the verified leg checks that the table active as left is the table given
-    assert main(["certificate", "v.h5", "--as-left", "v.h5", "--table", "t.csv", "--config", "station.toml"]) == 0
+    assert main(["certificate", "c.h5", "--as-left", "v.h5", "--table", "t.csv", "--config", "station.toml"]) == 0
     (cert,) = Path("runs/certificates").glob("*_r1.json")
     table = json.loads(cert.read_text())["compensation_table"]
     assert table["matches_as_left"] is True and table["active_as_left_sha256"] == table["leg_rows_sha256"]
     x2 = [1.0 for _ in x]
     Path("other.csv").write_text(table_csv_text(CompTable({3: LegTable(3, -90.0, 6.0, tuple(x2), tuple(x2))})))
     capsys.readouterr()
-    assert main(["certificate", "v.h5", "--as-left", "v.h5", "--table", "other.csv", "--config", "station.toml"]) == 0
+    assert main(["certificate", "c.h5", "--as-left", "v.h5", "--table", "other.csv", "--config", "station.toml"]) == 0
     assert "the table active in the as-left session is NOT the --table given" in capsys.readouterr().out

@@ -20,6 +20,7 @@ from textual.widgets import Button, Input, Label, ProgressBar, Select, Static
 from procedures.acquisition.plan_size import PlanSize, fmt_bytes, plan_size
 from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
 from procedures.acquisition.plans import parse_legs
+from station import values as V
 from station.progress import fmt_duration
 from station import values
 from station.tui.errors import describe
@@ -122,7 +123,7 @@ class SweepScreen(StationScreen):
             return self.query_one(f"#{wid}", ValueField).read()
 
         kind = self.query_one("#plan", Select).value
-        legs = parse_legs(val("legs") or "1")
+        legs = parse_legs(V.LEGS.parse(val("legs") or "1", "legs"))  # --legs's kind, then its numbers
         cycles, dwell_s = num("cycles"), num("dwell")
         n_targets = None if kind in ONTHEFLY else num("n-targets")  # on the fly: evenly spaced, by the step
         step_mm = None if kind == "paper" else num("step")  # the paper plan has fixed targets

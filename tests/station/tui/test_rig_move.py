@@ -96,6 +96,8 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
 
         # jogs: +1 mm (the default step), then the step is 10 mm (j), -10 mm; blank speed = default
         await type_into(pilot, "move-speed", "")
+        # a rig key within STRAY_HOLD_S of leaving a text field is taken for typing (docs/tui.md "Keys")
+        await pilot.pause(app.screen.STRAY_HOLD_S + 0.2)
         await pilot.press("plus")
         await wait_until(pilot, lambda: any("leg 1 at +31.0000 mm (moved at 5 mm/s)" in n for n in notes(app)),
                          what="the jog +1 mm")
