@@ -27,7 +27,8 @@ from station.catalog.store import Catalog, write_recs  # noqa: E402
 from station.web.app import WebSettings, create_app  # noqa: E402
 from station.web.engine import open_readonly  # noqa: E402
 
-GOALS_MS = {"fleet": 1000, "fleet --type": 1000, "fleet --due": 1000, "fleet --decision": 1000, "leg": 300}
+GOALS_MS = {"fleet": 1000, "fleet --type": 1000, "fleet --due": 1000, "fleet --decision": 300, "leg": 300,
+            "charts": 300, "compare": 1000}
 
 
 def fill(ingest, n_legs: int, n_cal: int) -> None:
@@ -44,7 +45,8 @@ def fill(ingest, n_legs: int, n_cal: int) -> None:
 def pages(n_legs: int) -> dict[str, str]:
     serial = f"HX-{random.Random(3).randrange(n_legs):05d}"
     return {"fleet": "/", "fleet --type": "/?type=HX-L450&page=3", "fleet --due": "/?due=2025-06-01",
-            "fleet --decision": "/?decision=not-conforming", "leg": f"/leg/{serial}"}
+            "fleet --decision": "/?decision=not-conforming", "leg": f"/leg/{serial}",
+            "charts": f"/charts?type={TYPES[1]}", "compare": "/compare"}
 
 
 def tolerances():

@@ -26,6 +26,7 @@ from fastapi.templating import Jinja2Templates
 from sqlalchemy.engine import Engine
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from procedures.io.recording.stage import AS_FOUND, AS_LEFT
 from station.catalog.history import history, legs, parse_utc
 from station.services.serials import SERIAL_RULE, is_serial
 from station.web import queries, svg
@@ -38,6 +39,8 @@ PAGE_SIZE = 50
 # keeps the offset inside every database's integer (20 digits overflowed SQLite: a 500)
 MAX_PAGE = 1_000_000
 PAGE_RE = re.compile(r"[1-9][0-9]{0,6}")  # ASCII digits only: int() also takes "+1", "1_0", "١"
+# the stages /compare offers: a calibration is compared with calibrations, a verification with verifications
+COMPARED_STAGES = {AS_FOUND: "as-found calibrations", AS_LEFT: "as-left verifications"}
 CHART_POINTS = 2000  # the most recent calibrations drawn per chart (statistics use all)
 
 
@@ -56,6 +59,7 @@ class WebSettings:
     decision_tolerances: dict = field(default_factory=dict)  # {type: Tolerance}: the fleet's decisions
     runs_dir: Path | None = None
     interval_days: int = 365
+    compare_window_days: float = 90.0  # [catalog] compare_window_days
     where: str = ""  # which catalog, shown in the footer
     check_hint: str = "check the catalog's server and --catalog / [catalog] url"  # the 503 page's advice
     page_size: int = PAGE_SIZE
@@ -248,21 +252,24 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
                     plots={c.figure: chart_plot(c) for c in cs}, calibrations=len(cals), chart_points=CHART_POINTS)
 
     @app.get("/compare", response_class=HTMLResponse)
-    def compare(request: Request, type: str | None = None, serial: str | None = None):
+    def compare(request: Request, type: str | None = None, serial: str | None = None, stage: str | None = None):
         types, _ = queries.filter_values(engine)
         leg_type = _choice("type", type, types)
+        st = _choice("stage", stage, list(COMPARED_STAGES)) or AS_FOUND
         if serial:
             _serial(serial, "serial=")
         n = _page(request.query_params.get("page"))
-        items, total = queries.compared_serials(engine, leg_type, serial or None, s.page_size, (n - 1) * s.page_size)
+        items, total = queries.compared_serials(engine, leg_type, serial or None, s.page_size, (n - 1) * s.page_size,
+                                                stage=st, window_days=s.compare_window_days)
         if serial and not items:
-            raise PageError(404, f"leg {serial!r} has no completed calibrations at more than one station")
+            raise PageError(404, f"leg {serial!r} has no completed {COMPARED_STAGES[st]} at more than one station")
         pages = max(1, -(-total // s.page_size))
         if n > pages:
             raise PageError(404, f"page {n}: there are {pages} page(s) of compared legs")
         plots = {f: compare_plot(items[0], f) for f in ("E", "B")} if serial else {}
         return page(request, "compare.html", items=items, total=total, types=types, leg_type=leg_type,
-                    serial=serial, plots=plots, page_no=n, pages=pages)
+                    serial=serial, plots=plots, page_no=n, pages=pages, stage=st, stages=COMPARED_STAGES,
+                    window_days=s.compare_window_days)
 
     from station.web import certificates  # noqa: PLC0415  (its routes: station/web/certificates.py)
 

@@ -11,8 +11,10 @@ session (the one whose E and B the fleet shows) against `[tolerances.TYPE]`, by 
 function the certificate and `station report` use (procedures.reporting.decision.decide_leg), at
 the stage of that session (as left for a verification sweep, else as found).
 
-Comparison of station A and B on one leg: E_n = (x_A - x_B) / sqrt(U_A^2 + U_B^2), each station's
-last completed calibration; |E_n| > 1 flags a disagreement beyond both uncertainties.
+Comparison of station A and B on one leg: E_n = (x_A - x_B) / sqrt(U_A^2 + U_B^2)
+(procedures.reporting.compare.e_n, as `station compare`), each station's last completed session
+of one stage (as found with as found, as left with as left), and only when the two were measured
+within `[catalog] compare_window_days`; |E_n| > 1 flags a disagreement beyond both uncertainties.
 """
 
 from __future__ import annotations
@@ -25,7 +27,10 @@ from itertools import combinations
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
+from procedures.io.recording.stage import AS_FOUND
+from procedures.reporting import compare as cmp
 from procedures.reporting import decision
+from station.catalog.history import parse_utc, stage_filter
 from station.catalog.models import FIGURES, Leg, Record, RecordLeg
 
 COMPLETED = sa.and_(RecordLeg.kind == "session", RecordLeg.outcome == "completed")
@@ -104,6 +109,7 @@ class StationValue:
     time_utc: str
     E: tuple[float | None, float | None]
     B: tuple[float | None, float | None]
+    flagged: bool = False  # disagrees with more than half of the stations it was compared with
 
 
 @dataclass
@@ -111,37 +117,45 @@ class Pair:
     a: str
     b: str
     en: dict[str, float | None]  # figure -> E_n
+    days_apart: float = 0.0
+    in_window: bool = True  # measured within the comparison window; else not compared (no E_n)
 
     @property
     def flagged(self) -> bool:
-        return any(v is not None and abs(v) > 1 for v in self.en.values())
+        return self.in_window and any(v is not None and abs(v) > 1 for v in self.en.values())
 
 
 @dataclass
 class Compared:
     serial: str
     leg_type: str | None
+    stage: str = AS_FOUND
     stations: list[StationValue] = field(default_factory=list)
     pairs: list[Pair] = field(default_factory=list)
 
     @property
     def flagged(self) -> bool:
-        return any(p.flagged for p in self.pairs)
+        return any(st.flagged for st in self.stations)
 
 
 def e_n(a: tuple[float | None, float | None], b: tuple[float | None, float | None]) -> float | None:
-    """(x_A - x_B) / sqrt(U_A^2 + U_B^2); None without both values and a non-zero U."""
-    (xa, ua), (xb, ub) = a, b
-    if xa is None or xb is None or ua is None or ub is None or ua * ua + ub * ub <= 0:
-        return None
-    return (xa - xb) / math.sqrt(ua * ua + ub * ub)
+    """E_n of two (value, U): procedures.reporting.compare.e_n, the formula `station compare` uses;
+    None where it is not finite (both U zero)."""
+    v = cmp.e_n(a[0], a[1], b[0], b[1])
+    return v if v is not None and math.isfinite(v) else None
 
 
 def compared_serials(engine: Engine, leg_type: str | None = None, serial: str | None = None,
-                     limit: int = 100, offset: int = 0) -> tuple[list[Compared], int]:
-    """Legs with completed calibrations at more than one station (of `leg_type`, or the one
-    `serial`): each station's last calibration and E_n of every pair; and how many legs there are."""
-    multi = (sa.select(RecordLeg.leg_serial).where(COMPLETED, RecordLeg.leg_serial.is_not(None))
+                     limit: int = 100, offset: int = 0, stage: str = AS_FOUND,
+                     window_days: float = 90.0) -> tuple[list[Compared], int]:
+    """Legs with completed sessions of `stage` (as found: calibrations; as left: verifications) at
+    more than one station (of `leg_type`, or the one `serial`): each station's last session of
+    that stage, and E_n of every pair measured at most `window_days` apart (a pair further apart
+    compares the leg's drift, not the stations: listed, not compared); a station is flagged when it
+    disagrees with more than half of the stations it was compared with (as `station compare`
+    does), and how many legs there are."""
+    of_stage = sa.and_(COMPLETED, stage_filter(RecordLeg.stage, stage))
+    multi = (sa.select(RecordLeg.leg_serial).where(of_stage, RecordLeg.leg_serial.is_not(None))
              .group_by(RecordLeg.leg_serial).having(sa.func.count(sa.distinct(RecordLeg.station_id)) > 1))
     if serial:
         multi = multi.where(RecordLeg.leg_serial == serial)
@@ -151,18 +165,25 @@ def compared_serials(engine: Engine, leg_type: str | None = None, serial: str | 
         total = int(conn.execute(sa.select(sa.func.count()).select_from(multi.subquery())).scalar_one())
         page = [s for (s,) in conn.execute(multi.order_by(RecordLeg.leg_serial).limit(limit).offset(offset))]
         types = dict(conn.execute(sa.select(Leg.serial, Leg.leg_type).where(Leg.serial.in_(page))).all())
-        cals = _calibrations(conn, RecordLeg.leg_serial.in_(page)) if page else []
+        cals = _calibrations(conn, sa.and_(RecordLeg.leg_serial.in_(page), stage_filter(RecordLeg.stage, stage))) \
+            if page else []
     latest: dict[str, dict[str, Calibration]] = {s: {} for s in page}
     for c in cals:  # oldest first: the last one per station stays
         if c.station_id:
             latest[c.serial][c.station_id] = c
     out = []
     for s in page:
-        item = Compared(s, types.get(s))
+        item = Compared(s, types.get(s), stage)
         for st, c in sorted(latest[s].items()):
             item.stations.append(StationValue(st, c.time_utc, c.values["E"], c.values["B"]))
         for a, b in combinations(item.stations, 2):
-            item.pairs.append(Pair(a.station_id, b.station_id, {"E": e_n(a.E, b.E), "B": e_n(a.B, b.B)}))
+            days = abs((parse_utc(a.time_utc) - parse_utc(b.time_utc)).total_seconds()) / 86400
+            inside = days <= window_days
+            en = {"E": e_n(a.E, b.E), "B": e_n(a.B, b.B)} if inside else {"E": None, "B": None}
+            item.pairs.append(Pair(a.station_id, b.station_id, en, days, inside))
+        for st in item.stations:
+            mine = [p for p in item.pairs if p.in_window and st.station_id in (p.a, p.b)]
+            st.flagged = bool(mine) and sum(p.flagged for p in mine) > len(mine) / 2
         out.append(item)
     return out, total
 

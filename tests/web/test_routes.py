@@ -134,7 +134,7 @@ def test_control_charts(client):
 
 def test_station_comparison(client):
     t = client.get("/compare").text
-    assert "2 leg(s) measured at more than one station" in t
+    assert "2 leg(s) with as-found calibrations at more than one station" in t
     flagged = set(re.findall(r'<tr class="pair flagged" data-serial="([^"]+)"', t))
     assert flagged == {s for s, f in fleet.EXPECT["compared"].items() if f}
     en = (12.1 - 9.1) / (0.5 ** 2 + 0.5 ** 2) ** 0.5
