@@ -102,26 +102,71 @@ def _x(time_utc: str) -> float:
     return parse_utc(time_utc).timestamp()
 
 
-def history_plot(figure: str, cals, limit_um: float | None) -> str:
-    pts = [svg.Point(_x(c.time_utc), c.figures[figure]["value_um"], c.figures[figure].get("U_um"), c.time_utc[:10])
-           for c in cals if (c.figures.get(figure) or {}).get("value_um") is not None]
-    lines = [svg.HLine(limit_um, f"tolerance {limit_um:g} µm", "tol")] if limit_um is not None else []
-    ends = (cals[0].time_utc[:10], cals[-1].time_utc[:10]) if cals else ("", "")
-    return svg.plot(f"{figure} over the calibrations", [svg.Series(figure, pts)], lines, ends, "µm")
+STAGE_WORDS = {AS_FOUND: "as found", AS_LEFT: "as left"}
+
+
+def stage_limits(s: "WebSettings", leg_type: str | None) -> dict[str, dict[str, float]]:
+    """{stage: {figure: upper limit um}} of `leg_type`: each stage its own limit from
+    [tolerances.TYPE] (and .as_found / .as_left), so an as-found point is never read against the
+    as-left limit; settings with only the as-left limits (`tolerances`) give the as-left stage."""
+    tol = s.decision_tolerances.get(leg_type or "")
+    if tol is not None:
+        return {st: tol.limits(st) for st in STAGE_WORDS}
+    return {AS_LEFT: dict(s.tolerances.get(leg_type or "", {}))}
+
+
+def limit_lines(figure: str, limits: dict[str, dict[str, float]]) -> list[svg.HLine]:
+    """The tolerance line of each stage, one line where both stages share the limit."""
+    found, left = limits.get(AS_FOUND, {}).get(figure), limits.get(AS_LEFT, {}).get(figure)
+    if found is not None and found == left:
+        return [svg.HLine(found, f"tolerance {found:g} µm (as found and as left)", "tol")]
+    out = []
+    for st, v in ((AS_FOUND, found), (AS_LEFT, left)):
+        if v is not None:
+            out.append(svg.HLine(v, f"{STAGE_WORDS[st]} tolerance {v:g} µm", "tol", st))
+    return out
+
+
+def _tip(time_utc: str, station: str | None, serial: str | None = None) -> str:
+    """A point's session as its tooltip names it: leg, station and start time (what `station
+    history` lists, so the session is found there)."""
+    return " ".join(x for x in (serial, station or "-", time_utc[:19].replace("T", " ")) if x)
+
+
+def history_plot(figure: str, by_stage: dict[str, list], limits: dict[str, dict[str, float]]) -> str:
+    """`figure` of a leg over its as-found calibrations and as-left verifications, a series per
+    stage, each stage's own tolerance line."""
+    series, times = [], []
+    for st, rows in by_stage.items():
+        pts = [svg.Point(_x(c.time_utc), c.figures[figure]["value_um"], c.figures[figure].get("U_um"),
+                         _tip(c.time_utc, c.station_id))
+               for c in rows if (c.figures.get(figure) or {}).get("value_um") is not None]
+        times += [c.time_utc for c in rows]
+        series.append(svg.Series(STAGE_WORDS[st].replace(" ", "-"), pts, st))
+    times.sort()
+    ends = (times[0][:10], times[-1][:10]) if times else ("", "")
+    return svg.plot(f"{figure} as found and as left", series, limit_lines(figure, limits), ends, "µm", y_floor=0.0)
 
 
 def chart_plot(c: queries.Chart) -> str:
     shown = c.values[-CHART_POINTS:]
-    pts = [svg.Point(_x(t), v, None, f"{serial} {t[:10]}") for t, serial, v in shown]
+    ucl, lcl = c.ucl, c.lcl
+    pts = [svg.Point(_x(t), v, None, _tip(t, station, serial), c.out_of_control(v))
+           for t, serial, station, v in shown]
     lines = []
     if c.mean is not None:
         lines.append(svg.HLine(c.mean, f"mean {c.mean:.2f}", "mean"))
     if c.s is not None:
-        lines += [svg.HLine(c.ucl, f"+3s {c.ucl:.2f}", "limit"), svg.HLine(c.lcl, f"-3s {c.lcl:.2f}", "limit")]
+        lines.append(svg.HLine(ucl, f"+3s {ucl:.2f}", "limit"))
+        # E, B, R cannot be negative: a lower limit under 0 is 0 (the axis stops there too)
+        lines.append(svg.HLine(max(lcl, 0.0), f"-3s {lcl:.2f}" if lcl > 0 else "-3s below 0: 0", "limit"))
     if c.limit_um is not None:
-        lines.append(svg.HLine(c.limit_um, f"tolerance {c.limit_um:g}", "tol"))
+        lines.append(svg.HLine(c.limit_um, f"{STAGE_WORDS.get(c.stage, '')} tolerance {c.limit_um:g}".strip(), "tol",
+                               c.stage))
     ends = (shown[0][0][:10], shown[-1][0][:10]) if shown else ("", "")
-    return svg.plot(f"control chart {c.figure}", [svg.Series(c.figure, pts)], lines, ends, "µm")
+    name = STAGE_WORDS.get(c.stage, "all").replace(" ", "-")
+    return svg.plot(f"control chart {c.figure} {STAGE_WORDS.get(c.stage, '')}".strip(),
+                    [svg.Series(name, pts, c.stage)], lines, ends, "µm", y_floor=0.0)
 
 
 def compare_plot(item: queries.Compared, figure: str) -> str:
@@ -219,13 +264,14 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         if not h.rows and not h.leg_info:
             raise PageError(404, f"no leg with serial {serial!r} in the catalog")
         leg_type = h.leg_info.get("leg_type")
-        limits = s.tolerances.get(leg_type or "", {})
-        cals = h.calibrations
-        plots = {f: history_plot(f, cals, limits.get(f)) for f in CHART_FIGURES}
+        limits = stage_limits(s, leg_type)
+        by_stage = {AS_FOUND: h.calibrations, AS_LEFT: h.verifications}
+        plots = {f: history_plot(f, by_stage, limits) for f in CHART_FIGURES}
         pushes = [r for r in h.rows if r.kind in ("push", "rollback")]
         tables = [r for r in h.rows if r.kind == "table"]
         files = queries.table_files(engine, sorted({r.table_sha256 for r in pushes if r.table_sha256}))
         return page(request, "leg.html", serial=serial, h=h, leg_type=leg_type, limits=limits, plots=plots,
+                    stage_words=STAGE_WORDS,
                     pushes=pushes, tables=tables, files=files, certificates=certificates_of(s.runs_dir, serial),
                     figures=CHART_FIGURES)
 
@@ -245,11 +291,15 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
     def charts(request: Request, type: str | None = None):
         types, _ = queries.filter_values(engine)
         leg_type = _choice("type", type, types) or (types[0] if types else None)
-        limits = s.tolerances.get(leg_type or "", {})
+        limits = stage_limits(s, leg_type)
         cals = queries.calibrations_of_type(engine, leg_type) if leg_type else []
-        cs = [queries.chart(cals, f, limits.get(f)) for f in CHART_FIGURES]
-        return page(request, "charts.html", types=types, leg_type=leg_type, charts=cs,
-                    plots={c.figure: chart_plot(c) for c in cs}, calibrations=len(cals), chart_points=CHART_POINTS)
+        # one chart per stage and figure: as-found and as-left values are different populations
+        # (before and after compensation), each against its own limit, with its own Cpk
+        cs = [queries.chart(cals, f, limits.get(st, {}).get(f), st) for st in STAGE_WORDS for f in CHART_FIGURES]
+        counts = {st: sum(1 for c in cals if c.stage == st) for st in STAGE_WORDS}
+        return page(request, "charts.html", types=types, leg_type=leg_type, charts=cs, stage_words=STAGE_WORDS,
+                    plots={(c.stage, c.figure): chart_plot(c) for c in cs}, calibrations=counts,
+                    chart_points=CHART_POINTS)
 
     @app.get("/compare", response_class=HTMLResponse)
     def compare(request: Request, type: str | None = None, serial: str | None = None, stage: str | None = None):

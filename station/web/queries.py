@@ -51,17 +51,18 @@ class Calibration:
     serial: str
     station_id: str | None
     values: dict[str, tuple[float | None, float | None]]  # figure -> (value um, U um)
+    stage: str | None = None
 
 
 def _calibrations(conn, where) -> list[Calibration]:
-    cols = [RecordLeg.time_utc, RecordLeg.leg_serial, RecordLeg.station_id]
+    cols = [RecordLeg.time_utc, RecordLeg.leg_serial, RecordLeg.station_id, RecordLeg.stage]
     cols += [getattr(RecordLeg, f"{n}{s}") for n in ("E", "B", "R") for s in ("_um", "_U_um")]
     q = sa.select(*cols).where(COMPLETED, where).order_by(RecordLeg.time_utc)
     out = []
     for r in conn.execute(q):
         m = r._mapping
         out.append(Calibration(m["time_utc"], m["leg_serial"], m["station_id"],
-                               {n: (m[f"{n}_um"], m[f"{n}_U_um"]) for n in ("E", "B", "R")}))
+                               {n: (m[f"{n}_um"], m[f"{n}_U_um"]) for n in ("E", "B", "R")}, m["stage"]))
     return out
 
 
@@ -75,11 +76,20 @@ def calibrations_of_type(engine: Engine, leg_type: str) -> list[Calibration]:
 @dataclass
 class Chart:
     figure: str
-    values: list[tuple[str, str, float]]  # (time_utc, serial, value um)
+    values: list[tuple[str, str, str | None, float]]  # (time_utc, serial, station, value um)
     mean: float | None = None
     s: float | None = None
     limit_um: float | None = None
     cpk: float | None = None
+    stage: str | None = None  # the stage charted (None: every completed session)
+
+    def out_of_control(self, v: float) -> bool:
+        """Beyond mean +- 3 s (Shewhart's first rule)."""
+        return self.s is not None and self.s > 0 and not (self.lcl <= v <= self.ucl)
+
+    @property
+    def n_out_of_control(self) -> int:
+        return sum(self.out_of_control(v) for *_, v in self.values)
 
     @property
     def ucl(self) -> float | None:
@@ -90,10 +100,13 @@ class Chart:
         return None if self.mean is None or self.s is None else self.mean - 3 * self.s
 
 
-def chart(cals: list[Calibration], figure: str, limit_um: float | None) -> Chart:
-    values = [(c.time_utc, c.serial, c.values[figure][0]) for c in cals if c.values[figure][0] is not None]
-    out = Chart(figure, values, limit_um=limit_um)
-    ys = [v for _, _, v in values]
+def chart(cals: list[Calibration], figure: str, limit_um: float | None, stage: str | None = None) -> Chart:
+    """The individuals chart of `figure` over `cals` of `stage` (all when None) against that
+    stage's `limit_um`: mean, s, Cpk of that stage alone."""
+    values = [(c.time_utc, c.serial, c.station_id, c.values[figure][0]) for c in cals
+              if c.values[figure][0] is not None and (stage is None or c.stage == stage)]
+    out = Chart(figure, values, limit_um=limit_um, stage=stage)
+    ys = [v for *_, v in values]
     if ys:
         out.mean = statistics.fmean(ys)
     if len(ys) >= 2:

@@ -84,7 +84,7 @@ def test_bad_queries_are_400_pages(client, query, what):
 def test_unknown_things_are_404_pages(client):
     for path, what in [("/leg/HX-9999", "no leg with serial"), ("/?page=99", "there are 3 page(s)"),
                        ("/nowhere", "nothing at /nowhere"), ("/leg/HX-0001/certificate/x.pdf", "no certificate"),
-                       ("/compare?serial=HX-0002", "no completed calibrations at more than one station")]:
+                       ("/compare?serial=HX-0002", "no completed as-found calibrations at more than one station")]:
         r = client.get(path)
         assert r.status_code == 404, path
         assert what.replace("'", "&#39;") in r.text and "<h1 class=\"error\">404" in r.text
