@@ -1,7 +1,8 @@
 """The web view at scale: a catalog of 10 000 legs x 5 calibrations (bench_catalog's synthetic
 records through the catalog API) on SQLite and, when initdb is installed, a throwaway PostgreSQL
 (tests/pg.py). Times the fleet page (goal < 1 s) and a leg's page (goal < 300 ms) server side
-(FastAPI TestClient, median of repeats) and in headless Chromium (selenium; the navigation's
+(FastAPI TestClient, median of repeats), the decision filter (goal < 300 ms: verdicts stored at
+ingest), the control charts of a leg type and the station comparison, and in headless Chromium (selenium; the navigation's
 duration, request to load event, from the Navigation Timing API) side by side.
 
     .venv/bin/python bench/bench_web.py [--legs 10000] [--calibrations 5]
@@ -32,9 +33,14 @@ GOALS_MS = {"fleet": 1000, "fleet --type": 1000, "fleet --due": 1000, "fleet --d
 
 
 def fill(ingest, n_legs: int, n_cal: int) -> None:
+    """The synthetic records, each session decided as a session file is at ingest
+    (station.catalog.readers.decide_legs, revision 0004) against the bench's tolerances."""
+    from station.catalog.readers import decide_legs
+
+    tol = tolerances()
     batch = []
     for rec in synthetic(n_legs, n_cal):
-        batch.append(rec)
+        batch.append(decide_legs(rec, tol))
         if len(batch) == BATCH:
             ingest(batch)
             batch = []
