@@ -238,19 +238,24 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         since_d, until_d = _date("since", since), _date("until", until)
         due_d = dt.date.today().isoformat() if due == "today" else _date("due", due)
         n = _page(q.get("page"))
-        rows = legs(engine, leg_type=leg_type, station=st, since=since_d, until=until_d, due_by=due_d,
-                    interval_days=s.interval_days)
         verdict = _choice("decision", decision, list(queries.DECISIONS))
-        decided = {}
-        if verdict:  # every leg decided, then filtered; else only the page shown
-            decided = queries.latest_decisions(engine, {r.serial: r.leg_type for r in rows}, s.decision_tolerances)
+        # the verdicts stored at ingest filter in SQL; a leg whose latest row was stored undecided
+        # comes along and is decided here (queries.latest_decisions), then kept or dropped
+        rows = legs(engine, leg_type=leg_type, station=st, since=since_d, until=until_d, due_by=due_d,
+                    interval_days=s.interval_days, decision=queries.DECISIONS[verdict] if verdict else None)
+        decided = {r.serial: r.decision for r in rows if r.decision}
+        if verdict:
+            later = [r for r in rows if not r.decision]
+            decided.update(queries.latest_decisions(engine, {r.serial: r.leg_type for r in later},
+                                                    s.decision_tolerances))
             rows = [r for r in rows if decided.get(r.serial) == queries.DECISIONS[verdict]]
         pages = max(1, -(-len(rows) // s.page_size))
         if n > pages:
             raise PageError(404, f"page {n}: there are {pages} page(s) of legs with these filters")
         shown = rows[(n - 1) * s.page_size: n * s.page_size]
         if not verdict:
-            decided = queries.latest_decisions(engine, {r.serial: r.leg_type for r in shown}, s.decision_tolerances)
+            decided.update(queries.latest_decisions(engine, {r.serial: r.leg_type for r in shown if not r.decision},
+                                                    s.decision_tolerances))
         filters = {k: v for k, v in dict(type=leg_type, station=st, since=since_d, until=until_d,
                                          due=due if due == "today" else due_d, decision=verdict).items() if v}
         return page(request, "fleet.html", rows=shown, total=len(rows), page_no=n, pages=pages, types=types,
