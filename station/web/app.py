@@ -297,11 +297,11 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         types, _ = queries.filter_values(engine)
         leg_type = _choice("type", type, types) or (types[0] if types else None)
         limits = stage_limits(s, leg_type)
-        cals = queries.calibrations_of_type(engine, leg_type) if leg_type else []
         # one chart per stage and figure: as-found and as-left values are different populations
         # (before and after compensation), each against its own limit, with its own Cpk
-        cs = [queries.chart(cals, f, limits.get(st, {}).get(f), st) for st in STAGE_WORDS for f in CHART_FIGURES]
-        counts = {st: sum(1 for c in cals if c.stage == st) for st in STAGE_WORDS}
+        cs = queries.charts_of_type(engine, leg_type, tuple(STAGE_WORDS), CHART_FIGURES, limits, CHART_POINTS) \
+            if leg_type else []
+        counts = {st: max([c.count for c in cs if c.stage == st], default=0) for st in STAGE_WORDS}
         return page(request, "charts.html", types=types, leg_type=leg_type, charts=cs, stage_words=STAGE_WORDS,
                     plots={(c.stage, c.figure): chart_plot(c) for c in cs}, calibrations=counts,
                     chart_points=CHART_POINTS)

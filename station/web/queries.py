@@ -1,9 +1,9 @@
 """What the web pages read from the catalog beyond `history` and `legs`: the filter values, the
-calibrations of a leg type (control charts), the legs measured at more than one station
+control charts of a leg type per stage (aggregated by the database), the legs measured at more than one station
 (comparison), the table files of a leg's pushes. Read-only queries; values in um.
 
-Control chart (individuals): mean and sample standard deviation s of the completed calibrations
-of a leg type, limits mean +- 3 s. The ISO 230-2 values E, B, R are >= 0 with an upper limit only,
+Control chart (individuals), one per stage (as found, as left) against that stage's limit: mean and
+sample standard deviation s of the completed sessions of that stage of a leg type, limits mean +- 3 s. The ISO 230-2 values E, B, R are >= 0 with an upper limit only,
 so Cpk = (limit - mean) / (3 s) (the one-sided index).
 
 Decision of a leg (the fleet's decision filter): the ISO 14253-1 verdict of its latest completed
@@ -66,13 +66,6 @@ def _calibrations(conn, where) -> list[Calibration]:
     return out
 
 
-def calibrations_of_type(engine: Engine, leg_type: str) -> list[Calibration]:
-    """Every completed calibration of a leg of type `leg_type`, oldest first."""
-    with engine.connect() as conn:
-        serials = sa.select(Leg.serial).where(Leg.leg_type == leg_type)
-        return _calibrations(conn, RecordLeg.leg_serial.in_(serials))
-
-
 @dataclass
 class Chart:
     figure: str
@@ -82,14 +75,20 @@ class Chart:
     limit_um: float | None = None
     cpk: float | None = None
     stage: str | None = None  # the stage charted (None: every completed session)
+    n: int | None = None  # values the figures use (`values` may hold only the most recent); None: len(values)
+    ooc: int | None = None  # of them out of control, counted by the database; None: counted in `values`
 
     def out_of_control(self, v: float) -> bool:
         """Beyond mean +- 3 s (Shewhart's first rule)."""
         return self.s is not None and self.s > 0 and not (self.lcl <= v <= self.ucl)
 
     @property
+    def count(self) -> int:
+        return len(self.values) if self.n is None else self.n
+
+    @property
     def n_out_of_control(self) -> int:
-        return sum(self.out_of_control(v) for *_, v in self.values)
+        return sum(self.out_of_control(v) for *_, v in self.values) if self.ooc is None else self.ooc
 
     @property
     def ucl(self) -> float | None:
@@ -100,20 +99,51 @@ class Chart:
         return None if self.mean is None or self.s is None else self.mean - 3 * self.s
 
 
-def chart(cals: list[Calibration], figure: str, limit_um: float | None, stage: str | None = None) -> Chart:
-    """The individuals chart of `figure` over `cals` of `stage` (all when None) against that
-    stage's `limit_um`: mean, s, Cpk of that stage alone."""
-    values = [(c.time_utc, c.serial, c.station_id, c.values[figure][0]) for c in cals
-              if c.values[figure][0] is not None and (stage is None or c.stage == stage)]
-    out = Chart(figure, values, limit_um=limit_um, stage=stage)
-    ys = [v for *_, v in values]
-    if ys:
-        out.mean = statistics.fmean(ys)
-    if len(ys) >= 2:
-        out.s = statistics.stdev(ys)
-        if limit_um is not None and out.s > 0:
-            out.cpk = (limit_um - out.mean) / (3 * out.s)
-    return out
+def charts_of_type(engine: Engine, leg_type: str, stages: tuple[str, ...], figures: tuple[str, ...],
+                   limits: dict[str, dict[str, float]], points: int) -> list[Chart]:
+    """The individuals chart of each figure of each stage over the completed sessions of legs of
+    `leg_type`, each stage against its own limit (`limits` {stage: {figure: um}}): n, mean, s and
+    the out-of-control count from the database (aggregates over every session: the fleet's tens
+    of thousands of rows never travel), the `points` most recent values of each stage to draw."""
+    serials = sa.select(Leg.serial).where(Leg.leg_type == leg_type)
+    where = sa.and_(COMPLETED, RecordLeg.leg_serial.in_(serials), RecordLeg.stage.in_(stages))
+    cols = [RecordLeg.stage]
+    for f in figures:
+        c = getattr(RecordLeg, f"{f}_um")
+        cols += [sa.func.count(c), sa.func.avg(c), sa.func.avg(c * c)]
+    out: dict[tuple[str, str], Chart] = {(st, f): Chart(f, [], limit_um=limits.get(st, {}).get(f), stage=st, n=0, ooc=0)
+                                         for st in stages for f in figures}
+    with engine.connect() as conn:
+        for row in conn.execute(sa.select(*cols).where(where).group_by(RecordLeg.stage)):
+            st = row[0]
+            for i, f in enumerate(figures):
+                n, mean, mean_sq = row[1 + 3 * i: 4 + 3 * i]
+                c = out[(st, f)]
+                c.n = int(n or 0)
+                if c.n:
+                    c.mean = float(mean)
+                if c.n >= 2:  # sample variance from the sums; never below 0 from rounding
+                    c.s = math.sqrt(max(0.0, (float(mean_sq) - c.mean * c.mean) * c.n / (c.n - 1)))
+                    if c.limit_um is not None and c.s > 0:
+                        c.cpk = (c.limit_um - c.mean) / (3 * c.s)
+        ooc = []
+        for st in stages:
+            for f in figures:
+                c, col = out[(st, f)], getattr(RecordLeg, f"{f}_um")
+                beyond = sa.false() if not c.s else sa.or_(col > c.ucl, col < c.lcl)
+                ooc.append(sa.func.sum(sa.case((sa.and_(RecordLeg.stage == st, beyond), 1), else_=0)))
+        counts = conn.execute(sa.select(*ooc).where(where)).one()
+        for k, (st, f) in enumerate((st, f) for st in stages for f in figures):
+            out[(st, f)].ooc = int(counts[k] or 0)
+        for st in stages:
+            q = (sa.select(RecordLeg.time_utc, RecordLeg.leg_serial, RecordLeg.station_id,
+                           *[getattr(RecordLeg, f"{f}_um") for f in figures])
+                 .where(where, RecordLeg.stage == st).order_by(RecordLeg.time_utc.desc()).limit(points))
+            for row in reversed(conn.execute(q).all()):
+                for i, f in enumerate(figures):
+                    if row[3 + i] is not None:
+                        out[(st, f)].values.append((row[0], row[1], row[2], row[3 + i]))
+    return list(out.values())
 
 
 @dataclass
