@@ -9,7 +9,9 @@ nor a driver's message. Who may connect, and the security headers: station/web/a
 
 from __future__ import annotations
 
+import csv
 import datetime as dt
+import io
 import logging
 import re
 from dataclasses import dataclass, field
@@ -20,7 +22,7 @@ import sqlalchemy as sa
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse
+from fastapi.responses import FileResponse, HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 from sqlalchemy.engine import Engine
@@ -96,6 +98,34 @@ def _serial(text: str, what: str = "serial") -> str:
     if not is_serial(text):
         raise PageError(400, f"{what} {text[:80]!r} is not a serial number: {SERIAL_RULE}")
     return text
+
+
+# the fleet's sort keys (sort=KEY ascending, sort=-KEY descending; legs without the value last)
+SORTS = {"serial": lambda r: r.serial, "type": lambda r: r.leg_type, "calibrations": lambda r: r.calibrations,
+         "last": lambda r: r.last_calibration_utc, "station": lambda r: r.station_id, "E": lambda r: r.E_um,
+         "B": lambda r: r.B_um, "decision": None, "due": lambda r: r.due}
+# rows stored undecided (before revision 0004) decided per request when at most this many, so the
+# counts per verdict hold; an older catalog beyond it shows the page's verdicts until rebuilt
+UNDECIDED_AT_ONCE = 2000
+
+
+def _find(text: str | None) -> str | None:
+    """The serial search text: printable, at most 64 characters (a serial's length)."""
+    if text in (None, ""):
+        return None
+    if len(text) > 64 or not text.isprintable():
+        raise PageError(400, f"serial={text[:40]!r}: give part of a serial (at most 64 printable characters)")
+    return text
+
+
+def _cell(v) -> str:
+    """A CSV cell; text a spreadsheet would run as a formula (= + - @ first) is quoted with '."""
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.4f}"
+    t = str(v)
+    return "'" + t if t[:1] in ("=", "+", "-", "@") and not isinstance(v, (int, float)) else t
 
 
 def _x(time_utc: str) -> float:
@@ -228,39 +258,84 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         log.exception("web: %s", request.url.path)
         return error_page(request, 500, f"an unexpected error ({type(exc).__name__}); the server log has the details")
 
-    @app.get("/", response_class=HTMLResponse)
-    def fleet(request: Request, type: str | None = None, station: str | None = None, since: str | None = None,
-              until: str | None = None, due: str | None = None, decision: str | None = None):
+    def fleet_rows(request: Request, type, station, since, until, due, decision, find, sort):
+        """The legs the fleet's filters keep (not paged), their verdicts, the counts per verdict
+        before the decision filter, and the filters as given back: shared by / and /fleet.csv."""
         types, stations = queries.filter_values(engine)
-        q = request.query_params
         leg_type = _choice("type", type, types)
         st = _choice("station", station, stations)
         since_d, until_d = _date("since", since), _date("until", until)
         due_d = dt.date.today().isoformat() if due == "today" else _date("due", due)
-        n = _page(q.get("page"))
         verdict = _choice("decision", decision, list(queries.DECISIONS))
-        # the verdicts stored at ingest filter in SQL; a leg whose latest row was stored undecided
-        # comes along and is decided here (queries.latest_decisions), then kept or dropped
+        key = _choice("sort", sort, [f"{d}{k}" for k in SORTS for d in ("", "-")])
+        find = _find(find)
         rows = legs(engine, leg_type=leg_type, station=st, since=since_d, until=until_d, due_by=due_d,
-                    interval_days=s.interval_days, decision=queries.DECISIONS[verdict] if verdict else None)
+                    interval_days=s.interval_days)
+        if find:  # the serial search: a part of the serial, any case
+            rows = [r for r in rows if find.lower() in r.serial.lower()]
+        # verdicts stored at ingest (revision 0004) cost nothing; rows stored undecided are decided
+        # here, all of them when few (the counts per verdict stay true), else the page's only
         decided = {r.serial: r.decision for r in rows if r.decision}
-        if verdict:
-            later = [r for r in rows if not r.decision]
+        later = [r for r in rows if not r.decision]
+        if verdict or len(later) <= UNDECIDED_AT_ONCE:
             decided.update(queries.latest_decisions(engine, {r.serial: r.leg_type for r in later},
                                                     s.decision_tolerances))
+            counts = {k: sum(1 for r in rows if decided.get(r.serial) == v) for k, v in queries.DECISIONS.items()}
+        else:
+            counts = None
+        if verdict:
             rows = [r for r in rows if decided.get(r.serial) == queries.DECISIONS[verdict]]
+        if key:
+            name = key.lstrip("-")
+            get = SORTS[name] if name != "decision" else (lambda r: decided.get(r.serial))
+            present = [r for r in rows if get(r) is not None]
+            rows = sorted(present, key=get, reverse=key.startswith("-")) + [r for r in rows if get(r) is None]
+        filters = {k: v for k, v in dict(type=leg_type, station=st, since=since_d, until=until_d,
+                                         due=due if due == "today" else due_d, decision=verdict, serial=find,
+                                         sort=key).items() if v}
+        return rows, decided, counts, filters, types, stations, later
+
+    @app.get("/", response_class=HTMLResponse)
+    def fleet(request: Request, type: str | None = None, station: str | None = None, since: str | None = None,
+              until: str | None = None, due: str | None = None, decision: str | None = None,
+              serial: str | None = None, sort: str | None = None):
+        n = _page(request.query_params.get("page"))
+        rows, decided, counts, filters, types, stations, later = fleet_rows(request, type, station, since, until, due,
+                                                                            decision, serial, sort)
         pages = max(1, -(-len(rows) // s.page_size))
         if n > pages:
             raise PageError(404, f"page {n}: there are {pages} page(s) of legs with these filters")
         shown = rows[(n - 1) * s.page_size: n * s.page_size]
-        if not verdict:
+        if counts is None:  # many rows stored undecided: the page's legs decided now
             decided.update(queries.latest_decisions(engine, {r.serial: r.leg_type for r in shown if not r.decision},
                                                     s.decision_tolerances))
-        filters = {k: v for k, v in dict(type=leg_type, station=st, since=since_d, until=until_d,
-                                         due=due if due == "today" else due_d, decision=verdict).items() if v}
+        with_tolerance = sum(v for k, v in (counts or {}).items() if k != "no-tolerance")
+        unsorted = {k: v for k, v in filters.items() if k != "sort"}
         return page(request, "fleet.html", rows=shown, total=len(rows), page_no=n, pages=pages, types=types,
-                    stations=stations, filters=filters, qs=urlencode(filters), today=dt.date.today().isoformat(),
-                    decisions=queries.DECISIONS, decided=decided)
+                    stations=stations, filters=filters, qs=urlencode(filters), sort_qs=urlencode(unsorted),
+                    today=dt.date.today().isoformat(), decisions=queries.DECISIONS, decided=decided, counts=counts,
+                    with_tolerance=with_tolerance, not_at_ingest=len(later), sorts=list(SORTS),
+                    sort=filters.get("sort", ""))
+
+    @app.get("/fleet.csv")
+    def fleet_csv(request: Request, type: str | None = None, station: str | None = None, since: str | None = None,
+                  until: str | None = None, due: str | None = None, decision: str | None = None,
+                  serial: str | None = None, sort: str | None = None):
+        """Every leg the filters keep (not paged) as CSV, the columns of the fleet page."""
+        rows, decided, counts, *_ = fleet_rows(request, type, station, since, until, due, decision, serial, sort)
+        if counts is None:
+            decided.update(queries.latest_decisions(engine, {r.serial: r.leg_type for r in rows if not r.decision},
+                                                    s.decision_tolerances))
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(["serial", "leg_type", "part_number", "calibrations", "verifications", "last_calibration_utc",
+                    "station", "E_um", "B_um", "decision", "due"])
+        for r in rows:
+            w.writerow([_cell(x) for x in (r.serial, r.leg_type, r.part_number, r.calibrations, r.verifications,
+                                           r.last_calibration_utc, r.station_id, r.E_um, r.B_um,
+                                           decided.get(r.serial), r.due)])
+        return Response(buf.getvalue(), media_type="text/csv; charset=utf-8",
+                        headers={"Content-Disposition": 'attachment; filename="fleet.csv"'})
 
     @app.get("/leg/{serial}", response_class=HTMLResponse)
     def leg(request: Request, serial: str):
