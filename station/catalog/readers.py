@@ -193,7 +193,8 @@ def session_rec(path: str | os.PathLike) -> Rec:
     for leg in session.legs:
         rec.legs[leg] = {**iso_figures(iso.get(leg)),
                          "drive": ident.text(session.devices.get(f"leg{leg}_drive"))}
-    _apply_identity(rec, session_identity(path))
+    # the identity read_session parsed (procedures.io.recording.identity), not a second parse of the file
+    _apply_identity(rec, session.identity.to_json() if session.identity.recorded else {})
     from procedures.reporting.decision import tolerances_from_json
 
     # decided once, here, against the tolerances the session recorded (what its report and
