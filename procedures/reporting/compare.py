@@ -42,6 +42,34 @@ class StationRun:
     serial: str
     targets: tuple[tuple[str, float, float, float], ...]
     values: dict[str, dict[str, Any]]
+    stage: str | None = None  # procedures/io/recording/stage.py: only sessions of one stage compare
+
+
+def e_n(x_a: float | None, u_a: float | None, x_b: float | None, u_b: float | None) -> float | None:
+    """E_n = (x_A - x_B) / sqrt(U_A^2 + U_B^2), the one formula `station compare` and the web's
+    /compare use; inf for different values with both U zero, None without both values and U."""
+    if x_a is None or x_b is None or u_a is None or u_b is None:
+        return None
+    den = math.hypot(u_a, u_b)
+    if den > 0:
+        return (x_a - x_b) / den
+    return 0.0 if x_a == x_b else math.inf
+
+
+STAGE_WORDS = {"as_found": "an as-found calibration", "as_left": "an as-left verification",
+               "adjustment": "an adjustment", "other": "a session of stage other"}
+
+
+def same_stage(runs: list[tuple[str, str | None]]) -> None:
+    """InputError (one line, naming both sessions) unless every (session name, stage) is of one stage: a calibration
+    as found and a verification as left measure different legs (before and after compensation),
+    so their difference is the compensation, not a station's bias."""
+    (a, sa), *rest = runs
+    for b, sb in rest:
+        if sb != sa:
+            raise InputError(f"{a} is {STAGE_WORDS.get(sa, f'of stage {sa}')} but {b} is "
+                             f"{STAGE_WORDS.get(sb, f'of stage {sb}')}: compare sessions of the same stage "
+                             "(as found with as found, as left with as left)")
 
 
 def binomial_tail(k: int, n: int, p: float) -> float:
@@ -77,8 +105,7 @@ def _pair(a: StationRun, b: StationRun, ia: int, ib: int, matched) -> dict[str, 
     rows, exceed = [], 0
     for d, t, row in matched:
         (xa, ua), (xb, ub) = row[ia], row[ib]
-        den = math.hypot(ua, ub)
-        en = (xa - xb) / den if den > 0 else (0.0 if xa == xb else math.inf)
+        en = e_n(xa, ua, xb, ub)
         exceed += abs(en) > 1
         rows.append({"direction": d, "target_mm": t, "x_a_um": xa, "U_a_um": ua, "x_b_um": xb, "U_b_um": ub,
                      "d_um": xa - xb, "E_n": en if math.isfinite(en) else None})
@@ -105,6 +132,7 @@ def compare(runs: list[StationRun]) -> dict[str, Any]:
         a, b = runs[0], next(r for r in runs if r.serial != runs[0].serial)
         raise InputError(f"{a.session} measured leg {a.serial} but {b.session} measured leg {b.serial}: a station "
                          "comparison needs the same reference leg (same serial) in every session")
+    same_stage([(r.session, r.stage) for r in runs])
     matched = _matched(runs)
     if not matched:
         raise InputError(f"{runs[0].session} and the other sessions share no target position (within "

@@ -200,14 +200,19 @@ class LegRow:
     E_um: float | None = None
     B_um: float | None = None
     verifications: int = 0  # completed as-left sessions
+    # the verdict stored at ingest (revision 0004) of its latest completed session, any stage
+    # (as left after a verification): None when that row was stored undecided, or no session
+    decision: str | None = None
 
 
 def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = None, since: str | None = None,
-         until: str | None = None, due_by: str | None = None, interval_days: int = 365) -> list[LegRow]:
+         until: str | None = None, due_by: str | None = None, interval_days: int = 365,
+         decision: str | None = None) -> list[LegRow]:
     """Every leg with a serial: its count of as-found calibrations and as-left verifications, its
     last completed as-found calibration (filtered by `since`/`until` on that time, `station` that
     made it, `leg_type`), and its due date; `due_by` (an ISO date) keeps the legs due on or before
-    it (or never calibrated)."""
+    it (or never calibrated). The stored verdict of its latest completed session; `decision` keeps
+    the legs with that verdict and those whose verdict was not stored (the caller decides those)."""
     # per leg a few index seeks (ix_record_legs_calibrations: serial, kind, outcome, time) for its
     # last completed calibration and their count; filters on the legs table cut the seeks.
     # PostgreSQL: LATERAL joins (one seek each); SQLite, which has none: scalar subqueries.
@@ -217,14 +222,19 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
     is_ver = sa.and_(r.leg_serial == Leg.serial, r.stage == AS_LEFT, r.outcome == "completed", r.kind == "session")
     count = sa.select(sa.func.count().label("n")).select_from(r).where(is_cal)
     count_ver = sa.select(sa.func.count().label("nv")).select_from(r).where(is_ver)
+    # ix_record_legs_calibrations (serial, kind, outcome, time): one seek for the latest session's verdict
+    is_done = sa.and_(r.leg_serial == Leg.serial, r.kind == "session", r.outcome == "completed")
+    verdict = sa.select(r.decision).where(is_done).order_by(r.time_utc.desc(), r.uid.desc()).limit(1)
     if engine.dialect.name == "postgresql":
         latest = (sa.select(r.time_utc.label("last"), r.station_id, r.E_um, r.B_um).where(is_cal)
                   .order_by(r.time_utc.desc()).limit(1).lateral("latest"))
         n = count.lateral("n")
         nv = count_ver.lateral("nv")
+        dv = verdict.lateral("dv")
         inner = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, n.c.n, nv.c.nv, latest.c.last,
-                           latest.c.station_id, latest.c.E_um, latest.c.B_um)
-                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(n, sa.true()).outerjoin(nv, sa.true()))
+                           latest.c.station_id, latest.c.E_um, latest.c.B_um, dv.c.decision)
+                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(n, sa.true()).outerjoin(nv, sa.true())
+                 .outerjoin(dv, sa.true()))
     else:
         def last_of(column):
             return sa.select(column).where(is_cal).order_by(r.time_utc.desc()).limit(1).scalar_subquery()
@@ -233,7 +243,7 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
                           count_ver.scalar_subquery().label("nv"),
                           sa.select(sa.func.max(r.time_utc)).where(is_cal).scalar_subquery().label("last"),
                           last_of(r.station_id).label("station_id"), last_of(r.E_um).label("E_um"),
-                          last_of(r.B_um).label("B_um"))
+                          last_of(r.B_um).label("B_um"), verdict.scalar_subquery().label("decision"))
     if leg_type:
         inner = inner.where(Leg.leg_type == leg_type)
     t = inner.subquery()
@@ -247,6 +257,8 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
     if due_by:
         cutoff = (datetime.fromisoformat(due_by) - timedelta(days=interval_days)).date().isoformat()
         q = q.where(sa.or_(t.c.last.is_(None), t.c.last < _next_day(cutoff)))
+    if decision:
+        q = q.where(sa.or_(t.c.decision == decision, t.c.decision.is_(None)))
     q = q.order_by(t.c.serial)
     rows: dict[str, LegRow] = {}
     with engine.connect() as conn:
@@ -254,7 +266,7 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
             rows[x.serial] = LegRow(serial=x.serial, leg_type=x.leg_type, part_number=x.part_number,
                                     calibrations=int(x.n or 0), last_calibration_utc=x.last, station_id=x.station_id,
                                     due=due_of(x.last, interval_days), E_um=x.E_um, B_um=x.B_um,
-                                    verifications=int(x.nv or 0))
+                                    verifications=int(x.nv or 0), decision=x.decision)
     return list(rows.values())
 
 

@@ -141,6 +141,9 @@ class RecordLeg(Base):
     verification_ratio: Mapped[float | None] = mapped_column(Float)
     outcome: Mapped[str | None] = mapped_column(String(32))
     stage: Mapped[str | None] = mapped_column(String(16))  # revision 0003: the record's stage, copied in
+    # revision 0004: the session's ISO 14253-1 overall verdict of this leg, decided at ingest
+    # (readers.decide_legs); NULL when not decided then (no recorded tolerance, older rows)
+    decision: Mapped[str | None] = mapped_column(String(32))
 
 
 # revision 0002: history reads by serial and time; leg lists the last completed calibration per serial

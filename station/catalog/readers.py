@@ -193,7 +193,13 @@ def session_rec(path: str | os.PathLike) -> Rec:
     for leg in session.legs:
         rec.legs[leg] = {**iso_figures(iso.get(leg)),
                          "drive": ident.text(session.devices.get(f"leg{leg}_drive"))}
-    _apply_identity(rec, session_identity(path))
+    # the identity read_session parsed (procedures.io.recording.identity), not a second parse of the file
+    _apply_identity(rec, session.identity.to_json() if session.identity.recorded else {})
+    from procedures.reporting.decision import tolerances_from_json
+
+    # decided once, here, against the tolerances the session recorded (what its report and
+    # certificate state): the web's decision filter reads the column (revision 0004)
+    decide_legs(rec, tolerances_from_json((session.station_config or {}).get("tolerances")))
     if rec.instrument is None:  # a 1.0 session: the instrument its config named ([metrology])
         metrology = (session.station_config or {}).get("metrology")
         metrology = metrology if isinstance(metrology, dict) else {}
@@ -201,6 +207,25 @@ def session_rec(path: str | os.PathLike) -> Rec:
         if serial:
             rec.instrument = {"serial": serial, "model": ident.text(metrology.get("model")), "calibration_due": None,
                               "calibrated_on": ident.text(metrology.get("calibration_date"))}
+    return rec
+
+
+def decide_legs(rec: Rec, tolerances: dict) -> Rec:
+    """Set each leg row's `decision` of session record `rec`: the ISO 14253-1 overall verdict of
+    its ISO 230-2 values with U (procedures.reporting.decision.decide_leg, the function the report,
+    the certificate and the web use) against `tolerances` ({type: Tolerance}) at the record's stage
+    (as-left limits for an as-left verification, else as found). A leg whose type has no
+    tolerance there is left undecided (None): the web decides it against its own config."""
+    from procedures.reporting import decision
+
+    stage = decision.STAGES[1] if rec.stage_or_default == stages.AS_LEFT else decision.STAGES[0]
+    for row in rec.legs.values():
+        info = rec.leg_info.get(row.get("leg_serial") or "", {})
+        leg_type = info.get("leg_type")
+        if rec.kind != "session" or not leg_type or leg_type not in tolerances:
+            continue
+        values = {n: {"value_um": row.get(f"{n}_um"), "U_um": row.get(f"{n}_U_um")} for n in FIGURES}
+        row["decision"] = decision.decide_leg(values, {}, leg_type, tolerances, stage)["overall"]
     return rec
 
 

@@ -19,7 +19,8 @@ if TYPE_CHECKING:
 NAME = "compare"
 HELP = "station comparison: sessions of one reference leg from several stations, E_n per target, bias flagged"
 DESCRIPTION = (
-    "Compare sessions of the same reference leg (same serial; refused otherwise, naming both) measured by "
+    "Compare sessions of the same reference leg (same serial; refused otherwise, naming both) and of the same "
+    "stage (an as-found calibration with calibrations, an as-left verification with verifications) measured by "
     "different stations: per target and direction the mean deviation of each station against the mean of the "
     "others, E_n = d / sqrt(U^2 + U_ref^2) with each side's expanded U of that mean (the uncertainty budget), and "
     "a station flagged when |E_n| > 1 at more targets than chance allows (binomial at 5 %). Writes compare.md, "
@@ -70,7 +71,7 @@ def run_of(session, serial: str | None, others: list, raw: bool) -> cmp.StationR
     station = session.identity.station.id or "unknown station"
     return cmp.StationRun(f"{station} ({Path(session.path).name})", station, Path(session.path).name, leg, serial,
                           tuple((t["direction"], t["target_mm"], t["mean_um"], t["U_um"]) for t in L["targets"]),
-                          L["values"])
+                          L["values"], stage=session.stage)
 
 
 def run(args) -> int:
@@ -82,6 +83,7 @@ def run(args) -> int:
         raise InputError("give at least two sessions to compare")
     out = check_output_folder(args.out, force=args.force)  # before reading: never overwrites unasked
     sessions = [read_session(Path(p)) for p in args.sessions]
+    cmp.same_stage([(Path(s.path).name, s.stage) for s in sessions])  # before the costly evaluation
     runs = [run_of(s, args.serial, [o for o in sessions if o is not s], args.raw) for s in sessions]
     result = cmp.compare(runs)
     out.mkdir(exist_ok=True)

@@ -56,6 +56,7 @@ def run(args) -> int:
         settings = WebSettings(tolerances=tolerances_of(args.config), runs_dir=runs,
                                decision_tolerances=decision_tolerances_of(args.config),
                                interval_days=cfg.catalog.calibration_interval_days,
+                               compare_window_days=cfg.catalog.compare_window_days,
                                where=f"catalog: {db.describe(url)} (read-only)", check_hint=what_to_check(url))
         app = Guard(create_app(engine, settings), host=args.host, port=port, access=access, login=login)
         shown = f"[{args.host}]" if ":" in args.host else args.host

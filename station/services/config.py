@@ -40,6 +40,7 @@ A TOML file selected with `--config`; without it the station runs on the simulat
     statement_timeout_s = 5.0   # the longest one shared-catalog statement (or its wait for a lock) may take
     calibration_interval_days = 365  # a leg is due this many days after its last calibration
     min_drift_interval_days = 30.0   # no drift figure from as-found calibrations closer together than this
+    compare_window_days = 90.0  # stations are compared on sessions of one stage at most this many days apart
     [limits]                    # the largest sweep plan started without asking (procedures/acquisition/plan_size.py)
     max_points = 500000         # points measured, all legs
     max_rig_hours = 72.0        # estimated time on the rig
@@ -262,6 +263,9 @@ class CatalogConfig:
     # drift (um/month) between as-found calibrations closer than this is noise over a tiny span:
     # not computed (station/catalog/history.py)
     min_drift_interval_days: float = 30.0
+    # the web's /compare pairs two stations' sessions of one leg only when measured this close: further
+    # apart, their difference is the leg's drift or wear, not a station's bias
+    compare_window_days: float = 90.0
 
 
 @dataclass
@@ -411,6 +415,8 @@ _RANGES = {
     ("catalog", "statement_timeout_s"): (0.0, True, "seconds one statement on the shared catalog may take"),
     ("catalog", "min_drift_interval_days"): (0.0, False, "days between as-found calibrations below which no "
                                                          "drift is computed"),
+    ("catalog", "compare_window_days"): (0.0, False, "days between two stations' sessions of a leg beyond which "
+                                                     "the web does not compare them"),
     ("sim", "time_scale"): (0.0, False, "real seconds per simulated second"),
     ("limits", "max_points"): (0, True, "the most points a sweep plan may have"),
     ("limits", "max_rig_hours"): (0.0, True, "the longest a sweep plan may take on the rig, hours"),

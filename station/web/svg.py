@@ -21,12 +21,14 @@ class Point:
     y_um: float
     u_um: float | None = None
     label: str = ""  # shown as the point's tooltip and data-label
+    flag: bool = False  # out of control (beyond mean +- 3 s): drawn ringed, class "ooc"
 
 
 @dataclass
 class Series:
     name: str
     points: list[Point] = field(default_factory=list)
+    stage: str | None = None  # data-stage of its points: a test reads which stage a point belongs to
 
 
 @dataclass
@@ -34,6 +36,24 @@ class HLine:
     y_um: float
     label: str
     kind: str  # "tol" (tolerance), "mean", "limit" (3-sigma)
+    stage: str | None = None  # the stage whose limit it is (data-stage), None for every stage
+
+
+LABEL_GAP = 14  # px between two reference-line baselines: an 11 px label box is about 13 px high
+
+
+def _label_ys(ys: list[float]) -> list[float]:
+    """Label baselines for lines at pixel heights `ys`: each just above its line, pushed apart
+    (in the order of the lines) so no two labels are closer than LABEL_GAP."""
+    order = sorted(range(len(ys)), key=lambda i: ys[i])
+    out = [0.0] * len(ys)
+    last = None
+    for i in order:
+        y = ys[i] - 3
+        if last is not None and y - last < LABEL_GAP:
+            y = last + LABEL_GAP
+        out[i] = last = y
+    return out
 
 
 def _fmt(v: float) -> str:
@@ -41,9 +61,10 @@ def _fmt(v: float) -> str:
 
 
 def plot(title: str, series: list[Series], hlines: list[HLine] = (), x_labels: tuple[str, str] = ("", ""),
-         y_unit: str = "um") -> str:
+         y_unit: str = "um", y_floor: float | None = None) -> str:
     """An SVG scatter plot of `series` with U error bars and horizontal lines `hlines`;
-    `x_labels` are printed under the left and right ends of the x axis."""
+    `x_labels` are printed under the left and right ends of the x axis. `y_floor`: the lowest
+    value the quantity can take (0 for ISO 230-2 magnitudes): the axis never goes below it."""
     pts = [p for s in series for p in s.points]
     ys = [p.y_um for p in pts] + [p.y_um + (p.u_um or 0) for p in pts] + [p.y_um - (p.u_um or 0) for p in pts]
     ys += [h.y_um for h in hlines]
@@ -52,6 +73,8 @@ def plot(title: str, series: list[Series], hlines: list[HLine] = (), x_labels: t
         y0, y1 = y0 - 1, y1 + 1
     pad = 0.08 * (y1 - y0)
     y0, y1 = y0 - pad, y1 + pad
+    if y_floor is not None:
+        y0 = max(y0, y_floor)
     xs = [p.x for p in pts]
     x0, x1 = (min(xs), max(xs)) if xs else (0.0, 1.0)
     if x1 - x0 < 1e-9:
@@ -73,11 +96,13 @@ def plot(title: str, series: list[Series], hlines: list[HLine] = (), x_labels: t
     out.append(f'<text class="tick" x="{LEFT}" y="{H - 10}">{escape(x_labels[0])}</text>')
     out.append(f'<text class="tick" x="{W - RIGHT}" y="{H - 10}" text-anchor="end">{escape(x_labels[1])}</text>')
     out.append(f'<text class="tick" x="{LEFT}" y="{TOP - 8}">{escape(y_unit)}</text>')
-    for h in hlines:
+    label_ys = _label_ys([sy(h.y_um) for h in hlines])
+    for h, ly in zip(hlines, label_ys):
         y = _fmt(sy(h.y_um))
-        out.append(f'<line class="hline hline-{h.kind}" data-y="{h.y_um:.4f}" x1="{LEFT}" x2="{W - RIGHT}" y1="{y}" y2="{y}"/>')
-        out.append(f'<text class="hlabel" x="{W - RIGHT - 4}" y="{float(y) - 3:.1f}" text-anchor="end">'
-                   f'{escape(h.label)}</text>')
+        st = f' data-stage="{escape(h.stage)}"' if h.stage else ""
+        out.append(f'<line class="hline hline-{h.kind}"{st} data-y="{h.y_um:.4f}" x1="{LEFT}" x2="{W - RIGHT}" y1="{y}" '
+                   f'y2="{y}"><title>{escape(h.label)}</title></line>')
+        out.append(f'<text class="hlabel"{st} x="{W - RIGHT - 4}" y="{ly:.1f}" text-anchor="end">{escape(h.label)}</text>')
     for i, s in enumerate(series):
         colour = COLOURS[i % len(COLOURS)]
         for p in s.points:
@@ -87,9 +112,13 @@ def plot(title: str, series: list[Series], hlines: list[HLine] = (), x_labels: t
                            f'y2="{_fmt(sy(p.y_um + p.u_um))}"/>')
             u = f' data-u="{p.u_um:.4f}"' if p.u_um is not None else ""
             tip = f"{s.name} {p.label} {p.y_um:.2f}" + (f" ± {p.u_um:.2f}" if p.u_um is not None else "") + f" {y_unit}"
-            out.append(f'<circle class="pt pt-{escape(s.name)}" fill="{colour}" r="3.5" cx="{cx}" cy="{cy}" '
-                       f'data-series="{escape(s.name)}" data-label="{escape(p.label)}" data-y="{p.y_um:.4f}"{u}>'
-                       f'<title>{escape(tip)}</title></circle>')
+            tip += " (out of control: beyond mean ± 3 s)" if p.flag else ""
+            st = f' data-stage="{escape(s.stage)}"' if s.stage else ""
+            if p.flag:  # a ring around the point: seen without hovering, in any colour vision
+                out.append(f'<circle class="ooc-ring" r="7" cx="{cx}" cy="{cy}"/>')
+            out.append(f'<circle class="pt pt-{escape(s.name)}{" ooc" if p.flag else ""}" fill="{colour}" r="3.5" '
+                       f'cx="{cx}" cy="{cy}" data-series="{escape(s.name)}"{st} data-label="{escape(p.label)}" '
+                       f'data-y="{p.y_um:.4f}"{u}><title>{escape(tip)}</title></circle>')
     for i, s in enumerate(series):  # legend
         x = LEFT + 40 + 90 * i
         out.append(f'<circle cx="{x}" cy="{TOP - 12}" r="4" fill="{COLOURS[i % len(COLOURS)]}"/>'

@@ -25,7 +25,7 @@ def _columns(engine, table):
 def test_from_empty_to_head(url):
     engine = db.open_engine(url)
     with engine.connect() as conn:
-        assert db.current_revision(conn) == db.head_revision() == "0003"
+        assert db.current_revision(conn) == db.head_revision() == "0004"
     assert {"stations", "legs", "instruments", "records", "record_legs", "outbox"} <= set(sa.inspect(engine).get_table_names())
     assert {"verification_ratio", "stage"} <= _columns(engine, "record_legs")
     assert {"stage", "supersedes"} <= _columns(engine, "records")
@@ -46,7 +46,7 @@ def test_from_previous_revision_keeps_rows(url):
     engine.dispose()
     engine = db.open_engine(url)  # opening migrates to head
     with engine.connect() as conn:
-        assert db.current_revision(conn) == "0003"
+        assert db.current_revision(conn) == "0004"
         row = conn.execute(sa.text("SELECT leg_serial, \"E_um\", verification_ratio, outcome, stage FROM record_legs")).one()
     assert tuple(row) == ("HX-1", 2.5, None, "completed", "as_found")  # outcome and stage filled in from the record
     engine.dispose()
@@ -90,7 +90,7 @@ def test_newer_schema_refused_in_one_line(url, tmp_path):
     with pytest.raises(InputError) as info:
         db.open_engine(url)
     message = str(info.value)
-    assert "\n" not in message and "'0099'" in message and "'0003'" in message and "newer" in message
+    assert "\n" not in message and "'0099'" in message and "'0004'" in message and "newer" in message
 
 
 def test_newer_local_catalog_refused_by_the_command(tmp_path, capsys):
@@ -103,4 +103,4 @@ def test_newer_local_catalog_refused_by_the_command(tmp_path, capsys):
     cfg.write_text(f'[station]\nrecordings_dir = "{runs}"\n')
     assert main(["catalog", "status", "--config", str(cfg)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "abc123" in err[0] and "knows up to '0003'" in err[0]
+    assert len(err) == 1 and "abc123" in err[0] and "knows up to '0004'" in err[0]

@@ -84,7 +84,7 @@ def test_bad_queries_are_400_pages(client, query, what):
 def test_unknown_things_are_404_pages(client):
     for path, what in [("/leg/HX-9999", "no leg with serial"), ("/?page=99", "there are 3 page(s)"),
                        ("/nowhere", "nothing at /nowhere"), ("/leg/HX-0001/certificate/x.pdf", "no certificate"),
-                       ("/compare?serial=HX-0002", "no completed calibrations at more than one station")]:
+                       ("/compare?serial=HX-0002", "no completed as-found calibrations at more than one station")]:
         r = client.get(path)
         assert r.status_code == 404, path
         assert what.replace("'", "&#39;") in r.text and "<h1 class=\"error\">404" in r.text
@@ -134,7 +134,7 @@ def test_control_charts(client):
 
 def test_station_comparison(client):
     t = client.get("/compare").text
-    assert "2 leg(s) measured at more than one station" in t
+    assert "2 leg(s) with as-found calibrations at more than one station" in t
     flagged = set(re.findall(r'<tr class="pair flagged" data-serial="([^"]+)"', t))
     assert flagged == {s for s, f in fleet.EXPECT["compared"].items() if f}
     en = (12.1 - 9.1) / (0.5 ** 2 + 0.5 ** 2) ** 0.5
