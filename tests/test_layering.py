@@ -386,9 +386,9 @@ procedures only through station/services; this list is what is left to move behi
 only shrink: a new direct import fails, and so does an entry no longer needed (delete it from here)."""
 
 
-SHARED_VOCABULARY = {"procedures.engine.errors"}
-"""What every layer may name: the input errors every front end raises and catches (issue 32: the
-shared vocabulary in one small module)."""
+SHARED_VOCABULARY = {"procedures.engine.errors", "procedures.io.recording.stage"}
+"""What every layer may name: the input errors every front end raises and catches, and the stages
+of a leg's life every view asks for (issue 32: the shared vocabulary in small modules)."""
 
 
 def front_end_procedures_imports() -> dict[str, set[str]]:
