@@ -340,8 +340,17 @@ def _unprivileged() -> list[str]:
 
 
 CHILD = """
-import os, resource, sys
+import atexit, os, resource, sys
 resource.setrlimit(resource.RLIMIT_AS, ({cap}, {cap}))
+
+def _peak():
+    # VmHWM: this program's own peak. ru_maxrss of the child is not: a fork copies the test worker's
+    # resident pages, and exec keeps that high-water mark in the process's rusage
+    with open("/proc/self/status") as status:
+        kb = next((line.split()[1] for line in status if line.startswith("VmHWM:")), "")
+    os.write(int(os.environ["STATION_TEST_PEAK_FD"]), kb.encode())
+
+atexit.register(_peak)
 from station.cli import main
 sys.exit(main(sys.argv[1:]))
 """
@@ -355,9 +364,14 @@ def run_station(argv: list[str], cwd: Path, env_home: Path, timeout_s: float = T
     env = {"PYTHONPATH": os.pathsep.join([sysconfig.get_paths()["purelib"], str(REPO)]),  # children inherit it
            "PATH": "/usr/bin:/bin", "HOME": str(env_home), "MPLCONFIGDIR": str(env_home / "mpl"), "LANG": "C.UTF-8",
            "OPENBLAS_NUM_THREADS": "1", "STATION_SIM_NOISE_SEED": "7"}
+    peak_r, peak_w = os.pipe()
+    env["STATION_TEST_PEAK_FD"] = str(peak_w)
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        proc = subprocess.Popen([*_unprivileged(), "-c", code, *argv], cwd=cwd, env=env, stdout=out, stderr=err,
-                                stdin=subprocess.DEVNULL)
+        try:
+            proc = subprocess.Popen([*_unprivileged(), "-c", code, *argv], cwd=cwd, env=env, stdout=out, stderr=err,
+                                    stdin=subprocess.DEVNULL, pass_fds=(peak_w,))
+        finally:
+            os.close(peak_w)
         t_end = time.monotonic() + timeout_s
         status = None
         while status is None:
@@ -375,7 +389,11 @@ def run_station(argv: list[str], cwd: Path, env_home: Path, timeout_s: float = T
         out.seek(0)
         err.seek(0)
         rc = os.waitstatus_to_exitcode(status) if status is not None else None
-        return rc, out.read().decode(errors="replace"), err.read().decode(errors="replace"), usage.ru_maxrss
+        with os.fdopen(peak_r, "rb") as peak:
+            reported = peak.read().decode().strip()
+        # killed before its exit handlers ran: the rusage figure, an upper side
+        peak_kb = int(reported) if reported.isdigit() else usage.ru_maxrss
+        return rc, out.read().decode(errors="replace"), err.read().decode(errors="replace"), peak_kb
 
 
 @pytest.fixture(scope="module")

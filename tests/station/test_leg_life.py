@@ -98,7 +98,8 @@ def test_history_counts_calibrations_and_verifications_and_refuses_drift_over_mi
     rc, out, err = life["history"]
     assert rc == 0, err
     assert "(shared)" in out.splitlines()[0]
-    assert "2 calibration(s) as found, 1 verification(s) as left" in out
+    steps = {k: v[:1] + (v[2][-300:],) for k, v in life.items() if isinstance(v, tuple)}  # rc, err of each step
+    assert "2 calibration(s) as found, 1 verification(s) as left" in out, (out, steps)
     (drift,) = [ln for ln in out.splitlines() if ln.startswith("drift ")]
     assert "not computed" in drift and "under the minimum interval of 30 days" in drift and "um/month" not in drift
     stages = [ln.split()[2:4] for ln in out.splitlines() if ln[:4] == "2026" or ln[:2] == "20"]

@@ -99,7 +99,9 @@ async def _ui_push_all(tmp_path):
         comp = app.screen
         comp.table = read_table_csv(_table(tmp_path / "t.csv"))  # as if made from a model (t)
         await pilot.press("U")
-        await wait(pilot, lambda: isinstance(app.screen, ConfirmScreen), "the confirmation")
+        # the dialog and its contents: a dialog is pushed before its widgets are mounted
+        await wait(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"),
+                   "the confirmation")
         question = str(app.screen.query_one("#confirm-question").render())
         assert all(f"leg {leg}: drive" in question for leg in LEGS)
         await pilot.press("y")

@@ -48,6 +48,7 @@ from textual.widgets import Input, Static
 from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
 from procedures.acquisition.plans import parse_legs
 from procedures.engine.errors import InputError
+from station import values as V
 from station.cli import build_parser
 from station.services.config import StationConfig
 from station.tui.app import StationApp
@@ -513,7 +514,8 @@ async def one_legs_string(pilot, rec, text):
     field = await type_into(pilot, "legs", text)
     TYPED["legs"] += 1
     try:
-        legs, ok = parse_legs(text.strip() or build_parser("sweep").parse_args(["sweep"]).legs), True
+        # as `station sweep --legs TEXT` reads it: the option's kind, then its leg numbers
+        legs, ok = parse_legs(V.LEGS.parse(text.strip() or build_parser("sweep").parse_args(["sweep"]).legs, "legs")), True
     except ValueError as exc:
         legs, ok, refusal = None, False, str(exc)
     rec.take()
