@@ -65,6 +65,9 @@ def life(tmp_path_factory):
         done["comp_written_when_refused"] = (ra / "comp.h5").exists()
         step("comp_yes", "sweep", "--config", a, *SWEEP, "--out", ra / "comp.h5", "--yes")
         assert step("cal_b", "sweep", "--config", b, *SWEEP, "--out", rb / "cal.h5") == 0
+        # what waits in an outbox (a forward that met a busy shared file under load) goes now
+        step("sync_a", "catalog", "sync", "--config", a)
+        step("sync_b", "catalog", "sync", "--config", b)
         step("history", "history", SERIAL, "--config", b)
         step("history_json", "history", SERIAL, "--config", b, "--json")
         step("legs", "legs", "--config", b)
