@@ -24,7 +24,7 @@ from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import RunResult, Sink, run
 from procedures.acquisition.sweep import RetryPolicy, sweep
 from station import __version__
-from station.catalog.writer import CatalogSink, catalog_for
+from station.catalog.writer import CatalogSink
 from station.services.config import StationConfig
 from station.services.identity import session_identity
 from station.services.wiring import Rig
@@ -139,7 +139,7 @@ def run_sweep(
     procedure = sweep(plan, rig.axes, rig.laser, rig.clock, control=control, done_indices=done,
                       retry=retry, session_id=session_id, materials=materials, warnings=identity.warnings)
     # the catalog sink after the recorder: it indexes the session once the recorder closed it
-    catalog = [CatalogSink(catalog_for(cfg), out)] if index else []
+    catalog = [CatalogSink.deferred(cfg, out)] if index else []
     return run(procedure, [recorder, *catalog, *sinks], control)
 
 
