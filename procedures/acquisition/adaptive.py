@@ -55,7 +55,7 @@ from typing import Any
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 IMPROVEMENT = 0.05
 NEAR_FLOOR = 1.05

@@ -28,7 +28,7 @@ from procedures.engine import events as ev
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.plans import PlanPoint, SweepPlan
 from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
-from procedures.engine.states import FaultKind
+from drivers.interfaces import FaultKind
 
 log = logging.getLogger(__name__)
 

@@ -62,7 +62,7 @@ class ProbeRule:
 
     def shape(self, passes: np.ndarray | None, leg: int) -> None:
         """Fit the leg's `passes` as `station fit` does (the default model), for the probes' residuals."""
-        from procedures.engine.errors import InputError
+        from procedures.vocabulary import InputError
         from procedures.fit import fit
         from procedures.metrology.thermal import Material, normalise_points
 

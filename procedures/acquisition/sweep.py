@@ -32,7 +32,7 @@ from procedures.acquisition.passes import (  # noqa: F401  (RetryPolicy, SweepFa
 from procedures.acquisition.plans import PlanPoint, SweepPlan
 from procedures.io.recording.schema import FLAG_FRAMES_LOST, FLAG_REREFERENCED, FLAG_RETRIED_BEAM
 from drivers.errors import CountLost
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 
 def laser_compensation_record(laser: Interferometer) -> str:

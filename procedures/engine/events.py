@@ -13,7 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from procedures.engine.states import FaultKind, Outcome
+from drivers.interfaces import FaultKind
+from procedures.vocabulary import Outcome
 
 
 @dataclass(frozen=True)

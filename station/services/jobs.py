@@ -12,7 +12,7 @@ from typing import Callable
 
 from procedures.engine import events as ev
 from procedures.engine.control import RunControl
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.numbers import NotANumber, finite_float
 import numpy as np
 

@@ -101,7 +101,7 @@ OPTIONAL_META_ATTRS = ("identity",)
 """/meta attributes added in 1.1: a file without them (1.0, an import) reads them as unknown."""
 
 # The root `outcome` attribute of a finished session holds an `Outcome.written()` value
-# (procedures/engine/states.py): "completed", "aborted" or "failed"; "" while open or when cut short.
+# (procedures/vocabulary.py): "completed", "aborted" or "failed"; "" while open or when cut short.
 
 POINTS_CHUNK_ROWS = 32  # 3.5 kB: each flush rewrites the whole last chunk, so keep it about a page
 FAULTS_CHUNK_ROWS = 16

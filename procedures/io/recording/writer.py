@@ -30,7 +30,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from procedures.engine.errors import InputError, SchemaError
+from procedures.vocabulary import InputError, SchemaError
 from procedures.io.recording.journal import Journal
 from procedures.io.recording.stage import STAGES, session_stage
 from procedures.io.recording.schema import (
@@ -45,7 +45,7 @@ from procedures.io.recording.schema import (
     UNWRITTEN_INDEX,
     schema_major,
 )
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 # v1.10 file format: needed for SWMR, and still readable by HDF5 1.10 tools (Debian's h5dump).
 LIBVER = ("v110", "v110")
