@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import uuid
-from typing import Any, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Iterator, Mapping, Sequence
 
 from drivers.interfaces import Clock, DriverError, Environment, Interferometer, ServoAxis
 from procedures.engine import events as ev
@@ -33,6 +33,9 @@ from procedures.acquisition.plans import PlanPoint, SweepPlan
 from procedures.io.recording.schema import FLAG_FRAMES_LOST, FLAG_REREFERENCED, FLAG_RETRIED_BEAM
 from drivers.errors import CountLost
 from procedures.vocabulary import Outcome
+
+if TYPE_CHECKING:  # the annotation only
+    from procedures.metrology.thermal import Material
 
 
 def laser_compensation_record(laser: Interferometer) -> str:
@@ -59,7 +62,7 @@ def sweep(
     retry: RetryPolicy = RetryPolicy(),
     session_id: str | None = None,
     t0_s: float | None = None,
-    materials: Mapping[int, Any] | None = None,
+    materials: Mapping[int, Material] | None = None,
     warnings: Sequence[str] = (),
 ) -> Iterator[ev.Event]:
     """Run `plan`, skipping plan indices in `done_indices` (resume). Yields events.

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -47,6 +47,9 @@ from procedures.metrology.thermal import normalise_session
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import compensation_target, describe_table, drive_table_spec, OperationFinished, PushRefused, refused, table_sha256
 from procedures.acquisition.sweep import sweep
+
+if TYPE_CHECKING:  # the annotation only: the caller's reader reads the sessions
+    from procedures.io.recording.reader import Session
 
 ACCEPT_RATIO = 1.1
 """A verified leg passes when its residual RMS is at most this times its noise floor."""
@@ -291,7 +294,7 @@ class ActiveTable:
 
 def verify_procedure(
     axes: dict[int, ServoAxis], laser: Interferometer, clock: Clock, plan: SweepPlan, out: str | Path, *,
-    read_session: Callable[[Path], Any], before: Any = None, expected_sha256: dict[int, str] | None = None,
+    read_session: Callable[[Path], Session], before: Session | None = None, expected_sha256: dict[int, str] | None = None,
     expected_source: str = "the table", drive_url: str = "", control: RunControl | None = None,
     sweep_options: dict[str, Any] | None = None, normalise: bool = True,
 ) -> Iterator[ev.Event]:
@@ -400,7 +403,7 @@ def verify_procedure(
     yield OperationFinished(Action.VERIFY, None, outcome, text, results)
 
 
-def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
+def error_basis(session: Session, before: Session | None, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
     """The verification's and the calibration's points as compared: normalised to 20 degC with
     the materials each session recorded (`normalise`), or raw; with the lines saying which."""
     before_points = before.points if before is not None else None

@@ -27,7 +27,7 @@ classifies them. Audit entries: a push or rollback is ``adjustment``, a verifica
 from __future__ import annotations
 
 import json
-from typing import Any, Mapping
+from typing import Any, Mapping, Protocol
 
 from procedures.compensation.applied_table import TableState
 
@@ -86,9 +86,21 @@ def session_stage(plan: Mapping[str, Any] | None, devices: Mapping[str, Any] | N
     return AS_FOUND
 
 
-def stage_of_session(session: Any) -> str:
-    """The stage of a read session (procedures.io.recording.reader.Session): the recorded root
-    attribute `stage` when it holds a known stage, else derived (files before schema 1.2)."""
+class RecordedSession(Protocol):
+    """What the stage is read from: procedures.io.recording.reader.Session (which imports this
+    module, hence a protocol rather than that class)."""
+
+    @property
+    def attrs(self) -> Mapping[str, Any]: ...  # the root attributes
+    @property
+    def plan(self) -> Mapping[str, Any] | None: ...
+    @property
+    def devices(self) -> Mapping[str, Any] | None: ...
+
+
+def stage_of_session(session: RecordedSession) -> str:
+    """The stage of a read session: the recorded root attribute `stage` when it holds a known
+    stage, else derived (files before schema 1.2)."""
     recorded = (session.attrs or {}).get("stage")
     if recorded in STAGES:
         return recorded
