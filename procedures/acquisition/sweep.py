@@ -20,7 +20,7 @@ from procedures.engine import events as ev
 from procedures.compensation.applied_table import TableState, applied_tables_devices
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.onthefly import onthefly_passes
-from procedures.acquisition.passes import (  # noqa: F401  (RetryPolicy, SweepFailed: re-exported for the sweep's callers)
+from procedures.acquisition.passes import (
     RetryPolicy,
     SweepFailed,
     point_record,
