@@ -173,7 +173,7 @@ def _diagnose(src: Path, tree: Path) -> None:
 def _through_csv(pts, src: Path):
     """The on-the-fly session written as an interchange CSV and imported (speed_mm_s column)."""
     from procedures.io.csv_io import import_csv
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from procedures.io.recording.reader import read_session
 
     csv_path, h5 = src / "otf.csv", src / "otf.h5"

@@ -24,7 +24,7 @@ import threading
 from pathlib import Path
 
 from drivers.errors import DriverError
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station import __version__, startup_interrupt
 
 

@@ -51,11 +51,15 @@ keep measuring on that wander.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
+
+if TYPE_CHECKING:  # names for the annotations only (the figures load their modules when first used)
+    from procedures.acquisition.plans import SweepPlan
+    from procedures.metrology.thermal import Material
 
 IMPROVEMENT = 0.05
 NEAR_FLOOR = 1.05
@@ -72,14 +76,12 @@ class AdaptiveRule:
     near_floor: float = NEAR_FLOOR
     reversal_se: float | None = REVERSAL_SE  # None: the reversal is not the passes' to know (probes)
     min_cycles: int = MIN_CYCLES
-    # the leg's material (procedures.metrology.thermal.Material or anything with its fields:
-    # expansion_um_m_k, fixed_point_mm); None = the default (steel, fixed at 0 mm)
-    material: Any = None
+    material: Material | None = None  # the leg's material; None = the default (steel, fixed at 0 mm)
     heldout_um: list[float] = field(default_factory=list)
     noise_floor_um: float | None = None
 
     @classmethod
-    def for_plan(cls, plan: Any, material: Any = None) -> "AdaptiveRule":
+    def for_plan(cls, plan: SweepPlan, material: Material | None = None) -> "AdaptiveRule":
         """The rule for a leg of `plan`: with reversal probes (SweepPlan.reversal_probes) the
         reversal is theirs to know (procedures/fit/reversal_probes.py), so the passes stop on
         their shape alone (`reversal_se` None) from the second cycle on (one at each speed)."""
@@ -126,7 +128,7 @@ class LegFigures:
     reversal_se_um: float | None
 
 
-def leg_figures(points: np.ndarray, leg: int, material: Any = None) -> LegFigures:
+def leg_figures(points: np.ndarray, leg: int, material: Material | None = None) -> LegFigures:
     """The rule's figures for `leg`'s points so far (module docstring).
 
     The points are taken as `station fit` takes them: normalised to 20 degC with the leg's

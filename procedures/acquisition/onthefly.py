@@ -21,7 +21,7 @@ every exit) stays with `sweep()`.
 
 from __future__ import annotations
 
-from typing import Any, Iterator, Mapping
+from typing import TYPE_CHECKING, Iterator, Mapping
 
 import numpy as np
 
@@ -41,6 +41,9 @@ from procedures.acquisition.passes import RetryPolicy, point_record, retry_after
 from procedures.acquisition.plans import PlanPoint, SweepPlan
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE, POINT_DTYPE
 from procedures.io.recording.writer import point_row
+
+if TYPE_CHECKING:  # the annotation only
+    from procedures.metrology.thermal import Material
 
 
 class CaptureShort(DriverError):
@@ -144,7 +147,7 @@ def onthefly_passes(
     t_start: float,
     done: int,
     total: int,
-    materials: Mapping[int, Any] | None = None,
+    materials: Mapping[int, Material] | None = None,
 ) -> Iterator[ev.Event]:
     """Measure the passes of `points` (the plan's points not yet done) on the fly; yields the
     sweep's events and returns the count of points done. Leg changes, faults and retries as the

@@ -10,8 +10,9 @@ reading minus target, micrometres (positive = leg longer than commanded).
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
-from typing import Any, Generator, Iterator, Mapping
+from typing import Generator, Iterator, Mapping
 
 from drivers.interfaces import (
     BeamBreak,
@@ -22,13 +23,14 @@ from drivers.interfaces import (
     Environment,
     FramingError,
     Interferometer,
+    Reading,
     ServoAxis,
 )
 from procedures.engine import events as ev
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.plans import PlanPoint, SweepPlan
-from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
-from procedures.engine.states import FaultKind
+from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, PointRecord
+from drivers.interfaces import FaultKind
 
 log = logging.getLogger(__name__)
 
@@ -115,21 +117,20 @@ def retry_after(exc: DriverError, attempt: int, retry: RetryPolicy, control: Run
     return FLAG_RETRIED_DRIVE
 
 
-def point_record(p: PlanPoint, reading: Any, env: Environment, *, drive_position_mm: float, time_s: float,
-                 material_temp_c: float, load_n: float, flags: int, **extra: float) -> dict[str, Any]:
-    """The record of a measured point (POINT_DTYPE field names; `extra`: optional fields such
-    as an on-the-fly sample's speed_mm_s). `reading`: the interferometer's (position_mm, signal_pct)."""
-    return {
-        "index": p.index, "leg": p.leg, "run": p.run, "direction": p.direction,
-        "target_mm": p.target_mm, "commanded_mm": p.target_mm,
-        "drive_position_mm": drive_position_mm, "measured_mm": reading.position_mm,
-        "error_um": (reading.position_mm - p.target_mm) * 1000.0,
-        "time_s": time_s,
-        "air_temp_c": env.air_temp_c, "air_pressure_hpa": env.air_pressure_hpa,
-        "humidity_pct": env.humidity_pct, "material_temp_c": material_temp_c,
-        "load_n": load_n, "signal_pct": reading.signal_pct, "flags": flags,
-        **extra,
-    }
+def point_record(p: PlanPoint, reading: Reading, env: Environment, *, drive_position_mm: float, time_s: float,
+                 material_temp_c: float, load_n: float, flags: int, speed_mm_s: float = math.nan) -> PointRecord:
+    """The record of a measured point. `reading`: the interferometer's (position_mm, signal_pct);
+    `speed_mm_s`: an on-the-fly sample's speed (NaN: read at rest)."""
+    return PointRecord(
+        index=p.index, leg=p.leg, run=p.run, direction=p.direction,
+        target_mm=p.target_mm, commanded_mm=p.target_mm,
+        drive_position_mm=drive_position_mm, measured_mm=reading.position_mm,
+        error_um=(reading.position_mm - p.target_mm) * 1000.0,
+        time_s=time_s,
+        air_temp_c=env.air_temp_c, air_pressure_hpa=env.air_pressure_hpa,
+        humidity_pct=env.humidity_pct, material_temp_c=material_temp_c,
+        load_n=load_n, signal_pct=reading.signal_pct, flags=flags, speed_mm_s=speed_mm_s,
+    )
 
 
 def prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.acquisition.plan_spec import DEFAULT_CYCLES, ONTHEFLY_KINDS, PlanSpec, probe_count
 from procedures.acquisition.plans import (
     ONTHEFLY_OVERRUN_MM,

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.acquisition.plans import (
     ONTHEFLY_OVERRUN_MM,
     PAPER_STEP_MM,

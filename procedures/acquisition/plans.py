@@ -18,7 +18,7 @@ from typing import Any, Iterable, Iterator
 
 import numpy as np
 
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.io.numbers import parse_finite
 
 PAPER_STEP_MM = 0.5

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from procedures.engine.errors import InputError, SchemaError
+from procedures.vocabulary import InputError, SchemaError
 
 ANALYSIS_FIELDS = ("leg", "run", "direction", "target_mm", "error_um")
 """Fields every analysis needs; the optional ones (time, temperature, load) may be absent."""

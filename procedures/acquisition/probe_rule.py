@@ -23,11 +23,15 @@ stops on is the one `station fit` prints. Deterministic: the same readings give 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from procedures.acquisition.plans import PROBE_MIN_PAIRS
+
+if TYPE_CHECKING:  # names for the annotations only: the fit loads when a rule first shapes
+    from procedures.fit.model import LegFit
+    from procedures.metrology.thermal import Material
 
 PROBE_TARGET_UM = 0.015
 PROBE_MAX_PAIRS = 48
@@ -54,15 +58,15 @@ class ProbeRule:
     target_um: float
     max_pairs: int
     min_pairs: int = PROBE_MIN_PAIRS
-    material: Any = None  # the leg's material (None: the default), as AdaptiveRule's
-    fit: Any = None  # the passes' leg fit (None: no shape: every pair is taken)
+    material: Material | None = None  # the leg's material (None: the default), as AdaptiveRule's
+    fit: LegFit | None = None  # the passes' leg fit (None: no shape: every pair is taken)
     passes: np.ndarray | None = field(default=None, repr=False)
     pairs: int = 0
     stderr_um: float | None = None
 
     def shape(self, passes: np.ndarray | None, leg: int) -> None:
         """Fit the leg's `passes` as `station fit` does (the default model), for the probes' residuals."""
-        from procedures.engine.errors import InputError
+        from procedures.vocabulary import InputError
         from procedures.fit import fit
         from procedures.metrology.thermal import Material, normalise_points
 
@@ -96,7 +100,7 @@ class ProbeRule:
         return stop_reason(self.pairs, self.stderr_um, self.target_um, self.min_pairs, self.max_pairs)
 
 
-def recorded_stop(plan: Any, pairs: int, stderr_um: float | None) -> str | None:
+def recorded_stop(plan: Mapping[str, Any] | None, pairs: int, stderr_um: float | None) -> str | None:
     """Why a recorded leg's probes stopped, from its session's `plan` (the stored dict) and the
     fit's pairs and standard error (`station fit`'s probe line); None for a fixed count. The fit's
     figure is the one the sweep stopped on (module docstring) unless the sweep was resumed among

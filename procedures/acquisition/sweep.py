@@ -13,14 +13,14 @@ from __future__ import annotations
 
 import json
 import uuid
-from typing import Any, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Iterator, Mapping, Sequence
 
 from drivers.interfaces import Clock, DriverError, Environment, Interferometer, ServoAxis
 from procedures.engine import events as ev
-from procedures.compensation.applied_table import applied_tables_devices
+from procedures.compensation.applied_table import TableState, applied_tables_devices
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.onthefly import onthefly_passes
-from procedures.acquisition.passes import (  # noqa: F401  (RetryPolicy, SweepFailed: re-exported for the sweep's callers)
+from procedures.acquisition.passes import (
     RetryPolicy,
     SweepFailed,
     point_record,
@@ -32,7 +32,10 @@ from procedures.acquisition.passes import (  # noqa: F401  (RetryPolicy, SweepFa
 from procedures.acquisition.plans import PlanPoint, SweepPlan
 from procedures.io.recording.schema import FLAG_FRAMES_LOST, FLAG_REREFERENCED, FLAG_RETRIED_BEAM
 from drivers.errors import CountLost
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
+
+if TYPE_CHECKING:  # the annotation only
+    from procedures.metrology.thermal import Material
 
 
 def laser_compensation_record(laser: Interferometer) -> str:
@@ -59,7 +62,7 @@ def sweep(
     retry: RetryPolicy = RetryPolicy(),
     session_id: str | None = None,
     t0_s: float | None = None,
-    materials: Mapping[int, Any] | None = None,
+    materials: Mapping[int, Material] | None = None,
     warnings: Sequence[str] = (),
 ) -> Iterator[ev.Event]:
     """Run `plan`, skipping plan indices in `done_indices` (resume). Yields events.
@@ -98,16 +101,16 @@ def sweep(
     devices["interferometer"] = laser.identity()
     devices["laser_air_compensation"] = laser_compensation_record(laser)
     tables = {leg: table_state(axes[leg]) for leg in plan.legs}
-    devices.update({f"leg{leg}_compensation": text for leg, (_, text) in tables.items()})
+    devices.update({f"leg{leg}_compensation": state.text for leg, state in tables.items()})
     devices.update(applied_tables_devices(axes, plan.legs))  # target, bank, sha256: in the file from its creation
     t_start = clock.now() if t0_s is None else t0_s
     yield ev.SweepStarted(session_id or uuid.uuid4().hex[:12], tuple(plan.legs), total, plan.to_dict(), devices, done)
     for text in warnings:
         yield ev.Message(text, level="warning")
-    for leg, (active, text) in tables.items():
-        if active:
+    for leg, state in tables.items():
+        if state.active:
             yield ev.Message(
-                f"leg {leg}: a compensation table is active ({text}): this sweep measures the compensated "
+                f"leg {leg}: a compensation table is active ({state.text}): this sweep measures the compensated "
                 "leg. Right for a verification; for a new calibration roll the table back first "
                 "(station rollback), or a table made from this session replaces the active one instead "
                 "of adding to it.", "warning")
@@ -178,17 +181,15 @@ def sweep(
     yield ev.SweepFinished(outcome, done, reason)
 
 
-def table_state(axis: ServoAxis) -> tuple[bool, str]:
-    """(active, description) of the compensation table the drive applies now. A table counts as
-    active when the drive has table compensation on and its active bank holds points."""
+def table_state(axis: ServoAxis) -> TableState:
+    """The compensation table the drive applies now (TableState.active: table compensation on
+    and its active bank holding points)."""
     try:
         st = axis.status()
         if not st.table_enabled:
-            return False, "table compensation off"
+            return TableState(enabled=False, bank=int(st.active_bank))
         bank = axis.read_table(st.active_bank)
     except DriverError as exc:
-        return False, f"unknown ({exc})"
-    if bank.point_count == 0:
-        return False, f"bank {st.active_bank} active, empty"
-    return True, (f"bank {st.active_bank} active, {bank.point_count} points from {bank.start_mm:+.3f} mm "
-                  f"every {bank.spacing_mm:g} mm")
+        return TableState(error=str(exc))
+    return TableState(enabled=True, bank=int(st.active_bank), point_count=bank.point_count,
+                      start_mm=bank.start_mm, spacing_mm=bank.spacing_mm)

@@ -15,13 +15,59 @@ or {"target": ..., "error": "..."} when the state could not be read.
 from __future__ import annotations
 
 import json
-from typing import Any
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
 
 from drivers.errors import DriverError
 from drivers.interfaces import ServoAxis, table_sha256
 
 DEVICES_KEY = "leg{leg}_compensation_table"
 """The `devices` key of a leg's applied table in a session file."""
+
+
+@dataclass(frozen=True)
+class TableState:
+    """Whether a leg's errors are compensated now, and by what: table compensation on or off,
+    the active bank and the table in it (`point_count` entries from `start_mm`, every
+    `spacing_mm`). `error`: the state could not be read (the other fields are then unknown)."""
+
+    enabled: bool = False
+    bank: int | None = None
+    point_count: int = 0
+    start_mm: float = math.nan
+    spacing_mm: float = math.nan
+    error: str = ""
+
+    @property
+    def active(self) -> bool:
+        """Table compensation is on and its active bank holds points."""
+        return self.enabled and self.point_count > 0 and not self.error
+
+    @property
+    def text(self) -> str:
+        """The state in words: what a session records as `leg{N}_compensation` (the same text
+        as before this type, which older readers and files hold)."""
+        if self.error:
+            return f"unknown ({self.error})"
+        if not self.enabled:
+            return "table compensation off"
+        if self.point_count == 0:
+            return f"bank {self.bank} active, empty"
+        return f"bank {self.bank} active, {self.point_count} points from {self.start_mm:+.3f} mm every {self.spacing_mm:g} mm"
+
+    @classmethod
+    def from_record(cls, record: Mapping[str, Any]) -> "TableState":
+        """The state a session recorded as `leg{N}_compensation_table` (`applied_table`). Raises
+        ValueError or TypeError for a record that is not one."""
+        if record.get("error"):
+            return cls(error=str(record["error"]))
+        points = record.get("points", 0)
+        if isinstance(points, bool) or not isinstance(points, int):
+            raise TypeError(f"points must be an integer, got {points!r}")
+        bank = record.get("bank")
+        return cls(enabled=bool(record.get("enabled")), bank=None if bank is None else int(bank), point_count=points,
+                   start_mm=float(record.get("start_mm", math.nan)), spacing_mm=float(record.get("spacing_mm", math.nan)))
 
 
 def compensation_target(axis: ServoAxis) -> str:

@@ -48,16 +48,28 @@ import socket
 import uuid
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, Iterable
 
 from procedures.engine import events as ev
-from procedures.engine.errors import InputError
-from procedures.engine.states import Action, AuditOutcome
+from procedures.vocabulary import InputError, Outcome
 
 AUDIT_VERSION = 1
+
+
+class Action(StrEnum):
+    """What an audit log entry records (its `action`; the values are the strings in the log)."""
+
+    PUSH = "push"
+    ROLLBACK = "rollback"
+    VERIFY = "verify"
+    APPROVE = "approve"  # a calibration certificate approved (station certificate approve)
+
+
 ACTIONS = tuple(Action)
-FINAL_PUSH_OUTCOMES = (AuditOutcome.OK, AuditOutcome.FAILED, AuditOutcome.REFUSED, AuditOutcome.CANCELLED)
+FINAL_PUSH_OUTCOMES = (Outcome.OK, Outcome.FAILED, Outcome.REFUSED, Outcome.CANCELLED)
+"""The outcomes that end a push or rollback (after its STARTED entry)."""
 
 
 class AuditError(InputError):
@@ -279,10 +291,10 @@ class AuditSink:
             self.written.append(self.log.append(entry))
         except AuditError as exc:
             text = str(exc.args[0])
-            if entry.outcome == AuditOutcome.STARTED:
+            if entry.outcome == Outcome.STARTED:
                 raise AuditStopped(entry, f"leg {entry.leg}: {text}; the {entry.action} was not started: nothing was "
                                    "written to the drive.") from None
-            if entry.outcome == AuditOutcome.OK and entry.action != Action.VERIFY:
+            if entry.outcome == Outcome.OK and entry.action != Action.VERIFY:
                 raise AuditStopped(entry, f"leg {entry.leg}: the table was written and bank {entry.bank} is active, but "
                                    f"the audit log could not record it ({text}); its backup is in the 'started' entry "
                                    f"({entry.op_id}).") from None

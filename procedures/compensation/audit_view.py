@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from procedures.compensation.audit import AuditEntry, AuditError, AuditProblem, read_entries
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 INTERRUPTED = "INTERRUPTED"
 """Outcome of an operation with a "started" entry and no final entry."""

@@ -47,11 +47,10 @@ from typing import Any, Callable, Iterator
 from drivers.errors import DriverError, TableError, TableRefused
 from drivers.interfaces import ServoAxis, TableBank, TableSpec, table_sha256
 from procedures.engine import events as ev
-from procedures.compensation.applied_table import compensation_target, target_details as _target_details
-from procedures.compensation.audit import AuditEntry, AuditLog, AuditRecord, AuditSink, AuditStopped, new_id
-from procedures.engine.errors import InputError
+from procedures.compensation.applied_table import compensation_target, target_details
+from procedures.compensation.audit import Action, AuditEntry, AuditLog, AuditRecord, AuditSink, AuditStopped, new_id
+from procedures.vocabulary import InputError, Outcome
 from procedures.engine.runner import ListSink, run
-from procedures.engine.states import Action, AuditOutcome
 from procedures.compensation.table import LegTable
 
 QUANTUM_UM = 0.01
@@ -248,8 +247,8 @@ class TablePushed(ev.Event):
 
 @dataclass(frozen=True)
 class OperationFinished(ev.Event):
-    """A push, rollback or verification ended. `action`: procedures.engine.states.Action; `outcome`:
-    procedures.engine.states.AuditOutcome (ok / refused / cancelled / failed for a push or rollback;
+    """A push, rollback or verification ended. `action`: procedures.compensation.audit.Action; `outcome`:
+    procedures.vocabulary.Outcome (ok / refused / cancelled / failed for a push or rollback;
     refused / completed / aborted / failed for a verification). `message` says what happened
     and, after a failed push, which table is active. `result`: a push's PushResult; a
     verification's figures per leg (procedures.compensation.verify.LegVerification, which imports this module)."""
@@ -327,7 +326,7 @@ def prepare_push(axis: ServoAxis, table: TableBank | LegTable, *, spec: TableSpe
     if source and source.get("path"):
         where = f"{source['path']}, {where}"
     spec.check(bank_table, where, limits, table.point_name if isinstance(table, LegTable) else None)
-    details = _target_details(axis)
+    details = target_details(axis)
     if leg_serial:
         details["leg_serial"] = leg_serial
     return PushPlan(Action.PUSH, axis.leg, identity, drive_url, bank_table, table_sha256(bank_table), active, 1 - active,
@@ -352,7 +351,7 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
     push = None
     for i in range(len(entries) - 1, -1, -1):
         e = entries[i]
-        if (e.action == Action.PUSH and e.outcome == AuditOutcome.OK and e.leg == leg and e.drive == identity
+        if (e.action == Action.PUSH and e.outcome == Outcome.OK and e.leg == leg and e.drive == identity
                 and same_target(e)):
             push, push_at = e, i
             break
@@ -361,7 +360,7 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
                           f"with compensation target {target}; there is nothing to roll back.")
     if push.table_sha256 != current_sha:
         for later in entries[push_at + 1:]:
-            if (later.action == Action.ROLLBACK and later.outcome == AuditOutcome.OK and later.leg == leg
+            if (later.action == Action.ROLLBACK and later.outcome == Outcome.OK and later.leg == leg
                     and later.drive == identity and later.table_sha256 == current_sha and same_target(later)):
                 raise PushRefused(f"leg {leg}: already rolled back at {later.time_utc}: the active table is the one from "
                                   f"before the push of {push.time_utc}. To use the pushed table again, push it again.")
@@ -371,7 +370,7 @@ def prepare_rollback(axis: ServoAxis, audit: AuditLog, *, drive_url: str = "") -
     restore = table_from_json(push.backup, where=f"{audit.path}, push of {push.time_utc}")
     return PushPlan(Action.ROLLBACK, leg, identity, drive_url, restore, table_sha256(restore), active, 1 - active,
                     current, current_sha, enabled, push.source,
-                    {**_target_details(axis), "rolls_back": push.op_id or push.id, "push_time_utc": push.time_utc})
+                    {**target_details(axis), "rolls_back": push.op_id or push.id, "push_time_utc": push.time_utc})
 
 
 # -- the procedures ------------------------------------------------------------------------------
@@ -390,7 +389,7 @@ def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Con
         plan = prepare_push(axis, table, spec=spec, drive_url=drive_url, source=source, leg_serial=leg_serial)
     except (PushRefused, TableRefused) as exc:
         yield from refused(Action.PUSH, axis.leg, exc, drive=_identity(axis), drive_url=drive_url, source=source,
-                           details=_target_details(axis))
+                           details=target_details(axis))
         return
     yield from _confirm_and_apply(axis, plan, confirm)
 
@@ -415,8 +414,8 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
                                       leg_serial=(leg_serials or {}).get(leg)))
         except (PushRefused, TableRefused) as exc:
             yield from refused(Action.PUSH, leg, exc, drive=_identity(axes[leg]), drive_url=drive_url,
-                               source=sources.get(leg), details=_target_details(axes[leg]))
-            yield OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED,
+                               source=sources.get(leg), details=target_details(axes[leg]))
+            yield OperationFinished(Action.PUSH, None, Outcome.REFUSED,
                                        f"{_message(exc)}; nothing was written to any leg")
             return
     for plan in plans:
@@ -428,14 +427,14 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
             for plan in plans:
                 yield from refused(plan.action, plan.leg, exc, drive=plan.drive, drive_url=plan.drive_url, source=plan.source,
                                details={"target": plan.target})
-            yield OperationFinished(Action.PUSH, None, AuditOutcome.REFUSED, _message(exc))
+            yield OperationFinished(Action.PUSH, None, Outcome.REFUSED, _message(exc))
             return
         if not ok:
             for plan in plans:
                 yield from refused(plan.action, plan.leg, "cancelled at the confirmation; nothing written", drive=plan.drive,
-                                   drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED,
+                                   drive_url=plan.drive_url, source=plan.source, outcome=Outcome.CANCELLED,
                                details={"target": plan.target})
-            yield OperationFinished(Action.PUSH, None, AuditOutcome.CANCELLED, "cancelled; nothing was written")
+            yield OperationFinished(Action.PUSH, None, Outcome.CANCELLED, "cancelled; nothing was written")
             return
     done: list[int] = []
     for plan in plans:
@@ -444,15 +443,15 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
             if isinstance(event, OperationFinished):
                 end = event
             yield event
-        if end is None or end.outcome != AuditOutcome.OK:
+        if end is None or end.outcome != Outcome.OK:
             left = [p.leg for p in plans if p.leg != plan.leg and p.leg not in done]
-            yield OperationFinished(Action.PUSH, None, end.outcome if end else AuditOutcome.FAILED,
+            yield OperationFinished(Action.PUSH, None, end.outcome if end else Outcome.FAILED,
                                        f"{end.message if end else 'no outcome'}"
                                        + (f" Pushed before it: legs {done}." if done else "")
                                        + (f" Not attempted: legs {left} (their tables are unchanged)." if left else ""))
             return
         done.append(plan.leg)
-    yield OperationFinished(Action.PUSH, None, AuditOutcome.OK, f"pushed legs {done}: each has its new table active")
+    yield OperationFinished(Action.PUSH, None, Outcome.OK, f"pushed legs {done}: each has its new table active")
 
 
 def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | None = None,
@@ -463,19 +462,19 @@ def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | N
         plan = prepare_rollback(axis, audit, drive_url=drive_url)
     except (PushRefused, InputError) as exc:
         yield from refused(Action.ROLLBACK, axis.leg, exc, drive=_identity(axis), drive_url=drive_url,
-                           details=_target_details(axis))
+                           details=target_details(axis))
         return
     yield from _confirm_and_apply(axis, plan, confirm)
 
 
 def refused(action: Action, leg: int, reason: BaseException | str, *, drive: str = "", drive_url: str = "",
-            source: dict[str, Any] | None = None, outcome: AuditOutcome = AuditOutcome.REFUSED,
+            source: dict[str, Any] | None = None, outcome: Outcome = Outcome.REFUSED,
             details: dict[str, Any] | None = None) -> Iterator[ev.Event]:
     """A refusal (or a cancellation) as events: its audit entry, then `OperationFinished`. Also
     what a front end runs for a refusal it finds before a drive is reached (a bad table file).
     `details` go into the audit entry (the compensation target, `{"target": ...}`)."""
     text = _message(reason) if isinstance(reason, BaseException) else str(reason)
-    if outcome == AuditOutcome.REFUSED and "written" not in text:
+    if outcome == Outcome.REFUSED and "written" not in text:
         text += ". Nothing was written to the drive."
     yield AuditRecord(AuditEntry(action, leg, outcome, text, drive, drive_url, source=source,
                                     details=dict(details or {})))
@@ -501,7 +500,7 @@ def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None)
             return
         if not ok:
             yield from refused(plan.action, plan.leg, "cancelled at the confirmation; nothing written", drive=plan.drive,
-                               drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED,
+                               drive_url=plan.drive_url, source=plan.source, outcome=Outcome.CANCELLED,
                                details={"target": plan.target})
             return
     yield from _apply(axis, plan)
@@ -515,10 +514,10 @@ def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
                 details=dict(plan.details), op_id=op_id, backup=table_to_json(plan.backup, prev))
     verb = "rollback" if plan.action == Action.ROLLBACK else "push"
     # the audit sink has this on disk before the runner resumes us: a crash can never lose the backup
-    yield AuditRecord(AuditEntry(outcome=AuditOutcome.STARTED,
+    yield AuditRecord(AuditEntry(outcome=Outcome.STARTED,
                                     message=f"{verb} to bank {bank} started; backup of bank {prev} recorded", **base))
 
-    def finish(outcome: AuditOutcome, text: str) -> Iterator[ev.Event]:
+    def finish(outcome: Outcome, text: str) -> Iterator[ev.Event]:
         yield AuditRecord(AuditEntry(outcome=outcome, message=text, **base))
         yield OperationFinished(plan.action, leg, outcome, text)
 
@@ -526,15 +525,15 @@ def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
     try:
         identity, active, current, _ = _read_state(axis, verb)
     except PushRefused as exc:
-        yield from finish(AuditOutcome.REFUSED, f"{_message(exc)}. {PushRefused.hint}")
+        yield from finish(Outcome.REFUSED, f"{_message(exc)}. {PushRefused.hint}")
         return
     if identity != plan.drive or active != prev or table_sha256(current) != plan.backup_sha256:
-        yield from finish(AuditOutcome.REFUSED, f"leg {leg}: the drive changed since its table was read (active bank "
+        yield from finish(Outcome.REFUSED, f"leg {leg}: the drive changed since its table was read (active bank "
                                                 f"{active}, was {prev}); read it again and retry. {PushRefused.hint}")
         return
 
     def failed(stage: str, exc: BaseException, state: str) -> Iterator[ev.Event]:
-        yield from finish(AuditOutcome.FAILED,
+        yield from finish(Outcome.FAILED,
                           f"leg {leg}: {verb} to drive {plan.drive} failed while {stage}: {_message(exc)}. {state}")
 
     stage = f"writing bank {bank}"
@@ -571,9 +570,9 @@ def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
     text = f"{verb} ok: bank {bank} active on leg {leg} ({describe_table(plan.table)}){note}"
     result = PushResult(plan.action, leg, plan.drive, bank, prev, plan.table_sha256, plan.backup_sha256,
                         plan.table.point_count, plan.table_enabled, op_id)
-    yield AuditRecord(AuditEntry(outcome=AuditOutcome.OK, message=text, **base))
+    yield AuditRecord(AuditEntry(outcome=Outcome.OK, message=text, **base))
     yield result.event()
-    yield OperationFinished(plan.action, leg, AuditOutcome.OK, text, result)
+    yield OperationFinished(plan.action, leg, Outcome.OK, text, result)
 
 
 def _previous_still_active(axis: ServoAxis, prev: int, backup_sha: str) -> bool | None:
@@ -639,13 +638,13 @@ def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) 
     try:
         run(procedure, sinks)
     except AuditStopped as exc:  # "started" not stored: nothing written; "ok" not stored: written and active
-        raise (PushRefused if exc.entry.outcome == AuditOutcome.STARTED else PushFailed)(str(exc.args[0])) from None
+        raise (PushRefused if exc.entry.outcome == Outcome.STARTED else PushFailed)(str(exc.args[0])) from None
     end = finished(events.events)
     if end is None:
         raise PushFailed("the operation ended without an outcome")
-    if end.outcome == AuditOutcome.OK:
+    if end.outcome == Outcome.OK:
         return end.result
-    if end.outcome == AuditOutcome.FAILED:
+    if end.outcome == Outcome.FAILED:
         raise PushFailed(end.message)
     refusal = PushRefused(end.message)
     refusal.hint = ""  # the message already says that nothing was written

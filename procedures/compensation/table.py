@@ -34,7 +34,7 @@ import numpy as np
 from drivers.errors import TableRefused
 from drivers.interfaces import DriveLimits, TableBank, TableSpec
 from procedures.io.atomic import write_files_atomic
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.identity import model_leg_serials
 from procedures.io.numbers import parse_finite
 from procedures.io.integrity import (

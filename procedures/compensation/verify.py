@@ -29,16 +29,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 import numpy as np
 
 from drivers.errors import DriverError
 from drivers.interfaces import Clock, Interferometer, ServoAxis
 from procedures.engine import events as ev
-from procedures.compensation.audit import AuditEntry, AuditRecord
+from procedures.compensation.audit import Action, AuditEntry, AuditRecord
 from procedures.engine.control import RunControl
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError, Outcome
 from procedures.fit.data import split_legs
 from procedures.fit.dynamic import is_onthefly, static_points
 from procedures.fit.noise import estimate_noise_floor
@@ -46,8 +46,10 @@ from procedures.reporting.iso230 import LegIso230, evaluate_leg
 from procedures.metrology.thermal import normalise_session
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import compensation_target, describe_table, drive_table_spec, OperationFinished, PushRefused, refused, table_sha256
-from procedures.engine.states import Action, AuditOutcome, Outcome
 from procedures.acquisition.sweep import sweep
+
+if TYPE_CHECKING:  # the annotation only: the caller's reader reads the sessions
+    from procedures.io.recording.reader import Session
 
 ACCEPT_RATIO = 1.1
 """A verified leg passes when its residual RMS is at most this times its noise floor."""
@@ -292,7 +294,7 @@ class ActiveTable:
 
 def verify_procedure(
     axes: dict[int, ServoAxis], laser: Interferometer, clock: Clock, plan: SweepPlan, out: str | Path, *,
-    read_session: Callable[[Path], Any], before: Any = None, expected_sha256: dict[int, str] | None = None,
+    read_session: Callable[[Path], Session], before: Session | None = None, expected_sha256: dict[int, str] | None = None,
     expected_source: str = "the table", drive_url: str = "", control: RunControl | None = None,
     sweep_options: dict[str, Any] | None = None, normalise: bool = True,
 ) -> Iterator[ev.Event]:
@@ -345,9 +347,9 @@ def verify_procedure(
             problem = (f"leg {leg}: {holder}'s active table (sha256 {sha[:12]}…) is not the leg's rows of {expected_source} "
                        f"(sha256 {expected[leg][:12]}…); push it first")
         if problem:
-            yield AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome.REFUSED, problem, identity, drive_url,
+            yield AuditRecord(AuditEntry(Action.VERIFY, leg, Outcome.REFUSED, problem, identity, drive_url,
                                             table_sha256=sha, bank=bank, details={"target": target}))
-            yield OperationFinished(Action.VERIFY, leg, AuditOutcome.REFUSED, problem)
+            yield OperationFinished(Action.VERIFY, leg, Outcome.REFUSED, problem)
             return
         active[leg] = ActiveTable(leg, identity, bank, sha, f"{describe_table(table)}; target {target}", target)
         yield LegChecked(leg, identity, bank, sha, active[leg].description)
@@ -366,7 +368,7 @@ def verify_procedure(
                 finished = event
             yield event
     except Exception as exc:  # a device gone mid-sweep: the audit log says so, then the error goes on up
-        yield from log_all(AuditOutcome.FAILED, f"verification sweep failed: {exc}", {"session": str(out)})
+        yield from log_all(Outcome.FAILED, f"verification sweep failed: {exc}", {"session": str(out)})
         raise
     outcome = Outcome(finished.outcome) if finished is not None else Outcome.FAILED
     session = read_session(out)
@@ -375,8 +377,8 @@ def verify_procedure(
         # stopped before a leg's first point (a link lost while preparing): no figures to compare
         text = (f"the verification sweep did not complete ({outcome}: {finished.reason if finished is not None else ''}); "
                 f"no point measured on leg(s) {unmeasured}, so no figures")
-        yield from log_all(AuditOutcome(str(outcome)), text, {"session": str(out)})
-        yield OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, {})
+        yield from log_all(outcome, text, {"session": str(out)})
+        yield OperationFinished(Action.VERIFY, None, outcome, text, {})
         return
     after_points, before_points, basis, basis_doc = error_basis(session, before, normalise)
     results = verify(after_points, before_points, list(active),
@@ -389,7 +391,7 @@ def verify_procedure(
         details = {"target": a.target, "session": str(out), "session_sha256": session.sha256, **r.to_json()}
         if before is not None:
             details["before_session"] = {"path": str(before.path), "sha256": before.sha256}
-        yield AuditRecord(AuditEntry(Action.VERIFY, leg, AuditOutcome(str(outcome)), summary_line(outcome, r),
+        yield AuditRecord(AuditEntry(Action.VERIFY, leg, outcome, summary_line(outcome, r),
                                         a.drive, drive_url, table_sha256=a.table_sha256, bank=a.bank, details=details))
     failed = [leg for leg, r in results.items() if not r.passed]
     if outcome != Outcome.COMPLETED:
@@ -398,10 +400,10 @@ def verify_procedure(
         text = f"leg(s) {failed}: residual RMS above {ACCEPT_RATIO:g} x the noise floor (or no floor)"
     else:
         text = f"leg(s) {sorted(results)}: residual RMS within {ACCEPT_RATIO:g} x the noise floor"
-    yield OperationFinished(Action.VERIFY, None, AuditOutcome(str(outcome)), text, results)
+    yield OperationFinished(Action.VERIFY, None, outcome, text, results)
 
 
-def error_basis(session: Any, before: Any, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
+def error_basis(session: Session, before: Session | None, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
     """The verification's and the calibration's points as compared: normalised to 20 degC with
     the materials each session recorded (`normalise`), or raw; with the lines saying which."""
     before_points = before.points if before is not None else None

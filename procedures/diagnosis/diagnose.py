@@ -37,7 +37,7 @@ from procedures.diagnosis.variants import VARIANTS
 from procedures.diagnosis.unexplained import unexplained
 from procedures.diagnosis.twin import TargetBasis, Twin, fit_position_twin
 from procedures.diagnosis.where import breakdown, outlier_mask, repeatability_um
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit.noise import noise_floor
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE
 

@@ -21,7 +21,7 @@ from scipy.linalg import solve_triangular
 
 from procedures.diagnosis.legdata import LegData
 from procedures.diagnosis.significance import condition_number, solve_gram
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 MAX_SINUSOIDS = 40  # per leg; the paper keeps up to 100 numbers = 33 amplitude/frequency/phase triples
 CV_TOLERANCE = 0.005  # take the smallest twin whose held-out MSE is within 0.5 % of the best

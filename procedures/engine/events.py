@@ -3,7 +3,8 @@
 The base class, the sweep's lifecycle and what every run may yield (pause, message, fault). An
 event carrying a procedure's own payload lives beside that payload (procedures.compensation:
 `AuditRecord` in audit.py, `TablePlanned`, `TablePushed`, `OperationFinished` in push.py,
-`LegChecked`, `Verified` in verify.py), so the engine imports no domain.
+`LegChecked`, `Verified` in verify.py), so the engine imports no domain; a measured point is the
+recording schema's `PointRecord` (procedures/io/recording/schema.py, a module of types only).
 
 Units are in the field names; `t_s` is on the rig clock (virtual on the simulated rig).
 """
@@ -13,7 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from procedures.engine.states import FaultKind, Outcome
+from drivers.interfaces import FaultKind
+from procedures.io.recording.schema import PointRecord
+from procedures.vocabulary import Outcome
 
 
 @dataclass(frozen=True)
@@ -38,9 +41,9 @@ class LegStarted(Event):
 
 @dataclass(frozen=True)
 class PointMeasured(Event):
-    """One point measured. `record` maps the POINT_DTYPE field names to values."""
+    """One point measured: `record` is its row of the session's /points."""
 
-    record: dict[str, float]
+    record: PointRecord
     done: int  # points done including this one
     total: int
 

@@ -22,7 +22,7 @@ from typing import Callable, Iterable, Iterator, Protocol
 
 from procedures.engine import events as ev
 from procedures.engine.control import RunControl
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 log = logging.getLogger(__name__)
 

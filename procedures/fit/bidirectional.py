@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.polynomial import legendre
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit.data import LegData
 from procedures.fit.model import FitStats, LegFit
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.acquisition.points import check_points, usable_rows_by_leg
 
 

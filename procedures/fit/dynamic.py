@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE
 
 

@@ -6,7 +6,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit.bidirectional import MAX_FOURIER_TERMS, fit_bidirectional_leg
 from procedures.fit.crossval import cycle_folds, heldout_residuals_um
 from procedures.fit.dynamic import is_onthefly, static_points

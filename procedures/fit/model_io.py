@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from procedures.io.atomic import write_text_atomic
-from procedures.engine.errors import SchemaError
+from procedures.vocabulary import SchemaError
 from procedures.fit.bidirectional import bidirectional_from_json
 from procedures.fit.model import FORMAT, METHODS, VERSION, FitStats, LegErrorModel, LegFit
 from procedures.fit.paper import paper_from_json

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit.data import LegData
 from procedures.fit.model import FitStats, LegFit
 

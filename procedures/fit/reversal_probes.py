@@ -24,11 +24,14 @@ The probes' points are normalised to 20 degC like every other point before they 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from procedures.io.recording.schema import FLAG_PROBE
+
+if TYPE_CHECKING:  # the annotation only: the model module imports this one's callers
+    from procedures.fit.model import LegFit
 
 
 @dataclass(frozen=True)
@@ -95,7 +98,7 @@ def reversal_of_residuals(resid_um: np.ndarray, direction: np.ndarray, run: np.n
     return shift, stderr, min(n_up, n_down)
 
 
-def apply_probes(leg_fit: Any, probes: np.ndarray) -> ProbeReversal | None:
+def apply_probes(leg_fit: LegFit, probes: np.ndarray) -> ProbeReversal | None:
     """Move `leg_fit`'s constant reversal coefficient to what its `probes` (this leg's probe
     points, error normalised) say (module docstring), in place; the result is also stored in
     its `selection["reversal_probes"]`. None (the fit untouched) when the fit has no reversal

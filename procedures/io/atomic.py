@@ -20,7 +20,7 @@ from pathlib import Path
 
 import drivers.atomic as _raw
 from drivers.atomic import file_mode, umask  # noqa: F401  (re-exported)
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 # OSErrors that say "this place cannot take the file" rather than "the program is wrong"
 _PLACE_ERRNOS = {errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC, errno.EDQUOT, errno.EFBIG}

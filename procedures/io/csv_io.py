@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.io.atomic import atomic_path
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
 from procedures.io.plausibility import check_points, settle_measured
 from procedures.io.numbers import NotANumber, finite_float

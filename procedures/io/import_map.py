@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from procedures.io.csv_io import EXTRA_COLUMNS, OPTIONAL_COLUMNS
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.numbers import parse_finite
 
 UNITS_TO_MM = {"mm": 1.0, "um": 1e-3, "nm": 1e-6, "inch": 25.4}

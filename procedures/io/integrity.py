@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 RECORD_PREFIX = "# integrity:"
 _RECORD_RE = re.compile(r"# integrity: (?P<kind>[a-z][a-z-]*) rows=(?P<rows>[0-9]{1,9}) sha256=(?P<sha>[0-9a-f]{64})")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 
 class NotANumber(ValueError):

@@ -18,7 +18,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 NOTHING_WRITTEN = "nothing was written"
 

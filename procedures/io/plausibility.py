@@ -25,7 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 ACCEPT_OPTION = "--accept-implausible"
 

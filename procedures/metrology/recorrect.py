@@ -40,7 +40,7 @@ import h5py
 import numpy as np
 
 from procedures.io.atomic import atomic_path
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.metrology import defaults as D
 from procedures.metrology.air import EQUATIONS, refractive_index
 from procedures.io.recording.columns import read_point_column, write_point_column

@@ -32,7 +32,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.platform.geometry import Geometry
 from procedures.platform.kinematics import FkStatus, forward_kinematics, in_stroke, inverse_kinematics, leg_positions_mm
 from procedures.platform.sensitivity import ARCSEC_PER_RAD, POSE_ERROR_FIELDS, pose_error_contributions

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.platform.kinematics import FkStatus, forward_kinematics
 
 GEOMETRY_FORMAT = "station.platform.geometry/1"

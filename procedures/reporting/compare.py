@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 P_CHANCE = 0.05
 ALPHA = 0.05

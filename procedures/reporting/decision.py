@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 DECIDED = ("E", "A", "B", "R", "M")  # bidirectional ISO 230-2 values with a tolerance
 STAGES = ("as_found", "as_left")

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from procedures.io.atomic import atomic_folder, write_text_atomic
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit import LegErrorModel, fit
 from procedures.fit.bidirectional import MIN_POINTS_PER_WAVE, pair_amplitudes
 from procedures.fit.data import LegData, split_legs

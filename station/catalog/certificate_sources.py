@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.catalog.models import Record, RecordLeg
 
 

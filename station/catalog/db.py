@@ -22,7 +22,7 @@ from alembic.script import ScriptDirectory
 from sqlalchemy import event
 from sqlalchemy.engine import Engine
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
 # Alembic's `context`/`op` are module-level proxies set and removed around each run: two threads

@@ -14,7 +14,7 @@ from typing import Iterable, Iterator
 
 import sqlalchemy as sa
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.catalog import readers
 from station.catalog.models import Record
 from station.catalog.readers import Rec

@@ -13,8 +13,9 @@ from typing import TYPE_CHECKING
 
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditError, AuditLog
-from procedures.engine.errors import InputError
-from procedures.engine.states import Action, AuditOutcome
+from procedures.vocabulary import InputError
+from procedures.compensation.audit import Action
+from procedures.vocabulary import Outcome as AuditOutcome
 from station.services.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ import sys
 from typing import Any
 
 from procedures.compensation.audit import ACTIONS
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.compensation.audit_view import (
     INTERRUPTED,
     AuditView,

@@ -8,7 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 NAME = "catalog"
 HELP = "the index of every session, model, table, push, verification and report: rebuild, check, sync"

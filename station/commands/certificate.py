@@ -7,7 +7,7 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 from pathlib import Path
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 NAME = "certificate"
 HELP = "calibration certificate of a leg (PDF + JSON): report number, as found / as left with U and decisions"

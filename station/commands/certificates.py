@@ -8,7 +8,7 @@ import argparse
 import json
 from dataclasses import asdict
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services.config import load_config
 
 NAME = "certificates"

@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.atomic import write_bytes_atomic  # never half a file
 
 if TYPE_CHECKING:

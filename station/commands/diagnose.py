@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
 from station.services.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
 from station.services.selfcheck import SELF_CHECK_CONTRIBUTION_UM

@@ -6,10 +6,10 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
 from procedures.fit.paper import DEFAULT_N_PARAMS
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 NAME = "fit"
 HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"

@@ -27,7 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from station.catalog.history import history, row_detail, stage_label, value_with_u
     from station.catalog.store import catalog_of, reading_engine
     from station.services.config import load_config

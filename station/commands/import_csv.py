@@ -125,7 +125,7 @@ def _import_mapped(args, limits, warnings):
     """Convert through the map, then import the interchange CSV; its problems are reported in
     terms of the source file (its lines and column names)."""
     from procedures.io.csv_io import import_csv
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from procedures.io.import_map import convert, load_map, source_message
 
     mapping = load_map(args.map)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from procedures.io.atomic import write_text_atomic
 from procedures.reporting.decision import decision_lines
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
 
 NAME = "iso230"

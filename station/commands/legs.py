@@ -9,7 +9,7 @@ import datetime as dt
 import json
 from dataclasses import asdict
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 NAME = "legs"
 HELP = "list legs by serial with last calibration and due date (filters: type, station, dates, due)"

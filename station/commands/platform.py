@@ -13,7 +13,7 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 import math
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_folder
 
 NAME = "platform"

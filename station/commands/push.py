@@ -11,8 +11,8 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 
 from procedures.compensation.audit import AuditLog
-from procedures.engine.errors import InputError
-from procedures.engine.states import Action
+from procedures.vocabulary import InputError
+from procedures.compensation.audit import Action
 from station.commands._table_cli import add_drive_arguments
 from station.services.devices import DriverError
 

@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from procedures.io.atomic import atomic_paths
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services.samples import FILES, SAMPLES
 
 NAME = "recordings"

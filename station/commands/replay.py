@@ -13,7 +13,7 @@ from station import values as V  # one parser per kind of value (issue 31)
 import argparse
 from pathlib import Path
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 NAME = "replay"
 HELP = "replay a recorded session through the same drivers and record it again (--speed 1|N|max)"

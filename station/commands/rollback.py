@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.engine.errors import InputError
-from procedures.engine.states import Action
+from procedures.vocabulary import InputError
+from procedures.compensation.audit import Action
 from station.commands._table_cli import add_drive_arguments
 
 NAME = "rollback"

@@ -13,7 +13,7 @@ import argparse
 
 from procedures.io.outputs import check_output_file
 from procedures.engine.control import RunControl
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 from station.interrupt import abort_on_sigint
 from station.progress import ConsoleProgress
 

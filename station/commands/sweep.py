@@ -12,7 +12,7 @@ from pathlib import Path
 
 from typing import TYPE_CHECKING
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.acquisition.plan_spec import PLAN_KINDS
 
 if TYPE_CHECKING:
@@ -157,7 +157,7 @@ def run(args) -> int:
         print(f"note: {note}")
     resume_hint = resume_command(out, cfg, args.config)
     from procedures.engine.control import RunControl
-    from procedures.engine.states import Outcome
+    from procedures.vocabulary import Outcome
     from station import interrupt
     from station.interrupt import abort_on_sigint
     from station.progress import ConsoleProgress

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from procedures.compensation import controllers
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
 
 if TYPE_CHECKING:

@@ -8,7 +8,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 NAME = "ui"
 HELP = "the terminal UI: rig status, sweeps, results, compensation, replay, diagnosis"

@@ -15,9 +15,10 @@ from typing import TYPE_CHECKING
 
 from procedures.engine import events as ev
 from procedures.reporting.decision import decision_lines
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
-from procedures.engine.states import Action, AuditOutcome
+from procedures.compensation.audit import Action
+from procedures.vocabulary import Outcome as AuditOutcome
 from station.progress import ConsoleProgress
 
 if TYPE_CHECKING:

@@ -72,7 +72,7 @@ def _hash_password() -> int:
     import getpass
     import sys
 
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from station.web.access import hash_password
 
     if sys.stdin.isatty():  # typed: not echoed, asked twice against typos

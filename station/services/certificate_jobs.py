@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from procedures.reporting import certificate, decision
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.stage import AS_FOUND, AS_LEFT, stage_of_session
 from procedures.io.atomic import write_bytes_atomic  # the index is whole or old
 from station.services.report_jobs import session_decisions

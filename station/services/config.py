@@ -104,7 +104,7 @@ from typing import Any
 
 from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
 from procedures.reporting.decision import Tolerance, parse_tolerances
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.numbers import NotANumber, finite_float
 from procedures.metrology import defaults as MD
 from procedures.metrology.thermal import Material

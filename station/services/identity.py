@@ -9,7 +9,7 @@ from typing import Any, Iterable, Mapping
 
 from drivers.errors import DriverError
 from procedures.compensation.audit import AuditLog
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.identity import (
     DriveIdentity,
     LegIdentity,

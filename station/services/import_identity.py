@@ -16,7 +16,7 @@ import datetime as _dt
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.identity import (InstrumentIdentity, LegIdentity, SessionIdentity, StationIdentity,
                                               instrument_identity)
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 
 @dataclass

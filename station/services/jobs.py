@@ -12,7 +12,7 @@ from typing import Callable
 
 from procedures.engine import events as ev
 from procedures.engine.control import RunControl
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.numbers import NotANumber, finite_float
 import numpy as np
 
@@ -43,9 +43,9 @@ def active_tables_now(rig: Rig, legs: Iterable[int]) -> dict[int, str]:
     out = {}
     for leg in legs:
         if leg in rig.axes:
-            active, text = table_state(rig.axes[leg])
-            if active:
-                out[int(leg)] = text
+            state = table_state(rig.axes[leg])
+            if state.active:
+                out[int(leg)] = state.text
     return out
 
 

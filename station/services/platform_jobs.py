@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.io.atomic import atomic_folder, write_text_atomic
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 REPORT_MD = "platform_report.md"
 SUMMARY_JSON = "platform_summary.json"

@@ -10,7 +10,7 @@ import os
 from procedures.reporting import iso230_report
 from procedures.io.csv_io import ExportSummary
 from procedures.reporting.decision import NO_TOLERANCE, decision_lines
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.reporting.report import ReportResult, make_report
 from station.catalog.writer import register
 

@@ -25,7 +25,7 @@ import re
 from pathlib import Path
 from typing import Iterable, Mapping
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.atomic import write_text_atomic
 from procedures.io.integrity import (
     UNVERIFIED,

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 PLATFORM_BASE_BYTES = 150e6
 """The interpreter, numpy, matplotlib and the recording: what a platform run takes at any size."""

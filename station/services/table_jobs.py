@@ -27,7 +27,7 @@ from drivers.interfaces import ServoAxis, TableSpec
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditLog, AuditSink
 from procedures.engine.control import RunControl
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import (
     Confirm,
@@ -51,7 +51,8 @@ from procedures.io.plausibility import (
 from procedures.io.recording.reader import file_sha256, read_session
 from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import ListSink, RunResult, Sink, run
-from procedures.engine.states import Action, AuditOutcome
+from procedures.compensation.audit import Action
+from procedures.vocabulary import Outcome as AuditOutcome
 from procedures.compensation.table import (
     CompTable,
     LegTable,

@@ -14,7 +14,7 @@ import numpy as np
 
 from procedures.diagnosis.reference_twin import twin_from_recording
 from procedures.diagnosis.twin import ExternalTwin, twin_from_model
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 
 def load_twin(spec: str, *, session=None, path=None, catalog=None):

@@ -17,7 +17,7 @@ from drivers.interferometer.client import SerialInterferometer
 from station.services.laser_wiring import open_laser, replay_laser, sim_rig_laser_options
 from drivers.modbus.client import connect_axes
 from drivers.modbus.profile import DriveProfile
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services.config import StationConfig
 from station.services.drive_lock import holds_drive_lock
 

@@ -32,7 +32,7 @@ from textual.message import Message
 from procedures.engine.control import RunControl
 from procedures.acquisition.plan_spec import PlanSpec
 from procedures.acquisition.plans import SweepPlan
-from procedures.engine.states import AuditOutcome
+from procedures.vocabulary import Outcome as AuditOutcome
 from station.services.config import StationConfig
 from station.services.rig_session import (
     JOB_LOCK_WAIT_S,

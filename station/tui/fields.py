@@ -23,7 +23,7 @@ from typing import Any
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Input
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station import values
 from station.values import Kind
 

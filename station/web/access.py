@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 ROLES = {"viewer": "every page", "auditor": "every page and the certificate PDFs"}
 LOGIN_MODES = ("beyond-loopback", "always")

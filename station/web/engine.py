@@ -11,7 +11,7 @@ from pathlib import Path
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.catalog import db
 
 

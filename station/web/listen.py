@@ -9,7 +9,7 @@ from __future__ import annotations
 import errno
 import socket
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.web.access import WebAccess, is_loopback
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import sqlalchemy as sa
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.catalog import db
 from station.cli import main
 

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from procedures.compensation.controllers import ecmc, heidenhain, linuxcnc, siemens840d, twincat
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.import_map import convert, load_map
 
 # text built from the formats' own vocabulary, so the fuzzing gets past the first line

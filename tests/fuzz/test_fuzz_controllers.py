@@ -21,7 +21,7 @@ import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
 from procedures.compensation.controllers import FORMATS, module
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.import_map import convert, load_map
 from procedures.compensation.table import CompTable, LegTable
 from tests.fuzz import tomlgen

@@ -15,7 +15,7 @@ import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
 from procedures.io.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, import_csv, read_csv_points
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.ranges import PointLimits
 from tests.fuzz.budget import examples, fed
 

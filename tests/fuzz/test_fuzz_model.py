@@ -19,7 +19,7 @@ import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
 from drivers.sim.plant import PlantConfig
-from procedures.engine.errors import SchemaError
+from procedures.vocabulary import SchemaError
 from procedures.fit import fit, load_model
 from procedures.fit.model_io import model_to_json
 from station.services.synth import synth_session

@@ -20,7 +20,7 @@ import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
 from procedures.io.csv_io import export_csv
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.reader import check_points, read_session
 from procedures.io.recording.schema import FAULT_DTYPE, POINT_DTYPE
 from procedures.io.recording.writer import SessionWriter

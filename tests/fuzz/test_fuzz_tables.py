@@ -15,7 +15,7 @@ import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
 from drivers.errors import TableRefused
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.compensation.controllers.linuxcnc import read_linuxcnc_comp, write_linuxcnc_comp
 from procedures.compensation.table import (
     CSV_HEADER,

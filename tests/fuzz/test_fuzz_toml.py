@@ -17,7 +17,7 @@ from pathlib import Path
 from hypothesis import example, given, settings, strategies as st
 
 from drivers.modbus.profile import DEFAULT_PROFILE, DriveProfile, ProfileError
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services.config import load_config
 from tests.fuzz import tomlgen
 from tests.fuzz.tomlgen import damaged, toml_value

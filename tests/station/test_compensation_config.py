@@ -10,7 +10,7 @@ import pytest
 
 from drivers.errors import TableError
 from drivers.interfaces import TableBank
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services.config import StationConfig, load_config
 from station.services.wiring import leg_table_spec, open_drive
 

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services.config import LegMaterial, MetrologyConfig, load_config
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from procedures.io.recording.reader import read_session
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -14,7 +14,7 @@ import pytest
 
 from drivers.sim.plant import default_leg_configs
 from procedures.diagnosis.fleet import error_map
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.writer import SessionWriter
 from station.catalog import files

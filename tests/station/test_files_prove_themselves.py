@@ -36,7 +36,7 @@ from drivers.sim.drive_server import SimDriveServer
 from drivers.sim.plant import LegPlant, default_leg_configs
 from procedures.compensation.push import quantize, table_sha256
 from procedures.compensation.table import CompTable, LegTable, check_covers_stroke, table_csv_text
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit import fit, load_model, save_model
 from procedures.io.integrity import UNVERIFIED, VERIFIED
 from station.cli import main

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from procedures.io.recording.reader import read_session
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -22,7 +22,7 @@ def test_a_model_held_in_memory_is_measured_on_its_own_basis(tmp_path):
     against a normalised model is refused."""
     import pytest
 
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from procedures.fit import fit
     from procedures.metrology.thermal import error_basis
     from procedures.platform.experiment import RecordedLegErrors, run_measurements

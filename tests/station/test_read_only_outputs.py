@@ -173,7 +173,7 @@ def test_the_resume_hint_quotes_a_path_with_spaces():
 
 
 def test_nothing_is_left_behind_by_the_check_itself(tmp_path):
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from procedures.io.outputs import check_output_file, check_output_folder
 
     check_output_file(tmp_path / "a.json")

@@ -5,7 +5,7 @@ import argparse
 
 import pytest
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services import jobs
 from station.commands import replay as replay_command
 from tests.tooling import defines, imported_names

@@ -14,7 +14,7 @@ import pytest
 
 import procedures.acquisition.adaptive as adaptive
 from drivers.sim.plant import LEG_JERK_MM_S3
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.acquisition.plans import iso230_plan, onthefly_plan
 from procedures.io.recording.reader import read_session
 from station.services import samples as recordings

@@ -4,7 +4,7 @@ terminal UI's Diagnosis page use the same functions."""
 import pytest
 
 from procedures.diagnosis.twin import ExternalTwin
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services import twins
 from tests.tooling import defines, imported_names
 

@@ -144,7 +144,7 @@ def test_dot_segments_sent_raw_are_refused(site):
 
 
 def test_the_serial_grammar_refuses_slashes_wherever_serials_enter(tmp_path, capsys):
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from station.cli import main
     from station.services.config import load_config
     from station.services.serials import parse_serial_args, read_serials_file

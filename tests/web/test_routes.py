@@ -165,7 +165,7 @@ def test_readonly_engine_refuses_writes(fleet_dir):
 
 
 def test_tolerances_are_the_configs_as_left_limits(tmp_path):
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
     from station.web.extensions import tolerances_of
 
     p = tmp_path / "s.toml"

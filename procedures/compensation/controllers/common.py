@@ -8,7 +8,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.numbers import parse_finite
 from procedures.compensation.table import CompTable, LegTable, write_table_files, validate_table
 

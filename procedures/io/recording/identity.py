@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Mapping
 
-from procedures.engine.errors import SchemaError
+from procedures.vocabulary import SchemaError
 
 DRIVE_SOURCES = ("modbus-device-id", "config", "sim")
 """Where a drive's identity came from: read over Modbus (function 43/14), the station config (the

@@ -40,7 +40,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from procedures.engine.errors import InputError, SchemaError
+from procedures.vocabulary import InputError, SchemaError
 from procedures.io.ranges import SESSION_BOUNDS
 from procedures.io.recording.identity import SessionIdentity, identity_of_meta
 from procedures.io.recording.journal import merge_journal, read_journal_raw

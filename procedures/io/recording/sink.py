@@ -12,7 +12,7 @@ from typing import Any
 
 from procedures.engine import events as ev
 from procedures.io.recording.writer import SessionWriter
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 
 class RecorderSink:

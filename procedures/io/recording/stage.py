@@ -27,7 +27,9 @@ classifies them. Audit entries: a push or rollback is ``adjustment``, a verifica
 from __future__ import annotations
 
 import json
-from typing import Any, Mapping
+from typing import Any, Mapping, Protocol
+
+from procedures.compensation.applied_table import TableState
 
 AS_FOUND = "as_found"
 ADJUSTMENT = "adjustment"
@@ -46,28 +48,27 @@ AUDIT_STAGES = {"push": ADJUSTMENT, "rollback": ADJUSTMENT, "verification": AS_L
 
 
 def active_tables(devices: Mapping[str, Any] | None) -> dict[int, str]:
-    """leg -> what the session recorded of a compensation table active at its start (only the
-    legs with one). Reads the JSON `legN_compensation_table` (enabled, points > 0) and, for files
-    from before it, the text `legN_compensation` ("bank B active, N points from X mm ...")."""
-    out: dict[int, str] = {}
+    """leg -> what the session recorded of a compensation table active at its start, in words
+    (TableState.text: "bank B active, N points from X mm every S mm"), for the legs with one.
+    Reads the structure, the JSON `legN_compensation_table` (procedures/compensation/applied_table.py),
+    and for files from before it the text `legN_compensation` the sweep records beside it."""
+    structured: dict[int, TableState] = {}
+    texts: dict[int, str] = {}
     for key, value in (devices or {}).items():
         if not (isinstance(key, str) and key.startswith("leg")):
             continue
-        if key.endswith("_compensation_table"):
-            leg_text = key[3:-len("_compensation_table")]
+        if key.endswith("_compensation_table") and key[3:-len("_compensation_table")].isdecimal():
             try:
-                d = json.loads(value) if isinstance(value, str) else dict(value)
-            except (ValueError, TypeError):
+                structured[int(key[3:-len("_compensation_table")])] = TableState.from_record(
+                    json.loads(value) if isinstance(value, str) else dict(value))
+            except (ValueError, TypeError, AttributeError):
                 continue
-            if isinstance(d, dict) and d.get("enabled") and isinstance(d.get("points"), int) and d["points"] > 0:
-                if leg_text.isdecimal():
-                    out.setdefault(int(leg_text),
-                                   f"bank {d.get('bank')} active, {d['points']} points, sha256 {str(d.get('sha256', ''))[:12]}")
-        elif key.endswith("_compensation") and isinstance(value, str) and " points from " in value:
-            leg_text = key[3:-len("_compensation")]
-            if leg_text.isdecimal():
-                out[int(leg_text)] = value  # the text says more (start, spacing): it wins
-    return out
+        elif key.endswith("_compensation") and key[3:-len("_compensation")].isdecimal() and isinstance(value, str):
+            texts[int(key[3:-len("_compensation")])] = value
+    out = {leg: state.text for leg, state in structured.items() if state.active}
+    # a leg with no readable structure (a file from before it): its text, when it names a table
+    out.update({leg: text for leg, text in texts.items() if leg not in structured and " points from " in text})
+    return dict(sorted(out.items()))
 
 
 def session_stage(plan: Mapping[str, Any] | None, devices: Mapping[str, Any] | None, rig: str | None) -> str:
@@ -85,9 +86,21 @@ def session_stage(plan: Mapping[str, Any] | None, devices: Mapping[str, Any] | N
     return AS_FOUND
 
 
-def stage_of_session(session: Any) -> str:
-    """The stage of a read session (procedures.io.recording.reader.Session): the recorded root
-    attribute `stage` when it holds a known stage, else derived (files before schema 1.2)."""
+class RecordedSession(Protocol):
+    """What the stage is read from: procedures.io.recording.reader.Session (which imports this
+    module, hence a protocol rather than that class)."""
+
+    @property
+    def attrs(self) -> Mapping[str, Any]: ...  # the root attributes
+    @property
+    def plan(self) -> Mapping[str, Any] | None: ...
+    @property
+    def devices(self) -> Mapping[str, Any] | None: ...
+
+
+def stage_of_session(session: RecordedSession) -> str:
+    """The stage of a read session: the recorded root attribute `stage` when it holds a known
+    stage, else derived (files before schema 1.2)."""
     recorded = (session.attrs or {}).get("stage")
     if recorded in STAGES:
         return recorded

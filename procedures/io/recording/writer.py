@@ -30,7 +30,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from procedures.engine.errors import InputError, SchemaError
+from procedures.vocabulary import InputError, SchemaError
 from procedures.io.recording.journal import Journal
 from procedures.io.recording.stage import STAGES, session_stage
 from procedures.io.recording.schema import (
@@ -42,10 +42,11 @@ from procedures.io.recording.schema import (
     POINT_UNITS,
     POINTS_CHUNK_ROWS,
     SCHEMA_VERSION,
+    PointRecord,
     UNWRITTEN_INDEX,
     schema_major,
 )
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 
 # v1.10 file format: needed for SWMR, and still readable by HDF5 1.10 tools (Debian's h5dump).
 LIBVER = ("v110", "v110")
@@ -107,9 +108,14 @@ _POINT_PREFIXES = frozenset(POINT_DTYPE.names[:n] for n in range(1, len(POINT_DT
                             if set(POINT_REQUIRED_KEYS) <= set(POINT_DTYPE.names[:n]))
 
 
-def _point_values(record: Mapping[str, Any]) -> list[Any]:
-    """The POINT_DTYPE field values of a dict record, in field order, defaults filled in and
-    checked (see point_row)."""
+def _point_values(record: PointRecord | Mapping[str, Any]) -> list[Any] | tuple:
+    """The POINT_DTYPE field values of a record (a PointRecord, or a dict keyed by field names),
+    in field order, defaults filled in and checked (see point_row)."""
+    if type(record) is PointRecord:  # a procedure's record: its fields are the row
+        values = record.to_row()
+        if values[0] < 0 or values[3] not in (1, -1) or values[1] < 1 or values[2] < 1:
+            _check_point(np.array([values], POINT_DTYPE))  # raises with the message
+        return values
     keys = tuple(record)
     if keys in _POINT_PREFIXES:  # the fields in file order (a sweep's records): no lookup per key
         values = [*record.values(), *_POINT_DEFAULTS[len(keys):]]
@@ -131,8 +137,9 @@ def _point_values(record: Mapping[str, Any]) -> list[Any]:
     return values
 
 
-def point_row(record: Mapping[str, Any] | np.void) -> np.ndarray:
-    """A POINT_DTYPE array of one row from a dict (or numpy record) keyed by field names.
+def point_row(record: PointRecord | Mapping[str, Any] | np.void) -> np.ndarray:
+    """A POINT_DTYPE array of one row from a PointRecord, or a dict (or numpy record) keyed by
+    field names.
 
     Keys in POINT_REQUIRED_KEYS must be present; absent float fields are NaN (unknown), absent
     `flags` is 0. An unknown key raises SchemaError (a typo would lose data silently).
@@ -145,7 +152,7 @@ def point_row(record: Mapping[str, Any] | np.void) -> np.ndarray:
             return row
         record = {n: record[n] for n in record.dtype.names}
     if not isinstance(record, Mapping):
-        raise TypeError(f"a point record must be a dict or a numpy record, not {type(record).__name__}")
+        raise TypeError(f"a point record must be a PointRecord, a dict or a numpy record, not {type(record).__name__}")
     # one tuple -> one row: several times faster than assigning the fields one by one
     return np.array([tuple(_point_values(record))], POINT_DTYPE)
 
@@ -155,8 +162,8 @@ _POINT_STRUCT = struct.Struct("<" + "".join(_STRUCT_CODE[POINT_DTYPE[n].str] for
 assert _POINT_STRUCT.size == POINT_DTYPE.itemsize  # packed, no padding: the same bytes as numpy's row
 
 
-def point_bytes(record: Mapping[str, Any] | np.void) -> tuple[int, bytes]:
-    """(index, the bytes of `point_row(record)`): a dict of plain numbers is packed with one
+def point_bytes(record: PointRecord | Mapping[str, Any] | np.void) -> tuple[int, bytes]:
+    """(index, the bytes of `point_row(record)`): a record of plain numbers is packed with one
     struct call, a quarter of the time of a numpy row (once per point: the recorder's main
     cost); anything struct does not take as numpy does (a float in an integer field, a text
     number, a value out of a field's range) goes the numpy way, with its conversions and errors."""
@@ -520,8 +527,8 @@ class SessionWriter:
 
     # -- writing ---------------------------------------------------------------------------
 
-    def append_point(self, record: Mapping[str, Any] | np.void) -> None:
-        """Record one point (POINT_DTYPE field names; units in the names / schema).
+    def append_point(self, record: PointRecord | Mapping[str, Any] | np.void) -> None:
+        """Record one point (a PointRecord, or a dict of its field names; units in the names)
 
         When this returns, the row is in the journal and survives a kill of this process; it
         reaches /points with the next batch (see the module docstring).

@@ -14,7 +14,8 @@ from textual.message import Message
 
 from procedures.compensation.audit import AuditLog
 from procedures.compensation.push import PushPlan
-from procedures.engine.states import Action, AuditOutcome
+from procedures.compensation.audit import Action
+from procedures.vocabulary import Outcome as AuditOutcome
 from procedures.io.plausibility import Override
 from station.services.config import StationConfig
 from station.tui.errors import describe

@@ -25,7 +25,7 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Static
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station import values
 from station.tui.errors import describe
 from station.tui.fields import FIELD_KINDS, ValueField
@@ -96,7 +96,7 @@ class PlatformWritten(Message):
 
 
 def _require_six_legs(session, name: str) -> None:
-    from procedures.engine.errors import InputError
+    from procedures.vocabulary import InputError
 
     legs = [int(leg) for leg in session.legs]
     missing = [leg for leg in range(1, 7) if leg not in legs]

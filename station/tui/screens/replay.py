@@ -20,7 +20,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Static
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.tui import capabilities
 from station.tui.errors import describe
 from station.tui.fields import FIELD_KINDS, ValueField

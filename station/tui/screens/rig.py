@@ -27,7 +27,7 @@ from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Select, Static
 
 from station.services.devices import DriveLimits, DriveStatus, Environment, Reading
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station import values
 from station.tui.errors import describe
 from station.tui.fields import ValueField

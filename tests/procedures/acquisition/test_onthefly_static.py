@@ -15,7 +15,7 @@ from drivers.modbus.client import connect_axes
 from drivers.sim.plant import default_leg_configs
 from drivers.sim.rig import SimRig
 from procedures.engine import events as ev
-from procedures.engine.errors import InputError, PlanError
+from procedures.vocabulary import InputError, PlanError
 from procedures.acquisition.adaptive import MIN_CYCLES
 from procedures.fit import fit
 from procedures.fit.dynamic import speed_coefficients, static_points

@@ -13,7 +13,7 @@ from procedures.acquisition.passes import RetryPolicy, SweepFailed, point_record
 from procedures.acquisition.plans import PlanPoint
 from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
 from procedures.io.recording.writer import point_row
-from procedures.engine.states import FaultKind
+from drivers.interfaces import FaultKind
 
 P = PlanPoint(index=7, leg=2, run=3, direction=-1, target_mm=12.5)
 

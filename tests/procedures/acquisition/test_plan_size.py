@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import pytest
 
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.acquisition.plan_size import PlanLimits, check_plan_size, plan_size
 from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PLAN_KINDS, PlanSpec, plan_from_spec
 from procedures.acquisition.plans import SweepPlan, iso230_plan, paper_plan
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.acquisition.plans import (
     SweepPlan, iso230_plan, paper_plan, parse_legs, targets_from_file, uniform_targets,
 )

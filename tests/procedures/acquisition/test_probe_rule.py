@@ -27,7 +27,7 @@ from procedures.acquisition.probe_rule import (
 )
 from procedures.acquisition.sweep import sweep
 from procedures.engine import events as ev
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.fit import fit
 from procedures.fit.reversal_probes import is_probe
 from procedures.io.recording.schema import POINT_DTYPE

@@ -17,7 +17,7 @@ from procedures.acquisition.adaptive import MIN_CYCLES_WITH_PROBES
 from procedures.acquisition.plans import SweepPlan, onthefly_plan
 from procedures.acquisition.sweep import sweep
 from procedures.engine import events as ev
-from procedures.engine.errors import PlanError
+from procedures.vocabulary import PlanError
 from procedures.fit import fit
 from procedures.fit.dynamic import static_points
 from procedures.fit.reversal_probes import apply_probes, is_probe

@@ -20,7 +20,7 @@ from procedures.compensation.audit_view import (
     read_audit,
     select,
 )
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 DRIVE = "StationSim LegServo-402 s/n SIM-0001 fw 1.0.0"
 OLD, NEW, NEWER = "a" * 64, "b" * 64, "c" * 64

@@ -12,7 +12,7 @@ from drivers.errors import TableRefused
 from drivers.interfaces import TableBank
 from drivers.sim.plant import PlantConfig
 from station.services.synth import synth_session
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit import fit
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, read_linuxcnc_comp, write_linuxcnc_comp
 from procedures.compensation.table import (

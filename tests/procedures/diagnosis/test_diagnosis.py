@@ -12,7 +12,7 @@ import pytest
 from drivers.sim.plant import PlantConfig
 from station.services.synth import synth_session
 from procedures.diagnosis import DiagnosisSettings, diagnose, to_json
-from procedures.engine.errors import InputError, SchemaError
+from procedures.vocabulary import InputError, SchemaError
 from station.services.twins import plant_twin
 
 BASE = PlantConfig(noise_um=0.03, run_offset_um=0.04).only("lead", "longwave", "wobble", "noise", "run_offset")

@@ -11,7 +11,7 @@ import pytest
 from drivers.sim.plant import default_leg_configs
 from procedures.io.csv_io import import_csv
 from procedures.diagnosis import diagnose
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.import_map import convert, load_map
 from procedures.io.recording.reader import read_session
 from station.services.synth import synth_session

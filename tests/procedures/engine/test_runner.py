@@ -13,7 +13,7 @@ from procedures.acquisition.plans import SweepPlan
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.sink import RecorderSink
 from procedures.engine.runner import CallbackSink, ListSink, run
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 from procedures.acquisition.sweep import sweep
 
 

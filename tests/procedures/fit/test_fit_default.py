@@ -8,7 +8,7 @@ import pytest
 
 from drivers.sim.plant import PlantConfig, default_leg_configs
 from station.services.synth import synth_session
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit import fit, model_to_json
 from procedures.fit.crossval import cycle_folds
 from procedures.fit.data import split_legs

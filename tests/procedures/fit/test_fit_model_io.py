@@ -9,7 +9,7 @@ import pytest
 
 from drivers.sim.plant import PlantConfig
 from station.services.synth import synth_session
-from procedures.engine.errors import SchemaError
+from procedures.vocabulary import SchemaError
 from procedures.fit import fit, load_model, save_model
 
 TARGETS = np.linspace(-60, 60, 81)

@@ -8,7 +8,7 @@ import pytest
 
 from drivers.sim.plant import PlantConfig
 from station.services.synth import synth_session
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit import fit
 from procedures.acquisition.plans import irregular_targets
 from procedures.io.recording.schema import POINT_DTYPE

@@ -14,7 +14,7 @@ import pytest
 
 from procedures.io.atomic import (WriteError, atomic_folder, atomic_path, write_bytes_atomic,
                                write_files_atomic, write_text_atomic)
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 ROOT = os.geteuid() == 0
 REPO = Path(__file__).resolve().parents[3]
@@ -69,7 +69,7 @@ READ_ONLY_CHECK = """
 import sys
 from pathlib import Path
 from procedures.io.atomic import WriteError, atomic_folder, write_files_atomic, write_text_atomic
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 
 folder = Path(sys.argv[1])
 for attempt in (lambda: write_text_atomic(folder / "table.csv", "x"),

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from procedures.io.csv_io import export_csv, import_csv, read_csv_points
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.columns import read_point_column
 
 HEAD = "leg,run,direction,target_mm,error_um"

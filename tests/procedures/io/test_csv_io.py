@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from procedures.io.csv_io import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, export_csv, import_csv, read_csv_points
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.schema import FLAG_IMPORTED
 from procedures.io.recording.writer import SessionWriter
 

@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 import pytest
 
-from procedures.engine.errors import InputError, SchemaError
+from procedures.vocabulary import InputError, SchemaError
 from procedures.fit.model_io import load_model
 from procedures.io.recording import reader
 from procedures.io.recording.reader import LiveReader, check_points, read_session, read_superblock

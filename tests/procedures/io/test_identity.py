@@ -11,7 +11,7 @@ from types import MappingProxyType
 import h5py
 import pytest
 
-from procedures.engine.errors import SchemaError
+from procedures.vocabulary import SchemaError
 from procedures.io.recording.identity import (
     NOT_STATED,
     DriveIdentity,

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.import_map import convert, load_map
 from procedures.io.recording.reader import read_session
 from station.cli import main

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from procedures.engine.errors import InputError, PlanError
+from procedures.vocabulary import InputError, PlanError
 from procedures.io.numbers import NotANumber, finite_float, parse_finite
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.tooling import require_tool
-from procedures.engine.errors import InputError, SchemaError
+from procedures.vocabulary import InputError, SchemaError
 from procedures.io.recording.reader import LiveReader, file_sha256, read_session
 from procedures.io.recording.schema import FAULT_DTYPE, POINT_DTYPE, POINT_UNITS, SCHEMA_VERSION
 from procedures.io.recording.writer import SessionWriter

@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 import pytest
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.io.recording.reader import LiveReader, file_sha256, read_session
 from procedures.io.recording.writer import SessionWriter
 

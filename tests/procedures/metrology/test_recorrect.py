@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 import pytest
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.metrology.air import ciddor, edlen
 from procedures.metrology.recorrect import RecorrectOptions, recorrect_points
 from procedures.io.recording.columns import read_point_column

@@ -7,7 +7,7 @@ import pytest
 
 from drivers.sim.plant import default_leg_configs
 from station.services.synth import synth_session
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.platform.experiment import (
     FunctionLegErrors,
     RecordedLegErrors,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.platform.geometry import (
     DEFAULT_GEOMETRY_PATH,
     GeometryError,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from procedures.reporting import decision as dec
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.services.config import load_config
 
 BUDGET = [{"source": "laser", "u_um": 0.3}, {"source": "repeatability", "u_um": 0.4},

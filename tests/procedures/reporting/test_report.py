@@ -9,7 +9,7 @@ import pytest
 
 from drivers.sim.plant import PlantConfig
 from station.services.synth import synth_session
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from procedures.fit import fit
 from procedures.reporting.report import make_report
 

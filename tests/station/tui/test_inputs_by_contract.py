@@ -47,7 +47,7 @@ from textual.widgets import Input, Static
 
 from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
 from procedures.acquisition.plans import parse_legs
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station import values as V
 from station.cli import build_parser
 from station.services.config import StationConfig

@@ -17,7 +17,7 @@ from textual.widgets import ProgressBar, Static
 
 from procedures.engine import events as ev
 from procedures.acquisition.plans import iso230_plan
-from procedures.engine.states import Outcome
+from procedures.vocabulary import Outcome
 from tests.tooling import start_paper_sweep
 from station.services.rig_session import RigSession
 from station.tui.app import StationApp

@@ -11,7 +11,7 @@ from textual.widgets import Input, Select, Static
 from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
 from station.cli import build_parser, main
 from station.commands.sweep import plan_spec as cli_plan_spec
-from procedures.engine.errors import InputError
+from procedures.vocabulary import InputError
 from station.tui.app import StationApp
 from station.tui.fields import FIELD_KINDS
 
