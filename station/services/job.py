@@ -29,7 +29,7 @@ from procedures.vocabulary import InputError
 @dataclass
 class JobOutcome:
     """What a job ended with. `status`: "completed", "aborted", "failed" (the values of
-    procedures.engine.states.Outcome) or "done" for a job that is not a run of the rig (a fit, a
+    procedures.vocabulary.Outcome) or "done" for a job that is not a run of the rig (a fit, a
     table, a report). `outputs`: the files it wrote. `lines`: what to tell the user, in order.
     `data`: the job's own result (a RunResult, a fitted model, ...) for the front end to present."""
 
