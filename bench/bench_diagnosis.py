@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drivers.sim.plant import default_leg_configs  # noqa: E402
+from drivers.plant.leg import default_leg_configs  # noqa: E402
 from station.services.synth import synth_session  # noqa: E402
 from procedures.diagnosis import diagnose  # noqa: E402
 from station.services.twins import plant_twin  # noqa: E402

@@ -51,16 +51,31 @@ def test_drivers_import_neither_procedures_nor_station():
 
 
 def test_procedures_see_only_driver_interfaces_and_no_front_end():
+    """Of drivers/, procedures see the interfaces (and their errors and atomic writes) and the plant
+    (drivers/plant): the leg's physics is a model, not a device (numpy only, no I/O, no protocol), and
+    the diagnosis' simulated-plant twin and the synthetic sessions need the same physics the
+    simulated devices run on, not a copy of it. No concrete device: not drivers.sim, drivers.modbus..."""
     def allowed(m: str) -> bool:
         top = m.split(".")[0]
         if top in ("station", "textual", "textual_plotext"):
             return False
         if top == "drivers":
-            return m in ("drivers.interfaces", "drivers.errors", "drivers.atomic")
+            return m in ("drivers.interfaces", "drivers.errors", "drivers.atomic") or m.startswith("drivers.plant.")
         return True
 
     bad = offending("procedures", allowed)
     assert not bad, "\n".join(bad)
+
+
+PLANT_MAY_IMPORT = {"__future__", "math", "dataclasses", "numpy"}
+
+
+def test_the_plant_is_pure_physics():
+    """drivers/plant, which procedures may import, holds the leg's physics alone: numpy and a few
+    standard modules, nothing of the devices, the protocols, files or the other layers."""
+    bad = offending("drivers/plant", lambda m: m.split(".")[0] in PLANT_MAY_IMPORT or m.startswith("drivers.plant."))
+    assert not bad, "\n".join(bad)
+    assert "numpy" in set().union(*imports_of("drivers/plant").values())  # it reads the plant's imports
 
 
 def is_command_line(module: str) -> bool:

@@ -64,7 +64,7 @@ def default_legs_points(legs=range(1, 7), cycles: int = 3, step_mm: float = 3.0,
     protocol layer): `legs` of the default leg configs, uniform targets -90..90 mm."""
     import numpy as np
 
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
     from station.services.synth import synth_session
 
     cfgs = {leg: c for leg, c in zip(range(1, 7), default_leg_configs(seed=seed)) if leg in legs}

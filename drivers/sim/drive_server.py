@@ -64,7 +64,7 @@ from drivers.modbus.profile import DriveProfile
 from drivers.sim import device_id
 from drivers.sim.modbus_tcp import MbapServer, NoReply
 from drivers.sim.motion import SmoothedMove
-from drivers.sim.plant import LegPlant
+from drivers.plant.leg import LegPlant
 from drivers.sim.position_compare import PositionCompare, TriggerLine
 from drivers.states import DriveState
 
@@ -1070,7 +1070,7 @@ class SimDriveServer:
 
 def main(argv: list[str] | None = None) -> int:
     from drivers.clock import VirtualClock
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
 
     ap = argparse.ArgumentParser(prog="python -m drivers.sim.drive_server", description="Simulated leg servo drives (Modbus).")
     ap.add_argument("--port", type=int, default=0, help="Modbus TCP port on 127.0.0.1 (0 = any free)")

@@ -39,7 +39,7 @@ import numpy as np
 
 from drivers.interfaces import Clock
 from drivers.linef1 import protocol as lf
-from drivers.sim.plant import LegPlant
+from drivers.plant.leg import LegPlant
 
 FAULT_KINDS = ("crc", "cut", "gap", "beam", "overflow", "no_ack")
 LOST_COUNT_MM = 0.3172  # where a lost count leaves the reading: off by a whole number of fringes, far from right

@@ -46,7 +46,7 @@ def plant_configs(seed: int = SEED):
     """The six legs of the samples: the simulator's default legs with the load and the room
     temperature changing during the session, so that thermal, load and drift effects are all
     present and separable."""
-    from drivers.sim.plant import PlantConfig, default_leg_configs
+    from drivers.plant.leg import PlantConfig, default_leg_configs
 
     base = replace(PlantConfig(), load_per_pass_n=LOADS_N, ambient_swing_k=AMBIENT_SWING_K,
                    ambient_period_s=AMBIENT_PERIOD_S, jerk_mm_s3=JERK_MM_S3)

@@ -38,7 +38,7 @@ def selfcheck_trial(seed: int, n_targets: int = 91, cycles: int = 5,
     as twin, even seeds the twin fitted on the session."""
     from procedures.diagnosis.selfcheck import Trial
     from station.services.twins import plant_twin
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
     from station.services.synth import synth_session
 
     rng = np.random.default_rng(10_000 + seed)
@@ -111,7 +111,7 @@ def _base_leg(rng, lib_cfg, leg: int, has_load: bool, targets, cycles: int, seed
 def _withhold(rng, eff: str, cfg, dry, m: float, fitted: bool):
     """`cfg` with effect `eff` added at RMS contribution `m` um against the twin (measured on the
     leg's points `dry` of the plant without it), and the effect's true parameters."""
-    from drivers.sim.plant import systematic_error_um
+    from drivers.plant.leg import systematic_error_um
 
     x, t_h = dry["target_mm"], dry["time_s"] / 3600.0
     temp, load_n = dry["material_temp_c"], dry["load_n"]
@@ -150,7 +150,7 @@ def _withhold(rng, eff: str, cfg, dry, m: float, fitted: bool):
 
 def _true_contribution(points, truth: dict[int, dict], real: dict, base: dict) -> np.ndarray:
     """The true contribution (um) of the withheld effects at every point."""
-    from drivers.sim.plant import systematic_error_um
+    from drivers.plant.leg import systematic_error_um
 
     true_um = np.zeros(points.size)
     for leg, effects in truth.items():

@@ -43,7 +43,7 @@ def situation_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 
     from procedures.diagnosis.selfcheck import Trial  # scipy: not for `station diagnose --help`
 
     """One session of `physics` (SITUATIONS); deterministic for the seed."""
-    from drivers.sim.plant import default_leg_configs, systematic_error_um
+    from drivers.plant.leg import default_leg_configs, systematic_error_um
     from station.services.synth import synth_session
     from station.services.twins import plant_twin
 

@@ -1,5 +1,5 @@
 """Self-check sessions for the effect variants (issue 25): physics outside the plain library,
-made with the project's own plant (drivers/sim/plant.py) and withheld from the twin.
+made with the project's own plant (drivers/plant/leg.py) and withheld from the twin.
 
 Each session is one leg of 91 irregular targets, 5 cycles, the plant's lead, long-wave, wobble,
 noise and pass offsets, a material temperature that changes (ambient cycling) and loads that
@@ -72,7 +72,7 @@ def _beyond(part: np.ndarray, cols: list[np.ndarray], x: np.ndarray, fitted: boo
 def variant_trial(seed: int, physics: str, n_targets: int = 91, cycles: int = 5) -> Trial:
     """One session with `physics` (PHYSICS) withheld from the twin; deterministic for the seed."""
     from procedures.diagnosis.selfcheck import Trial
-    from drivers.sim.plant import default_leg_configs, systematic_error_um
+    from drivers.plant.leg import default_leg_configs, systematic_error_um
     from station.services.synth import synth_session
     from station.services.twins import plant_twin
 

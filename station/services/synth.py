@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.sim.plant import LegPlant, PlantConfig
+from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.io.recording.schema import POINT_DTYPE
 
 

@@ -57,7 +57,7 @@ def _plant_configs(spec: str) -> dict:
         [leg.2]                 # fields for one leg
         reversal_um = 1.2
     """
-    from drivers.sim.plant import PlantConfig, default_leg_configs
+    from drivers.plant.leg import PlantConfig, default_leg_configs
 
     if spec in ("", "default"):
         return {i + 1: c for i, c in enumerate(default_leg_configs(0))}
@@ -107,7 +107,7 @@ def _plant_configs(spec: str) -> dict:
 def plant_twin(cfgs: dict, description: str) -> ExternalTwin:
     """The plant's systematic error as a twin: position terms only (direction 0, temperature at
     the reference, no load, time 0), so backlash/thermal/load/drift are left in the gap."""
-    from drivers.sim.plant import systematic_error_um
+    from drivers.plant.leg import systematic_error_um
 
     def predict(leg, x_mm, direction):
         cfg = cfgs[leg]

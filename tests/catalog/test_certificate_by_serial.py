@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.compensation.audit import AuditEntry
 from procedures.compensation.table import CompTable, LegTable, table_csv_text
 from station.catalog.readers import audit_recs, session_rec, table_rec

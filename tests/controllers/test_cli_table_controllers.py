@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.compensation import controllers
 from procedures.fit import load_model
 from procedures.compensation.table import make_table

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from drivers.errors import TableRefused
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.compensation.controllers import ecmc, heidenhain, linuxcnc, siemens840d, twincat
 from procedures.compensation.controllers.common import ControllerFileError
 from procedures.fit import fit

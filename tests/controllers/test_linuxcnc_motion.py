@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.compensation.controllers import linuxcnc
 from procedures.fit import fit
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from drivers.clock import VirtualClock
-from drivers.sim.plant import PlantConfig, LegPlant, systematic_error_um, default_leg_configs
+from drivers.plant.leg import PlantConfig, LegPlant, systematic_error_um, default_leg_configs
 from station.services.synth import synth_session
 
 

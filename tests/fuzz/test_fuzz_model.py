@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.engine.errors import SchemaError
 from procedures.fit import fit, load_model
 from procedures.fit.model_io import model_to_json

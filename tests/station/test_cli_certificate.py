@@ -13,7 +13,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from station.cli import main
 from station.services.synth import synth_session
 from tests.tooling import lab_config, write_identified_session

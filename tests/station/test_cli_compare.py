@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from station.cli import main
 from station.services.config import StationConfig
 from station.services.synth import synth_session

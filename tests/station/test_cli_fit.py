@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from station.services.synth import synth_session
 from procedures.acquisition.plans import irregular_targets
 from procedures.io.recording.reader import file_sha256

@@ -12,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis.fleet import error_map
 from procedures.engine.errors import InputError
 from procedures.io.recording.reader import read_session

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import procedures.acquisition.adaptive as adaptive
-from drivers.sim.plant import LEG_JERK_MM_S3
+from drivers.plant.leg import LEG_JERK_MM_S3
 from procedures.engine.errors import InputError
 from procedures.acquisition.plans import iso230_plan, onthefly_plan
 from procedures.io.recording.reader import read_session
@@ -82,7 +82,7 @@ def test_leg_figures_depend_on_the_material_given():
     """A leg whose material temperature changes between passes, fixed far from 0 mm: normalised
     with its own fixed point, the noise floor is smaller than with the default one (fixed at 0 mm),
     whose wrong normalisation adds a per-pass offset."""
-    from drivers.sim.plant import PlantConfig
+    from drivers.plant.leg import PlantConfig
     from station.services.synth import synth_session
 
     plant = PlantConfig(bearing_mm=-400.0, ambient_ramp_k_per_h=4.0, tau_s=60.0)

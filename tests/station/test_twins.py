@@ -37,7 +37,7 @@ def test_a_reference_3_k_warmer_is_compared_normalised_to_20_c(tmp_path):
 
     import numpy as np
 
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
     from procedures.diagnosis import diagnose
     from procedures.diagnosis.reference_twin import twin_from_recording
     from procedures.io.recording.reader import read_session

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.diagnosis.legdata import split_legs as diagnosis_legs
 from procedures.engine.errors import InputError, SchemaError
 from procedures.fit.data import split_legs as fit_legs

@@ -10,7 +10,7 @@ import pytest
 
 from drivers.errors import TableRefused
 from drivers.interfaces import TableBank
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from station.services.synth import synth_session
 from procedures.engine.errors import InputError
 from procedures.fit import fit

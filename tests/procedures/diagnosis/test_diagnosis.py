@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from station.services.synth import synth_session
 from procedures.diagnosis import DiagnosisSettings, diagnose, to_json
 from procedures.engine.errors import InputError, SchemaError

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis import DiagnosisSettings, diagnose
 from procedures.diagnosis.text_report import text_report
 from station.services.synth import synth_session

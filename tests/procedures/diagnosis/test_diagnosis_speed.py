@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.io.csv_io import import_csv
 from procedures.diagnosis import diagnose
 from procedures.engine.errors import InputError

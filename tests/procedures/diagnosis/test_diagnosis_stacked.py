@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis import diagnose
 from procedures.diagnosis.reference_twin import twin_from_recording
 from station.services.synth import synth_session

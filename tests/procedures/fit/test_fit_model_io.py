@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from station.services.synth import synth_session
 from procedures.engine.errors import SchemaError
 from procedures.fit import fit, load_model, save_model

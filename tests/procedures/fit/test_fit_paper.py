@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from station.services.synth import synth_session
 from procedures.engine.errors import InputError
 from procedures.fit import fit

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.reporting import iso230
 from procedures.acquisition import plans
 from procedures.metrology import air

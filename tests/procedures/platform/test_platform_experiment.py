@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from station.services.synth import synth_session
 from procedures.engine.errors import InputError
 from procedures.platform.experiment import (

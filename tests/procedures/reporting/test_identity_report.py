@@ -11,7 +11,7 @@ from types import MappingProxyType
 
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.acquisition import plans
 from procedures.io.recording.identity import (
     DriveIdentity,

@@ -12,7 +12,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.reporting import iso230
 from procedures.acquisition import plans
 from procedures.metrology.thermal import normalise_points, Material
