@@ -150,7 +150,7 @@ class SimConfig:
     thermal_tau_s: float = 1800.0  # how fast the simulated legs' material follows the hall
     # the simulated drives' jerk limit, mm/s^3 (0 = not limited): a real leg's by default, so the
     # rig time a user sees for any plan is a real leg's (drivers.plant.leg LEG_JERK_MM_S3); the
-    # sample recordings pin 0, the setting they were made with (station/services/samples.py)
+    # sample recordings pin 0, the setting they were made with (procedures.synthetic.SAMPLE_JERK_MM_S3)
     jerk_mm_s3: float = SIM_LEG_JERK_MM_S3
     # um added to every simulated laser reading after its zero (a station bias; 0 = off, so the
     # sample recordings stay identical): the station comparison's acceptance test (docs/decisions.md)

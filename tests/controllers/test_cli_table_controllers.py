@@ -11,7 +11,7 @@ from procedures.compensation import controllers
 from procedures.fit import load_model
 from procedures.compensation.table import make_table
 from station.cli import main
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.tooling import write_points_session as write_session
 
 CFG = PlantConfig(reversal_um=2.0).only("backlash", "lead", "longwave", "wobble", "noise")

@@ -5,7 +5,7 @@ import pytest
 
 from drivers.clock import VirtualClock
 from drivers.plant.leg import PlantConfig, LegPlant, systematic_error_um, default_leg_configs
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 
 def test_all_sources_off_gives_a_perfect_leg():

@@ -22,7 +22,7 @@ from drivers.plant.leg import PlantConfig
 from procedures.engine.errors import SchemaError
 from procedures.fit import fit, load_model
 from procedures.fit.model_io import model_to_json
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.fuzz.budget import examples, fed
 from tests.fuzz.jsondamage import damaged_json, json_value
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drivers.plant.leg import default_leg_configs
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from procedures.fit import fit, save_model
 from station.cli import main
 from tests.tooling import write_points_session as write_session

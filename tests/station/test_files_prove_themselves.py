@@ -41,7 +41,7 @@ from procedures.fit import fit, load_model, save_model
 from procedures.io.integrity import UNVERIFIED, VERIFIED
 from station.cli import main
 from station.services.serials import read_serials_file_checked, write_serials_file
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from station.services.table_jobs import load_leg_table
 
 LONG = os.environ.get("HYPOTHESIS_PROFILE") == "long"

@@ -72,8 +72,10 @@ def test_the_station_sim_rig_is_jerk_limited_and_the_session_records_it(tmp_path
 
 
 def test_the_sample_recordings_pin_no_jerk_limit():
-    assert recordings.JERK_MM_S3 == 0.0
-    assert all(c.jerk_mm_s3 == 0.0 for c in recordings.plant_configs())
+    from procedures.synthetic import SAMPLE_JERK_MM_S3, sample_plant_configs
+
+    assert SAMPLE_JERK_MM_S3 == 0.0 and recordings.sample_config().sim.jerk_mm_s3 == 0.0
+    assert all(c.jerk_mm_s3 == 0.0 for c in sample_plant_configs())
     with recordings.open_sample_rig() as rig:
         assert all(p.cfg.jerk_mm_s3 == 0.0 for p in rig.sim.plants.values())
 
@@ -83,7 +85,7 @@ def test_leg_figures_depend_on_the_material_given():
     with its own fixed point, the noise floor is smaller than with the default one (fixed at 0 mm),
     whose wrong normalisation adds a per-pass offset."""
     from drivers.plant.leg import PlantConfig
-    from station.services.synth import synth_session
+    from procedures.synthetic import synth_session
 
     plant = PlantConfig(bearing_mm=-400.0, ambient_ramp_k_per_h=4.0, tau_s=60.0)
     points = synth_session({1: plant}, np.linspace(-90, 90, 37), cycles=4, seed=2, dwell_s=5.0)

@@ -8,7 +8,7 @@ from procedures.diagnosis.legdata import split_legs as diagnosis_legs
 from procedures.engine.errors import InputError, SchemaError
 from procedures.fit.data import split_legs as fit_legs
 from procedures.acquisition.points import check_points, usable_rows_by_leg
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 
 def points():

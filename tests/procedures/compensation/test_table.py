@@ -11,7 +11,7 @@ import pytest
 from drivers.errors import TableRefused
 from drivers.interfaces import TableBank
 from drivers.plant.leg import PlantConfig
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from procedures.engine.errors import InputError
 from procedures.fit import fit
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, read_linuxcnc_comp, write_linuxcnc_comp

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from drivers.plant.leg import PlantConfig
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from procedures.compensation.verify import format_report, verify
 
 

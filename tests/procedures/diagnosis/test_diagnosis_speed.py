@@ -14,7 +14,7 @@ from procedures.diagnosis import diagnose
 from procedures.engine.errors import InputError
 from procedures.io.import_map import convert, load_map
 from procedures.io.recording.reader import read_session
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 
 def on_the_fly(speeds=(5.0, 10.0, 20.0)):

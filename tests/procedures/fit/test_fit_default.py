@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from drivers.plant.leg import PlantConfig, default_leg_configs
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from procedures.engine.errors import InputError
 from procedures.fit import fit, model_to_json
 from procedures.fit.crossval import cycle_folds

@@ -8,7 +8,7 @@ from drivers.plant.leg import PlantConfig
 from procedures.metrology.thermal import (Material, nde_correction_um, normalise_points, normalise_session,
                                           recorded_materials)
 from station.services.config import load_config
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 TARGETS = np.linspace(-90.0, 90.0, 31)
 

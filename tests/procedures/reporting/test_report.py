@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.plant.leg import PlantConfig
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from procedures.engine.errors import InputError
 from procedures.fit import fit
 from procedures.reporting.report import make_report

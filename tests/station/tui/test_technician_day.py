@@ -215,7 +215,7 @@ def irregular_session(tmp_path):
     """Legs 1 and 2 on ISO 230-2 irregular targets: the paper's method refuses them."""
     from drivers.plant.leg import default_leg_configs
     from procedures.acquisition.plans import irregular_targets
-    from station.services.synth import synth_session
+    from procedures.synthetic import synth_session
     from tests.tooling import write_points_session
 
     cfgs = default_leg_configs(seed=0)
