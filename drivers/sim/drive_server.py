@@ -225,10 +225,6 @@ class DriveModel:
             return self._internal.get(name, 0)
         return r.decode(self.regs[a:e])
 
-    def _touched(self, name: str, address: int, count: int) -> bool:
-        """Whether a request at `address` (+`count`) covers register `name` (False if unmapped)."""
-        return name in self._span(address, count)[0]
-
     def _span(self, address: int, count: int) -> tuple[frozenset[str], frozenset[int]]:
         """The registers (names) and table banks a request at `address` (+`count`) covers,
         worked out once per span (a client uses a handful)."""
@@ -550,9 +546,6 @@ class DriveModel:
             return ExcCodes.ILLEGAL_ADDRESS
         self.refresh()
         return self.regs[address : address + count]
-
-    def _bank_of(self, address: int, count: int) -> frozenset[int]:
-        return self._span(address, count)[1]
 
     def write(self, address: int, values: list[int]) -> ExcCodes | None:
         """Apply a register write; returns a Modbus exception code to refuse it (nothing applied)."""

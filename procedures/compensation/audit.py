@@ -57,7 +57,6 @@ from procedures.engine.states import Action, AuditOutcome
 
 AUDIT_VERSION = 1
 ACTIONS = tuple(Action)
-FINAL_PUSH_OUTCOMES = (AuditOutcome.OK, AuditOutcome.FAILED, AuditOutcome.REFUSED, AuditOutcome.CANCELLED)
 
 
 class AuditError(InputError):

@@ -103,12 +103,6 @@ def frequency_grid(leg: LegData) -> np.ndarray:
     return np.arange(1, k_max + 1) / (2 * span)
 
 
-def _aggregate(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    ux, inv = np.unique(x, return_inverse=True)
-    w = np.bincount(inv).astype(float)
-    return ux, np.bincount(inv, y) / w, w
-
-
 def _amplitudes(ss, cc, sc, ys, yc, wsum: float):
     det = ss * cc - sc * sc
     # near the Nyquist frequency of a regular grid sin (or cos) vanishes at every target: such a
@@ -266,10 +260,6 @@ class Twin:
 
     def predict_um(self, leg: int, x_mm, direction) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
-
-    @property
-    def is_external(self) -> bool:
-        return self.kind != "fitted"
 
 
 @dataclass

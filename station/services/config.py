@@ -191,14 +191,6 @@ class MetrologyConfig:
     abbe_offset_mm: float = MD.ABBE_OFFSET_MM
     abbe_angle_u_urad: float = MD.ABBE_ANGLE_U_URAD
 
-    @property
-    def instrument_model(self) -> str:
-        return self.model
-
-    @property
-    def instrument_serial(self) -> str:
-        return self.serial
-
 
 LegMaterial = Material
 """A leg's [legs] material: procedures.metrology.thermal.Material (one class, one set of defaults)."""
