@@ -78,6 +78,23 @@ def test_the_plant_is_pure_physics():
     assert "numpy" in set().union(*imports_of("drivers/plant").values())  # it reads the plant's imports
 
 
+ONE_HOME = {"PlantConfig": "drivers/plant/leg.py", "LegPlant": "drivers/plant/leg.py",
+            "systematic_error_um": "drivers/plant/leg.py", "default_leg_configs": "drivers/plant/leg.py",
+            "synth_session": "procedures/synthetic.py", "plant_twin": "procedures/diagnosis/twin.py"}
+
+
+def test_the_leg_physics_and_the_sessions_made_from_it_have_one_home():
+    """The plant and what is made from it alone are defined once (issue 32: the simulators, the
+    twins and the generators use the plant; none keeps a copy of it)."""
+    found: dict[str, list[str]] = {}
+    for top in ("station", "procedures", "drivers"):
+        for path in sorted((REPO / top).rglob("*.py")):
+            for node in ast.parse(path.read_text()).body:
+                if isinstance(node, (ast.ClassDef, ast.FunctionDef)) and node.name in ONE_HOME:
+                    found.setdefault(node.name, []).append(str(path.relative_to(REPO)))
+    assert found == {name: [home] for name, home in ONE_HOME.items()}
+
+
 def is_command_line(module: str) -> bool:
     return module == "station.commands" or module.startswith("station.commands.")
 
