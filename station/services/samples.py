@@ -37,21 +37,14 @@ FAULT_AFTER_INDEX = 157  # leg 2 run 5 (third upward pass), its 4th target is ne
 
 
 def open_sample_rig(seed: int = SAMPLE_SEED):
-    """The simulated rig of the samples, wired like `open_rig` does (real Modbus TCP and pty)."""
-    from drivers.interferometer.client import SerialInterferometer
-    from drivers.modbus.client import connect_axes
-    from drivers.sim.rig import SimRig
-    from station.services.wiring import Rig
+    """The simulated rig of the samples, opened by the composition root (`open_rig`: real Modbus
+    TCP and pty) on the samples' legs, at time scale 0."""
+    from dataclasses import replace
 
-    sim = SimRig(time_scale=0.0, seed=seed, configs=sample_plant_configs(seed)).start()
-    try:
-        axes = connect_axes(sim.drive_url, (1, 2, 3, 4, 5, 6), sim.profile)
-        laser = SerialInterferometer(sim.laser_port)
-    except Exception:
-        sim.stop()
-        raise
-    return Rig(axes, laser, sim.clock, "sim", f"simulated rig (seed {seed}) for the sample recordings", sim.profile,
-               sim, [sim.stop])
+    from station.services.wiring import open_rig
+
+    cfg = sample_config()
+    return open_rig(replace(cfg, sim=replace(cfg.sim, seed=seed)), time_scale=0.0, leg_configs=sample_plant_configs(seed))
 
 
 def _injector(actions: dict[int, Callable[[], None]], clear_beam: Callable[[ev.Fault], None] | None = None):
