@@ -16,10 +16,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drivers.sim.plant import default_leg_configs  # noqa: E402
-from station.services.synth import synth_session  # noqa: E402
+from drivers.plant.leg import default_leg_configs  # noqa: E402
+from procedures.synthetic import synth_session  # noqa: E402
 from procedures.diagnosis import diagnose  # noqa: E402
-from station.services.twins import plant_twin  # noqa: E402
+from procedures.diagnosis.twin import plant_twin  # noqa: E402
 
 TARGET_S = 1.0  # CPU seconds (issue 25: at most 1 s with the variants tried)
 

@@ -44,7 +44,7 @@ from drivers.modbus.client import connect_axes  # noqa: E402
 from drivers.modbus.profile import DEFAULT_PROFILE, DriveProfile  # noqa: E402
 from drivers.modbus.wire import WireTally, rtu_ms  # noqa: E402
 from drivers.sim.drive_server import SimDriveServer  # noqa: E402
-from drivers.sim.plant import LegPlant, default_leg_configs  # noqa: E402
+from drivers.plant.leg import LegPlant, default_leg_configs  # noqa: E402
 from procedures.engine import events as ev  # noqa: E402
 from procedures.acquisition.plans import SweepPlan, onthefly_plan, uniform_targets  # noqa: E402
 from procedures.engine.runner import CallbackSink  # noqa: E402

@@ -25,8 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drivers.sim.plant import default_leg_configs  # noqa: E402
-from station.services.synth import synth_session  # noqa: E402
+from drivers.plant.leg import default_leg_configs  # noqa: E402
+from procedures.synthetic import synth_session  # noqa: E402
 from procedures.fit import fit_leg  # noqa: E402
 from procedures.fit.data import split_legs  # noqa: E402
 from procedures.fit.model import FitStats  # noqa: E402

@@ -87,7 +87,7 @@ from procedures.io.recording.reader import read_session  # noqa: E402
 from procedures.compensation.table import make_table  # noqa: E402
 from procedures.fit.reversal_probes import is_probe  # noqa: E402
 from procedures.io.recording.schema import POINT_DTYPE  # noqa: E402
-from drivers.sim.plant import systematic_error_um  # noqa: E402
+from drivers.plant.leg import systematic_error_um  # noqa: E402
 from station.services.config import StationConfig  # noqa: E402
 from station.services.jobs import run_sweep  # noqa: E402
 from station.services.table_jobs import push_legs_job, verify_job  # noqa: E402
@@ -121,7 +121,7 @@ plan, so every plan's table is verified against the same noise and pass offsets 
 
 
 def oracle_points(cfgs, legs: tuple[int, ...]) -> np.ndarray:
-    """The simulated legs' own static error at 20 degC (drivers.sim.plant.systematic_error_um,
+    """The simulated legs' own static error at 20 degC (drivers.plant.leg.systematic_error_um,
     no noise, no load, no drift) at the paper's 361 targets, two cycles: what a perfect
     calibration would measure. Only a simulation knows it."""
     x = np.linspace(-90.0, 90.0, 361)

@@ -25,12 +25,12 @@ BASE = frozenset({"lead", "longwave", "wobble", "noise", "run_offset"})
 
 def _make(out: Path) -> None:
     sys.path.insert(0, str(HERE))
-    from drivers.sim.plant import default_leg_configs, systematic_error_um
+    from drivers.plant.leg import default_leg_configs, systematic_error_um
     from procedures.diagnosis import DiagnosisSettings
     from procedures.diagnosis.selfcheck import Trial, oracle_rms_um
-    from station.services.selfcheck import selfcheck_trial
-    from station.services.synth import synth_session
-    from station.services.twins import plant_twin
+    from procedures.synthetic import selfcheck_trial
+    from procedures.synthetic import synth_session
+    from procedures.diagnosis.twin import plant_twin
 
     out.mkdir(parents=True, exist_ok=True)
     meta = {}

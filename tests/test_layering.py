@@ -51,16 +51,48 @@ def test_drivers_import_neither_procedures_nor_station():
 
 
 def test_procedures_see_only_driver_interfaces_and_no_front_end():
+    """Of drivers/, procedures see the interfaces (and their errors and atomic writes) and the plant
+    (drivers/plant): the leg's physics is a model, not a device (numpy only, no I/O, no protocol), and
+    the diagnosis' simulated-plant twin and the synthetic sessions need the same physics the
+    simulated devices run on, not a copy of it. No concrete device: not drivers.sim, drivers.modbus..."""
     def allowed(m: str) -> bool:
         top = m.split(".")[0]
         if top in ("station", "textual", "textual_plotext"):
             return False
         if top == "drivers":
-            return m in ("drivers.interfaces", "drivers.errors", "drivers.atomic")
+            return m in ("drivers.interfaces", "drivers.errors", "drivers.atomic") or m.startswith("drivers.plant.")
         return True
 
     bad = offending("procedures", allowed)
     assert not bad, "\n".join(bad)
+
+
+PLANT_MAY_IMPORT = {"__future__", "math", "dataclasses", "numpy"}
+
+
+def test_the_plant_is_pure_physics():
+    """drivers/plant, which procedures may import, holds the leg's physics alone: numpy and a few
+    standard modules, nothing of the devices, the protocols, files or the other layers."""
+    bad = offending("drivers/plant", lambda m: m.split(".")[0] in PLANT_MAY_IMPORT or m.startswith("drivers.plant."))
+    assert not bad, "\n".join(bad)
+    assert "numpy" in set().union(*imports_of("drivers/plant").values())  # it reads the plant's imports
+
+
+ONE_HOME = {"PlantConfig": "drivers/plant/leg.py", "LegPlant": "drivers/plant/leg.py",
+            "systematic_error_um": "drivers/plant/leg.py", "default_leg_configs": "drivers/plant/leg.py",
+            "synth_session": "procedures/synthetic.py", "plant_twin": "procedures/diagnosis/twin.py"}
+
+
+def test_the_leg_physics_and_the_sessions_made_from_it_have_one_home():
+    """The plant and what is made from it alone are defined once (issue 32: the simulators, the
+    twins and the generators use the plant; none keeps a copy of it)."""
+    found: dict[str, list[str]] = {}
+    for top in ("station", "procedures", "drivers"):
+        for path in sorted((REPO / top).rglob("*.py")):
+            for node in ast.parse(path.read_text()).body:
+                if isinstance(node, (ast.ClassDef, ast.FunctionDef)) and node.name in ONE_HOME:
+                    found.setdefault(node.name, []).append(str(path.relative_to(REPO)))
+    assert found == {name: [home] for name, home in ONE_HOME.items()}
 
 
 def is_command_line(module: str) -> bool:

@@ -60,12 +60,12 @@ def write_points_session(path, points):
 
 
 def default_legs_points(legs=range(1, 7), cycles: int = 3, step_mm: float = 3.0, seed: int = 0):
-    """Points of a small synthetic sweep straight from the simulated plant (station.services.synth, no
+    """Points of a small synthetic sweep straight from the simulated plant (procedures.synthetic, no
     protocol layer): `legs` of the default leg configs, uniform targets -90..90 mm."""
     import numpy as np
 
-    from drivers.sim.plant import default_leg_configs
-    from station.services.synth import synth_session
+    from drivers.plant.leg import default_leg_configs
+    from procedures.synthetic import synth_session
 
     cfgs = {leg: c for leg, c in zip(range(1, 7), default_leg_configs(seed=seed)) if leg in legs}
     return synth_session(cfgs, np.arange(-90.0, 90.01, step_mm), cycles=cycles, seed=seed)

@@ -82,8 +82,6 @@ PR_COMMANDS = ("servo_on", "servo_off", "run_path", "stop_path", "alarm_reset")
 REQUIRED_HEADER = ("point_count", "start_position", "spacing", "units", "checksum", "valid")
 REQUIRED_FAULTS = ("soft_limit",)
 
-STATES = tuple(DriveState)  # the CiA 402 states a statusword decodes to
-
 
 class ProfileError(DriverError, ValueError):
     """A drive profile file is missing, unreadable or inconsistent (a DriverError, so the

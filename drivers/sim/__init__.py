@@ -1,1 +1,1 @@
-"""Simulated leg rig: the plant (digital twin) behind real Modbus and serial protocols."""
+"""Simulated leg rig: the plant (drivers/plant, the digital twin) behind real Modbus and serial protocols."""

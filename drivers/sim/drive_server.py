@@ -64,7 +64,7 @@ from drivers.modbus.profile import DriveProfile
 from drivers.sim import device_id
 from drivers.sim.modbus_tcp import MbapServer, NoReply
 from drivers.sim.motion import SmoothedMove
-from drivers.sim.plant import LegPlant
+from drivers.plant.leg import LegPlant
 from drivers.sim.position_compare import PositionCompare, TriggerLine
 from drivers.states import DriveState
 
@@ -224,10 +224,6 @@ class DriveModel:
         if r is None:
             return self._internal.get(name, 0)
         return r.decode(self.regs[a:e])
-
-    def _touched(self, name: str, address: int, count: int) -> bool:
-        """Whether a request at `address` (+`count`) covers register `name` (False if unmapped)."""
-        return name in self._span(address, count)[0]
 
     def _span(self, address: int, count: int) -> tuple[frozenset[str], frozenset[int]]:
         """The registers (names) and table banks a request at `address` (+`count`) covers,
@@ -550,9 +546,6 @@ class DriveModel:
             return ExcCodes.ILLEGAL_ADDRESS
         self.refresh()
         return self.regs[address : address + count]
-
-    def _bank_of(self, address: int, count: int) -> frozenset[int]:
-        return self._span(address, count)[1]
 
     def write(self, address: int, values: list[int]) -> ExcCodes | None:
         """Apply a register write; returns a Modbus exception code to refuse it (nothing applied)."""
@@ -1070,7 +1063,7 @@ class SimDriveServer:
 
 def main(argv: list[str] | None = None) -> int:
     from drivers.clock import VirtualClock
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
 
     ap = argparse.ArgumentParser(prog="python -m drivers.sim.drive_server", description="Simulated leg servo drives (Modbus).")
     ap.add_argument("--port", type=int, default=0, help="Modbus TCP port on 127.0.0.1 (0 = any free)")

@@ -24,7 +24,7 @@ import numpy as np
 
 from drivers.interferometer import protocol as p
 from drivers.interfaces import Clock
-from drivers.sim.plant import LegPlant
+from drivers.plant.leg import LegPlant
 
 GARBAGE_KINDS = ("checksum", "truncated", "noise", "unterminated")
 _DEFAULT_GARBAGE_CYCLE = ("checksum", "truncated", "noise")  # the ones a client detects at once

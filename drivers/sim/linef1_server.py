@@ -39,7 +39,7 @@ import numpy as np
 
 from drivers.interfaces import Clock
 from drivers.linef1 import protocol as lf
-from drivers.sim.plant import LegPlant
+from drivers.plant.leg import LegPlant
 
 FAULT_KINDS = ("crc", "cut", "gap", "beam", "overflow", "no_ack")
 LOST_COUNT_MM = 0.3172  # where a lost count leaves the reading: off by a whole number of fringes, far from right
@@ -291,7 +291,7 @@ class SimLineF1:
         return bytes(out)
 
     def _distances(self, times_s: list[float]) -> bytes:
-        """The frames due at `times_s`: the plant read once for the batch (drivers.sim.plant
+        """The frames due at `times_s`: the plant read once for the batch (drivers.plant.leg
         LegPlant.measured_positions_mm), each frame with its own noise and faults."""
         with self.lock:
             plant = self.plants.get(self.leg) if self.leg is not None else None

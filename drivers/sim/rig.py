@@ -15,7 +15,7 @@ from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
 from drivers.sim.interferometer_server import SimInterferometer
 from drivers.sim.position_compare import TriggerLine
-from drivers.sim.plant import LegPlant, PlantConfig, default_leg_configs
+from drivers.plant.leg import LegPlant, PlantConfig, default_leg_configs
 
 
 @dataclass

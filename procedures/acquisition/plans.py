@@ -150,11 +150,6 @@ class SweepPlan:
         order = self.speeds_mm_s if rnd % 2 == 0 else self.speeds_mm_s[::-1]
         return float(order[k])
 
-    @property
-    def cycles_per_round(self) -> int:
-        """Cycles of one round: every speed once (1 for stop-and-go)."""
-        return max(1, len(self.speeds_mm_s))
-
     # -- expansion -----------------------------------------------------------------------
     @property
     def points_per_leg(self) -> int:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from drivers.plant.leg import LEAD_MM
 from procedures.diagnosis.effects import EFFECTS
 from procedures.diagnosis.legdata import LegData, split_legs
 from procedures.diagnosis.selection import LegProblem
@@ -99,7 +100,7 @@ def _wls_coef(leg: LegData, basis: PositionBasis, y: np.ndarray) -> np.ndarray:
     return solve_gram(bw.T @ bw, bw.T @ (m * np.sqrt(w)))
 
 
-def reference_fit(leg: LegData, lead_mm: float | None = 5.0) -> PositionFit:
+def reference_fit(leg: LegData, lead_mm: float | None = LEAD_MM) -> PositionFit:
     """The twin of a leg of a reference recording: its position-only twin chosen with the
     reference's own effects (backlash, thermal, load, drift: fitted jointly, as nuisance) taken out
     of the error, where they would act as noise and keep the twin coarse, then completed with
@@ -124,7 +125,7 @@ def reference_fit(leg: LegData, lead_mm: float | None = 5.0) -> PositionFit:
 
 
 def twin_from_recording(points: np.ndarray, source: str = "the reference recording",
-                        normalised_points: np.ndarray | None = None, lead_mm: float | None = 5.0) -> ExternalTwin:
+                        normalised_points: np.ndarray | None = None, lead_mm: float | None = LEAD_MM) -> ExternalTwin:
     """A fixed twin: the position-only twin fitted on every pass of another recording
     (`reference_fit`: chosen with the reference's own effects taken out, with every periodic
     term the reference resolves, the `lead_mm` wobble included).

@@ -2,8 +2,8 @@
 withheld from the twin; does the diagnosis name them, only them, with the right parameters, and
 does the gap shrink as far as the oracle's (the twin with the true effect added)?
 
-The sessions come from the caller (station builds them with the simulated plant, so procedures
-never import the simulator): a `Trial` carries the points, the twin, the true effects and their
+The sessions come from the caller (procedures/synthetic.py makes them from the plant, drivers/plant):
+a `Trial` carries the points, the twin, the true effects and their
 true contribution to every point.
 """
 

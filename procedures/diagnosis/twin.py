@@ -7,8 +7,8 @@ fitted by least squares at the real positions, so irregular spacing is fine and 
 ring), their number chosen by cross-validation over held-out cycles.
 
 An external twin is anything with `predict_um(leg, x_mm, direction) -> error_um` (measured minus
-commanded, um): a saved leg-error model, a twin fitted on a reference recording, or the simulated
-plant's own systematic error (built by the caller, so procedures never import the simulator).
+commanded, um): a saved leg-error model, a twin fitted on a reference recording, or the plant's own
+systematic error (`plant_twin`: the leg's physics of drivers/plant, which the simulated devices run on).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 from scipy.linalg import solve_triangular
 
+from drivers.plant.leg import PlantConfig, systematic_error_um
 from procedures.diagnosis.legdata import LegData
 from procedures.diagnosis.significance import condition_number, solve_gram
 from procedures.vocabulary import InputError
@@ -100,12 +101,6 @@ def frequency_grid(leg: LegData) -> np.ndarray:
     f_nyq = 0.5 / leg.spacing_mm
     k_max = int(min(np.floor(f_nyq * 2 * span), 800))
     return np.arange(1, k_max + 1) / (2 * span)
-
-
-def _aggregate(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    ux, inv = np.unique(x, return_inverse=True)
-    w = np.bincount(inv).astype(float)
-    return ux, np.bincount(inv, y) / w, w
 
 
 def _amplitudes(ss, cc, sc, ys, yc, wsum: float):
@@ -266,10 +261,6 @@ class Twin:
     def predict_um(self, leg: int, x_mm, direction) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
-    @property
-    def is_external(self) -> bool:
-        return self.kind != "fitted"
-
 
 @dataclass
 class ExternalTwin(Twin):
@@ -315,3 +306,15 @@ def twin_from_model(model, source: str = "a saved model") -> ExternalTwin:
         description=f"leg-error model {source}",
         legs=legs_set,
     )
+
+
+def plant_twin(cfgs: dict[int, PlantConfig], description: str) -> ExternalTwin:
+    """The plant's systematic error as a twin (leg number -> plant configuration): position terms
+    only (direction 0, temperature at the reference, no load, time 0), so backlash, thermal, load
+    and drift are left in the gap."""
+
+    def predict(leg, x_mm, direction):
+        cfg = cfgs[leg]
+        return systematic_error_um(cfg, x_mm, 0.0, cfg.temp_ref_c, 0.0, 0.0)
+
+    return ExternalTwin(predict=predict, kind="sim", description=description, legs=frozenset(cfgs))

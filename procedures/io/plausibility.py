@@ -79,11 +79,6 @@ class Implausible:
         return f"{self.where} = {self.value:g}: {self.slip}"
 
 
-def fahrenheit_slip(value_c: float) -> str:
-    return (f"looks like degF in a degC field ({value_c:g} degF = {(value_c - 32.0) * 5.0 / 9.0:.1f} degC; a "
-            f"workshop and a leg are rarely above {FAHRENHEIT_FROM_C:g} degC)")
-
-
 def nm_slip(value_um: float) -> str:
     return (f"looks like nm in an um field ({value_um:g} nm = {value_um / 1000.0:g} um; a ball-screw leg is off by "
             f"micrometres to tens of micrometres, not {NM_FROM_UM:g} um and more)")

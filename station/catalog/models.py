@@ -107,11 +107,6 @@ class CertificateRecord(Record):
     __mapper_args__ = {"polymorphic_identity": "certificate"}
 
 
-RECORD_CLASSES = {cls.__mapper_args__["polymorphic_identity"]: cls for cls in
-                  (SessionRecord, ModelRecord, TableRecord, PushRecord, VerificationRecord, RollbackRecord, ReportRecord,
-                   CertificateRecord)}
-
-
 class RecordLeg(Base):
     """One leg of a record: its serial (None when the file names none), the drive and table it
     concerns, and the key figures (um; U with k = 2)."""

@@ -20,8 +20,7 @@ from typing import TYPE_CHECKING
 
 from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
-from station.services.selfcheck_variants import PHYSICS as VARIANT_PHYSICS
-from station.services.selfcheck import SELF_CHECK_CONTRIBUTION_UM
+from station.services.diagnosis_jobs import PHYSICS as VARIANT_PHYSICS, SELF_CHECK_CONTRIBUTION_UM
 
 if TYPE_CHECKING:
     from procedures.diagnosis import DiagnosisSettings
@@ -135,7 +134,7 @@ def _catalog_engine(args):
 # -- self-check -----------------------------------------------------------------------------------
 def _self_check(args, settings: DiagnosisSettings) -> int:
     from procedures.diagnosis.selfcheck import format_self_check, run_self_check
-    from station.services.selfcheck import selfcheck_trial
+    from station.services.diagnosis_jobs import selfcheck_trial
 
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     if args.variants:
@@ -160,7 +159,7 @@ def _variant_check(args, settings: DiagnosisSettings, seeds) -> int:
     parameters within 15 %, gap within 25 % of the oracle's."""
     from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, format_by_physics,
                                                 format_self_check, run_self_check, summarise_by_physics)
-    from station.services.selfcheck_variants import variant_trial
+    from station.services.diagnosis_jobs import variant_trial
 
     physics = [p.strip() for p in args.variants.split(",") if p.strip()]
     unknown = sorted(set(physics) - set(VARIANT_PHYSICS))

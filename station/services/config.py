@@ -102,7 +102,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from drivers.sim.plant import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
+from drivers.plant.leg import LEG_JERK_MM_S3 as SIM_LEG_JERK_MM_S3
 from procedures.reporting.decision import Tolerance, parse_tolerances
 from procedures.vocabulary import InputError
 from procedures.io.numbers import NotANumber, finite_float
@@ -149,17 +149,17 @@ class SimConfig:
     ambient_ramp_k_per_h: float = 0.0  # the simulated hall warms by this (a leg warming during a sweep)
     thermal_tau_s: float = 1800.0  # how fast the simulated legs' material follows the hall
     # the simulated drives' jerk limit, mm/s^3 (0 = not limited): a real leg's by default, so the
-    # rig time a user sees for any plan is a real leg's (drivers.sim.plant LEG_JERK_MM_S3); the
-    # sample recordings pin 0, the setting they were made with (station/services/samples.py)
+    # rig time a user sees for any plan is a real leg's (drivers.plant.leg LEG_JERK_MM_S3); the
+    # sample recordings pin 0, the setting they were made with (procedures.synthetic.SAMPLE_JERK_MM_S3)
     jerk_mm_s3: float = SIM_LEG_JERK_MM_S3
     # um added to every simulated laser reading after its zero (a station bias; 0 = off, so the
     # sample recordings stay identical): the station comparison's acceptance test (docs/decisions.md)
     laser_offset_um: float = 0.0
 
     def leg_configs(self) -> list:
-        """The simulated legs' plant configurations (drivers.sim.plant) for this seed, ramp, time
+        """The simulated legs' plant configurations (drivers.plant.leg) for this seed, ramp, time
         constant and jerk limit."""
-        from drivers.sim.plant import PlantConfig, default_leg_configs
+        from drivers.plant.leg import PlantConfig, default_leg_configs
 
         return default_leg_configs(self.seed, base=PlantConfig(ambient_ramp_k_per_h=self.ambient_ramp_k_per_h,
                                                                tau_s=self.thermal_tau_s,
@@ -190,14 +190,6 @@ class MetrologyConfig:
     misalignment_mm: float = MD.MISALIGNMENT_MM
     abbe_offset_mm: float = MD.ABBE_OFFSET_MM
     abbe_angle_u_urad: float = MD.ABBE_ANGLE_U_URAD
-
-    @property
-    def instrument_model(self) -> str:
-        return self.model
-
-    @property
-    def instrument_serial(self) -> str:
-        return self.serial
 
 
 LegMaterial = Material

@@ -10,6 +10,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+# The self-check's sessions (`station diagnose --self-check`) are made from the plant alone, with the
+# other synthetic sessions (procedures/synthetic.py); the front ends take them from here.
+from procedures.synthetic import PHYSICS, SELF_CHECK_CONTRIBUTION_UM, selfcheck_trial, variant_trial  # noqa: F401
+
 
 def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings: Any = None
                      ) -> tuple[dict, list[str]]:

@@ -23,8 +23,6 @@ from procedures.io.recording.identity import (InstrumentIdentity, LegIdentity, S
 STAGES = ("calibration", "verification", "other")
 LEG_KEYS = ("serial", "part_number", "leg_type", "screw_lot")
 LASER_KEYS = ("laser_model", "laser_serial", "laser_calibrated_on", "laser_calibration_due")
-MAP_KEYS = LEG_KEYS + ("station", "stage", "measured_utc") + LASER_KEYS
-"""The keys of a map's [identity] section (procedures/io/import_map.py)."""
 
 
 @dataclass

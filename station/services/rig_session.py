@@ -33,7 +33,6 @@ JOG_SPEED_FRACTION = 0.25
 # How long a rig action waits for the lock before it is refused as "busy", and a job.
 ACTION_LOCK_WAIT_S = 5.0
 JOB_LOCK_WAIT_S = 10.0
-RIG_ACTIONS = ("enable", "disable", "home", "reset", "stop", "move")
 # Drive states a move is refused in, as the refusal names them (fault is refused separately).
 _NOT_ENABLED_TEXT = {
     "switch_on_disabled": "disabled",

@@ -1,5 +1,7 @@
 """The sample sessions of recordings/ (`station recordings`, recordings/README.md): the simulated
-legs and rig they are made on, and how each is made (faults injected at fixed points).
+rig they are made on and how each is made (faults injected at fixed points). Their legs are the
+plant's (procedures.synthetic.sample_plant_configs, beside the other sessions made from the plant);
+this one needs the simulated devices (real Modbus TCP and pty), so it stays in the station layer.
 
 Deterministic: fixed seeds on the virtual clock (`station recordings` regenerates them).
 
@@ -17,58 +19,32 @@ Deterministic: fixed seeds on the virtual clock (`station recordings` regenerate
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
 from procedures.engine import events as ev
 from procedures.acquisition.plans import iso230_plan, paper_plan
 from procedures.engine.runner import CallbackSink
+from procedures.synthetic import SAMPLE_JERK_MM_S3, SAMPLE_SEED, sample_plant_configs
 from station.services.config import SimConfig, StationConfig
 
 SAMPLES = ("calibration", "verification", "fault")
 FILES = {"calibration": "calibration-6legs.h5", "verification": "verification-6legs.h5", "fault": "fault-beam-break.h5"}
-SEED = 1
-LOADS_N = (150.0, 150.0, 450.0, 450.0)  # axial load per pass: changes between bidirectional cycles
-AMBIENT_SWING_K = 0.3
-AMBIENT_PERIOD_S = 2.0 * 3600.0
 CAL_BEAM_BREAK = (3, 1000)  # (leg, point of that leg after which its beam is interrupted once)
 CAL_DRIVE_FAULT = (5, 2000)  # (leg, point of that leg after which its drive faults once)
 FAULT_LEG = 2
 FAULT_AFTER_INDEX = 157  # leg 2 run 5 (third upward pass), its 4th target is never measured
-# the drives' jerk limit the samples were made with (0 = not limited): pinned, not the station's
-# sim default (a real leg's, station.services.config.SimConfig.jerk_mm_s3), so recordings/*.h5 regenerate
-# point for point; recorded in each sample's station_config as sim.jerk_mm_s3
-JERK_MM_S3 = 0.0
 
 
-def plant_configs(seed: int = SEED):
-    """The six legs of the samples: the simulator's default legs with the load and the room
-    temperature changing during the session, so that thermal, load and drift effects are all
-    present and separable."""
-    from drivers.sim.plant import PlantConfig, default_leg_configs
+def open_sample_rig(seed: int = SAMPLE_SEED):
+    """The simulated rig of the samples, opened by the composition root (`open_rig`: real Modbus
+    TCP and pty) on the samples' legs, at time scale 0."""
+    from dataclasses import replace
 
-    base = replace(PlantConfig(), load_per_pass_n=LOADS_N, ambient_swing_k=AMBIENT_SWING_K,
-                   ambient_period_s=AMBIENT_PERIOD_S, jerk_mm_s3=JERK_MM_S3)
-    return default_leg_configs(seed, 6, base)
+    from station.services.wiring import open_rig
 
-
-def open_sample_rig(seed: int = SEED):
-    """The simulated rig of the samples, wired like `open_rig` does (real Modbus TCP and pty)."""
-    from drivers.interferometer.client import SerialInterferometer
-    from drivers.modbus.client import connect_axes
-    from drivers.sim.rig import SimRig
-    from station.services.wiring import Rig
-
-    sim = SimRig(time_scale=0.0, seed=seed, configs=plant_configs(seed)).start()
-    try:
-        axes = connect_axes(sim.drive_url, (1, 2, 3, 4, 5, 6), sim.profile)
-        laser = SerialInterferometer(sim.laser_port)
-    except Exception:
-        sim.stop()
-        raise
-    return Rig(axes, laser, sim.clock, "sim", f"simulated rig (seed {seed}) for the sample recordings", sim.profile,
-               sim, [sim.stop])
+    cfg = sample_config()
+    return open_rig(replace(cfg, sim=replace(cfg.sim, seed=seed)), time_scale=0.0, leg_configs=sample_plant_configs(seed))
 
 
 def _injector(actions: dict[int, Callable[[], None]], clear_beam: Callable[[ev.Fault], None] | None = None):
@@ -137,5 +113,5 @@ def make_fault(rig, out: Path, cfg: StationConfig):
 
 
 def sample_config() -> StationConfig:
-    """The config recorded in each sample: it says how its rig moved (sim.jerk_mm_s3 = JERK_MM_S3)."""
-    return StationConfig(operator="station recordings", sim=SimConfig(jerk_mm_s3=JERK_MM_S3))
+    """The config recorded in each sample: it says how its rig moved (sim.jerk_mm_s3 = SAMPLE_JERK_MM_S3)."""
+    return StationConfig(operator="station recordings", sim=SimConfig(jerk_mm_s3=SAMPLE_JERK_MM_S3))

@@ -1,8 +1,8 @@
-"""Twins of the diagnosis built from files, the simulated plant or the catalog, for both front
-ends (`station diagnose --twin`, the terminal UI's Diagnosis page): MODEL.json, REFERENCE.h5,
-sim:CONFIG.toml, sim:default or fleet:TYPE. The simulated plant's systematic error is made a twin
-here, in the station layer, so procedures never import the simulator; the fleet twin reads the
-catalog and the session files it names."""
+"""Twins of the diagnosis built from files, the plant or the catalog, for both front ends
+(`station diagnose --twin`, the terminal UI's Diagnosis page): MODEL.json, REFERENCE.h5,
+sim:CONFIG.toml, sim:default or fleet:TYPE. The plant's twin is procedures.diagnosis.twin.plant_twin;
+here its legs are read (a TOML file), and the fleet twin reads the catalog and the session files it
+names."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.diagnosis.reference_twin import twin_from_recording
-from procedures.diagnosis.twin import ExternalTwin, twin_from_model
+from procedures.diagnosis.twin import ExternalTwin, plant_twin, twin_from_model
 from procedures.vocabulary import InputError
 
 
@@ -57,7 +57,7 @@ def _plant_configs(spec: str) -> dict:
         [leg.2]                 # fields for one leg
         reversal_um = 1.2
     """
-    from drivers.sim.plant import PlantConfig, default_leg_configs
+    from drivers.plant.leg import PlantConfig, default_leg_configs
 
     if spec in ("", "default"):
         return {i + 1: c for i, c in enumerate(default_leg_configs(0))}
@@ -102,18 +102,6 @@ def _plant_configs(spec: str) -> dict:
             raise InputError(f"{path}: [leg.{key}]: expected a leg number") from None
         cfgs[leg] = apply(cfgs.get(leg, PlantConfig()), table, f"leg.{key}")
     return cfgs
-
-
-def plant_twin(cfgs: dict, description: str) -> ExternalTwin:
-    """The plant's systematic error as a twin: position terms only (direction 0, temperature at
-    the reference, no load, time 0), so backlash/thermal/load/drift are left in the gap."""
-    from drivers.sim.plant import systematic_error_um
-
-    def predict(leg, x_mm, direction):
-        cfg = cfgs[leg]
-        return systematic_error_um(cfg, x_mm, 0.0, cfg.temp_ref_c, 0.0, 0.0)
-
-    return ExternalTwin(predict=predict, kind="sim", description=description, legs=frozenset(cfgs))
 
 
 def sim_twin(spec: str) -> ExternalTwin:

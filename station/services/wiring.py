@@ -56,12 +56,14 @@ class Rig:
 
 @holds_drive_lock(whole_rig=True)  # a leg another station process uses is refused (station/services/drive_lock.py)
 def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | None = None,
-             noise_seed: int | None = None) -> Rig:
+             noise_seed: int | None = None, leg_configs: list | None = None) -> Rig:
     """Connect to the rig named by `cfg`; on "sim" start the simulated rig in-process first.
 
     `noise_seed` (simulated rig only): seed of the measurement noise and pass offsets, so a
     later session (a verification) sees new noise on the same plant (`cfg.sim.seed`); None =
-    the plant seed, which repeats a session's noise exactly."""
+    the plant seed, which repeats a session's noise exactly. `leg_configs` (simulated rig only):
+    the legs' plant configurations (drivers.plant.leg.PlantConfig, leg 1 first); None =
+    `cfg.sim.leg_configs()` (the sample recordings bring their own legs)."""
     cfg.check_devices()  # a mixed config (one device simulated) is never opened, whichever front end asks
     profile = DriveProfile.load(cfg.drive.profile or None)
     if cfg.is_sim:
@@ -71,7 +73,8 @@ def open_rig(cfg: StationConfig, legs=(1, 2, 3, 4, 5, 6), time_scale: float | No
         nv = Path(cfg.sim.nv_path) if cfg.sim.nv_path else None
         # the plant is always cfg.sim.seed's; only the noise follows noise_seed
         seed = cfg.sim.seed if noise_seed is None else int(noise_seed)
-        sim = SimRig(time_scale=scale, seed=seed, configs=cfg.sim.leg_configs(), nv_path=nv, profile=profile,
+        configs = cfg.sim.leg_configs() if leg_configs is None else leg_configs
+        sim = SimRig(time_scale=scale, seed=seed, configs=configs, nv_path=nv, profile=profile,
                      laser_offset_um=cfg.sim.laser_offset_um, **sim_rig_laser_options(cfg)).start()
         try:
             axes = _connect_legs(cfg, sim.drive_url, legs, profile, clock=sim.clock)

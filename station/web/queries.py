@@ -20,7 +20,6 @@ within `[catalog] compare_window_days`; |E_n| > 1 flags a disagreement beyond bo
 from __future__ import annotations
 
 import math
-import statistics
 from dataclasses import dataclass, field
 from itertools import combinations
 

@@ -10,13 +10,13 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.compensation.audit import AuditEntry
 from procedures.compensation.table import CompTable, LegTable, table_csv_text
 from station.catalog.readers import audit_recs, session_rec, table_rec
 from station.catalog.store import Catalog
 from station.cli import main
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.tooling import lab_config, write_identified_session
 
 TOL = {"HX300": {"as_found_um": {"E": 25.0, "B": 6.0, "R": 3.0}, "as_left_um": {"E": 0.001}, "source": "recorded"}}

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from station.cli import main
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.tooling import write_identified_session
 
 TOL = {"HX300": {"as_found_um": {"E": 25.0, "B": 6.0, "R": 3.0}, "as_left_um": {"E": 3.0}, "source": "recorded",

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.compensation import controllers
 from procedures.fit import load_model
 from procedures.compensation.table import make_table
 from station.cli import main
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.tooling import write_points_session as write_session
 
 CFG = PlantConfig(reversal_um=2.0).only("backlash", "lead", "longwave", "wobble", "noise")

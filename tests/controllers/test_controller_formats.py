@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from drivers.errors import TableRefused
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.compensation.controllers import ecmc, heidenhain, linuxcnc, siemens840d, twincat
 from procedures.compensation.controllers.common import ControllerFileError
 from procedures.fit import fit
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS
 from procedures.compensation.table import CompTable, LegTable, make_table
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 X = np.concatenate([np.linspace(-95, 95, 397), [-90.0, 0.0, 90.0]])  # between points, on them, beyond the table
 

@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.compensation.controllers import linuxcnc
 from procedures.fit import fit
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS
 from procedures.compensation.table import make_table
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 HERE = Path(__file__).resolve().parent
 DISPLAY = HERE / "linuxcnc_display.py"

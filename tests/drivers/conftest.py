@@ -13,7 +13,7 @@ from drivers.clock import VirtualClock
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, PlantConfig, default_leg_configs
+from drivers.plant.leg import LegPlant, PlantConfig, default_leg_configs
 
 
 @pytest.fixture(autouse=True, scope="session")

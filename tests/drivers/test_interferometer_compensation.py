@@ -13,7 +13,7 @@ from drivers.clock import VirtualClock
 from drivers.interferometer import protocol as p
 from drivers.interferometer.client import SerialInterferometer
 from drivers.sim.interferometer_server import SimInterferometer
-from drivers.sim.plant import LegPlant, PlantConfig
+from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.acquisition.sweep import laser_compensation_record
 
 

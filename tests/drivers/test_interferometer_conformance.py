@@ -8,7 +8,7 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.interferometer.client import SerialInterferometer
 from drivers.sim.interferometer_server import SimInterferometer
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 
 import interferometer_conformance as conformance
 

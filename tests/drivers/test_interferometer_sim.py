@@ -18,7 +18,7 @@ from drivers.errors import BeamBreak, CommTimeout, DriverError, FramingError
 from drivers.interferometer.client import SerialInterferometer
 from drivers.interferometer.protocol import ERR_BAD_AXIS, InstrumentError
 from drivers.sim.interferometer_server import SimInterferometer
-from drivers.sim.plant import LegPlant, PlantConfig
+from drivers.plant.leg import LegPlant, PlantConfig
 
 # quiet legs: the error sources stay, noise and run-to-run offsets are small
 QUIET = PlantConfig(noise_um=0.005, run_offset_um=0.0)

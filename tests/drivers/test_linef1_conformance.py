@@ -8,7 +8,7 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.linef1 import LineF1Interferometer
 from drivers.sim.linef1_server import SimLineF1
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 
 import interferometer_conformance as conformance
 

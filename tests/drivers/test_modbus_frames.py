@@ -20,7 +20,7 @@ from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, RequestRefused, connect_axes
 from drivers.modbus.profile import DEFAULT_PROFILE, DriveProfile, ProfileError
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 from tests.tooling import require_tool
 
 PROFILES_DIR = DEFAULT_PROFILE.parent

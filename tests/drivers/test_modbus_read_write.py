@@ -19,7 +19,7 @@ from drivers.modbus.client import ModbusBus, ModbusServoAxis, RequestRefused
 from drivers.modbus.profile import DEFAULT_PROFILE, DriveProfile, ProfileError
 from drivers.modbus.wire import WireTally, rtu_frame_bytes, rtu_ms
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 
 pytestmark = pytest.mark.filterwarnings("ignore:isSet:DeprecationWarning")  # inside modbus-tk
 

@@ -11,7 +11,7 @@ import pytest
 
 from drivers.errors import CommTimeout, DriveFault, SoftLimitError
 from drivers.modbus.client import BusConfigError, ModbusBus, RequestRefused, connect_axes
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 
 
 def _raw_cw(sd, bus, leg: int, cw: int) -> int:

@@ -15,7 +15,7 @@ from drivers.errors import CommTimeout, TableError
 from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis, RequestRefused, table_registers
 from drivers.sim.drive_server import NvError, SimDriveServer
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from tests.tooling import kill_process, start_drive_process
 
 
@@ -68,7 +68,7 @@ def test_table_corrects_a_leg_with_errors(sim_drives):
         ax.move_to(t)
         sd.clock.sleep(cfg.settling_time_s)  # read the settled leg, after its ring-out (a sweep's dwell)
         uncorrected.append(abs(plant.true_position_mm(sd.clock.now()) - t) * 1000.0)
-    from drivers.sim.plant import systematic_error_um
+    from drivers.plant.leg import systematic_error_um
 
     start, spacing, n = -50.0, 0.25, 401
     xs = [start + i * spacing for i in range(n)]
@@ -180,7 +180,7 @@ def test_tables_survive_a_restart_in_nv_memory(sim_drives, tmp_path):
 
 def test_unreadable_nv_memory_is_explained(tmp_path, profile):
     from drivers.clock import VirtualClock
-    from drivers.sim.plant import LegPlant
+    from drivers.plant.leg import LegPlant
 
     nv = tmp_path / "nv.json"
     nv.write_text("{ half a file")

@@ -16,7 +16,7 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 from modbus_tk import defines as cst  # an independent client
 from modbus_tk import modbus_tcp
 

@@ -15,7 +15,7 @@ from drivers.interferometer.client import SerialInterferometer
 from drivers.interferometer.protocol import InstrumentError
 from drivers.modbus.client import connect_axes
 from drivers.sim.motion import SmoothedMove
-from drivers.sim.plant import LEG_JERK_MM_S3, LegPlant, PlantConfig, default_leg_configs
+from drivers.plant.leg import LEG_JERK_MM_S3, LegPlant, PlantConfig, default_leg_configs
 from drivers.sim.rig import SimRig
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from drivers.clock import VirtualClock
-from drivers.sim.plant import PlantConfig, LegPlant, systematic_error_um, default_leg_configs
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig, LegPlant, systematic_error_um, default_leg_configs
+from procedures.synthetic import synth_session
 
 
 def test_all_sources_off_gives_a_perfect_leg():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from drivers.sim.plant import LegPlant, PlantConfig, systematic_error_um
+from drivers.plant.leg import LegPlant, PlantConfig, systematic_error_um
 
 
 def test_the_variants_are_off_by_default_and_change_nothing():

@@ -13,7 +13,7 @@ import pytest
 
 from drivers.errors import SoftLimitError, TableError
 from drivers.interfaces import TableBank
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from drivers.station_compensation import (
     StationCompensatedAxis,
     StationTableStore,
@@ -161,7 +161,7 @@ def test_station_compensation_through_a_real_drive_profile_without_table(tmp_pat
     from drivers.modbus.client import connect_axes
     from drivers.modbus.profile import DriveProfile
     from drivers.sim.drive_server import SimDriveServer
-    from drivers.sim.plant import LegPlant
+    from drivers.plant.leg import LegPlant
 
     profile = DriveProfile.load(str(Path(__file__).resolve().parents[2] / "drivers/modbus/profiles/kinco_fd.toml"))
     assert profile.table is None

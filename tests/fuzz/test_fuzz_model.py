@@ -18,11 +18,11 @@ from pathlib import Path
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.vocabulary import SchemaError
 from procedures.fit import fit, load_model
 from procedures.fit.model_io import model_to_json
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.fuzz.budget import examples, fed
 from tests.fuzz.jsondamage import damaged_json, json_value
 

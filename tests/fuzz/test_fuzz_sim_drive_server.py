@@ -20,7 +20,7 @@ from drivers.clock import VirtualClock
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer, _Units
 from drivers.sim.modbus_tcp import FrameError, answer_frames
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 from tests.fuzz.budget import fed
 
 PROFILE = DriveProfile.load(None)

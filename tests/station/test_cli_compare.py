@@ -10,10 +10,10 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from station.cli import main
 from station.services.config import StationConfig
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.tooling import write_identified_session
 
 BIAS_UM = 1.5

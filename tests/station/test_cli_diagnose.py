@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
-from station.services.synth import synth_session
+from drivers.plant.leg import default_leg_configs
+from procedures.synthetic import synth_session
 from procedures.fit import fit, save_model
 from station.cli import main
 from tests.tooling import write_points_session as write_session

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig
+from procedures.synthetic import synth_session
 from procedures.acquisition.plans import irregular_targets
 from procedures.io.recording.reader import file_sha256
 from procedures.compensation.table import read_table_csv

@@ -18,7 +18,7 @@ from drivers.clock import VirtualClock
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 from drivers.sim.modbus_tcp import NoReply  # the simulated drive answers nothing
 from procedures.compensation.audit import read_entries
 from procedures.compensation.push import quantize, table_sha256

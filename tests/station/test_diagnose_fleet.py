@@ -1,6 +1,6 @@
 """`station diagnose --twin fleet:TYPE`: the legs of one type in the catalog as the twin, and how
 many sigma a feature of this leg lies from its siblings. Real session files from the project's
-generator (station.services.synth, the plant's leg-to-leg spread of default_leg_configs), indexed into a
+generator (procedures.synthetic, the plant's leg-to-leg spread of default_leg_configs), indexed into a
 real SQLite catalog by the catalog's own indexer."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis.fleet import error_map
 from procedures.vocabulary import InputError
 from procedures.io.recording.reader import read_session
@@ -21,7 +21,7 @@ from station.catalog import files
 from station.catalog.fleet import completed_sessions_of_type
 from station.catalog.store import Catalog
 from station.cli import main
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from station.services.twins import load_twin
 from tests.catalog.helpers import identity, stamp_identity
 

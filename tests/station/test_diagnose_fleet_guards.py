@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.io.csv_io import import_csv
 from procedures.io.recording.reader import read_session
 from station.services.diagnosis_jobs import diagnose_session

@@ -9,11 +9,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis.text_report import text_report
 from procedures.io.recording.reader import read_session
 from station.services.diagnosis_jobs import diagnose_session
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from station.services.twins import load_twin
 from tests.tooling import write_points_session
 

@@ -31,7 +31,7 @@ import math
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.compensation.audit import read_entries
 from procedures.metrology.thermal import error_basis
 from procedures.io.recording.reader import read_session

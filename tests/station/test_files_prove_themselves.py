@@ -33,7 +33,7 @@ from drivers.interfaces import DriveLimits
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, default_leg_configs
+from drivers.plant.leg import LegPlant, default_leg_configs
 from procedures.compensation.push import quantize, table_sha256
 from procedures.compensation.table import CompTable, LegTable, check_covers_stroke, table_csv_text
 from procedures.vocabulary import InputError
@@ -41,7 +41,7 @@ from procedures.fit import fit, load_model, save_model
 from procedures.io.integrity import UNVERIFIED, VERIFIED
 from station.cli import main
 from station.services.serials import read_serials_file_checked, write_serials_file
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from station.services.table_jobs import load_leg_table
 
 LONG = os.environ.get("HYPOTHESIS_PROFILE") == "long"
@@ -247,7 +247,7 @@ def test_pushed_cuts_and_edits_never_leave_a_partial_table_active(capsys, bench,
 
 @pytest.fixture(scope="module")
 def model_file(tmp_path_factory):
-    from drivers.sim.plant import PlantConfig
+    from drivers.plant.leg import PlantConfig
 
     cfg = PlantConfig(reversal_um=2.0).only("backlash", "lead", "longwave", "noise")
     model = fit(synth_session({1: cfg, 2: cfg}, np.linspace(-90, 90, 61), cycles=3, seed=3), lead_mm=5.0)

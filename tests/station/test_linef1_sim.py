@@ -123,7 +123,7 @@ def _quiet_sweep(out, tmp, air_offset_c: float) -> None:
     measurement or sensor noise, so two sessions differ only by that sensor."""
     from drivers.linef1 import LineF1Interferometer
     from drivers.modbus.client import connect_axes
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
     from drivers.sim.rig import SimRig
     from station.services.laser_wiring import air_index
     from station.services.wiring import Rig

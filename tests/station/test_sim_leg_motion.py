@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import procedures.acquisition.adaptive as adaptive
-from drivers.sim.plant import LEG_JERK_MM_S3
+from drivers.plant.leg import LEG_JERK_MM_S3
 from procedures.vocabulary import InputError
 from procedures.acquisition.plans import iso230_plan, onthefly_plan
 from procedures.io.recording.reader import read_session
@@ -72,8 +72,10 @@ def test_the_station_sim_rig_is_jerk_limited_and_the_session_records_it(tmp_path
 
 
 def test_the_sample_recordings_pin_no_jerk_limit():
-    assert recordings.JERK_MM_S3 == 0.0
-    assert all(c.jerk_mm_s3 == 0.0 for c in recordings.plant_configs())
+    from procedures.synthetic import SAMPLE_JERK_MM_S3, sample_plant_configs
+
+    assert SAMPLE_JERK_MM_S3 == 0.0 and recordings.sample_config().sim.jerk_mm_s3 == 0.0
+    assert all(c.jerk_mm_s3 == 0.0 for c in sample_plant_configs())
     with recordings.open_sample_rig() as rig:
         assert all(p.cfg.jerk_mm_s3 == 0.0 for p in rig.sim.plants.values())
 
@@ -82,8 +84,8 @@ def test_leg_figures_depend_on_the_material_given():
     """A leg whose material temperature changes between passes, fixed far from 0 mm: normalised
     with its own fixed point, the noise floor is smaller than with the default one (fixed at 0 mm),
     whose wrong normalisation adds a per-pass offset."""
-    from drivers.sim.plant import PlantConfig
-    from station.services.synth import synth_session
+    from drivers.plant.leg import PlantConfig
+    from procedures.synthetic import synth_session
 
     plant = PlantConfig(bearing_mm=-400.0, ambient_ramp_k_per_h=4.0, tau_s=60.0)
     points = synth_session({1: plant}, np.linspace(-90, 90, 37), cycles=4, seed=2, dwell_s=5.0)

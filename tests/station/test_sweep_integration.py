@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.sim.plant import systematic_error_um
+from drivers.plant.leg import systematic_error_um
 from procedures.engine import events as ev
 from procedures.engine.control import RunControl
 from procedures.acquisition.plans import SweepPlan

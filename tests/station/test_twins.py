@@ -12,9 +12,11 @@ from tests.tooling import defines, imported_names
 def test_the_command_and_the_self_check_use_the_shared_twins():
     # by their imports (inside the functions: `station diagnose --help` loads no diagnosis), no copy of their own
     assert imported_names("station.commands.diagnose")["load_twin"] == "station.services.twins.load_twin"
-    assert imported_names("station.services.selfcheck")["plant_twin"] == "station.services.twins.plant_twin"
-    assert not defines("station.commands.diagnose", "load_twin") and not defines("station.services.selfcheck", "plant_twin")
-    assert twins.load_twin.__module__ == twins.plant_twin.__module__ == "station.services.twins"
+    assert imported_names("procedures.synthetic")["plant_twin"] == "procedures.diagnosis.twin.plant_twin"
+    assert imported_names("station.services.twins")["plant_twin"] == "procedures.diagnosis.twin.plant_twin"
+    assert not defines("station.commands.diagnose", "load_twin") and not defines("procedures.synthetic", "plant_twin")
+    assert twins.load_twin.__module__ == "station.services.twins"
+    assert twins.plant_twin.__module__ == "procedures.diagnosis.twin"
 
 
 def test_the_simulated_plant_as_a_twin(tmp_path):
@@ -37,12 +39,12 @@ def test_a_reference_3_k_warmer_is_compared_normalised_to_20_c(tmp_path):
 
     import numpy as np
 
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
     from procedures.diagnosis import diagnose
     from procedures.diagnosis.reference_twin import twin_from_recording
     from procedures.io.recording.reader import read_session
     from station.services.diagnosis_jobs import diagnose_session
-    from station.services.synth import synth_session
+    from procedures.synthetic import synth_session
     from tests.tooling import write_points_session
 
     cfg = replace(default_leg_configs(3)[0], heating_k_per_m=0.0)

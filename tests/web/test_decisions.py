@@ -9,11 +9,11 @@ import re
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from station.catalog.readers import session_rec
 from station.catalog.store import Catalog
 from station.services.report_jobs import session_decisions
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from station.web.queries import latest_decisions
 from tests.tooling import write_identified_session
 

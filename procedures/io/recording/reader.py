@@ -561,7 +561,6 @@ class LiveReader:
         self._next = 0  # rows of /points read
         self._journal_at = 0  # bytes of the writer's journal read
         self._seen: set[int] = set()  # indices returned (from either)
-        self._returned = 0
 
     def poll(self) -> np.ndarray:
         """New rows since the last call (possibly none): those in /points, then those the writer
@@ -593,13 +592,7 @@ class LiveReader:
         _, first = np.unique(data["index"], return_index=True)
         data = data[np.sort(first)]
         self._seen.update(int(i) for i in data["index"])
-        self._returned += len(data)
         return data
-
-    @property
-    def rows_read(self) -> int:
-        """Points returned so far."""
-        return self._returned
 
     def close(self) -> None:
         self._f.close()

@@ -12,7 +12,7 @@ import pytest
 
 from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import connect_axes
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from drivers.sim.rig import SimRig
 from procedures.engine import events as ev
 from procedures.vocabulary import InputError, PlanError

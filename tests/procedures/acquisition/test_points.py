@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.diagnosis.legdata import split_legs as diagnosis_legs
 from procedures.vocabulary import InputError, SchemaError
 from procedures.fit.data import split_legs as fit_legs
 from procedures.acquisition.points import check_points, usable_rows_by_leg
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 
 def points():

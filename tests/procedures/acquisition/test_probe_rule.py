@@ -13,7 +13,7 @@ import pytest
 
 from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import connect_axes
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from drivers.sim.rig import SimRig
 from procedures.acquisition.plan_size import plan_size
 from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec

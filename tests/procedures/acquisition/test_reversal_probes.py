@@ -11,7 +11,7 @@ import pytest
 
 from drivers.interferometer.client import SerialInterferometer
 from drivers.modbus.client import connect_axes
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from drivers.sim.rig import SimRig
 from procedures.acquisition.adaptive import MIN_CYCLES_WITH_PROBES
 from procedures.acquisition.plans import SweepPlan, onthefly_plan

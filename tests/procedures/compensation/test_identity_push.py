@@ -15,7 +15,7 @@ from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, PlantConfig
+from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.compensation.audit import AuditLog
 from procedures.compensation.push import PushRefused, check_leg_serial, push_legs_procedure, push_table, table_sha256
 from procedures.engine.runner import ListSink, run

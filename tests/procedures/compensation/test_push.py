@@ -17,7 +17,7 @@ from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, PlantConfig
+from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.compensation.audit import AuditLog
 from procedures.compensation.push import (
     PushFailed,

@@ -10,8 +10,8 @@ import pytest
 
 from drivers.errors import TableRefused
 from drivers.interfaces import TableBank
-from drivers.sim.plant import PlantConfig
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig
+from procedures.synthetic import synth_session
 from procedures.vocabulary import InputError
 from procedures.fit import fit
 from procedures.compensation.controllers.linuxcnc import LINUXCNC_LIMITS, read_linuxcnc_comp, write_linuxcnc_comp

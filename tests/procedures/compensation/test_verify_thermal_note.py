@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig
+from procedures.synthetic import synth_session
 from procedures.compensation.verify import format_report, verify
 
 

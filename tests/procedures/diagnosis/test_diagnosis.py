@@ -9,11 +9,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig
+from procedures.synthetic import synth_session
 from procedures.diagnosis import DiagnosisSettings, diagnose, to_json
 from procedures.vocabulary import InputError, SchemaError
-from station.services.twins import plant_twin
+from procedures.diagnosis.twin import plant_twin
 
 BASE = PlantConfig(noise_um=0.03, run_offset_um=0.04).only("lead", "longwave", "wobble", "noise", "run_offset")
 TARGETS = np.linspace(-90.0, 90.0, 61)

@@ -10,7 +10,7 @@ import pytest
 from procedures.diagnosis import DiagnosisSettings
 from procedures.diagnosis.selfcheck import evaluate_trial
 from procedures.diagnosis.significance import condition_number, solve_gram
-from station.services.selfcheck import selfcheck_trial
+from procedures.synthetic import selfcheck_trial
 
 
 def test_nearly_collinear_columns_give_a_bounded_solution():

@@ -8,10 +8,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis import DiagnosisSettings, diagnose
 from procedures.diagnosis.text_report import text_report
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 BASE = frozenset({"lead", "longwave", "wobble", "noise", "run_offset"})
 
@@ -47,7 +47,7 @@ def test_a_pass_off_for_no_recorded_reason_stays_an_outlier():
 
 
 def _gearbox_session(step_mm=1.25):
-    from station.services.twins import plant_twin
+    from procedures.diagnosis.twin import plant_twin
 
     base = _leg()
     real = replace(base, longwave=base.longwave + ((1.5625, 0.5, 0.3),))  # a gearbox term: 5 mm lead / 3.2
@@ -98,7 +98,7 @@ def test_a_reference_recorded_3_k_warmer_ties_the_scale_to_the_temperature_diffe
 
 
 def _clean_session():
-    from station.services.twins import plant_twin
+    from procedures.diagnosis.twin import plant_twin
 
     base = _leg()
     pts = synth_session({1: base}, np.linspace(-90, 90, 91), 5, seed=5, dwell_s=4.0)

@@ -10,7 +10,7 @@ import pytest
 
 from procedures.diagnosis import DiagnosisSettings
 from procedures.diagnosis.selfcheck import evaluate_trial, format_self_check, run_self_check
-from station.services.selfcheck import selfcheck_trial
+from procedures.synthetic import selfcheck_trial
 
 SEEDS = range(10)  # both twins, every effect, a two-effect leg (thermal + drift), a session without effect
 

@@ -1,4 +1,4 @@
-"""Issue 35's self-check situations (station/services/selfcheck_stacked.py): a warming leg whose
+"""Issue 35's self-check situations (procedures.synthetic.situation_trial): a warming leg whose
 reversal grows with temperature, the same with a worn nut (stacked variants), a reference twin
 sharing the session's 5 mm lead wobble, a fleet with one session filed under three serials.
 
@@ -15,8 +15,8 @@ import pytest
 from procedures.diagnosis import DiagnosisSettings
 from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, format_by_physics,
                                             run_self_check, summarise_by_physics)
-from station.services.selfcheck_stacked import SITUATIONS
-from station.services.selfcheck_variants import variant_trial
+from procedures.synthetic import SITUATIONS
+from procedures.synthetic import variant_trial
 
 SEEDS = int(os.environ.get("STATION_DIAG_SITUATION_SEEDS", "4"))
 GAP_RATIO_MAX = 1.5  # estimated pass-level parameters (a reversal per K from 10 passes) cost up to ~40 % now and then

@@ -8,13 +8,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.io.csv_io import import_csv
 from procedures.diagnosis import diagnose
 from procedures.vocabulary import InputError
 from procedures.io.import_map import convert, load_map
 from procedures.io.recording.reader import read_session
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 
 def on_the_fly(speeds=(5.0, 10.0, 20.0)):

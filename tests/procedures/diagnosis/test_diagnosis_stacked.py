@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis import diagnose
 from procedures.diagnosis.reference_twin import twin_from_recording
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 BASE = frozenset({"lead", "longwave", "wobble", "noise", "run_offset", "backlash"})
 

@@ -15,7 +15,7 @@ import pytest
 from procedures.diagnosis import DiagnosisSettings
 from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, evaluate_trial,
                                             format_by_physics, run_self_check, summarise_by_physics)
-from station.services.selfcheck_variants import VARIANT_PHYSICS, variant_trial
+from procedures.synthetic import VARIANT_PHYSICS, variant_trial
 
 SEEDS = int(os.environ.get("STATION_DIAG_VARIANT_SEEDS", "10"))
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig, default_leg_configs
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig, default_leg_configs
+from procedures.synthetic import synth_session
 from procedures.vocabulary import InputError
 from procedures.fit import fit, model_to_json
 from procedures.fit.crossval import cycle_folds
@@ -83,7 +83,7 @@ def test_irregular_spacing_is_fitted_at_the_real_positions():
     assert leg.reversal_um == pytest.approx(cfg.reversal_um, abs=0.1)
     assert leg.stats.heldout_ratio < 1.25
     # the model follows the true screw error between the targets too
-    from drivers.sim.plant import screw_error_um
+    from drivers.plant.leg import screw_error_um
 
     x = np.linspace(-85, 85, 200)
     truth = screw_error_um(cfg, x)

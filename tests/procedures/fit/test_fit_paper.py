@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig
+from procedures.synthetic import synth_session
 from procedures.vocabulary import InputError
 from procedures.fit import fit
 from procedures.acquisition.plans import irregular_targets

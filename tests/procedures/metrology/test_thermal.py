@@ -4,11 +4,11 @@ thermal expansion, the reference point, missing temperatures, the materials a se
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.metrology.thermal import (Material, nde_correction_um, normalise_points, normalise_session,
                                           recorded_materials)
 from station.services.config import load_config
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 TARGETS = np.linspace(-90.0, 90.0, 31)
 

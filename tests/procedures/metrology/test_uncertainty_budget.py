@@ -9,11 +9,11 @@ import math
 
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.reporting import iso230
 from procedures.acquisition import plans
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget, table_budget
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 
 @pytest.fixture(scope="module")

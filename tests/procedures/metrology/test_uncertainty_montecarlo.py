@@ -22,12 +22,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.reporting import iso230
 from procedures.acquisition import plans
 from procedures.metrology import air
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 N_TRIALS = 20000
 INPUTS = UncertaintyInputs(laser_accuracy_ppm=0.5, laser_resolution_nm=1.0, air_temp_u_c=0.2,

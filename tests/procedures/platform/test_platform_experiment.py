@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
-from station.services.synth import synth_session
+from drivers.plant.leg import default_leg_configs
+from procedures.synthetic import synth_session
 from procedures.vocabulary import InputError
 from procedures.platform.experiment import (
     FunctionLegErrors,
@@ -290,9 +290,9 @@ def test_sample_rig_compensation_shrinks_the_pose_at_least_as_much_as_the_legs(g
     error), every pose component's range shrinks at least as much as the pooled leg range."""
     from procedures.fit import fit
     from procedures.compensation.table import make_table
-    from station.services.samples import plant_configs
+    from procedures.synthetic import sample_plant_configs
 
-    pts = synth_session(dict(enumerate(plant_configs(seed=5), start=1)), np.linspace(-90.0, 90.0, 361), cycles=6, seed=5)
+    pts = synth_session(dict(enumerate(sample_plant_configs(seed=5), start=1)), np.linspace(-90.0, 90.0, 361), cycles=6, seed=5)
     table = make_table(fit(pts))
 
     def applied_um(leg, pos, d):

@@ -11,7 +11,7 @@ from types import MappingProxyType
 
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.acquisition import plans
 from procedures.io.recording.identity import (
     DriveIdentity,
@@ -21,7 +21,7 @@ from procedures.io.recording.identity import (
     instrument_identity,
 )
 from procedures.reporting.report import make_report
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 PLAN = plans.iso230_plan(legs=(1, 2))
 ATTRS = {"session_id": "abc", "operator": "ana", "rig": "sim", "started_utc": "2026-11-24T08:00:00+00:00",

@@ -12,13 +12,13 @@ import subprocess
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
+from drivers.plant.leg import PlantConfig
 from procedures.reporting import iso230
 from procedures.acquisition import plans
 from procedures.metrology.thermal import normalise_points, Material
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
 from procedures.reporting.report import make_report
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 
 PLAN = plans.iso230_plan(legs=(1, 2))
 CONFIG = {

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import PlantConfig
-from station.services.synth import synth_session
+from drivers.plant.leg import PlantConfig
+from procedures.synthetic import synth_session
 from procedures.vocabulary import InputError
 from procedures.fit import fit
 from procedures.reporting.report import make_report

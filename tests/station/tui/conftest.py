@@ -78,7 +78,7 @@ def notes():
 
 
 def write_six_leg_session(path, legs=(1, 2, 3, 4, 5, 6), cycles: int = 3, step_mm: float = 3.0, seed: int = 0):
-    """A small synthetic session straight from the simulated plant (station.services.synth, no protocol
+    """A small synthetic session straight from the simulated plant (procedures.synthetic, no protocol
     layer): `legs` of the default leg configs, uniform targets -90..90 mm, `cycles` cycles."""
     from tests.tooling import default_legs_points, write_points_session
 

@@ -213,9 +213,9 @@ async def _no_session(cfg, size, wait_until, notes):
 @pytest.fixture
 def irregular_session(tmp_path):
     """Legs 1 and 2 on ISO 230-2 irregular targets: the paper's method refuses them."""
-    from drivers.sim.plant import default_leg_configs
+    from drivers.plant.leg import default_leg_configs
     from procedures.acquisition.plans import irregular_targets
-    from station.services.synth import synth_session
+    from procedures.synthetic import synth_session
     from tests.tooling import write_points_session
 
     cfgs = default_leg_configs(seed=0)

@@ -63,6 +63,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+LEAD_MM = 5.0
+"""The leg's screw lead, mm per revolution (the paper's positioner): where its once-per-revolution
+error repeats (the plant's `lead_mm`, the reference twin's wobble)."""
+
 LEG_JERK_MM_S3 = 2000.0
 """Jerk limit of a real leg's drive tuning: 50 ms to reach 100 mm/s^2 (docs/onthefly.md)."""
 
@@ -77,7 +81,7 @@ class PlantConfig:
 
     nominal_length_mm: float = 1095.85  # leg length at mid-stroke (the paper's positioner)
     stroke_half_mm: float = 90.0  # usable stroke is +/- this around mid-stroke
-    lead_mm: float = 5.0  # screw lead (travel per revolution)
+    lead_mm: float = LEAD_MM  # screw lead (travel per revolution)
     lead_slope_um_per_m: float = 9.0  # the paper's "linear deviation of 9 um/m"
     longwave: tuple[tuple[float, float, float], ...] = ((120.0, 0.6, 0.4), (45.0, 0.25, 1.9))
     wobble_amplitude_um: float = 0.2
