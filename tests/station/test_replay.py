@@ -289,6 +289,23 @@ def test_fault_sample_regenerates_identically(tmp_path, capsys, caplog, monkeypa
     assert new.station_config["sim"]["jerk_mm_s3"] == 0.0  # the setting the samples were made with, recorded
 
 
+def test_calibration_and_verification_samples_regenerate_identically(tmp_path, monkeypatch):
+    """`station recordings` makes the calibration, then pushes the tables fitted to it and sweeps the
+    compensated legs (the verification sample, confirmed as `station sweep --yes` would): every point
+    of both equals the committed ones (the files' older dtypes read through the current schema)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["recordings", "--out", str(tmp_path), "--only", "calibration,verification"]) == 0
+    for name in ("calibration", "verification"):
+        new, committed = read_session(tmp_path / FILES[name]), read_session(RECORDINGS / FILES[name])
+        assert len(new.points) == len(committed.points) > 0, name
+        assert new.points.tobytes() == committed.points.tobytes(), name
+        assert new.plan == committed.plan, name
+    # the verification swept legs whose tables were active, and says so
+    from procedures.io.recording.stage import active_tables
+
+    assert sorted(active_tables(read_session(tmp_path / FILES["verification"]).devices)) == [1, 2, 3, 4, 5, 6]
+
+
 def test_replay_reads_the_environment_again_only_where_the_recording_changed_it(recorded, tmp_path):
     """A replayed point whose recorded environment is the one of the point just before (same leg)
     keeps the values held instead of asking the instrument again; the session stays identical."""
