@@ -348,11 +348,8 @@ FRONT_ENDS = ("station/commands", "station/tui", "station/web")
 
 FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {
     "station/commands/_table_cli.py": {"procedures.acquisition.plans", "procedures.compensation.audit", "procedures.compensation.push", "procedures.engine", "procedures.engine.states"},
-    "station/commands/certificate.py": {"procedures.io.recording.reader"},
     "station/commands/compare.py": {"procedures.io.atomic", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting"},
     "station/commands/diagnose.py": {"procedures.diagnosis", "procedures.diagnosis.selfcheck", "procedures.diagnosis.text_report", "procedures.io.outputs", "procedures.io.recording.reader"},
-    "station/commands/export_csv.py": {"procedures.io.csv_io", "procedures.io.outputs"},
-    "station/commands/import_csv.py": {"procedures.acquisition.plans", "procedures.io.csv_io", "procedures.io.import_map", "procedures.io.outputs", "procedures.io.ranges"},
     "station/commands/iso230.py": {"procedures.io.atomic", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting.decision", "procedures.reporting.iso230"},
     "station/commands/platform.py": {"procedures.io.integrity", "procedures.io.outputs", "procedures.platform.experiment", "procedures.platform.geometry", "procedures.platform.report"},
     "station/commands/push.py": {"procedures.compensation.audit", "procedures.compensation.push", "procedures.engine.states", "procedures.io.plausibility"},
