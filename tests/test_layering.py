@@ -358,7 +358,6 @@ FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {
     "station/commands/rollback.py": {"procedures.compensation.push", "procedures.engine.states"},
     "station/commands/run.py": {"procedures.acquisition.plan_spec", "procedures.acquisition.plans", "procedures.engine.control", "procedures.engine.states", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.metrology.thermal", "procedures.reporting.iso230"},
     "station/commands/sweep.py": {"procedures.acquisition.plan_size", "procedures.acquisition.plan_spec", "procedures.acquisition.plans", "procedures.engine.control", "procedures.engine.states", "procedures.io.outputs"},
-    "station/commands/table.py": {"procedures.acquisition.plans", "procedures.compensation", "procedures.compensation.controllers.common", "procedures.compensation.controllers.linuxcnc", "procedures.fit", "procedures.fit.model_io", "procedures.io.outputs", "procedures.io.plausibility"},
     "station/commands/verify.py": {"procedures.acquisition.plan_size", "procedures.acquisition.plan_spec", "procedures.acquisition.plans", "procedures.compensation.verify", "procedures.engine", "procedures.engine.states", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting.decision"},
     "station/tui/app.py": {"procedures.acquisition.plan_size", "procedures.acquisition.plan_spec", "procedures.acquisition.plans", "procedures.engine", "procedures.engine.control", "procedures.engine.states", "procedures.io.recording.reader"},
     "station/tui/bridge.py": {"procedures.engine"},
