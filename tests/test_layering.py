@@ -349,7 +349,6 @@ FRONT_ENDS = ("station/commands", "station/tui", "station/web")
 FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {
     "station/commands/_table_cli.py": {"procedures.acquisition.plans", "procedures.compensation.audit", "procedures.compensation.push", "procedures.engine", "procedures.engine.states"},
     "station/commands/compare.py": {"procedures.io.atomic", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting"},
-    "station/commands/diagnose.py": {"procedures.diagnosis", "procedures.diagnosis.selfcheck", "procedures.diagnosis.text_report", "procedures.io.outputs", "procedures.io.recording.reader"},
     "station/commands/iso230.py": {"procedures.io.atomic", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting.decision", "procedures.reporting.iso230"},
     "station/commands/platform.py": {"procedures.io.integrity", "procedures.io.outputs", "procedures.platform.experiment", "procedures.platform.geometry", "procedures.platform.report"},
     "station/commands/push.py": {"procedures.compensation.audit", "procedures.compensation.push", "procedures.engine.states", "procedures.io.plausibility"},
@@ -363,7 +362,6 @@ FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {
     "station/tui/bridge.py": {"procedures.engine"},
     "station/tui/screens/compensation.py": {"procedures.compensation.audit", "procedures.compensation.verify", "procedures.io.plausibility", "procedures.io.recording.reader", "procedures.reporting.decision"},
     "station/tui/screens/compensation_controller.py": {"procedures.acquisition.plans", "procedures.compensation.audit", "procedures.compensation.push", "procedures.engine.states", "procedures.io.plausibility"},
-    "station/tui/screens/diagnosis.py": {"procedures.diagnosis", "procedures.diagnosis.text_report", "procedures.io.ranges", "procedures.io.recording.reader"},
     "station/tui/screens/platform.py": {"procedures.io.recording.reader", "procedures.platform.experiment", "procedures.platform.geometry", "procedures.platform.report", "procedures.platform.sensitivity"},
     "station/tui/screens/replay.py": {"procedures.io.recording.reader"},
     "station/tui/screens/results.py": {"procedures.io.csv_io", "procedures.io.ranges", "procedures.io.recording.reader", "procedures.reporting.decision"},
