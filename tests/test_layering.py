@@ -351,7 +351,6 @@ FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {
     "station/commands/compare.py": {"procedures.io.atomic", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting"},
     "station/commands/iso230.py": {"procedures.io.atomic", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting.decision", "procedures.reporting.iso230"},
     "station/commands/push.py": {"procedures.compensation.audit", "procedures.compensation.push", "procedures.engine.states", "procedures.io.plausibility"},
-    "station/commands/recordings.py": {"procedures.io.atomic"},
     "station/commands/report.py": {"procedures.fit", "procedures.io.outputs", "procedures.io.recording.reader"},
     "station/commands/rollback.py": {"procedures.compensation.push", "procedures.engine.states"},
     "station/commands/run.py": {"procedures.acquisition.plan_spec", "procedures.acquisition.plans", "procedures.engine.control", "procedures.engine.states", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.metrology.thermal", "procedures.reporting.iso230"},
