@@ -360,8 +360,6 @@ FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {
     "station/tui/bridge.py": {"procedures.engine"},
     "station/tui/screens/compensation.py": {"procedures.compensation.audit", "procedures.compensation.verify", "procedures.io.plausibility", "procedures.io.recording.reader", "procedures.reporting.decision"},
     "station/tui/screens/compensation_controller.py": {"procedures.acquisition.plans", "procedures.compensation.audit", "procedures.compensation.push", "procedures.engine.states", "procedures.io.plausibility"},
-    "station/tui/screens/replay.py": {"procedures.io.recording.reader"},
-    "station/tui/screens/results.py": {"procedures.io.csv_io", "procedures.io.ranges", "procedures.io.recording.reader", "procedures.reporting.decision"},
     "station/tui/screens/sweep.py": {"procedures.acquisition.plan_size", "procedures.acquisition.plan_spec", "procedures.acquisition.plans"},
     "station/tui/state.py": {"procedures.engine"},
     "station/web/extensions.py": {"procedures.reporting.decision"},

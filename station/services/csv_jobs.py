@@ -17,11 +17,13 @@ from station.services.job import JobOutcome
 
 @dataclass
 class ExportRequest:
-    """Write the points of the session file `session` to the CSV `out` (replaced only with `force`)."""
+    """Write the points of the session file `session` to the CSV `out` (replaced only with
+    `force`; its folder made with `make_parents`, as the UI's Results page writes beside a sample)."""
 
     session: Path
     out: Path
     force: bool = False
+    make_parents: bool = False
 
 
 @dataclass
@@ -44,7 +46,7 @@ def prepare_export(request: ExportRequest, cfg: Any = None) -> PreparedExport:
     """Refuse an existing output without force (procedures/io/outputs.py)."""
     from procedures.io.outputs import check_output_file
 
-    check_output_file(request.out, force=request.force)
+    check_output_file(request.out, force=request.force, make_parents=request.make_parents)
     return PreparedExport(request, lines=[f"export {request.session} -> {request.out}"])
 
 

@@ -86,3 +86,44 @@ def prepare_replay(request: ReplayRequest, cfg: Any = None) -> PreparedReplay:
     return PreparedReplay(source, session, out, request.speed, request.force, cfg,
                           lines=[f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) "
                                  f"{pace_text(request.speed)}"])
+
+
+# -- a recording as the Replay page shows it --------------------------------------------------------
+
+@dataclass
+class Recording:
+    """A recording read for a page: the session (procedures.io.recording.reader.Session) and what
+    it holds in words and rows."""
+
+    path: Path
+    session: Any
+
+    def summary(self) -> dict[str, Any]:
+        """outcome, points, legs, faults (count), plan kind, targets (mm), cycles, rig, operator,
+        schema, started and ended (UTC), as recorded ('?' where the file does not say)."""
+        s = self.session
+        plan = s.plan or {}
+        return {"outcome": s.outcome, "points": len(s.points), "legs": s.legs, "faults": len(s.faults),
+                "kind": plan.get("kind", "?"), "targets_mm": list(plan.get("targets_mm") or []),
+                "cycles": plan.get("cycles", "?"), "rig": s.attrs.get("rig", "?"),
+                "operator": s.attrs.get("operator", "?"), "schema": s.schema_version,
+                "started_utc": s.attrs.get("started_utc", "?"), "ended_utc": s.attrs.get("ended_utc", "?")}
+
+    def fault_rows(self, label: str) -> list[tuple[str, ...]]:
+        """One row per fault record (procedures.io.recording.schema.FAULT_DTYPE, file order): `label`,
+        index (the plan point), leg, run, target mm, time s, kind, attempt, gave up, message."""
+        return [(label, str(int(f["index"])), str(int(f["leg"])), str(int(f["run"])), f"{float(f['target_mm']):+.4f}",
+                 f"{float(f['time_s']):.3f}", _text(f["kind"]), str(int(f["attempt"])),
+                 "yes" if int(f["gave_up"]) else "no", _text(f["message"]))
+                for f in self.session.faults]
+
+
+def _text(value) -> str:
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+
+
+def read_recording(path: str | Path) -> Recording:
+    """Read the recording at `path` (a damaged file is refused by the reader within seconds)."""
+    from procedures.io.recording.reader import read_session
+
+    return Recording(Path(path), read_session(path))
