@@ -389,15 +389,13 @@ class ResultsScreen(StationScreen):
     @work(thread=True, group="results-write", exit_on_error=False)
     def _report_worker(self, session, model, out: Path, hide: bool) -> None:
         try:
-            from station.catalog.writer import catalog_for
-            from station.services.report_jobs import report_lines, session_report
+            from station.services.analysis import write_session_report
 
-            result = session_report(session, out, model, catalog=catalog_for(self.app.cfg))
+            result, notes = write_session_report(session, out, model, self.app.cfg)
         except Exception as exc:
             self.post_message(FilesWritten("Report", "", describe(exc, f"cannot write the report to {out}")))
             return
         where = f"report/{out.name}/" if hide else str(out)
-        notes = [line for line in report_lines(result, model) if line.startswith("note:")]
         self.post_message(FilesWritten("Report", f"Report written to {where}: "
                                        + ", ".join(p.name for p in result.files) + "".join("\n" + n for n in notes)))
 
