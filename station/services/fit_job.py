@@ -7,11 +7,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from procedures.engine.errors import InputError
 from procedures.fit.paper import DEFAULT_N_PARAMS  # the paper's number of cosine terms (help text, default)
 from station.services.job import JobOutcome
+
+if TYPE_CHECKING:
+    from station.services.config import StationConfig
 
 __all__ = ["DEFAULT_N_PARAMS", "FitRequest", "FitResult", "PreparedFit", "prepare_fit"]
 
@@ -29,7 +32,7 @@ class FitRequest:
     force: bool = False
     method: str = "default"
     params: int | None = None
-    lead_mm: Any = "auto"
+    lead_mm: float | str | None = "auto"
     legs: str | None = None
     config: Path | None = None
     raw: bool = False
@@ -61,7 +64,7 @@ class PreparedFit:
     out: Path
     params: int
     legs: list[int] | None
-    cfg: Any  # station.services.config.StationConfig
+    cfg: "StationConfig"
     needs_rig: bool = False
     question: str | None = None
     lines: list[str] = field(default_factory=list)
