@@ -65,8 +65,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:
     """The as-found session, as-left session and table of the leg --serial, from the catalog; printed."""
     from station.catalog import db  # noqa: PLC0415
-    from station.catalog.certificate_sources import certificate_sources  # noqa: PLC0415
     from station.catalog.store import catalog_of, reading_engine  # noqa: PLC0415
+    from station.services.certificate_jobs import sources_from_catalog  # noqa: PLC0415
     from station.web.engine import catalog_url, open_readonly  # noqa: PLC0415
 
     try:
@@ -77,30 +77,10 @@ def _from_catalog(args, cfg) -> tuple[str, str | None, str | None]:
             engine, where = reading_engine(catalog_of(cfg))
     except db.CatalogUnreachable as exc:
         raise InputError(f"{exc}; give --catalog with a reachable catalog (or the local catalog.sqlite)") from None
-    found = certificate_sources(engine, args.serial)
-    print(where)
-    given = {"as left": args.as_left, "table": args.table}  # given on the command line: those win
-    picked = [("as found", found.as_found, "calibration session", "no calibration"),
-              ("as left", found.as_left, "verification session", "no verification session after the calibration"),
-              ("table", found.table, "last table pushed", "no table pushed after the calibration is indexed")]
-    for label, src, what, none in picked:
-        if given.get(label):
-            print(f"{label}: {given[label]} (given)")
-        elif src is None:
-            print(f"{label}: none ({none})")
-        else:
-            print(f"{label}: {src.path} ({what}, {src.time_utc}, sha256 {(src.sha256 or '?')[:16]})")
-            if not Path(src.path).is_file():
-                raise InputError(f"{src.path}: the catalog lists this {what} of leg {args.serial} but the file is "
-                                 "missing; restore it, or re-index with `station catalog check` and `station catalog "
-                                 "rebuild DIR`")
-    if found.table is None and found.pushed_table_sha256 and not args.table:
-        print(f"note: a table (sha256 {found.pushed_table_sha256[:16]}) was pushed after the calibration but its "
-              "file is not in the catalog; give it with --table to state it")
+    found = sources_from_catalog(engine, where, args.serial, as_left=args.as_left, table=args.table, say=print)
     if args.leg is None:
-        args.leg = found.as_found.leg
-    return (found.as_found.path, args.as_left or (found.as_left.path if found.as_left else None),
-            args.table or (found.table.path if found.table else None))
+        args.leg = found.leg
+    return found.session, found.as_left, found.table
 
 
 def _approve(args, cfg) -> int:

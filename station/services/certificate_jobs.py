@@ -614,3 +614,46 @@ def issue_lines(issued: Issued) -> list[str]:
     lines += [f"wrote {issued.pdf}", f"wrote {issued.json}", f"index {issued.index}",
               f"approve it: station certificate approve {issued.report_no} --by NAME"]
     return lines
+
+
+@dataclass
+class CatalogSources:
+    """What the catalog gives a certificate of one leg: its as-found session, as-left session and
+    table (paths; those given win over the catalog's) and the leg of the as-found session."""
+
+    session: str
+    as_left: str | None
+    table: str | None
+    leg: int | None
+
+
+def sources_from_catalog(engine: Any, where: str, serial: str, *, as_left: str | None = None,
+                         table: str | None = None, say: Any = None) -> CatalogSources:
+    """The sources of leg `serial` in the catalog `engine` (described by `where`): the last
+    calibration, the verification after it and the last table pushed after it; `say(line)` is
+    told each (and the catalog). InputError when the catalog lists a file that is missing."""
+    from station.catalog.certificate_sources import certificate_sources  # noqa: PLC0415
+
+    say = say or (lambda line: None)
+    found = certificate_sources(engine, serial)
+    say(where)
+    given = {"as left": as_left, "table": table}  # given on the command line: those win
+    picked = [("as found", found.as_found, "calibration session", "no calibration"),
+              ("as left", found.as_left, "verification session", "no verification session after the calibration"),
+              ("table", found.table, "last table pushed", "no table pushed after the calibration is indexed")]
+    for label, src, what, none in picked:
+        if given.get(label):
+            say(f"{label}: {given[label]} (given)")
+        elif src is None:
+            say(f"{label}: none ({none})")
+        else:
+            say(f"{label}: {src.path} ({what}, {src.time_utc}, sha256 {(src.sha256 or '?')[:16]})")
+            if not Path(src.path).is_file():
+                raise InputError(f"{src.path}: the catalog lists this {what} of leg {serial} but the file is "
+                                 "missing; restore it, or re-index with `station catalog check` and `station catalog "
+                                 "rebuild DIR`")
+    if found.table is None and found.pushed_table_sha256 and not table:
+        say(f"note: a table (sha256 {found.pushed_table_sha256[:16]}) was pushed after the calibration but its "
+            "file is not in the catalog; give it with --table to state it")
+    return CatalogSources(found.as_found.path, as_left or (found.as_left.path if found.as_left else None),
+                          table or (found.table.path if found.table else None), found.as_found.leg)
