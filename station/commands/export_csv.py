@@ -5,9 +5,6 @@ from __future__ import annotations
 from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
-from pathlib import Path
-
-from procedures.io.outputs import check_output_file
 
 NAME = "export"
 HELP = "write a session file's points as an interchange CSV"
@@ -24,11 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from procedures.io.csv_io import export_csv
-    from station.services.report_jobs import export_lines
+    from station.services.csv_jobs import ExportRequest, prepare_export
 
-    check_output_file(args.out, force=args.force)
-    summary = export_csv(Path(args.h5), Path(args.out), overwrite=args.force)
-    for line in export_lines(summary):
+    for line in prepare_export(ExportRequest(args.h5, args.out, force=args.force)).run().lines:
         print(line)
     return 0

@@ -6,10 +6,7 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
 
-from procedures.vocabulary import InputError
-from procedures.io.outputs import check_output_file
-from procedures.fit.paper import DEFAULT_N_PARAMS
-from procedures.vocabulary import Outcome
+from station.services.fit_job import DEFAULT_N_PARAMS
 
 NAME = "fit"
 HELP = "fit a leg-error model (default bidirectional, or the paper's Fourier model) to a session"
@@ -45,46 +42,17 @@ def _fmt(value, spec: str = ".3f", none: str = "n/a") -> str:
 
 
 def run(args) -> int:
-    from procedures.acquisition.plans import parse_legs
-    from procedures.acquisition.probe_rule import recorded_stop
-    from procedures.fit.reversal_probes import ProbeReversal
-    from procedures.io.recording.reader import read_session
-    from station.services.analysis import analyse_session, save_session_model
-    from station.services.config import load_config
+    from station.services.fit_job import FitRequest, prepare_fit
 
-    if args.params is not None and args.method != "paper":  # never silently ignored
-        raise InputError(f"--params {args.params}: the number of cosine terms applies to --method paper only "
-                         "(the default method sizes itself by cross-validation); drop --params or add --method paper")
-    params_given = args.params is not None
-    args.params = DEFAULT_N_PARAMS if args.params is None else args.params
-    out = check_output_file(args.out, force=args.force)  # before the fit (procedures/io/outputs.py)
-    session = read_session(args.session)
-    if session.points.size == 0:
-        raise InputError(f"{session.path}: the session has no points; record a sweep first")
-    legs = parse_legs(args.legs) if args.legs else None
-    analysis = analyse_session(session, args.raw, fit_method=args.method,
-                               fit_options={"legs": legs, "n_params": args.params, "lead_mm": args.lead_mm})
-    model = analysis.model
-    if params_given:  # the paper method keeps at most the terms the targets give: more is refused, not ignored
-        for leg, f in model.legs.items():
-            most = (int(getattr(f, "n_samples", 0)) + 1) // 2 - 1
-            if args.params > most:
-                raise InputError(f"--params {args.params}: leg {leg} has {f.n_samples} targets per pass, which give "
-                                 f"at most {most} cosine terms; give --params 1..{most}; nothing was written")
-    save_session_model(model, out, session, load_config(args.config))
-    for line in analysis.basis_lines:
+    job = prepare_fit(FitRequest(args.session, args.out, force=args.force, method=args.method, params=args.params,
+                                 lead_mm=args.lead_mm, legs=args.legs, config=args.config, raw=args.raw))
+    r = job.run().data
+    for line in r.basis_lines + r.notes:
         print(line)
-    if session.outcome != Outcome.COMPLETED:
-        print(f"note: the session's outcome is '{session.outcome}': the model uses the {session.points.size} points recorded")
-    for key, state in sorted(session.devices.items()):
-        if key.endswith("_compensation") and " points from " in state:
-            print(f"warning: {key.split('_')[0].replace('leg', 'leg ')} was recorded with a compensation table "
-                  f"active ({state}): this model describes the compensated leg, and a table made from it "
-                  "replaces the active one instead of adding to it")
-    print(f"method: {args.method}" + (f" ({args.params} cosine terms)" if args.method == "paper" else ""))
+    print(f"method: {r.method}" + (f" ({r.params} cosine terms)" if r.method == "paper" else ""))
     print(f"{'leg':>3}  {'held-out RMS':>12}  {'noise floor':>11}  {'held-out ratio':>14}  {'(ideal)':>7}  "
           f"{'range before':>12}  {'held-out range':>14}  {'held-out range reduction':>24}  terms")
-    for leg, f in model.legs.items():
+    for leg, f in r.model.legs.items():
         s = f.stats
         rr = s.heldout_range_reduction_pct
         print(
@@ -96,13 +64,11 @@ def run(args) -> int:
             print(f"     note: {s.note}")
         if s.dropped:
             print(f"     note: {s.dropped} point(s) without a finite error were left out")
-        probes = getattr(f, "selection", {}).get("reversal_probes")
-        if probes:
-            why = recorded_stop(session.plan, probes["pairs"], probes["stderr_um"])
-            print(f"     {ProbeReversal(**probes).describe()}" + (f"; probes stopped: {why}" if why else ""))
+        if leg in r.probes:
+            print(f"     {r.probes[leg]}")
     print("held-out: each cycle scored by a model fitted without it; held-out ratio = held-out RMS / noise floor;"
           " (ideal) = the held-out ratio a perfect static model would score; held-out range = max - min of the"
           " held-out residuals (figures: docs/figures.md)")
-    print(f"model: {out}")
-    print(f"next: station table {out} --out table.csv   |   station report {session.path} --out report --model {out}")
+    print(f"model: {r.path}")
+    print(f"next: station table {r.path} --out table.csv   |   station report {r.session_path} --out report --model {r.path}")
     return 0

@@ -11,10 +11,6 @@ from __future__ import annotations
 from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
-import math
-
-from procedures.vocabulary import InputError
-from procedures.io.outputs import check_output_folder
 
 NAME = "platform"
 HELP = "pose errors of the platform from leg errors, before and after compensation (paper's Table 2)"
@@ -59,41 +55,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from station.services.platform_jobs import load_errors, write_report
-    from procedures.platform.experiment import MEASUREMENT_LABELS, Workspace, run_measurements
-    from procedures.platform.geometry import default_geometry, load_geometry
-    from procedures.platform.report import pose_table_markdown, reduction_lines
+    from station.services.platform_jobs import PlatformRequest, prepare_platform
 
-    from station.services.sizing import check_platform_poses
-
-    size = check_platform_poses(args.poses)  # sized first: refused before anything is read or allocated
-    for name in ("xy_mm", "z_mm", "tilt_deg", "yaw_deg"):
-        value = getattr(args, name)
-        if not (math.isfinite(value) and value >= 0):
-            raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
-    out = check_output_folder(args.out, force=args.force)  # before the poses are computed
-    print(f"platform: {size.describe()}", flush=True)
-    geometry = load_geometry(args.geometry) if args.geometry else default_geometry()
-    errors, other_errors, inputs = load_errors(args.source, recording=args.recording, measured=args.measured,
-                                               profile=args.profile, raw=args.raw)
-    workspace = Workspace(args.xy_mm, args.z_mm, math.radians(args.tilt_deg), math.radians(args.yaw_deg))
-    # same seed for the other measurement, so the same poses and directions: only the measurement differs
-    result, summary = run_measurements(geometry, errors, other_errors, poses=args.poses, seed=args.seed,
-                                       workspace=workspace)
-    summary["measured"] = inputs["measured"]
-    written = write_report(out, result, summary, inputs, geometry)
-    for kind in ("table", "model"):  # a file without its integrity record: read whole, said once (docs/tables.md)
-        if (inputs.get(kind) or {}).get("integrity") == "unverified":
-            from procedures.io.integrity import unverified_line
-
-            print(unverified_line(inputs[kind]["path"], kind, "every row and field checked"))
-    for line in inputs["error_basis"]["lines"]:
+    job = prepare_platform(PlatformRequest(
+        args.poses, args.seed, source=args.source, recording=args.recording, measured=args.measured,
+        profile=args.profile, raw=args.raw, geometry=args.geometry, xy_mm=args.xy_mm, z_mm=args.z_mm,
+        tilt_deg=args.tilt_deg, yaw_deg=args.yaw_deg, out=args.out, force=args.force))
+    for line in job.lines:
+        print(line, flush=True)
+    for line in job.run().lines:
         print(line)
-    print(f"measured leg error: {MEASUREMENT_LABELS[summary['measured']]}\n")
-    print(pose_table_markdown(summary))
-    print()
-    print(reduction_lines(summary))
-    print(f"poses used: {summary['poses_used']} of {summary['poses']}")
-    for path in written:
-        print(f"wrote {path}")
     return 0

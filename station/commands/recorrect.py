@@ -5,11 +5,8 @@ from __future__ import annotations
 from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
-from pathlib import Path
 
-from procedures.io.outputs import check_output_file
-
-from procedures.metrology.air import EQUATIONS
+from station.services.recorrect_job import EQUATIONS
 
 NAME = "recorrect"
 HELP = "re-correct a session's laser readings for the air refractive index (Ciddor/Edlen) into a new file"
@@ -44,24 +41,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from procedures.metrology.recorrect import RecorrectOptions, recorrect_session
-    from station.services.config import load_config
+    from station.services.recorrect_job import RecorrectRequest, prepare_recorrect
 
-    out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
-    if args.force and out.exists() and out.resolve() != Path(args.session).resolve():
-        out.unlink()  # --force: the re-corrected session replaces it
-    m = load_config(args.config).metrology
-    options = RecorrectOptions(
-        equation=args.equation,
-        wavelength_nm=m.wavelength_nm if args.wavelength_nm is None else args.wavelength_nm,
-        co2_ppm=m.co2_ppm if args.co2_ppm is None else args.co2_ppm,
-        dead_path_mm=m.dead_path_mm if args.dead_path_mm is None else args.dead_path_mm,
-        air_temp_offset_c=args.air_temp_offset_c, air_temp_c=args.air_temp_c,
-        pressure_pa=args.pressure_pa, humidity_pct=args.humidity_pct,
-    )
-    r = recorrect_session(Path(args.session), Path(args.out), options)
-    print(f"instrument's index: {r.n_instrument[0]:.9f} .. {r.n_instrument[1]:.9f}")
-    print(f"station's index ({options.equation}, {options.wavelength_nm:g} nm): {r.n_station[0]:.9f} .. {r.n_station[1]:.9f}")
-    print(f"dead path {options.dead_path_mm:g} mm; error_um changed by {r.change_um[0]:+.4f} .. {r.change_um[1]:+.4f} um")
-    print(f"written: {args.out} (the original {args.session} is unchanged; /meta recorrection says what was done)")
+    job = prepare_recorrect(RecorrectRequest(
+        args.session, args.out, force=args.force, equation=args.equation, air_temp_offset_c=args.air_temp_offset_c,
+        air_temp_c=args.air_temp_c, pressure_pa=args.pressure_pa, humidity_pct=args.humidity_pct,
+        co2_ppm=args.co2_ppm, dead_path_mm=args.dead_path_mm, wavelength_nm=args.wavelength_nm, config=args.config))
+    for line in job.run().lines:
+        print(line)
     return 0

@@ -47,37 +47,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # -- the command -----------------------------------------------------------------------------------
 
 def run(args) -> int:
-    from procedures.io.recording.reader import read_session
-    from procedures.io.outputs import check_output_file
-    from station.services.config import load_config
     from station.progress import ConsoleProgress
-    from station.services.jobs import replay_and_compare
+    from station.services.replay_job import ReplayRequest, prepare_replay
 
-    source = Path(args.session)
-    session = read_session(source)
-    out = Path(args.out) if args.out else source.with_name(source.stem + ".replay.h5")
-    if out.resolve() == source.resolve():
-        raise InputError(f"--out {out} is the recording being replayed; choose another file")
-    check_output_file(out, force=args.force, suffixes=(".h5",))
-    if not session.plan:
-        raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
-    cfg = load_config(None)
-    pace = "as fast as possible" if args.speed is None else ("real time" if args.speed == 1 else f"{args.speed:g}x real time")
-    print(f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) {pace}")
-    if args.force and out.exists():
-        out.unlink()  # --force: the new replay session replaces it
-    ended = replay_and_compare(source, session, out, cfg, args.speed, sinks=[ConsoleProgress()])
-    result = ended.result
-    print(f"session: {out} ({result.outcome}, {result.points} points; rig replay)")
+    job = prepare_replay(ReplayRequest(Path(args.session), Path(args.out) if args.out else None, args.speed,
+                                       args.force))
+    for line in job.lines:
+        print(line)
+    outcome = job.run(sinks=[ConsoleProgress()])
+    ended = outcome.data
+    print(outcome.lines[0])
     if ended.mismatch is not None:
         raise ended.mismatch
-    cmp = ended.comparison
-    if cmp.identical:
-        print(f"identical to the recording: {cmp.points} points (all fields), {cmp.faults} faults, outcome {result.outcome}")
-        print(f"next: station fit {out} --out model.json   (gives the model of {source})")
-        return 0
-    print("differs from the recording:")
-    for line in cmp.differences:
-        print(f"  {line}")
-    return 1
-
+    for line in outcome.lines[1:]:
+        print(line)
+    return 0 if ended.comparison.identical else 1

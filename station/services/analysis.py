@@ -84,3 +84,67 @@ def save_session_model(model: Any, out: Any, session: Any, cfg: Any) -> Path:
     path = save_model(model, out, str(session.path), session.sha256, identity=model_identity(session.identity, model.legs))
     register(catalog_for(cfg), path, "model")
     return Path(path)
+
+
+@dataclass
+class FileAnalysis:
+    """What the terminal UI's Results page shows of a recording file: `analysis` (the fit and ISO
+    230-2 values with U, as `station fit` and `station iso230` give them), the ISO 14253-1
+    `decisions` against the session's recorded [tolerances] (None when it states none for its
+    legs' types) and their one-line `decision_summary`, and `decisions_error` (why they could not
+    be had; the rest stands without them)."""
+
+    analysis: SessionAnalysis
+    decisions: dict | None = None
+    decision_summary: str = ""
+    decisions_error: Exception | None = None
+
+
+def analyse_file(path: str | Path, method: str, raw: bool = False) -> FileAnalysis:
+    """Read the recording `path` and analyse it on the chosen error basis with a `method` fit,
+    ISO 230-2 with U, and the tolerance decisions; reading and fitting errors are raised."""
+    from procedures.io.recording.reader import read_session
+
+    a = analyse_session(read_session(path), raw, fit_method=method, iso=True, uncertainty=True)
+    out = FileAnalysis(a)
+    try:  # ISO 14253-1 against the recorded [tolerances] of the legs' types (docs/decisions.md)
+        from procedures.reporting.decision import decision_summary
+        from station.services.report_jobs import decisions_if_stated
+
+        out.decisions = decisions_if_stated(a.session, raw)
+        if out.decisions:
+            out.decision_summary = decision_summary(out.decisions["legs"])
+    except Exception as exc:
+        out.decisions_error = exc
+    return out
+
+
+def normalised_basis_text(basis: dict) -> str:
+    """The error basis of a normalised analysis in one line (`basis`: error_basis' JSON): the
+    reference temperature and legs, the material temperature and correction ranges over them,
+    and the legs left raw with why."""
+    from procedures.io.ranges import legs_text
+
+    ref = basis.get("reference_temp_c", 20.0)
+    legs = [str(k) for k in basis.get("normalised_legs", [])]
+    temps = [v for k, v in basis.get("material_temp_range_c", {}).items() if k in legs]
+    corr = [v for k, v in basis.get("correction_range_um", {}).items() if k in legs]
+    text = f"error: normalised to {ref:g} degC material temperature, legs {legs_text(int(k) for k in legs)}"
+    if temps and corr:
+        text += (f": material {min(t[0] for t in temps):.2f}..{max(t[1] for t in temps):.2f} °C, "
+                 f"correction {min(c[0] for c in corr):+.3f}..{max(c[1] for c in corr):+.3f} µm")
+    raw_legs = basis.get("raw_legs") or {}
+    if raw_legs:
+        text += "; raw on " + "; ".join(f"leg {k} ({v})" for k, v in sorted(raw_legs.items()))
+    return text
+
+
+def write_session_report(session: Any, out: Any, model: Any, cfg: Any) -> tuple[Any, list[str]]:
+    """The report `station report SESSION --out OUT --model MODEL.json` writes, of `session` with
+    the model on show, indexed in the catalog of station config `cfg`; and the report's note lines
+    (the UI's Results page, `r`)."""
+    from station.catalog.writer import catalog_for
+    from station.services.report_jobs import report_lines, session_report
+
+    result = session_report(session, out, model, catalog=catalog_for(cfg))
+    return result, [line for line in report_lines(result, model) if line.startswith("note:")]

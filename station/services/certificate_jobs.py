@@ -483,3 +483,177 @@ def approve(report_no: str, *, by: str, folder: str | os.PathLike, authoriser: d
     write_bytes_atomic(index_path, (json.dumps(index, indent=2) + "\n").encode())
     _register(catalog, cert, pdf_path, sha, json_path)
     return Issued(report_no, int(last["revision"]), pdf_path, json_path, index_path, cert)
+
+
+# -- the certificate jobs as every front end asks for them (issue 32 part 1) ----------------------
+
+@dataclass
+class ApproveRequest:
+    """Approve the current revision of certificate `report_no` by `by` (the [lab] authoriser);
+    `out`: the certificates folder (None: <recordings_dir>/certificates)."""
+
+    report_no: str | None
+    by: str | None
+    out: str | os.PathLike | None = None
+
+
+def approve_certificate(request: ApproveRequest, cfg: Any) -> Issued:
+    """`approve` with what the station config `cfg` says: the folder, the authoriser, the audit
+    log and the catalog the approval is recorded in."""
+    from station.catalog.writer import catalog_for  # noqa: PLC0415
+    from station.services.config import AUDIT_NAME  # noqa: PLC0415
+
+    if not request.report_no or not request.by:
+        raise InputError("usage: station certificate approve REPORT_NO --by NAME (the [lab] authoriser)")
+    folder = Path(request.out) if request.out else Path(cfg.recordings_dir) / FOLDER_NAME
+    return approve(request.report_no, by=request.by, folder=folder,
+                   authoriser={"name": cfg.lab.authoriser, "role": cfg.lab.authoriser_role},
+                   audit_path=Path(cfg.recordings_dir) / AUDIT_NAME, catalog=catalog_for(cfg),
+                   station_id=cfg.station_id)
+
+
+@dataclass
+class CertificateRequest:
+    """Issue a certificate (a DRAFT until approved) of leg `leg` (None: the session's only one)
+    from the as-found session `session`, the as-left session `as_left` and the table `table`
+    (paths; None: none). `out`: the certificates folder (None: <recordings_dir>/certificates);
+    `customer`/`customer_contact`: None = the config's (a revision keeps the earlier one's);
+    `received`: YYYY-MM-DD; `revise`: the report number of which to issue the next revision, with
+    `reason`; `use_config_tolerances`: the config's [tolerances] instead of the session's."""
+
+    session: str | os.PathLike
+    as_left: str | os.PathLike | None = None
+    table: str | os.PathLike | None = None
+    leg: int | None = None
+    out: str | os.PathLike | None = None
+    customer: str | None = None
+    customer_contact: str | None = None
+    received: str | None = None
+    revise: str | None = None
+    reason: str = ""
+    use_config_tolerances: bool = False
+
+
+@dataclass
+class PreparedCertificate:
+    """A certificate whose sessions were read and inputs checked; `run` issues it."""
+
+    kwargs: dict[str, Any]
+    as_found: Any  # procedures.io.recording.reader.Session
+    needs_rig: bool = False
+    question: str | None = None
+    lines: list[str] = field(default_factory=list)
+
+    def run(self, sinks=(), control=None):
+        from station.services.job import JobOutcome  # noqa: PLC0415
+
+        issued = issue_certificate(self.as_found, **self.kwargs)
+        return JobOutcome("done", outputs=[Path(issued.pdf), Path(issued.json)], lines=issue_lines(issued),
+                          data=issued)
+
+
+def prepare_certificate(request: CertificateRequest, cfg: Any) -> PreparedCertificate:
+    """Read the sessions, pick the leg, hash the leg's rows of the table as its drive holds them,
+    and check the received date (InputError naming what to give)."""
+    from procedures.io.recording.reader import read_session  # noqa: PLC0415
+    from station.catalog.writer import catalog_for  # noqa: PLC0415
+
+    r = request
+    as_found = read_session(Path(r.session))
+    as_left = read_session(Path(r.as_left)) if r.as_left else None
+    tolerances = {k: t.to_json() for k, t in cfg.tolerances.items()} if r.use_config_tolerances else None
+    folder = Path(r.out) if r.out else Path(cfg.recordings_dir) / FOLDER_NAME
+    lab = {"name": cfg.lab.name, "address": cfg.lab.address, "accreditation": cfg.lab.accreditation}
+    leg = pick_leg(as_found, r.leg)
+    leg_sha = None
+    if r.table:  # the leg's rows as its drive (or the station) holds them: compared with the as-left table
+        from station.services.table_jobs import expected_tables  # noqa: PLC0415
+        from station.services.wiring import leg_table_spec  # noqa: PLC0415
+
+        leg_sha = expected_tables(r.table, (leg,), leg_table_spec(cfg, leg))[leg]
+    # a revision keeps the customer an earlier revision corrected unless given again
+    customer = r.customer if r.customer is not None else (None if r.revise else cfg.lab.customer)
+    contact = r.customer_contact if r.customer_contact is not None else (
+        None if r.revise else cfg.lab.customer_contact)
+    received = None
+    if r.received is not None:
+        try:
+            received = _dt.date.fromisoformat(r.received).isoformat()
+        except ValueError:
+            raise InputError(f"--received {r.received!r}: give the date the item was received as YYYY-MM-DD") from None
+    kwargs = dict(leg=leg, as_left=as_left, table=r.table, lab=lab, customer=customer, folder=folder,
+                  counter_path=Path(cfg.recordings_dir) / COUNTER_NAME, revise=r.revise, reason=r.reason,
+                  tolerances=tolerances, station_id=cfg.station_id, table_leg_sha256=leg_sha,
+                  customer_contact=contact, authoriser={"name": cfg.lab.authoriser, "role": cfg.lab.authoriser_role},
+                  prepared_by=cfg.operator, catalog=catalog_for(cfg), received=received)
+    return PreparedCertificate(kwargs, as_found, lines=[f"certificate of leg {leg} from {r.session}"])
+
+
+def issue_lines(issued: Issued) -> list[str]:
+    """What to tell the user about a certificate just issued: its number and verdicts, every
+    warning it carries, the files written and how to approve it."""
+    c = issued.content
+    lines = [f"certificate {issued.report_no} revision {issued.revision} (DRAFT until approved): leg {c['item']['leg']} "
+             f"serial {c['item']['serial']}, as found {c['as_found']['overall']}"
+             + (f", as left {c['as_left']['overall']}" if c["as_left"] else "")]
+    if issued.earlier:
+        lines.append(f"warning: these sessions are already certified: {'; '.join(issued.earlier)}; this is another "
+                     f"number for the same measurement (a correction is `--revise {issued.earlier[0].split(' ')[0]} "
+                     "--reason ...`)")
+    if c.get("simulated"):
+        lines.append("warning: SIMULATION: " + "; ".join(c["simulated"]) + "; the certificate says so on every page "
+                     "and states no accreditation")
+    if not c["traceability"]["traceable"]:
+        lines.append("warning: " + c["traceability"]["statement"].split(". The results")[0] + "; the certificate says "
+                     "NOT TRACEABLE")
+    if (c["compensation_table"] or {}).get("matches_as_left") is False:
+        lines.append("warning: the table active in the as-left session is NOT the --table given; the certificate says so")
+    if c["supersedes"]:
+        lines.append(f"supersedes revision {c['supersedes']['revision']} (kept; marked superseded in {issued.index}); "
+                     f"{len(c['supersedes'].get('changes') or [])} field(s) changed")
+    lines += [f"wrote {issued.pdf}", f"wrote {issued.json}", f"index {issued.index}",
+              f"approve it: station certificate approve {issued.report_no} --by NAME"]
+    return lines
+
+
+@dataclass
+class CatalogSources:
+    """What the catalog gives a certificate of one leg: its as-found session, as-left session and
+    table (paths; those given win over the catalog's) and the leg of the as-found session."""
+
+    session: str
+    as_left: str | None
+    table: str | None
+    leg: int | None
+
+
+def sources_from_catalog(engine: Any, where: str, serial: str, *, as_left: str | None = None,
+                         table: str | None = None, say: Any = None) -> CatalogSources:
+    """The sources of leg `serial` in the catalog `engine` (described by `where`): the last
+    calibration, the verification after it and the last table pushed after it; `say(line)` is
+    told each (and the catalog). InputError when the catalog lists a file that is missing."""
+    from station.catalog.certificate_sources import certificate_sources  # noqa: PLC0415
+
+    say = say or (lambda line: None)
+    found = certificate_sources(engine, serial)
+    say(where)
+    given = {"as left": as_left, "table": table}  # given on the command line: those win
+    picked = [("as found", found.as_found, "calibration session", "no calibration"),
+              ("as left", found.as_left, "verification session", "no verification session after the calibration"),
+              ("table", found.table, "last table pushed", "no table pushed after the calibration is indexed")]
+    for label, src, what, none in picked:
+        if given.get(label):
+            say(f"{label}: {given[label]} (given)")
+        elif src is None:
+            say(f"{label}: none ({none})")
+        else:
+            say(f"{label}: {src.path} ({what}, {src.time_utc}, sha256 {(src.sha256 or '?')[:16]})")
+            if not Path(src.path).is_file():
+                raise InputError(f"{src.path}: the catalog lists this {what} of leg {serial} but the file is "
+                                 "missing; restore it, or re-index with `station catalog check` and `station catalog "
+                                 "rebuild DIR`")
+    if found.table is None and found.pushed_table_sha256 and not table:
+        say(f"note: a table (sha256 {found.pushed_table_sha256[:16]}) was pushed after the calibration but its "
+            "file is not in the catalog; give it with --table to state it")
+    return CatalogSources(found.as_found.path, as_left or (found.as_left.path if found.as_left else None),
+                          table or (found.table.path if found.table else None), found.as_found.leg)

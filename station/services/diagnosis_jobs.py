@@ -7,8 +7,13 @@ One function, so the two front ends' JSON reports are the same report, not two c
 
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
+
+from procedures.vocabulary import InputError
+from station.services.job import JobOutcome
 
 # The self-check's sessions (`station diagnose --self-check`) are made from the plant alone, with the
 # other synthetic sessions (procedures/synthetic.py); the front ends take them from here.
@@ -113,3 +118,242 @@ def on_common_basis(session: Any, twin: Any) -> tuple[Any, Any, list[int]]:
         description=f"{twin.description}; legs {', '.join(map(str, legs))} normalised to 20 degC on both sides",
         legs=twin.legs, info=info)
     return points, combined, legs
+
+
+# -- the diagnosis job (issue 32 part 1, one shape for every job) ---------------------------------
+
+@dataclass
+class DiagnoseRequest:
+    """Diagnose the recording `session` against a twin: `twin` as `station diagnose --twin` spells
+    it (MODEL.json, REFERENCE.h5, sim:..., fleet:TYPE; None: the twin fitted on the recording), or
+    `twin_model` (a fitted model and the file it names, as the UI's Results page holds it).
+    `json_out`: where to write the report (replaced only with `force`); `local`: fleet:TYPE reads
+    the local catalog. The settings: `threshold_um`, `alpha`, `lead_mm`, `motor_turn_mm`,
+    `effects` (comma separated; None: all), `holdout` ("cycle" or "pass"); None = the default."""
+
+    session: Path | None
+    twin: str | None = None
+    twin_model: tuple[Any, str] | None = None
+    json_out: Path | None = None
+    force: bool = False
+    local: bool = False
+    threshold_um: float | None = None
+    alpha: float | None = None
+    lead_mm: float | None = None
+    motor_turn_mm: float | None = None
+    effects: str | None = None
+    holdout: str | None = None
+
+
+def diagnosis_settings(r: Any) -> Any:
+    """procedures.diagnosis.DiagnosisSettings from a request's fields (None: the default)."""
+    from procedures.diagnosis import DiagnosisSettings
+
+    kw = {k: getattr(r, k) for k in ("threshold_um", "alpha", "lead_mm", "holdout", "motor_turn_mm")
+          if getattr(r, k) is not None or k == "motor_turn_mm"}
+    effects = tuple(e.strip() for e in r.effects.split(",") if e.strip()) if r.effects else ()
+    if effects:
+        kw["effects"] = effects
+    return DiagnosisSettings(**kw)
+
+
+@dataclass
+class Diagnosis:
+    """A diagnosis for the front end to present: the JSON `report`, its `text` (as `station
+    diagnose` prints it) and the lines on the error used and the material temperature."""
+
+    path: Path
+    report: dict
+    text: str
+    temp_lines: list[str]
+
+
+@dataclass
+class PreparedDiagnosis:
+    request: DiagnoseRequest
+    session: Any  # procedures.io.recording.reader.Session
+    twin: Any
+    settings: Any
+    needs_rig: bool = False
+    question: str | None = None
+    lines: list[str] = field(default_factory=list)
+
+    def run(self, sinks=(), control=None) -> JobOutcome:
+        from procedures.diagnosis import to_json
+        from procedures.diagnosis.text_report import text_report
+
+        r = self.request
+        report, temp_lines = diagnose_session(self.session, r.session, self.twin, self.settings)
+        text = text_report(report)
+        lines = [text, "\n" + "\n".join(temp_lines)]
+        outputs = []
+        if r.json_out:
+            Path(r.json_out).write_text(to_json(report))
+            lines.append(f"\nreport written to {r.json_out}")
+            outputs.append(Path(r.json_out))
+        return JobOutcome("done", outputs=outputs, lines=lines,
+                          data=Diagnosis(Path(r.session), report, text, list(temp_lines)))
+
+
+def prepare_diagnosis(request: DiagnoseRequest, cfg: Any = None, say: Callable[[str], None] | None = None,
+                      config: Path | None = None) -> PreparedDiagnosis:
+    """Every refusal before the (long) diagnosis: the settings, an output that exists, no file,
+    a CSV not imported, an unreadable session or twin. `cfg`: the station config whose catalog a
+    fleet twin reads (None: load `config`); `say(line)` is told which catalog it read."""
+    from procedures.io.outputs import check_output_file
+
+    r = request
+    settings = diagnosis_settings(r)
+    if r.json_out:  # before the (long) diagnosis
+        check_output_file(r.json_out, force=r.force, option="--json")
+    if not r.session:
+        raise InputError("name a session file (FILE.h5), or use --self-check")
+    path = Path(r.session)
+    if path.suffix.lower() == ".csv":
+        raise InputError(f"{path}: a CSV must be imported first: `station import {path} --out FILE.h5`, "
+                         "then `station diagnose FILE.h5`")
+    from procedures.io.recording.reader import read_session
+
+    session = read_session(path)
+    twin = None
+    if r.twin_model is not None:
+        from procedures.diagnosis import twin_from_model
+
+        twin = twin_from_model(*r.twin_model)
+    elif r.twin:
+        from station.services.twins import load_twin
+
+        def engine():  # fleet:TYPE reads the station's catalog
+            from station.catalog.store import catalog_of, reading_engine
+            from station.services.config import load_config
+
+            got, where = reading_engine(catalog_of(cfg if cfg is not None else load_config(config)), r.local)
+            if say is not None:
+                say(where)
+            return got
+
+        twin = load_twin(r.twin, session=session, path=path, catalog=engine)
+    return PreparedDiagnosis(r, session, twin, settings, lines=[f"diagnose {path}"])
+
+
+# -- the self-check: the diagnosis on simulated sessions with known effects withheld ---------------
+
+@dataclass
+class SelfCheckRequest:
+    """`seeds` sessions from `first_seed` (per physics with `variants`, comma separated, "" = all)
+    with a withheld effect of RMS contribution in `magnitude_um` (MIN, MAX); `json_out`: where to
+    write the results (replaced only with `force`); the settings as DiagnoseRequest's."""
+
+    session: Path | None = None  # refused: the self-check makes its own sessions
+    seeds: int = 20
+    first_seed: int = 0
+    variants: str | None = None
+    magnitude_um: tuple[float, float] | None = None
+    json_out: Path | None = None
+    force: bool = False
+    threshold_um: float | None = None
+    alpha: float | None = None
+    lead_mm: float | None = None
+    motor_turn_mm: float | None = None
+    effects: str | None = None
+    holdout: str | None = None
+
+
+@dataclass
+class PreparedSelfCheck:
+    request: SelfCheckRequest
+    settings: Any
+    physics: list[str]
+    progress: Callable[[str], None] | None = None
+    needs_rig: bool = False
+    question: str | None = None
+    lines: list[str] = field(default_factory=list)
+
+    def run(self, sinks=(), control=None) -> JobOutcome:
+        """Status "done" when every trial was fully right, "failed" otherwise; `data` the results."""
+        r = self.request
+        seeds = range(r.first_seed, r.first_seed + r.seeds)
+        say = self.progress or (lambda line: None)
+        if self.physics:
+            lines, result = self._variants(seeds, say)
+        else:
+            from procedures.diagnosis.selfcheck import format_self_check, run_self_check
+
+            def progress(t):
+                say(f"  {'ok ' if t['ok'] else 'BAD'} seed {t['seed']:>4} ({t['twin']} twin): {t['label']}")
+
+            lo, hi = r.magnitude_um or SELF_CHECK_CONTRIBUTION_UM
+            result = run_self_check((selfcheck_trial(s, contribution_um=(lo, hi)) for s in seeds), self.settings,
+                                    progress)
+            lines = [format_self_check(result)]
+        outputs = []
+        if r.json_out:
+            Path(r.json_out).write_text(json.dumps(result, indent=1, allow_nan=False, default=float))
+            outputs.append(Path(r.json_out))
+        ok = result["summary"]["trials_ok"] == result["summary"]["trials"]
+        return JobOutcome("done" if ok else "failed", outputs=outputs, lines=lines, data=result)
+
+    def _variants(self, seeds, say) -> tuple[list[str], dict]:
+        """The variants' self-check: seeds sessions per physics (procedures/synthetic.py),
+        parameters within 15 %, gap within 25 % of the oracle's."""
+        from procedures.diagnosis.selfcheck import (VARIANT_GAP_TOLERANCE, VARIANT_PARAM_TOLERANCE, format_by_physics,
+                                                    format_self_check, run_self_check, summarise_by_physics)
+
+        def progress(t):
+            if not t["ok"]:
+                say(f"  BAD seed {t['seed']:>4} ({t['twin']} twin): {t['label']}")
+
+        result = run_self_check((variant_trial(s, p) for p in self.physics for s in seeds), self.settings, progress,
+                                VARIANT_PARAM_TOLERANCE, VARIANT_GAP_TOLERANCE)
+        result["by_physics"] = summarise_by_physics(result["trials"])
+        lines = [f"variant self-check: {len(seeds)} sessions per physics, {result['summary']['trials_ok']} of "
+                 f"{result['summary']['trials']} fully right",
+                 format_by_physics(result["by_physics"], VARIANT_PARAM_TOLERANCE, VARIANT_GAP_TOLERANCE),
+                 "\n".join(line for line in format_self_check(result).splitlines() if line.startswith("  seed"))]
+        return lines, result
+
+
+def prepare_self_check(request: SelfCheckRequest, progress: Callable[[str], None] | None = None) -> PreparedSelfCheck:
+    """Every refusal before the sessions are made (settings, output, physics, magnitudes);
+    `lines`: the size estimate. `progress(line)` is told each trial (the variants: each bad one)."""
+    from procedures.io.outputs import check_output_file
+    from station.services.sizing import selfcheck_estimate
+
+    r = request
+    settings = diagnosis_settings(r)
+    if r.json_out:  # before the (long) self-check
+        check_output_file(r.json_out, force=r.force, option="--json")
+    if r.session:
+        raise InputError("--self-check makes its own sessions; drop FILE.h5")
+    physics = [p.strip() for p in r.variants.split(",") if p.strip()] if r.variants else []
+    per = len(r.variants.split(",")) if r.variants else 1
+    lines = [f"self-check: {selfcheck_estimate(r.seeds * per).describe()}"]
+    if physics:
+        unknown = sorted(set(physics) - set(PHYSICS))
+        if unknown:
+            raise InputError(f"--variants {r.variants}: unknown physics {', '.join(unknown)}; known: "
+                             f"{', '.join(PHYSICS)}")
+    elif r.magnitude_um is not None:
+        lo, hi = r.magnitude_um
+        if not 0 < lo <= hi:
+            raise InputError(f"--magnitude-um {lo:g} {hi:g}: need 0 < MIN <= MAX (um)")
+    return PreparedSelfCheck(r, settings, physics, progress, lines=lines)
+
+
+def material_text(doc: dict | None) -> str | None:
+    """One line on the material temperature over the legs from a report's `material_temperature`
+    (procedures.metrology.thermal.diagnosis_temperature_note), None when the report has none. The
+    diagnosis is on the raw error, which the other analyses normalise to the reference temperature."""
+    if not doc:
+        return None
+    from procedures.io.ranges import legs_text
+
+    ref = doc.get("reference_temp_c", 20.0)
+    legs = doc.get("legs") or {}
+    if not legs:
+        return f"raw error; no material temperature recorded (nothing to normalise to {ref:g} °C)"
+    lo = min(v["min_c"] for v in legs.values())
+    hi = max(v["max_c"] for v in legs.values())
+    far = max(v["max_from_reference_k"] for v in legs.values())
+    return (f"raw error (not normalised to {ref:g} °C); material {lo:.2f}..{hi:.2f} °C on legs "
+            f"{legs_text(int(k) for k in legs)}, up to {far:.2f} K from {ref:g} °C")

@@ -13,7 +13,9 @@ by default (a table from `station table` holds what the default model holds), ra
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -244,3 +246,212 @@ def write_report(out: Path, result, summary: dict, inputs: dict, geometry) -> li
         write_text_atomic(work / SUMMARY_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
         figures = _write_figures(result, work)
     return [out / REPORT_MD, out / SUMMARY_JSON, *(out / f.name for f in figures)]
+
+
+# -- the platform job (issue 32 part 1, one shape for every job) ----------------------------------
+
+UNSAVED_MODEL = "fitted in the station UI, not saved (Results, F3: w saves it)"
+COMPONENTS = ("x_um", "y_um", "z_um", "rx_rad", "ry_rad", "rz_rad")  # the pose error's components, in its order
+
+
+@dataclass
+class PlatformRequest:
+    """What to run: `poses` random poses from `seed`, the leg errors of `source` (FILE.h5,
+    MODEL.json or TABLE.csv with `recording`) or, with no source, of `analysis` (the UI's Results
+    analysis: its model and session, or the held-out `recording`). `measured`, `profile`, `raw`
+    as `station platform` takes them; `geometry`: a TOML (None: the paper-like positioner); the
+    workspace half-ranges about home in mm and degrees; `out`: the report folder (None: written
+    later, `write_platform_report`), replaced only with `force`."""
+
+    poses: int = 2000
+    seed: int = 0
+    source: Path | None = None
+    analysis: Any = None
+    recording: Path | None = None
+    measured: str | None = None
+    profile: Path | None = None
+    raw: bool = False
+    geometry: Path | None = None
+    xy_mm: float = 60.0
+    z_mm: float = 60.0
+    tilt_deg: float = 3.0
+    yaw_deg: float = 0.0
+    out: Path | None = None
+    force: bool = False
+
+
+@dataclass
+class PlatformRun:
+    """One finished experiment: the main measurement's result and summary (with the other
+    measurement's digest), what went in, and where its report goes; the figures a front end
+    shows, in its units (`pose_rows`, `dominant`, `histogram`)."""
+
+    result: Any  # procedures.platform.experiment.ExperimentResult
+    summary: dict
+    inputs: dict
+    geometry: Any
+    recording: Path
+    label: str  # what was compensated with what, for the status line (file names only)
+    analysis: Any = None
+    written: list[Path] = field(default_factory=list)
+
+    def measurement_label(self, measured: str | None, default: str = "the source") -> str:
+        from procedures.platform.experiment import MEASUREMENT_LABELS
+
+        return MEASUREMENT_LABELS.get(measured or "", default)
+
+    def pose_rows(self) -> list[tuple[str, list[str]]]:
+        """The paper's Table 2: (measure, cells per component)."""
+        from procedures.platform.report import pose_table_rows
+
+        return list(pose_table_rows(self.summary))
+
+    def dominant(self, stage: str, k: int) -> str:
+        """The leg dominating component `k` "original" or "compensated", in words."""
+        from procedures.platform.report import dominant_text
+
+        return dominant_text(self.summary["dominant_leg"][stage][k])
+
+    def histogram(self, component: str, bins: int = 40) -> tuple[list[float], list[float], list[float], str]:
+        """Step outlines of the original and compensated error of `component` on the same bins,
+        positions in um, angles in arcsec: (x, counts original, counts compensated, unit)."""
+        from procedures.platform.sensitivity import ARCSEC_PER_RAD
+
+        k = COMPONENTS.index(component)
+        ok = self.result.valid
+        scale = 1.0 if k < 3 else ARCSEC_PER_RAD
+        xs, c0, c1 = histogram_steps(self.result.pose_error[ok, k] * scale,
+                                     self.result.pose_error_compensated[ok, k] * scale, bins)
+        return xs, c0, c1, ("µm" if k < 3 else "arcsec")
+
+
+def histogram_steps(orig: np.ndarray, comp: np.ndarray, bins: int = 40) -> tuple[list[float], list[float], list[float]]:
+    """Step outlines of the histograms of `orig` and `comp` on the same bins (as the report's
+    figures: the narrowing is visible): (x, counts original, counts compensated)."""
+    lo = float(min(np.min(orig), np.min(comp)))
+    hi = float(max(np.max(orig), np.max(comp)))
+    if not hi > lo:
+        hi = lo + 1e-12
+    edges = np.linspace(lo, hi, bins + 1)
+    c0, _ = np.histogram(orig, bins=edges)
+    c1, _ = np.histogram(comp, bins=edges)
+    xs = np.repeat(edges, 2)[1:-1]  # each bin's left and right edge
+    return [float(x) for x in xs], [float(c) for c in np.repeat(c0, 2)], [float(c) for c in np.repeat(c1, 2)]
+
+
+def require_six_legs(session, name: str) -> None:
+    legs = [int(leg) for leg in session.legs]
+    missing = [leg for leg in range(1, 7) if leg not in legs]
+    if missing:
+        raise InputError(
+            f"{name} has leg(s) {legs}, no {missing}; the platform needs the errors of all six legs. "
+            "Record a sweep of legs 1-6 (Sweep, F2) and fit it on Results (F3)."
+        )
+
+
+@dataclass
+class PreparedPlatform:
+    request: PlatformRequest
+    out: Path | None
+    needs_rig: bool = False
+    question: str | None = None
+    lines: list[str] = field(default_factory=list)
+
+    def run(self, sinks=(), control=None):
+        """Load the error sources, run both measurements on the same poses and, with `out`, write
+        the report. `data`: the PlatformRun; `lines`: what `station platform` prints after it."""
+        import math
+
+        from procedures.platform.experiment import Workspace, run_measurements
+        from procedures.platform.geometry import default_geometry, load_geometry
+        from station.services.job import JobOutcome
+
+        r = self.request
+        geometry = load_geometry(r.geometry) if r.geometry else default_geometry()
+        a = r.analysis
+        if r.source is None:  # the model on Results
+            from procedures.io.recording.reader import read_session
+
+            if r.recording is None:
+                session, rec_path, held_out = a.session, a.path, False
+            else:
+                session, rec_path = read_session(r.recording), Path(r.recording)
+                held_out = session.sha256 != a.session.sha256
+            require_six_legs(session, rec_path.name)
+            errors, other, inputs = model_errors(
+                a.model, session, rec_path, a.model_path, held_out=held_out,
+                model_label=None if a.model_path else f"fitted on {a.path.name} in the station UI, not saved")
+            if a.model_path is None:
+                inputs["model"]["note"] = UNSAVED_MODEL
+            label = f"{a.method} model fitted on {a.path.name}" + (f", measured on {rec_path.name}" if held_out else "")
+        else:
+            source = Path(r.source)
+            errors, other, inputs = load_errors(source, recording=r.recording, measured=r.measured,
+                                                profile=r.profile, raw=r.raw)
+            rec_path = Path(inputs["recording"]["path"])
+            kind = "table" if source.suffix.lower() == ".csv" else "model"
+            label = f"{kind} {source.name} on {rec_path.name}"
+            a = None
+        workspace = Workspace(r.xy_mm, r.z_mm, math.radians(r.tilt_deg), math.radians(r.yaw_deg))
+        # same seed for the other measurement, so the same poses and directions: only the measurement differs
+        result, summary = run_measurements(geometry, errors, other, poses=r.poses, seed=r.seed, workspace=workspace)
+        if r.source is not None:
+            summary["measured"] = inputs["measured"]
+        run = PlatformRun(result, summary, inputs, geometry, rec_path, label, analysis=a)
+        if self.out is None:
+            return JobOutcome("done", data=run)
+        run.written = write_report(self.out, result, summary, inputs, geometry)
+        return JobOutcome("done", outputs=list(run.written), lines=platform_lines(run), data=run)
+
+
+def prepare_platform(request: PlatformRequest, cfg: Any = None) -> PreparedPlatform:
+    """Every refusal before a pose is computed: the size (memory) of the run, the workspace's
+    half-ranges, an output folder that exists. `lines`: the size estimate."""
+    import math
+
+    from station.services.sizing import check_platform_poses
+
+    r = request
+    size = check_platform_poses(r.poses)  # sized first: refused before anything is read or allocated
+    for name in ("xy_mm", "z_mm", "tilt_deg", "yaw_deg"):
+        value = getattr(r, name)
+        if not (math.isfinite(value) and value >= 0):
+            raise InputError(f"--{name.replace('_', '-')} must be a number >= 0, got {value}.")
+    out = None
+    if r.out is not None:
+        from procedures.io.outputs import check_output_folder
+
+        out = check_output_folder(r.out, force=r.force)  # before the poses are computed
+    return PreparedPlatform(r, out, lines=[f"platform: {size.describe()}"])
+
+
+def write_platform_report(run: PlatformRun, out: Path) -> list[Path]:
+    """The CLI's report files for a run of the UI in `out` (any thread); a model saved on Results
+    since the run is named by its file."""
+    import copy
+
+    inputs = copy.deepcopy(run.inputs)
+    a = run.analysis
+    if a is not None and a.model_path is not None and inputs.get("model", {}).get("path") is None:
+        inputs["model"]["path"] = str(a.model_path)  # saved on Results since the run
+        inputs["model"].pop("note", None)
+    return write_report(out, run.result, dict(run.summary), inputs, run.geometry)
+
+
+def platform_lines(run: PlatformRun) -> list[str]:
+    """What `station platform` prints of a run: files read without their integrity record, the
+    error basis, the measurement, Table 2, the reductions, the poses used and the files written."""
+    from procedures.platform.report import pose_table_markdown, reduction_lines
+
+    inputs, summary = run.inputs, run.summary
+    lines = []
+    for kind in ("table", "model"):  # a file without its integrity record: read whole, said once (docs/tables.md)
+        if (inputs.get(kind) or {}).get("integrity") == "unverified":
+            from procedures.io.integrity import unverified_line
+
+            lines.append(unverified_line(inputs[kind]["path"], kind, "every row and field checked"))
+    lines += list(inputs["error_basis"]["lines"])
+    lines += [f"measured leg error: {run.measurement_label(summary['measured'])}\n", pose_table_markdown(summary), "",
+              reduction_lines(summary), f"poses used: {summary['poses_used']} of {summary['poses']}"]
+    lines += [f"wrote {path}" for path in run.written]
+    return lines

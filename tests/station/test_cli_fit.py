@@ -117,3 +117,25 @@ def test_fit_of_a_csv_file_says_what_to_do(tmp_path, capsys):
     f.write_text("leg,run,direction,target_mm,error_um\n1,1,1,0.0,0.1\n")
     assert main(["fit", str(f), "--out", str(tmp_path / "m.json")]) == 2
     assert "station import" in capsys.readouterr().err
+
+
+def test_fit_warns_of_a_table_recorded_only_as_the_structured_state(tmp_path, capsys):
+    # a session whose devices carry the table state only as JSON (legN_compensation_table, no prose):
+    # fit reads it through procedures.io.recording.stage.active_tables, not by parsing text
+    from procedures.io.recording.writer import SessionWriter
+
+    pts = synth_session({1: CFG, 2: CFG}, np.linspace(-90, 90, 61), cycles=2, seed=5)
+    state = json.dumps({"enabled": True, "bank": 1, "points": 37, "sha256": "ab" * 32})
+    off = json.dumps({"enabled": False, "bank": 0, "points": 0, "sha256": ""})
+    path = tmp_path / "tabled.h5"
+    with SessionWriter.create(path, session_id="t", operator="test", rig="sim", plan={"kind": "test"},
+                              station_config={}, devices={"leg2_compensation_table": state,
+                                                          "leg1_compensation_table": off},
+                              software_version="test") as w:
+        w.append_points(pts)
+        w.finish("completed")
+    assert main(["fit", str(path), "--out", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert ("warning: leg 2 was recorded with a compensation table active (bank 1 active, 37 points, sha256 "
+            "abababababab)") in out
+    assert "warning: leg 1" not in out

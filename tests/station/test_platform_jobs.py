@@ -9,10 +9,15 @@ from tests.tooling import defines, imported_names
 
 def test_the_command_and_the_ui_share_the_inputs_and_the_report():
     # by the command's imports (inside run(): `station platform --help` loads none of it), no copy of its own
-    names = imported_names("station.commands.platform")
+    # both front ends run the one job (prepare_platform: inputs by load_errors, report by write_report)
+    for front in ("station.commands.platform", "station.tui.screens.platform"):
+        names = imported_names(front)
+        assert names["prepare_platform"] == "station.services.platform_jobs.prepare_platform"
+        for name in ("load_errors", "write_report", "run_measurements", "prepare_platform"):
+            assert not defines(front, name)
     for name in ("load_errors", "write_report"):
-        assert names[name] == f"station.services.platform_jobs.{name}" == f"{getattr(platform_jobs, name).__module__}.{name}"
-        assert not defines("station.commands.platform", name)
+        assert getattr(platform_jobs, name).__module__ == "station.services.platform_jobs"
+        assert name in platform_jobs.PreparedPlatform.run.__code__.co_names
 
 
 def test_a_model_held_in_memory_is_measured_on_its_own_basis(tmp_path):

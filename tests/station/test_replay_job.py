@@ -13,7 +13,8 @@ from tests.tooling import defines, imported_names
 
 def test_the_command_uses_the_shared_job_and_comparison():
     # by its imports (inside run(): `station replay --help` loads neither), and no copy of its own
-    assert imported_names("station.commands.replay")["replay_and_compare"] == "station.services.jobs.replay_and_compare"
+    assert imported_names("station.commands.replay")["prepare_replay"] == "station.services.replay_job.prepare_replay"
+    assert imported_names("station.services.replay_job")["replay_and_compare"] == "station.services.jobs.replay_and_compare"
     assert imported_names("station.services.jobs")["compare_sessions"] == "procedures.io.replay_compare.compare_sessions"
     for name in ("replay_and_compare", "replay_sweep", "retry_policy_of", "compare_sessions", "Comparison"):
         assert not defines("station.commands.replay", name)

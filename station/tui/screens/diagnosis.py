@@ -47,26 +47,19 @@ def material_summary(doc: dict | None) -> str:
     `material_temperature` (procedures.metrology.thermal.diagnosis_temperature_note; each leg's
     range ends the text). The diagnosis is on the raw error, which the other analyses normalise
     to the reference temperature."""
-    if not doc:
-        return "[dim]material temperature: not in the report[/dim]"
-    from procedures.io.ranges import legs_text
+    from station.services.diagnosis_jobs import material_text
 
-    ref = doc.get("reference_temp_c", 20.0)
-    legs = doc.get("legs") or {}
-    if not legs:
-        return f"raw error; no material temperature recorded (nothing to normalise to {ref:g} °C)"
-    lo = min(v["min_c"] for v in legs.values())
-    hi = max(v["max_c"] for v in legs.values())
-    far = max(v["max_from_reference_k"] for v in legs.values())
-    return (f"raw error (not normalised to {ref:g} °C); material {lo:.2f}..{hi:.2f} °C on legs "
-            f"{legs_text(int(k) for k in legs)}, up to {far:.2f} K from {ref:g} °C")
+    text = material_text(doc)
+    return "[dim]material temperature: not in the report[/dim]" if text is None else text
 
 
 class DiagnosisReady(Message):
-    def __init__(self, path: Path, report: dict, request: int = 0, temp_lines: list[str] | None = None) -> None:
+    def __init__(self, path: Path, report: dict, request: int = 0, temp_lines: list[str] | None = None,
+                 text: str = "") -> None:
         super().__init__()
         self.path = path
         self.report = report
+        self.text = text  # the report as `station diagnose` prints it
         self.temp_lines = temp_lines or []  # the error basis and material temperature, as the CLI prints them
         self.request = request  # the diagnosis request it answers (DiagnosisScreen._request)
 
@@ -112,6 +105,7 @@ class DiagnosisScreen(StationScreen):
 
     def on_mount(self) -> None:
         self.report: dict | None = None
+        self.report_text = ""  # the report as `station diagnose` prints it
         self.temp_lines: list[str] = []
         self.plot_leg: str | None = None
         self._request = 0  # numbers the diagnosis requests: only the newest one's answer is shown
@@ -174,37 +168,23 @@ class DiagnosisScreen(StationScreen):
     @work(thread=True, exclusive=True, group="diagnosis", exit_on_error=False)
     def _run(self, path: Path, twin_kind: str, spec: str | None, model, request: int = 0) -> None:
         try:
-            from procedures.diagnosis import twin_from_model
-            from procedures.io.recording.reader import read_session
-            from station.services.diagnosis_jobs import diagnose_session
+            from station.services.diagnosis_jobs import DiagnoseRequest, prepare_diagnosis
 
-            session = read_session(path)
-            twin = None
-            if twin_kind == "results" and model is not None:
-                twin = twin_from_model(model[0], model[1])
-            elif spec is not None:  # as `station diagnose --twin SPEC`
-                from station.services.twins import load_twin
-
-                cfg = self.app.cfg
-
-                def engine():  # fleet:TYPE reads the station's catalog, as `station diagnose --config` does
-                    from station.catalog.store import catalog_of, reading_engine
-
-                    return reading_engine(catalog_of(cfg))[0]
-
-                twin = load_twin(spec, session=session, path=path, catalog=engine)
-            # the report of `station diagnose` (with its material_temperature), by the same function
-            report, temp_lines = diagnose_session(session, path, twin)
+            # the twin as `station diagnose --twin SPEC` chooses it (fleet:TYPE reads the station's catalog, as
+            # `station diagnose --config` does), or the Results page's model; the report by the same job
+            ask = DiagnoseRequest(path, twin=spec, twin_model=model if twin_kind == "results" else None)
+            done = prepare_diagnosis(ask, self.app.cfg).run().data
         except Exception as exc:
             self.post_message(DiagnosisFailed(describe(exc, f"cannot diagnose {path.name}"), request))
             return
-        self.post_message(DiagnosisReady(path, report, request, temp_lines))
+        self.post_message(DiagnosisReady(path, done.report, request, done.temp_lines, done.text))
 
     def on_diagnosis_ready(self, message: DiagnosisReady) -> None:
         if message.request != self._request:  # asked for before the last request
             return
         self.running = False
         self.report = message.report
+        self.report_text = message.text
         self.report_path = message.path
         self.temp_lines = message.temp_lines
         self.plot_leg = None
@@ -236,8 +216,6 @@ class DiagnosisScreen(StationScreen):
             text.update("")
             self._show_plot()
             return
-        from procedures.diagnosis.text_report import text_report
-
         name = self.report_path.name
         n = len(r["findings"])
         status.update(f"[b]{name}[/b]: twin {r['twin']['description']}\n"
@@ -249,7 +227,7 @@ class DiagnosisScreen(StationScreen):
             table.add_row(str(f["leg"]), f["effect"] + (f" ({f['variant']})" if f.get("variant") else ""),
                           f"{f['heldout_rms_before_um']:.3g} → {f['heldout_rms_after_um']:.3g}",
                           f"{f['shrink_pct']:.0f} %", f"{f['p_value']:.2g}", params)
-        report_text = text_report(r) + ("\n\n" + "\n".join(self.temp_lines) if self.temp_lines else "")
+        report_text = self.report_text + ("\n\n" + "\n".join(self.temp_lines) if self.temp_lines else "")
         if self.app.hide_volatile:  # the recording's path and hash vary from run to run
             report_text = "\n".join(line for line in report_text.splitlines() if not line.startswith("recording:"))
         text.update(report_text)

@@ -11,12 +11,8 @@ beside the session, in platform/<session name>/.
 
 from __future__ import annotations
 
-import copy
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
-import numpy as np
 from textual import work
 from rich.markup import escape
 from textual.app import ComposeResult
@@ -27,6 +23,8 @@ from textual.widgets import Button, DataTable, Input, Label, Static
 
 from procedures.vocabulary import InputError
 from station import values
+from station.services.platform_jobs import COMPONENTS, PlatformRequest, PlatformRun, prepare_platform, \
+    write_platform_report
 from station.tui.errors import describe
 from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.screens.common import FieldRefusal, StationScreen
@@ -34,10 +32,8 @@ from station.tui.widgets import XYPlot, columns_fit, set_columns
 
 DEFAULT_POSES = 2000
 DEFAULT_SEED = 0
-COMPONENTS = ("x_um", "y_um", "z_um", "rx_rad", "ry_rad", "rz_rad")
 COMPONENT_LABELS = {"x_um": "x", "y_um": "y", "z_um": "z", "rx_rad": "rx", "ry_rad": "ry", "rz_rad": "rz"}
 SHORT_MEASUREMENT = {"mean": "systematic", "pass": "one pass"}
-UNSAVED_MODEL = "fitted in the station UI, not saved (Results, F3: w saves it)"
 
 
 def report_folder(recording: Path, recordings_dir) -> Path:
@@ -47,32 +43,6 @@ def report_folder(recording: Path, recordings_dir) -> Path:
     from station.tui.widgets import output_folder
 
     return output_folder(recording, recordings_dir) / "platform" / recording.stem
-
-
-@dataclass
-class PlatformRequest:
-    """What to run, resolved on the app's thread from the page's fields and the analysis on show."""
-
-    poses: int
-    seed: int
-    analysis: Any = None  # results.Analysis: its model and session (recording None) or a held-out recording
-    compensation: Path | None = None  # TABLE.csv or MODEL.json typed in
-    recording: Path | None = None
-
-
-@dataclass
-class PlatformRun:
-    """One finished experiment: the main measurement's result and summary (with the other
-    measurement's digest), what went in, and where its report goes."""
-
-    result: Any  # procedures.platform.experiment.ExperimentResult
-    summary: dict
-    inputs: dict
-    geometry: Any
-    recording: Path
-    label: str  # what was compensated with what, for the status line (file names only)
-    analysis: Any = None
-    written: list[Path] = field(default_factory=list)
 
 
 class PlatformReady(Message):
@@ -93,77 +63,6 @@ class PlatformWritten(Message):
         super().__init__()
         self.run = run
         self.paths = paths
-
-
-def _require_six_legs(session, name: str) -> None:
-    from procedures.vocabulary import InputError
-
-    legs = [int(leg) for leg in session.legs]
-    missing = [leg for leg in range(1, 7) if leg not in legs]
-    if missing:
-        raise InputError(
-            f"{name} has leg(s) {legs}, no {missing}; the platform needs the errors of all six legs. "
-            "Record a sweep of legs 1-6 (Sweep, F2) and fit it on Results (F3)."
-        )
-
-
-def run_platform(request: PlatformRequest) -> PlatformRun:
-    """Load the error sources and run both measurements on the same poses (any thread)."""
-    from procedures.platform.experiment import Workspace, run_measurements
-    from procedures.platform.geometry import default_geometry
-    from procedures.io.recording.reader import read_session
-    from station.services.platform_jobs import load_errors, model_errors
-
-    a = request.analysis
-    if request.compensation is None:  # the model on Results
-        if request.recording is None:
-            session, rec_path, held_out = a.session, a.path, False
-        else:
-            session, rec_path = read_session(request.recording), request.recording
-            held_out = session.sha256 != a.session.sha256
-        _require_six_legs(session, rec_path.name)
-        errors, other, inputs = model_errors(
-            a.model, session, rec_path, a.model_path, held_out=held_out,
-            model_label=None if a.model_path else f"fitted on {a.path.name} in the station UI, not saved")
-        if a.model_path is None:
-            inputs["model"]["note"] = UNSAVED_MODEL
-        label = f"{a.method} model fitted on {a.path.name}" + (f", measured on {rec_path.name}" if held_out else "")
-    else:
-        errors, other, inputs = load_errors(request.compensation, recording=request.recording)
-        rec_path = Path(inputs["recording"]["path"])
-        kind = "table" if request.compensation.suffix.lower() == ".csv" else "model"
-        label = f"{kind} {request.compensation.name} on {rec_path.name}"
-        a = None
-    geometry = default_geometry()
-    result, summary = run_measurements(geometry, errors, other, poses=request.poses, seed=request.seed,
-                                       workspace=Workspace())
-    return PlatformRun(result, summary, inputs, geometry, rec_path, label, analysis=a)
-
-
-def write_platform_report(run: PlatformRun, out: Path) -> list[Path]:
-    """The CLI's report files for `run` in `out` (any thread)."""
-    from station.services.platform_jobs import write_report
-
-    inputs = copy.deepcopy(run.inputs)
-    a = run.analysis
-    if a is not None and a.model_path is not None and inputs.get("model", {}).get("path") is None:
-        inputs["model"]["path"] = str(a.model_path)  # saved on Results since the run
-        inputs["model"].pop("note", None)
-    return write_report(out, run.result, dict(run.summary), inputs, run.geometry)
-
-
-def histogram_steps(orig: np.ndarray, comp: np.ndarray, bins: int = 40) -> tuple[list[float], list[float], list[float]]:
-    """Step outlines of the histograms of `orig` and `comp` on the same bins (as the report's
-    figures: the narrowing is visible): (x, counts original, counts compensated)."""
-    lo = float(min(np.min(orig), np.min(comp)))
-    hi = float(max(np.max(orig), np.max(comp)))
-    if not hi > lo:
-        hi = lo + 1e-12
-    edges = np.linspace(lo, hi, bins + 1)
-    c0, _ = np.histogram(orig, bins=edges)
-    c1, _ = np.histogram(comp, bins=edges)
-    xs = np.repeat(edges, 2)[1:-1]  # each bin's left and right edge
-    return [float(x) for x in xs], [float(c) for c in np.repeat(c0, 2)], [float(c) for c in np.repeat(c1, 2)]
 
 
 # Table 2 on a narrow terminal: shorter labels for its measures and components.
@@ -297,7 +196,7 @@ class PlatformScreen(StationScreen):
                 self.notify(f"{comp.name} does not name its recording: type the session (FILE.h5) the table was "
                             "made from under Recording.", title="Platform", severity="warning", timeout=10)
                 return None
-        return PlatformRequest(poses, seed, compensation=comp, recording=recording)
+        return PlatformRequest(poses, seed, source=comp, recording=recording)
 
     def action_run(self) -> None:
         if self.running:
@@ -314,7 +213,7 @@ class PlatformScreen(StationScreen):
     @work(thread=True, exclusive=True, group="platform", exit_on_error=False)
     def _run_worker(self, request: PlatformRequest) -> None:
         try:
-            run = run_platform(request)
+            run = prepare_platform(request).run().data
         except Exception as exc:
             self.post_message(PlatformFailed(describe(exc, "cannot run the platform experiment")))
             return
@@ -390,8 +289,6 @@ class PlatformScreen(StationScreen):
                     status.update(f"ready: the {a.method} model fitted on [b]{a.path.name}[/b] "
                                   f"(legs {legs}); press p to run")
             return
-        from procedures.platform.experiment import MEASUREMENT_LABELS
-
         s = run.summary
         other = s.get("other_measurement")
         lines = [f"[b]{run.label}[/b]: {s['poses_used']} of {s['poses']} poses used, seed {s['seed']}{basis_words(run.inputs)}"
@@ -400,13 +297,11 @@ class PlatformScreen(StationScreen):
         for measured, acc in [(s.get("measured"), s["acceptance"])] + ([(other["measured"], other["acceptance"])] if other else []):
             n_ok = sum(1 for v in acc.values() if v["at_least_leg_reduction"])
             counts.append(f"{SHORT_MEASUREMENT.get(measured or '', 'pose')} {n_ok}/{len(acc)}")
-        lines.append(f"Table 2: {MEASUREMENT_LABELS.get(s.get('measured') or '', 'the source')}. "
+        lines.append(f"Table 2: {run.measurement_label(s.get('measured'))}. "
                      f"At least as much as the legs: {', '.join(counts)}")
         status.update("\n".join(lines))
 
     def _show(self) -> None:
-        from procedures.platform.report import dominant_text, pose_table_rows
-
         table = self.query_one("#plat-table", DataTable)
         legs = self.query_one("#plat-legs", DataTable)
         table.clear()
@@ -420,7 +315,7 @@ class PlatformScreen(StationScreen):
             self._show_plot()
             return
         s = run.summary
-        rows = [(label, *cells) for label, cells in pose_table_rows(s)]
+        rows = [(label, *cells) for label, cells in run.pose_rows()]
         if columns_fit(table, POSE_COLUMNS, rows, width):
             set_columns(table, POSE_COLUMNS)
         else:  # a narrow terminal: the short labels
@@ -438,13 +333,12 @@ class PlatformScreen(StationScreen):
             heads += [f"{name}: pose", "legs", "≥ legs"]
         heads += ["dominant leg before", "after"]
         legs.add_columns(*heads)
-        dom = s["dominant_leg"]
         for k, comp in enumerate(COMPONENTS):
             cells = [COMPONENT_LABELS[comp]]
             for _, acc, leg_red in columns:
                 a = acc[comp]
                 cells += [_pct(a["range_reduction_pct"]), _pct(leg_red), "yes" if a["at_least_leg_reduction"] else "no"]
-            cells += [dominant_text(dom["original"][k]), dominant_text(dom["compensated"][k])]
+            cells += [run.dominant("original", k), run.dominant("compensated", k)]
             legs.add_row(*cells, key=comp)
         legs.move_cursor(row=COMPONENTS.index(self.component))
         self._show_plot()
@@ -456,14 +350,8 @@ class PlatformScreen(StationScreen):
             for plot, what in zip(plots, ("original", "compensated")):
                 plot.show([], title=f"{what} pose error (no run yet)")
             return
-        from procedures.platform.sensitivity import ARCSEC_PER_RAD
-
-        k = COMPONENTS.index(self.component)
-        ok = run.result.valid
-        scale = 1.0 if k < 3 else ARCSEC_PER_RAD
-        unit = "µm" if k < 3 else "arcsec"
         name = COMPONENT_LABELS[self.component]
-        xs, c0, c1 = histogram_steps(run.result.pose_error[ok, k] * scale, run.result.pose_error_compensated[ok, k] * scale)
+        xs, c0, c1, unit = run.histogram(self.component)
         measured = SHORT_MEASUREMENT.get(run.summary.get("measured") or "", "")
         for plot, what, counts in zip(plots, ("original", "compensated"), (c0, c1)):
             plot.xlabel_text = f"{name} error ({unit})"

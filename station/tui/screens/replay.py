@@ -49,17 +49,9 @@ NARROW_FAULT_COLUMNS = (("Session", "Leg", "Run", "Pt", "Kind", "Try", "Gave up"
 MESSAGE_SHOWN = 30  # cells of the message the full columns must leave room for
 
 
-def _text(value) -> str:
-    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
-
-
-def fault_rows(faults, session: str) -> list[tuple[str, ...]]:
-    """One row per fault record (procedures.io.recording.schema.FAULT_DTYPE, file order): index
-    (the plan point), leg, run, target mm, time s, kind, attempt, gave up, message."""
-    return [(session, str(int(f["index"])), str(int(f["leg"])), str(int(f["run"])), f"{float(f['target_mm']):+.4f}",
-             f"{float(f['time_s']):.3f}", _text(f["kind"]), str(int(f["attempt"])),
-             "yes" if int(f["gave_up"]) else "no", _text(f["message"]))
-            for f in faults]
+def fault_rows(recording, session: str) -> list[tuple[str, ...]]:
+    """One row per fault record of `recording` (station.services.replay_job.Recording), labelled `session`."""
+    return recording.fault_rows(session)
 
 
 class ReplayScreen(StationScreen):
@@ -131,18 +123,18 @@ class ReplayScreen(StationScreen):
     @work(thread=True, exclusive=True, group="replay-read", exit_on_error=False)
     def _read_worker(self, path: Path) -> None:
         try:
-            from procedures.io.recording.reader import read_session
+            from station.services.replay_job import read_recording
 
-            self.post_message(SessionRead(path, read_session(path)))
+            self.post_message(SessionRead(path, read_recording(path)))
         except Exception as exc:
             self.post_message(SessionRead(path, error=describe(exc, f"cannot read {path.name}")))
 
     @work(thread=True, exclusive=True, group="replay-read-replayed", exit_on_error=False)
     def _read_replayed(self, path: Path, source: Path) -> None:
         try:
-            from procedures.io.recording.reader import read_session
+            from station.services.replay_job import read_recording
 
-            self.post_message(SessionRead(path, read_session(path), replayed=True, source=source))
+            self.post_message(SessionRead(path, read_recording(path), replayed=True, source=source))
         except Exception as exc:
             self.post_message(SessionRead(path, error=describe(exc, f"cannot read the replay {path.name}"),
                                           replayed=True, source=source))
@@ -160,22 +152,21 @@ class ReplayScreen(StationScreen):
             self._show_faults()
             self.notify(message.error, title="Replay", severity="error", timeout=12)
             return
-        s = self.session = message.session
+        self.session = message.session
         self.session_path = message.path
-        plan = s.plan or {}
-        targets = plan.get("targets_mm") or []
-        faults = len(s.faults)
+        s = message.session.summary()
+        targets = s["targets_mm"]
         name = message.path.name if self.app.hide_volatile else str(message.path)
         lines = [
             f"[b]{name}[/b]",
-            f"outcome [b]{s.outcome}[/b]; {len(s.points)} points on legs {s.legs}; {faults} fault record(s)",
-            f"plan {plan.get('kind', '?')}: {len(targets)} targets"
+            f"outcome [b]{s['outcome']}[/b]; {s['points']} points on legs {s['legs']}; {s['faults']} fault record(s)",
+            f"plan {s['kind']}: {len(targets)} targets"
             + (f" {targets[0]:+.1f}..{targets[-1]:+.1f} mm" if targets else "")
-            + f", {plan.get('cycles', '?')} cycles",
-            f"rig {s.attrs.get('rig', '?')}, operator {s.attrs.get('operator', '?')}, schema {s.schema_version}",
+            + f", {s['cycles']} cycles",
+            f"rig {s['rig']}, operator {s['operator']}, schema {s['schema']}",
         ]
         if not self.app.hide_volatile:
-            lines.append(f"recorded {s.attrs.get('started_utc', '?')} .. {s.attrs.get('ended_utc', '?')}")
+            lines.append(f"recorded {s['started_utc']} .. {s['ended_utc']}")
         if capabilities.find("replay") is None:
             lines.append("[yellow]" + capabilities.missing_text("replay", "Replay through the drivers") +
                          "[/yellow] You can still analyse the session (o, d).")
@@ -200,8 +191,9 @@ class ReplayScreen(StationScreen):
         if r is None or self.session is None or self.session_path != self.replay_source:
             return []
         name = self.replayed_path.name
-        return [f"replayed as [b]{name}[/b]: outcome [b]{r.outcome}[/b]; {len(r.points)} points; "
-                f"{len(r.faults)} fault record(s) (listed below as 'replayed')"]
+        r = r.summary()
+        return [f"replayed as [b]{name}[/b]: outcome [b]{r['outcome']}[/b]; {r['points']} points; "
+                f"{r['faults']} fault record(s) (listed below as 'replayed')"]
 
     def _show_faults(self) -> None:
         """The faults of the session on show, then those of its replay (when replayed here)."""
@@ -209,9 +201,9 @@ class ReplayScreen(StationScreen):
         table.clear()
         rows = []
         if self.session is not None:
-            rows = fault_rows(self.session.faults, "recorded")
+            rows = fault_rows(self.session, "recorded")
             if self.replayed is not None and self.session_path == self.replay_source:
-                rows += fault_rows(self.replayed.faults, "replayed")
+                rows += fault_rows(self.replayed, "replayed")
         measured = [(*row[:-1], row[-1][:MESSAGE_SHOWN]) for row in rows]
         order = fit_columns(table, [(FAULT_COLUMNS, None), NARROW_FAULT_COLUMNS], measured, self.app.size.width - 2)
         for row in rows:

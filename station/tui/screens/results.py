@@ -72,6 +72,7 @@ class Analysis:
     basis_lines: tuple[str, ...] = ()  # what error_basis says, as the commands print it
     basis: dict | None = None  # the same as JSON (the model's options["error_basis"])
     decisions: dict | None = None  # procedures.reporting.decision per leg when the session states tolerances
+    decision_summary: str = ""  # the decisions in one line (station.services.analysis.analyse_file)
 
     @property
     def analysed_points(self) -> Any:
@@ -137,24 +138,14 @@ def basis_text(lines: tuple[str, ...] | list[str], basis: dict | None, raw: bool
     switch. The commands' full lines are the status' tooltip."""
     from rich.markup import escape
 
-    from procedures.io.ranges import legs_text
-
     if not lines:
         return f"error: {basis_name(raw)}"
     if raw or not basis or not basis.get("normalised"):
         head = lines[0].replace(" (--raw)", "")
         return escape(head) + f"  [dim](t: {'normalise to 20 °C' if raw else 'raw'})[/dim]"
-    ref = basis.get("reference_temp_c", 20.0)
-    legs = [str(k) for k in basis.get("normalised_legs", [])]
-    temps = [v for k, v in basis.get("material_temp_range_c", {}).items() if k in legs]
-    corr = [v for k, v in basis.get("correction_range_um", {}).items() if k in legs]
-    text = f"error: normalised to {ref:g} degC material temperature, legs {legs_text(int(k) for k in legs)}"
-    if temps and corr:
-        text += (f": material {min(t[0] for t in temps):.2f}..{max(t[1] for t in temps):.2f} °C, "
-                 f"correction {min(c[0] for c in corr):+.3f}..{max(c[1] for c in corr):+.3f} µm")
-    raw_legs = basis.get("raw_legs") or {}
-    if raw_legs:
-        text += "; raw on " + "; ".join(f"leg {k} ({v})" for k, v in sorted(raw_legs.items()))
+    from station.services.analysis import normalised_basis_text
+
+    text = normalised_basis_text(basis)
     return escape(text) + "  [dim](t: raw)[/dim]"
 
 
@@ -303,29 +294,26 @@ class ResultsScreen(StationScreen):
     @work(thread=True, exclusive=True, group="analysis", exit_on_error=False)
     def _analyse(self, path: Path, method: str, raw: bool = False, request: int = 0) -> None:
         try:
-            from procedures.io.recording.reader import read_session
-            from station.services.analysis import analyse_session
+            from station.services.analysis import analyse_file
 
-            # the error, model and ISO figures `station fit` and `station iso230` give (normalised to 20 degC unless raw)
-            a = analyse_session(read_session(path), raw, fit_method=method, iso=True, uncertainty=True)
+            # the error, model and ISO figures `station fit` and `station iso230` give (normalised to 20 degC unless
+            # raw), and the ISO 14253-1 decisions against the recorded [tolerances] (docs/decisions.md)
+            done = analyse_file(path, method, raw)
         except Exception as exc:
             self.post_message(AnalysisFailed(describe(exc, f"cannot analyse {path.name}"), method, request, raw))
             return
+        a = done.analysis
         note = ""
         if a.iso_error is not None:
             note = describe(a.iso_error, "ISO 230-2")
         elif a.uncertainty_error is not None:  # the values stand without their U; say why
             note = describe(a.uncertainty_error, "ISO 230-2 uncertainty")
-        decisions = None
-        try:  # ISO 14253-1 against the recorded [tolerances] of the legs' types (docs/decisions.md)
-            from station.services.report_jobs import decisions_if_stated
-
-            decisions = decisions_if_stated(a.session, raw)
-        except Exception as exc:
-            note = describe(exc, "the tolerance decisions")
+        if done.decisions_error is not None:
+            note = describe(done.decisions_error, "the tolerance decisions")
         self.post_message(AnalysisReady(Analysis(path, a.session, method, a.model, a.iso, note, iso_u=a.iso_u, raw=raw,
                                                  points=a.points, basis_lines=a.basis_lines, basis=a.basis,
-                                                 decisions=decisions), request))
+                                                 decisions=done.decisions, decision_summary=done.decision_summary),
+                                        request))
 
     def on_analysis_ready(self, message: AnalysisReady) -> None:
         if message.request != self._request:  # asked for before the last request
@@ -401,15 +389,13 @@ class ResultsScreen(StationScreen):
     @work(thread=True, group="results-write", exit_on_error=False)
     def _report_worker(self, session, model, out: Path, hide: bool) -> None:
         try:
-            from station.catalog.writer import catalog_for
-            from station.services.report_jobs import report_lines, session_report
+            from station.services.analysis import write_session_report
 
-            result = session_report(session, out, model, catalog=catalog_for(self.app.cfg))
+            result, notes = write_session_report(session, out, model, self.app.cfg)
         except Exception as exc:
             self.post_message(FilesWritten("Report", "", describe(exc, f"cannot write the report to {out}")))
             return
         where = f"report/{out.name}/" if hide else str(out)
-        notes = [line for line in report_lines(result, model) if line.startswith("note:")]
         self.post_message(FilesWritten("Report", f"Report written to {where}: "
                                        + ", ".join(p.name for p in result.files) + "".join("\n" + n for n in notes)))
 
@@ -430,14 +416,13 @@ class ResultsScreen(StationScreen):
     @work(thread=True, group="results-write", exit_on_error=False)
     def _export_worker(self, session_path: Path, out: Path, hide: bool) -> None:
         try:
-            from procedures.io.csv_io import export_csv
-            from station.services.report_jobs import export_lines
+            from station.services.csv_jobs import ExportRequest, prepare_export
 
-            summary = export_csv(session_path, out, overwrite=False)
+            lines = prepare_export(ExportRequest(session_path, out, make_parents=True)).run().lines
         except Exception as exc:
             self.post_message(FilesWritten("Export CSV", "", describe(exc, f"cannot export {session_path.name}")))
             return
-        text = "\n".join(export_lines(summary))
+        text = "\n".join(lines)
         if hide:
             text = text.replace(str(out), out.name)
         self.post_message(FilesWritten("Export CSV", text))
@@ -486,9 +471,7 @@ class ResultsScreen(StationScreen):
         if a.iso_note:
             text += f"\n[yellow]{a.iso_note}[/yellow]"
         if a.decisions:
-            from procedures.reporting.decision import decision_summary
-
-            text += f"\n[b]{a.decisions['stage'].replace('_', '-')}[/b] (ISO 14253-1): {decision_summary(a.decisions['legs'])}"
+            text += f"\n[b]{a.decisions['stage'].replace('_', '-')}[/b] (ISO 14253-1): {a.decision_summary}"
         extra = []
         for leg, r in (a.iso or {}).items():
             extra += [f"[yellow]leg {leg}:[/yellow] {note}" for note in r.notes]

@@ -14,7 +14,7 @@ from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
-from drivers.sim.plant import LegPlant, PlantConfig
+from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.acquisition.sweep import table_state
 from procedures.compensation.applied_table import TableState, applied_table
 from procedures.compensation.push import push_table

@@ -1,0 +1,129 @@
+"""The replay job (issue 32 part 1, one shape for every job): `station replay` fills a
+`ReplayRequest`; `prepare_replay` reads the recording and makes every refusal (the output is the
+recording itself or exists, no plan to replay); `PreparedReplay.run(sinks, control)` replays it
+through the replay devices and compares the new recording with the original
+(station.services.jobs.replay_and_compare)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from procedures.vocabulary import InputError
+from station.services.job import JobOutcome
+
+
+@dataclass
+class ReplayRequest:
+    """Replay the recording `session` into `out` (None: NAME.replay.h5 beside it; replaced only
+    with `force`) at `speed` (1 = real time, N = N times faster, None = as fast as possible)."""
+
+    session: Path
+    out: Path | None = None
+    speed: float | None = None
+    force: bool = False
+
+
+def pace_text(speed: float | None) -> str:
+    return "as fast as possible" if speed is None else ("real time" if speed == 1 else f"{speed:g}x real time")
+
+
+@dataclass
+class PreparedReplay:
+    """A replay that passed every check. `lines`: what it will do (print before run)."""
+
+    source: Path
+    session: Any  # procedures.io.recording.reader.Session
+    out: Path
+    speed: float | None
+    replace: bool
+    cfg: Any
+    needs_rig: bool = False  # the replay devices answer from the file: no drive moves
+    question: str | None = None
+    lines: list[str] = field(default_factory=list)
+
+    def run(self, sinks=(), control=None) -> JobOutcome:
+        """The outcome's status is the run's; `data` the ReplayOutcome (its `mismatch`: the first
+        request the recording did not hold; `comparison`: field by field)."""
+        from station.services.jobs import replay_and_compare
+
+        if self.replace and self.out.exists():
+            self.out.unlink()  # --force: the new replay session replaces it
+        ended = replay_and_compare(self.source, self.session, self.out, self.cfg, self.speed, sinks=sinks,
+                                   control=control)
+        result = ended.result
+        lines = [f"session: {self.out} ({result.outcome}, {result.points} points; rig replay)"]
+        cmp = ended.comparison
+        if ended.mismatch is None and cmp is not None:
+            if cmp.identical:
+                lines += [f"identical to the recording: {cmp.points} points (all fields), {cmp.faults} faults, "
+                          f"outcome {result.outcome}",
+                          f"next: station fit {self.out} --out model.json   (gives the model of {self.source})"]
+            else:
+                lines += ["differs from the recording:"] + [f"  {line}" for line in cmp.differences]
+        return JobOutcome(str(getattr(result.outcome, "value", result.outcome)), outputs=[self.out], lines=lines,
+                          data=ended)
+
+
+def prepare_replay(request: ReplayRequest, cfg: Any = None) -> PreparedReplay:
+    """Read the recording and refuse what cannot be replayed (InputError, nothing written)."""
+    from procedures.io.outputs import check_output_file
+    from procedures.io.recording.reader import read_session
+
+    source = Path(request.session)
+    session = read_session(source)
+    out = Path(request.out) if request.out else source.with_name(source.stem + ".replay.h5")
+    if out.resolve() == source.resolve():
+        raise InputError(f"--out {out} is the recording being replayed; choose another file")
+    check_output_file(out, force=request.force, suffixes=(".h5",))
+    if not session.plan:
+        raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
+    if cfg is None:
+        from station.services.config import load_config
+
+        cfg = load_config(None)
+    return PreparedReplay(source, session, out, request.speed, request.force, cfg,
+                          lines=[f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) "
+                                 f"{pace_text(request.speed)}"])
+
+
+# -- a recording as the Replay page shows it --------------------------------------------------------
+
+@dataclass
+class Recording:
+    """A recording read for a page: the session (procedures.io.recording.reader.Session) and what
+    it holds in words and rows."""
+
+    path: Path
+    session: Any
+
+    def summary(self) -> dict[str, Any]:
+        """outcome, points, legs, faults (count), plan kind, targets (mm), cycles, rig, operator,
+        schema, started and ended (UTC), as recorded ('?' where the file does not say)."""
+        s = self.session
+        plan = s.plan or {}
+        return {"outcome": s.outcome, "points": len(s.points), "legs": s.legs, "faults": len(s.faults),
+                "kind": plan.get("kind", "?"), "targets_mm": list(plan.get("targets_mm") or []),
+                "cycles": plan.get("cycles", "?"), "rig": s.attrs.get("rig", "?"),
+                "operator": s.attrs.get("operator", "?"), "schema": s.schema_version,
+                "started_utc": s.attrs.get("started_utc", "?"), "ended_utc": s.attrs.get("ended_utc", "?")}
+
+    def fault_rows(self, label: str) -> list[tuple[str, ...]]:
+        """One row per fault record (procedures.io.recording.schema.FAULT_DTYPE, file order): `label`,
+        index (the plan point), leg, run, target mm, time s, kind, attempt, gave up, message."""
+        return [(label, str(int(f["index"])), str(int(f["leg"])), str(int(f["run"])), f"{float(f['target_mm']):+.4f}",
+                 f"{float(f['time_s']):.3f}", _text(f["kind"]), str(int(f["attempt"])),
+                 "yes" if int(f["gave_up"]) else "no", _text(f["message"]))
+                for f in self.session.faults]
+
+
+def _text(value) -> str:
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+
+
+def read_recording(path: str | Path) -> Recording:
+    """Read the recording at `path` (a damaged file is refused by the reader within seconds)."""
+    from procedures.io.recording.reader import read_session
+
+    return Recording(Path(path), read_session(path))
