@@ -125,7 +125,8 @@ def test_fit_warns_of_a_table_recorded_only_as_the_structured_state(tmp_path, ca
     from procedures.io.recording.writer import SessionWriter
 
     pts = synth_session({1: CFG, 2: CFG}, np.linspace(-90, 90, 61), cycles=2, seed=5)
-    state = json.dumps({"enabled": True, "bank": 1, "points": 37, "sha256": "ab" * 32})
+    state = json.dumps({"enabled": True, "bank": 1, "points": 37, "sha256": "ab" * 32, "start_mm": -90.0,
+                        "spacing_mm": 5.0, "target": "drive"})  # as procedures.compensation.applied_table records
     off = json.dumps({"enabled": False, "bank": 0, "points": 0, "sha256": ""})
     path = tmp_path / "tabled.h5"
     with SessionWriter.create(path, session_id="t", operator="test", rig="sim", plan={"kind": "test"},
@@ -136,6 +137,6 @@ def test_fit_warns_of_a_table_recorded_only_as_the_structured_state(tmp_path, ca
         w.finish("completed")
     assert main(["fit", str(path), "--out", str(tmp_path / "m.json")]) == 0
     out = capsys.readouterr().out
-    assert ("warning: leg 2 was recorded with a compensation table active (bank 1 active, 37 points, sha256 "
-            "abababababab)") in out
+    assert ("warning: leg 2 was recorded with a compensation table active (bank 1 active, 37 points from "
+            "-90.000 mm every 5 mm)") in out
     assert "warning: leg 1" not in out
