@@ -223,19 +223,21 @@ def legs(engine: Engine, *, leg_type: str | None = None, station: str | None = N
     is_ver = sa.and_(r.leg_serial == Leg.serial, r.stage == AS_LEFT, r.outcome == "completed", r.kind == "session")
     count = sa.select(sa.func.count().label("n")).select_from(r).where(is_cal)
     count_ver = sa.select(sa.func.count().label("nv")).select_from(r).where(is_ver)
-    # ix_record_legs_calibrations (serial, kind, outcome, time, uid, decision): one seek for the latest verdict
+    # ix_record_legs_calibrations (serial, kind, outcome, time, uid, decision, stage): one seek for the latest verdict
     is_done = sa.and_(r.leg_serial == Leg.serial, r.kind == "session", r.outcome == "completed")
     verdict = sa.select(r.decision).where(is_done).order_by(r.time_utc.desc(), r.uid.desc()).limit(1)
     if engine.dialect.name == "postgresql":
-        latest = (sa.select(r.time_utc.label("last"), r.station_id, r.E_um, r.B_um).where(is_cal)
+        # two LATERAL index-only scans per leg: its as-found calibrations, newest first, give the
+        # last one and (a window count over the same rows) how many; its completed sessions give
+        # the latest verdict and how many were as-left verifications
+        latest = (sa.select(r.time_utc.label("last"), r.station_id, r.E_um, r.B_um,
+                            sa.func.count().over().label("n")).where(is_cal)
                   .order_by(r.time_utc.desc()).limit(1).lateral("latest"))
-        n = count.lateral("n")
-        nv = count_ver.lateral("nv")
-        dv = verdict.lateral("dv")
-        inner = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, n.c.n, nv.c.nv, latest.c.last,
+        dv = (sa.select(r.decision, sa.func.count().filter(r.stage == AS_LEFT).over().label("nv")).where(is_done)
+              .order_by(r.time_utc.desc(), r.uid.desc()).limit(1).lateral("dv"))
+        inner = (sa.select(Leg.serial, Leg.leg_type, Leg.part_number, latest.c.n, dv.c.nv, latest.c.last,
                            latest.c.station_id, latest.c.E_um, latest.c.B_um, dv.c.decision)
-                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(n, sa.true()).outerjoin(nv, sa.true())
-                 .outerjoin(dv, sa.true()))
+                 .select_from(Leg).outerjoin(latest, sa.true()).outerjoin(dv, sa.true()))
     else:
         # SQLite has no LATERAL: the last calibration's row is found by one seek for its rowid
         # and read once (three seeks for its time, station, E and B otherwise); counts and the
