@@ -95,13 +95,18 @@ def session_decisions(session, raw: bool = False, tolerances: dict | None = None
     return evaluation.evaluate_session(session, raw, tolerances, stage)
 
 
-def decisions_if_stated(session, raw: bool = False, stage: str | None = None) -> dict | None:
+def decisions_if_stated(session, raw: bool = False, stage: str | None = None,
+                        evaluated: dict | None = None) -> dict | None:
     """session_decisions' "decisions" when the session's recorded [tolerances] hold a type of one
-    of its legs, else None without computing anything (the screens call this on every session)."""
+    of its legs, else None without computing anything (the screens call this on every session).
+    `evaluated`: the session's evaluation already made on the same basis (analyse_session's
+    `evaluation`), reused when it was decided at `stage`, so a screen evaluates a session once."""
     from procedures.reporting.decision import tolerances_from_json  # noqa: PLC0415
 
     tol = tolerances_from_json((session.station_config or {}).get("tolerances"))
     if not any(session.identity.leg(leg).leg_type in tol for leg in session.legs):
         return None
+    if evaluated is not None and evaluated["decisions"]["stage"] == (stage or evaluation.decision_stage(session.stage)):
+        return evaluated["decisions"]
     return session_decisions(session, raw, stage=stage)["decisions"]
 
