@@ -72,6 +72,31 @@ def same_stage(runs: list[tuple[str, str | None]]) -> None:
                              "(as found with as found, as left with as left)")
 
 
+def within_window(runs: list[tuple[str, str | None]], window_days: float) -> None:
+    """InputError (one line, naming both sessions) when two of (session name, start time UTC
+    text) started more than `window_days` apart: the web's /compare does not compare such a pair
+    either ([catalog] compare_window_days); the difference of sessions months apart is the leg's
+    drift or wear, not a station's bias. A session without a readable start time is not refused."""
+    import datetime as dt
+
+    def when(text):
+        try:
+            t = dt.datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+        except ValueError:
+            return None
+        return t if t.tzinfo else t.replace(tzinfo=dt.timezone.utc)
+
+    timed = [(name, when(t)) for name, t in runs if t]
+    timed = [(name, t) for name, t in timed if t is not None]
+    for i, (a, ta) in enumerate(timed):
+        for b, tb in timed[i + 1:]:
+            days = abs((tb - ta).total_seconds()) / 86400.0
+            if days > window_days:
+                raise InputError(f"{a} and {b} were measured {days:.0f} days apart, beyond the comparison window of "
+                                 f"{window_days:g} days ([catalog] compare_window_days of --config): compare sessions "
+                                 "of one period, or widen the window")
+
+
 def binomial_tail(k: int, n: int, p: float) -> float:
     """P(X >= k) for X ~ Binomial(n, p)."""
     return sum(math.comb(n, i) * p ** i * (1 - p) ** (n - i) for i in range(max(k, 0), n + 1))
@@ -119,6 +144,18 @@ def _pair(a: StationRun, b: StationRun, ia: int, ib: int, matched) -> dict[str, 
             "share_within_pct": 100.0 * (n - exceed) / n, "critical_count": k,
             "chance_tail_p": binomial_tail(exceed, n, P_CHANCE), "disagree": exceed >= k,
             "mean_difference_um": mean_d, "rows": rows}
+
+
+def compare_pair(label_a: str, targets_a, label_b: str, targets_b) -> dict[str, Any]:
+    """One pair of stations' comparison, target by target (what `compare` gives every pair, and
+    the web's /compare shows for a leg): `targets_*` are (direction, target_mm, mean_um, U_um) of
+    each side's session; rows at the targets both measured, E_n (`e_n`), counts and verdict."""
+    a = StationRun(label_a, label_a, label_a, 0, "", tuple(tuple(t) for t in targets_a), {})
+    b = StationRun(label_b, label_b, label_b, 0, "", tuple(tuple(t) for t in targets_b), {})
+    matched = _matched([a, b])
+    if not matched:
+        return {"a": label_a, "b": label_b, "n_targets": 0, "exceed": 0, "rows": [], "disagree": False}
+    return _pair(a, b, 0, 1, matched)
 
 
 def compare(runs: list[StationRun]) -> dict[str, Any]:

@@ -510,11 +510,11 @@ def _col_widths(rows: list[list[str]], total: float) -> tuple[float, ...]:
 
 def write(points: np.ndarray, out_dir: str | os.PathLike, *, plan: dict, devices: dict, station_config: dict,
           attrs: dict, source: dict, raw: bool = False, identity: dict | None = None,
-          tolerances: dict | None = None) -> tuple[dict[str, Any], list[Path]]:
+          tolerances: dict | None = None, stage: str | None = None) -> tuple[dict[str, Any], list[Path]]:
     """Write the four files (module docstring) into `out_dir` (which exists); their content and paths."""
     out = Path(out_dir)
     d = build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs, source=source, raw=raw,
-              identity=identity, tolerances=tolerances)
+              identity=identity, tolerances=tolerances, stage=stage)
     paths = [out / name for name in FILES]
     write_bytes_atomic(paths[0], (json.dumps(d, indent=2, allow_nan=False) + "\n").encode())
     write_bytes_atomic(paths[1], markdown(d).encode())

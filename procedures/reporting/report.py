@@ -330,6 +330,7 @@ def make_report(points: np.ndarray, out_dir: str | os.PathLike, model: LegErrorM
 
             meta = {k: session_meta.get(k) or {} for k in ("plan", "devices", "station_config", "attrs", "identity",
                                                            "tolerances")}
+            meta["stage"] = session_meta.get("stage")  # None: from the plan kind
             # the recorded points: the ISO report normalises them itself (unless raw), on the same basis
             result.iso230, paths = iso230_report.write(recorded, work, source={"path": source_path, "sha256": source_sha256},
                                                        raw=is_raw, **meta)

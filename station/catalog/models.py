@@ -143,10 +143,15 @@ class RecordLeg(Base):
 
 # revision 0002: history reads by serial and time; leg lists the last completed calibration per serial
 Index("ix_record_legs_serial_time", RecordLeg.leg_serial, RecordLeg.time_utc)
-Index("ix_record_legs_calibrations", RecordLeg.leg_serial, RecordLeg.kind, RecordLeg.outcome, RecordLeg.time_utc)
+# (revision 0005 widened it by uid, decision and stage: the latest session's verdict read from the index alone)
+Index("ix_record_legs_calibrations", RecordLeg.leg_serial, RecordLeg.kind, RecordLeg.outcome, RecordLeg.time_utc,
+      RecordLeg.uid, RecordLeg.decision, RecordLeg.stage)
 # revision 0003: a leg's as-found calibrations by stage; a file's records by kind and path (retiring)
 Index("ix_record_legs_stage", RecordLeg.leg_serial, RecordLeg.stage, RecordLeg.outcome, RecordLeg.time_utc)
 Index("ix_records_kind_path", Record.kind, Record.path)
+# revision 0005: covering (index-only) for the fleet's leg list and the control charts per stage
+Index("ix_record_legs_last", RecordLeg.leg_serial, RecordLeg.kind, RecordLeg.outcome, RecordLeg.stage,
+      RecordLeg.time_utc, RecordLeg.station_id, RecordLeg.E_um, RecordLeg.B_um, RecordLeg.R_um)
 
 
 class Outbox(Base):

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from procedures.io.recording import stage as stages
+from procedures.reporting import evaluation
 from station.catalog import identity as ident
 from station.catalog.models import FIGURES
 
@@ -137,35 +138,16 @@ def iso_figures(values: Any) -> dict:
 # -- sessions ---------------------------------------------------------------------------------------
 
 def session_identity(path: str | os.PathLike) -> dict:
-    """/meta attribute `identity` of a session file ({} for schema 1.0 files or when unreadable)."""
-    import h5py
+    """The identity of a session file as JSON ({} for a file without one, schema 1.0, or when
+    unreadable), read by the sessions' one reader (procedures.io.recording.reader.read_identity),
+    not parsed again here."""
+    from procedures.io.recording.reader import read_identity
 
     try:
-        with h5py.File(path, "r") as f:
-            raw = f["meta"].attrs.get("identity") if "meta" in f else None
-    except Exception:
+        identity = read_identity(path)
+    except Exception:  # an unreadable file names no leg: the caller's message says what is missing
         return {}
-    return ident.parse_identity(raw)
-
-
-def session_iso(session) -> dict[int, dict]:
-    """ISO 230-2 values of each leg with U (k = 2), on the basis of the ISO 230-2 report
-    (normalised to 20 degC where the session allows): {leg: {"E": {"value_um", "U_um"}, ...}}.
-    The leg-level budget only: the report's per-target U is not needed here and costs most."""
-    from procedures.reporting import iso230
-    from procedures.reporting.iso230_report import VALUE_ORDER, normalised_points
-    from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
-
-    pts, _ = normalised_points(session.points, session.station_config or {})
-    out: dict[int, dict] = {}
-    for leg, r in iso230.evaluate(pts).items():
-        budget = leg_budget(r, pts, UncertaintyInputs.from_record(session.station_config or {}, leg))
-        values = {}
-        for name in VALUE_ORDER:
-            v, b = r.values.get(name), budget.values.get(name)
-            values[name] = {"value_um": v, "U_um": b.U_um if (b is not None and v is not None) else None}
-        out[int(leg)] = values
-    return out
+    return identity.to_json() if identity.recorded else {}
 
 
 def session_rec(path: str | os.PathLike) -> Rec:
@@ -184,22 +166,26 @@ def session_rec(path: str | os.PathLike) -> Rec:
                    "schema_version": session.schema_version,
                    # "verification" for an as-left sweep (`station verify`): certificates by serial tell them apart
                    "plan_kind": ident.text((session.plan or {}).get("kind"))}
-    iso: dict = {}
+    # the one evaluation (procedures.reporting.evaluation, what the report and the certificate
+    # state): values with U, per-target means with U (the web's per-target E_n), and the verdict
+    # of each leg at the session's stage against the tolerances the session recorded (revision
+    # 0004: the web's decision filter reads the column)
+    ev = None
     if session.points.size:
         try:
-            iso = session_iso(session)
+            ev = evaluation.evaluate_session(session)
         except Exception as exc:  # a session too short for ISO 230-2 is still a record
             rec.summary["iso230_not_computed"] = str(exc)[:200]
     for leg in session.legs:
-        rec.legs[leg] = {**iso_figures(iso.get(leg)),
+        rec.legs[leg] = {**iso_figures(evaluation.leg_values(ev, leg) if ev else None),
                          "drive": ident.text(session.devices.get(f"leg{leg}_drive"))}
+        verdict = evaluation.leg_verdict(ev, leg) if ev else None
+        if verdict is not None:
+            rec.legs[leg]["decision"] = verdict
+    if ev:
+        rec.summary["targets"] = {str(leg): evaluation.leg_targets(ev, leg) for leg in session.legs}
     # the identity read_session parsed (procedures.io.recording.identity), not a second parse of the file
     _apply_identity(rec, session.identity.to_json() if session.identity.recorded else {})
-    from procedures.reporting.decision import tolerances_from_json
-
-    # decided once, here, against the tolerances the session recorded (what its report and
-    # certificate state): the web's decision filter reads the column (revision 0004)
-    decide_legs(rec, tolerances_from_json((session.station_config or {}).get("tolerances")))
     if rec.instrument is None:  # a 1.0 session: the instrument its config named ([metrology])
         metrology = (session.station_config or {}).get("metrology")
         metrology = metrology if isinstance(metrology, dict) else {}

@@ -23,7 +23,9 @@ DESCRIPTION = (
     "stage (an as-found calibration with calibrations, an as-left verification with verifications) measured by "
     "different stations: per target and direction the mean deviation of each station against the mean of the "
     "others, E_n = d / sqrt(U^2 + U_ref^2) with each side's expanded U of that mean (the uncertainty budget), and "
-    "a station flagged when |E_n| > 1 at more targets than chance allows (binomial at 5 %). Writes compare.md, "
+    "a station flagged when |E_n| > 1 at more targets than chance allows (binomial at 5 %). Sessions started "
+    "further apart than [catalog] compare_window_days of --config (default 90) are refused, as the web's /compare "
+    "does not compare them: their difference is the leg's drift, not a station's bias. Writes compare.md, "
     "compare.json and compare.png into --out. docs/decisions.md."
 )
 
@@ -34,6 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=V.OUT_DIR.argtype(), required=True, metavar="DIR", help="folder for compare.md/.json/.png (created; its parent must exist)")
     p.add_argument("--force", action="store_true", help="replace compare.md/.json/.png in an existing --out (default: refused)")
     p.add_argument("--raw", action="store_true", help="compare the raw error (default: normalised to 20 degC)")
+    p.add_argument("--config", type=V.CONFIG.argtype(), metavar="C",
+                   help="station TOML whose [catalog] compare_window_days bounds how far apart the sessions may be "
+                        "(the web's /compare uses the same; default 90 days)")
 
 
 def _leg_of(session, serial: str | None, others: list) -> tuple[int, str]:
@@ -82,8 +87,12 @@ def run(args) -> int:
     if len(args.sessions) < 2:
         raise InputError("give at least two sessions to compare")
     out = check_output_folder(args.out, force=args.force)  # before reading: never overwrites unasked
+    from station.services.config import load_config
+
+    window_days = load_config(args.config).catalog.compare_window_days
     sessions = [read_session(Path(p)) for p in args.sessions]
     cmp.same_stage([(Path(s.path).name, s.stage) for s in sessions])  # before the costly evaluation
+    cmp.within_window([(Path(s.path).name, s.attrs.get("started_utc")) for s in sessions], window_days)
     runs = [run_of(s, args.serial, [o for o in sessions if o is not s], args.raw) for s in sessions]
     result = cmp.compare(runs)
     out.mkdir(exist_ok=True)

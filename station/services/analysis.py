@@ -1,7 +1,8 @@
 """The analysis of a recorded session, composed once for every front end: the error on the
 chosen basis (procedures.metrology.thermal.error_basis: normalised to 20 degC unless raw), then
 the fitted leg-error model tagged with that basis, and the ISO 230-2 values with their expanded
-uncertainty U (k = 2). `station fit`, `station iso230` and the terminal UI's Results page call it."""
+uncertainty U (k = 2) from the one evaluation of a session (procedures.reporting.evaluation).
+`station fit`, `station iso230` and the terminal UI's Results page call it."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from procedures.metrology.thermal import error_basis
+from procedures.reporting import evaluation
 
 
 @dataclass
@@ -25,6 +27,7 @@ class SessionAnalysis:
     model: Any = None  # procedures.fit.LegErrorModel, when a fit was asked for
     iso: Any = None  # procedures.reporting.iso230.evaluate's result, when asked for
     iso_u: dict[int, dict[str, float | None]] | None = None  # leg -> value name -> U (k = 2), um
+    evaluation: dict | None = None  # procedures.reporting.evaluation.evaluate_session's, with `uncertainty`
     iso_error: Exception | None = None
     uncertainty_error: Exception | None = None
     fit_options: dict = field(default_factory=dict)
@@ -55,22 +58,17 @@ def analyse_session(session, raw: bool = False, *, fit_method: str | None = None
             out.iso_error = exc
         if out.iso and uncertainty:
             try:
-                out.iso_u = iso_uncertainty(out.iso, points, session.station_config)
+                out.evaluation = evaluation.evaluate_session(session, raw)
+                out.iso_u = iso_uncertainty(out.evaluation)
             except Exception as exc:  # the values stand without their U
                 out.uncertainty_error = exc
     return out
 
 
-def iso_uncertainty(iso: Any, points: Any, station_config: dict) -> dict[int, dict[str, float | None]]:
-    """U (k = 2, um) of every ISO 230-2 value per leg (procedures.metrology.uncertainty), with the
-    session's recorded [metrology] and leg materials (the station's defaults when it has none)."""
-    from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
-
-    out = {}
-    for leg, r in iso.items():
-        b = leg_budget(r, points, UncertaintyInputs.from_record(station_config or {}, leg))
-        out[leg] = {name: b.U(name) for name in r.values}
-    return out
+def iso_uncertainty(ev: dict) -> dict[int, dict[str, float | None]]:
+    """U (k = 2, um) of every ISO 230-2 value per leg from the one evaluation of the session
+    (procedures.reporting.evaluation: what the report and the certificate state)."""
+    return {int(leg): {name: v["U_um"] for name, v in evaluation.leg_values(ev, leg).items()} for leg in ev["legs"]}
 
 
 def save_session_model(model: Any, out: Any, session: Any, cfg: Any) -> Path:

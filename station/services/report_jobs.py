@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 
-from procedures.reporting import iso230_report
+from procedures.reporting import evaluation
 from procedures.io.csv_io import ExportSummary
 from procedures.reporting.decision import NO_TOLERANCE, decision_lines
 from procedures.vocabulary import InputError
@@ -25,7 +25,9 @@ def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: 
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
     meta = {"plan": session.plan, "devices": session.devices, "station_config": session.station_config,
             "attrs": session.attrs,
-            "identity": session.identity.to_json() if session.identity.recorded else {}}
+            "identity": session.identity.to_json() if session.identity.recorded else {},
+            # decided at the session's stage, as the catalog and the certificate decide it
+            "stage": evaluation.decision_stage(session.stage)}
     result = make_report(session.points, out_dir, model, source_path=str(session.path),
                          source_sha256=session.sha256, lead_mm=lead_mm, session_meta=meta, raw=raw,
                          model_name=model_name)
@@ -86,23 +88,25 @@ def export_lines(summary: ExportSummary) -> list[str]:
 
 
 def session_decisions(session, raw: bool = False, tolerances: dict | None = None, stage: str | None = None) -> dict:
-    """The ISO 230-2 report's values with U and their decisions (procedures.reporting.iso230_report.build):
-    `tolerances` {type: Tolerance.to_json()}, None = the session's recorded ones; `stage`
-    "as_found" / "as_left" (None: as left for a verification plan, else as found)."""
-    return iso230_report.build(session.points, plan=session.plan, devices=session.devices,
-                               station_config=session.station_config, attrs=session.attrs,
-                               source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
-                               identity=session.identity.to_json() if session.identity.recorded else None,
-                               tolerances=tolerances, stage=stage)
+    """The one evaluation of `session` (procedures.reporting.evaluation.evaluate_session: the ISO
+    230-2 report's values with U, budget, per-target U and decisions): `tolerances` {type:
+    Tolerance.to_json()}, None = the session's recorded ones (a --config's are the caller's to
+    load); `stage` "as_found" / "as_left" (None: the session's own stage)."""
+    return evaluation.evaluate_session(session, raw, tolerances, stage)
 
 
-def decisions_if_stated(session, raw: bool = False, stage: str | None = None) -> dict | None:
+def decisions_if_stated(session, raw: bool = False, stage: str | None = None,
+                        evaluated: dict | None = None) -> dict | None:
     """session_decisions' "decisions" when the session's recorded [tolerances] hold a type of one
-    of its legs, else None without computing anything (the screens call this on every session)."""
+    of its legs, else None without computing anything (the screens call this on every session).
+    `evaluated`: the session's evaluation already made on the same basis (analyse_session's
+    `evaluation`), reused when it was decided at `stage`, so a screen evaluates a session once."""
     from procedures.reporting.decision import tolerances_from_json  # noqa: PLC0415
 
     tol = tolerances_from_json((session.station_config or {}).get("tolerances"))
     if not any(session.identity.leg(leg).leg_type in tol for leg in session.legs):
         return None
+    if evaluated is not None and evaluated["decisions"]["stage"] == (stage or evaluation.decision_stage(session.stage)):
+        return evaluated["decisions"]
     return session_decisions(session, raw, stage=stage)["decisions"]
 

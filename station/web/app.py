@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
+import functools
 import io
 import logging
 import re
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import quote, urlencode
@@ -128,7 +130,10 @@ def _cell(v) -> str:
     return "'" + t if t[:1] in ("=", "+", "-", "@") and not isinstance(v, (int, float)) else t
 
 
+@functools.lru_cache(maxsize=16384)
 def _x(time_utc: str) -> float:
+    """A point's x: its time in seconds (cached: the charts of a type draw each session's time
+    once per figure)."""
     return parse_utc(time_utc).timestamp()
 
 
@@ -280,7 +285,8 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         if verdict or len(later) <= UNDECIDED_AT_ONCE:
             decided.update(queries.latest_decisions(engine, {r.serial: r.leg_type for r in later},
                                                     s.decision_tolerances))
-            counts = {k: sum(1 for r in rows if decided.get(r.serial) == v) for k, v in queries.DECISIONS.items()}
+            tally = Counter(decided.get(r.serial) for r in rows)  # one pass over the fleet, not one per verdict
+            counts = {k: tally[v] for k, v in queries.DECISIONS.items()}
         else:
             counts = None
         if verdict:
@@ -397,9 +403,11 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         if n > pages:
             raise PageError(404, f"page {n}: there are {pages} page(s) of compared legs")
         plots = {f: compare_plot(items[0], f) for f in ("E", "B")} if serial else {}
+        # one leg: every pair's table target by target (deviations, U, E_n), as `station compare` prints
+        targets = queries.per_target(engine, items[0]) if serial else []
         return page(request, "compare.html", items=items, total=total, types=types, leg_type=leg_type,
                     serial=serial, plots=plots, page_no=n, pages=pages, stage=st, stages=COMPARED_STAGES,
-                    window_days=s.compare_window_days)
+                    window_days=s.compare_window_days, targets=targets)
 
     from station.web import certificates  # noqa: PLC0415  (its routes: station/web/certificates.py)
 

@@ -51,17 +51,21 @@ class Calibration:
     station_id: str | None
     values: dict[str, tuple[float | None, float | None]]  # figure -> (value um, U um)
     stage: str | None = None
+    uid: str | None = None  # the session's record and its leg number there (its per-target figures)
+    leg: int | None = None
 
 
 def _calibrations(conn, where) -> list[Calibration]:
-    cols = [RecordLeg.time_utc, RecordLeg.leg_serial, RecordLeg.station_id, RecordLeg.stage]
+    cols = [RecordLeg.time_utc, RecordLeg.leg_serial, RecordLeg.station_id, RecordLeg.stage, RecordLeg.uid,
+            RecordLeg.leg]
     cols += [getattr(RecordLeg, f"{n}{s}") for n in ("E", "B", "R") for s in ("_um", "_U_um")]
     q = sa.select(*cols).where(COMPLETED, where).order_by(RecordLeg.time_utc)
     out = []
     for r in conn.execute(q):
         m = r._mapping
         out.append(Calibration(m["time_utc"], m["leg_serial"], m["station_id"],
-                               {n: (m[f"{n}_um"], m[f"{n}_U_um"]) for n in ("E", "B", "R")}, m["stage"]))
+                               {n: (m[f"{n}_um"], m[f"{n}_U_um"]) for n in ("E", "B", "R")}, m["stage"],
+                               m["uid"], m["leg"]))
     return out
 
 
@@ -152,6 +156,8 @@ class StationValue:
     E: tuple[float | None, float | None]
     B: tuple[float | None, float | None]
     flagged: bool = False  # disagrees with more than half of the stations it was compared with
+    uid: str | None = None  # the session compared (its record) and the leg's number in it
+    leg: int | None = None
 
 
 @dataclass
@@ -217,7 +223,7 @@ def compared_serials(engine: Engine, leg_type: str | None = None, serial: str | 
     for s in page:
         item = Compared(s, types.get(s), stage)
         for st, c in sorted(latest[s].items()):
-            item.stations.append(StationValue(st, c.time_utc, c.values["E"], c.values["B"]))
+            item.stations.append(StationValue(st, c.time_utc, c.values["E"], c.values["B"], uid=c.uid, leg=c.leg))
         for a, b in combinations(item.stations, 2):
             days = abs((parse_utc(a.time_utc) - parse_utc(b.time_utc)).total_seconds()) / 86400
             inside = days <= window_days
@@ -228,6 +234,47 @@ def compared_serials(engine: Engine, leg_type: str | None = None, serial: str | 
             st.flagged = bool(mine) and sum(p.flagged for p in mine) > len(mine) / 2
         out.append(item)
     return out, total
+
+
+@dataclass
+class TargetComparison:
+    """One pair of stations of a compared leg, target by target: `rows` as
+    procedures.reporting.compare.compare_pair gives them (direction, target_mm, x_a_um, U_a_um,
+    x_b_um, U_b_um, d_um, E_n), the figures `station compare` prints for the same two sessions;
+    `missing` names a side whose record holds no per-target figures (indexed before they were
+    kept: `station catalog rebuild` adds them)."""
+
+    a: str
+    b: str
+    rows: list[dict] = field(default_factory=list)
+    exceed: int = 0
+    n_targets: int = 0
+    disagree: bool = False
+    missing: list[str] = field(default_factory=list)
+
+
+def per_target(engine: Engine, item: Compared) -> list[TargetComparison]:
+    """Per-target E_n of every pair of `item`'s stations measured within the window: each
+    session's mean deviation and U per target and direction as the evaluation gave them at
+    ingest (the record's summary "targets"), compared by procedures.reporting.compare.compare_pair."""
+    uids = sorted({st.uid for st in item.stations if st.uid})
+    with engine.connect() as conn:
+        summaries = dict(conn.execute(sa.select(Record.uid, Record.summary).where(Record.uid.in_(uids))).all()) \
+            if uids else {}
+    by_station = {st.station_id: ((summaries.get(st.uid) or {}).get("targets") or {}).get(str(st.leg))
+                  for st in item.stations}
+    out = []
+    for p in item.pairs:
+        if not p.in_window:
+            continue
+        ta, tb = by_station.get(p.a), by_station.get(p.b)
+        missing = [name for name, t in ((p.a, ta), (p.b, tb)) if not t]
+        if missing:
+            out.append(TargetComparison(p.a, p.b, missing=missing))
+            continue
+        c = cmp.compare_pair(p.a, ta, p.b, tb)
+        out.append(TargetComparison(p.a, p.b, c["rows"], c["exceed"], c["n_targets"], c["disagree"]))
+    return out
 
 
 def table_files(engine: Engine, sha256s: list[str]) -> dict[str, str]:

@@ -104,21 +104,25 @@ def plot(title: str, series: list[Series], hlines: list[HLine] = (), x_labels: t
                    f'y2="{y}"><title>{escape(h.label)}</title></line>')
         out.append(f'<text class="hlabel"{st} x="{W - RIGHT - 4}" y="{ly:.1f}" text-anchor="end">{escape(h.label)}</text>')
     for i, s in enumerate(series):
+        # what is the same for every point of the series, once (a control chart draws thousands)
         colour = COLOURS[i % len(COLOURS)]
+        name = escape(s.name)
+        st = f' data-stage="{escape(s.stage)}"' if s.stage else ""
+        unit = escape(y_unit)
         for p in s.points:
             cx, cy = _fmt(sx(p.x)), _fmt(sy(p.y_um))
             if p.u_um:
                 out.append(f'<line class="ubar" stroke="{colour}" x1="{cx}" x2="{cx}" y1="{_fmt(sy(p.y_um - p.u_um))}" '
                            f'y2="{_fmt(sy(p.y_um + p.u_um))}"/>')
             u = f' data-u="{p.u_um:.4f}"' if p.u_um is not None else ""
-            tip = f"{s.name} {p.label} {p.y_um:.2f}" + (f" ± {p.u_um:.2f}" if p.u_um is not None else "") + f" {y_unit}"
+            label = escape(p.label)
+            tip = f"{name} {label} {p.y_um:.2f}" + (f" ± {p.u_um:.2f}" if p.u_um is not None else "") + f" {unit}"
             tip += " (out of control: beyond mean ± 3 s)" if p.flag else ""
-            st = f' data-stage="{escape(s.stage)}"' if s.stage else ""
             if p.flag:  # a ring around the point: seen without hovering, in any colour vision
                 out.append(f'<circle class="ooc-ring" r="7" cx="{cx}" cy="{cy}"/>')
-            out.append(f'<circle class="pt pt-{escape(s.name)}{" ooc" if p.flag else ""}" fill="{colour}" r="3.5" '
-                       f'cx="{cx}" cy="{cy}" data-series="{escape(s.name)}"{st} data-label="{escape(p.label)}" '
-                       f'data-y="{p.y_um:.4f}"{u}><title>{escape(tip)}</title></circle>')
+            out.append(f'<circle class="pt pt-{name}{" ooc" if p.flag else ""}" fill="{colour}" r="3.5" '
+                       f'cx="{cx}" cy="{cy}" data-series="{name}"{st} data-label="{label}" '
+                       f'data-y="{p.y_um:.4f}"{u}><title>{tip}</title></circle>')
     for i, s in enumerate(series):  # legend
         x = LEFT + 40 + 90 * i
         out.append(f'<circle cx="{x}" cy="{TOP - 12}" r="4" fill="{COLOURS[i % len(COLOURS)]}"/>'

@@ -25,12 +25,13 @@ def _columns(engine, table):
 def test_from_empty_to_head(url):
     engine = db.open_engine(url)
     with engine.connect() as conn:
-        assert db.current_revision(conn) == db.head_revision() == "0004"
+        assert db.current_revision(conn) == db.head_revision() == "0005"
     assert {"stations", "legs", "instruments", "records", "record_legs", "outbox"} <= set(sa.inspect(engine).get_table_names())
     assert {"verification_ratio", "stage"} <= _columns(engine, "record_legs")
     assert {"stage", "supersedes"} <= _columns(engine, "records")
     indexes = {i["name"] for i in sa.inspect(engine).get_indexes("record_legs")}
-    assert {"ix_record_legs_serial_time", "ix_record_legs_calibrations", "ix_record_legs_stage"} <= indexes
+    assert {"ix_record_legs_serial_time", "ix_record_legs_calibrations", "ix_record_legs_stage",
+            "ix_record_legs_last"} <= indexes
     engine.dispose()
 
 
@@ -46,7 +47,7 @@ def test_from_previous_revision_keeps_rows(url):
     engine.dispose()
     engine = db.open_engine(url)  # opening migrates to head
     with engine.connect() as conn:
-        assert db.current_revision(conn) == "0004"
+        assert db.current_revision(conn) == "0005"
         row = conn.execute(sa.text("SELECT leg_serial, \"E_um\", verification_ratio, outcome, stage FROM record_legs")).one()
     assert tuple(row) == ("HX-1", 2.5, None, "completed", "as_found")  # outcome and stage filled in from the record
     engine.dispose()
@@ -90,7 +91,7 @@ def test_newer_schema_refused_in_one_line(url, tmp_path):
     with pytest.raises(InputError) as info:
         db.open_engine(url)
     message = str(info.value)
-    assert "\n" not in message and "'0099'" in message and "'0004'" in message and "newer" in message
+    assert "\n" not in message and "'0099'" in message and "'0005'" in message and "newer" in message
 
 
 def test_newer_local_catalog_refused_by_the_command(tmp_path, capsys):
@@ -103,4 +104,4 @@ def test_newer_local_catalog_refused_by_the_command(tmp_path, capsys):
     cfg.write_text(f'[station]\nrecordings_dir = "{runs}"\n')
     assert main(["catalog", "status", "--config", str(cfg)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "abc123" in err[0] and "knows up to '0004'" in err[0]
+    assert len(err) == 1 and "abc123" in err[0] and "knows up to '0005'" in err[0]

@@ -19,10 +19,10 @@ from tests.tooling import write_identified_session
 BIAS_UM = 1.5
 
 
-def _synth(path, seed: int, bias_um: float, station: str, serial: str = "REF-1"):
+def _synth(path, seed: int, bias_um: float, station: str, serial: str = "REF-1", started_utc: str | None = None):
     points = synth_session({1: default_leg_configs(0)[0]}, np.linspace(-90.0, 90.0, 11), cycles=5, seed=seed)
     points["error_um"] += bias_um  # the station's laser reads long by bias_um everywhere
-    return write_identified_session(path, points, station_id=station, serial=serial)
+    return write_identified_session(path, points, station_id=station, serial=serial, started_utc=started_utc)
 
 
 @pytest.fixture(scope="module")
@@ -110,3 +110,18 @@ def test_two_sessions_of_one_station_are_called_a_repeat(synthetic, tmp_path, ca
     again = _synth(tmp_path / "a2.h5", 5, 0.0, "A")
     c, printed = _result(tmp_path, capsys, synthetic["a"], again, rc=0)
     assert "a.h5 and a2.h5 are both from station A: a repeat on one station" in c["note"] and "repeat" in printed
+
+
+def test_sessions_beyond_the_comparison_window_are_refused(tmp_path, capsys):
+    """The window of the web's /compare ([catalog] compare_window_days) bounds `station compare`
+    too: 100 days apart is refused by default (90) in one line naming both, compared with 120."""
+    a = _synth(tmp_path / "early.h5", 1, 0.0, "A", started_utc="2026-01-01T08:00:00Z")
+    b = _synth(tmp_path / "late.h5", 2, 0.0, "B", started_utc="2026-04-11T08:00:00Z")
+    assert main(["compare", str(a), str(b), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "early.h5 and late.h5 were measured 100 days apart" in err[0]
+    assert "comparison window of 90 days" in err[0] and not (tmp_path / "o").exists()
+    wide = tmp_path / "wide.toml"
+    wide.write_text("[catalog]\ncompare_window_days = 120\n")
+    assert main(["compare", str(a), str(b), "--out", str(tmp_path / "o"), "--config", str(wide)]) == 0
+    assert json.loads((tmp_path / "o" / "compare.json").read_text())["pairs"][0]["n_targets"] == 22

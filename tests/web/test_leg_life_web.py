@@ -119,3 +119,30 @@ def test_leg_page_and_charts_per_stage_with_their_own_limits(life, web, browser)
         assert rows[("as_left", "E")].split()[3] == "1" and rows[("as_found", "E")].split()[3] == "2"  # n per stage
     finally:
         server.stop()
+
+
+def test_web_per_target_en_is_what_station_compare_prints(life, web, tmp_path):  # noqa: F811
+    """The leg's comparison page shows, target by target, both stations' mean deviations with
+    their U and E_n: the figures `station compare` writes for the same two calibrations (one
+    evaluation at ingest, one E_n formula), every row."""
+    import re
+
+    from fastapi.testclient import TestClient
+
+    cap = _Capture()
+    out = tmp_path / "cmp"
+    assert cap.run(["compare", life["tmp"] / "ST-A" / "cal.h5", life["tmp"] / "ST-B" / "cal.h5", "--out", out]) == 0
+    (pair,) = json.loads((out / "compare.json").read_text())["pairs"]
+    with TestClient(web) as client:
+        t = client.get("/compare", params={"serial": SERIAL}).text
+    assert "Per target: ST-A − ST-B" in t and 'class="targets-missing"' not in t
+    table = t[t.index('<table class="targets"'):]
+    table = table[:table.index("</table>")]
+    cells = [re.findall(r"<td[^>]*>([^<]*)", row) for row in re.findall(r'<tr class="target[^"]*">(.*?)</tr>', table)]
+    assert len(cells) == pair["n_targets"] == len(pair["rows"]) > 10
+    for web_row, r in zip(cells, pair["rows"]):
+        assert web_row[0] == r["direction"] and float(web_row[1]) == pytest.approx(r["target_mm"], abs=1e-3)
+        got = [float(c.replace(" ⚑", "")) for c in web_row[2:]]
+        want = [r["x_a_um"], r["U_a_um"], r["x_b_um"], r["U_b_um"], r["d_um"], r["E_n"]]
+        assert got == pytest.approx(want, abs=0.006), (web_row, r)
+    assert f"at {pair['exceed']} of {pair['n_targets']} targets" in t
