@@ -10,11 +10,11 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim.plant import default_leg_configs
+from drivers.plant.leg import default_leg_configs
 from station.catalog.models import FIGURES
 from station.catalog.readers import session_identity, session_rec
 from station.cli import main
-from station.services.synth import synth_session
+from procedures.synthetic import synth_session
 from tests.tooling import write_identified_session
 
 # E of the synthetic leg is about 3 um: an as-found limit of 1 um does not conform (a real verdict);
