@@ -109,7 +109,7 @@ def analyse_file(path: str | Path, method: str, raw: bool = False) -> FileAnalys
         from procedures.reporting.decision import decision_summary
         from station.services.report_jobs import decisions_if_stated
 
-        out.decisions = decisions_if_stated(a.session, raw)
+        out.decisions = decisions_if_stated(a.session, raw, evaluated=a.evaluation)  # evaluated once
         if out.decisions:
             out.decision_summary = decision_summary(out.decisions["legs"])
     except Exception as exc:
