@@ -77,21 +77,27 @@ def check_compensation(rig: Rig, plan: SweepPlan, out: Path, resume: bool,
         return
     now = active_tables_now(rig, plan.legs)
     if resume:
-        from procedures.io.recording.stage import active_tables
-
-        recorded = active_tables(read_session(out).devices)
-        changed = sorted(leg for leg in plan.legs if (leg in now) != (leg in recorded))
-        if changed:
-            states = "; ".join(f"leg {leg}: {'table active now' if leg in now else 'no table active now'}, "
-                               f"{'one' if leg in recorded else 'none'} when the session started" for leg in changed)
-            raise CompensatedSweepRefused(f"{out}: cannot be resumed: {states}; its points would mix two states "
-                                          "of the leg: restore the table state it was started with, or sweep a new "
-                                          "session; nothing moved")
+        resume_table_refusal(out, plan.legs, now)
         return
     if not now:
         return
     if confirm is None or not confirm(compensated_question(now)):
         raise CompensatedSweepRefused(compensated_refusal(now))
+
+
+def resume_table_refusal(out: Path, legs: Iterable[int], now: Mapping[int, str]) -> None:
+    """CompensatedSweepRefused when the session `out` was started with another table state on a
+    leg of `legs` than `now` (leg -> its active table): its points would mix two states of the leg."""
+    from procedures.io.recording.stage import active_tables
+
+    recorded = active_tables(read_session(out).devices)
+    changed = sorted(leg for leg in legs if (leg in now) != (leg in recorded))
+    if changed:
+        states = "; ".join(f"leg {leg}: {'table active now' if leg in now else 'no table active now'}, "
+                           f"{'one' if leg in recorded else 'none'} when the session started" for leg in changed)
+        raise CompensatedSweepRefused(f"{out}: cannot be resumed: {states}; its points would mix two states "
+                                      "of the leg: restore the table state it was started with, or sweep a new "
+                                      "session; nothing moved")
 
 
 def run_sweep(
@@ -107,6 +113,7 @@ def run_sweep(
     serials_file: str | None = None,
     index: bool = True,
     confirm_compensated: Callable[[str], bool] | None = None,
+    tables_checked: bool = False,
 ) -> RunResult:
     """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`), and index the
     session in the station's catalog (`index` False: not, e.g. the sample sessions, which are
@@ -118,10 +125,12 @@ def run_sweep(
     start of every session, a resumed one too.
 
     `confirm_compensated(question) -> bool`: asked before a leg whose compensation table is
-    active is swept (check_compensation; None: such a sweep is refused, CompensatedSweepRefused)."""
+    active is swept (check_compensation; None: such a sweep is refused, CompensatedSweepRefused);
+    `tables_checked`: the job has made that check already (PreparedSweep.check, under the rig lock)."""
     control = control or RunControl()
     out = Path(out)
-    check_compensation(rig, plan, out, resume, confirm_compensated)  # before anything is written or moves
+    if not tables_checked:
+        check_compensation(rig, plan, out, resume, confirm_compensated)  # before anything is written or moves
     done: frozenset[int] = frozenset()
     session_id = uuid.uuid4().hex[:12]
     if resume:
