@@ -43,7 +43,8 @@ class SweepRequest:
     (None: the kind's standard), `n_targets` / `step_mm` / `targets_file`, `min_mm` .. `max_mm`,
     `overrun_mm`, `dwell_s`, `averaging_s`; or `plan`, a plan built already (a script, a test).
     `serials`: leg -> identity fields entered for this session; `serials_file`: their CSV.
-    `time_scale`, `seed`: the simulated rig's. `build_in_run`: the plan is built by the run
+    `time_scale`, `seed`: the simulated rig's. `beyond_limits`: the user accepted a plan beyond
+    the config's [limits] (the UI asks; else it is refused). `build_in_run`: the plan is built by the run
     (abortable: a huge plan takes seconds; the UI) rather than by prepare. `make_parents`: the
     folder of `out` is made when missing. `index`: the session goes to the station's catalog."""
 
@@ -67,6 +68,7 @@ class SweepRequest:
     time_scale: float | None = None
     seed: int | None = None
     default_out_prefix: str | None = None
+    beyond_limits: bool = False
     build_in_run: bool = False
     make_parents: bool = False
     index: bool = True
@@ -111,12 +113,12 @@ class SweepSize:
     file_bytes: float
     text: str  # "N points, about H h on the rig, a file of about B" (PlanSize.describe)
     bytes_text: str  # the file size, e.g. "1.2 MB"
-    within_limits: str  # "" when within the config's [limits]; else why not (and what fits)
+    over_limits: str  # "" when within the config's [limits]; else how it exceeds them (and what fits)
 
 
 def estimate(request: SweepRequest, cfg: StationConfig | None = None) -> SweepSize:
     """The size of the sweep `request` asks for, without building it (InputError for a plan no
-    sweep has). With `cfg`, `within_limits` says whether its [limits] take it."""
+    sweep has). With `cfg`, `over_limits` says whether its [limits] take it."""
     from procedures.acquisition.plan_size import fmt_bytes, plan_size
 
     spec = plan_spec_of(request)
@@ -262,16 +264,18 @@ def prepare_sweep(request: SweepRequest, cfg: StationConfig, rig: Any = None) ->
         if plan is not None:
             legs, kind, total = plan.legs, plan.kind, plan.total_points
         else:
-            from procedures.acquisition.plan_size import check_plan_size
+            from procedures.acquisition.plan_size import check_plan_size, plan_size
 
             spec = plan_spec_of(request)
-            size = check_plan_size(spec, cfg.limits)  # sized (and refused when huge) before anything is built
+            limits = None if request.beyond_limits else cfg.limits
+            # sized (and refused when huge) before anything is built
+            size = plan_size(spec) if limits is None else check_plan_size(spec, limits)
             lines.append(f"plan: {size.describe()}")
             legs, kind, total = spec.legs, spec.kind, size.points
             if not request.build_in_run:
                 from procedures.acquisition.plan_spec import plan_from_spec
 
-                plan = plan_from_spec(spec, cfg.limits)
+                plan = plan_from_spec(spec, limits)
     if plan is not None:
         check_plan_for_laser(plan, cfg)  # before anything connects or is written
         lines.extend(f"note: {note}" for note in plan.notes)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import uuid
-from dataclasses import dataclass, field
+
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
@@ -68,32 +68,8 @@ from station.catalog.store import LOCAL_NAME, Catalog
 from station.catalog.writer import CatalogSink, catalog_for, enabled, register
 from station.services.config import LEG_COUNT, StationConfig
 from station.services.identity import session_identity
+from station.services.job import JobOutcome  # the one outcome of every job
 from station.services.wiring import Rig
-
-
-@dataclass
-class JobOutcome:
-    """How a table job ended: its `OperationFinished` (None when the run broke off with an
-    exception, which the runner re-raised), every event, and audit entries that could not be
-    stored (the refusal or failure they describe is still reported)."""
-
-    finished: OperationFinished | None
-    events: list[ev.Event] = field(default_factory=list)
-    audit_problems: list[str] = field(default_factory=list)
-    run: RunResult | None = None
-    implausible: bool = False  # refused for values that look like a unit slip: the user may accept them
-    warnings: list[str] = field(default_factory=list)  # implausible values the user accepted, one line each
-
-    @property
-    def outcome(self) -> str:
-        return self.finished.outcome if self.finished is not None else AuditOutcome.FAILED
-
-    @property
-    def ok(self) -> bool:
-        return self.outcome in (AuditOutcome.OK, AuditOutcome.COMPLETED)
-
-    def of(self, kind: type) -> list:
-        return [e for e in self.events if isinstance(e, kind)]
 
 
 def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterable[Sink] = (),
@@ -108,7 +84,9 @@ def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterabl
         catalog = Catalog(local=audit.path.parent / LOCAL_NAME)
     catalog_sink = CatalogSink(catalog, session_path, audit_sink)
     result = run(procedure, [audit_sink, events, *sinks, catalog_sink], control)
-    return JobOutcome(finished(events.events), events.events, audit_sink.problems, result)
+    end = finished(events.events)
+    return JobOutcome(end.outcome if end is not None else AuditOutcome.FAILED, run=result, events=events.events,
+                      finished=end, audit_problems=audit_sink.problems)
 
 
 # -- compensation targets ----------------------------------------------------------------------------

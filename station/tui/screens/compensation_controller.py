@@ -7,7 +7,6 @@ back as messages; it never touches a widget from a worker.
 from __future__ import annotations
 
 import threading
-from dataclasses import replace
 from typing import Any, Protocol
 
 from textual.message import Message
@@ -40,7 +39,7 @@ class StationHost(Protocol):
 
     def post_message(self, message: Message) -> bool: ...
 
-    def start_sweep(self, plan, out, label: str = "sweep", on_done=None, job=None) -> bool: ...
+    def start_job(self, job, label: str = "sweep", on_done=None) -> bool: ...
 
 
 UI_OVERRIDE = Override(how="confirm it in the dialog that follows", kept="confirmed in the dialog")
@@ -276,35 +275,20 @@ class CompensationController:
     # -- verify ----------------------------------------------------------------------------------------
     def verify(self, leg: int, analysis) -> bool:
         """A verification sweep of `leg` with its table active, repeating the plan of the
-        calibration on show (`analysis.session`), through station.services.table_jobs.verify_job on the
-        Sweep page. False (and a notice) when it cannot start."""
-        from procedures.acquisition.plans import SweepPlan
-        from station.services.table_jobs import verify_job
+        calibration on show (`analysis.session`): the job `station verify --before` runs
+        (station/services/verify_job.py), shown on the Sweep page. False (and a notice) when it
+        cannot start."""
         from station.services.sessions import default_session_path
-        from station.services.wiring import drive_url_of
+        from station.services.verify_job import VerifyRequest, prepare_verify
 
-        try:
-            plan = replace(SweepPlan.from_dict(analysis.session.plan), legs=(leg,), kind="verification", notes=())
-        except Exception as exc:
-            self.app.post_message(Notice(describe(exc, "the calibration's plan cannot be repeated"), "error", "Verify"))
-            return False
-        from station.services.table_jobs import controller_refusal, refusal_job
-
-        controller = controller_refusal(self.app.cfg, (leg,), Action.VERIFY)
-        if controller:  # the station cannot verify a table the controller applies: refused and logged
-            try:
-                refusal_job(Action.VERIFY, leg, controller[1], audit=self.audit(), drive_url=drive_url_of(self.app.cfg))
-            except Exception:
-                pass  # the refusal itself is what matters; the notice says it
-            self.app.post_message(Notice(controller[1], "error", "Verify"))
-            return False
         made = default_session_path(self.app.cfg, (leg,))  # runs/ui-STAMP-legN.h5
         out = made.with_name("verify-" + made.name.removeprefix("ui-"))
-        before, cfg, audit = analysis.session, self.app.cfg, self.audit()
-
-        def job(rig, sinks, control):
-            return verify_job(rig, plan, out, cfg, audit=audit, before=before, drive_url=drive_url_of(cfg),
-                              sinks=sinks, control=control)
-
-        return self.app.start_sweep(plan, out, label=f"verification of leg {leg}", job=job,
-                                    on_done=lambda state: self.screen.post_message(VerificationDone(leg, state.result)))
+        try:
+            job = prepare_verify(VerifyRequest(legs=(leg,), out=out, before=analysis.session.path, make_parents=True),
+                                 self.app.cfg)
+        except Exception as exc:
+            self.app.post_message(Notice(describe(exc, "cannot verify"), "error", "Verify"))
+            return False
+        job.rig = self.app.rig
+        return self.app.start_job(job, label=f"verification of leg {leg}",
+                                  on_done=lambda state: self.screen.post_message(VerificationDone(leg, state.result)))
