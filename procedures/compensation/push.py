@@ -48,9 +48,8 @@ from drivers.errors import DriverError, TableError, TableRefused
 from drivers.interfaces import ServoAxis, TableBank, TableSpec, table_sha256
 from procedures.engine import events as ev
 from procedures.compensation.applied_table import compensation_target, target_details as _target_details
-from procedures.compensation.audit import AuditEntry, AuditLog, AuditRecord, AuditSink, AuditStopped, new_id
+from procedures.compensation.audit import AuditEntry, AuditLog, AuditRecord, new_id
 from procedures.engine.errors import InputError
-from procedures.engine.runner import ListSink, run
 from procedures.engine.states import Action, AuditOutcome
 from procedures.compensation.table import LegTable
 
@@ -392,7 +391,7 @@ def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Con
         yield from refused(Action.PUSH, axis.leg, exc, drive=_identity(axis), drive_url=drive_url, source=source,
                            details=_target_details(axis))
         return
-    yield from _confirm_and_apply(axis, plan, confirm)
+    yield from _confirm_andapply_plan(axis, plan, confirm)
 
 
 def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank | LegTable], *,
@@ -440,7 +439,7 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
     done: list[int] = []
     for plan in plans:
         end: OperationFinished | None = None
-        for event in _apply(axes[plan.leg], plan):
+        for event in apply_plan(axes[plan.leg], plan):
             if isinstance(event, OperationFinished):
                 end = event
             yield event
@@ -465,7 +464,7 @@ def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | N
         yield from refused(Action.ROLLBACK, axis.leg, exc, drive=_identity(axis), drive_url=drive_url,
                            details=_target_details(axis))
         return
-    yield from _confirm_and_apply(axis, plan, confirm)
+    yield from _confirm_andapply_plan(axis, plan, confirm)
 
 
 def refused(action: Action, leg: int, reason: BaseException | str, *, drive: str = "", drive_url: str = "",
@@ -490,7 +489,7 @@ def _identity(axis: ServoAxis) -> str:
         return ""
 
 
-def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None) -> Iterator[ev.Event]:
+def _confirm_andapply_plan(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None) -> Iterator[ev.Event]:
     yield TablePlanned(plan)
     if confirm is not None:
         try:
@@ -504,10 +503,10 @@ def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None)
                                drive_url=plan.drive_url, source=plan.source, outcome=AuditOutcome.CANCELLED,
                                details={"target": plan.target})
             return
-    yield from _apply(axis, plan)
+    yield from apply_plan(axis, plan)
 
 
-def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
+def apply_plan(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
     leg, bank, prev = plan.leg, plan.target_bank, plan.active_bank
     op_id = new_id()
     base = dict(action=plan.action, leg=leg, drive=plan.drive, drive_url=plan.drive_url,
@@ -622,51 +621,7 @@ def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str, bac
                        "axis before checking its table.")
 
 
-# -- for scripts and tests: run a procedure, return its result or raise ------------------------------
-
 def finished(events: list[ev.Event]) -> OperationFinished | None:
     """The `OperationFinished` among `events` (the last one), if any."""
     done = [e for e in events if isinstance(e, OperationFinished)]
     return done[-1] if done else None
-
-
-def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) -> PushResult:
-    """Run a push/rollback procedure through the runner (with an AuditSink on `audit`) and
-    return its PushResult; PushRefused (refused, cancelled) or PushFailed (failed; the message
-    says which table is active) otherwise."""
-    events = ListSink()
-    sinks = [events] + ([AuditSink(audit)] if audit is not None else [])
-    try:
-        run(procedure, sinks)
-    except AuditStopped as exc:  # "started" not stored: nothing written; "ok" not stored: written and active
-        raise (PushRefused if exc.entry.outcome == AuditOutcome.STARTED else PushFailed)(str(exc.args[0])) from None
-    end = finished(events.events)
-    if end is None:
-        raise PushFailed("the operation ended without an outcome")
-    if end.outcome == AuditOutcome.OK:
-        return end.result
-    if end.outcome == AuditOutcome.FAILED:
-        raise PushFailed(end.message)
-    refusal = PushRefused(end.message)
-    refusal.hint = ""  # the message already says that nothing was written
-    raise refusal
-
-
-def push_table(axis: ServoAxis, table: TableBank | LegTable | None = None, *, plan: PushPlan | None = None,
-               audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
-               source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushResult:
-    """Push `table` (or an already confirmed `plan` from `prepare_push`) to `axis`:
-    `push_procedure` run to its end, every entry appended to `audit` (when given)."""
-    if plan is not None:
-        return run_operation(_apply(axis, plan), audit)
-    if table is None:
-        raise ValueError("push_table needs a table or a plan")
-    return run_operation(push_procedure(axis, table, drive_url=drive_url, source=source, spec=spec,
-                                        leg_serial=leg_serial), audit)
-
-
-def rollback(axis: ServoAxis, audit: AuditLog, *, plan: PushPlan | None = None, drive_url: str = "") -> PushResult:
-    """`rollback_procedure` run to its end (or an already confirmed `plan`), logged in `audit`."""
-    if plan is not None:
-        return run_operation(_apply(axis, plan), audit)
-    return run_operation(rollback_procedure(axis, audit, drive_url=drive_url), audit)

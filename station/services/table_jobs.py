@@ -25,13 +25,18 @@ import numpy as np
 from drivers.errors import DriverError
 from drivers.interfaces import ServoAxis, TableSpec
 from procedures.engine import events as ev
-from procedures.compensation.audit import AuditLog, AuditSink
+from procedures.compensation.audit import AuditLog, AuditSink, AuditStopped
 from procedures.engine.control import RunControl
 from procedures.engine.errors import InputError
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import (
     Confirm,
     OperationFinished,
+    PushFailed,
+    PushPlan,
+    PushRefused,
+    PushResult,
+    apply_plan,
     finished,
     push_legs_procedure,
     push_procedure,
@@ -87,6 +92,50 @@ def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterabl
     end = finished(events.events)
     return JobOutcome(end.outcome if end is not None else AuditOutcome.FAILED, run=result, events=events.events,
                       finished=end, audit_problems=audit_sink.problems)
+
+
+def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) -> PushResult:
+    """Run a push/rollback procedure through the runner (with an AuditSink on `audit`) and
+    return its PushResult; PushRefused (refused, cancelled) or PushFailed (failed; the message
+    says which table is active) otherwise. For scripts, the sample sessions and tests: the front
+    ends run the jobs below (push_job, rollback_job), which report instead of raising."""
+    events = ListSink()
+    sinks = [events] + ([AuditSink(audit)] if audit is not None else [])
+    try:
+        run(procedure, sinks)
+    except AuditStopped as exc:  # "started" not stored: nothing written; "ok" not stored: written and active
+        raise (PushRefused if exc.entry.outcome == AuditOutcome.STARTED else PushFailed)(str(exc.args[0])) from None
+    end = finished(events.events)
+    if end is None:
+        raise PushFailed("the operation ended without an outcome")
+    if end.outcome == AuditOutcome.OK:
+        return end.result
+    if end.outcome == AuditOutcome.FAILED:
+        raise PushFailed(end.message)
+    refusal = PushRefused(end.message)
+    refusal.hint = ""  # the message already says that nothing was written
+    raise refusal
+
+
+def push_table(axis: ServoAxis, table: Any = None, *, plan: PushPlan | None = None,
+               audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
+               source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushResult:
+    """Push `table` (a TableBank or LegTable; or an already confirmed `plan` from
+    procedures.compensation.push.prepare_push) to `axis`: push_procedure run to its end through
+    the runner, every entry appended to `audit` (when given)."""
+    if plan is not None:
+        return run_operation(apply_plan(axis, plan), audit)
+    if table is None:
+        raise ValueError("push_table needs a table or a plan")
+    return run_operation(push_procedure(axis, table, drive_url=drive_url, source=source, spec=spec,
+                                        leg_serial=leg_serial), audit)
+
+
+def rollback(axis: ServoAxis, audit: AuditLog, *, plan: PushPlan | None = None, drive_url: str = "") -> PushResult:
+    """`rollback_procedure` run to its end through the runner (or an already confirmed `plan`), logged in `audit`."""
+    if plan is not None:
+        return run_operation(apply_plan(axis, plan), audit)
+    return run_operation(rollback_procedure(axis, audit, drive_url=drive_url), audit)
 
 
 # -- compensation targets ----------------------------------------------------------------------------
