@@ -169,18 +169,23 @@ class PushPlan:
         """The leg's compensation target: "drive" (its table banks) or "station"."""
         return str(self.details.get("target", "drive"))
 
-    def describe(self) -> list[str]:
-        """Lines for the confirmation: leg, drive, target, what is written, what is replaced."""
+    def describe(self, drive_url: bool = True, checksums: bool = True) -> list[str]:
+        """Lines for the confirmation: leg, drive, target, what is written, what is replaced.
+        `drive_url` False: without the drive's address (a volatile port); `checksums` False:
+        without the new table's checksum line (several legs in one confirmation)."""
         verb = "restore" if self.action == Action.ROLLBACK else "write"
         lines = [
-            f"leg {self.leg}: drive {self.drive}" + (f" at {self.drive_url}" if self.drive_url else ""),
+            f"leg {self.leg}: drive {self.drive}" + (f" at {self.drive_url}" if self.drive_url and drive_url else ""),
             f"  target:   {self.target}" + (f" (the station applies the table to every command; tables in "
                                             f"{self.details.get('store')})" if self.target == "station"
                                             else " (the drive's table banks)"),
             f"  {verb}:    {describe_table(self.table)}",
-            f"            sha256 {self.table_sha256}, into bank {self.target_bank} (inactive), then switch to it",
-            f"  replaces: bank {self.active_bank}, {describe_table(self.backup)}, sha256 {_short(self.backup_sha256)}…",
         ]
+        if checksums:
+            lines.append(f"            sha256 {self.table_sha256}, into bank {self.target_bank} (inactive), then "
+                         "switch to it")
+        lines.append(f"  replaces: bank {self.active_bank}, {describe_table(self.backup)}, sha256 "
+                     f"{_short(self.backup_sha256)}…")
         if self.table_sha256 == self.backup_sha256:
             lines.append("  note: the drive's active table already holds exactly this table")
         made_for, carries = (self.source or {}).get("leg_serial"), self.details.get("leg_serial")
