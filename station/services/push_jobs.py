@@ -53,7 +53,9 @@ class RollbackRequest:
     audit: str | Path | None = None
 
 
-def _override(how: str | None, kept: str | None):
+def accept_override(how: str | None, kept: str | None = None):
+    """How a front end lets its user accept implausible values (procedures.io.plausibility.Override):
+    `how` the refusal says to do it, `kept` what kept them; None: the command line's option."""
     from procedures.io.plausibility import Override
 
     return Override() if how is None else Override(how=how, kept=kept or how)
@@ -142,7 +144,7 @@ class PreparedTableOperation:
                                 confirm=self.confirm_plans, sinks=sinks, catalog=catalog)
         request = self.request
         serials = configured_serials(self.cfg)
-        override = _override(request.accept_how, request.accepted_as)
+        override = accept_override(request.accept_how, request.accepted_as)
         name = request.table_name or (str(request.table) if request.table else None)
         if len(self.legs) == 1:
             leg = self.legs[0]
@@ -235,7 +237,7 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
         # against what each leg's holder takes by the config (the push job checks again against the drive's)
         accepted = check_push_values(tables, name, {leg: _configured_limit_um(cfg, leg) for leg in legs},
                                      accept_implausible=request.accept_implausible,
-                                     override=_override(request.accept_how, request.accepted_as))
+                                     override=accept_override(request.accept_how, request.accepted_as))
     except ImplausibleError as exc:
         return refused(exc.leg, exc, sources.get(exc.leg), implausible=True)
     warned = [line for lines_ in accepted.values() for line in lines_]

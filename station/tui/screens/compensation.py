@@ -23,7 +23,8 @@ from station.tui.errors import describe
 from station.tui.fields import ValueField
 from station.tui.screens.common import ConfirmScreen, FieldRefusal, StationScreen
 from station.tui.screens.compensation_controller import (
-    UI_OVERRIDE,
+    UI_ACCEPT_HOW,
+    UI_ACCEPTED_AS,
     CompensationController,
     DriveTablesRead,
     TableJobDone,
@@ -126,6 +127,7 @@ class CompensationScreen(StationScreen):
 
     def action_make_table(self, accept_implausible: bool = False) -> None:
         from procedures.io.plausibility import ImplausibleError
+        from station.services.push_jobs import accept_override
         from station.services.table_jobs import make_checked_table
 
         a = self.app.analysis
@@ -136,7 +138,7 @@ class CompensationScreen(StationScreen):
         try:
             step = self.query_one("#comp-step", ValueField).read()  # station table --step's parser
             table, warnings = make_checked_table(a.model, step, self._spec(), accept_implausible=accept_implausible,
-                                                 override=UI_OVERRIDE)
+                                                 override=accept_override(UI_ACCEPT_HOW, UI_ACCEPTED_AS))
             # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s
             serials = {leg: s for leg in table.legs if (s := a.session.identity.leg_serial(leg))}
             self.table = type(table)(table.legs, serials or table.serials)
