@@ -240,12 +240,12 @@ def prepare_sweep(request: SweepRequest, cfg: StationConfig, rig: Any = None) ->
     recorded = None
     spec = None
     if request.resume:
+        if request.out is None:
+            raise InputError("no session file to resume given")
+        out = check_appendable(request.out)  # before the recording's modules load (h5py, the catalog)
         from procedures.io.recording.reader import read_session
         from station.services.jobs import resumable_plan
 
-        if request.out is None:
-            raise InputError("no session file to resume given")
-        out = check_appendable(request.out)
         plan = resumable_plan(out)
         recorded = read_session(out).points
         legs, kind, total = plan.legs, plan.kind, plan.total_points
