@@ -74,8 +74,12 @@ def request(args) -> SweepRequest:
         cycles=args.cycles, n_targets=args.n_targets, step_mm=args.step, targets_file=args.targets,
         min_mm=args.min_mm, max_mm=args.max_mm, overrun_mm=args.overrun, dwell_s=args.dwell,
         averaging_s=args.averaging, serials=_serials(args), serials_file=args.serials, time_scale=args.time_scale,
-        seed=args.seed,
+        seed=args.seed, ways_out=WAYS_OUT,
     )
+
+
+WAYS_OUT = {"rollback": "station rollback --leg N", "confirm": "station sweep --yes"}
+"""The ways out of a refused sweep of a compensated leg, as this command line takes them."""
 
 
 def _serials(args) -> dict:

@@ -58,11 +58,17 @@ def compensated_question(tables: Mapping[int, str]) -> str:
             "anyway? The session records the active tables and is stage 'other', not an as-found calibration.")
 
 
-def compensated_refusal(tables: Mapping[int, str]) -> str:
+def compensated_refusal(tables: Mapping[int, str], how: Mapping[str, str] | None = None) -> str:
+    """The refusal of a sweep of legs with an active table, not confirmed. `how`: how this front
+    end does each way out ("rollback", "confirm"), added in parentheses (e.g. the command line's
+    commands, the UI's keys); none: the sentence alone."""
+    how = how or {}
     legs = ", ".join(str(leg) for leg in sorted(tables))
+    rollback = f" ({how['rollback']})" if how.get("rollback") else ""
+    confirm = f" ({how['confirm']})" if how.get("confirm") else ""
     return (f"leg(s) {legs}: a compensation table is active ({'; '.join(tables[k] for k in sorted(tables))}); "
-            "a calibration measures the leg as found: roll the table back first (station rollback --leg N), or "
-            "confirm the sweep of the compensated leg (station sweep --yes), recorded as stage 'other'; nothing moved")
+            f"a calibration measures the leg as found: roll the table back first{rollback}, or confirm the sweep of "
+            f"the compensated leg{confirm}, recorded as stage 'other'; nothing moved")
 
 
 def check_compensation(rig: Rig, plan: SweepPlan, out: Path, resume: bool,

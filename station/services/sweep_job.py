@@ -72,6 +72,7 @@ class SweepRequest:
     build_in_run: bool = False
     make_parents: bool = False
     index: bool = True
+    ways_out: Mapping[str, str] | None = None  # how the front end rolls back / confirms (a refusal names them)
 
 
 def check_time_scale(time_scale: float | None) -> None:
@@ -190,7 +191,8 @@ class PreparedSweep:
             resume_table_refusal(self.out, self.legs, now)
             return
         if now:
-            self.question, self.declined = compensated_question(now), compensated_refusal(now)
+            self.question = compensated_question(now)
+            self.declined = compensated_refusal(now, self.request.ways_out)
 
     def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
         """Sweep (after `check()` and the question, which the JobRunner makes): the plan built

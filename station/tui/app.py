@@ -73,6 +73,8 @@ log = logging.getLogger("station.tui")
 ALL_LEGS = (1, 2, 3, 4, 5, 6)
 # The keys of the rig actions a refusal names as the way out (station.services.rig_session.REMEDIES).
 RIG_KEYS = {"reset": "r", "enable": "e", "stop": "x"}
+# The ways out of a refused sweep of a compensated leg, on this UI (station.services.jobs.compensated_refusal).
+UI_WAYS_OUT = {"rollback": "b on the Compensation page, F4", "confirm": "answer yes when asked"}
 # How long quitting waits for an aborted sweep to stop the drives and close its recording.
 QUIT_WAIT_S = 15.0
 
@@ -395,6 +397,8 @@ class StationApp(App):
         title = "Resume" if request.resume else "Sweep"
         if not self._rig_free(title):
             return False
+        if request.ways_out is None:  # a refused compensated leg: the ways out on this UI
+            request.ways_out = UI_WAYS_OUT
         try:
             job = prepare_sweep(request, self.cfg, rig=self.rig)
         except OutputExists as exc:
