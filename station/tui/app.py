@@ -18,7 +18,6 @@ events (`SweepState.apply`).
 
 from __future__ import annotations
 
-import logging
 import threading
 import time
 from pathlib import Path
@@ -67,8 +66,6 @@ from station.tui.screens.results import ResultsScreen
 from station.tui.screens.rig import RigScreen
 from station.tui.screens.sweep import SweepScreen
 from station.tui.state import LegTrace, SweepState, event_notice
-
-log = logging.getLogger("station.tui")
 
 ALL_LEGS = (1, 2, 3, 4, 5, 6)
 # The keys of the rig actions a refusal names as the way out (station.services.rig_session.REMEDIES).
