@@ -134,7 +134,7 @@ def run(args) -> int:
     # every refusal is made before anything connects or moves (station/services/sweep_job.py)
     try:
         job = prepare_sweep(request(args), cfg)
-    except OutputExists as exc:
+    except OutputExists:
         raise InputError(f"--out {args.out}: exists; add --force to replace it, choose another --out, or "
                          f"--resume {args.out} to finish it; nothing was written") from None
     for line in job.lines:

@@ -180,7 +180,8 @@ class JobRunner:
             if control is not None:
                 ticket.control = control
         try:
-            if not self._rig.acquire(timeout=self._wait_s) if self._wait_s > 0 else not self._rig.acquire(False):
+            taken = self._rig.acquire(timeout=self._wait_s) if self._wait_s > 0 else self._rig.acquire(blocking=False)
+            if not taken:  # a rig action still running after `wait_s`
                 raise RigBusy(self.BUSY)
             try:
                 check = getattr(job, "check", None)

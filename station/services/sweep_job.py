@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
-from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PLAN_KINDS  # what SweepRequest.kind and .cycles take
+from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PLAN_KINDS  # noqa: F401 (what SweepRequest.kind and .cycles take)
 from procedures.engine.errors import InputError
 from station.services.config import StationConfig
 from station.services.job import JobOutcome

@@ -31,7 +31,6 @@ from procedures.engine.errors import InputError
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import (
     Confirm,
-    OperationFinished,
     PushFailed,
     PushPlan,
     PushRefused,
@@ -55,7 +54,7 @@ from procedures.io.plausibility import (
 )
 from procedures.io.recording.reader import file_sha256, read_session
 from procedures.io.recording.sink import RecorderSink
-from procedures.engine.runner import ListSink, RunResult, Sink, run
+from procedures.engine.runner import ListSink, Sink, run
 from procedures.engine.states import Action, AuditOutcome
 from procedures.compensation.table import (
     CompTable,
