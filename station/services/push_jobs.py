@@ -22,7 +22,7 @@ from procedures.engine.errors import InputError
 from station.services.config import StationConfig
 from station.services.job import JobOutcome
 
-PUSH, ROLLBACK = "push", "rollback"
+PUSH, ROLLBACK, VERIFY = "push", "rollback", "verify"  # the audit log's actions (its entries' `action`)
 
 
 @dataclass
@@ -83,9 +83,7 @@ class PreparedRefusal:
         from station.services.table_jobs import refusal_job
         from station.services.wiring import drive_url_of
 
-        from procedures.engine.states import Action
-
-        job = refusal_job(Action(self.action), self.leg, self.reason, audit=self.audit, drive_url=drive_url_of(self.cfg),
+        job = refusal_job(self.action, self.leg, self.reason, audit=self.audit, drive_url=drive_url_of(self.cfg),
                           source=self.source, sinks=sinks, catalog=catalog_for(self.cfg))
         job.implausible = self.implausible
         return job
@@ -197,7 +195,6 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
     """A PreparedRefusal (refused before any drive: the legs, the table file, a controller
     target, values that look like a unit slip, against what each leg's holder takes by the
     config) or a PreparedTableOperation whose `lines` say what was accepted and where it goes."""
-    from procedures.engine.states import Action
     from procedures.io.plausibility import ImplausibleError
     from station.services.devices import DriverError
     from station.services.identity import station_audit_log
@@ -229,7 +226,7 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
         unverified = unverified_table_line(request.table, tables, next(iter(sources.values())).get("table_integrity", ""))
         if unverified:  # a file without its integrity record: said once; the push checks it covers the stroke
             lines.append(unverified)
-    controller = controller_refusal(cfg, legs, Action.PUSH)
+    controller = controller_refusal(cfg, legs, PUSH)
     if controller:
         return refused(controller[0], InputError(controller[1]), sources.get(controller[0]))
     name = request.table_name or path or str((sources.get(legs[0]) or {}).get("path") or "the table")
@@ -249,7 +246,6 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
 
 def prepare_rollback(request: RollbackRequest, cfg: StationConfig):
     """A PreparedRefusal (a leg this station does not have, a controller target) or the rollback."""
-    from procedures.engine.states import Action
     from station.services.config import LEG_COUNT
     from station.services.identity import station_audit_log
     from station.services.table_jobs import controller_refusal
@@ -259,7 +255,7 @@ def prepare_rollback(request: RollbackRequest, cfg: StationConfig):
     if not 1 <= leg <= LEG_COUNT:
         return PreparedRefusal(ROLLBACK, leg, InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}"), cfg,
                                audit)
-    controller = controller_refusal(cfg, (leg,), Action.ROLLBACK)
+    controller = controller_refusal(cfg, (leg,), ROLLBACK)
     if controller:
         return PreparedRefusal(ROLLBACK, leg, InputError(controller[1]), cfg, audit)
     return PreparedTableOperation(ROLLBACK, request, cfg, (leg,), audit,

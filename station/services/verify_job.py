@@ -239,8 +239,8 @@ def prepare_verify(request: VerifyRequest, cfg: StationConfig) -> PreparedVerify
     from station.services.identity import station_audit_log
     from station.services.sweep_job import check_time_scale
     from station.services.table_jobs import controller_refusal, expected_tables, refusal_job
+    from station.services.push_jobs import VERIFY
     from station.services.wiring import drive_url_of, leg_table_spec
-    from procedures.engine.states import Action
 
     legs = parse_leg_choice(request.legs)
     if not cfg.is_sim and (request.seed is not None or request.noise_seed is not None):
@@ -248,9 +248,9 @@ def prepare_verify(request: VerifyRequest, cfg: StationConfig) -> PreparedVerify
     if request.seed is not None:
         cfg.sim.seed = request.seed
     audit = station_audit_log(cfg, request.audit)
-    controller = controller_refusal(cfg, legs, Action.VERIFY)
+    controller = controller_refusal(cfg, legs, VERIFY)
     if controller:  # the station cannot verify a table the controller applies: refused and logged
-        job = refusal_job(Action.VERIFY, controller[0], controller[1], audit=audit, drive_url=drive_url_of(cfg))
+        job = refusal_job(VERIFY, controller[0], controller[1], audit=audit, drive_url=drive_url_of(cfg))
         raise InputError(job.finished.message)
     check_time_scale(request.time_scale)
     # every output checked before anything connects or moves (procedures/io/outputs.py)
