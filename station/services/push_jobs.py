@@ -22,7 +22,7 @@ from procedures.engine.errors import InputError
 from station.services.config import StationConfig
 from station.services.job import JobOutcome
 
-PUSH, ROLLBACK, VERIFY = "push", "rollback", "verify"  # the audit log's actions (its entries' `action`)
+PUSH, ROLLBACK = "push", "rollback"  # the audit log's actions (its entries' `action`)
 
 
 @dataclass

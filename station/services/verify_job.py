@@ -20,6 +20,8 @@ from procedures.engine.errors import InputError
 from station.services.config import StationConfig
 from station.services.job import JobOutcome
 
+VERIFY = "verify"  # the audit log's action of a verification (its entries' `action`)
+
 NOISE_SEED_ENV = "STATION_SIM_NOISE_SEED"
 """Simulated rig only: the verification's noise seed when none is given (a demo or a test that
 repeats exactly: tests/station/test_readme_calibration.py); unset = a new seed each time."""
@@ -239,7 +241,6 @@ def prepare_verify(request: VerifyRequest, cfg: StationConfig) -> PreparedVerify
     from station.services.identity import station_audit_log
     from station.services.sweep_job import check_time_scale
     from station.services.table_jobs import controller_refusal, expected_tables, refusal_job
-    from station.services.push_jobs import VERIFY
     from station.services.wiring import drive_url_of, leg_table_spec
 
     legs = parse_leg_choice(request.legs)
