@@ -48,9 +48,10 @@ from drivers.errors import DriverError, TableError, TableRefused
 from drivers.interfaces import ServoAxis, TableBank, TableSpec, table_sha256
 from procedures.engine import events as ev
 from procedures.compensation.applied_table import compensation_target, target_details
-from procedures.compensation.audit import Action, AuditEntry, AuditLog, AuditRecord, AuditSink, AuditStopped, new_id
-from procedures.vocabulary import InputError, Outcome
-from procedures.engine.runner import ListSink, run
+from procedures.compensation.audit import AuditEntry, AuditLog, AuditRecord, new_id
+from procedures.vocabulary import InputError
+from procedures.compensation.audit import Action
+from procedures.vocabulary import Outcome
 from procedures.compensation.table import LegTable
 
 QUANTUM_UM = 0.01
@@ -169,18 +170,23 @@ class PushPlan:
         """The leg's compensation target: "drive" (its table banks) or "station"."""
         return str(self.details.get("target", "drive"))
 
-    def describe(self) -> list[str]:
-        """Lines for the confirmation: leg, drive, target, what is written, what is replaced."""
+    def describe(self, drive_url: bool = True, checksums: bool = True) -> list[str]:
+        """Lines for the confirmation: leg, drive, target, what is written, what is replaced.
+        `drive_url` False: without the drive's address (a volatile port); `checksums` False:
+        without the new table's checksum line (several legs in one confirmation)."""
         verb = "restore" if self.action == Action.ROLLBACK else "write"
         lines = [
-            f"leg {self.leg}: drive {self.drive}" + (f" at {self.drive_url}" if self.drive_url else ""),
+            f"leg {self.leg}: drive {self.drive}" + (f" at {self.drive_url}" if self.drive_url and drive_url else ""),
             f"  target:   {self.target}" + (f" (the station applies the table to every command; tables in "
                                             f"{self.details.get('store')})" if self.target == "station"
                                             else " (the drive's table banks)"),
             f"  {verb}:    {describe_table(self.table)}",
-            f"            sha256 {self.table_sha256}, into bank {self.target_bank} (inactive), then switch to it",
-            f"  replaces: bank {self.active_bank}, {describe_table(self.backup)}, sha256 {_short(self.backup_sha256)}…",
         ]
+        if checksums:
+            lines.append(f"            sha256 {self.table_sha256}, into bank {self.target_bank} (inactive), then "
+                         "switch to it")
+        lines.append(f"  replaces: bank {self.active_bank}, {describe_table(self.backup)}, sha256 "
+                     f"{_short(self.backup_sha256)}…")
         if self.table_sha256 == self.backup_sha256:
             lines.append("  note: the drive's active table already holds exactly this table")
         made_for, carries = (self.source or {}).get("leg_serial"), self.details.get("leg_serial")
@@ -391,7 +397,7 @@ def push_procedure(axis: ServoAxis, table: TableBank | LegTable, *, confirm: Con
         yield from refused(Action.PUSH, axis.leg, exc, drive=_identity(axis), drive_url=drive_url, source=source,
                            details=target_details(axis))
         return
-    yield from _confirm_and_apply(axis, plan, confirm)
+    yield from _confirm_andapply_plan(axis, plan, confirm)
 
 
 def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank | LegTable], *,
@@ -439,7 +445,7 @@ def push_legs_procedure(axes: dict[int, ServoAxis], tables: dict[int, TableBank 
     done: list[int] = []
     for plan in plans:
         end: OperationFinished | None = None
-        for event in _apply(axes[plan.leg], plan):
+        for event in apply_plan(axes[plan.leg], plan):
             if isinstance(event, OperationFinished):
                 end = event
             yield event
@@ -464,7 +470,7 @@ def rollback_procedure(axis: ServoAxis, audit: AuditLog, *, confirm: Confirm | N
         yield from refused(Action.ROLLBACK, axis.leg, exc, drive=_identity(axis), drive_url=drive_url,
                            details=target_details(axis))
         return
-    yield from _confirm_and_apply(axis, plan, confirm)
+    yield from _confirm_andapply_plan(axis, plan, confirm)
 
 
 def refused(action: Action, leg: int, reason: BaseException | str, *, drive: str = "", drive_url: str = "",
@@ -489,7 +495,7 @@ def _identity(axis: ServoAxis) -> str:
         return ""
 
 
-def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None) -> Iterator[ev.Event]:
+def _confirm_andapply_plan(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None) -> Iterator[ev.Event]:
     yield TablePlanned(plan)
     if confirm is not None:
         try:
@@ -503,10 +509,10 @@ def _confirm_and_apply(axis: ServoAxis, plan: PushPlan, confirm: Confirm | None)
                                drive_url=plan.drive_url, source=plan.source, outcome=Outcome.CANCELLED,
                                details={"target": plan.target})
             return
-    yield from _apply(axis, plan)
+    yield from apply_plan(axis, plan)
 
 
-def _apply(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
+def apply_plan(axis: ServoAxis, plan: PushPlan) -> Iterator[ev.Event]:
     leg, bank, prev = plan.leg, plan.target_bank, plan.active_bank
     op_id = new_id()
     base = dict(action=plan.action, leg=leg, drive=plan.drive, drive_url=plan.drive_url,
@@ -621,51 +627,7 @@ def _state_after_activation(axis: ServoAxis, bank: int, prev: int, sha: str, bac
                        "axis before checking its table.")
 
 
-# -- for scripts and tests: run a procedure, return its result or raise ------------------------------
-
 def finished(events: list[ev.Event]) -> OperationFinished | None:
     """The `OperationFinished` among `events` (the last one), if any."""
     done = [e for e in events if isinstance(e, OperationFinished)]
     return done[-1] if done else None
-
-
-def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) -> PushResult:
-    """Run a push/rollback procedure through the runner (with an AuditSink on `audit`) and
-    return its PushResult; PushRefused (refused, cancelled) or PushFailed (failed; the message
-    says which table is active) otherwise."""
-    events = ListSink()
-    sinks = [events] + ([AuditSink(audit)] if audit is not None else [])
-    try:
-        run(procedure, sinks)
-    except AuditStopped as exc:  # "started" not stored: nothing written; "ok" not stored: written and active
-        raise (PushRefused if exc.entry.outcome == Outcome.STARTED else PushFailed)(str(exc.args[0])) from None
-    end = finished(events.events)
-    if end is None:
-        raise PushFailed("the operation ended without an outcome")
-    if end.outcome == Outcome.OK:
-        return end.result
-    if end.outcome == Outcome.FAILED:
-        raise PushFailed(end.message)
-    refusal = PushRefused(end.message)
-    refusal.hint = ""  # the message already says that nothing was written
-    raise refusal
-
-
-def push_table(axis: ServoAxis, table: TableBank | LegTable | None = None, *, plan: PushPlan | None = None,
-               audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
-               source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushResult:
-    """Push `table` (or an already confirmed `plan` from `prepare_push`) to `axis`:
-    `push_procedure` run to its end, every entry appended to `audit` (when given)."""
-    if plan is not None:
-        return run_operation(_apply(axis, plan), audit)
-    if table is None:
-        raise ValueError("push_table needs a table or a plan")
-    return run_operation(push_procedure(axis, table, drive_url=drive_url, source=source, spec=spec,
-                                        leg_serial=leg_serial), audit)
-
-
-def rollback(axis: ServoAxis, audit: AuditLog, *, plan: PushPlan | None = None, drive_url: str = "") -> PushResult:
-    """`rollback_procedure` run to its end (or an already confirmed `plan`), logged in `audit`."""
-    if plan is not None:
-        return run_operation(_apply(axis, plan), audit)
-    return run_operation(rollback_procedure(axis, audit, drive_url=drive_url), audit)

@@ -11,15 +11,11 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from procedures.engine import events as ev
-from procedures.compensation.audit import AuditError, AuditLog
 from procedures.vocabulary import InputError
-from procedures.compensation.audit import Action
-from procedures.vocabulary import Outcome as AuditOutcome
 from station.services.config import LEG_COUNT, SIM_NV_NAME, StationConfig, load_config
 
 if TYPE_CHECKING:
-    from station.services.table_jobs import JobOutcome
+    from station.services.job import JobOutcome
 
 # The drive's, the catalog's and the jobs' modules are imported inside the functions that use
 # them: `station push --help` and an argument error load none of them (issue 32).
@@ -61,7 +57,7 @@ def station_config(args, interferometer: bool = False) -> StationConfig:
     return cfg.with_sim_memory()
 
 
-def audit_log(args, cfg: StationConfig) -> AuditLog:
+def audit_log(args, cfg: StationConfig):
     from station.services.identity import station_audit_log
 
     return station_audit_log(cfg, getattr(args, "audit", None))
@@ -95,16 +91,16 @@ class PlanPrinter:
     def __init__(self, header: str = "") -> None:
         self.header = header
 
-    def handle(self, event: ev.Event) -> None:
-        from procedures.compensation.push import TablePlanned
+    def handle(self, event) -> None:
+        from station.services.push_jobs import planned, plan_lines
 
-        if isinstance(event, TablePlanned):
-            plan = event.plan
-            if plan.action == Action.ROLLBACK:
+        plan = planned(event)
+        if plan is not None:
+            if plan.action == "rollback":
                 print(f"rollback of the push of {plan.details.get('push_time_utc')}")
             elif self.header:
                 print(self.header)
-            for line in plan.describe():
+            for line in plan_lines(plan):
                 print(line)
             sys.stdout.flush()
 
@@ -112,23 +108,14 @@ class PlanPrinter:
         pass
 
 
-def drive_text(cfg: StationConfig) -> str:
-    """Which drive a push or rollback writes to, said before anything else."""
-    if cfg.drive.url == "sim":
-        return f"the SIMULATED drive (its table memory {cfg.sim.nv_path}); not a real drive"
-    return f"{cfg.drive.url}" + (f" (config {cfg.source})" if cfg.from_file else "")
+def warn_audit_problems(audit) -> None:
+    from station.services.push_jobs import audit_problem_lines
+
+    for line in audit_problem_lines(audit):
+        print(f"warning: {line}", file=sys.stderr)
 
 
-def warn_audit_problems(audit: AuditLog) -> None:
-    try:
-        _, problems = audit.read()
-    except AuditError:
-        return
-    for p in problems[:3]:
-        print(f"warning: {audit.path}, line {p.line}: {p.reason} (left as is: the log is append-only)", file=sys.stderr)
-
-
-def report(job: JobOutcome, audit: AuditLog) -> int:
+def report(job: JobOutcome, audit) -> int:
     """Print how a push or rollback ended; the exit code (0 ok, 1 cancelled, else an error)."""
     from station.services.table_jobs import OperationFailed
 
@@ -137,35 +124,11 @@ def report(job: JobOutcome, audit: AuditLog) -> int:
     end = job.finished
     if end is None:
         raise InputError("the operation ended without an outcome")
-    if end.outcome == AuditOutcome.OK:
+    if end.outcome == "ok":
         return 0
-    if end.outcome == AuditOutcome.CANCELLED:
+    if end.outcome == "cancelled":
         print("cancelled; nothing was written")
         return 1
-    if end.outcome == AuditOutcome.FAILED:
+    if end.outcome == "failed":
         raise OperationFailed(end.message)
     raise InputError(end.message)
-
-
-def refuse(args, cfg: StationConfig, audit: AuditLog, action: Action, leg: int, exc: BaseException,
-           source: dict | None = None) -> int:
-    """A refusal found before the drive is opened: logged through the audit sink, then reported."""
-    from station.catalog.writer import catalog_for
-    from station.services.table_jobs import refusal_job
-    from station.services.wiring import drive_url_of
-
-    job = refusal_job(action, leg, exc, audit=audit, drive_url=drive_url_of(cfg), source=source, catalog=catalog_for(cfg))
-    return report(job, audit)
-
-
-def parse_leg_choice(text: str) -> tuple[int, ...]:
-    """"3", "1-6", "1,4" or "all" as leg numbers; InputError naming what is wrong."""
-    from procedures.acquisition.plans import parse_legs
-
-    if str(text).strip().lower() == "all":
-        return tuple(range(1, LEG_COUNT + 1))
-    try:
-        return parse_legs(str(text))
-    except InputError:
-        raise InputError(f"--leg {text}: give a leg number from 1 to {LEG_COUNT}, a range (1-6), a list (1,4) "
-                         "or all") from None

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from procedures.vocabulary import InputError
-from procedures.compensation.audit import Action
 from station.commands._table_cli import add_drive_arguments
 
 NAME = "rollback"
@@ -22,37 +20,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from procedures.compensation.push import TablePlanned, describe_table
-    from station.catalog.writer import catalog_for
-    from station.commands._table_cli import (
-        PlanPrinter, audit_log, drive_text, prompt, refuse, report, station_config, warn_audit_problems,
-    )
-    from station.services.config import LEG_COUNT
-    from station.services.table_jobs import controller_refusal, rollback_job, target_text
-    from station.services.wiring import open_drive
+    from station.commands._table_cli import PlanPrinter, prompt, report, station_config, warn_audit_problems
+    from station.services.job import JobRunner
+    from station.services.push_jobs import PreparedRefusal, RollbackRequest, prepare_rollback, rolled_back_line
 
     cfg = station_config(args)
-    audit = audit_log(args, cfg)
-    leg = int(args.leg)
-    if not 1 <= leg <= LEG_COUNT:
-        return refuse(args, cfg, audit, Action.ROLLBACK, leg,
-                      InputError(f"--leg {leg}: leg numbers run from 1 to {LEG_COUNT}"))
-    controller = controller_refusal(cfg, (leg,), Action.ROLLBACK)
-    if controller:
-        return refuse(args, cfg, audit, Action.ROLLBACK, leg, InputError(controller[1]))
-    print(f"drive: {drive_text(cfg)}")
-    if cfg.compensation.target_of(leg) != "drive":
-        print(f"compensation target of leg {leg}: {target_text(cfg, leg)}")
-    with open_drive(cfg, leg) as drive:
-        warn_audit_problems(audit)
-        ask = prompt(args.yes)
-        job = rollback_job(drive.axis, audit=audit, drive_url=drive.url, confirm=lambda plan: ask(plan.question()),
-                           sinks=[PlanPrinter()], catalog=catalog_for(cfg))
-    code = report(job, audit)
+    job = prepare_rollback(RollbackRequest(leg=int(args.leg), audit=args.audit), cfg)
+    if isinstance(job, PreparedRefusal):  # refused before the drive: logged, then said
+        return report(JobRunner().run(job), job.audit)
+    for line in job.lines:
+        print(line)
+    ask = prompt(args.yes)
+    job.confirm_plans = lambda plan: ask(plan.question())
+    with job.connect():
+        warn_audit_problems(job.audit)
+        ended = JobRunner().run(job, [PlanPrinter()])
+    code = report(ended, job.audit)
     if code:
         return code
-    result = job.finished.result
-    plan = job.of(TablePlanned)[-1].plan
-    print(f"rolled back: leg {leg} bank {result.bank} active (was bank {result.previous_bank}): "
-          f"{describe_table(plan.table)}; sha256 {result.table_sha256}")
+    print(rolled_back_line(ended))
     return 0

@@ -2,7 +2,8 @@
 
 An ISO 230-2 sweep of one leg on the simulated rig (through the real Modbus and serial
 protocols), recorded to runs/, followed by its ISO 230-2 evaluation. This is the scriptable,
-non-interactive main job; `station` with no arguments starts the terminal UI.
+non-interactive main job; `station` with no arguments starts the terminal UI. The sweep is the
+job `station sweep` runs (station/services/sweep_job.py), prepared and run the same way.
 """
 
 from __future__ import annotations
@@ -10,12 +11,6 @@ from __future__ import annotations
 from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
-
-from procedures.io.outputs import check_output_file
-from procedures.engine.control import RunControl
-from procedures.vocabulary import Outcome
-from station.interrupt import abort_on_sigint
-from station.progress import ConsoleProgress
 
 NAME = "run"
 HELP = "headless calibration sweep on the simulated rig, then its ISO 230-2 evaluation"
@@ -29,35 +24,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
-    from procedures.acquisition.plans import parse_legs
-    from station.commands.sweep import check_time_scale
     from station.services.config import load_config
-    from station.services.jobs import run_sweep
-    from station.services.sessions import default_session_path
-    from station.services.wiring import open_rig
+    from station.services.job import JobRunner
+    from procedures.vocabulary import InputError
+    from station.services.sweep_job import OutputExists, SweepRequest, iso230_lines, prepare_sweep
+    from station.interrupt import abort_on_sigint
+    from station.progress import ConsoleProgress
 
     cfg = load_config(None)
-    plan = plan_from_spec(PlanSpec(legs=parse_legs(args.legs), kind="iso230", cycles=args.cycles), cfg.limits)
-    check_time_scale(args.time_scale)
-    out = check_output_file(args.out or default_session_path(cfg, prefix="run"), suffixes=(".h5",), make_parents=True)
-    with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
+    try:
+        job = prepare_sweep(SweepRequest(out=args.out, legs=args.legs, kind="iso230", cycles=args.cycles,
+                                         time_scale=args.time_scale, default_out_prefix="run", make_parents=True), cfg)
+    except OutputExists:
+        raise InputError(f"--out {args.out}: exists; choose another --out; nothing was written") from None
+    runner = JobRunner()
+    ticket = runner.claim()
+    with job.connect(sim_memory=False) as rig:
         print(f"rig: {rig.description}")
-        with abort_on_sigint(RunControl()) as control:
-            result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control)
-    print(f"session recorded: {out.resolve()} ({result.outcome}, {result.points} points)")
-    if result.outcome != Outcome.COMPLETED:
+        with abort_on_sigint(ticket.control):
+            ended = runner.run(job, [ConsoleProgress()], ticket=ticket)  # the simulated rig: no table to ask about
+    print(f"session recorded: {job.out.resolve()} ({ended.status}, {ended.points} points)")
+    if ended.status != "completed":
         return 1
-    from procedures.reporting.iso230 import evaluate, format_table
-    from procedures.io.recording.reader import read_session
-    from procedures.metrology.thermal import error_basis
-    from station.services.report_jobs import iso_lines, session_iso230
-
-    session = read_session(out)
-    points, basis_lines, _ = error_basis(session, False)  # as station iso230 / fit: normalised to 20 degC
-    for line in basis_lines:
-        print(line)
-    print(format_table(evaluate(points)))
-    for line in iso_lines(session_iso230(session)):  # each value with its expanded uncertainty U (k = 2)
+    for line in iso230_lines(job.out):
         print(line)
     return 0

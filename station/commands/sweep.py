@@ -5,7 +5,6 @@ from __future__ import annotations
 from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
-import math
 import shlex
 import sys
 from pathlib import Path
@@ -13,11 +12,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from procedures.vocabulary import InputError
-from procedures.acquisition.plan_spec import PLAN_KINDS
+from station.services.sweep_job import PLAN_KINDS
 
 if TYPE_CHECKING:
-    from procedures.acquisition.plan_spec import PlanSpec
-    from procedures.acquisition.plans import SweepPlan
+    from station.services.sweep_job import SweepRequest
 
 # What a run needs is imported inside the functions (the recorder, the catalog, the rig's
 # drivers): `station sweep --help`, an argument error and a refusal load none of it.
@@ -67,31 +65,43 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "at the terminal, and refused when stdin is not one")
 
 
-def plan_spec(args) -> PlanSpec:
-    """The plan `station sweep` is asked for (not for --resume, which reuses the file's plan)."""
-    from procedures.acquisition.plan_spec import PlanSpec
-    from procedures.acquisition.plans import parse_legs
+def request(args) -> SweepRequest:
+    """The sweep `station sweep` is asked for, as the services' request."""
+    from station.services.sweep_job import SweepRequest
 
-    return PlanSpec(
-        legs=parse_legs(args.legs), kind=args.plan, cycles=args.cycles, n_targets=args.n_targets, step_mm=args.step,
-        targets_file=Path(args.targets) if args.targets else None, min_mm=args.min_mm, max_mm=args.max_mm,
-        overrun_mm=args.overrun, dwell_s=args.dwell, averaging_s=args.averaging,
+    return SweepRequest(
+        out=args.resume or args.out, resume=bool(args.resume), force=args.force, legs=args.legs, kind=args.plan,
+        cycles=args.cycles, n_targets=args.n_targets, step_mm=args.step, targets_file=args.targets,
+        min_mm=args.min_mm, max_mm=args.max_mm, overrun_mm=args.overrun, dwell_s=args.dwell,
+        averaging_s=args.averaging, serials=_serials(args), serials_file=args.serials, time_scale=args.time_scale,
+        seed=args.seed, ways_out=WAYS_OUT,
     )
 
 
-def build_plan(args, limits=None) -> SweepPlan:
+WAYS_OUT = {"rollback": "station rollback --leg N", "confirm": "station sweep --yes"}
+"""The ways out of a refused sweep of a compensated leg, as this command line takes them."""
+
+
+def _serials(args) -> dict:
+    from station.services.serials import parse_serial_args
+
+    return parse_serial_args(args.serial)
+
+
+def plan_spec(args):
+    """The plan `station sweep` is asked for (procedures.acquisition.plan_spec.PlanSpec; not for
+    --resume, which reuses the file's plan)."""
+    from station.services.sweep_job import plan_spec_of
+
+    return plan_spec_of(request(args))
+
+
+def build_plan(args, limits=None):
     """The plan asked for; with `limits` (the config's [limits]) sized first and refused beyond
     them before anything is built (procedures/acquisition/plan_size.py)."""
-    from procedures.acquisition.plan_spec import plan_from_spec
+    from station.services.sweep_job import build_plan_of
 
-    return plan_from_spec(plan_spec(args), limits)
-
-
-def check_time_scale(time_scale: float | None) -> None:
-    """--time-scale: real seconds per simulated second, a finite number >= 0 (or not given)."""
-    if time_scale is not None and not (math.isfinite(time_scale) and time_scale >= 0):
-        raise InputError(f"--time-scale must be a number >= 0 (real seconds per simulated second; 0 = no "
-                         f"waiting), got {time_scale:g}")
+    return build_plan_of(request(args), limits)
 
 
 def resume_command(out: Path, cfg, config: str | None) -> str:
@@ -101,8 +111,8 @@ def resume_command(out: Path, cfg, config: str | None) -> str:
 
 
 def _confirm(yes: bool):
-    """How a sweep of a compensated leg is confirmed here: --yes; else the question at the
-    terminal; else (no terminal) None: refused in one line naming the legs and --yes."""
+    """How a question (a sweep of a compensated leg) is confirmed here: --yes; else the question
+    at the terminal; else (no terminal) None: refused in one line naming the legs and --yes."""
     from station.commands._table_cli import prompt
 
     if yes:
@@ -111,80 +121,53 @@ def _confirm(yes: bool):
 
 
 def run(args) -> int:
-    from procedures.io.outputs import check_appendable, check_output_file
     from station.services.config import load_config
-    from station.services.identity import leg_fields
-    from station.services.serials import parse_serial_args, serials_unverified_line
+    from station.services.sweep_job import OutputExists, prepare_sweep
 
     cfg = load_config(args.config)
     cfg.require_devices()
-    serials = parse_serial_args(args.serial)
-    leg_fields(cfg, serials, args.serials)  # a bad serials file is refused before anything moves
-    unverified = serials_unverified_line(args.serials or cfg.serials_file)
-    if unverified:  # a list typed by hand: read whole, but nothing proves it (procedures/io/integrity.py)
-        print(unverified)
-    check_time_scale(args.time_scale)
-    if args.seed is not None:
-        cfg.sim.seed = args.seed
-    # every output is checked before anything connects or moves (procedures/io/outputs.py)
     if args.resume:
-        if args.serial or args.serials:
-            raise InputError("--serial/--serials name the legs of a new session; a resumed session keeps the identity "
-                             "it was created with: drop them")
-        out = check_appendable(args.resume)
-        if args.out and Path(args.out) != out:
+        if args.out and Path(args.out) != Path(args.resume):
             raise InputError("--resume appends to the session it names; drop --out")
-        from station.services.jobs import resumable_plan
+    elif not args.out:
+        raise InputError("--out FILE.h5 is required (where to record the session)")
+    # every refusal is made before anything connects or moves (station/services/sweep_job.py)
+    try:
+        job = prepare_sweep(request(args), cfg)
+    except OutputExists:
+        raise InputError(f"--out {args.out}: exists; add --force to replace it, choose another --out, or "
+                         f"--resume {args.out} to finish it; nothing was written") from None
+    for line in job.lines:
+        print(line)
+    return run_prepared(job, cfg, args.config, _confirm(args.yes))
 
-        plan = resumable_plan(out)
-    else:
-        if not args.out:
-            raise InputError("--out FILE.h5 is required (where to record the session)")
-        if Path(args.out).exists() and not args.force and Path(args.out).suffix.lower() == ".h5":
-            raise InputError(f"--out {args.out}: exists; add --force to replace it, choose another --out, or "
-                             f"--resume {args.out} to finish it; nothing was written")
-        out = check_output_file(args.out, force=args.force, suffixes=(".h5",))
-        plan = build_plan(args, cfg.limits)  # sized (and refused when huge) before anything connects
-        from procedures.acquisition.plan_size import plan_size
 
-        print(f"plan: {plan_size(plan_spec(args)).describe()}")
-        if args.force and out.exists():
-            out.unlink()  # --force: the new session replaces it (after the plan was accepted)
-    from station.services.laser_wiring import check_plan_for_laser
-
-    check_plan_for_laser(plan, cfg)  # before anything connects or is written
-    for note in plan.notes:
-        print(f"note: {note}")
-    resume_hint = resume_command(out, cfg, args.config)
-    from procedures.engine.control import RunControl
-    from procedures.vocabulary import Outcome
+def run_prepared(job, cfg, config: str | None, confirm) -> int:
+    """Run the prepared sweep `job` on the rig the config names, with a progress bar and Ctrl-C
+    as an abort; print how it ended (the session line, what next). The exit code."""
     from station import interrupt
     from station.interrupt import abort_on_sigint
     from station.progress import ConsoleProgress
-    from station.services.jobs import run_sweep
-    from station.services.wiring import open_rig
+    from station.services.job import JobRunner
 
-    # the simulated drives keep their tables where push/verify/rollback --sim and the UI find them
-    # (its folder made only now, when everything was accepted): a leg pushed a table is swept
-    # compensated here as in the UI, asked first (services.jobs.check_compensation)
-    cfg.with_sim_memory()
-    with open_rig(cfg, legs=plan.legs, time_scale=args.time_scale) as rig:
+    out = job.out
+    resume_hint = resume_command(out, cfg, config)
+    runner = JobRunner()
+    ticket = runner.claim()
+    with job.connect() as rig:
         print(f"rig: {rig.description}")
-        with abort_on_sigint(RunControl()) as control:
+        with abort_on_sigint(ticket.control) as control:
             try:
-                result = run_sweep(rig, plan, out, cfg, sinks=[ConsoleProgress()], control=control,
-                                   resume=bool(args.resume), serials=serials, serials_file=args.serials,
-                                   confirm_compensated=_confirm(args.yes))
+                ended = runner.run(job, [ConsoleProgress()], confirm=confirm, ticket=ticket)
             except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
-                print(f"session: {out} ({Outcome.ABORTED}, interrupted (Ctrl-C twice))")
+                print(f"session: {out} (aborted, interrupted (Ctrl-C twice))")
                 if out.exists():  # a hint never names a file that was not written
                     print(resume_hint)
                 return 130
-    print(f"session: {out} ({result.outcome}, {result.points} of {plan.total_points} points)")
-    if result.outcome == Outcome.COMPLETED:
+    print(f"session: {out} ({ended.status}, {ended.points} of {job.total_points} points)")
+    if ended.status == "completed":
         print(f"next: station iso230 {out}   |   station fit {out} --out model.json")
         return 0
     if out.exists():
         print(resume_hint)
     return 130 if control.reason == interrupt.REASON else 1  # Ctrl-C: as every command ends on it
-

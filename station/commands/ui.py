@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from station.commands.sweep import check_time_scale
+    from station.services.sweep_job import check_time_scale
     from station.services.config import load_config
 
     cfg = load_config(args.config)

@@ -1,16 +1,20 @@
 """The one shape of every job the station runs (issue 32 part 1), for every front end alike:
 
     request (plain data the front end fills)  ->  prepare(request, cfg)  ->  Prepared | InputError
-    Prepared.run(sinks, control)  ->  JobOutcome
+    JobRunner.run(prepared, sinks, confirm)  ->  JobOutcome
 
 - `prepare` makes every refusal, output check and size estimate before anything moves or is
   written: it raises `InputError` (one line naming what was wrong and what to do) or returns a
   `Prepared` that says what it will do (`lines`) and what it still asks (`question`: a yes/no the
-  front end puts to the user, e.g. a sweep of a compensated leg; None = nothing to ask).
-- `JobRunner` runs a prepared job: it owns the rig lock (one rig job at a time in this process,
-  and the drive lock across processes), the abort (`RunControl`), and the follow-ups every job
-  has (a line when its records wait in the catalog's outbox). The CLI, the TUI and the web only
-  fill requests and present the events and the outcome.
+  front end puts to the user; None = nothing to ask).
+- A rig job's checks that need the devices (which legs have a drive, which tables are active) are
+  its `check()`, which the runner calls holding the rig lock, before the question and before
+  anything moves: it refuses (InputError) or sets `question` (e.g. a sweep of a compensated leg,
+  `declined` the refusal when the answer is no).
+- `JobRunner` runs prepared jobs: it owns the rig lock (one rig job at a time; the lock the front
+  end's rig actions share), the run numbering (`claim`), the abort (the job's `RunControl`) and
+  the follow-ups every job has. The CLI, the TUI and the web only fill requests and present the
+  events and the outcome.
 
 Nothing here imports the procedures' heavy modules: a request and its refusal load nothing
 beyond the standard library (`station X --help` and an argument error start at once).
@@ -25,26 +29,61 @@ from typing import Any, Callable, Iterable, Protocol
 
 from procedures.vocabulary import InputError
 
+FAILED = "failed"
+
 
 @dataclass
 class JobOutcome:
-    """What a job ended with. `status`: "completed", "aborted", "failed" (the values of
-    procedures.vocabulary.Outcome) or "done" for a job that is not a run of the rig (a fit, a
-    table, a report). `outputs`: the files it wrote. `lines`: what to tell the user, in order.
-    `data`: the job's own result (a RunResult, a fitted model, ...) for the front end to present."""
+    """What a job ended with, whatever the job.
+
+    `status`: a sweep's "completed" / "aborted" / "failed" (procedures.vocabulary.Outcome), a
+    table operation's "ok" / "refused" / "cancelled" / "failed" / "completed"
+    (procedures.vocabulary.Outcome), or "done" for a job that is not a run of the rig (a
+    fit, a table, a report). `outputs`: the files it wrote. `lines`: what to tell the user, in
+    order. `data`: the job's own result for the front end to present (a fitted model, ...).
+
+    A job run through the procedures' runner also carries the runner's `run` (its RunResult:
+    outcome and points), every `events` it yielded, the `finished` event of a table operation
+    (procedures.compensation.push.OperationFinished; None when the run broke off), the audit
+    entries that could not be stored (`audit_problems`), whether a push was refused for values
+    that look like a unit slip (`implausible`: the user may accept them) and the lines of the
+    implausible values the user accepted (`warnings`)."""
 
     status: str
     outputs: list[Path] = field(default_factory=list)
     lines: list[str] = field(default_factory=list)
     data: Any = None
+    run: Any = None  # procedures.engine.runner.RunResult
+    events: list = field(default_factory=list)
+    finished: Any = None  # procedures.compensation.push.OperationFinished
+    audit_problems: list[str] = field(default_factory=list)
+    implausible: bool = False
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def outcome(self) -> str:
+        return self.status
 
     @property
     def ok(self) -> bool:
-        return self.status in ("completed", "done")
+        return self.status in ("completed", "done", "ok")
+
+    @property
+    def points(self) -> int:
+        """The points the run measured (0 for a job that measured none)."""
+        return int(getattr(self.run, "points", 0) or 0)
+
+    def of(self, kind: type) -> list:
+        """The events of `kind` the job yielded, in order."""
+        return [e for e in self.events if isinstance(e, kind)]
 
 
 class Prepared(Protocol):
-    """A job that passed every check: `run` does it."""
+    """A job that passed every check it can make without the devices: `run` does it.
+
+    Optional: `check()`, the checks that read the devices (called by the runner under the rig
+    lock, before anything moves; it raises InputError or sets `question`), and `declined`, the
+    refusal when the question is answered no."""
 
     needs_rig: bool  # True: the job moves or writes to the drives (JobRunner takes the rig lock)
     question: str | None  # a yes/no to confirm before run (None: nothing to ask)
@@ -54,52 +93,125 @@ class Prepared(Protocol):
 
 
 class RigBusy(InputError):
-    """Another job holds the rig in this process (nothing was done)."""
+    """Another job holds the rig (nothing was done)."""
+
+
+class NotConfirmed(InputError):
+    """The job's question was answered no, or nobody could answer it (nothing moved)."""
+
+
+Confirm = Callable[[str], bool]
+"""`confirm(question) -> bool`: how a front end asks a job's question (a terminal prompt, a dialog)."""
+
+
+@dataclass
+class Ticket:
+    """A job claimed on the runner: its run number (the front end's events carry it) and its
+    `control` (pause, resume, abort). Claimed on the front end's thread, run on a worker."""
+
+    run: int
+    control: Any  # procedures.engine.control.RunControl
+    rig: bool = True  # the job holds the rig: no other rig job is claimed while it lives
 
 
 class JobRunner:
-    """Runs prepared jobs one rig job at a time (jobs that do not touch the rig run beside them).
+    """Runs prepared jobs, one rig job at a time (jobs that do not touch the rig run beside them).
 
-    `on_outcome(outcome)`: the follow-ups every front end gets the same way (each is called
-    after the job, whatever its status)."""
+    `lock`: the rig lock the front end's rig actions and status polls share (None: one of the
+    runner's own); a rig job waits for it `wait_s` (a rig action finishing), else RigBusy.
+    `follow_ups`: called with every outcome, whatever its status (the same for every front end)."""
 
-    def __init__(self, follow_ups: Iterable[Callable[[JobOutcome], None]] = ()) -> None:
-        self._rig = threading.Lock()
+    BUSY = "the rig is busy with another job; wait for it to finish, or abort it; nothing was done"
+
+    def __init__(self, follow_ups: Iterable[Callable[[JobOutcome], None]] = (), lock: Any = None,
+                 wait_s: float = 0.0) -> None:
+        self._rig = lock if lock is not None else threading.Lock()
+        self._wait_s = wait_s
         self._follow_ups = list(follow_ups)
-        self.control: Any = None  # the running rig job's RunControl (abort() reaches it)
+        self._claims = threading.Lock()
+        self._claimed: Ticket | None = None  # the rig job claimed and not yet ended
+        self.runs = 0  # the jobs numbered so far
 
     @property
     def busy(self) -> bool:
-        return self._rig.locked()
+        return self._claimed is not None
 
-    def run(self, job: Prepared, sinks: Iterable[Any] = (), control: Any = None,
-            confirmed: bool = False) -> JobOutcome:
-        """Run `job`. A job with a `question` runs only `confirmed` (the front end asked); refused
-        otherwise with the question's text. RigBusy when another rig job is running."""
-        if job.question and not confirmed:
-            raise InputError(job.question)
+    @property
+    def control(self) -> Any:
+        """The claimed rig job's RunControl (None: none)."""
+        ticket = self._claimed
+        return ticket.control if ticket is not None else None
+
+    def claim(self, rig: bool = True) -> Ticket:
+        """Number a new job and make its run control; with `rig`, RigBusy while another rig job
+        is claimed (before any worker starts: the front end says so at once)."""
+        from procedures.engine.control import RunControl
+
+        with self._claims:
+            if rig and self._claimed is not None:
+                raise RigBusy(self.BUSY)
+            self.runs += 1
+            ticket = Ticket(self.runs, RunControl(), rig)
+            if rig:
+                self._claimed = ticket
+            return ticket
+
+    def release(self, ticket: Ticket) -> None:
+        """End `ticket`'s claim (run() does it; a front end whose job never ran does it itself)."""
+        with self._claims:
+            if self._claimed is ticket:
+                self._claimed = None
+
+    def run(self, job: Prepared, sinks: Iterable[Any] = (), control: Any = None, confirmed: bool = False,
+            confirm: Confirm | None = None, ticket: Ticket | None = None) -> JobOutcome:
+        """Run `job` (its claim `ticket`, or a new one). A rig job takes the rig lock, then makes
+        its device checks (`check()`); a job with a `question` runs only when `confirmed` or
+        `confirm(question)` says yes, else NotConfirmed with its `declined` text (nothing moved).
+        RigBusy when another rig job holds the rig."""
         if not job.needs_rig:
-            return self._follow(job.run(sinks, control))
-        if not self._rig.acquire(blocking=False):
-            raise RigBusy("the rig is busy with another job; wait for it to finish, or abort it")
+            try:
+                self._ask(job, confirmed, confirm, None)
+                return self._follow(job.run(sinks, control))
+            finally:
+                if ticket is not None:
+                    self.release(ticket)
+        if ticket is None:
+            ticket = self.claim()
+            if control is not None:
+                ticket.control = control
         try:
-            if control is None:
-                from procedures.engine.control import RunControl
-
-                control = RunControl()
-            self.control = control
-            return self._follow(job.run(sinks, control))
+            taken = self._rig.acquire(timeout=self._wait_s) if self._wait_s > 0 else self._rig.acquire(blocking=False)
+            if not taken:  # a rig action still running after `wait_s`
+                raise RigBusy(self.BUSY)
+            try:
+                check = getattr(job, "check", None)
+                if check is not None:
+                    check()
+                self._ask(job, confirmed, confirm, ticket.control)
+                return self._follow(job.run(sinks, ticket.control))
+            finally:
+                self._rig.release()
         finally:
-            self.control = None
-            self._rig.release()
+            self.release(ticket)
 
-    def abort(self) -> bool:
+    def abort(self, reason: str = "aborted by the operator") -> bool:
         """Abort the running rig job (its drives quick-stop from this thread). False: none runs."""
         control = self.control
         if control is None:
             return False
-        control.abort()
+        control.abort(reason)
         return True
+
+    @staticmethod
+    def _ask(job: Prepared, confirmed: bool, confirm: Confirm | None, control: Any) -> None:
+        question = getattr(job, "question", None)
+        if not question or confirmed:
+            return
+        yes = confirm is not None and confirm(question)
+        if control is not None and control.aborted:
+            yes = False  # aborted while the question was open (e.g. the UI quit)
+        if not yes:
+            raise NotConfirmed(getattr(job, "declined", "") or f"not confirmed: {question}")
 
     def _follow(self, outcome: JobOutcome) -> JobOutcome:
         for follow in self._follow_ups:

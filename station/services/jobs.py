@@ -58,11 +58,17 @@ def compensated_question(tables: Mapping[int, str]) -> str:
             "anyway? The session records the active tables and is stage 'other', not an as-found calibration.")
 
 
-def compensated_refusal(tables: Mapping[int, str]) -> str:
+def compensated_refusal(tables: Mapping[int, str], how: Mapping[str, str] | None = None) -> str:
+    """The refusal of a sweep of legs with an active table, not confirmed. `how`: how this front
+    end does each way out ("rollback", "confirm"), added in parentheses (e.g. the command line's
+    commands, the UI's keys); none: the sentence alone."""
+    how = how or {}
     legs = ", ".join(str(leg) for leg in sorted(tables))
+    rollback = f" ({how['rollback']})" if how.get("rollback") else ""
+    confirm = f" ({how['confirm']})" if how.get("confirm") else ""
     return (f"leg(s) {legs}: a compensation table is active ({'; '.join(tables[k] for k in sorted(tables))}); "
-            "a calibration measures the leg as found: roll the table back first (station rollback --leg N), or "
-            "confirm the sweep of the compensated leg (station sweep --yes), recorded as stage 'other'; nothing moved")
+            f"a calibration measures the leg as found: roll the table back first{rollback}, or confirm the sweep of "
+            f"the compensated leg{confirm}, recorded as stage 'other'; nothing moved")
 
 
 def check_compensation(rig: Rig, plan: SweepPlan, out: Path, resume: bool,
@@ -77,21 +83,27 @@ def check_compensation(rig: Rig, plan: SweepPlan, out: Path, resume: bool,
         return
     now = active_tables_now(rig, plan.legs)
     if resume:
-        from procedures.io.recording.stage import active_tables
-
-        recorded = active_tables(read_session(out).devices)
-        changed = sorted(leg for leg in plan.legs if (leg in now) != (leg in recorded))
-        if changed:
-            states = "; ".join(f"leg {leg}: {'table active now' if leg in now else 'no table active now'}, "
-                               f"{'one' if leg in recorded else 'none'} when the session started" for leg in changed)
-            raise CompensatedSweepRefused(f"{out}: cannot be resumed: {states}; its points would mix two states "
-                                          "of the leg: restore the table state it was started with, or sweep a new "
-                                          "session; nothing moved")
+        resume_table_refusal(out, plan.legs, now)
         return
     if not now:
         return
     if confirm is None or not confirm(compensated_question(now)):
         raise CompensatedSweepRefused(compensated_refusal(now))
+
+
+def resume_table_refusal(out: Path, legs: Iterable[int], now: Mapping[int, str]) -> None:
+    """CompensatedSweepRefused when the session `out` was started with another table state on a
+    leg of `legs` than `now` (leg -> its active table): its points would mix two states of the leg."""
+    from procedures.io.recording.stage import active_tables
+
+    recorded = active_tables(read_session(out).devices)
+    changed = sorted(leg for leg in legs if (leg in now) != (leg in recorded))
+    if changed:
+        states = "; ".join(f"leg {leg}: {'table active now' if leg in now else 'no table active now'}, "
+                           f"{'one' if leg in recorded else 'none'} when the session started" for leg in changed)
+        raise CompensatedSweepRefused(f"{out}: cannot be resumed: {states}; its points would mix two states "
+                                      "of the leg: restore the table state it was started with, or sweep a new "
+                                      "session; nothing moved")
 
 
 def run_sweep(
@@ -107,6 +119,7 @@ def run_sweep(
     serials_file: str | None = None,
     index: bool = True,
     confirm_compensated: Callable[[str], bool] | None = None,
+    tables_checked: bool = False,
 ) -> RunResult:
     """Run `plan` on `rig`, recording to `out` (or appending to it when `resume`), and index the
     session in the station's catalog (`index` False: not, e.g. the sample sessions, which are
@@ -118,10 +131,12 @@ def run_sweep(
     start of every session, a resumed one too.
 
     `confirm_compensated(question) -> bool`: asked before a leg whose compensation table is
-    active is swept (check_compensation; None: such a sweep is refused, CompensatedSweepRefused)."""
+    active is swept (check_compensation; None: such a sweep is refused, CompensatedSweepRefused);
+    `tables_checked`: the job has made that check already (PreparedSweep.check, under the rig lock)."""
     control = control or RunControl()
     out = Path(out)
-    check_compensation(rig, plan, out, resume, confirm_compensated)  # before anything is written or moves
+    if not tables_checked:
+        check_compensation(rig, plan, out, resume, confirm_compensated)  # before anything is written or moves
     done: frozenset[int] = frozenset()
     session_id = uuid.uuid4().hex[:12]
     if resume:

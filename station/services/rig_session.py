@@ -19,11 +19,9 @@ import logging
 import math
 import threading
 from dataclasses import dataclass
-from pathlib import Path
 
 from station.services.config import StationConfig
 from station.services.devices import DriveFault
-from station.services.sessions import new_session_problem
 
 log = logging.getLogger("station.services.rig_session")
 
@@ -59,11 +57,32 @@ class MoveRequest:
         return f"{where} at {speed}"
 
 
+REMEDIES = {"reset": "reset the fault", "enable": "enable it", "stop": "stop it"}
+"""The rig actions a refusal may name as the way out; a front end names each its own way (the
+terminal UI adds its key: station/tui/app.py), `say(how)`."""
+
+
 class ActionRefused(Exception):
-    """A rig action was refused before anything moved; the message says why and what to do."""
+    """A rig action was refused before anything moved; the message says why and what to do.
+
+    `template`: the message with the actions it names as the way out as {reset}, {enable},
+    {stop} (REMEDIES): `say(how)` names them as a front end does them (how: action -> e.g. its
+    key), str() in plain words."""
+
+    def __init__(self, template: str) -> None:
+        self.template = template
+        super().__init__(self.say())
+
+    def say(self, how: dict[str, str] | None = None) -> str:
+        how = how or {}
+        try:
+            return self.template.format(**{action: text + (f" ({how[action]})" if action in how else "")
+                                           for action, text in REMEDIES.items()})
+        except (KeyError, IndexError, ValueError):  # a brace in an interpolated text: said as it is
+            return self.template
 
 
-class MoveStopped(Exception):
+class MoveStopped(ActionRefused):
     """A move was quick-stopped on its way (the message says where)."""
 
 
@@ -105,7 +124,7 @@ def rig_action(rig, lock: threading.Lock, action: str, legs: tuple[int, ...]) ->
             axis = rig.axes[leg]
             if action == "enable":
                 if axis.status().fault:
-                    raise ActionRefused(f"leg {leg} is in fault: reset the fault (r) first")
+                    raise ActionRefused(f"leg {leg} is in fault: {{reset}} first")
                 axis.enable()
             elif action == "disable":
                 axis.disable()
@@ -133,10 +152,10 @@ def move_axis(axis, leg: int, move: MoveRequest) -> tuple[float, float]:
     lim = axis.limits()
     st = axis.status()
     if st.fault:
-        raise ActionRefused(f"leg {leg} is in fault: reset the fault (r), then enable it (e), first; nothing moved")
+        raise ActionRefused(f"leg {leg} is in fault: {{reset}}, then {{enable}}, first; nothing moved")
     if not st.enabled:
         state = _NOT_ENABLED_TEXT.get(str(st.state), str(st.state))
-        raise ActionRefused(f"leg {leg} is {state}, not enabled: enable it (e) first; nothing moved")
+        raise ActionRefused(f"leg {leg} is {state}, not enabled: {{enable}} first; nothing moved")
     if move.step_mm is not None:
         target = st.position_mm + move.step_mm
         how = f" (a jog of {move.step_mm:+g} mm from {st.position_mm:+.3f} mm)"
@@ -159,7 +178,7 @@ def move_axis(axis, leg: int, move: MoveRequest) -> tuple[float, float]:
             now = None
         if now is not None and str(now.state) == "quick_stop_active":
             raise MoveStopped(f"leg {leg} was quick-stopped at {now.position_mm:+.3f} mm on its way to "
-                              f"{target:+.3f} mm; enable it (e) to move again") from None
+                              f"{target:+.3f} mm; {{enable}} to move again") from None
         raise
     return reached.position_mm, speed
 
@@ -230,27 +249,22 @@ class RigSession:
         return self.rig.description
 
     # -- refusals, before a worker starts ----------------------------------------------------------
-    def move_refusal(self) -> str:
-        """'' when no move runs; else the sentence a second move is refused with."""
+    def move_refusal(self) -> ActionRefused | None:
+        """None when no move runs; else what a second move is refused with."""
         if not self.motion:
-            return ""
+            return None
         leg, running = next(iter(self.motion.items()))
-        return f"Leg {leg} is still moving ({running.describe()}): wait for it, or stop it (x)."
+        return ActionRefused(f"Leg {leg} is still moving ({running.describe()}): wait for it, or {{stop}}.")
 
-    def job_refusal(self, legs: tuple[int, ...], out: Path, resume: bool = False) -> tuple[str, str]:
-        """("", "") when a job on `legs` recording to `out` may start; else (what stands in the
-        way: "rig", "motion" or "out", the sentence): no rig, a leg without a drive, a move under
-        way, `out` taken."""
+    def job_refusal(self) -> tuple[str, str]:
+        """("", "") when a job may take the rig now; else (what stands in the way: "rig" or
+        "motion", what is wrong): no rig connected, a move under way. (What a job itself refuses,
+        a leg without a drive, its file, is the job's prepare: station/services/sweep_job.py.)"""
         if self.rig is None:
-            return "rig", "Not connected to the rig: go to the Rig screen (F1) and press c to connect."
-        missing = [leg for leg in legs if leg not in self.rig.axes]
-        if missing:
-            return "rig", f"No drive connected for leg(s) {missing}; connected: {sorted(self.rig.axes)}."
+            return "rig", "Not connected to the rig"
         if self.motion:
             leg = next(iter(self.motion))
-            return "motion", f"Leg {leg} is still moving (Rig page): wait for it, or stop it (x), first."
-        if not resume and new_session_problem(out) == "exists":
-            return "out", f"{out} exists already; choose another file name."
+            return "motion", f"Leg {leg} is still moving"
         return "", ""
 
     def begin_move(self, leg: int, move: MoveRequest) -> None:

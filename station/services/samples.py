@@ -10,7 +10,7 @@ Deterministic: fixed seeds on the virtual clock (`station recordings` regenerate
   axial load changing between cycles and the room temperature swinging; one transient beam
   break (leg 3) and one drive fault (leg 5) on the way, both retried.
 - verification-6legs.h5: after fitting the default model to the calibration, making a
-  compensation table per leg and pushing it into the simulated drives (procedures.compensation.push.push_table:
+  compensation table per leg and pushing it into the simulated drives (station.services.table_jobs.push_table:
   inactive bank, read back, switch, over the Modbus client), an ISO 230-2 test of all six legs on
   the same rig.
 - fault-beam-break.h5: an ISO 230-2 test of legs 1-2, cut short by a beam break on leg 2 that
@@ -83,7 +83,7 @@ def make_verification(rig, calibration: Path, out: Path, cfg: StationConfig) -> 
     """Fit, tabulate and load the tables into the drives, then an ISO 230-2 test. Returns lines
     describing what was loaded."""
     from procedures.fit import fit
-    from procedures.compensation.push import push_table
+    from station.services.table_jobs import push_table
     from procedures.io.recording.reader import read_session
     from procedures.compensation.table import make_table
     from station.services.jobs import run_sweep

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import uuid
-from dataclasses import dataclass, field
+
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
@@ -25,13 +25,17 @@ import numpy as np
 from drivers.errors import DriverError
 from drivers.interfaces import ServoAxis, TableSpec
 from procedures.engine import events as ev
-from procedures.compensation.audit import AuditLog, AuditSink
+from procedures.compensation.audit import AuditLog, AuditSink, AuditStopped
 from procedures.engine.control import RunControl
 from procedures.vocabulary import InputError
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import (
     Confirm,
-    OperationFinished,
+    PushFailed,
+    PushPlan,
+    PushRefused,
+    PushResult,
+    apply_plan,
     finished,
     push_legs_procedure,
     push_procedure,
@@ -50,9 +54,9 @@ from procedures.io.plausibility import (
 )
 from procedures.io.recording.reader import file_sha256, read_session
 from procedures.io.recording.sink import RecorderSink
-from procedures.engine.runner import ListSink, RunResult, Sink, run
+from procedures.engine.runner import ListSink, Sink, run
 from procedures.compensation.audit import Action
-from procedures.vocabulary import Outcome as AuditOutcome
+from procedures.vocabulary import Outcome
 from procedures.compensation.table import (
     CompTable,
     LegTable,
@@ -69,32 +73,8 @@ from station.catalog.store import LOCAL_NAME, Catalog
 from station.catalog.writer import CatalogSink, catalog_for, enabled, register
 from station.services.config import LEG_COUNT, StationConfig
 from station.services.identity import session_identity
+from station.services.job import JobOutcome  # the one outcome of every job
 from station.services.wiring import Rig
-
-
-@dataclass
-class JobOutcome:
-    """How a table job ended: its `OperationFinished` (None when the run broke off with an
-    exception, which the runner re-raised), every event, and audit entries that could not be
-    stored (the refusal or failure they describe is still reported)."""
-
-    finished: OperationFinished | None
-    events: list[ev.Event] = field(default_factory=list)
-    audit_problems: list[str] = field(default_factory=list)
-    run: RunResult | None = None
-    implausible: bool = False  # refused for values that look like a unit slip: the user may accept them
-    warnings: list[str] = field(default_factory=list)  # implausible values the user accepted, one line each
-
-    @property
-    def outcome(self) -> str:
-        return self.finished.outcome if self.finished is not None else AuditOutcome.FAILED
-
-    @property
-    def ok(self) -> bool:
-        return self.outcome in (AuditOutcome.OK, AuditOutcome.COMPLETED)
-
-    def of(self, kind: type) -> list:
-        return [e for e in self.events if isinstance(e, kind)]
 
 
 def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterable[Sink] = (),
@@ -109,7 +89,53 @@ def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterabl
         catalog = Catalog(local=audit.path.parent / LOCAL_NAME)
     catalog_sink = CatalogSink(catalog, session_path, audit_sink)
     result = run(procedure, [audit_sink, events, *sinks, catalog_sink], control)
-    return JobOutcome(finished(events.events), events.events, audit_sink.problems, result)
+    end = finished(events.events)
+    return JobOutcome(end.outcome if end is not None else Outcome.FAILED, run=result, events=events.events,
+                      finished=end, audit_problems=audit_sink.problems)
+
+
+def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) -> PushResult:
+    """Run a push/rollback procedure through the runner (with an AuditSink on `audit`) and
+    return its PushResult; PushRefused (refused, cancelled) or PushFailed (failed; the message
+    says which table is active) otherwise. For scripts, the sample sessions and tests: the front
+    ends run the jobs below (push_job, rollback_job), which report instead of raising."""
+    events = ListSink()
+    sinks = [events] + ([AuditSink(audit)] if audit is not None else [])
+    try:
+        run(procedure, sinks)
+    except AuditStopped as exc:  # "started" not stored: nothing written; "ok" not stored: written and active
+        raise (PushRefused if exc.entry.outcome == Outcome.STARTED else PushFailed)(str(exc.args[0])) from None
+    end = finished(events.events)
+    if end is None:
+        raise PushFailed("the operation ended without an outcome")
+    if end.outcome == Outcome.OK:
+        return end.result
+    if end.outcome == Outcome.FAILED:
+        raise PushFailed(end.message)
+    refusal = PushRefused(end.message)
+    refusal.hint = ""  # the message already says that nothing was written
+    raise refusal
+
+
+def push_table(axis: ServoAxis, table: Any = None, *, plan: PushPlan | None = None,
+               audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
+               source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushResult:
+    """Push `table` (a TableBank or LegTable; or an already confirmed `plan` from
+    procedures.compensation.push.prepare_push) to `axis`: push_procedure run to its end through
+    the runner, every entry appended to `audit` (when given)."""
+    if plan is not None:
+        return run_operation(apply_plan(axis, plan), audit)
+    if table is None:
+        raise ValueError("push_table needs a table or a plan")
+    return run_operation(push_procedure(axis, table, drive_url=drive_url, source=source, spec=spec,
+                                        leg_serial=leg_serial), audit)
+
+
+def rollback(axis: ServoAxis, audit: AuditLog, *, plan: PushPlan | None = None, drive_url: str = "") -> PushResult:
+    """`rollback_procedure` run to its end through the runner (or an already confirmed `plan`), logged in `audit`."""
+    if plan is not None:
+        return run_operation(apply_plan(axis, plan), audit)
+    return run_operation(rollback_procedure(axis, audit, drive_url=drive_url), audit)
 
 
 # -- compensation targets ----------------------------------------------------------------------------

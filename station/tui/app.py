@@ -18,7 +18,6 @@ events (`SweepState.apply`).
 
 from __future__ import annotations
 
-import logging
 import threading
 import time
 from pathlib import Path
@@ -28,24 +27,22 @@ from textual import work
 from textual.app import App
 from textual.binding import Binding
 from textual.message import Message
+from textual.notifications import Notification, Notify
 
-from procedures.engine.control import RunControl
-from procedures.acquisition.plan_spec import PlanSpec
-from procedures.acquisition.plans import SweepPlan
-from procedures.vocabulary import Outcome as AuditOutcome
+from procedures.vocabulary import InputError
 from station.services.config import StationConfig
+from station.services.job import JobRunner, RigBusy, Ticket
 from station.services.rig_session import (
     JOB_LOCK_WAIT_S,
     ActionRefused,
     MoveRequest,
     MoveStopped,
-    RigBusy,
     RigSession,
     checked_move,
     close_quietly,
-    holding_rig,
     rig_action,
 )
+from station.services.sweep_job import OutputExists, SweepRequest, prepare_sweep
 from station.services.sessions import replay_output_path
 from station.tui.bridge import SweepEnded, SweepEvent, TuiBridge
 from station.tui.errors import describe
@@ -68,11 +65,13 @@ from station.tui.screens.replay import ReplayScreen
 from station.tui.screens.results import ResultsScreen
 from station.tui.screens.rig import RigScreen
 from station.tui.screens.sweep import SweepScreen
-from station.tui.state import LegTrace, SweepState
-
-log = logging.getLogger("station.tui")
+from station.tui.state import LegTrace, SweepState, event_notice
 
 ALL_LEGS = (1, 2, 3, 4, 5, 6)
+# The keys of the rig actions a refusal names as the way out (station.services.rig_session.REMEDIES).
+RIG_KEYS = {"reset": "r", "enable": "e", "stop": "x"}
+# The ways out of a refused sweep of a compensated leg, on this UI (station.services.jobs.compensated_refusal).
+UI_WAYS_OUT = {"rollback": "b on the Compensation page, F4", "confirm": "answer yes when asked"}
 # How long quitting waits for an aborted sweep to stop the drives and close its recording.
 QUIT_WAIT_S = 15.0
 
@@ -159,12 +158,14 @@ class StationApp(App):
         # lock, the move under way (station.services.rig_session).
         self.session = self.SESSION(self.cfg, self.legs, time_scale)
         self.sweep = SweepState()
-        self.sweep_control: RunControl | None = None
+        self.sweep_control = None  # the RunControl of the job on show (its ticket's)
+        # the one runner of the rig jobs: the rig lock (the session's, which rig actions share),
+        # run numbering, abort (station/services/job.py)
+        self.jobs = JobRunner(lock=self.session.lock, wait_s=JOB_LOCK_WAIT_S)
         self._sweep_idle = threading.Event()  # set by the job's worker when it has returned
         self._sweep_idle.set()
         self._quit_after_sweep = False
         self.replay_rig = None  # the replay devices of the running (or last) replay
-        self._sweep_run = 0  # numbers the jobs started: their messages carry it
         # run number -> (its SweepState, its on_done), until its SweepEnded has been handled
         self._runs: dict[int, tuple[SweepState, Callable[[SweepState], None] | None]] = {}
         self._sweep_redraw_due = None  # the Timer of the coalesced SweepChanged still to post
@@ -172,6 +173,7 @@ class StationApp(App):
         self.last_session: Path | None = None  # the newest recording made or opened here
         self.analysis = None  # results.Analysis: the session, model and ISO figures on show (Compensation, Platform use it)
         self.session_listeners: list[Callable[[Path], None]] = []
+        self._stop_notices: dict[int, list[Notification]] = {}  # leg -> its quick stop's notifications on show
 
     # -- the rig session's state, as the screens read it ----------------------------------------
     @property
@@ -318,8 +320,8 @@ class StationApp(App):
             if move is None or len(legs) != 1:
                 raise ValueError("a move is one leg's, with its MoveRequest")
             refusal = self.session.move_refusal()
-            if refusal:
-                self.notify(refusal, title=f"move leg {legs[0]}", severity="warning")
+            if refusal is not None:
+                self.notify(refusal.say(RIG_KEYS), title=f"move leg {legs[0]}", severity="warning")
                 return False
             self.session.begin_move(legs[0], move)
             self._rig_changed()
@@ -335,7 +337,7 @@ class StationApp(App):
         try:
             rig_action(rig, lock, action, legs)
         except ActionRefused as exc:
-            self.post_message(RigActionDone(action, legs, str(exc)))
+            self.post_message(RigActionDone(action, legs, exc.say(RIG_KEYS)))
             return
         except Exception as exc:
             self.post_message(RigActionDone(action, legs, describe(exc, f"{action} failed")))
@@ -349,9 +351,9 @@ class StationApp(App):
             position, speed = checked_move(rig, lock, leg, move)
             done = RigMoveDone(leg, position_mm=position, speed_mm_s=speed)
         except MoveStopped as exc:
-            done = RigMoveDone(leg, str(exc), stopped=True)
+            done = RigMoveDone(leg, exc.say(RIG_KEYS), stopped=True)
         except ActionRefused as exc:
-            done = RigMoveDone(leg, str(exc))
+            done = RigMoveDone(leg, exc.say(RIG_KEYS))
         except Exception as exc:
             done = RigMoveDone(leg, describe(exc, f"move of leg {leg} failed"))
         finally:
@@ -363,132 +365,119 @@ class StationApp(App):
             self.notify(message.error, title=f"{message.action} leg {legs}", severity="error", timeout=12)
         else:
             if message.action == "enable":  # the quick stop is over: its toasts ("enable it (e)") go
-                self._drop_notifications(lambda n: "quick-stopped" in n.message
-                                         and any(f"leg {leg} " in n.message for leg in message.legs))
+                for leg in message.legs:
+                    for notification in self._stop_notices.pop(leg, []):
+                        if notification in self._notifications:
+                            self._unnotify(notification)
             self.notify(f"{message.action}: leg {legs} done.", timeout=3)
-
-    def _drop_notifications(self, which: Callable) -> None:
-        for notification in [n for n in self._notifications if which(n)]:
-            self._unnotify(notification)
 
     def on_rig_move_done(self, message: RigMoveDone) -> None:
         if message.error:
             self.session.end_move(message.leg, message.error)
-            self.notify(message.error, title=f"move leg {message.leg}",
-                        severity="warning" if message.stopped else "error", timeout=12)
+            if message.stopped:  # kept, to be taken down when the leg is enabled again
+                notification = Notification(message.error, f"move leg {message.leg}", "warning", 12)
+                self._stop_notices.setdefault(message.leg, []).append(notification)
+                self.post_message(Notify(notification))
+            else:
+                self.notify(message.error, title=f"move leg {message.leg}", severity="error", timeout=12)
         else:
             self.session.end_move(message.leg, f"leg {message.leg} at {message.position_mm:+.4f} mm "
                                                f"(moved at {message.speed_mm_s:g} mm/s)")
             self.notify(f"move: {self.rig_motion_text}.", timeout=3)
         self._rig_changed()
 
-    # -- sweep -----------------------------------------------------------------------------------
-    def start_sweep(self, plan: SweepPlan | PlanSpec, out: Path, label: str = "sweep",
-                    on_done: Callable[[SweepState], None] | None = None, job: Callable | None = None,
-                    resume: bool = False, serials: dict | None = None) -> bool:
-        """Start `plan`, recording to `out`, through station.services.jobs.run_sweep (the CLI's runner), or
-        through `job(rig, sinks, control)` (a job of station.services.table_jobs, e.g. a verification,
-        returning a JobOutcome). `label` names the job on screen ("sweep", "verification of leg
-        2"); `on_done(state)` is called on the app's thread when it has ended (whatever the
-        outcome), with the job's outcome in `state.result`. `resume`: `out` is an unfinished
-        session and `plan` its plan (see `resume_sweep`): the run appends to it. `plan` may be a
-        PlanSpec: it is then built in the worker, where an abort ends the building at once (a
-        huge plan takes seconds to build; procedures/plan_size.build_abortable). `serials`: the
-        legs' serials entered on the Sweep page (leg -> {"serial": ...}), recorded in the session."""
-        if self.sweep.active:
-            self.notify("A sweep is already running.", severity="warning")
+    # -- jobs on the rig: the sweep, a resumed sweep, a verification ----------------------------------
+    def start_sweep(self, request: SweepRequest, on_done: Callable[[SweepState], None] | None = None) -> bool:
+        """Prepare the sweep `request` asks for (new, or resumed with `request.resume`) on the
+        connected rig (station.services.sweep_job, the job `station sweep` runs) and start it.
+        Refusals are notifications; True if it started. `on_done(state)`: as for start_job."""
+        title = "Resume" if request.resume else "Sweep"
+        if not self._rig_free(title):
             return False
-        what, refusal = self.session.job_refusal(plan.legs, out, resume)
-        if what == "out":
-            self.notify(refusal, severity="error")
+        if request.ways_out is None:  # a refused compensated leg: the ways out on this UI
+            request.ways_out = UI_WAYS_OUT
+        try:
+            job = prepare_sweep(request, self.cfg, rig=self.rig)
+        except OutputExists as exc:
+            self.notify(f"{exc.path} exists already; choose another file name.", title=title, severity="error")
             return False
-        if refusal:
-            self.notify(refusal, severity="warning" if what == "motion" else "error", timeout=10)
+        except Exception as exc:
+            self.notify(describe(exc, "cannot resume" if request.resume else "cannot start the sweep"), title=title,
+                        severity="error", timeout=15)
             return False
-        if isinstance(plan, PlanSpec):  # sized, not built, on the app's thread
-            from procedures.acquisition.plan_size import plan_size
-
-            total = plan_size(plan).points
-        else:
-            total = plan.total_points
-        state = SweepState(out=out, legs=plan.legs, plan_kind=plan.kind, status="starting", total=total, label=label)
-        if resume:
-            _show_recorded_points(state, out)
-        run = self._begin_run(state, on_done)
-        self._sweep_worker(run, self.rig, self.session.lock, plan, out, self.sweep_control, self._sweep_idle, job,
-                           resume, serials)
-        return True
+        return self.start_job(job, on_done=on_done)
 
     def resume_sweep(self, path: Path) -> bool:
         """Finish the aborted (or failed) session `path`: its own plan, appended to the same
-        file, by the job `station sweep --resume` runs (station.services.jobs.resumable_plan, then
-        run_sweep(resume=True)). Refusals (a complete or imported file, a sweep running, no rig)
-        are notifications; True if it started."""
-        from station.services.jobs import resumable_plan
+        file, by the job `station sweep --resume` runs. Refusals (a complete or imported file, a
+        sweep running, no rig) are notifications; True if it started."""
+        return self.start_sweep(SweepRequest(out=Path(path).expanduser(), resume=True))
 
-        path = Path(path).expanduser()
+    def _rig_free(self, title: str) -> bool:
+        """True when a job may take the rig now; else says why (a job running, no rig, a move)."""
         if self.sweep.active:
-            self.notify(self.sweep_refusal(), title="Resume", severity="warning")
+            self.notify(self.sweep_refusal(), title=title, severity="warning")
             return False
-        if self.rig is None:
-            self.notify("Not connected to the rig: go to the Rig screen (F1) and press c to connect.",
-                        title="Resume", severity="error", timeout=10)
+        what, refusal = self.session.job_refusal()
+        if what == "rig":
+            self.notify(f"{refusal}: go to the Rig screen (F1) and press c to connect.", title=title,
+                        severity="error", timeout=10)
+            return False
+        if refusal:
+            self.notify(f"{refusal}: wait for it, or stop it (x on the Rig page, F1), first.", title=title,
+                        severity="warning", timeout=10)
+            return False
+        return True
+
+    def start_job(self, job, label: str = "sweep", on_done: Callable[[SweepState], None] | None = None) -> bool:
+        """Start the prepared rig job `job` (a PreparedSweep, a verification: station/services/job.py)
+        through the app's JobRunner, shown on the Sweep page. `label` names it on screen ("sweep",
+        "verification of leg 2"); `on_done(state)` is called on the app's thread when it has ended
+        (whatever the outcome), with its JobOutcome in `state.result`."""
+        if not self._rig_free(label.capitalize()):
             return False
         try:
-            plan = resumable_plan(path)
-        except Exception as exc:
-            self.notify(describe(exc, "cannot resume"), title="Resume", severity="error", timeout=15)
+            ticket = self.jobs.claim()
+        except RigBusy as exc:
+            self.notify(str(exc), title=label.capitalize(), severity="warning")
             return False
-        return self.start_sweep(plan, path, resume=True)
+        state = SweepState(out=job.out, legs=job.legs, plan_kind=job.kind, status="starting", total=job.total_points,
+                           label=label)
+        if getattr(job, "recorded", None) is not None:
+            _show_recorded_points(state, job.recorded)
+        self._begin_run(ticket, state, on_done)
+        self._job_worker(ticket, job, self._sweep_idle)
+        return True
 
-    def _begin_run(self, state: SweepState, on_done: Callable[[SweepState], None] | None) -> int:
-        """Make `state` the sweep on show with a new run control; the new job's run number."""
-        self._sweep_run += 1
-        self._runs[self._sweep_run] = (state, on_done)
+    def _begin_run(self, ticket: Ticket, state: SweepState, on_done: Callable[[SweepState], None] | None) -> None:
+        """Make `state` the job on show, with `ticket`'s run number and run control."""
+        self._runs[ticket.run] = (state, on_done)
         self.sweep = state
-        self.sweep_control = RunControl()
+        self.sweep_control = ticket.control
         self._sweep_idle.clear()
         self._sweep_changed()
-        return self._sweep_run
 
     @work(thread=True, group="sweep", exit_on_error=False)
-    def _sweep_worker(self, run: int, rig, lock: threading.Lock, plan: SweepPlan, out: Path, control: RunControl,
-                      idle: threading.Event, job: Callable | None = None, resume: bool = False,
-                      serials: dict | None = None) -> None:
-        from station.services.jobs import run_sweep
-
+    def _job_worker(self, ticket: Ticket, job, idle: threading.Event) -> None:
+        """Run `job` through the JobRunner (the rig lock, the device checks, the question in a
+        dialog, the run); always ends with one SweepEnded."""
         outcome, points, error, ended = "error", 0, "", None
         try:
-            with holding_rig(lock, JOB_LOCK_WAIT_S, "the rig stayed busy for 10 s (a rig action is still running); "
-                                                    "try again"):
-                if isinstance(plan, PlanSpec):
-                    from procedures.acquisition.plan_size import build_abortable
-
-                    plan = build_abortable(plan, control)
-                    if plan is None:  # aborted while the plan was being built: nothing moved or written
-                        outcome = "aborted"
-                        return
-                if job is None:
-                    # the decision on a compensated leg is the services' (check_compensation, as for
-                    # `station sweep`); the UI only asks its question, in a dialog
-                    result = run_sweep(rig, plan, out, self.cfg, sinks=[TuiBridge(self, run)], control=control,
-                                       resume=resume, serials=serials,
-                                       confirm_compensated=lambda question: self._ask_from_worker(question, control))
-                else:
-                    ended = job(rig, [TuiBridge(self, run)], control)
-                    result = ended.run
-                    if ended.outcome == AuditOutcome.REFUSED:  # nothing moved: say why, as the CLI does
-                        error = ended.finished.message
-                outcome, points = result.outcome, result.points
-        except RigBusy as exc:
+            ended = self.jobs.run(job, [TuiBridge(self, ticket.run)], ticket=ticket,
+                                  confirm=lambda question: self._ask_from_worker(question, ticket.control))
+            outcome = ended.run.outcome if ended.run is not None else ended.status
+            points = ended.points
+            if ended.status == "refused" and ended.finished is not None:  # nothing moved: say why, as the CLI does
+                error = ended.finished.message
+        except InputError as exc:  # refused before anything moved (the rig busy, a question answered no)
             error = str(exc)
         except Exception as exc:  # the runner has already stopped the drives in its finally
             error = describe(exc, "the sweep stopped")
         finally:
             idle.set()
-            self.post_message(SweepEnded(outcome, points, error, result=ended, run=run))
+            self.post_message(SweepEnded(outcome, points, error, result=ended, run=ticket.run))
 
-    def _ask_from_worker(self, question: str, control: RunControl) -> bool:
+    def _ask_from_worker(self, question: str, control) -> bool:
         """Ask `question` in a dialog from a worker thread and wait for the answer (False when
         the job is aborted meanwhile, e.g. by quitting; "Cancel" is the default)."""
         answered = threading.Event()
@@ -512,12 +501,13 @@ class StationApp(App):
             self.notify("A sweep is already running.", severity="warning")
             return False
         out = replay_output_path(self.cfg, source)
-        run = self._begin_run(SweepState(out=out, label=f"replay of {source.name}", status="starting"), None)
-        self._replay_worker(run, source, speed, out, self.sweep_control, self._sweep_idle)
+        ticket = self.jobs.claim(rig=False)  # the replay devices, not the rig
+        self._begin_run(ticket, SweepState(out=out, label=f"replay of {source.name}", status="starting"), None)
+        self._replay_worker(ticket.run, source, speed, out, self.sweep_control, self._sweep_idle)
         return True
 
     @work(thread=True, group="sweep", exit_on_error=False)
-    def _replay_worker(self, run: int, source: Path, speed: float | None, out: Path, control: RunControl,
+    def _replay_worker(self, run: int, source: Path, speed: float | None, out: Path, control,
                        idle: threading.Event) -> None:
         outcome, points, error, note = "error", 0, "", ""
         try:
@@ -547,22 +537,16 @@ class StationApp(App):
         self.replay_rig = message.rig
 
     def on_sweep_event(self, message: SweepEvent) -> None:
-        from procedures.engine import events as ev
-
         run = self._runs.get(message.run)
         if run is None:  # its job has ended already (an event after its end: nothing to show)
             return
         s = run[0]
         if s.apply(message.event) and s is self.sweep:
             self._sweep_changed()
-        event = message.event
-        if isinstance(event, ev.Fault):
-            self.notify(f"leg {event.leg} run {event.run} at {event.target_mm:+.3f} mm: {event.message}",
-                        title=f"{event.kind} ({'gave up' if event.gave_up else f'attempt {event.attempt}, retrying'})",
-                        severity="error" if event.gave_up else "warning", timeout=10)
-        elif isinstance(event, ev.Message) and event.level != "info" and s.label == "sweep":
-            # e.g. a calibration sweep on a leg whose compensation table is active
-            self.notify(event.text, title="Sweep", severity="warning", timeout=15)
+        notice = event_notice(message.event, s.label)
+        if notice is not None:
+            self.notify(notice.text, title=notice.title, severity=notice.severity,  # type: ignore[arg-type]
+                        timeout=notice.timeout)
 
     def on_sweep_ended(self, message: SweepEnded) -> None:
         run = self._runs.pop(message.run, None)
@@ -627,7 +611,7 @@ class StationApp(App):
             screen.post_message(message_type())
 
     # -- pause, resume, abort: asked for here only -----------------------------------------------
-    def _control_of_running_sweep(self) -> RunControl | None:
+    def _control_of_running_sweep(self):
         if not self.sweep.active or self.sweep_control is None:
             self.notify("No sweep is running.", severity="warning")
             return None
@@ -660,7 +644,7 @@ class StationApp(App):
             self.notify("Aborting: stopping the drives…", severity="warning", timeout=4)
 
     @work(thread=True, group="abort", exit_on_error=False)
-    def _abort_worker(self, control: RunControl) -> None:
+    def _abort_worker(self, control) -> None:
         control.abort("aborted by the operator")
 
     # -- quitting --------------------------------------------------------------------------------
@@ -693,16 +677,9 @@ class StationApp(App):
         self.exit()
 
 
-def _show_recorded_points(state: SweepState, path: Path) -> None:
-    """Put the points `path` holds already into `state`'s plot, so a resumed sweep shows its
-    whole session (the procedure's SweepStarted then sets the counts)."""
-    from procedures.io.recording.reader import read_session
-
-    try:
-        points = read_session(path).points
-    except Exception:  # the plot is a nicety; the job reads the file itself and says what is wrong
-        log.exception("reading the points of %s for the plot", path)
-        return
+def _show_recorded_points(state: SweepState, points) -> None:
+    """Put the points a resumed session holds already (`points`, its recorded rows) into `state`'s
+    plot, so a resumed sweep shows its whole session (the procedure's SweepStarted then sets the counts)."""
     for r in points:
         state.traces.setdefault(int(r["leg"]), LegTrace()).add(float(r["target_mm"]), float(r["error_um"]),
                                                                int(r["direction"]))

@@ -131,3 +131,26 @@ class SweepState:
         else:
             return False
         return True
+
+
+@dataclass(frozen=True)
+class EventNotice:
+    """A notification an event of a running job asks for (the app shows it)."""
+
+    text: str
+    title: str
+    severity: str  # "information" / "warning" / "error"
+    timeout: float
+
+
+def event_notice(event: ev.Event, label: str) -> EventNotice | None:
+    """The notification `event` of the job named `label` ("sweep", "verification of leg 2")
+    asks for, by its type: a fault (retrying or given up), a warning message of a sweep (e.g. a
+    calibration sweep on a leg whose compensation table is active); None for every other event."""
+    if isinstance(event, ev.Fault):
+        return EventNotice(f"leg {event.leg} run {event.run} at {event.target_mm:+.3f} mm: {event.message}",
+                           f"{event.kind} ({'gave up' if event.gave_up else f'attempt {event.attempt}, retrying'})",
+                           "error" if event.gave_up else "warning", 10)
+    if isinstance(event, ev.Message) and event.level != "info" and label == "sweep":
+        return EventNotice(event.text, "Sweep", "warning", 15)
+    return None

@@ -31,7 +31,8 @@ from drivers.interfaces import TableBank
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditLog
 from procedures.acquisition.plans import SweepPlan
-from procedures.compensation.push import PushFailed, PushRefused, push_table, rollback
+from procedures.compensation.push import PushFailed, PushRefused
+from station.services.table_jobs import push_table, rollback  # the one way to run a push: the runner
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
 from procedures.engine.runner import CallbackSink

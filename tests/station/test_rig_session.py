@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from procedures.vocabulary import InputError
 from station.services.config import StationConfig
+from station.services.sweep_job import OutputExists, SweepRequest, prepare_sweep
 from station.services.rig_session import (
     ActionRefused,
     MoveRequest,
@@ -93,17 +95,27 @@ def _refusal(rig, lock):
 
 
 def test_job_refusals(session, tmp_path):
+    """The session refuses a job while it has no rig or a move runs; the job's own refusals (a leg
+    without a drive, a session file that exists) are its prepare's (station.services.sweep_job)."""
     out = tmp_path / "s.h5"
-    assert session.job_refusal((1,), out) == ("", "")
-    assert session.job_refusal((3,), out)[0] == "rig"  # no drive connected for leg 3
+    assert session.job_refusal() == ("", "")
+    with pytest.raises(InputError, match=r"no drive connected for leg\(s\) \[3\]"):
+        prepare_sweep(SweepRequest(out=out, legs=(3,)), session.cfg, rig=session.rig)
     session.begin_move(1, MoveRequest(target_mm=2.0))
-    assert session.job_refusal((1,), out)[0] == "motion"
-    assert session.move_refusal().startswith("Leg 1 is still moving (to +2.000 mm at the default speed)")
+    assert session.job_refusal()[0] == "motion"
+    assert str(session.move_refusal()).startswith("Leg 1 is still moving (to +2.000 mm at the default speed)")
+    # the key to press is the front end's: the service names the action, the UI adds its key
+    assert session.move_refusal().say({"stop": "x"}).endswith("wait for it, or stop it (x).")
+    assert "(x)" not in str(session.move_refusal())
     session.end_move(1, "leg 1 at +2.0000 mm")
+    assert session.move_refusal() is None
     out.write_bytes(b"")
-    assert session.job_refusal((1,), out)[0] == "out"
-    assert session.job_refusal((1,), out, resume=True) == ("", "")
-    assert RigSession(session.cfg, (1,)).job_refusal((1,), out)[0] == "rig"  # not connected
+    with pytest.raises(OutputExists):
+        prepare_sweep(SweepRequest(out=out, legs=(1,)), session.cfg, rig=session.rig)
+    assert out.read_bytes() == b""  # refused: nothing written
+    assert prepare_sweep(SweepRequest(out=out, legs=(1,), force=True), session.cfg, rig=session.rig).out == out
+    assert out.read_bytes() == b""  # prepared, not run: replaced only when the job runs
+    assert RigSession(session.cfg, (1,)).job_refusal()[0] == "rig"  # not connected
 
 
 def test_session_names_never_overwrite(tmp_path, monkeypatch):

@@ -23,7 +23,8 @@ from station.tui.errors import describe
 from station.tui.fields import ValueField
 from station.tui.screens.common import ConfirmScreen, FieldRefusal, StationScreen
 from station.tui.screens.compensation_controller import (
-    UI_OVERRIDE,
+    UI_ACCEPT_HOW,
+    UI_ACCEPTED_AS,
     CompensationController,
     DriveTablesRead,
     TableJobDone,
@@ -33,18 +34,17 @@ from station.tui.screens.compensation_widgets import AuditTail, DriveTable, LegT
 
 
 def verdict_line(leg: int, result) -> str:
-    """One line: the verification's verdict for `leg` (procedures.compensation.verify's
-    LegVerification `result`): pass or above the limit, the ratio, the range reduction."""
-    from procedures.compensation.verify import ACCEPT_RATIO
+    """One line: the verification's verdict for `leg` (a leg's result of station.services.verify_job's
+    Verification): pass or above the limit, the ratio, the range reduction."""
+    from station.services.verify_job import verdict_parts
 
-    ratio = result.ratio
-    if ratio is None:
+    verdict, ratio, limit, red = verdict_parts(result)
+    if verdict == "none":
         head = f"[yellow b]leg {leg} verification: no verdict[/yellow b] (no repeat passes)"
-    elif result.passed:
-        head = f"[green b]leg {leg} verification: PASS[/green b], ratio {ratio:.3f} (limit {ACCEPT_RATIO:g})"
+    elif verdict == "pass":
+        head = f"[green b]leg {leg} verification: PASS[/green b], ratio {ratio:.3f} (limit {limit:g})"
     else:
-        head = f"[red b]leg {leg} verification: ABOVE the limit[/red b], ratio {ratio:.3f} (limit {ACCEPT_RATIO:g})"
-    red = result.range_reduction_pct
+        head = f"[red b]leg {leg} verification: ABOVE the limit[/red b], ratio {ratio:.3f} (limit {limit:g})"
     return head + (f", range reduction {red:.1f} %" if red is not None else "") + "; report below"
 
 
@@ -127,6 +127,7 @@ class CompensationScreen(StationScreen):
 
     def action_make_table(self, accept_implausible: bool = False) -> None:
         from procedures.io.plausibility import ImplausibleError
+        from station.services.push_jobs import accept_override
         from station.services.table_jobs import make_checked_table
 
         a = self.app.analysis
@@ -137,7 +138,7 @@ class CompensationScreen(StationScreen):
         try:
             step = self.query_one("#comp-step", ValueField).read()  # station table --step's parser
             table, warnings = make_checked_table(a.model, step, self._spec(), accept_implausible=accept_implausible,
-                                                 override=UI_OVERRIDE)
+                                                 override=accept_override(UI_ACCEPT_HOW, UI_ACCEPTED_AS))
             # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s
             serials = {leg: s for leg in table.legs if (s := a.session.identity.leg_serial(leg))}
             self.table = type(table)(table.legs, serials or table.serials)
@@ -285,18 +286,16 @@ class CompensationScreen(StationScreen):
             self.app.switch_mode("sweep")
 
     def on_verification_done(self, message: VerificationDone) -> None:
-        from procedures.compensation.audit import AuditRecord
-        from procedures.compensation.verify import Verified
-
         self._show_audit()
         job = message.job
-        if job is None or not job.of(Verified):
+        if job is None or job.data is None:
             return  # refused or broken off: the Sweep page said why
-        verified = job.of(Verified)[-1]
-        result = verified.results[message.leg]
-        self.verify_text = verified.report + _as_left_text(verified.session.get("path"))
+        verification = job.data  # station.services.verify_job.Verification
+        result = verification.results[message.leg]
+        self.verify_text = verification.report + (f"\nas-left (ISO 14253-1): {verification.as_left_summary}"
+                                                  if verification.as_left_summary else "")
         self.verdict_text = verdict_line(message.leg, result)
-        line = next((e.entry.message for e in job.of(AuditRecord) if e.entry.leg == message.leg), "")
+        line = verification.audit_lines.get(message.leg, "")
         self.notify(line, title="Verify", severity="information" if result.passed else "warning", timeout=12)
         self._show()
 
@@ -360,18 +359,3 @@ class CompensationScreen(StationScreen):
     def _show_plots(self) -> None:
         leg = self._selected_leg()
         self.query_one(TablePlots).show(leg, self.table, self.drive_tables.get(leg) if leg is not None else None)
-
-
-def _as_left_text(path: str | None) -> str:
-    """The verification's as-left decisions in one line (ISO 14253-1, docs/decisions.md), "" when
-    its legs' types state no tolerance or the file cannot be read (the report above stands)."""
-    try:
-        from procedures.reporting.decision import decision_summary
-        from procedures.io.recording.reader import read_session
-        from station.services.report_jobs import decisions_if_stated
-
-        d = decisions_if_stated(read_session(path), stage="as_left") if path else None
-    except Exception:  # noqa: BLE001 (a decision line is an extra; the verification's figures stand)
-        return ""
-    return f"\nas-left (ISO 14253-1): {decision_summary(d['legs'])}" if d else ""
-

@@ -7,17 +7,13 @@ back as messages; it never touches a widget from a worker.
 from __future__ import annotations
 
 import threading
-from dataclasses import replace
 from typing import Any, Protocol
 
 from textual.message import Message
 
-from procedures.compensation.audit import AuditLog
-from procedures.compensation.push import PushPlan
-from procedures.compensation.audit import Action
-from procedures.vocabulary import Outcome as AuditOutcome
-from procedures.io.plausibility import Override
 from station.services.config import StationConfig
+from station.services.push_jobs import PUSH, ROLLBACK, PushRequest, RollbackRequest, plan_lines, prepare_push, \
+    prepare_rollback
 from station.tui.errors import describe
 from station.tui.messages import Notice
 from station.tui.screens.common import ConfirmScreen
@@ -41,10 +37,13 @@ class StationHost(Protocol):
 
     def post_message(self, message: Message) -> bool: ...
 
-    def start_sweep(self, plan, out, label: str = "sweep", on_done=None, job=None) -> bool: ...
+    @property
+    def jobs(self): ...  # station.services.job.JobRunner: the app's one runner of rig jobs
+
+    def start_job(self, job, label: str = "sweep", on_done=None) -> bool: ...
 
 
-UI_OVERRIDE = Override(how="confirm it in the dialog that follows", kept="confirmed in the dialog")
+UI_ACCEPT_HOW, UI_ACCEPTED_AS = "confirm it in the dialog that follows", "confirmed in the dialog"
 """How the page lets the user accept implausible values (the command line's --accept-implausible)."""
 
 RIG_WAIT_S = 5.0
@@ -62,7 +61,7 @@ class TableJobDone(Message):
     with `error` when it could not run). `accept_again`: for a push refused for implausible values,
     the same push with them accepted (started only after the user confirms it)."""
 
-    def __init__(self, action: Action, leg: int, job: Any = None, error: str = "", accept_again=None) -> None:
+    def __init__(self, action: str, leg: int | None, job: Any = None, error: str = "", accept_again=None) -> None:
         super().__init__()
         self.action = action
         self.leg = leg
@@ -88,7 +87,7 @@ class CompensationController:
     def app(self) -> StationHost:
         return self.screen.app
 
-    def audit(self) -> AuditLog:
+    def audit(self):
         """The audit log `station push/rollback/verify` use: <recordings_dir>/audit.jsonl."""
         from station.services.identity import station_audit_log
 
@@ -134,90 +133,62 @@ class CompensationController:
     # -- push and rollback ---------------------------------------------------------------------------
     def push(self, leg: int, table, source: dict | None, table_name: str | None = None,
              accept_implausible: bool = False) -> None:
-        """Push `table` (a procedures.compensation.table.LegTable) to `leg`'s drive after a confirmation;
-        values that look like a unit slip are refused unless `accept_implausible` (`table_name` names it;
-        default: the source's path)."""
-        from station.services.table_jobs import push_job
-
-        self._table_job(Action.PUSH, leg, lambda axis, audit, url: push_job(
-            axis, table, audit=audit, drive_url=url, source=source, confirm=self.confirm,
-            leg_serial=audit.leg_serials.get(leg), accept_implausible=accept_implausible, table_name=table_name,
-            override=UI_OVERRIDE), again=lambda: self.push(leg, table, source, table_name, accept_implausible=True))
+        """Push `table` (a procedures.compensation.table.LegTable) to `leg`'s drive after a confirmation
+        (the job of `station push`, station/services/push_jobs.py); values that look like a unit slip
+        are refused unless `accept_implausible` (`table_name` names it; default: the source's path)."""
+        request = PushRequest(legs=(leg,), tables={leg: table}, sources={leg: source}, table_name=table_name,
+                              accept_implausible=accept_implausible, accept_how=UI_ACCEPT_HOW,
+                              accepted_as=UI_ACCEPTED_AS)
+        self._table_job(PUSH, leg, request, self.confirm,
+                        again=lambda: self.push(leg, table, source, table_name, accept_implausible=True))
 
     def push_all(self, tables: dict, sources: dict[int, dict], table_name: str | None = None,
                  accept_implausible: bool = False) -> None:
-        """Push every leg's table after one confirmation (procedures.compensation.push.push_legs_procedure)."""
-        from station.services.table_jobs import push_legs_job
-
-        def start(axes, audit, url):
-            return push_legs_job(axes, tables, audit=audit, drive_url=url, sources=sources, confirm=self.confirm_all,
-                                 leg_serials=audit.leg_serials, accept_implausible=accept_implausible,
-                                 table_name=table_name, override=UI_OVERRIDE)
-
-        self._table_job(Action.PUSH, None, start, legs=tuple(sorted(tables)),
+        """Push every leg's table after one confirmation."""
+        request = PushRequest(legs=tuple(sorted(tables)), tables=tables, sources=sources, table_name=table_name,
+                              accept_implausible=accept_implausible, accept_how=UI_ACCEPT_HOW,
+                              accepted_as=UI_ACCEPTED_AS)
+        self._table_job(PUSH, None, request, self.confirm_all,
                         again=lambda: self.push_all(tables, sources, table_name, accept_implausible=True))
 
     def rollback(self, leg: int) -> None:
-        from station.services.table_jobs import rollback_job
+        self._table_job(ROLLBACK, leg, RollbackRequest(leg=leg), self.confirm)
 
-        self._table_job(Action.ROLLBACK, leg, lambda axis, audit, url: rollback_job(
-            axis, audit=audit, drive_url=url, confirm=self.confirm))
-
-    def _table_job(self, action: Action, leg: int | None, start, legs: tuple[int, ...] = (), again=None) -> None:
-        """Run `start(axis or axes, audit, drive_url)` in a worker holding the rig; `legs` for
-        several legs (then `start` gets the axes by leg); `again`: the job with implausible values
-        accepted, offered when they refused it."""
-        rig, lock, audit, cfg = self.app.rig, self.app.rig_lock, self.audit(), self.app.cfg  # read on the UI thread
+    def _table_job(self, action: str, leg: int | None, request, confirm, again=None) -> None:
+        """Prepare and run the push or rollback `request` asks for in a worker, through the app's
+        JobRunner (the rig lock, one rig job at a time) on the connected rig, confirmed by
+        `confirm`; `again`: the job with implausible values accepted, offered when they refused it."""
+        rig, cfg, jobs = self.app.rig, self.app.cfg, self.app.jobs  # read on the UI thread
 
         def work() -> None:
             from station.services.wiring import drive_url_of
 
-            from station.services.table_jobs import controller_refusal, refusal_job
-
-            if rig is None:
-                self.screen.post_message(TableJobDone(action, leg, error="Not connected to the rig."))
-                return
-            controller = controller_refusal(cfg, legs or (leg,), action)
-            if controller:  # the controller applies this leg's table: refused and logged, as on the command line
-                try:
-                    job = refusal_job(action, controller[0], controller[1], audit=audit, drive_url=drive_url_of(cfg))
-                except Exception as exc:
-                    self.screen.post_message(TableJobDone(action, leg, error=describe(exc, f"{action} of leg {leg}")))
-                    return
-                self.screen.post_message(TableJobDone(action, leg, job))
-                return
-            missing = [x for x in legs if x not in rig.axes]
-            if missing:
-                self.screen.post_message(TableJobDone(action, leg, error=f"No drive connected for leg(s) {missing}; "
-                                                      "nothing was written."))
-                return
-            if not lock.acquire(timeout=RIG_WAIT_S):
-                self.screen.post_message(TableJobDone(action, leg, error="The rig is busy; nothing was written. Try again."))
-                return
             try:
-                target = {x: rig.axes[x] for x in legs} if legs else rig.axes[leg]
-                job = start(target, audit, drive_url_of(cfg))
-            except Exception as exc:  # an audit log that cannot be written, a drive gone: said, not raised
+                job = (prepare_push if action == PUSH else prepare_rollback)(request, cfg)
+                if job.needs_rig:
+                    if rig is None:
+                        self.screen.post_message(TableJobDone(action, leg, error="Not connected to the rig."))
+                        return
+                    job.axes, job.drive_url, job.confirm_plans = dict(rig.axes), drive_url_of(cfg), confirm
+                ended = jobs.run(job)
+            except Exception as exc:  # busy, a leg without a drive, an audit log that cannot be written: said
                 self.screen.post_message(TableJobDone(action, leg, error=describe(exc, f"{action} of leg {leg}")))
                 return
-            finally:
-                lock.release()
-            self.screen.post_message(TableJobDone(action, leg, job, accept_again=again if job.implausible else None))
+            self.screen.post_message(TableJobDone(action, leg, ended, accept_again=again if ended.implausible else None))
 
         self.screen.run_worker(work, thread=True, exclusive=True, group="push", exit_on_error=False)
 
-    def confirm(self, plan: PushPlan) -> bool:
-        """The procedures' `Confirm`, called on the worker thread: a dialog on the UI thread,
-        waited for. False (cancelled) if the app closes meanwhile."""
-        lines = plan.describe()
-        if self.app.hide_volatile:
-            lines = [line.split(" at ")[0] if line.startswith(f"leg {plan.leg}: drive") else line for line in lines]
-        verb = "Push this table to" if plan.action == Action.PUSH else "Roll back the table of"
+    def confirm(self, plan) -> bool:
+        """The procedures' `Confirm` of one plan (procedures.compensation.push.PushPlan), called on
+        the worker thread: a dialog on the UI thread, waited for. False (cancelled) if the app
+        closes meanwhile."""
+        lines = plan_lines(plan, drive_url=not self.app.hide_volatile)
+        verb = "Push this table to" if plan.action == PUSH else "Roll back the table of"
         holder = "The station's" if plan.target == "station" else "The drive's"
         question = (f"[b]{verb} leg {plan.leg}[/b], drive [b]{plan.drive}[/b], compensation target "
                     f"[b]{plan.target}[/b]?\n\n" + "\n".join(lines)
                     + f"\n\n{holder} current table is backed up in the audit log first; on any failure it stays active.")
-        return self._ask(question, "Push" if plan.action == Action.PUSH else "Roll back")
+        return self._ask(question, "Push" if plan.action == PUSH else "Roll back")
 
     def _ask(self, question: str, yes: str) -> bool:
         """A dialog on the UI thread, waited for from the worker; False if the app closes meanwhile."""
@@ -242,12 +213,11 @@ class CompensationController:
                 return False
         return answer["yes"]
 
-    def confirm_all(self, plans: list[PushPlan]) -> bool:
+    def confirm_all(self, plans: list) -> bool:
         """One dialog for several legs' plans (a whole platform)."""
         lines = []
         for plan in plans:
-            lines.append(f"leg {plan.leg}: drive {plan.drive}")
-            lines.extend(line for line in plan.describe()[1:] if not line.startswith("            sha256"))
+            lines.extend(plan_lines(plan, drive_url=False, checksums=False))
         question = (f"[b]Push the tables of legs {', '.join(str(p.leg) for p in plans)}[/b]?\n\n" + "\n".join(lines)
                     + "\n\nEach drive's current table is backed up in the audit log first; a leg that fails keeps its "
                     "table and stops the rest.")
@@ -262,50 +232,35 @@ class CompensationController:
         problems = "".join(f" (audit log: {p})" for p in job.audit_problems)
         problems += "".join(f"\n{w}" for w in job.warnings)  # implausible values the user accepted
         end = job.finished
-        if end.outcome == AuditOutcome.OK and end.leg is None:  # several legs
+        if end.outcome == "ok" and end.leg is None:  # several legs
             return f"{end.message}; backups in the audit log.{problems}", "information"
-        if end.outcome == AuditOutcome.OK:
+        if end.outcome == "ok":
             r = end.result
-            done = "pushed and active" if message.action == Action.PUSH else "rolled back"
+            done = "pushed and active" if message.action == PUSH else "rolled back"
             warn = "" if r.table_enabled else " Warning: the drive does not apply its table (table_enable = 0)."
             return (f"Leg {r.leg}: table {done} in bank {r.bank} (was bank {r.previous_bank}); backup in the audit log."
                     f"{warn}{problems}", "information")
-        if end.outcome == AuditOutcome.CANCELLED:
+        if end.outcome == "cancelled":
             return f"{message.action.capitalize()} cancelled; nothing was written.{problems}", "information"
         return f"{title} {end.outcome}: {end.message}{problems}", "error"
 
     # -- verify ----------------------------------------------------------------------------------------
     def verify(self, leg: int, analysis) -> bool:
         """A verification sweep of `leg` with its table active, repeating the plan of the
-        calibration on show (`analysis.session`), through station.services.table_jobs.verify_job on the
-        Sweep page. False (and a notice) when it cannot start."""
-        from procedures.acquisition.plans import SweepPlan
-        from station.services.table_jobs import verify_job
+        calibration on show (`analysis.session`): the job `station verify --before` runs
+        (station/services/verify_job.py), shown on the Sweep page. False (and a notice) when it
+        cannot start."""
         from station.services.sessions import default_session_path
-        from station.services.wiring import drive_url_of
+        from station.services.verify_job import VerifyRequest, prepare_verify
 
-        try:
-            plan = replace(SweepPlan.from_dict(analysis.session.plan), legs=(leg,), kind="verification", notes=())
-        except Exception as exc:
-            self.app.post_message(Notice(describe(exc, "the calibration's plan cannot be repeated"), "error", "Verify"))
-            return False
-        from station.services.table_jobs import controller_refusal, refusal_job
-
-        controller = controller_refusal(self.app.cfg, (leg,), Action.VERIFY)
-        if controller:  # the station cannot verify a table the controller applies: refused and logged
-            try:
-                refusal_job(Action.VERIFY, leg, controller[1], audit=self.audit(), drive_url=drive_url_of(self.app.cfg))
-            except Exception:
-                pass  # the refusal itself is what matters; the notice says it
-            self.app.post_message(Notice(controller[1], "error", "Verify"))
-            return False
         made = default_session_path(self.app.cfg, (leg,))  # runs/ui-STAMP-legN.h5
         out = made.with_name("verify-" + made.name.removeprefix("ui-"))
-        before, cfg, audit = analysis.session, self.app.cfg, self.audit()
-
-        def job(rig, sinks, control):
-            return verify_job(rig, plan, out, cfg, audit=audit, before=before, drive_url=drive_url_of(cfg),
-                              sinks=sinks, control=control)
-
-        return self.app.start_sweep(plan, out, label=f"verification of leg {leg}", job=job,
-                                    on_done=lambda state: self.screen.post_message(VerificationDone(leg, state.result)))
+        try:
+            job = prepare_verify(VerifyRequest(legs=(leg,), out=out, before=analysis.session.path, make_parents=True),
+                                 self.app.cfg)
+        except Exception as exc:
+            self.app.post_message(Notice(describe(exc, "cannot verify"), "error", "Verify"))
+            return False
+        job.rig = self.app.rig
+        return self.app.start_job(job, label=f"verification of leg {leg}",
+                                  on_done=lambda state: self.screen.post_message(VerificationDone(leg, state.result)))

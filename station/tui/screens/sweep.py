@@ -17,10 +17,8 @@ from textual.containers import Grid, Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Label, ProgressBar, Select, Static
 
-from procedures.acquisition.plan_size import PlanSize, fmt_bytes, plan_size
-from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PlanSpec, plan_from_spec
-from procedures.acquisition.plans import parse_legs
 from station import values as V
+from station.services.sweep_job import DEFAULT_CYCLES, SweepRequest, SweepSize, build_plan_of, estimate, plan_spec_of
 from station.progress import fmt_duration
 from station import values
 from station.tui.errors import describe
@@ -113,8 +111,9 @@ class SweepScreen(StationScreen):
         self._redraw()
 
     # -- form --------------------------------------------------------------------------------------
-    def plan_spec(self) -> PlanSpec:
-        """The plan the form asks for (ValueError/PlanError naming the field that is wrong)."""
+    def request(self, serials: dict | None = None) -> SweepRequest:
+        """The sweep the form asks for, as the services' request (InputError naming the field
+        that is wrong); recorded to a new session file under the recordings folder."""
         def val(wid: str) -> str:
             return self.query_one(f"#{wid}", Input).value.strip()
 
@@ -123,17 +122,21 @@ class SweepScreen(StationScreen):
             return self.query_one(f"#{wid}", ValueField).read()
 
         kind = self.query_one("#plan", Select).value
-        legs = parse_legs(V.LEGS.parse(val("legs") or "1", "legs"))  # --legs's kind, then its numbers
+        legs = V.LEGS.parse(val("legs") or "1", "legs")  # --legs's kind; its numbers are the request's
         cycles, dwell_s = num("cycles"), num("dwell")
         n_targets = None if kind in ONTHEFLY else num("n-targets")  # on the fly: evenly spaced, by the step
         step_mm = None if kind == "paper" else num("step")  # the paper plan has fixed targets
         min_mm, max_mm = num("min-mm"), num("max-mm")
-        return PlanSpec(legs=legs, kind=kind, cycles=cycles, n_targets=n_targets, step_mm=step_mm,
-                        min_mm=min_mm, max_mm=max_mm, dwell_s=dwell_s)
+        return SweepRequest(legs=legs, kind=kind, cycles=cycles, n_targets=n_targets, step_mm=step_mm,
+                            min_mm=min_mm, max_mm=max_mm, dwell_s=dwell_s, serials=serials or {}, make_parents=True)
+
+    def plan_spec(self):
+        """The plan the form asks for (procedures' PlanSpec, as `station sweep` makes it)."""
+        return plan_spec_of(self.request())
 
     def build_plan(self):
         """The plan from the form, built exactly as `station sweep` builds it."""
-        return plan_from_spec(self.plan_spec())
+        return build_plan_of(self.request())
 
     def serials(self, legs) -> dict[int, dict[str, str]]:
         """The Serials field as `station sweep --serial` takes it (InputError naming what is
@@ -147,13 +150,10 @@ class SweepScreen(StationScreen):
             raise ValueError(f"serials: leg(s) {other} are not swept (legs {list(legs)})")
         leg_fields(self.app.cfg, entered)  # a bad serials file in the config is said before the start
         return entered
-    def plan_size(self) -> PlanSize:
-        """The size of the plan the form asks for, from the form alone (nothing built)."""
-        return plan_size(self.plan_spec())
-
-    def over_limits(self, size: PlanSize) -> bool:
-        limits = self.app.cfg.limits
-        return size.points > limits.max_points or size.rig_hours > limits.max_rig_hours
+    def plan_size(self) -> SweepSize:
+        """The size of the plan the form asks for, from the form alone (nothing built), and
+        whether the config's [limits] take it."""
+        return estimate(self.request(), self.app.cfg)
 
     def _update_summary(self) -> None:
         summary = self.query_one("#plan-summary", Static)
@@ -164,8 +164,8 @@ class SweepScreen(StationScreen):
                                                          or (wid == "n-targets" and kind in ONTHEFLY))
         try:
             size = self.plan_size()
-            if self.over_limits(size):  # sized, never built here: a huge plan would take seconds per key
-                summary.update(f"[yellow b]{size.describe()}[/yellow b]: beyond the config's \\[limits]; Start asks "
+            if size.over_limits:  # sized, never built here: a huge plan would take seconds per key
+                summary.update(f"[yellow b]{size.text}[/yellow b]: beyond the config's \\[limits]; Start asks "
                                "first")
                 return
             plan = self.build_plan()
@@ -181,7 +181,7 @@ class SweepScreen(StationScreen):
         else:
             text = (f"{len(plan.targets_mm)} targets × {plan.cycles} cycles × 2 directions × "
                     f"{len(plan.legs)} leg(s) = [b]{plan.total_points}[/b] points")
-        text += f"; a {fmt_bytes(size.file_bytes)} session file"
+        text += f"; a {size.bytes_text} session file"
         for note in plan.notes:
             text += f"\n[yellow]note:[/yellow] {note}"
         summary.update(text)
@@ -213,30 +213,30 @@ class SweepScreen(StationScreen):
             self.notify("A sweep is already running.", severity="warning")
             return
         try:
-            spec = self.plan_spec()
-            serials = self.serials(spec.legs)  # a bad serial is said before anything is asked or built
-            size = plan_size(spec)  # before anything is built
-            if self.over_limits(size):
+            request = self.request()
+            request.serials = self.serials(plan_spec_of(request).legs)  # said before anything is asked or built
+            size = estimate(request, self.app.cfg)  # before anything is built
+            if size.over_limits:
                 limits = self.app.cfg.limits
-                question = (f"This plan has [b]{size.describe()}[/b]: beyond the config's \\[limits] "
+                question = (f"This plan has [b]{size.text}[/b]: beyond the config's \\[limits] "
                             f"(max_points {limits.max_points}, max_rig_hours {limits.max_rig_hours:g}).\n\n"
                             "Start it anyway? Abort (a) or quitting stops it at any moment.")
+                # accepted: built in the job's worker, where an abort ends the building at once
+                request.beyond_limits = request.build_in_run = True
                 self.app.push_screen(ConfirmScreen(question, yes="Start anyway", no="Cancel"),
-                                     lambda yes: self._start(spec, serials) if yes else None)
+                                     lambda yes: self._start(request) if yes else None)
                 return
-            plan = self.build_plan()
         except Exception as exc:
             self.notify(escape(describe(exc)), title="Plan", severity="error", timeout=10)
             return
-        self._start(plan, serials)
+        self._start(request)
 
-    def _start(self, plan, serials: dict[int, dict[str, str]]) -> None:
-        """Start `plan` (a SweepPlan, or a PlanSpec the app builds in its worker, abortably) with
-        the legs' `serials` from the form."""
+    def _start(self, request: SweepRequest) -> None:
+        """Start the sweep `request` asks for, recorded to a new session file."""
         from station.services.sessions import default_session_path
 
-        out = default_session_path(self.app.cfg, plan.legs)
-        if self.app.start_sweep(plan, out, serials=serials):
+        request.out = default_session_path(self.app.cfg, plan_spec_of(request).legs)
+        if self.app.start_sweep(request):
             self.plot_leg = None
             self.query_one("#abort", Button).focus()
             self._redraw()

@@ -17,7 +17,8 @@ from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
 from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.compensation.audit import AuditLog
-from procedures.compensation.push import PushRefused, check_leg_serial, push_legs_procedure, push_table, table_sha256
+from procedures.compensation.push import PushRefused, check_leg_serial, push_legs_procedure, table_sha256
+from station.services.table_jobs import push_table  # the one way to run a push: the runner
 from procedures.engine.runner import ListSink, run
 from procedures.compensation.table import CompTable, LegTable, read_table_csv, write_table_csv
 

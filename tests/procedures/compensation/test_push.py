@@ -23,11 +23,10 @@ from procedures.compensation.push import (
     PushFailed,
     PushRefused,
     prepare_push,
-    push_table,
     quantize,
-    rollback,
     table_sha256,
 )
+from station.services.table_jobs import push_table, rollback  # the one way to run a push: the runner
 from drivers.modbus.client import table_spec
 from drivers.sim.modbus_tcp import NoReply  # the simulated drive answers nothing
 from procedures.compensation.table import LegTable

@@ -14,7 +14,8 @@ from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from procedures.compensation.audit import AuditLog
-from procedures.compensation.push import PushFailed, push_table, quantize, table_sha256
+from procedures.compensation.push import PushFailed, quantize, table_sha256
+from station.services.table_jobs import push_table  # the one way to run a push: the runner
 from tests.tooling import kill_process, start_drive_process
 
 PROFILE = DriveProfile.load()

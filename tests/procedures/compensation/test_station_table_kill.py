@@ -19,7 +19,8 @@ import pytest
 from drivers.interfaces import TableBank
 from drivers.station_compensation import StationTableStore, station_table_spec
 from procedures.compensation.audit import AuditLog, read_entries
-from procedures.compensation.push import PushFailed, push_table, table_sha256
+from procedures.compensation.push import PushFailed, table_sha256
+from station.services.table_jobs import push_table  # the one way to run a push: the runner
 from station.services.config import StationConfig
 from station.services.wiring import open_drive
 
@@ -31,7 +32,7 @@ CHILD = """
 import os, signal, sys
 from drivers.interfaces import TableBank
 from procedures.compensation.audit import AuditLog
-from procedures.compensation.push import push_table
+from station.services.table_jobs import push_table
 from station.services.config import StationConfig
 from station.services.wiring import open_drive
 

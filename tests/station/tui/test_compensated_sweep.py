@@ -10,7 +10,7 @@ import asyncio
 
 import pytest
 
-from procedures.compensation.push import push_table
+from station.services.table_jobs import push_table
 from procedures.compensation.table import LegTable
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.stage import active_tables

@@ -200,8 +200,16 @@ def ui(tmp_path_factory, recorded_session):
         calls.append(("rig", (action, tuple(legs), move)))
         return True
 
-    def start_sweep(plan, out, label="sweep", on_done=None, job=None, resume=False, serials=None):
-        calls.append(("sweep", plan))
+    def start_sweep(request, on_done=None):
+        # what the app does before the rig: the job's prepare (its refusals: a plan no sweep has);
+        # the plan it would start is recorded, nothing runs
+        from station.services.sweep_job import prepare_sweep
+
+        try:
+            job = prepare_sweep(request, app.cfg)
+        except InputError:
+            return False  # refused (the app says why in a notification): not started
+        calls.append(("sweep", job.plan))
         return False
 
     def start_replay(source, speed):

@@ -19,6 +19,7 @@ from procedures.engine import events as ev
 from procedures.acquisition.plans import iso230_plan
 from procedures.vocabulary import Outcome
 from tests.tooling import start_paper_sweep
+from station.services.job import JobOutcome
 from station.services.rig_session import RigSession
 from station.tui.app import StationApp
 from station.tui.messages import SweepChanged
@@ -220,7 +221,7 @@ async def _burst(cfg, size, wait_until):
     plan = iso230_plan((1,), -90.0, 90.0, step_mm=18.0, cycles=1)
     go = threading.Event()
 
-    def job(rig, sinks, control):
+    def run(sinks, control):
         """A job without hardware: the events of a sweep of `n` points, as fast as they come."""
         go.wait(10)
         bridge = sinks[0]
@@ -228,8 +229,11 @@ async def _burst(cfg, size, wait_until):
         for i in range(n):
             bridge.handle(ev.PointMeasured(record(i), done=i + 1, total=n))
         bridge.handle(ev.SweepFinished(Outcome.COMPLETED, n))
-        return SimpleNamespace(run=SimpleNamespace(outcome=Outcome.COMPLETED, points=n), outcome="completed",
-                               finished=None)
+        return JobOutcome(Outcome.COMPLETED, run=SimpleNamespace(outcome=Outcome.COMPLETED, points=n))
+
+    # a prepared rig job (station/services/job.py) of the plan's legs and size
+    job = SimpleNamespace(needs_rig=True, question=None, lines=[], out=Path(cfg.recordings_dir) / "burst.h5",
+                          legs=plan.legs, kind=plan.kind, total_points=plan.total_points, run=run)
 
     app = StationApp(cfg, autoconnect=False, hide_volatile=True)
     async with app.run_test(size=size) as pilot:
@@ -245,7 +249,7 @@ async def _burst(cfg, size, wait_until):
 
         screen._redraw = counted
         app.rig = SimpleNamespace(axes={1: None}, close=lambda: None)  # the job needs no device
-        assert app.start_sweep(plan, Path(cfg.recordings_dir) / "burst.h5", job=job)
+        assert app.start_job(job)
         t0 = time.monotonic()
         go.set()
         await wait_until(pilot, lambda: not app.sweep.active and f"{n}/{n} points" in status_text(app), 30,

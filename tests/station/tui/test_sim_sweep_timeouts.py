@@ -5,7 +5,7 @@ At time scale 0.02 one real millisecond is 50 ms of the rig's clock. The UI runs
 worker thread of the process that also draws the screens, so the sweep's thread is often kept
 waiting for tens of milliseconds; the move timeout once counted that wait as motion time and
 recorded `timeout` faults (`the drive did not reach ...`) the CLI never saw. The sweeps here run
-through the app's own sweep job (StationApp.start_sweep -> station.services.jobs.run_sweep, on the rig
+through the app's own sweep job (StationApp.start_sweep -> station.services.sweep_job, on the rig
 the app opened with station.services.wiring.open_rig) with the Sweep page drawing, and a thread of pure
 Python work competing for the interpreter, as a busy redraw does.
 """
@@ -23,6 +23,7 @@ from procedures.acquisition.plans import iso230_plan
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.schema import FLAG_RETRIED_DRIVE
 from station.commands.ui import DEFAULT_SIM_TIME_SCALE
+from station.services.sweep_job import SweepRequest
 from station.tui.app import StationApp
 
 pytestmark = pytest.mark.timeout(300)
@@ -68,7 +69,8 @@ async def _sweep(pilot, wait_until, out: Path, during=None) -> str:
     Returns the outcome the app saw once the sweep job had ended."""
     app = pilot.app
     ended: list[str] = []
-    assert app.start_sweep(PLAN, out, on_done=lambda state: ended.append(state.status)), "the app refused the sweep"
+    assert app.start_sweep(SweepRequest(out=out, plan=PLAN), on_done=lambda state: ended.append(state.status)), \
+        "the app refused the sweep"
     while not ended:
         if during is not None:
             during(app)
