@@ -17,7 +17,7 @@ from drivers.sim.drive_server import SimDriveServer
 from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.acquisition.sweep import table_state
 from procedures.compensation.applied_table import TableState, applied_table
-from procedures.compensation.push import push_table
+from station.services.table_jobs import push_table
 from procedures.io.recording.stage import active_tables
 
 PROFILE = DriveProfile.load()
