@@ -47,7 +47,7 @@ os.environ.setdefault("STATION_CATALOG", "off")
 import numpy as np  # noqa: E402
 
 from procedures.io.recording.reader import read_session  # noqa: E402
-from procedures.io.replay_compare import compare_sessions  # noqa: E402
+from procedures.acquisition.replay_compare import compare_sessions  # noqa: E402
 from station.commands.replay import parse_speed  # noqa: E402
 from station.services.jobs import replay_sweep  # noqa: E402
 from station.services.config import StationConfig  # noqa: E402

@@ -1,4 +1,4 @@
-"""The all-or-nothing file write every layer uses (procedures.io.atomic wraps it for the front ends).
+"""The all-or-nothing file write every layer uses (procedures.io.atomic_outputs wraps it for the front ends).
 
 A file is written to a temporary name beside its target, fsynced, and renamed into place (the folder fsynced too), so a
 crash, a full disk or Ctrl-C never leaves half a file; new files honour the process umask

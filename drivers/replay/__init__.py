@@ -11,7 +11,7 @@ physical model, so the station's own clients run unchanged. See docs/replay.md.
 """
 
 from drivers.replay.clock import ReplayClock, TimeoutClock
-from drivers.replay.errors import ReplayDataError, ReplayMismatch
+from drivers.replay.replay_errors import ReplayDataError, ReplayMismatch
 from drivers.replay.rig import ReplayRig
 from drivers.replay.script import ReplayFault, ReplayPoint, ReplayScript
 

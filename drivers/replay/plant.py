@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from drivers.replay.clock import ReplayClock
-from drivers.replay.errors import ReplayMismatch
+from drivers.replay.replay_errors import ReplayMismatch
 from drivers.replay.script import ReplayPoint, ReplayScript
 from drivers.states import FaultKind
 

@@ -14,7 +14,7 @@ from typing import Callable
 from drivers.modbus.profile import DriveProfile
 from drivers.replay.clock import ReplayClock, TimeoutClock
 from drivers.replay.drive_server import ReplayDriveServer, replay_profile
-from drivers.replay.errors import ReplayMismatch
+from drivers.replay.replay_errors import ReplayMismatch
 from drivers.replay.interferometer_server import ReplayInterferometer
 from drivers.replay.plant import ReplayPlant, ReplayState
 from drivers.replay.script import ReplayScript

@@ -21,7 +21,7 @@ from typing import Mapping
 
 import numpy as np
 
-from drivers.replay.errors import ReplayDataError
+from drivers.replay.replay_errors import ReplayDataError
 from drivers.states import FaultKind
 
 FAULT_KINDS = tuple(FaultKind)

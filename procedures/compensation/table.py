@@ -33,7 +33,7 @@ import numpy as np
 
 from drivers.errors import TableRefused
 from drivers.interfaces import DriveLimits, TableBank, TableSpec
-from procedures.io.atomic import write_files_atomic
+from procedures.io.atomic_outputs import write_files_atomic
 from procedures.vocabulary import InputError
 from procedures.io.recording.identity import model_leg_serials
 from procedures.io.numbers import parse_finite
@@ -223,7 +223,7 @@ def validate_table(table: CompTable, spec: TableSpec | None = None, expected_leg
 # -- writing -----------------------------------------------------------------------------------
 
 def write_table_files(files: Mapping[Path, str], error: type[Exception] = TableValidationError) -> list[Path]:
-    """Write every file or none (procedures.io.atomic). A missing directory raises `error` (the
+    """Write every file or none (procedures.io.atomic_outputs). A missing directory raises `error` (the
     caller's own InputError subclass) naming it."""
     for path in files:
         if not path.parent.is_dir():

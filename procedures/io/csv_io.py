@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.io.atomic import atomic_path
+from procedures.io.atomic_outputs import atomic_path
 from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file
-from procedures.io.plausibility import check_points, settle_measured
+from procedures.metrology.plausibility import check_points, settle_measured
 from procedures.io.numbers import NotANumber, finite_float
 from procedures.io.ranges import LEG_NUMBERS, PointLimits
 from procedures.io.recording.columns import read_point_column, write_point_column
@@ -279,7 +279,7 @@ def import_csv(
     The whole CSV is checked first (see read_csv_points; `limits`: the physical ranges); on any
     problem InputError is raised and no file is created. The plan metadata names the source
     file and its SHA-256, and the legs the points hold. Values that look like a unit slip (degF
-    in a degC column, nm in the um column: procedures.io.plausibility) are imported with a warning
+    in a degC column, nm in the um column: procedures.metrology.plausibility) are imported with a warning
     line each in `warnings`; only a physically impossible one (an error larger than the travel the
     targets span) is refused the same way, unless `accept_implausible`.
 

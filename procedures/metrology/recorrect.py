@@ -39,7 +39,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from procedures.io.atomic import atomic_path
+from procedures.io.atomic_outputs import atomic_path
 from procedures.vocabulary import InputError
 from procedures.metrology import defaults as D
 from procedures.metrology.air import EQUATIONS, refractive_index

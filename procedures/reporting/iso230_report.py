@@ -1,8 +1,8 @@
 """The ISO 230-2 test report of a session: what the standard's report states, with the expanded
 uncertainty (k = 2) of every value (procedures.metrology.uncertainty). Part of `station report`
-(procedures.reporting.report.make_report writes it beside the other report files); docs/uncertainty.md.
+(procedures.reporting.session_report.make_report writes it beside the other report files); docs/uncertainty.md.
 
-Files, written atomically (procedures.io.atomic) into the report folder:
+Files, written atomically (procedures.io.atomic_outputs) into the report folder:
 - iso230-2.json   every figure: identification, environment, materials and NDE, test parameters,
                   compensation state, per leg and value {value_um, U_um} and the full budget,
                   U of each target's mean deviation (what a compensation table entry is made of)
@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from procedures.reporting import decision, iso230
-from procedures.io.atomic import atomic_path, write_bytes_atomic
+from procedures.io.atomic_outputs import atomic_path, write_bytes_atomic
 from procedures.metrology.uncertainty import K_COVERAGE, UncertaintyInputs, leg_budget, table_budget
 from procedures.io.recording.identity import SessionIdentity, calibration_warnings, identity_from_json, instrument_identity
 

@@ -5,7 +5,7 @@ names one. The files stay the records: the index can be rebuilt from them at any
 
 - models.py   the tables (SQLAlchemy 2); migrations/ their Alembic revisions
 - db.py       opening a catalog: engines, migration, refusal of a newer schema
-- identity.py tolerant reading of the identity a file carries
+- identity_reader.py tolerant reading of the identity a file carries
 - readers.py  a file's (or audit entry's) record
 - store.py    the local catalog, its backlog and forwarding to the shared one
 - files.py    scanning folders: index, rebuild, check

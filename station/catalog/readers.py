@@ -2,7 +2,7 @@
 report folder and audit entry, read from the file alone, so a record written as the station
 works and one rebuilt from the files later are equal.
 
-Identity comes from the file (station.catalog.identity); a record that names no station is
+Identity comes from the file (station.catalog.identity_reader); a record that names no station is
 given `default_station` (the station whose catalog indexes it, `[station] id`). A model
 or report that names no leg serials takes those of the session it was made from, when the
 catalog already holds it (`serials_of_source`).
@@ -20,7 +20,7 @@ from typing import Any, Callable, Iterator
 
 from procedures.io.recording import stage as stages
 from procedures.reporting import evaluation
-from station.catalog import identity as ident
+from station.catalog import identity_reader as ident
 from station.catalog.models import FIGURES
 
 SerialLookup = Callable[[str], dict[int, str]]

@@ -58,7 +58,7 @@ def station_config(args, interferometer: bool = False) -> StationConfig:
 
 
 def audit_log(args, cfg: StationConfig):
-    from station.services.identity import station_audit_log
+    from station.services.session_identity import station_audit_log
 
     return station_audit_log(cfg, getattr(args, "audit", None))
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from procedures.vocabulary import InputError
-from procedures.io.atomic import write_bytes_atomic  # never half a file
+from procedures.io.atomic_outputs import write_bytes_atomic  # never half a file
 
 if TYPE_CHECKING:
     from procedures.reporting import compare as cmp

@@ -8,7 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
-from procedures.io.atomic import write_text_atomic
+from procedures.io.atomic_outputs import write_text_atomic
 from procedures.reporting.decision import decision_lines
 from procedures.vocabulary import InputError
 from procedures.io.outputs import check_output_file

@@ -63,7 +63,7 @@ def query_audit(query: AuditQuery, cfg: Any = None) -> AuditAnswer:
     station's, a bad day or an operation id that names none or several."""
     from procedures.compensation.audit_view import find_operation, leg_states, parse_since, read_audit
     from station.services.config import LEG_COUNT, load_config
-    from station.services.identity import station_audit_log
+    from station.services.session_identity import station_audit_log
 
     q = query
     cfg = load_config(q.config) if cfg is None else cfg

@@ -27,7 +27,7 @@ from typing import Any
 from procedures.reporting import certificate, decision
 from procedures.vocabulary import InputError
 from procedures.io.recording.stage import AS_FOUND, AS_LEFT, stage_of_session
-from procedures.io.atomic import write_bytes_atomic  # the index is whole or old
+from procedures.io.atomic_outputs import write_bytes_atomic  # the index is whole or old
 from station.services.report_jobs import session_decisions
 
 COUNTER_NAME = "certificate-counter.json"

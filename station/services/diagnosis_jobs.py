@@ -180,7 +180,7 @@ class PreparedDiagnosis:
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         from procedures.diagnosis import to_json
-        from procedures.diagnosis.text_report import text_report
+        from procedures.diagnosis.diagnosis_text import text_report
 
         r = self.request
         report, temp_lines = diagnose_session(self.session, r.session, self.twin, self.settings)

@@ -26,7 +26,7 @@ from procedures.acquisition.sweep import RetryPolicy, sweep
 from station import __version__
 from station.catalog.writer import CatalogSink
 from station.services.config import StationConfig
-from station.services.identity import session_identity
+from station.services.session_identity import session_identity
 from station.services.wiring import Rig
 
 
@@ -127,7 +127,7 @@ def run_sweep(
 
     `serials`: leg -> identity fields entered for this session (--serial, the Sweep page), on
     top of `serials_file` / [station] serials_file and [legs.N] (station/services/serials.py). The session
-    records the identity (station/services/identity.py); the laser's calibration warnings are said at the
+    records the identity (station/services/session_identity.py); the laser's calibration warnings are said at the
     start of every session, a resumed one too.
 
     `confirm_compensated(question) -> bool`: asked before a leg whose compensation table is
@@ -309,7 +309,7 @@ class ReplayOutcome:
 
     result: RunResult
     mismatch: Exception | None
-    comparison: object | None  # procedures.io.replay_compare.Comparison
+    comparison: object | None  # procedures.acquisition.replay_compare.Comparison
 
 
 def replay_and_compare(source: Path, session: Session, out: Path, cfg: StationConfig, speed: float | None,
@@ -319,7 +319,7 @@ def replay_and_compare(source: Path, session: Session, out: Path, cfg: StationCo
     (None: as fast as possible), recording to `out`, and compare the two recordings: the job of
     `station replay` and of the terminal UI's Replay page. `on_rig_opened(rig)` is told the
     replay rig once it runs (the UI keeps it)."""
-    from procedures.io.replay_compare import compare_sessions
+    from procedures.acquisition.replay_compare import compare_sessions
     from station.services.wiring import open_replay_rig
 
     with open_replay_rig(source, speed, cfg) as rig:

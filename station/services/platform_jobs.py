@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from procedures.io.atomic import atomic_folder, write_text_atomic
+from procedures.io.atomic_outputs import atomic_folder, write_text_atomic
 from procedures.vocabulary import InputError
 
 REPORT_MD = "platform_report.md"
@@ -66,7 +66,7 @@ def check_model_legs(model, name) -> None:
 def recording_error(session, *, model=None, raw: bool = False, model_name: str = "the model") -> tuple[object, dict]:
     """The recording's points with `error_um` on the compensation's basis (module docstring) and
     that basis as JSON ({"basis": "normalised"|"raw", "lines": [what the commands print], ...})."""
-    from procedures.reporting.report import report_basis
+    from procedures.reporting.session_report import report_basis
 
     points, _, basis = report_basis(session.points, getattr(session, "station_config", None), model, raw,
                                     model_name=model_name)
@@ -155,7 +155,7 @@ def load_errors(source, *, recording=None, measured: str | None = None,
 
         model = load_model(src)
         check_model_legs(model, src)
-        from procedures.reporting.report import basis_is_raw
+        from procedures.reporting.session_report import basis_is_raw
 
         basis_is_raw(model, raw, model_name=str(src))  # refuse a basis mismatch before reading the recording
         session, rec_path, held_out = _recording_for_model(src, model, recording)
@@ -222,7 +222,7 @@ def write_report(out: Path, result, summary: dict, inputs: dict, geometry) -> li
     and conventions, and write platform_report.md, platform_summary.json and the histograms into
     `out` (created). Returns the paths written: report, summary, figures."""
     from procedures.platform.geometry import describe
-    from procedures.platform.report import report_markdown
+    from procedures.platform.platform_markdown import report_markdown
     from procedures.platform.sensitivity import sensitivity_report
 
     home = sensitivity_report(geometry, geometry.home_pose_mm_rad)
@@ -302,13 +302,13 @@ class PlatformRun:
 
     def pose_rows(self) -> list[tuple[str, list[str]]]:
         """The paper's Table 2: (measure, cells per component)."""
-        from procedures.platform.report import pose_table_rows
+        from procedures.platform.platform_markdown import pose_table_rows
 
         return list(pose_table_rows(self.summary))
 
     def dominant(self, stage: str, k: int) -> str:
         """The leg dominating component `k` "original" or "compensated", in words."""
-        from procedures.platform.report import dominant_text
+        from procedures.platform.platform_markdown import dominant_text
 
         return dominant_text(self.summary["dominant_leg"][stage][k])
 
@@ -441,7 +441,7 @@ def write_platform_report(run: PlatformRun, out: Path) -> list[Path]:
 def platform_lines(run: PlatformRun) -> list[str]:
     """What `station platform` prints of a run: files read without their integrity record, the
     error basis, the measurement, Table 2, the reductions, the poses used and the files written."""
-    from procedures.platform.report import pose_table_markdown, reduction_lines
+    from procedures.platform.platform_markdown import pose_table_markdown, reduction_lines
 
     inputs, summary = run.inputs, run.summary
     lines = []

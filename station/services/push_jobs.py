@@ -54,9 +54,9 @@ class RollbackRequest:
 
 
 def accept_override(how: str | None, kept: str | None = None):
-    """How a front end lets its user accept implausible values (procedures.io.plausibility.Override):
+    """How a front end lets its user accept implausible values (procedures.metrology.plausibility.Override):
     `how` the refusal says to do it, `kept` what kept them; None: the command line's option."""
-    from procedures.io.plausibility import Override
+    from procedures.metrology.plausibility import Override
 
     return Override() if how is None else Override(how=how, kept=kept or how)
 
@@ -132,7 +132,7 @@ class PreparedTableOperation:
 
     def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
         from station.catalog.writer import catalog_for
-        from station.services.identity import configured_serials
+        from station.services.session_identity import configured_serials
         from station.services.table_jobs import push_job, push_legs_job, rollback_job
 
         catalog = catalog_for(self.cfg)
@@ -195,9 +195,9 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
     """A PreparedRefusal (refused before any drive: the legs, the table file, a controller
     target, values that look like a unit slip, against what each leg's holder takes by the
     config) or a PreparedTableOperation whose `lines` say what was accepted and where it goes."""
-    from procedures.io.plausibility import ImplausibleError
+    from procedures.metrology.plausibility import ImplausibleError
     from station.services.devices import DriverError
-    from station.services.identity import station_audit_log
+    from station.services.session_identity import station_audit_log
     from station.services.table_jobs import check_push_values, controller_refusal, load_leg_table, \
         unverified_table_line
 
@@ -247,7 +247,7 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
 def prepare_rollback(request: RollbackRequest, cfg: StationConfig):
     """A PreparedRefusal (a leg this station does not have, a controller target) or the rollback."""
     from station.services.config import LEG_COUNT
-    from station.services.identity import station_audit_log
+    from station.services.session_identity import station_audit_log
     from station.services.table_jobs import controller_refusal
 
     audit = station_audit_log(cfg, request.audit)

@@ -11,7 +11,7 @@ from procedures.reporting import evaluation
 from procedures.io.csv_io import ExportSummary
 from procedures.reporting.decision import NO_TOLERANCE, decision_lines
 from procedures.vocabulary import InputError
-from procedures.reporting.report import ReportResult, make_report
+from procedures.reporting.session_report import ReportResult, make_report
 from station.catalog.writer import register
 
 

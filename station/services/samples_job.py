@@ -32,7 +32,7 @@ class PreparedSamples:
     lines: list[str] = field(default_factory=list)
 
     def run(self, sinks=(), control=None) -> JobOutcome:
-        from procedures.io.atomic import atomic_paths
+        from procedures.io.atomic_outputs import atomic_paths
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
         # made under temporary names and renamed at the end: a failed run leaves the old samples

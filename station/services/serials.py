@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Iterable, Mapping
 
 from procedures.vocabulary import InputError
-from procedures.io.atomic import write_text_atomic
+from procedures.io.atomic_outputs import write_text_atomic
 from procedures.io.integrity import (
     UNVERIFIED,
     VERIFIED,

@@ -223,7 +223,7 @@ def prepare_sweep(request: SweepRequest, cfg: StationConfig, rig: Any = None) ->
     [limits] and built (unless `build_in_run`), and one the configured laser can measure.
     `rig`: the connected rig, when the front end holds one (the UI). InputError otherwise."""
     from procedures.io.outputs import check_appendable, check_output_file
-    from station.services.identity import leg_fields
+    from station.services.session_identity import leg_fields
     from station.services.laser_wiring import check_plan_for_laser
     from station.services.serials import serials_unverified_line
 

@@ -139,7 +139,7 @@ def prepare_table(request: TableRequest, cfg: Any = None) -> PreparedTable:
     from procedures.fit import load_model
     from procedures.fit.model_io import unverified_model_line
     from procedures.io.outputs import check_output_file
-    from procedures.io.plausibility import ImplausibleError
+    from procedures.metrology.plausibility import ImplausibleError
     from station.services.table_jobs import make_checked_table
     from station.services.wiring import drive_table_spec
 

@@ -5,7 +5,7 @@ sink (the only writer of the audit log) and the front end's own sinks, and retur
 it. The command line and the terminal UI differ only in how they ask for confirmation and how
 they show the events, so they give the same refusals, audit lines and figures.
 
-The unit-slip checks (procedures.io.plausibility) are made here too: a table correcting more than
+The unit-slip checks (procedures.metrology.plausibility) are made here too: a table correcting more than
 the error it was made from (`make_checked_table`) and a push of corrections beyond 100 um, most
 likely nm (`push_job`, `push_legs_job`, before anything reaches a drive), are refused unless the
 front end passes `accept_implausible=True` (the command line's --accept-implausible, the UI's
@@ -44,7 +44,7 @@ from procedures.compensation.push import (
     rollback_procedure,
     table_sha256,
 )
-from procedures.io.plausibility import (
+from procedures.metrology.plausibility import (
     Implausible,
     ImplausibleError,
     Override,
@@ -72,7 +72,7 @@ from station import __version__
 from station.catalog.store import LOCAL_NAME, Catalog
 from station.catalog.writer import CatalogSink, catalog_for, enabled, register
 from station.services.config import LEG_COUNT, StationConfig
-from station.services.identity import session_identity
+from station.services.session_identity import session_identity
 from station.services.job import JobOutcome  # the one outcome of every job
 from station.services.wiring import Rig
 
@@ -278,7 +278,7 @@ def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegT
 
 def implausible_corrections(model, table: CompTable) -> list[Implausible]:
     """The legs of `table` whose corrections span more than the error `model` was fitted to
-    (procedures.io.plausibility.check_correction)."""
+    (procedures.metrology.plausibility.check_correction)."""
     source = model.source.get("path") or "the model's recording"
     found = []
     for leg, t in table.legs.items():

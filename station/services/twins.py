@@ -119,7 +119,7 @@ def fleet_twin(leg_type: str, session, path, engine):
     from procedures.metrology.thermal import normalise_session
     from procedures.io.recording.reader import read_session
     from station.catalog.fleet import completed_sessions_of_type, latest_per_serial
-    from station.catalog.identity import legs_of
+    from station.catalog.identity_reader import legs_of
     from station.catalog.readers import session_identity
 
     ids = legs_of(session_identity(path)) if path is not None else {}

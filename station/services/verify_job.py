@@ -238,7 +238,7 @@ def prepare_verify(request: VerifyRequest, cfg: StationConfig) -> PreparedVerify
     table. InputError otherwise."""
     from procedures.io.outputs import check_output_file
     from procedures.io.recording.reader import read_session
-    from station.services.identity import station_audit_log
+    from station.services.session_identity import station_audit_log
     from station.services.sweep_job import check_time_scale
     from station.services.table_jobs import controller_refusal, expected_tables, refusal_job
     from station.services.wiring import drive_url_of, leg_table_spec

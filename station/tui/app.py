@@ -45,7 +45,7 @@ from station.services.rig_session import (
 from station.services.sweep_job import OutputExists, SweepRequest, prepare_sweep
 from station.services.sessions import replay_output_path
 from station.tui.bridge import SweepEnded, SweepEvent, TuiBridge
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.messages import (
     Notice,
     ReplayRigOpened,

@@ -1,4 +1,4 @@
-"""Fuzzing the catalog's readers (station/catalog/readers.py, identity.py): a session identity,
+"""Fuzzing the catalog's readers (station/catalog/readers.py, identity_reader.py): a session identity,
 a model, a report's iso230-2.json, a table CSV and an audit line, valid ones damaged at any depth,
 cut short or with bytes flipped, and arbitrary bytes.
 Property: a record or None (not a record of that kind), never an exception; and every record
@@ -14,7 +14,7 @@ from pathlib import Path
 import sqlalchemy as sa
 from hypothesis import example, given, settings, strategies as st
 
-from station.catalog import db, identity, readers
+from station.catalog import db, identity_reader, readers
 from station.catalog.store import write_recs
 from tests.fuzz.budget import examples, fed
 from tests.fuzz.jsondamage import damaged_json, json_value
@@ -121,7 +121,7 @@ def test_audit_reader_fuzzed(data):
 @given(_any(IDENTITY))
 @example(json.dumps({"legs": {"1": {"serial": 10**400}}}).encode())
 def test_identity_reader_fuzzed(data):
-    ident = identity.parse_identity(data)
+    ident = identity_reader.parse_identity(data)
     rec = readers.Rec(kind="session", key="x" * 64, time_utc="2026-01-01T00:00:00Z")
     readers._apply_identity(rec, ident)
     fed("catalog: identity", refused=not rec.legs)

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from drivers.plant.leg import default_leg_configs
-from procedures.diagnosis.text_report import text_report
+from procedures.diagnosis.diagnosis_text import text_report
 from procedures.io.recording.reader import read_session
 from station.services.diagnosis_jobs import diagnose_session
 from procedures.synthetic import synth_session

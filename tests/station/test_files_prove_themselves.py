@@ -377,7 +377,7 @@ def test_a_serials_list_proves_itself(tmp_path):
 
 def test_both_front_ends_refuse_a_model_worse_on_held_out_data_unless_accepted(worse_model):
     """The service the CLI and the UI's Compensation page ("Make anyway") make tables through."""
-    from procedures.io.plausibility import ImplausibleError
+    from procedures.metrology.plausibility import ImplausibleError
     from station.services.table_jobs import make_checked_table
 
     model = load_model(worse_model)

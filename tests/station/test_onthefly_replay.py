@@ -12,7 +12,7 @@ from procedures.acquisition.plans import onthefly_plan
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE, FLAG_REPLAYED
 from station.services.samples import open_sample_rig
-from procedures.io.replay_compare import compare_sessions
+from procedures.acquisition.replay_compare import compare_sessions
 from station.services.jobs import replay_sweep
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep

@@ -13,12 +13,12 @@ import pytest
 from procedures.compensation.audit import read_entries
 from procedures.compensation.push import table_sha256
 from procedures.compensation.table import write_table_csv
-from procedures.io.plausibility import ImplausibleError, Override
+from procedures.metrology.plausibility import ImplausibleError, Override
 from procedures.io.recording.reader import read_session
 from station.cli import main
 from station.services.analysis import analyse_session
 from station.services.config import StationConfig
-from station.services.identity import station_audit_log
+from station.services.session_identity import station_audit_log
 from station.services.table_jobs import load_leg_table, make_checked_table, push_job, push_legs_job
 from station.services.wiring import open_drive
 from tests.tooling import slipped_model

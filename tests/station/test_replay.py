@@ -29,7 +29,7 @@ from procedures.engine.runner import CallbackSink
 from procedures.compensation.table import make_table, table_csv_text
 from station.cli import main
 from station.services.samples import FAULT_AFTER_INDEX, FAULT_LEG, FILES, open_sample_rig
-from procedures.io.replay_compare import compare_sessions
+from procedures.acquisition.replay_compare import compare_sessions
 from station.commands.replay import parse_speed
 from station.services.jobs import replay_sweep, retry_policy_of
 from station.services.config import StationConfig

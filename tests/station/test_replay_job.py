@@ -1,5 +1,5 @@
 """The replay job lives with the other jobs both front ends start (station.services.jobs), the comparison
-with the recording in procedures.io.replay_compare; `station replay` uses the same objects."""
+with the recording in procedures.acquisition.replay_compare; `station replay` uses the same objects."""
 
 import argparse
 
@@ -15,7 +15,7 @@ def test_the_command_uses_the_shared_job_and_comparison():
     # by its imports (inside run(): `station replay --help` loads neither), and no copy of its own
     assert imported_names("station.commands.replay")["prepare_replay"] == "station.services.replay_job.prepare_replay"
     assert imported_names("station.services.replay_job")["replay_and_compare"] == "station.services.jobs.replay_and_compare"
-    assert imported_names("station.services.jobs")["compare_sessions"] == "procedures.io.replay_compare.compare_sessions"
+    assert imported_names("station.services.jobs")["compare_sessions"] == "procedures.acquisition.replay_compare.compare_sessions"
     for name in ("replay_and_compare", "replay_sweep", "retry_policy_of", "compare_sessions", "Comparison"):
         assert not defines("station.commands.replay", name)
 

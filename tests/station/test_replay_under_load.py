@@ -3,7 +3,7 @@ however busy the machine is (every time_s equal), because no wall-clock timeout 
 request the replay devices answer, and a query answered again does not move the replay clock.
 
 The samples are replayed as `station replay` does (station.services.wiring.open_replay_rig, the replay job
-station.services.jobs.replay_sweep, procedures.io.replay_compare.compare_sessions), over the real Modbus TCP
+station.services.jobs.replay_sweep, procedures.acquisition.replay_compare.compare_sessions), over the real Modbus TCP
 and serial pty clients. The CPU-load test is statistical (it cannot fail on a correct replay, and
 a wall-clock leak makes it fail sometimes); the late-reply test makes the devices answer late on
 purpose, so it fails every time a timeout would fire on a replay."""
@@ -22,7 +22,7 @@ import pytest
 from procedures.engine import events as ev
 from procedures.acquisition.plans import iso230_plan
 from procedures.io.recording.reader import read_session
-from procedures.io.replay_compare import compare_sessions
+from procedures.acquisition.replay_compare import compare_sessions
 from procedures.engine.runner import CallbackSink
 from station.services.samples import FILES, open_sample_rig
 from station.services.config import StationConfig

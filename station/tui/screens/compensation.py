@@ -6,7 +6,7 @@ Tables are made by station.services.table_jobs.make_checked_table (the same as `
 are measured minus commanded, um, which the drive subtracts. Push, verify and rollback run the
 jobs of station.services.table_jobs through the controller (compensation_controller), exactly as the
 command line does: the same procedures, refusals and audit entries. A table or push the service
-refuses as a likely unit slip (procedures.io.plausibility) is said on the page; a confirmation
+refuses as a likely unit slip (procedures.metrology.plausibility) is said on the page; a confirmation
 dialog then lets the user accept it (the command line's --accept-implausible).
 """
 
@@ -19,7 +19,7 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.widgets import Button, DataTable, Input, Label, Static
 
 from station import values
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.fields import ValueField
 from station.tui.screens.common import ConfirmScreen, FieldRefusal, StationScreen
 from station.tui.screens.compensation_controller import (
@@ -126,7 +126,7 @@ class CompensationScreen(StationScreen):
         return drive_table_spec(self.app.cfg.drive.profile or None)
 
     def action_make_table(self, accept_implausible: bool = False) -> None:
-        from procedures.io.plausibility import ImplausibleError
+        from procedures.metrology.plausibility import ImplausibleError
         from station.services.push_jobs import accept_override
         from station.services.table_jobs import make_checked_table
 

@@ -14,7 +14,7 @@ from textual.message import Message
 from station.services.config import StationConfig
 from station.services.push_jobs import PUSH, ROLLBACK, PushRequest, RollbackRequest, plan_lines, prepare_push, \
     prepare_rollback
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.messages import Notice
 from station.tui.screens.common import ConfirmScreen
 from station.tui.screens.compensation_widgets import DriveTable
@@ -89,7 +89,7 @@ class CompensationController:
 
     def audit(self):
         """The audit log `station push/rollback/verify` use: <recordings_dir>/audit.jsonl."""
-        from station.services.identity import station_audit_log
+        from station.services.session_identity import station_audit_log
 
         return station_audit_log(self.app.cfg)
 

@@ -25,7 +25,7 @@ from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, Select, Static
 
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.screens.common import StationScreen
 from station.tui.widgets import SessionPicker, sample_folders, XYPlot
 

@@ -15,7 +15,7 @@ from textual.widgets import Button, DataTable, Input, Label, Static
 
 from station.catalog.history import History, history, parse_utc, row_detail, value_with_u
 from station.catalog.store import catalog_of, reading_engine
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.screens.common import StationScreen
 from station.tui.widgets import XYPlot
 

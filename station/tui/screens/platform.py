@@ -25,7 +25,7 @@ from procedures.vocabulary import InputError
 from station import values
 from station.services.platform_jobs import COMPONENTS, PlatformRequest, PlatformRun, prepare_platform, \
     write_platform_report
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.screens.common import FieldRefusal, StationScreen
 from station.tui.widgets import XYPlot, columns_fit, set_columns

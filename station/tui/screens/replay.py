@@ -22,7 +22,7 @@ from textual.widgets import Button, DataTable, Input, Label, Static
 
 from procedures.vocabulary import InputError
 from station.tui import capabilities
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.screens.common import FieldRefusal, StationScreen
 from station.tui.widgets import SessionPicker, fit_columns, sample_folders

@@ -33,7 +33,7 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Label, Select, Static
 
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.screens.common import StationScreen
 from station.tui.widgets import SessionPicker, XYPlot, fit_columns, output_folder
 

@@ -29,7 +29,7 @@ from textual.widgets import Button, DataTable, Input, Label, Select, Static
 from station.services.devices import DriveLimits, DriveStatus, Environment, Reading
 from procedures.vocabulary import InputError
 from station import values
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.fields import ValueField
 from station.tui.messages import RigStateChanged, SweepChanged
 from station.tui.screens.common import ConfirmScreen, StationScreen

@@ -21,7 +21,7 @@ from station import values as V
 from station.services.sweep_job import DEFAULT_CYCLES, SweepRequest, SweepSize, build_plan_of, estimate, plan_spec_of
 from station.progress import fmt_duration
 from station import values
-from station.tui.errors import describe
+from station.tui.error_text import describe
 from station.tui.fields import FIELD_KINDS, ValueField
 from station.tui.messages import SweepChanged
 from station.tui.screens.common import ConfirmScreen, StationScreen
@@ -141,7 +141,7 @@ class SweepScreen(StationScreen):
     def serials(self, legs) -> dict[int, dict[str, str]]:
         """The Serials field as `station sweep --serial` takes it (InputError naming what is
         wrong); a serial for a leg the plan does not sweep is refused."""
-        from station.services.identity import leg_fields
+        from station.services.session_identity import leg_fields
         from station.services.serials import parse_serial_args
 
         entered = parse_serial_args(self.query_one("#serials", Input).value.replace(",", " ").split())

@@ -10,7 +10,7 @@ import numpy as np
 
 from drivers.plant.leg import default_leg_configs
 from procedures.diagnosis import DiagnosisSettings, diagnose
-from procedures.diagnosis.text_report import text_report
+from procedures.diagnosis.diagnosis_text import text_report
 from procedures.synthetic import synth_session
 
 BASE = frozenset({"lead", "longwave", "wobble", "noise", "run_offset"})

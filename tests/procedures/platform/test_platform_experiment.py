@@ -20,7 +20,7 @@ from procedures.platform.experiment import (
 )
 from procedures.platform.geometry import default_geometry
 from procedures.platform.kinematics import FkStatus, forward_kinematics, in_stroke, inverse_kinematics, length_jacobian
-from procedures.platform.report import report_markdown
+from procedures.platform.platform_markdown import report_markdown
 from procedures.platform.sensitivity import (
     ARCSEC_PER_RAD,
     dominant_legs,

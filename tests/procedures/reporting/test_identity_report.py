@@ -20,7 +20,7 @@ from procedures.io.recording.identity import (
     StationIdentity,
     instrument_identity,
 )
-from procedures.reporting.report import make_report
+from procedures.reporting.session_report import make_report
 from procedures.synthetic import synth_session
 
 PLAN = plans.iso230_plan(legs=(1, 2))

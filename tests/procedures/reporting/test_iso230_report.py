@@ -17,7 +17,7 @@ from procedures.reporting import iso230
 from procedures.acquisition import plans
 from procedures.metrology.thermal import normalise_points, Material
 from procedures.metrology.uncertainty import UncertaintyInputs, leg_budget
-from procedures.reporting.report import make_report
+from procedures.reporting.session_report import make_report
 from procedures.synthetic import synth_session
 
 PLAN = plans.iso230_plan(legs=(1, 2))

@@ -11,7 +11,7 @@ from drivers.plant.leg import PlantConfig
 from procedures.synthetic import synth_session
 from procedures.vocabulary import InputError
 from procedures.fit import fit
-from procedures.reporting.report import make_report
+from procedures.reporting.session_report import make_report
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -1,4 +1,4 @@
-"""procedures.io.atomic: files and folders appear whole or not at all, honour the umask, and a place
+"""procedures.io.atomic_outputs: files and folders appear whole or not at all, honour the umask, and a place
 that cannot be written gives one WriteError (an InputError) naming it, leaving nothing behind."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from procedures.io.atomic import (WriteError, atomic_folder, atomic_path, write_bytes_atomic,
-                               write_files_atomic, write_text_atomic)
+from procedures.io.atomic_outputs import (WriteError, atomic_folder, atomic_path, write_bytes_atomic,
+                                         write_files_atomic, write_text_atomic)
 from procedures.vocabulary import InputError
 
 ROOT = os.geteuid() == 0
@@ -68,7 +68,7 @@ def test_replacing_keeps_the_old_file_until_the_new_one_is_complete(tmp_path):
 READ_ONLY_CHECK = """
 import sys
 from pathlib import Path
-from procedures.io.atomic import WriteError, atomic_folder, write_files_atomic, write_text_atomic
+from procedures.io.atomic_outputs import WriteError, atomic_folder, write_files_atomic, write_text_atomic
 from procedures.vocabulary import InputError
 
 folder = Path(sys.argv[1])

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from procedures.io.atomic import atomic_folder, write_text_atomic
+from procedures.io.atomic_outputs import atomic_folder, write_text_atomic
 from procedures.vocabulary import InputError
 from procedures.fit import LegErrorModel, fit
 from procedures.fit.bidirectional import MIN_POINTS_PER_WAVE, pair_amplitudes
