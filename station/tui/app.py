@@ -511,10 +511,10 @@ class StationApp(App):
                        idle: threading.Event) -> None:
         outcome, points, error, note = "error", 0, "", ""
         try:
-            from procedures.io.recording.reader import read_session
             from station.services.jobs import replay_and_compare
+            from station.services.replay_job import read_recording
 
-            session = read_session(source)
+            session = read_recording(source).session
             if not session.plan:
                 raise ValueError(f"{source.name}: the session stores no sweep plan, so there is nothing to replay")
             # the app keeps the replay rig as replay_rig (tests look at its devices)

@@ -33,7 +33,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from procedures.io.recording.stage import AS_FOUND, AS_LEFT
 from station.catalog.history import history, legs, parse_utc
 from station.services.serials import SERIAL_RULE, is_serial
-from station.web import queries, svg
+from station.catalog import queries  # the fleet's catalog readers beyond history and legs
+from station.web import svg
 from station.web.extensions import CHART_FIGURES, certificates_of
 
 log = logging.getLogger(__name__)
