@@ -418,7 +418,7 @@ class ResultsScreen(StationScreen):
         try:
             from station.services.csv_jobs import ExportRequest, prepare_export
 
-            lines = prepare_export(ExportRequest(session_path, out, make_parents=True)).run().lines
+            lines = self.app.jobs.run(prepare_export(ExportRequest(session_path, out, make_parents=True))).lines
         except Exception as exc:
             self.post_message(FilesWritten("Export CSV", "", describe(exc, f"cannot export {session_path.name}")))
             return
