@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from procedures.reporting import evaluation
 from procedures.io.csv_io import ExportSummary
@@ -142,6 +143,10 @@ class PreparedReport:
     needs_rig: bool = False
     question: str | None = None
     lines: list[str] = field(default_factory=list)
+    # what a page has read already (prepare_session_report): the Session, the model on show, the config
+    session: Any = None
+    model: Any = None
+    cfg: Any = None
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         from procedures.fit import load_model
@@ -150,10 +155,11 @@ class PreparedReport:
         from station.services.config import load_config
 
         r = self.request
-        session = read_session(r.session)
-        model = load_model(r.model) if r.model else None
+        session = self.session if self.session is not None else read_session(r.session)
+        model = self.model if self.model is not None else (load_model(r.model) if r.model else None)
+        cfg = self.cfg if self.cfg is not None else load_config(r.config)
         result = session_report(session, r.out, model, lead_mm=r.lead_mm, raw=r.raw, model_name=r.model or "",
-                                catalog=catalog_for(load_config(r.config)))
+                                catalog=catalog_for(cfg))
         return JobOutcome("done", outputs=[Path(f) for f in result.files], lines=report_lines(result, model),
                           data=result)
 
@@ -165,3 +171,12 @@ def prepare_report(request: ReportRequest) -> PreparedReport:
 
     check_output_folder(request.out, force=request.force)
     return PreparedReport(request)
+
+
+def prepare_session_report(session, model, out: Path, cfg) -> PreparedReport:
+    """The report `station report SESSION --out OUT --model MODEL.json` writes, of the `session`
+    (procedures.io.recording.reader.Session) already read with the `model` on show, indexed in
+    the catalog of station config `cfg` (the UI's Results page, `r`; the page keeps an existing
+    folder that holds a report, so nothing is refused here). The outcome's "note:" lines are what
+    the page says beside the files."""
+    return PreparedReport(ReportRequest(Path(session.path), Path(out)), session=session, model=model, cfg=cfg)
