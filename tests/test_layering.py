@@ -378,51 +378,43 @@ def test_no_private_name_is_imported_across_packages():
 # -- front ends reach procedures through services ---------------------------------------------------
 FRONT_ENDS = ("station/commands", "station/tui", "station/web")
 
-FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {
-    "station/commands/compare.py": {"procedures.io.atomic_outputs", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting"},
-    "station/commands/iso230.py": {"procedures.io.atomic_outputs", "procedures.io.outputs", "procedures.io.recording.reader", "procedures.reporting.decision", "procedures.reporting.iso230"},
-    "station/commands/report.py": {"procedures.fit", "procedures.io.outputs", "procedures.io.recording.reader"},
-    "station/tui/app.py": {"procedures.io.recording.reader"},
-    "station/tui/bridge.py": {"procedures.engine"},
-    "station/tui/screens/compensation.py": {"procedures.metrology.plausibility"},
-    "station/tui/state.py": {"procedures.engine"},
-    "station/web/extensions.py": {"procedures.reporting.decision"},
-    "station/web/queries.py": {"procedures.reporting"},
-}
-"""The procedures modules each front-end file still imports directly: 144 module imports in 36
-files on main before issue 32's parts 5 and 6, 140 after. The rule is that a front end reaches
-procedures only through station/services; this list is what is left to move behind them. It may
-only shrink: a new direct import fails, and so does an entry no longer needed (delete it from here)."""
+FRONT_END_PROCEDURES_ALLOWED: dict[str, set[str]] = {}
+"""Empty, and the rule is absolute: a front end (station/commands, station/tui, station/web) reaches
+procedures only through station/services (or the catalog's readers, station/catalog), naming
+nothing of procedures beyond SHARED_VOCABULARY. The list held 144 module imports in 36 files on
+main before issue 32's parts 5 and 6 and was emptied by part 1 (the jobs in station/services);
+it stays empty: a new direct import fails."""
 
 
-SHARED_VOCABULARY = {"procedures.vocabulary", "procedures.io.recording.stage"}
+SHARED_VOCABULARY = {"procedures.vocabulary", "procedures.io.recording.stage", "procedures.engine.events"}
 """What every layer may name: the input errors every front end raises and catches, how an operation
-ended (procedures/vocabulary.py), and the stages
-of a leg's life every view asks for (issue 32: the shared vocabulary in small modules)."""
+ended (procedures/vocabulary.py), the stages of a leg's life every view asks for (issue 32: the
+shared vocabulary in small modules), and the events a procedure yields (procedures/engine/events.py).
+The events are the contract between the procedures and every front end, not a procedure's
+internals: the runner hands each one to the sinks (the recorder, the TUI's bridge and state, the
+CLI's printer) as the procedure yielded it, and a front end only presents them; a service
+translating them into its own types would be a second copy of the same contract."""
 
 
-def front_end_procedures_imports() -> dict[str, set[str]]:
-    """File of a front end -> the procedures modules it imports (anywhere in the file)."""
+def front_end_procedures_imports(shared: set[str] = SHARED_VOCABULARY) -> dict[str, set[str]]:
+    """File of a front end -> the procedures modules it imports (anywhere in the file) beyond `shared`."""
     out: dict[str, set[str]] = {}
     for front in FRONT_ENDS:
         for path in sorted((REPO / front).rglob("*.py")):
             module = ".".join(path.relative_to(REPO).with_suffix("").parts)
             mods = {m for m in imported_modules(path.read_text(), module)
-                    if m.split(".")[0] == "procedures" and m not in SHARED_VOCABULARY}
+                    if m.split(".")[0] == "procedures" and m not in shared}
             if mods:
                 out[str(path.relative_to(REPO))] = mods
     return out
 
 
-def test_front_ends_reach_procedures_only_through_services_or_the_shrinking_list():
+def test_front_ends_reach_procedures_only_through_services():
     found = front_end_procedures_imports()
-    new = [f"{f}: imports {m}" for f, mods in sorted(found.items())
-           for m in sorted(mods - FRONT_END_PROCEDURES_ALLOWED.get(f, set()))]
-    gone = [f"{f}: {m}" for f, mods in sorted(FRONT_END_PROCEDURES_ALLOWED.items())
-            for m in sorted(mods - found.get(f, set()))]
-    assert not new, "a front end imports procedures directly (go through station/services):\n" + "\n".join(new)
-    assert not gone, ("no longer imported: delete from FRONT_END_PROCEDURES_ALLOWED (the list only shrinks):\n"
-                      + "\n".join(gone))
+    new = [f"{f}: imports {m}" for f, mods in sorted(found.items()) for m in sorted(mods)]
+    assert not FRONT_END_PROCEDURES_ALLOWED, "the list stays empty: move the import behind station/services"
+    assert not new, ("a front end imports procedures directly (go through station/services; only "
+                     "SHARED_VOCABULARY may be named):\n" + "\n".join(new))
 
 
 def test_the_new_checks_see_what_they_check():
@@ -430,6 +422,7 @@ def test_the_new_checks_see_what_they_check():
     in_function = "def run(args):\n    from procedures.fit import fit\n"
     assert "procedures.compensation.push" in imported_modules(type_only, "station.commands.x")
     assert "procedures.fit" in imported_modules(in_function, "station.commands.x")
-    found = front_end_procedures_imports()  # reads the front ends
+    found = front_end_procedures_imports(shared=set())  # reads the front ends: they name the vocabulary
     assert found and all(f.startswith(FRONT_ENDS) for f in found)
+    assert set().union(*found.values()) <= SHARED_VOCABULARY
     assert "procedures.engine" in imported_modules("from procedures.engine import events as ev", "station.tui.state")

@@ -31,8 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from station.catalog import db  # noqa: PLC0415
-    from station.catalog.certificates import issued  # noqa: PLC0415
-    from station.catalog.store import catalog_of, reading_engine  # noqa: PLC0415
+    from station.services.fleet_queries import CatalogReading, issued_certificates, open_catalog  # noqa: PLC0415
 
     cfg = load_config(args.config)
     if args.serial:
@@ -44,10 +43,12 @@ def run(args) -> int:
             from station.web.engine import catalog_url, open_readonly  # noqa: PLC0415
 
             url = catalog_url(args.catalog)
-            engine, where = open_readonly(url, cfg.catalog.connect_timeout_s), f"catalog: {db.describe(url)}"
+            reading = CatalogReading(open_readonly(url, cfg.catalog.connect_timeout_s), f"catalog: {db.describe(url)}",
+                                     cfg)
         else:
-            engine, where = reading_engine(catalog_of(cfg), args.local)
-        rows = issued(engine, args.serial)
+            reading = open_catalog(cfg, args.local)
+        where = reading.where
+        rows = issued_certificates(reading, args.serial)
     except db.CatalogUnreachable as exc:
         raise InputError(f"{exc}; give --catalog with a reachable catalog (or --local)") from None
     if args.json:

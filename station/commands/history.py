@@ -27,17 +27,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from procedures.vocabulary import InputError
-    from station.catalog.history import history, row_detail, stage_label, value_with_u
-    from station.catalog.store import catalog_of, reading_engine
+    from station.catalog.history import row_detail, stage_label, value_with_u
     from station.services.config import load_config
+    from station.services.fleet_queries import leg_history, open_catalog
 
     cfg = load_config(args.config)
-    engine, where = reading_engine(catalog_of(cfg), args.local)
-    h = history(engine, args.serial, cfg.catalog.calibration_interval_days, cfg.catalog.min_drift_interval_days)
-    if not h.rows:  # a serial the catalog never saw: a typo, refused as `station legs --type NOPE` is (exit 2)
-        raise InputError(f"{args.serial}: no records of a leg with this serial in the catalog ({where}); "
-                         "`station legs` lists the serials it knows")
+    reading = open_catalog(cfg, args.local)
+    where = reading.where
+    h = leg_history(reading, args.serial)  # a serial the catalog never saw: refused (exit 2)
     if args.json:
         print(json.dumps(h.to_json(), indent=2))
         return 0

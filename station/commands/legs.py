@@ -5,11 +5,8 @@ from __future__ import annotations
 from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
-import datetime as dt
 import json
 from dataclasses import asdict
-
-from procedures.vocabulary import InputError
 
 NAME = "legs"
 HELP = "list legs by serial with last calibration and due date (filters: type, station, dates, due)"
@@ -32,35 +29,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print JSON")
 
 
-def _refuse_unknown(engine, where: str, args, interval_days: int) -> None:
-    """A --type or --station the catalog has never seen is a typo, not an empty answer: refused in
-    one line (exit 2) naming the known ones, as `station history` refuses an unknown serial and the
-    web view answers 400. A known one that matches nothing with the other filters lists 0 legs."""
-    from station.catalog.history import legs
-
-    every = legs(engine, interval_days=interval_days)
-    for given, name, option, of in ((args.leg_type, "type", "--type", lambda r: r.leg_type),
-                                    (args.station, "station", "--station", lambda r: r.station_id)):
-        known = sorted({of(r) for r in every if of(r)})
-        if given and given not in known:
-            raise InputError(f"{option} {given}: no leg of this {name} in the catalog ({where}); known: "
-                             f"{', '.join(known) or 'none'}")
-
-
 def run(args) -> int:
-    from station.catalog.history import legs
-    from station.catalog.store import catalog_of, reading_engine
     from station.services.config import load_config
+    from station.services.fleet_queries import listed_legs, open_catalog
 
     cfg = load_config(args.config)
-    due = args.due
-    if due == "today":
-        due = dt.date.today().isoformat()
-    engine, where = reading_engine(catalog_of(cfg), args.local)
-    rows = legs(engine, leg_type=args.leg_type, station=args.station, since=args.since, until=args.until, due_by=due,
-                interval_days=cfg.catalog.calibration_interval_days)
-    if not rows and (args.leg_type or args.station):
-        _refuse_unknown(engine, where, args, cfg.catalog.calibration_interval_days)
+    reading = open_catalog(cfg, args.local)
+    where = reading.where
+    # a --type or --station the catalog has never seen: refused naming the known ones (exit 2)
+    rows = listed_legs(reading, leg_type=args.leg_type, station=args.station, since=args.since, until=args.until,
+                       due=args.due)
     if args.json:
         print(json.dumps([asdict(r) for r in rows], indent=2))
         return 0

@@ -7,8 +7,6 @@ from station import values as V  # one parser per kind of value (issue 31)
 
 import argparse
 
-from procedures.io.outputs import check_output_folder
-
 NAME = "report"
 HELP = "plots, a summary before/after compensation and the ISO 230-2 test report with uncertainties (Markdown, JSON, PDF)"
 DESCRIPTION = (
@@ -38,17 +36,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from procedures.fit import load_model
-    from procedures.io.recording.reader import read_session
-    from station.catalog.writer import catalog_for
-    from station.services.config import load_config
-    from station.services.report_jobs import report_lines, session_report
+    from station.services.report_jobs import ReportRequest, prepare_report
 
-    check_output_folder(args.out, force=args.force)  # before reading and fitting (procedures/io/outputs.py)
-    session = read_session(args.session)
-    model = load_model(args.model) if args.model else None
-    result = session_report(session, args.out, model, lead_mm=args.lead_mm, raw=args.raw, model_name=args.model or "",
-                            catalog=catalog_for(load_config(args.config)))
-    for line in report_lines(result, model):
+    job = prepare_report(ReportRequest(args.session, args.out, args.force, args.model, args.lead_mm, args.raw,
+                                       args.config))  # the output checked before reading and fitting
+    for line in job.run().lines:
         print(line)
     return 0

@@ -25,11 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from station.services.config import load_config
-    from station.services.job import JobRunner
+    from station.commands._rig_cli import run_on_rig
     from procedures.vocabulary import InputError
     from station.services.sweep_job import OutputExists, SweepRequest, iso230_lines, prepare_sweep
-    from station.interrupt import abort_on_sigint
-    from station.progress import ConsoleProgress
 
     cfg = load_config(None)
     try:
@@ -37,12 +35,7 @@ def run(args) -> int:
                                          time_scale=args.time_scale, default_out_prefix="run", make_parents=True), cfg)
     except OutputExists:
         raise InputError(f"--out {args.out}: exists; choose another --out; nothing was written") from None
-    runner = JobRunner()
-    ticket = runner.claim()
-    with job.connect(sim_memory=False) as rig:
-        print(f"rig: {rig.description}")
-        with abort_on_sigint(ticket.control):
-            ended = runner.run(job, [ConsoleProgress()], ticket=ticket)  # the simulated rig: no table to ask about
+    ended, _ = run_on_rig(job, sim_memory=False)  # the simulated rig: no table to ask about
     print(f"session recorded: {job.out.resolve()} ({ended.status}, {ended.points} points)")
     if ended.status != "completed":
         return 1

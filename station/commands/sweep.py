@@ -146,24 +146,17 @@ def run_prepared(job, cfg, config: str | None, confirm) -> int:
     """Run the prepared sweep `job` on the rig the config names, with a progress bar and Ctrl-C
     as an abort; print how it ended (the session line, what next). The exit code."""
     from station import interrupt
-    from station.interrupt import abort_on_sigint
-    from station.progress import ConsoleProgress
-    from station.services.job import JobRunner
+    from station.commands._rig_cli import run_on_rig
 
     out = job.out
     resume_hint = resume_command(out, cfg, config)
-    runner = JobRunner()
-    ticket = runner.claim()
-    with job.connect() as rig:
-        print(f"rig: {rig.description}")
-        with abort_on_sigint(ticket.control) as control:
-            try:
-                ended = runner.run(job, [ConsoleProgress()], confirm=confirm, ticket=ticket)
-            except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
-                print(f"session: {out} (aborted, interrupted (Ctrl-C twice))")
-                if out.exists():  # a hint never names a file that was not written
-                    print(resume_hint)
-                return 130
+    try:
+        ended, control = run_on_rig(job, confirm)
+    except KeyboardInterrupt:  # Ctrl-C twice: the runner has finished the session as aborted
+        print(f"session: {out} (aborted, interrupted (Ctrl-C twice))")
+        if out.exists():  # a hint never names a file that was not written
+            print(resume_hint)
+        return 130
     print(f"session: {out} ({ended.status}, {ended.points} of {job.total_points} points)")
     if ended.status == "completed":
         print(f"next: station iso230 {out}   |   station fit {out} --out model.json")

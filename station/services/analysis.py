@@ -135,14 +135,3 @@ def normalised_basis_text(basis: dict) -> str:
     if raw_legs:
         text += "; raw on " + "; ".join(f"leg {k} ({v})" for k, v in sorted(raw_legs.items()))
     return text
-
-
-def write_session_report(session: Any, out: Any, model: Any, cfg: Any) -> tuple[Any, list[str]]:
-    """The report `station report SESSION --out OUT --model MODEL.json` writes, of `session` with
-    the model on show, indexed in the catalog of station config `cfg`; and the report's note lines
-    (the UI's Results page, `r`)."""
-    from station.catalog.writer import catalog_for
-    from station.services.report_jobs import report_lines, session_report
-
-    result = session_report(session, out, model, catalog=catalog_for(cfg))
-    return result, [line for line in report_lines(result, model) if line.startswith("note:")]

@@ -552,6 +552,12 @@ def _convert(want: type, value: Any) -> Any:
     return want(value)
 
 
+def tolerances_of_config(path: str | Path | None) -> dict[str, Tolerance]:
+    """{leg type: Tolerance} of the station TOML at `path` (both stages), for the fleet's ISO
+    14253-1 decisions; {} without a config (the web decides against these)."""
+    return dict(load_config(path).tolerances) if path else {}
+
+
 def load_config(path: str | Path | None) -> StationConfig:
     """Read a station TOML; unknown keys and wrong types are refused with file and key named."""
     cfg = StationConfig()

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from procedures.vocabulary import InputError
 from station.services.job import JobOutcome
@@ -17,12 +17,14 @@ from station.services.job import JobOutcome
 @dataclass
 class ReplayRequest:
     """Replay the recording `session` into `out` (None: NAME.replay.h5 beside it; replaced only
-    with `force`) at `speed` (1 = real time, N = N times faster, None = as fast as possible)."""
+    with `force`) at `speed` (1 = real time, N = N times faster, None = as fast as possible);
+    `make_parents`: create the folders of `out` (the UI's recordings folder) rather than refuse."""
 
     session: Path
     out: Path | None = None
     speed: float | None = None
     force: bool = False
+    make_parents: bool = False
 
 
 def pace_text(speed: float | None) -> str:
@@ -42,6 +44,7 @@ class PreparedReplay:
     needs_rig: bool = False  # the replay devices answer from the file: no drive moves
     question: str | None = None
     lines: list[str] = field(default_factory=list)
+    on_rig_opened: Callable[[Any], None] | None = None  # told the replay rig once it runs (the UI keeps it)
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         """The outcome's status is the run's; `data` the ReplayOutcome (its `mismatch`: the first
@@ -51,7 +54,7 @@ class PreparedReplay:
         if self.replace and self.out.exists():
             self.out.unlink()  # --force: the new replay session replaces it
         ended = replay_and_compare(self.source, self.session, self.out, self.cfg, self.speed, sinks=sinks,
-                                   control=control)
+                                   control=control, on_rig_opened=self.on_rig_opened)
         result = ended.result
         lines = [f"session: {self.out} ({result.outcome}, {result.points} points; rig replay)"]
         cmp = ended.comparison
@@ -76,7 +79,7 @@ def prepare_replay(request: ReplayRequest, cfg: Any = None) -> PreparedReplay:
     out = Path(request.out) if request.out else source.with_name(source.stem + ".replay.h5")
     if out.resolve() == source.resolve():
         raise InputError(f"--out {out} is the recording being replayed; choose another file")
-    check_output_file(out, force=request.force, suffixes=(".h5",))
+    check_output_file(out, force=request.force, suffixes=(".h5",), make_parents=request.make_parents)
     if not session.plan:
         raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
     if cfg is None:

@@ -6,6 +6,9 @@ station/commands/report.py and export_csv.py (the UI never imports a command mod
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 from procedures.reporting import evaluation
 from procedures.io.csv_io import ExportSummary
@@ -13,6 +16,7 @@ from procedures.reporting.decision import NO_TOLERANCE, decision_lines
 from procedures.vocabulary import InputError
 from procedures.reporting.session_report import ReportResult, make_report
 from station.catalog.writer import register
+from station.services.job import JobOutcome
 
 
 def session_report(session, out_dir: str | os.PathLike, model=None, *, lead_mm: float | str | None = "auto",
@@ -110,3 +114,69 @@ def decisions_if_stated(session, raw: bool = False, stage: str | None = None,
         return evaluated["decisions"]
     return session_decisions(session, raw, stage=stage)["decisions"]
 
+
+
+# -- the report and the ISO 230-2 jobs (issue 32 part 1, one shape for every job) --------------------
+
+@dataclass
+class ReportRequest:
+    """`station report`: the report files of `session` into the folder `out` (replaced only with
+    `force`), before and after the model in `model` (None: the default model fitted to the
+    session), the screw lead `lead_mm` (a float, "auto" or None), on the raw error with `raw`;
+    `config`: the station TOML whose catalog indexes the files (None: the built-in config)."""
+
+    session: Path
+    out: Path
+    force: bool = False
+    model: Path | None = None
+    lead_mm: float | str | None = "auto"
+    raw: bool = False
+    config: Path | None = None
+
+
+@dataclass
+class PreparedReport:
+    """A report that passed the output check; `run` reads, fits if asked and writes the files. The
+    outcome's `lines` are what `station report` prints, its `data` the ReportResult."""
+
+    request: ReportRequest
+    needs_rig: bool = False
+    question: str | None = None
+    lines: list[str] = field(default_factory=list)
+    # what a page has read already (prepare_session_report): the Session, the model on show, the config
+    session: Any = None
+    model: Any = None
+    cfg: Any = None
+
+    def run(self, sinks=(), control=None) -> JobOutcome:
+        from procedures.fit import load_model
+        from procedures.io.recording.reader import read_session
+        from station.catalog.writer import catalog_for
+        from station.services.config import load_config
+
+        r = self.request
+        session = self.session if self.session is not None else read_session(r.session)
+        model = self.model if self.model is not None else (load_model(r.model) if r.model else None)
+        cfg = self.cfg if self.cfg is not None else load_config(r.config)
+        result = session_report(session, r.out, model, lead_mm=r.lead_mm, raw=r.raw, model_name=r.model or "",
+                                catalog=catalog_for(cfg))
+        return JobOutcome("done", outputs=[Path(f) for f in result.files], lines=report_lines(result, model),
+                          data=result)
+
+
+def prepare_report(request: ReportRequest) -> PreparedReport:
+    """The output check before reading and fitting (procedures/io/outputs.py): an existing --out
+    without `force` is refused (InputError, nothing written)."""
+    from procedures.io.outputs import check_output_folder
+
+    check_output_folder(request.out, force=request.force)
+    return PreparedReport(request)
+
+
+def prepare_session_report(session, model, out: Path, cfg) -> PreparedReport:
+    """The report `station report SESSION --out OUT --model MODEL.json` writes, of the `session`
+    (procedures.io.recording.reader.Session) already read with the `model` on show, indexed in
+    the catalog of station config `cfg` (the UI's Results page, `r`; the page keeps an existing
+    folder that holds a report, so nothing is refused here). The outcome's "note:" lines are what
+    the page says beside the files."""
+    return PreparedReport(ReportRequest(Path(session.path), Path(out)), session=session, model=model, cfg=cfg)

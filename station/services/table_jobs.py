@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import uuid
+from dataclasses import dataclass
 
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
@@ -337,6 +338,29 @@ def make_checked_table(model, step_mm: float | None = None, spec: TableSpec | No
     check_table_stroke(model, table, soft_limits_mm)
     found = implausible_corrections(model, table) + heldout_worse(model, table)
     return table, settle(found, accept_implausible, override=override)
+
+
+@dataclass
+class TableAttempt:
+    """A table made for a page that shows a unit-slip refusal and offers to accept it: `table` and
+    the `warnings` of what was accepted, or `table` None and `refused` the refusal's text (the
+    ImplausibleError of make_checked_table; nothing was made)."""
+
+    table: CompTable | None
+    warnings: list[str]
+    refused: str | None = None
+
+
+def attempt_checked_table(model, step_mm: float | None = None, spec: TableSpec | None = None, *,
+                          accept_implausible: bool = False, override: Override = Override()) -> TableAttempt:
+    """make_checked_table with its unit-slip refusal as data (the TUI's Compensation page says it
+    and asks whether to accept it); any other refusal (InputError) is raised as there."""
+    try:
+        table, warnings = make_checked_table(model, step_mm, spec, accept_implausible=accept_implausible,
+                                             override=override)
+    except ImplausibleError as exc:
+        return TableAttempt(None, [], str(exc))
+    return TableAttempt(table, warnings)
 
 
 def check_push_values(tables: Mapping[int, LegTable], table_name: str, limits_um: Mapping[int, float], *,

@@ -503,23 +503,22 @@ class StationApp(App):
         out = replay_output_path(self.cfg, source)
         ticket = self.jobs.claim(rig=False)  # the replay devices, not the rig
         self._begin_run(ticket, SweepState(out=out, label=f"replay of {source.name}", status="starting"), None)
-        self._replay_worker(ticket.run, source, speed, out, self.sweep_control, self._sweep_idle)
+        self._replay_worker(ticket, source, speed, out, self.sweep_control, self._sweep_idle)
         return True
 
     @work(thread=True, group="sweep", exit_on_error=False)
-    def _replay_worker(self, run: int, source: Path, speed: float | None, out: Path, control,
+    def _replay_worker(self, ticket: Ticket, source: Path, speed: float | None, out: Path, control,
                        idle: threading.Event) -> None:
+        run = ticket.run
         outcome, points, error, note = "error", 0, "", ""
         try:
-            from procedures.io.recording.reader import read_session
-            from station.services.jobs import replay_and_compare
+            from station.services.replay_job import ReplayRequest, prepare_replay
 
-            session = read_session(source)
-            if not session.plan:
-                raise ValueError(f"{source.name}: the session stores no sweep plan, so there is nothing to replay")
+            # the job `station replay` runs (its refusals: no plan to replay, ...), through the app's JobRunner
+            job = prepare_replay(ReplayRequest(source, out, speed, make_parents=True), self.cfg)
             # the app keeps the replay rig as replay_rig (tests look at its devices)
-            ended = replay_and_compare(source, session, out, self.cfg, speed, sinks=[TuiBridge(self, run)],
-                                       control=control, on_rig_opened=lambda rig: self.post_message(ReplayRigOpened(rig)))
+            job.on_rig_opened = lambda rig: self.post_message(ReplayRigOpened(rig))
+            ended = self.jobs.run(job, [TuiBridge(self, run)], control=control, ticket=ticket).data
             outcome, points = ended.result.outcome, ended.result.points
             if ended.mismatch is not None:
                 error = describe(ended.mismatch, "the replay met a request the recording does not hold")

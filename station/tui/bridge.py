@@ -14,7 +14,7 @@ from typing import Any
 from textual.app import App
 from textual.message import Message
 
-from procedures.engine import events as ev
+import procedures.engine.events as ev  # the contract: what procedures yield, front ends present
 
 
 class SweepEvent(Message):

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from procedures.engine import events as ev
+import procedures.engine.events as ev  # the contract: what procedures yield, front ends present
 from station.progress import Eta
 
 

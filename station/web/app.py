@@ -31,9 +31,11 @@ from sqlalchemy.engine import Engine
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from procedures.io.recording.stage import AS_FOUND, AS_LEFT
-from station.catalog.history import history, legs, parse_utc
+from station.catalog.history import history, parse_utc
+from station.services.fleet_queries import fleet_legs
 from station.services.serials import SERIAL_RULE, is_serial
-from station.web import queries, svg
+from station.catalog import queries  # the fleet's catalog readers beyond history and legs
+from station.web import svg
 from station.web.extensions import CHART_FIGURES, certificates_of
 
 log = logging.getLogger(__name__)
@@ -274,8 +276,8 @@ def create_app(engine: Engine, settings: WebSettings | None = None) -> FastAPI:
         verdict = _choice("decision", decision, list(queries.DECISIONS))
         key = _choice("sort", sort, [f"{d}{k}" for k in SORTS for d in ("", "-")])
         find = _find(find)
-        rows = legs(engine, leg_type=leg_type, station=st, since=since_d, until=until_d, due_by=due_d,
-                    interval_days=s.interval_days)
+        rows = fleet_legs(engine, interval_days=s.interval_days, leg_type=leg_type, station=st, since=since_d,
+                          until=until_d, due=due_d)  # as `station legs` lists them
         if find:  # the serial search: a part of the serial, any case
             rows = [r for r in rows if find.lower() in r.serial.lower()]
         # verdicts stored at ingest (revision 0004) cost nothing; rows stored undecided are decided

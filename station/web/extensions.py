@@ -15,22 +15,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from procedures.reporting.decision import Tolerance
+from station.services.config import tolerances_of_config
 
 CHART_FIGURES = ("E", "B", "R")
 
-
-def decision_tolerances_of(config_path: str | Path | None) -> dict[str, "Tolerance"]:
-    """{leg type: procedures.reporting.decision.Tolerance} of the station TOML (both stages), for
-    the fleet's ISO 14253-1 decisions; {} without a config."""
-    if not config_path:
-        return {}
-    from station.services.config import load_config  # noqa: PLC0415
-
-    return dict(load_config(config_path).tolerances)
+decision_tolerances_of = tolerances_of_config
+"""{leg type: Tolerance} of the station TOML (both stages), for the fleet's ISO 14253-1
+decisions; {} without a config (station.services.config.tolerances_of_config)."""
 
 
 def tolerances_of(config_path: str | Path | None) -> dict[str, dict[str, float]]:

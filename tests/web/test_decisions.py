@@ -14,7 +14,7 @@ from station.catalog.readers import session_rec
 from station.catalog.store import Catalog
 from station.services.report_jobs import session_decisions
 from procedures.synthetic import synth_session
-from station.web.queries import latest_decisions
+from station.catalog.queries import latest_decisions
 from tests.tooling import write_identified_session
 
 # as found: loose enough to conform; as left: E within 0.001 um, which no measurement proves

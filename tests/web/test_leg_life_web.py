@@ -50,7 +50,7 @@ def test_compare_of_a_calibration_with_a_verification_is_refused(life, tmp_path)
 def test_web_comparison_pairs_calibrations_only_and_flags_nothing(life, web):  # noqa: F811
     from fastapi.testclient import TestClient
 
-    from station.web import queries
+    from station.catalog import queries
 
     with TestClient(web) as client:
         t = client.get("/compare").text

@@ -126,9 +126,8 @@ class CompensationScreen(StationScreen):
         return drive_table_spec(self.app.cfg.drive.profile or None)
 
     def action_make_table(self, accept_implausible: bool = False) -> None:
-        from procedures.metrology.plausibility import ImplausibleError
         from station.services.push_jobs import accept_override
-        from station.services.table_jobs import make_checked_table
+        from station.services.table_jobs import attempt_checked_table
 
         a = self.app.analysis
         if a is None:
@@ -137,15 +136,17 @@ class CompensationScreen(StationScreen):
         refused = None
         try:
             step = self.query_one("#comp-step", ValueField).read()  # station table --step's parser
-            table, warnings = make_checked_table(a.model, step, self._spec(), accept_implausible=accept_implausible,
-                                                 override=accept_override(UI_ACCEPT_HOW, UI_ACCEPTED_AS))
-            # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s
-            serials = {leg: s for leg in table.legs if (s := a.session.identity.leg_serial(leg))}
-            self.table = type(table)(table.legs, serials or table.serials)
-            self.slip_text = "\n".join(warnings)
-        except ImplausibleError as exc:  # a likely unit slip: said here, then the user may accept it
-            self.table, refused = None, exc
-            self.slip_text = f"table refused: {exc}"
+            made = attempt_checked_table(a.model, step, self._spec(), accept_implausible=accept_implausible,
+                                         override=accept_override(UI_ACCEPT_HOW, UI_ACCEPTED_AS))
+            if made.refused is not None:  # a likely unit slip: said here, then the user may accept it
+                self.table, refused = None, made.refused
+                self.slip_text = f"table refused: {refused}"
+            else:
+                table = made.table
+                # the session's leg serials, so a saved table carries them (# leg_serial:) like `station table`'s
+                serials = {leg: s for leg in table.legs if (s := a.session.identity.leg_serial(leg))}
+                self.table = type(table)(table.legs, serials or table.serials)
+                self.slip_text = "\n".join(made.warnings)
         except ValueError as exc:
             self.table = None
             self.notify(escape(describe(exc, "cannot make the table")), severity="error", timeout=12)

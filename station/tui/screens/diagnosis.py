@@ -173,7 +173,7 @@ class DiagnosisScreen(StationScreen):
             # the twin as `station diagnose --twin SPEC` chooses it (fleet:TYPE reads the station's catalog, as
             # `station diagnose --config` does), or the Results page's model; the report by the same job
             ask = DiagnoseRequest(path, twin=spec, twin_model=model if twin_kind == "results" else None)
-            done = prepare_diagnosis(ask, self.app.cfg).run().data
+            done = self.app.jobs.run(prepare_diagnosis(ask, self.app.cfg)).data  # the app's one JobRunner
         except Exception as exc:
             self.post_message(DiagnosisFailed(describe(exc, f"cannot diagnose {path.name}"), request))
             return

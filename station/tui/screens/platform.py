@@ -213,7 +213,7 @@ class PlatformScreen(StationScreen):
     @work(thread=True, exclusive=True, group="platform", exit_on_error=False)
     def _run_worker(self, request: PlatformRequest) -> None:
         try:
-            run = prepare_platform(request).run().data
+            run = self.app.jobs.run(prepare_platform(request)).data  # the app's one JobRunner
         except Exception as exc:
             self.post_message(PlatformFailed(describe(exc, "cannot run the platform experiment")))
             return

@@ -389,9 +389,11 @@ class ResultsScreen(StationScreen):
     @work(thread=True, group="results-write", exit_on_error=False)
     def _report_worker(self, session, model, out: Path, hide: bool) -> None:
         try:
-            from station.services.analysis import write_session_report
+            from station.services.report_jobs import prepare_session_report
 
-            result, notes = write_session_report(session, out, model, self.app.cfg)
+            # the job `station report` runs, through the app's one JobRunner
+            done = self.app.jobs.run(prepare_session_report(session, model, out, self.app.cfg))
+            result, notes = done.data, [line for line in done.lines if line.startswith("note:")]
         except Exception as exc:
             self.post_message(FilesWritten("Report", "", describe(exc, f"cannot write the report to {out}")))
             return
@@ -418,7 +420,7 @@ class ResultsScreen(StationScreen):
         try:
             from station.services.csv_jobs import ExportRequest, prepare_export
 
-            lines = prepare_export(ExportRequest(session_path, out, make_parents=True)).run().lines
+            lines = self.app.jobs.run(prepare_export(ExportRequest(session_path, out, make_parents=True))).lines
         except Exception as exc:
             self.post_message(FilesWritten("Export CSV", "", describe(exc, f"cannot export {session_path.name}")))
             return
