@@ -14,6 +14,7 @@ confirmation dialog).
 
 from __future__ import annotations
 
+import json
 import math
 import uuid
 
@@ -52,8 +53,10 @@ from procedures.io.plausibility import (
     check_table_values,
     settle,
 )
-from procedures.io.recording.reader import file_sha256, read_session
+from procedures.io.recording.identity import SessionIdentity
+from procedures.io.recording.reader import Session, file_sha256
 from procedures.io.recording.sink import RecorderSink
+from procedures.io.recording.writer import to_json_text
 from procedures.engine.runner import ListSink, Sink, run
 from procedures.compensation.audit import Action
 from procedures.vocabulary import Outcome
@@ -398,26 +401,39 @@ def expected_tables(path: str | Path, legs: Iterable[int], spec: TableSpec) -> d
     return {leg: table_sha256(quantize(table.legs[leg].to_bank(), spec)) for leg in legs}
 
 
-def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *, audit: AuditLog, before: Any = None,
-               expected_sha256: dict[int, str] | None = None, expected_source: str = "the table",
-               drive_url: str = "", sinks: Iterable[Sink] = (), control: RunControl | None = None,
-               normalise: bool = True) -> JobOutcome:
+def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *, audit: AuditLog,
+               before: Session | None = None, expected_sha256: dict[int, str] | None = None,
+               expected_source: str = "the table", drive_url: str = "", sinks: Iterable[Sink] = (),
+               control: RunControl | None = None, normalise: bool = True,
+               identity: SessionIdentity | None = None) -> JobOutcome:
     """A verification sweep of `plan` with the tables active, recorded to `out`, compared with the
     calibration `before` (procedures.compensation.verify.verify_procedure); errors normalised to 20 degC
-    unless `normalise` is False."""
+    unless `normalise` is False. `identity`: the session's (None: station.services.identity.session_identity
+    of the rig's legs now)."""
     out = Path(out)
     if out.exists():
         raise InputError(f"{out}: exists; choose another file (a verification is a new session)")
     out.parent.mkdir(parents=True, exist_ok=True)
     # a verification is a session too: it records who and what it measured, and warns about the laser
-    identity = session_identity(cfg, plan.legs, rig.axes, __version__)
-    recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=cfg.to_dict(),
+    identity = identity or session_identity(cfg, plan.legs, rig.axes, __version__)
+    station_config = as_recorded("station_config", cfg.to_dict())
+    recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=station_config,
                             software_version=__version__, identity=identity.to_json())
-    procedure = verify_procedure(rig.axes, rig.laser, rig.clock, plan, out, read_session=read_session, before=before,
+    # the figures come from the points as measured, with the config as recorded; the file's
+    # hash names the recording (the catalog sink indexes the file itself when it closes)
+    procedure = verify_procedure(rig.axes, rig.laser, rig.clock, plan, out, recording_sha256=file_sha256,
+                                 station_config=station_config, before=before,
                                  expected_sha256=expected_sha256, expected_source=expected_source, drive_url=drive_url,
                                  control=control, normalise=normalise,
                                  sweep_options={"session_id": uuid.uuid4().hex[:12], "warnings": identity.warnings})
     return run_table_job(procedure, audit, [recorder, *sinks], control, catalog=catalog_for(cfg), session_path=out)
+
+
+def as_recorded(name: str, value: dict[str, Any]) -> dict[str, Any]:
+    """`value` as a session records it in /meta (`name`: "station_config", "identity") and a
+    reader reads it back: the same JSON, so a figure of the points as measured equals the
+    figure of the file."""
+    return json.loads(to_json_text(name, value))
 
 
 class OperationFailed(DriverError):

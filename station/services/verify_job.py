@@ -153,20 +153,24 @@ class PreparedVerify:
             raise InputError(f"no drive connected for leg(s) {missing} (connected: {sorted(self.rig.axes)}); "
                              "nothing moved")
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         from procedures.compensation.audit import AuditRecord
         from procedures.compensation.verify import Verified
-        from procedures.io.recording.reader import read_session
+        from procedures.engine.events import SweepStarted
         from procedures.reporting.decision import decision_lines, decision_summary
-        from station.services.report_jobs import decisions_if_stated, session_decisions
-        from station.services.table_jobs import verify_job
+        from procedures.reporting.evaluation import evaluate_points
+        from station import __version__
+        from station.services.identity import session_identity
+        from station.services.table_jobs import as_recorded, verify_job
         from station.services.wiring import drive_url_of
 
         if self.request.force and self.out.exists():
             self.out.unlink()  # --force: the new verification session replaces it
+        identity = session_identity(self.cfg, self.plan.legs, self.rig.axes, __version__)
         job = verify_job(self.rig, self.plan, self.out, self.cfg, audit=self.audit, before=self.before,
                          expected_sha256=self.expected, expected_source=str(self.request.table),
-                         drive_url=drive_url_of(self.cfg), sinks=sinks, control=control, normalise=not self.request.raw)
+                         drive_url=drive_url_of(self.cfg), sinks=sinks, control=control, normalise=not self.request.raw,
+                         identity=identity)
         if not job.of(Verified):
             return job  # refused (nothing moved) or broken off: its finished event says why
         verified = job.of(Verified)[-1]
@@ -174,17 +178,21 @@ class PreparedVerify:
         doc = {"session": verified.session,
                "before": None if before is None else {"path": str(before.path), "sha256": before.sha256},
                "legs": {str(leg): r.to_json() for leg, r in verified.results.items()}}
-        # as-left: the verification's ISO 230-2 values with U against [tolerances.TYPE] as_left (docs/decisions.md)
-        session = read_session(self.out)
-        as_left = session_decisions(session, raw=self.request.raw, stage="as_left")["decisions"]
+        # as-left: the verification's ISO 230-2 values with U against [tolerances.TYPE] as_left
+        # (docs/decisions.md), of the points it measured with the config and identity it recorded
+        # (the same figures as the recording's, read back: tests/station/test_cli_verify_decisions.py)
+        started = job.of(SweepStarted)[-1]
+        as_left = evaluate_points(verified.points, plan=started.plan, devices=started.devices,
+                                  station_config=as_recorded("station_config", self.cfg.to_dict()),
+                                  identity=as_recorded("identity", identity.to_json()),
+                                  source={"path": verified.session["path"], "sha256": verified.session["sha256"]},
+                                  raw=self.request.raw, stage="as_left")["decisions"]
         doc["decisions"] = as_left
         audit_lines = {}
         for e in job.of(AuditRecord):
             audit_lines.setdefault(e.entry.leg, e.entry.message)
-        summary = ""
-        try:  # the one line of the Compensation page: only when the legs' types state a tolerance
-            if decisions_if_stated(session, stage="as_left") is not None:
-                summary = decision_summary(as_left["legs"])
+        try:  # the one line of the Compensation page ("" when no leg's type states a tolerance)
+            summary = decision_summary(as_left["legs"])
         except Exception:  # noqa: BLE001 (a decision line is an extra; the verification's figures stand)
             summary = ""
         job.data = Verification(verified.report, dict(verified.results), audit_lines,
