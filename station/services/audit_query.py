@@ -9,11 +9,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from procedures.compensation.audit import ACTIONS
 from procedures.compensation.audit_view import INTERRUPTED, LegState, Operation, backup_summary
 from procedures.vocabulary import InputError
+
+if TYPE_CHECKING:
+    from station.services.config import StationConfig
 
 ACTION_NAMES: tuple[str, ...] = tuple(str(a.value) for a in ACTIONS)
 """The actions an audit entry names (push, verify, rollback, ...): what a query may filter by."""
@@ -58,7 +61,7 @@ class AuditAnswer:
         return doc
 
 
-def query_audit(query: AuditQuery, cfg: Any = None) -> AuditAnswer:
+def query_audit(query: AuditQuery, cfg: StationConfig | None = None) -> AuditAnswer:
     """Read the station's audit log and answer `query`; InputError for a leg outside the
     station's, a bad day or an operation id that names none or several."""
     from procedures.compensation.audit_view import find_operation, leg_states, parse_since, read_audit

@@ -16,11 +16,21 @@ from __future__ import annotations
 import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator, Mapping
 
 from procedures.vocabulary import InputError
 from station.services.config import StationConfig
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, OfflineJob, require_legs
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of the procedures
+    from drivers.interfaces import ServoAxis
+    from procedures.compensation.audit import AuditLog
+    from procedures.compensation.push import PushPlan
+    from procedures.compensation.table import LegTable
+    from procedures.engine.control import RunControl
+    from procedures.engine.runner import Sink
+    from procedures.io.plausibility import Override
+    from station.services.wiring import DriveHandle
 
 PUSH, ROLLBACK = "push", "rollback"  # the audit log's actions (its entries' `action`)
 
@@ -36,7 +46,7 @@ class PushRequest:
 
     legs: tuple[int, ...] | str | int
     table: str | Path | None = None
-    tables: Mapping[int, Any] | None = None
+    tables: Mapping[int, LegTable] | None = None
     sources: Mapping[int, dict] | None = None
     table_name: str | None = None
     accept_implausible: bool = False
@@ -53,7 +63,7 @@ class RollbackRequest:
     audit: str | Path | None = None
 
 
-def accept_override(how: str | None, kept: str | None = None):
+def accept_override(how: str | None, kept: str | None = None) -> Override:
     """How a front end lets its user accept implausible values (procedures.io.plausibility.Override):
     `how` the refusal says to do it, `kept` what kept them; None: the command line's option."""
     from procedures.io.plausibility import Override
@@ -62,23 +72,20 @@ def accept_override(how: str | None, kept: str | None = None):
 
 
 @dataclass
-class PreparedRefusal:
+class PreparedRefusal(OfflineJob):
     """A push, rollback or verify refused before any drive was reached: `run` logs it in the
     audit log (as every refusal) and returns the refused outcome. `implausible`: refused for
     values that look like a unit slip (the user may accept them)."""
 
     action: str
     leg: int
-    reason: Any  # the exception or sentence
+    reason: BaseException | str
     cfg: StationConfig
-    audit: Any
+    audit: AuditLog
     source: dict | None = None
     implausible: bool = False
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         from station.catalog.writer import catalog_for
         from station.services.table_jobs import refusal_job
         from station.services.wiring import drive_url_of
@@ -97,22 +104,22 @@ class PreparedTableOperation:
     sets it, nobody is asked and the operation is cancelled (nothing written)."""
 
     action: str
-    request: Any
+    request: PushRequest | RollbackRequest
     cfg: StationConfig
     legs: tuple[int, ...]
-    audit: Any
-    tables: dict[int, Any] = field(default_factory=dict)
+    audit: AuditLog
+    tables: dict[int, LegTable] = field(default_factory=dict)
     sources: dict[int, dict] = field(default_factory=dict)
     warned: list[str] = field(default_factory=list)
     lines: list[str] = field(default_factory=list)
-    axes: dict[int, Any] | None = None
+    axes: dict[int, ServoAxis] | None = None
     drive_url: str = ""
-    confirm_plans: Callable[[Any], bool] = field(default=lambda plans: False)
+    confirm_plans: Callable[[PushPlan | list[PushPlan]], bool] = field(default=lambda plans: False)
     needs_rig: bool = True
     question: str | None = None
 
     @contextlib.contextmanager
-    def connect(self) -> Iterator[Any]:
+    def connect(self) -> Iterator[DriveHandle]:
         """Open the drives of the legs alone (never the interferometer) and bind them in the block."""
         from station.services.wiring import open_drive
 
@@ -124,13 +131,9 @@ class PreparedTableOperation:
                 self.axes = None
 
     def check(self) -> None:
-        if self.axes is None:
-            raise InputError("not connected to the drives; nothing was written")
-        missing = [leg for leg in self.legs if leg not in self.axes]
-        if missing:
-            raise InputError(f"no drive connected for leg(s) {missing}; nothing was written")
+        require_legs(self.axes, self.legs, "the drives", "nothing was written")
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         from station.catalog.writer import catalog_for
         from station.services.identity import configured_serials
         from station.services.table_jobs import push_job, push_legs_job, rollback_job
@@ -158,7 +161,7 @@ class PreparedTableOperation:
         return job
 
 
-def parse_legs_text(text: Any) -> tuple[int, ...]:
+def parse_legs_text(text: tuple[int, ...] | str | int) -> tuple[int, ...]:
     """Leg numbers of a request: a number, numbers, or text "3", "1-6", "1,4", "all"."""
     from station.services.verify_job import parse_leg_choice
 

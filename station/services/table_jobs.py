@@ -19,12 +19,12 @@ import math
 import uuid
 
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Mapping
+from typing import TYPE_CHECKING, Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
 from drivers.errors import DriverError
-from drivers.interfaces import ServoAxis, TableSpec
+from drivers.interfaces import ServoAxis, TableBank, TableSpec
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditLog, AuditSink, AuditStopped
 from procedures.engine.control import RunControl
@@ -79,6 +79,9 @@ from station.services.identity import session_identity
 from station.services.job import JobOutcome  # the one outcome of every job
 from station.services.wiring import Rig
 
+if TYPE_CHECKING:  # annotations only: the fitting code loads when a table is made
+    from procedures.fit.model import LegErrorModel
+
 
 def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterable[Sink] = (),
                   control: RunControl | None = None, catalog: Catalog | None = None,
@@ -120,7 +123,7 @@ def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) 
     raise refusal
 
 
-def push_table(axis: ServoAxis, table: Any = None, *, plan: PushPlan | None = None,
+def push_table(axis: ServoAxis, table: TableBank | LegTable | None = None, *, plan: PushPlan | None = None,
                audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
                source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushResult:
     """Push `table` (a TableBank or LegTable; or an already confirmed `plan` from
@@ -253,7 +256,7 @@ def unverified_table_line(path: str | Path, tables: Mapping[int, LegTable], inte
     return unverified_line(path, "table", f"{legs}; whole rows, even steps; the push checks it covers the stroke")
 
 
-def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, Any], *,
+def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, dict[str, Any] | None], *,
                         audit: AuditLog, drive_url: str, sinks: Iterable[Sink], catalog: Catalog | None):
     """A refusal job (audit line written, nothing sent to any drive) when a leg's table came from
     a file without an integrity record and does not cover the leg's stroke by its drive's soft
@@ -279,7 +282,7 @@ def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegT
 
 # -- plausibility: a likely unit slip reaches neither a table file nor a drive unasked ------------------
 
-def implausible_corrections(model, table: CompTable) -> list[Implausible]:
+def implausible_corrections(model: LegErrorModel, table: CompTable) -> list[Implausible]:
     """The legs of `table` whose corrections span more than the error `model` was fitted to
     (procedures.io.plausibility.check_correction)."""
     source = model.source.get("path") or "the model's recording"
@@ -293,7 +296,7 @@ def implausible_corrections(model, table: CompTable) -> list[Implausible]:
     return found
 
 
-def heldout_worse(model, table: CompTable) -> list[Implausible]:
+def heldout_worse(model: LegErrorModel, table: CompTable) -> list[Implausible]:
     """The legs of `table` whose model made the error worse on the cycles held out of its fit
     (a negative held-out range reduction, docs/figures.md): a table from it adds error."""
     found = []
@@ -309,7 +312,7 @@ def heldout_worse(model, table: CompTable) -> list[Implausible]:
     return found
 
 
-def check_table_stroke(model, table: CompTable, soft_limits_mm: tuple[float, float] | None, source: str = "") -> None:
+def check_table_stroke(model: LegErrorModel, table: CompTable, soft_limits_mm: tuple[float, float] | None, source: str = "") -> None:
     """InputError when a leg of `table` ends beyond the drive's soft limits (min_mm, max_mm): a
     step that does not divide the stroke ends the table up to a step beyond it, where no drive
     holds a table (the push would refuse it later)."""
@@ -327,7 +330,7 @@ def check_table_stroke(model, table: CompTable, soft_limits_mm: tuple[float, flo
                 "nothing was written")
 
 
-def make_checked_table(model, step_mm: float | None = None, spec: TableSpec | None = None, *,
+def make_checked_table(model: LegErrorModel, step_mm: float | None = None, spec: TableSpec | None = None, *,
                        legs: Iterable[int] | None = None, accept_implausible: bool = False,
                        override: Override = Override(),
                        soft_limits_mm: tuple[float, float] | None = None) -> tuple[CompTable, list[str]]:
@@ -369,7 +372,7 @@ def _limit_um(axis: ServoAxis) -> float:
     return spec.max_correction_um if spec is not None else float("inf")
 
 
-def _plausible_push(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, Any], *,
+def _plausible_push(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, dict[str, Any] | None], *,
                     audit: AuditLog, drive_url: str, sinks: Iterable[Sink], catalog: Catalog | None,
                     accept_implausible: bool, table_name: str | None, override: Override):
     """(refusal job, [], sources) when a leg's values look like a unit slip and were not accepted,

@@ -14,11 +14,22 @@ import os
 import secrets
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import TYPE_CHECKING, Iterable, Iterator
 
 from procedures.vocabulary import InputError
 from station.services.config import StationConfig
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, require_legs
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of the procedures
+    import numpy as np
+
+    from procedures.acquisition.plans import SweepPlan
+    from procedures.compensation.audit import AuditLog
+    from procedures.compensation.verify import LegChecked, LegVerification
+    from procedures.engine.control import RunControl
+    from procedures.engine.runner import Sink
+    from procedures.io.recording.reader import Session
+    from station.services.wiring import Rig
 
 VERIFY = "verify"  # the audit log's action of a verification (its entries' `action`)
 
@@ -70,7 +81,7 @@ class Verification:
     one-line `as_left_summary`), the figures as JSON (`doc`)."""
 
     report: str
-    results: dict[int, Any]
+    results: dict[int, LegVerification]
     audit_lines: dict[int, str] = field(default_factory=dict)
     as_left: list[str] = field(default_factory=list)
     as_left_summary: str = ""
@@ -82,7 +93,7 @@ class Verification:
         return all(r.passed for r in self.results.values())
 
 
-def leg_checked_line(event) -> str | None:
+def leg_checked_line(event: object) -> str | None:
     """The line of a leg's active table as the verification found it (its LegChecked event), else None."""
     from procedures.compensation.verify import LegChecked
 
@@ -91,7 +102,7 @@ def leg_checked_line(event) -> str | None:
     return f"leg {event.leg}: bank {event.bank} active, {event.description}, sha256 {event.table_sha256[:12]}…"
 
 
-def verdict_parts(result) -> tuple[str, float | None, float, float | None]:
+def verdict_parts(result: LegVerification) -> tuple[str, float | None, float, float | None]:
     """(verdict "pass" / "above" / "none", ratio, the limit, range reduction %) of a leg's result."""
     from procedures.compensation.verify import ACCEPT_RATIO
 
@@ -108,24 +119,24 @@ class PreparedVerify:
     cfg: StationConfig
     out: Path
     legs: tuple[int, ...]
-    plan: Any  # procedures.acquisition.plans.SweepPlan
-    before: Any  # the calibration Session, or None
+    plan: SweepPlan
+    before: Session | None  # the calibration
     expected: dict[int, str]
     noise_seed: int | None
-    audit: Any  # procedures.compensation.audit.AuditLog
+    audit: AuditLog
     lines: list[str] = field(default_factory=list)
-    rig: Any = None
+    rig: Rig | None = None
     question: str | None = None
     needs_rig: bool = True
     kind: str = "verification"
-    recorded: Any = None
+    recorded: np.ndarray | None = None  # a resumed sweep's points (PreparedSweep's): none for a verification
 
     @property
     def total_points(self) -> int:
         return self.plan.total_points
 
     @contextlib.contextmanager
-    def connect(self) -> Iterator[Any]:
+    def connect(self) -> Iterator[Rig]:
         """Open the rig for the verified legs (the simulated one with the verification's noise seed)."""
         from station.services.wiring import open_rig
 
@@ -146,12 +157,7 @@ class PreparedVerify:
                 *(f"compensation target of leg {leg}: {target_text(self.cfg, leg)}" for leg in self.legs)]
 
     def check(self) -> None:
-        if self.rig is None:
-            raise InputError("not connected to the rig; nothing moved")
-        missing = [leg for leg in self.legs if leg not in self.rig.axes]
-        if missing:
-            raise InputError(f"no drive connected for leg(s) {missing} (connected: {sorted(self.rig.axes)}); "
-                             "nothing moved")
+        require_legs(None if self.rig is None else self.rig.axes, self.legs)
 
     def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         from procedures.compensation.audit import AuditRecord
@@ -205,7 +211,7 @@ class PreparedVerify:
         return job
 
 
-def _plan(request: VerifyRequest, legs: tuple[int, ...], before):
+def _plan(request: VerifyRequest, legs: tuple[int, ...], before: Session | None) -> SweepPlan:
     from procedures.acquisition.plans import SweepPlan, iso230_plan
 
     if before is None:
