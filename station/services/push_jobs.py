@@ -298,16 +298,8 @@ def pushed_lines(job: JobOutcome, cfg: StationConfig) -> list[str]:
     from procedures.compensation.push import OperationFinished
     from station.services.table_jobs import target_text
 
-    out = []
-    for end in job.of(OperationFinished):
-        result = end.result
-        if end.leg is not None and result is not None:
-            out.append(f"pushed: leg {result.leg} bank {result.bank} active (was bank {result.previous_bank}); "
-                       f"table sha256 {result.table_sha256}; compensation target {target_text(cfg, result.leg)}")
-            if not result.table_enabled:
-                out.append(f"warning: leg {result.leg}: the drive does not apply its table (table_enable = 0); switch it "
-                           "on before relying on it")
-    return out
+    return [line for end in job.of(OperationFinished) if end.leg is not None and end.result is not None
+            for line in end.result.lines(target_text(cfg, end.result.leg))]
 
 
 def rolled_back_line(job: JobOutcome) -> str:
