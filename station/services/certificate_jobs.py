@@ -261,7 +261,7 @@ def _register(catalog, cert: dict, pdf_path: Path, pdf_sha: str, json_path: Path
         logging.getLogger(__name__).warning("catalog %s: certificate %s not indexed (%s)", catalog.local, pdf_path, exc)
 
 
-def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: str | os.PathLike | None = None,
+def issue_certificate(as_found: Session, *, leg: int | None = None, as_left: Session | None = None, table: str | os.PathLike | None = None,
                       lab: dict | None = None, customer: str | None = None, folder: str | os.PathLike,
                       counter_path: str | os.PathLike, revise: str | None = None, reason: str = "",
                       tolerances: dict | None = None, issued_utc: str | None = None,

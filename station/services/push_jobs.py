@@ -194,7 +194,7 @@ def _target_lines(cfg: StationConfig, legs: Iterable[int]) -> list[str]:
             if cfg.compensation.target_of(leg) != "drive"]
 
 
-def prepare_push(request: PushRequest, cfg: StationConfig):
+def prepare_push(request: PushRequest, cfg: StationConfig) -> PreparedRefusal | PreparedTableOperation:
     """A PreparedRefusal (refused before any drive: the legs, the table file, a controller
     target, values that look like a unit slip, against what each leg's holder takes by the
     config) or a PreparedTableOperation whose `lines` say what was accepted and where it goes."""
@@ -247,7 +247,7 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
     return PreparedTableOperation(PUSH, request, cfg, legs, audit, tables, sources, warned, lines)
 
 
-def prepare_rollback(request: RollbackRequest, cfg: StationConfig):
+def prepare_rollback(request: RollbackRequest, cfg: StationConfig) -> PreparedRefusal | PreparedTableOperation:
     """A PreparedRefusal (a leg this station does not have, a controller target) or the rollback."""
     from station.services.config import LEG_COUNT
     from station.services.identity import station_audit_log
@@ -272,7 +272,7 @@ def plan_lines(plan, drive_url: bool = True, checksums: bool = True) -> list[str
     return plan.describe(drive_url=drive_url, checksums=checksums)
 
 
-def planned(event):
+def planned(event: object) -> PushPlan | None:
     """The plan a push or rollback shows before its confirmation, when `event` is it (its
     TablePlanned event), else None."""
     from procedures.compensation.push import TablePlanned
