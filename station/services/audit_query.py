@@ -65,11 +65,12 @@ def query_audit(query: AuditQuery, cfg: StationConfig | None = None) -> AuditAns
     """Read the station's audit log and answer `query`; InputError for a leg outside the
     station's, a bad day or an operation id that names none or several."""
     from procedures.compensation.audit_view import find_operation, leg_states, parse_since, read_audit
-    from station.services.config import LEG_COUNT, load_config
+    from station.services.config import LEG_COUNT
     from station.services.identity import station_audit_log
+    from station.services.job import config_or_load
 
     q = query
-    cfg = load_config(q.config) if cfg is None else cfg
+    cfg = config_or_load(cfg, q.config)
     path = station_audit_log(cfg, q.audit).path
     if q.leg is not None and not 1 <= q.leg <= LEG_COUNT:
         raise InputError(f"--leg {q.leg}: leg numbers run from 1 to {LEG_COUNT}")

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from procedures.vocabulary import InputError
-from station.services.job import JobOutcome, OfflineJob
+from station.services.job import JobOutcome, OfflineJob, config_or_load
 
 if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of the diagnosis
     import numpy as np
@@ -238,9 +238,8 @@ def prepare_diagnosis(request: DiagnoseRequest, cfg: StationConfig | None = None
 
         def engine():  # fleet:TYPE reads the station's catalog
             from station.catalog.store import catalog_of, reading_engine
-            from station.services.config import load_config
 
-            got, where = reading_engine(catalog_of(cfg if cfg is not None else load_config(config)), r.local)
+            got, where = reading_engine(catalog_of(config_or_load(cfg, config)), r.local)
             if say is not None:
                 say(where)
             return got

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from procedures.vocabulary import InputError
 from procedures.fit.paper import DEFAULT_N_PARAMS  # the paper's number of cosine terms (help text, default)
-from station.services.job import JobOutcome, OfflineJob
+from station.services.job import JobOutcome, OfflineJob, config_or_load
 
 if TYPE_CHECKING:
     from procedures.fit.model import LegErrorModel
@@ -122,9 +122,6 @@ def prepare_fit(request: FitRequest, cfg: StationConfig | None = None) -> Prepar
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
     legs = parse_legs(r.legs) if r.legs else None
-    if cfg is None:
-        from station.services.config import load_config
-
-        cfg = load_config(r.config)
+    cfg = config_or_load(cfg, r.config)
     params = DEFAULT_N_PARAMS if r.params is None else r.params
     return PreparedFit(r, session, Path(out), params, legs, cfg, lines=[f"fit {session.path} ({r.method}) -> {out}"])

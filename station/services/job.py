@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of
     from procedures.compensation.push import OperationFinished
     from procedures.engine.control import RunControl
     from procedures.engine.runner import RunResult, Sink
+    from station.services.config import StationConfig
 
 FAILED = "failed"
 
@@ -105,6 +106,16 @@ class Prepared(Protocol):
     lines: list[str]  # what it will do, for the user to read before it starts
 
     def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome: ...
+
+
+def config_or_load(cfg: StationConfig | None, path: str | Path | None = None) -> StationConfig:
+    """`cfg` when the front end holds one, else the station config `path` names (None: where
+    station.services.config.load_config looks), loaded only then."""
+    if cfg is not None:
+        return cfg
+    from station.services.config import load_config
+
+    return load_config(path)
 
 
 def require_legs(axes: Mapping[int, object] | None, legs: Iterable[int], device: str = "the rig",

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from procedures.metrology.air import EQUATIONS  # the equations a request may name (argparse choices)
-from station.services.job import JobOutcome, OfflineJob
+from station.services.job import JobOutcome, OfflineJob, config_or_load
 
 if TYPE_CHECKING:  # annotations only
     from procedures.metrology.recorrect import RecorrectOptions
@@ -75,10 +75,7 @@ def prepare_recorrect(request: RecorrectRequest, cfg: StationConfig | None = Non
 
     r = request
     out = check_output_file(r.out, force=r.force, suffixes=(".h5",))
-    if cfg is None:
-        from station.services.config import load_config
-
-        cfg = load_config(r.config)
+    cfg = config_or_load(cfg, r.config)
     m = cfg.metrology
     options = RecorrectOptions(
         equation=r.equation,

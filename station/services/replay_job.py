@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from procedures.vocabulary import InputError
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, config_or_load
 
 if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing heavy
     from procedures.io.recording.reader import Session
@@ -83,10 +83,7 @@ def prepare_replay(request: ReplayRequest, cfg: StationConfig | None = None) -> 
     check_output_file(out, force=request.force, suffixes=(".h5",))
     if not session.plan:
         raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
-    if cfg is None:
-        from station.services.config import load_config
-
-        cfg = load_config(None)
+    cfg = config_or_load(cfg)
     return PreparedReplay(source, session, out, request.speed, request.force, cfg,
                           lines=[f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) "
                                  f"{pace_text(request.speed)}"])
