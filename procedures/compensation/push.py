@@ -196,8 +196,7 @@ class PushPlan:
             lines.append(f"  note: the table was made for leg serial {made_for}; the serial of leg {self.leg} is not "
                          f"configured ([legs.{self.leg}] serial), so it was not checked")
         if not self.table_enabled:
-            lines.append(f"  note: {'the station' if self.target == 'station' else 'the drive'} does not apply this leg's table "
-                         "(table compensation off); the table is stored but not applied")
+            lines.append(f"  note: {not_applied(self.leg, self.target)}; the table is stored but not applied")
         return lines
 
     def question(self) -> str:
@@ -223,6 +222,23 @@ class PushResult:
 
     def event(self) -> TablePushed:
         return TablePushed(self.leg, self.bank, self.table_sha256, self.drive)
+
+    def lines(self, target: str = "") -> list[str]:
+        """What a completed push says, every front end alike: the bank now active, the table's
+        checksum (`target`: where the compensation is applied, in words), and a warning when the
+        drive does not apply the table."""
+        out = [f"pushed: leg {self.leg} bank {self.bank} active (was bank {self.previous_bank}); table sha256 "
+               f"{self.table_sha256}" + (f"; compensation target {target}" if target else "")]
+        if not self.table_enabled:
+            out.append(f"warning: {not_applied(self.leg)}; switch it on before relying on it")
+        return out
+
+
+def not_applied(leg: int, target: str = "drive") -> str:
+    """The words for a leg whose table holder (`target`: "drive" or "station") does not apply
+    its table: the plan's note before a push and the warning after it."""
+    holder = "the station" if target == "station" else "the drive"
+    return f"{holder} does not apply leg {leg}'s table (table compensation off)"
 
 
 Confirm = Callable[[PushPlan], bool]

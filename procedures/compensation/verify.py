@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -47,8 +47,9 @@ from procedures.metrology.thermal import normalise_session
 from procedures.acquisition.plans import SweepPlan
 from procedures.compensation.push import compensation_target, describe_table, drive_table_spec, OperationFinished, PushRefused, refused, table_sha256
 from procedures.acquisition.sweep import sweep
+from procedures.io.recording.schema import POINT_DTYPE
 
-if TYPE_CHECKING:  # the annotation only: the caller's reader reads the sessions
+if TYPE_CHECKING:  # the annotation only: the caller's reader reads the calibration session
     from procedures.io.recording.reader import Session
 
 ACCEPT_RATIO = 1.1
@@ -273,11 +274,24 @@ class LegChecked(ev.Event):
 
 @dataclass(frozen=True)
 class Verified(ev.Event):
-    """A verification's figures (a LegVerification per leg), after its sweep."""
+    """A verification's figures (a LegVerification per leg), after its sweep, and the `points`
+    they were computed from: the sweep's points as measured (POINT_DTYPE rows in the order the
+    recorder wrote them, raw error), for a caller's further figures of the same data (the
+    as-left decisions) without reading the recording back."""
 
     results: dict[int, LegVerification]
     report: str
     session: dict[str, Any]
+    points: np.ndarray
+
+
+@dataclass(frozen=True)
+class MeasuredPoints:
+    """A sweep's points as measured (POINT_DTYPE) with the station config recorded beside them
+    (the materials of the normalisation to 20 degC): what `error_basis` reads of a session."""
+
+    points: np.ndarray
+    station_config: Mapping[str, Any] | None
 
 
 @dataclass(frozen=True)
@@ -294,7 +308,8 @@ class ActiveTable:
 
 def verify_procedure(
     axes: dict[int, ServoAxis], laser: Interferometer, clock: Clock, plan: SweepPlan, out: str | Path, *,
-    read_session: Callable[[Path], Session], before: Session | None = None, expected_sha256: dict[int, str] | None = None,
+    recording_sha256: Callable[[Path], str], station_config: Mapping[str, Any] | None = None,
+    before: Session | None = None, expected_sha256: dict[int, str] | None = None,
     expected_source: str = "the table", drive_url: str = "", control: RunControl | None = None,
     sweep_options: dict[str, Any] | None = None, normalise: bool = True,
 ) -> Iterator[ev.Event]:
@@ -307,8 +322,12 @@ def verify_procedure(
     active table is empty, its drive does not apply it (table_enable = 0), or it is not the
     one in `expected_sha256` (per leg, hashed as the drive holds it). After the sweep: `Verified`
     (figures and the report), one `AuditRecord` per leg with the sweep's outcome, and
-    `OperationFinished` (completed / aborted / failed). `read_session(path)` reads the finished
-    recording (the recorder sink finishes it on `SweepFinished`).
+    `OperationFinished` (completed / aborted / failed).
+
+    The figures are computed from the points the sweep yields (the ones the recorder writes),
+    with `station_config` the recorder records (its materials normalise them), not read back
+    from `out`; `recording_sha256(out)` names the finished recording (the recorder sink
+    finishes it on `SweepFinished`) in the figures and the audit entries.
 
     `normalise` (default): both sessions' errors are normalised to 20 degC material temperature
     with the materials each recorded (procedures.metrology.thermal), and the report says so;
@@ -362,17 +381,20 @@ def verify_procedure(
 
     out = Path(out)
     finished: ev.SweepFinished | None = None
+    rows: list[tuple] = []  # the measured points, as the recorder writes them
     try:
         for event in sweep(plan, axes, laser, clock, control=control, **(sweep_options or {})):
-            if isinstance(event, ev.SweepFinished):
+            if isinstance(event, ev.PointMeasured):
+                rows.append(event.record.to_row())
+            elif isinstance(event, ev.SweepFinished):
                 finished = event
             yield event
     except Exception as exc:  # a device gone mid-sweep: the audit log says so, then the error goes on up
         yield from log_all(Outcome.FAILED, f"verification sweep failed: {exc}", {"session": str(out)})
         raise
     outcome = Outcome(finished.outcome) if finished is not None else Outcome.FAILED
-    session = read_session(out)
-    unmeasured = sorted(set(active) - {int(v) for v in session.points["leg"]})
+    measured = MeasuredPoints(np.array(rows, POINT_DTYPE), station_config)
+    unmeasured = sorted(set(active) - {int(v) for v in measured.points["leg"]})
     if outcome != Outcome.COMPLETED and unmeasured:
         # stopped before a leg's first point (a link lost while preparing): no figures to compare
         text = (f"the verification sweep did not complete ({outcome}: {finished.reason if finished is not None else ''}); "
@@ -380,15 +402,16 @@ def verify_procedure(
         yield from log_all(outcome, text, {"session": str(out)})
         yield OperationFinished(Action.VERIFY, None, outcome, text, {})
         return
-    after_points, before_points, basis, basis_doc = error_basis(session, before, normalise)
+    after_points, before_points, basis, basis_doc = error_basis(measured, before, normalise)
     results = verify(after_points, before_points, list(active),
                      after_source=str(out), before_source=str(before.path) if before is not None else "")
-    doc = {"path": str(out), "sha256": session.sha256, "outcome": str(outcome),
+    sha256 = recording_sha256(out)
+    doc = {"path": str(out), "sha256": sha256, "outcome": str(outcome),
            "reason": finished.reason if finished is not None else "", "error_basis": basis_doc}
-    yield Verified(results, "\n".join(basis) + "\n" + format_report(results), doc)
+    yield Verified(results, "\n".join(basis) + "\n" + format_report(results), doc, measured.points)
     for leg, r in results.items():
         a = active[leg]
-        details = {"target": a.target, "session": str(out), "session_sha256": session.sha256, **r.to_json()}
+        details = {"target": a.target, "session": str(out), "session_sha256": sha256, **r.to_json()}
         if before is not None:
             details["before_session"] = {"path": str(before.path), "sha256": before.sha256}
         yield AuditRecord(AuditEntry(Action.VERIFY, leg, outcome, summary_line(outcome, r),
@@ -403,9 +426,11 @@ def verify_procedure(
     yield OperationFinished(Action.VERIFY, None, outcome, text, results)
 
 
-def error_basis(session: Session, before: Session | None, normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
-    """The verification's and the calibration's points as compared: normalised to 20 degC with
-    the materials each session recorded (`normalise`), or raw; with the lines saying which."""
+def error_basis(session: Session | MeasuredPoints, before: Session | None,
+                normalise: bool) -> tuple[np.ndarray, np.ndarray | None, list[str], dict]:
+    """The verification's (`session`: as measured, or a session file as read) and the
+    calibration's points as compared: normalised to 20 degC with the materials each session
+    recorded (`normalise`), or raw; with the lines saying which."""
     before_points = before.points if before is not None else None
     if not normalise:
         return session.points, before_points, ["error: raw, not normalised to 20 degC (--raw)"], {"normalised": False}

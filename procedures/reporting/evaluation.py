@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from procedures.io.recording.stage import AS_LEFT
 from procedures.reporting import decision, iso230_report
 
@@ -33,11 +35,22 @@ def evaluate_session(session: Any, raw: bool = False, tolerances: dict | None = 
     those the session recorded) at `stage` ("as_found" / "as_left"; None: the session's own,
     `decision_stage`). A JSON-able dict."""
     identity = session.identity.to_json() if session.identity.recorded else None
-    return iso230_report.build(session.points, plan=session.plan, devices=session.devices,
-                               station_config=session.station_config, attrs=session.attrs,
-                               source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
-                               identity=identity, tolerances=tolerances,
-                               stage=stage or decision_stage(getattr(session, "stage", None)))
+    return evaluate_points(session.points, plan=session.plan, devices=session.devices,
+                           station_config=session.station_config, attrs=session.attrs,
+                           source={"path": str(session.path), "sha256": session.sha256}, raw=raw,
+                           identity=identity, tolerances=tolerances,
+                           stage=stage or decision_stage(getattr(session, "stage", None)))
+
+
+def evaluate_points(points: np.ndarray, *, plan: dict, devices: dict, station_config: dict,
+                    identity: dict | None, source: dict, attrs: dict | None = None, raw: bool = False,
+                    tolerances: dict | None = None, stage: str) -> dict[str, Any]:
+    """The same evaluation of points not read from a file: a verification's points as it
+    measured them, with the plan, devices, config and identity its recording holds (`attrs`: the
+    recording's root attributes, None when not at hand: the identification then says less, the
+    values and decisions are the same)."""
+    return iso230_report.build(points, plan=plan, devices=devices, station_config=station_config, attrs=attrs or {},
+                               source=source, raw=raw, identity=identity, tolerances=tolerances, stage=stage)
 
 
 def leg_values(evaluation: dict, leg: int | str) -> dict[str, dict[str, float | None]]:

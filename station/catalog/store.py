@@ -19,7 +19,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 import sqlalchemy as sa
 from sqlalchemy.dialects import postgresql, sqlite
@@ -28,6 +28,9 @@ from sqlalchemy.engine import Engine
 from station.catalog import db
 from station.catalog.models import Instrument, Leg, Outbox, Record, RecordLeg, Station
 from station.catalog.readers import Rec
+
+if TYPE_CHECKING:
+    from station.services.config import StationConfig
 
 log = logging.getLogger(__name__)
 outbox_log = logging.getLogger("station.catalog.outbox")  # the one line a job says when its records wait
@@ -267,8 +270,8 @@ class Catalog:
         return result
 
 
-def catalog_of(cfg) -> Catalog:
-    """The catalog of a station configuration (station.services.config.StationConfig)."""
+def catalog_of(cfg: StationConfig) -> Catalog:
+    """The catalog of a station configuration."""
     c = cfg.catalog
     return Catalog(local=Path(cfg.recordings_dir) / LOCAL_NAME, url=c.url, station_id=cfg.station_id,
                    connect_timeout_s=c.connect_timeout_s, statement_timeout_s=c.statement_timeout_s)

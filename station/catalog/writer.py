@@ -16,12 +16,14 @@ import logging
 import os
 import threading
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 from procedures.engine import events as ev
 
 if TYPE_CHECKING:
+    from procedures.compensation.audit import AuditSink
     from station.catalog.store import Catalog
+    from station.services.config import StationConfig
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +32,7 @@ def enabled() -> bool:
     return os.environ.get("STATION_CATALOG", "").strip().lower() not in ("off", "0", "no", "false")
 
 
-def catalog_for(cfg: Any) -> Catalog | None:
+def catalog_for(cfg: StationConfig) -> Catalog | None:
     """The catalog of a station config, or None when catalog writes are off. With a shared
     catalog, a backlog left by earlier work starts going out now, in a thread (a job starting is
     the "next write" the backlog waits for; the job does not wait for it)."""
@@ -66,7 +68,7 @@ class CatalogSink:
     critical = False
 
     def __init__(self, catalog: Catalog | None, session_path: str | os.PathLike | None = None,
-                 audit_sink: Any = None, *, opener: Callable[[], Catalog | None] | None = None) -> None:
+                 audit_sink: AuditSink | None = None, *, opener: Callable[[], Catalog | None] | None = None) -> None:
         self.catalog = catalog
         self.session_path = Path(session_path) if session_path else None
         self.audit_sink = audit_sink
@@ -77,7 +79,8 @@ class CatalogSink:
         self._points_seen = False
 
     @classmethod
-    def deferred(cls, cfg: Any, session_path: str | os.PathLike | None = None, audit_sink: Any = None) -> CatalogSink:
+    def deferred(cls, cfg: StationConfig, session_path: str | os.PathLike | None = None,
+                 audit_sink: AuditSink | None = None) -> CatalogSink:
         """The sink for the catalog of `cfg` (catalog_for), opened off the run's way (see the class);
         one that does nothing when catalog writes are off."""
         if not enabled():

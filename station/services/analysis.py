@@ -8,10 +8,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from procedures.metrology.thermal import error_basis
 from procedures.reporting import evaluation
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from procedures.fit.model import LegErrorModel
+    from procedures.io.recording.reader import Session
+    from procedures.reporting.iso230 import LegIso230
+    from procedures.reporting.session_report import ReportResult
+    from station.services.config import StationConfig
 
 
 @dataclass
@@ -19,13 +28,13 @@ class SessionAnalysis:
     """What `analyse_session` found. `iso_error` / `uncertainty_error`: why the ISO 230-2 values
     or their U could not be had (the rest stands without them)."""
 
-    session: Any  # procedures.io.recording.reader.Session
-    points: Any  # session.points with error_um on the chosen basis
+    session: Session
+    points: np.ndarray  # session.points with error_um on the chosen basis
     basis_lines: tuple[str, ...]  # what error_basis says, as the commands print it
     basis: dict  # the same as JSON (a model carries it as options["error_basis"])
     raw: bool = False
-    model: Any = None  # procedures.fit.LegErrorModel, when a fit was asked for
-    iso: Any = None  # procedures.reporting.iso230.evaluate's result, when asked for
+    model: LegErrorModel | None = None  # when a fit was asked for
+    iso: dict[int, LegIso230] | None = None  # procedures.reporting.iso230.evaluate's result, when asked for
     iso_u: dict[int, dict[str, float | None]] | None = None  # leg -> value name -> U (k = 2), um
     evaluation: dict | None = None  # procedures.reporting.evaluation.evaluate_session's, with `uncertainty`
     iso_error: Exception | None = None
@@ -33,7 +42,7 @@ class SessionAnalysis:
     fit_options: dict = field(default_factory=dict)
 
 
-def analyse_session(session, raw: bool = False, *, fit_method: str | None = None, fit_options: dict | None = None,
+def analyse_session(session: Session, raw: bool = False, *, fit_method: str | None = None, fit_options: dict | None = None,
                     iso: bool = False, uncertainty: bool = False) -> SessionAnalysis:
     """Analyse `session` (procedures.io.recording.reader.Session) on the raw error (`raw`) or the
     error normalised to 20 degC. With `fit_method` ("default", "paper"), fit a model (keyword
@@ -71,7 +80,7 @@ def iso_uncertainty(ev: dict) -> dict[int, dict[str, float | None]]:
     return {int(leg): {name: v["U_um"] for name, v in evaluation.leg_values(ev, leg).items()} for leg in ev["legs"]}
 
 
-def save_session_model(model: Any, out: Any, session: Any, cfg: Any) -> Path:
+def save_session_model(model: LegErrorModel, out: str | Path, session: Session, cfg: StationConfig) -> Path:
     """Write `model` (fitted to `session`) as JSON with the session's identity, and index it in
     the catalog of station config `cfg` (a catalog that cannot be written never fails the save:
     `station catalog sync` indexes the file later). Both front ends save models through this."""

@@ -9,11 +9,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from procedures.compensation.audit import ACTIONS
 from procedures.compensation.audit_view import INTERRUPTED, LegState, Operation, backup_summary
 from procedures.vocabulary import InputError
+
+if TYPE_CHECKING:
+    from station.services.config import StationConfig
 
 ACTION_NAMES: tuple[str, ...] = tuple(str(a.value) for a in ACTIONS)
 """The actions an audit entry names (push, verify, rollback, ...): what a query may filter by."""
@@ -58,15 +61,16 @@ class AuditAnswer:
         return doc
 
 
-def query_audit(query: AuditQuery, cfg: Any = None) -> AuditAnswer:
+def query_audit(query: AuditQuery, cfg: StationConfig | None = None) -> AuditAnswer:
     """Read the station's audit log and answer `query`; InputError for a leg outside the
     station's, a bad day or an operation id that names none or several."""
     from procedures.compensation.audit_view import find_operation, leg_states, parse_since, read_audit
-    from station.services.config import LEG_COUNT, load_config
+    from station.services.config import LEG_COUNT
     from station.services.session_identity import station_audit_log
+    from station.services.job import config_or_load
 
     q = query
-    cfg = load_config(q.config) if cfg is None else cfg
+    cfg = config_or_load(cfg, q.config)
     path = station_audit_log(cfg, q.audit).path
     if q.leg is not None and not 1 <= q.leg <= LEG_COUNT:
         raise InputError(f"--leg {q.leg}: leg numbers run from 1 to {LEG_COUNT}")

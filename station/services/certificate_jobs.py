@@ -22,13 +22,20 @@ import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 from procedures.reporting import certificate, decision
 from procedures.vocabulary import InputError
 from procedures.io.recording.stage import AS_FOUND, AS_LEFT, stage_of_session
 from procedures.io.atomic_outputs import write_bytes_atomic  # the index is whole or old
 from station.services.report_jobs import session_decisions
+from station.services.job import OfflineJob
+
+if TYPE_CHECKING:  # annotations only: the catalog (SQLAlchemy) loads when it is read
+    from sqlalchemy.engine import Engine
+
+    from procedures.io.recording.reader import Session
+    from station.services.config import StationConfig
 
 COUNTER_NAME = "certificate-counter.json"
 FOLDER_NAME = "certificates"
@@ -254,7 +261,7 @@ def _register(catalog, cert: dict, pdf_path: Path, pdf_sha: str, json_path: Path
         logging.getLogger(__name__).warning("catalog %s: certificate %s not indexed (%s)", catalog.local, pdf_path, exc)
 
 
-def issue_certificate(as_found, *, leg: int | None = None, as_left=None, table: str | os.PathLike | None = None,
+def issue_certificate(as_found: Session, *, leg: int | None = None, as_left: Session | None = None, table: str | os.PathLike | None = None,
                       lab: dict | None = None, customer: str | None = None, folder: str | os.PathLike,
                       counter_path: str | os.PathLike, revise: str | None = None, reason: str = "",
                       tolerances: dict | None = None, issued_utc: str | None = None,
@@ -497,7 +504,7 @@ class ApproveRequest:
     out: str | os.PathLike | None = None
 
 
-def approve_certificate(request: ApproveRequest, cfg: Any) -> Issued:
+def approve_certificate(request: ApproveRequest, cfg: StationConfig) -> Issued:
     """`approve` with what the station config `cfg` says: the folder, the authoriser, the audit
     log and the catalog the approval is recorded in."""
     from station.catalog.writer import catalog_for  # noqa: PLC0415
@@ -535,14 +542,11 @@ class CertificateRequest:
 
 
 @dataclass
-class PreparedCertificate:
+class PreparedCertificate(OfflineJob):
     """A certificate whose sessions were read and inputs checked; `run` issues it."""
 
     kwargs: dict[str, Any]
-    as_found: Any  # procedures.io.recording.reader.Session
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
+    as_found: Session
 
     def run(self, sinks=(), control=None):
         from station.services.job import JobOutcome  # noqa: PLC0415
@@ -552,7 +556,7 @@ class PreparedCertificate:
                           data=issued)
 
 
-def prepare_certificate(request: CertificateRequest, cfg: Any) -> PreparedCertificate:
+def prepare_certificate(request: CertificateRequest, cfg: StationConfig) -> PreparedCertificate:
     """Read the sessions, pick the leg, hash the leg's rows of the table as its drive holds them,
     and check the received date (InputError naming what to give)."""
     from procedures.io.recording.reader import read_session  # noqa: PLC0415
@@ -627,8 +631,8 @@ class CatalogSources:
     leg: int | None
 
 
-def sources_from_catalog(engine: Any, where: str, serial: str, *, as_left: str | None = None,
-                         table: str | None = None, say: Any = None) -> CatalogSources:
+def sources_from_catalog(engine: Engine, where: str, serial: str, *, as_left: str | None = None,
+                         table: str | None = None, say: Callable[[str], None] | None = None) -> CatalogSources:
     """The sources of leg `serial` in the catalog `engine` (described by `where`): the last
     calibration, the verification after it and the last table pushed after it; `say(line)` is
     told each (and the catalog). InputError when the catalog lists a file that is missing."""

@@ -7,11 +7,17 @@ from __future__ import annotations
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from procedures.vocabulary import InputError
 from station import __version__
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, OfflineJob
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing heavy
+    from procedures.io.import_map import ImportMap
+    from procedures.io.ranges import PointLimits
+    from procedures.io.recording.reader import Session
+    from station.services.config import StationConfig
 
 # -- export: a session file -> the interchange CSV --------------------------------------------------
 
@@ -27,11 +33,8 @@ class ExportRequest:
 
 
 @dataclass
-class PreparedExport:
+class PreparedExport(OfflineJob):
     request: ExportRequest
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         from procedures.io.csv_io import export_csv
@@ -42,7 +45,7 @@ class PreparedExport:
         return JobOutcome("done", outputs=[Path(summary.path)], lines=export_lines(summary), data=summary)
 
 
-def prepare_export(request: ExportRequest, cfg: Any = None) -> PreparedExport:
+def prepare_export(request: ExportRequest, cfg: StationConfig | None = None) -> PreparedExport:
     """Refuse an existing output without force (procedures/io/outputs.py)."""
     from procedures.io.outputs import check_output_file
 
@@ -110,14 +113,11 @@ def _identity(r: ImportRequest, mapping) -> dict:
 
 
 @dataclass
-class PreparedImport:
+class PreparedImport(OfflineJob):
     request: ImportRequest
-    limits: Any  # procedures.io.ranges.PointLimits
-    mapping: Any = None  # procedures.io.import_map's map, with --map
+    limits: PointLimits
+    mapping: ImportMap | None = None  # with --map
     identity: dict = field(default_factory=dict)
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         from procedures.io.csv_io import import_csv
@@ -145,7 +145,7 @@ class PreparedImport:
                           data=session)
 
 
-def prepare_import(request: ImportRequest, cfg: Any = None) -> PreparedImport:
+def prepare_import(request: ImportRequest, cfg: StationConfig | None = None) -> PreparedImport:
     """The output check, the ranges, the map and the identity given (each refusal one line naming
     the option or map key), before the file is read."""
     from procedures.io.outputs import check_output_file
@@ -162,7 +162,7 @@ def prepare_import(request: ImportRequest, cfg: Any = None) -> PreparedImport:
     return PreparedImport(r, limits, mapping, identity, lines=[f"import {r.csv} -> {r.out}"])
 
 
-def import_lines(session: Any, r: ImportRequest) -> list[str]:
+def import_lines(session: Session, r: ImportRequest) -> list[str]:
     """What `station import` says about the session it wrote: points, legs, runs, the optional
     columns and the identity (or that none was given, and what that costs)."""
     pts = session.points

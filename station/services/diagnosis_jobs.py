@@ -10,18 +10,27 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 from procedures.vocabulary import InputError
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, OfflineJob, config_or_load
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of the diagnosis
+    import numpy as np
+
+    from procedures.diagnosis import DiagnosisSettings
+    from procedures.diagnosis.twin import ExternalTwin
+    from procedures.fit.model import LegErrorModel
+    from procedures.io.recording.reader import Session
+    from station.services.config import StationConfig
 
 # The self-check's sessions (`station diagnose --self-check`) are made from the plant alone, with the
 # other synthetic sessions (procedures/synthetic.py); the front ends take them from here.
 from procedures.synthetic import PHYSICS, SELF_CHECK_CONTRIBUTION_UM, selfcheck_trial, variant_trial  # noqa: F401
 
 
-def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings: Any = None
-                     ) -> tuple[dict, list[str]]:
+def diagnose_session(session: Session, path: str | Path, twin: ExternalTwin | None = None,
+                     settings: DiagnosisSettings | None = None) -> tuple[dict, list[str]]:
     """The diagnosis report of `session` (as procedures.io.recording.reader reads it, from `path`)
     against `twin` (None: the twin fitted on the recording), and the lines saying which error it
     used and the material temperature range per leg. The diagnosis works on the raw error_um on
@@ -61,7 +70,7 @@ def diagnose_session(session: Any, path: str | Path, twin: Any = None, settings:
 MATERIAL_LIKE = (0.5, 2.0)  # a leg expanding within these factors of its assumed material expands like it
 
 
-def thermal_beyond_material(report: dict, session: Any, legs: list[int]) -> None:
+def thermal_beyond_material(report: dict, session: Session, legs: list[int]) -> None:
     """On legs compared normalised to 20 degC, a thermal finding is the expansion beyond the
     assumed material's (issue 35): say so in words and figures (`material` on the finding: the
     assumed and the measured total expansion, ppm/K). Sign: measured = assumed + found."""
@@ -87,7 +96,7 @@ def thermal_beyond_material(report: dict, session: Any, legs: list[int]) -> None
                          "note": note}
 
 
-def on_common_basis(session: Any, twin: Any) -> tuple[Any, Any, list[int]]:
+def on_common_basis(session: Session, twin: ExternalTwin | None) -> tuple[np.ndarray, ExternalTwin | None, list[int]]:
     """(points, twin, legs compared normalised): the session's error normalised to 20 degC on the
     legs where both it and the twin carry the material temperature (a reference recorded at
     another temperature then shows no scale from the temperature alone), raw elsewhere."""
@@ -122,21 +131,15 @@ def on_common_basis(session: Any, twin: Any) -> tuple[Any, Any, list[int]]:
 
 # -- the diagnosis job (issue 32 part 1, one shape for every job) ---------------------------------
 
-@dataclass
-class DiagnoseRequest:
-    """Diagnose the recording `session` against a twin: `twin` as `station diagnose --twin` spells
-    it (MODEL.json, REFERENCE.h5, sim:..., fleet:TYPE; None: the twin fitted on the recording), or
-    `twin_model` (a fitted model and the file it names, as the UI's Results page holds it).
-    `json_out`: where to write the report (replaced only with `force`); `local`: fleet:TYPE reads
-    the local catalog. The settings: `threshold_um`, `alpha`, `lead_mm`, `motor_turn_mm`,
-    `effects` (comma separated; None: all), `holdout` ("cycle" or "pass"); None = the default."""
+@dataclass(kw_only=True)
+class DiagnosisOptions:
+    """What a diagnosis and its self-check are both asked (keywords of either request): `json_out`,
+    where to write the report (replaced only with `force`), and the settings: `threshold_um`,
+    `alpha`, `lead_mm`, `motor_turn_mm`, `effects` (comma separated; None: all), `holdout`
+    ("cycle" or "pass"); None = the default."""
 
-    session: Path | None
-    twin: str | None = None
-    twin_model: tuple[Any, str] | None = None
     json_out: Path | None = None
     force: bool = False
-    local: bool = False
     threshold_um: float | None = None
     alpha: float | None = None
     lead_mm: float | None = None
@@ -144,17 +147,34 @@ class DiagnoseRequest:
     effects: str | None = None
     holdout: str | None = None
 
+    def checked_settings(self) -> DiagnosisSettings:
+        """The settings (InputError naming a bad one) and the output (refused when it exists
+        without `force`), both checked before the (long) run."""
+        from procedures.diagnosis import DiagnosisSettings
+        from procedures.io.outputs import check_output_file
 
-def diagnosis_settings(r: Any) -> Any:
-    """procedures.diagnosis.DiagnosisSettings from a request's fields (None: the default)."""
-    from procedures.diagnosis import DiagnosisSettings
+        kw = {k: getattr(self, k) for k in ("threshold_um", "alpha", "lead_mm", "holdout", "motor_turn_mm")
+              if getattr(self, k) is not None or k == "motor_turn_mm"}
+        effects = tuple(e.strip() for e in self.effects.split(",") if e.strip()) if self.effects else ()
+        if effects:
+            kw["effects"] = effects
+        settings = DiagnosisSettings(**kw)
+        if self.json_out:
+            check_output_file(self.json_out, force=self.force, option="--json")
+        return settings
 
-    kw = {k: getattr(r, k) for k in ("threshold_um", "alpha", "lead_mm", "holdout", "motor_turn_mm")
-          if getattr(r, k) is not None or k == "motor_turn_mm"}
-    effects = tuple(e.strip() for e in r.effects.split(",") if e.strip()) if r.effects else ()
-    if effects:
-        kw["effects"] = effects
-    return DiagnosisSettings(**kw)
+
+@dataclass
+class DiagnoseRequest(DiagnosisOptions):
+    """Diagnose the recording `session` against a twin: `twin` as `station diagnose --twin` spells
+    it (MODEL.json, REFERENCE.h5, sim:..., fleet:TYPE; None: the twin fitted on the recording), or
+    `twin_model` (a fitted model and the file it names, as the UI's Results page holds it).
+    `local`: fleet:TYPE reads the local catalog. The output and settings: DiagnosisOptions."""
+
+    session: Path | None
+    twin: str | None = None
+    twin_model: tuple[LegErrorModel, str] | None = None
+    local: bool = False
 
 
 @dataclass
@@ -169,14 +189,11 @@ class Diagnosis:
 
 
 @dataclass
-class PreparedDiagnosis:
+class PreparedDiagnosis(OfflineJob):
     request: DiagnoseRequest
-    session: Any  # procedures.io.recording.reader.Session
-    twin: Any
-    settings: Any
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
+    session: Session
+    twin: ExternalTwin | None  # None: the twin fitted on the recording
+    settings: DiagnosisSettings
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         from procedures.diagnosis import to_json
@@ -195,17 +212,13 @@ class PreparedDiagnosis:
                           data=Diagnosis(Path(r.session), report, text, list(temp_lines)))
 
 
-def prepare_diagnosis(request: DiagnoseRequest, cfg: Any = None, say: Callable[[str], None] | None = None,
+def prepare_diagnosis(request: DiagnoseRequest, cfg: StationConfig | None = None, say: Callable[[str], None] | None = None,
                       config: Path | None = None) -> PreparedDiagnosis:
     """Every refusal before the (long) diagnosis: the settings, an output that exists, no file,
     a CSV not imported, an unreadable session or twin. `cfg`: the station config whose catalog a
     fleet twin reads (None: load `config`); `say(line)` is told which catalog it read."""
-    from procedures.io.outputs import check_output_file
-
     r = request
-    settings = diagnosis_settings(r)
-    if r.json_out:  # before the (long) diagnosis
-        check_output_file(r.json_out, force=r.force, option="--json")
+    settings = r.checked_settings()
     if not r.session:
         raise InputError("name a session file (FILE.h5), or use --self-check")
     path = Path(r.session)
@@ -225,9 +238,8 @@ def prepare_diagnosis(request: DiagnoseRequest, cfg: Any = None, say: Callable[[
 
         def engine():  # fleet:TYPE reads the station's catalog
             from station.catalog.store import catalog_of, reading_engine
-            from station.services.config import load_config
 
-            got, where = reading_engine(catalog_of(cfg if cfg is not None else load_config(config)), r.local)
+            got, where = reading_engine(catalog_of(config_or_load(cfg, config)), r.local)
             if say is not None:
                 say(where)
             return got
@@ -239,35 +251,24 @@ def prepare_diagnosis(request: DiagnoseRequest, cfg: Any = None, say: Callable[[
 # -- the self-check: the diagnosis on simulated sessions with known effects withheld ---------------
 
 @dataclass
-class SelfCheckRequest:
+class SelfCheckRequest(DiagnosisOptions):
     """`seeds` sessions from `first_seed` (per physics with `variants`, comma separated, "" = all)
-    with a withheld effect of RMS contribution in `magnitude_um` (MIN, MAX); `json_out`: where to
-    write the results (replaced only with `force`); the settings as DiagnoseRequest's."""
+    with a withheld effect of RMS contribution in `magnitude_um` (MIN, MAX); the output and
+    settings: DiagnosisOptions."""
 
     session: Path | None = None  # refused: the self-check makes its own sessions
     seeds: int = 20
     first_seed: int = 0
     variants: str | None = None
     magnitude_um: tuple[float, float] | None = None
-    json_out: Path | None = None
-    force: bool = False
-    threshold_um: float | None = None
-    alpha: float | None = None
-    lead_mm: float | None = None
-    motor_turn_mm: float | None = None
-    effects: str | None = None
-    holdout: str | None = None
 
 
 @dataclass
-class PreparedSelfCheck:
+class PreparedSelfCheck(OfflineJob):
     request: SelfCheckRequest
-    settings: Any
+    settings: DiagnosisSettings
     physics: list[str]
     progress: Callable[[str], None] | None = None
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         """Status "done" when every trial was fully right, "failed" otherwise; `data` the results."""
@@ -316,13 +317,10 @@ class PreparedSelfCheck:
 def prepare_self_check(request: SelfCheckRequest, progress: Callable[[str], None] | None = None) -> PreparedSelfCheck:
     """Every refusal before the sessions are made (settings, output, physics, magnitudes);
     `lines`: the size estimate. `progress(line)` is told each trial (the variants: each bad one)."""
-    from procedures.io.outputs import check_output_file
     from station.services.sizing import selfcheck_estimate
 
     r = request
-    settings = diagnosis_settings(r)
-    if r.json_out:  # before the (long) self-check
-        check_output_file(r.json_out, force=r.force, option="--json")
+    settings = r.checked_settings()
     if r.session:
         raise InputError("--self-check makes its own sessions; drop FILE.h5")
     physics = [p.strip() for p in r.variants.split(",") if p.strip()] if r.variants else []

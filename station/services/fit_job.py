@@ -7,13 +7,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from procedures.vocabulary import InputError
 from procedures.fit.paper import DEFAULT_N_PARAMS  # the paper's number of cosine terms (help text, default)
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, OfflineJob, config_or_load
 
 if TYPE_CHECKING:
+    from procedures.fit.model import LegErrorModel
+    from procedures.io.recording.reader import Session
     from station.services.config import StationConfig
 
 __all__ = ["DEFAULT_N_PARAMS", "FitRequest", "FitResult", "PreparedFit", "prepare_fit"]
@@ -46,7 +48,7 @@ class FitResult:
     probes (only the legs that had them)."""
 
     session_path: Path
-    model: Any
+    model: LegErrorModel
     path: Path
     method: str
     params: int
@@ -56,18 +58,15 @@ class FitResult:
 
 
 @dataclass
-class PreparedFit:
+class PreparedFit(OfflineJob):
     """A fit that passed every check (prepare_fit); `run` fits, writes and indexes the model."""
 
     request: FitRequest
-    session: Any  # procedures.io.recording.reader.Session
+    session: Session
     out: Path
     params: int
     legs: list[int] | None
-    cfg: "StationConfig"
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
+    cfg: StationConfig
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         from procedures.acquisition.probe_rule import recorded_stop
@@ -106,7 +105,7 @@ class PreparedFit:
         return JobOutcome("done", outputs=[self.out], lines=result.basis_lines + notes, data=result)
 
 
-def prepare_fit(request: FitRequest, cfg: Any = None) -> PreparedFit:
+def prepare_fit(request: FitRequest, cfg: StationConfig | None = None) -> PreparedFit:
     """Every refusal of a fit before it runs (InputError): --params without the paper method, an
     output that exists (without force), an empty session, a bad leg list. `cfg`: the station
     config (None: load `request.config`)."""
@@ -123,9 +122,6 @@ def prepare_fit(request: FitRequest, cfg: Any = None) -> PreparedFit:
     if session.points.size == 0:
         raise InputError(f"{session.path}: the session has no points; record a sweep first")
     legs = parse_legs(r.legs) if r.legs else None
-    if cfg is None:
-        from station.services.config import load_config
-
-        cfg = load_config(r.config)
+    cfg = config_or_load(cfg, r.config)
     params = DEFAULT_N_PARAMS if r.params is None else r.params
     return PreparedFit(r, session, Path(out), params, legs, cfg, lines=[f"fit {session.path} ({r.method}) -> {out}"])

@@ -25,9 +25,15 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Protocol
 
 from procedures.vocabulary import InputError
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of the procedures
+    from procedures.compensation.push import OperationFinished
+    from procedures.engine.control import RunControl
+    from procedures.engine.runner import RunResult, Sink
+    from station.services.config import StationConfig
 
 FAILED = "failed"
 
@@ -53,9 +59,9 @@ class JobOutcome:
     outputs: list[Path] = field(default_factory=list)
     lines: list[str] = field(default_factory=list)
     data: Any = None
-    run: Any = None  # procedures.engine.runner.RunResult
+    run: RunResult | None = None
     events: list = field(default_factory=list)
-    finished: Any = None  # procedures.compensation.push.OperationFinished
+    finished: OperationFinished | None = None
     audit_problems: list[str] = field(default_factory=list)
     implausible: bool = False
     warnings: list[str] = field(default_factory=list)
@@ -78,6 +84,16 @@ class JobOutcome:
         return [e for e in self.events if isinstance(e, kind)]
 
 
+@dataclass(kw_only=True)
+class OfflineJob:
+    """What every prepared job that does not touch the rig has of `Prepared`: no rig lock,
+    nothing to ask; `lines` what it will do (a keyword of the job's constructor)."""
+
+    needs_rig: bool = False
+    question: str | None = None
+    lines: list[str] = field(default_factory=list)
+
+
 class Prepared(Protocol):
     """A job that passed every check it can make without the devices: `run` does it.
 
@@ -89,7 +105,28 @@ class Prepared(Protocol):
     question: str | None  # a yes/no to confirm before run (None: nothing to ask)
     lines: list[str]  # what it will do, for the user to read before it starts
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome: ...
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome: ...
+
+
+def config_or_load(cfg: StationConfig | None, path: str | Path | None = None) -> StationConfig:
+    """`cfg` when the front end holds one, else the station config `path` names (None: where
+    station.services.config.load_config looks), loaded only then."""
+    if cfg is not None:
+        return cfg
+    from station.services.config import load_config
+
+    return load_config(path)
+
+
+def require_legs(axes: Mapping[int, object] | None, legs: Iterable[int], device: str = "the rig",
+                 nothing: str = "nothing moved") -> None:
+    """A rig job's first device check: connected (`axes` not None) with a drive for every leg of
+    `legs`; InputError naming the missing legs and what was not done (`nothing`) otherwise."""
+    if axes is None:
+        raise InputError(f"not connected to {device}; {nothing}")
+    missing = [leg for leg in legs if leg not in axes]
+    if missing:
+        raise InputError(f"no drive connected for leg(s) {missing} (connected: {sorted(axes)}); {nothing}")
 
 
 class RigBusy(InputError):
@@ -110,7 +147,7 @@ class Ticket:
     `control` (pause, resume, abort). Claimed on the front end's thread, run on a worker."""
 
     run: int
-    control: Any  # procedures.engine.control.RunControl
+    control: RunControl
     rig: bool = True  # the job holds the rig: no other rig job is claimed while it lives
 
 
@@ -123,7 +160,7 @@ class JobRunner:
 
     BUSY = "the rig is busy with another job; wait for it to finish, or abort it; nothing was done"
 
-    def __init__(self, follow_ups: Iterable[Callable[[JobOutcome], None]] = (), lock: Any = None,
+    def __init__(self, follow_ups: Iterable[Callable[[JobOutcome], None]] = (), lock: threading.Lock | None = None,
                  wait_s: float = 0.0) -> None:
         self._rig = lock if lock is not None else threading.Lock()
         self._wait_s = wait_s
@@ -137,7 +174,7 @@ class JobRunner:
         return self._claimed is not None
 
     @property
-    def control(self) -> Any:
+    def control(self) -> RunControl | None:
         """The claimed rig job's RunControl (None: none)."""
         ticket = self._claimed
         return ticket.control if ticket is not None else None
@@ -162,7 +199,7 @@ class JobRunner:
             if self._claimed is ticket:
                 self._claimed = None
 
-    def run(self, job: Prepared, sinks: Iterable[Any] = (), control: Any = None, confirmed: bool = False,
+    def run(self, job: Prepared, sinks: Iterable[Sink] = (), control: RunControl | None = None, confirmed: bool = False,
             confirm: Confirm | None = None, ticket: Ticket | None = None) -> JobOutcome:
         """Run `job` (its claim `ticket`, or a new one). A rig job takes the rig lock, then makes
         its device checks (`check()`); a job with a `question` runs only when `confirmed` or
@@ -203,7 +240,7 @@ class JobRunner:
         return True
 
     @staticmethod
-    def _ask(job: Prepared, confirmed: bool, confirm: Confirm | None, control: Any) -> None:
+    def _ask(job: Prepared, confirmed: bool, confirm: Confirm | None, control: RunControl | None) -> None:
         question = getattr(job, "question", None)
         if not question or confirmed:
             return

@@ -15,12 +15,19 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from procedures.io.atomic_outputs import atomic_folder, write_text_atomic
 from procedures.vocabulary import InputError
+from station.services.job import OfflineJob
+
+if TYPE_CHECKING:  # annotations only: the experiment loads when it runs
+    from procedures.platform.experiment import ExperimentResult
+    from procedures.platform.geometry import Geometry
+    from station.services.analysis import SessionAnalysis
+    from station.services.config import StationConfig
 
 REPORT_MD = "platform_report.md"
 SUMMARY_JSON = "platform_summary.json"
@@ -266,7 +273,7 @@ class PlatformRequest:
     poses: int = 2000
     seed: int = 0
     source: Path | None = None
-    analysis: Any = None
+    analysis: SessionAnalysis | None = None
     recording: Path | None = None
     measured: str | None = None
     profile: Path | None = None
@@ -286,13 +293,13 @@ class PlatformRun:
     measurement's digest), what went in, and where its report goes; the figures a front end
     shows, in its units (`pose_rows`, `dominant`, `histogram`)."""
 
-    result: Any  # procedures.platform.experiment.ExperimentResult
+    result: ExperimentResult
     summary: dict
     inputs: dict
-    geometry: Any
+    geometry: Geometry
     recording: Path
     label: str  # what was compensated with what, for the status line (file names only)
-    analysis: Any = None
+    analysis: SessionAnalysis | None = None
     written: list[Path] = field(default_factory=list)
 
     def measurement_label(self, measured: str | None, default: str = "the source") -> str:
@@ -350,12 +357,9 @@ def require_six_legs(session, name: str) -> None:
 
 
 @dataclass
-class PreparedPlatform:
+class PreparedPlatform(OfflineJob):
     request: PlatformRequest
     out: Path | None
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
 
     def run(self, sinks=(), control=None):
         """Load the error sources, run both measurements on the same poses and, with `out`, write
@@ -404,7 +408,7 @@ class PreparedPlatform:
         return JobOutcome("done", outputs=list(run.written), lines=platform_lines(run), data=run)
 
 
-def prepare_platform(request: PlatformRequest, cfg: Any = None) -> PreparedPlatform:
+def prepare_platform(request: PlatformRequest, cfg: StationConfig | None = None) -> PreparedPlatform:
     """Every refusal before a pose is computed: the size (memory) of the run, the workspace's
     half-ranges, an output folder that exists. `lines`: the size estimate."""
     import math

@@ -16,11 +16,21 @@ from __future__ import annotations
 import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator, Mapping
 
 from procedures.vocabulary import InputError
 from station.services.config import StationConfig
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, OfflineJob, require_legs
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of the procedures
+    from drivers.interfaces import ServoAxis
+    from procedures.compensation.audit import AuditLog
+    from procedures.compensation.push import PushPlan
+    from procedures.compensation.table import LegTable
+    from procedures.engine.control import RunControl
+    from procedures.engine.runner import Sink
+    from procedures.metrology.plausibility import Override
+    from station.services.wiring import DriveHandle
 
 PUSH, ROLLBACK = "push", "rollback"  # the audit log's actions (its entries' `action`)
 
@@ -36,7 +46,7 @@ class PushRequest:
 
     legs: tuple[int, ...] | str | int
     table: str | Path | None = None
-    tables: Mapping[int, Any] | None = None
+    tables: Mapping[int, LegTable] | None = None
     sources: Mapping[int, dict] | None = None
     table_name: str | None = None
     accept_implausible: bool = False
@@ -53,7 +63,7 @@ class RollbackRequest:
     audit: str | Path | None = None
 
 
-def accept_override(how: str | None, kept: str | None = None):
+def accept_override(how: str | None, kept: str | None = None) -> Override:
     """How a front end lets its user accept implausible values (procedures.metrology.plausibility.Override):
     `how` the refusal says to do it, `kept` what kept them; None: the command line's option."""
     from procedures.metrology.plausibility import Override
@@ -62,23 +72,20 @@ def accept_override(how: str | None, kept: str | None = None):
 
 
 @dataclass
-class PreparedRefusal:
+class PreparedRefusal(OfflineJob):
     """A push, rollback or verify refused before any drive was reached: `run` logs it in the
     audit log (as every refusal) and returns the refused outcome. `implausible`: refused for
     values that look like a unit slip (the user may accept them)."""
 
     action: str
     leg: int
-    reason: Any  # the exception or sentence
+    reason: BaseException | str
     cfg: StationConfig
-    audit: Any
+    audit: AuditLog
     source: dict | None = None
     implausible: bool = False
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         from station.catalog.writer import catalog_for
         from station.services.table_jobs import refusal_job
         from station.services.wiring import drive_url_of
@@ -97,22 +104,22 @@ class PreparedTableOperation:
     sets it, nobody is asked and the operation is cancelled (nothing written)."""
 
     action: str
-    request: Any
+    request: PushRequest | RollbackRequest
     cfg: StationConfig
     legs: tuple[int, ...]
-    audit: Any
-    tables: dict[int, Any] = field(default_factory=dict)
+    audit: AuditLog
+    tables: dict[int, LegTable] = field(default_factory=dict)
     sources: dict[int, dict] = field(default_factory=dict)
     warned: list[str] = field(default_factory=list)
     lines: list[str] = field(default_factory=list)
-    axes: dict[int, Any] | None = None
+    axes: dict[int, ServoAxis] | None = None
     drive_url: str = ""
-    confirm_plans: Callable[[Any], bool] = field(default=lambda plans: False)
+    confirm_plans: Callable[[PushPlan | list[PushPlan]], bool] = field(default=lambda plans: False)
     needs_rig: bool = True
     question: str | None = None
 
     @contextlib.contextmanager
-    def connect(self) -> Iterator[Any]:
+    def connect(self) -> Iterator[DriveHandle]:
         """Open the drives of the legs alone (never the interferometer) and bind them in the block."""
         from station.services.wiring import open_drive
 
@@ -124,13 +131,9 @@ class PreparedTableOperation:
                 self.axes = None
 
     def check(self) -> None:
-        if self.axes is None:
-            raise InputError("not connected to the drives; nothing was written")
-        missing = [leg for leg in self.legs if leg not in self.axes]
-        if missing:
-            raise InputError(f"no drive connected for leg(s) {missing}; nothing was written")
+        require_legs(self.axes, self.legs, "the drives", "nothing was written")
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         from station.catalog.writer import catalog_for
         from station.services.session_identity import configured_serials
         from station.services.table_jobs import push_job, push_legs_job, rollback_job
@@ -158,7 +161,7 @@ class PreparedTableOperation:
         return job
 
 
-def parse_legs_text(text: Any) -> tuple[int, ...]:
+def parse_legs_text(text: tuple[int, ...] | str | int) -> tuple[int, ...]:
     """Leg numbers of a request: a number, numbers, or text "3", "1-6", "1,4", "all"."""
     from station.services.verify_job import parse_leg_choice
 
@@ -191,7 +194,7 @@ def _target_lines(cfg: StationConfig, legs: Iterable[int]) -> list[str]:
             if cfg.compensation.target_of(leg) != "drive"]
 
 
-def prepare_push(request: PushRequest, cfg: StationConfig):
+def prepare_push(request: PushRequest, cfg: StationConfig) -> PreparedRefusal | PreparedTableOperation:
     """A PreparedRefusal (refused before any drive: the legs, the table file, a controller
     target, values that look like a unit slip, against what each leg's holder takes by the
     config) or a PreparedTableOperation whose `lines` say what was accepted and where it goes."""
@@ -244,7 +247,7 @@ def prepare_push(request: PushRequest, cfg: StationConfig):
     return PreparedTableOperation(PUSH, request, cfg, legs, audit, tables, sources, warned, lines)
 
 
-def prepare_rollback(request: RollbackRequest, cfg: StationConfig):
+def prepare_rollback(request: RollbackRequest, cfg: StationConfig) -> PreparedRefusal | PreparedTableOperation:
     """A PreparedRefusal (a leg this station does not have, a controller target) or the rollback."""
     from station.services.config import LEG_COUNT
     from station.services.session_identity import station_audit_log
@@ -269,7 +272,7 @@ def plan_lines(plan, drive_url: bool = True, checksums: bool = True) -> list[str
     return plan.describe(drive_url=drive_url, checksums=checksums)
 
 
-def planned(event):
+def planned(event: object) -> PushPlan | None:
     """The plan a push or rollback shows before its confirmation, when `event` is it (its
     TablePlanned event), else None."""
     from procedures.compensation.push import TablePlanned
@@ -295,16 +298,8 @@ def pushed_lines(job: JobOutcome, cfg: StationConfig) -> list[str]:
     from procedures.compensation.push import OperationFinished
     from station.services.table_jobs import target_text
 
-    out = []
-    for end in job.of(OperationFinished):
-        result = end.result
-        if end.leg is not None and result is not None:
-            out.append(f"pushed: leg {result.leg} bank {result.bank} active (was bank {result.previous_bank}); "
-                       f"table sha256 {result.table_sha256}; compensation target {target_text(cfg, result.leg)}")
-            if not result.table_enabled:
-                out.append(f"warning: leg {result.leg}: the drive does not apply its table (table_enable = 0); switch it "
-                           "on before relying on it")
-    return out
+    return [line for end in job.of(OperationFinished) if end.leg is not None and end.result is not None
+            for line in end.result.lines(target_text(cfg, end.result.leg))]
 
 
 def rolled_back_line(job: JobOutcome) -> str:

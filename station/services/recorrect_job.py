@@ -8,10 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from procedures.metrology.air import EQUATIONS  # the equations a request may name (argparse choices)
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, OfflineJob, config_or_load
+
+if TYPE_CHECKING:  # annotations only
+    from procedures.metrology.recorrect import RecorrectOptions
+    from station.services.config import StationConfig
 
 __all__ = ["EQUATIONS", "PreparedRecorrect", "RecorrectRequest", "prepare_recorrect"]
 
@@ -38,17 +42,14 @@ class RecorrectRequest:
 
 
 @dataclass
-class PreparedRecorrect:
+class PreparedRecorrect(OfflineJob):
     """A re-correction that passed the output check; `options` is what the index is computed from."""
 
     request: RecorrectRequest
     session: Path
     out: Path
     replace: bool  # --force over an existing file other than the source
-    options: Any  # procedures.metrology.recorrect.RecorrectOptions
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
+    options: RecorrectOptions
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         from procedures.metrology.recorrect import recorrect_session
@@ -66,7 +67,7 @@ class PreparedRecorrect:
         return JobOutcome("done", outputs=[self.out], lines=lines, data=r)
 
 
-def prepare_recorrect(request: RecorrectRequest, cfg: Any = None) -> PreparedRecorrect:
+def prepare_recorrect(request: RecorrectRequest, cfg: StationConfig | None = None) -> PreparedRecorrect:
     """The output check (an existing file refused without force, a name not ending .h5 refused)
     and the defaults from `cfg` (None: load `request.config`)'s [metrology]."""
     from procedures.io.outputs import check_output_file
@@ -74,10 +75,7 @@ def prepare_recorrect(request: RecorrectRequest, cfg: Any = None) -> PreparedRec
 
     r = request
     out = check_output_file(r.out, force=r.force, suffixes=(".h5",))
-    if cfg is None:
-        from station.services.config import load_config
-
-        cfg = load_config(r.config)
+    cfg = config_or_load(cfg, r.config)
     m = cfg.metrology
     options = RecorrectOptions(
         equation=r.equation,

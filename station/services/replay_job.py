@@ -8,10 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from procedures.vocabulary import InputError
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, config_or_load
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing heavy
+    from procedures.io.recording.reader import Session
+    from station.services.config import StationConfig
 
 
 @dataclass
@@ -36,11 +40,11 @@ class PreparedReplay:
     """A replay that passed every check. `lines`: what it will do (print before run)."""
 
     source: Path
-    session: Any  # procedures.io.recording.reader.Session
+    session: Session
     out: Path
     speed: float | None
     replace: bool
-    cfg: Any
+    cfg: StationConfig
     needs_rig: bool = False  # the replay devices answer from the file: no drive moves
     question: str | None = None
     lines: list[str] = field(default_factory=list)
@@ -69,7 +73,7 @@ class PreparedReplay:
                           data=ended)
 
 
-def prepare_replay(request: ReplayRequest, cfg: Any = None) -> PreparedReplay:
+def prepare_replay(request: ReplayRequest, cfg: StationConfig | None = None) -> PreparedReplay:
     """Read the recording and refuse what cannot be replayed (InputError, nothing written)."""
     from procedures.io.outputs import check_output_file
     from procedures.io.recording.reader import read_session
@@ -82,10 +86,7 @@ def prepare_replay(request: ReplayRequest, cfg: Any = None) -> PreparedReplay:
     check_output_file(out, force=request.force, suffixes=(".h5",), make_parents=request.make_parents)
     if not session.plan:
         raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
-    if cfg is None:
-        from station.services.config import load_config
-
-        cfg = load_config(None)
+    cfg = config_or_load(cfg)
     return PreparedReplay(source, session, out, request.speed, request.force, cfg,
                           lines=[f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) "
                                  f"{pace_text(request.speed)}"])
@@ -99,7 +100,7 @@ class Recording:
     it holds in words and rows."""
 
     path: Path
-    session: Any
+    session: Session
 
     def summary(self) -> dict[str, Any]:
         """outcome, points, legs, faults (count), plan kind, targets (mm), cycles, rig, operator,

@@ -19,9 +19,13 @@ import logging
 import math
 import threading
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from station.services.config import StationConfig
 from station.services.devices import DriveFault
+
+if TYPE_CHECKING:  # the annotation only: the devices' modules load when the rig is opened
+    from station.services.wiring import Rig
 
 log = logging.getLogger("station.services.rig_session")
 
@@ -194,7 +198,7 @@ class RigSession:
         self.cfg = cfg
         self.legs = tuple(legs)
         self.time_scale = time_scale
-        self.rig = None  # station.services.wiring.Rig once connected
+        self.rig: Rig | None = None  # once connected
         self.state = "not connected"  # "connecting" / "connected" / "not connected"
         self.error = ""
         self.lock = threading.Lock()

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import datetime as _dt
 from types import MappingProxyType
-from typing import Any, Iterable, Mapping
+from typing import Iterable, Mapping
 
 from drivers.errors import DriverError
+from drivers.interfaces import ServoAxis
 from procedures.compensation.audit import AuditLog
 from procedures.vocabulary import InputError
 from procedures.io.recording.identity import (
@@ -64,7 +65,7 @@ def station_audit_log(cfg: StationConfig, path: str | None = None) -> AuditLog:
                     leg_serials=configured_serials(cfg))
 
 
-def drive_identity(axis: Any, cfg_fields: Mapping[str, str]) -> DriveIdentity:
+def drive_identity(axis: ServoAxis, cfg_fields: Mapping[str, str]) -> DriveIdentity:
     """What the drive says (Modbus 43/14 and its serial register, drivers/modbus/client.py), with
     `[legs.N] drive_serial` for a drive that cannot tell its serial. A drive that does not answer
     is named from the config (source "config")."""
@@ -85,7 +86,7 @@ def instrument_of(cfg: StationConfig, on: _dt.date | None = None):
     return instrument_identity(m.model, m.serial, m.calibration_due, m.calibration_date, on)
 
 
-def session_identity(cfg: StationConfig, legs: Iterable[int], axes: Mapping[int, Any], software_version: str,
+def session_identity(cfg: StationConfig, legs: Iterable[int], axes: Mapping[int, ServoAxis], software_version: str,
                      entered: Mapping[int, Mapping[str, str]] | None = None, serials_file: str | None = None,
                      on: _dt.date | None = None) -> SessionIdentity:
     """The identity of a session on `legs` (drives in `axes`), with the laser's calibration

@@ -14,12 +14,21 @@ import contextlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Mapping
+from typing import TYPE_CHECKING, Iterable, Iterator, Mapping
 
 from procedures.acquisition.plan_spec import DEFAULT_CYCLES, PLAN_KINDS  # noqa: F401 (what SweepRequest.kind and .cycles take)
 from procedures.vocabulary import InputError
 from station.services.config import StationConfig
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, require_legs
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing heavy
+    import numpy as np
+
+    from procedures.acquisition.plan_spec import PlanSpec
+    from procedures.acquisition.plans import SweepPlan
+    from procedures.engine.control import RunControl
+    from procedures.engine.runner import Sink
+    from station.services.wiring import Rig
 
 
 class OutputExists(InputError):
@@ -62,7 +71,7 @@ class SweepRequest:
     overrun_mm: float = 2.0
     dwell_s: float = 1.0
     averaging_s: float = 0.1
-    plan: Any = None  # procedures.acquisition.plans.SweepPlan
+    plan: SweepPlan | None = None
     serials: Mapping[int, Mapping[str, str]] = field(default_factory=dict)
     serials_file: str | None = None
     time_scale: float | None = None
@@ -146,17 +155,17 @@ class PreparedSweep:
     legs: tuple[int, ...]
     kind: str
     total_points: int
-    plan: Any = None
-    spec: Any = None  # the PlanSpec built in the run (build_in_run)
+    plan: SweepPlan | None = None
+    spec: PlanSpec | None = None  # the PlanSpec built in the run (build_in_run)
     lines: list[str] = field(default_factory=list)
-    recorded: Any = None
-    rig: Any = None  # station.services.wiring.Rig, bound by prepare_sweep(rig=) or connect()
+    recorded: np.ndarray | None = None
+    rig: Rig | None = None  # bound by prepare_sweep(rig=) or connect()
     question: str | None = None
     declined: str = ""
     needs_rig: bool = True
 
     @contextlib.contextmanager
-    def connect(self, sim_memory: bool = True) -> Iterator[Any]:
+    def connect(self, sim_memory: bool = True) -> Iterator[Rig]:
         """Open the rig the config names for this sweep's legs and bind it while in the block.
         `sim_memory`: the simulated drives keep their tables where push/verify/rollback --sim and
         the UI find them (its folder made only now, when everything was accepted)."""
@@ -178,12 +187,7 @@ class PreparedSweep:
         from station.services.jobs import active_tables_now, compensated_question, compensated_refusal, \
             resume_table_refusal
 
-        if self.rig is None:
-            raise InputError("not connected to the rig; nothing moved")
-        missing = [leg for leg in self.legs if leg not in self.rig.axes]
-        if missing:
-            raise InputError(f"no drive connected for leg(s) {missing} (connected: {sorted(self.rig.axes)}); "
-                             "nothing moved")
+        require_legs(None if self.rig is None else self.rig.axes, self.legs)
         if self.kind == "verification":
             return
         now = active_tables_now(self.rig, self.legs)
@@ -194,7 +198,7 @@ class PreparedSweep:
             self.question = compensated_question(now)
             self.declined = compensated_refusal(now, self.request.ways_out)
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         """Sweep (after `check()` and the question, which the JobRunner makes): the plan built
         first when `build_in_run` (an abort meanwhile ends it: nothing moved or written)."""
         from station.services.jobs import run_sweep
@@ -216,7 +220,7 @@ class PreparedSweep:
                           data=self.plan)
 
 
-def prepare_sweep(request: SweepRequest, cfg: StationConfig, rig: Any = None) -> PreparedSweep:
+def prepare_sweep(request: SweepRequest, cfg: StationConfig, rig: Rig | None = None) -> PreparedSweep:
     """Every refusal of `request` made without moving or writing anything: the simulated rig's
     options, the serials, the session file (a new one not there unless `force`, its folder there;
     a resumed one writable, with something left to measure), the plan sized against the config's

@@ -9,11 +9,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from procedures.compensation import controllers
 from procedures.vocabulary import InputError
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, OfflineJob
+
+if TYPE_CHECKING:  # annotations only
+    from drivers.interfaces import TableSpec
+    from procedures.compensation.table import CompTable
+    from procedures.fit.model import LegErrorModel
+    from station.services.config import StationConfig
 
 TABLE_FORMATS: tuple[str, ...] = ("csv", "linuxcnc", *controllers.FORMATS)
 """What a table can be written as: the drive's CSV, LinuxCNC COMP_FILEs, or a controller's files."""
@@ -68,22 +74,19 @@ def _soft_limits(profile) -> tuple[float, float] | None:
 
 
 @dataclass
-class PreparedTable:
+class PreparedTable(OfflineJob):
     """A table made and checked. `refusal`: the plausibility checks' ImplausibleError when they
     refused it (then `question` asks whether to make it anyway; `run` after a yes makes it with the
     checks' findings as warnings)."""
 
     request: TableRequest
-    model: Any  # procedures.fit.LegErrorModel
+    model: LegErrorModel
     legs: list[int] | None
-    limits: Any  # procedures.compensation.table.TableSpec
+    limits: TableSpec
     soft_limits_mm: tuple[float, float] | None
-    table: Any = None  # procedures.compensation.table.CompTable (None while refused)
+    table: CompTable | None = None  # None while refused
     warnings: list[str] = field(default_factory=list)
     refusal: Exception | None = None
-    needs_rig: bool = False
-    question: str | None = None
-    lines: list[str] = field(default_factory=list)
 
     def run(self, sinks=(), control=None) -> JobOutcome:
         import numpy as np
@@ -131,7 +134,7 @@ class PreparedTable:
         return JobOutcome("done", outputs=[Path(p) for p in written], lines=lines, data=table)
 
 
-def prepare_table(request: TableRequest, cfg: Any = None) -> PreparedTable:
+def prepare_table(request: TableRequest, cfg: StationConfig | None = None) -> PreparedTable:
     """Every refusal before a file is written (InputError): a model without the legs asked for, an
     output that exists, a profile whose table limits cannot be had, corrections beyond the soft
     limits; and the plausibility checks (their refusal kept, as the job's question)."""

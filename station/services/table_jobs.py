@@ -14,17 +14,18 @@ confirmation dialog).
 
 from __future__ import annotations
 
+import json
 import math
 import uuid
 from dataclasses import dataclass
 
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Mapping
+from typing import TYPE_CHECKING, Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
 from drivers.errors import DriverError
-from drivers.interfaces import ServoAxis, TableSpec
+from drivers.interfaces import ServoAxis, TableBank, TableSpec
 from procedures.engine import events as ev
 from procedures.compensation.audit import AuditLog, AuditSink, AuditStopped
 from procedures.engine.control import RunControl
@@ -53,8 +54,10 @@ from procedures.metrology.plausibility import (
     check_table_values,
     settle,
 )
-from procedures.io.recording.reader import file_sha256, read_session
+from procedures.io.recording.identity import SessionIdentity
+from procedures.io.recording.reader import Session, file_sha256
 from procedures.io.recording.sink import RecorderSink
+from procedures.io.recording.writer import to_json_text
 from procedures.engine.runner import ListSink, Sink, run
 from procedures.compensation.audit import Action
 from procedures.vocabulary import Outcome
@@ -76,6 +79,9 @@ from station.services.config import LEG_COUNT, StationConfig
 from station.services.session_identity import session_identity
 from station.services.job import JobOutcome  # the one outcome of every job
 from station.services.wiring import Rig
+
+if TYPE_CHECKING:  # annotations only: the fitting code loads when a table is made
+    from procedures.fit.model import LegErrorModel
 
 
 def run_table_job(procedure: Iterator[ev.Event], audit: AuditLog, sinks: Iterable[Sink] = (),
@@ -118,7 +124,7 @@ def run_operation(procedure: Iterator[ev.Event], audit: AuditLog | None = None) 
     raise refusal
 
 
-def push_table(axis: ServoAxis, table: Any = None, *, plan: PushPlan | None = None,
+def push_table(axis: ServoAxis, table: TableBank | LegTable | None = None, *, plan: PushPlan | None = None,
                audit: AuditLog | None = None, drive_url: str = "", spec: TableSpec | None = None,
                source: dict[str, Any] | None = None, leg_serial: str | None = None) -> PushResult:
     """Push `table` (a TableBank or LegTable; or an already confirmed `plan` from
@@ -251,7 +257,7 @@ def unverified_table_line(path: str | Path, tables: Mapping[int, LegTable], inte
     return unverified_line(path, "table", f"{legs}; whole rows, even steps; the push checks it covers the stroke")
 
 
-def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, Any], *,
+def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, dict[str, Any] | None], *,
                         audit: AuditLog, drive_url: str, sinks: Iterable[Sink], catalog: Catalog | None):
     """A refusal job (audit line written, nothing sent to any drive) when a leg's table came from
     a file without an integrity record and does not cover the leg's stroke by its drive's soft
@@ -277,7 +283,7 @@ def _incomplete_refusal(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegT
 
 # -- plausibility: a likely unit slip reaches neither a table file nor a drive unasked ------------------
 
-def implausible_corrections(model, table: CompTable) -> list[Implausible]:
+def implausible_corrections(model: LegErrorModel, table: CompTable) -> list[Implausible]:
     """The legs of `table` whose corrections span more than the error `model` was fitted to
     (procedures.metrology.plausibility.check_correction)."""
     source = model.source.get("path") or "the model's recording"
@@ -291,7 +297,7 @@ def implausible_corrections(model, table: CompTable) -> list[Implausible]:
     return found
 
 
-def heldout_worse(model, table: CompTable) -> list[Implausible]:
+def heldout_worse(model: LegErrorModel, table: CompTable) -> list[Implausible]:
     """The legs of `table` whose model made the error worse on the cycles held out of its fit
     (a negative held-out range reduction, docs/figures.md): a table from it adds error."""
     found = []
@@ -307,7 +313,7 @@ def heldout_worse(model, table: CompTable) -> list[Implausible]:
     return found
 
 
-def check_table_stroke(model, table: CompTable, soft_limits_mm: tuple[float, float] | None, source: str = "") -> None:
+def check_table_stroke(model: LegErrorModel, table: CompTable, soft_limits_mm: tuple[float, float] | None, source: str = "") -> None:
     """InputError when a leg of `table` ends beyond the drive's soft limits (min_mm, max_mm): a
     step that does not divide the stroke ends the table up to a step beyond it, where no drive
     holds a table (the push would refuse it later)."""
@@ -325,7 +331,7 @@ def check_table_stroke(model, table: CompTable, soft_limits_mm: tuple[float, flo
                 "nothing was written")
 
 
-def make_checked_table(model, step_mm: float | None = None, spec: TableSpec | None = None, *,
+def make_checked_table(model: LegErrorModel, step_mm: float | None = None, spec: TableSpec | None = None, *,
                        legs: Iterable[int] | None = None, accept_implausible: bool = False,
                        override: Override = Override(),
                        soft_limits_mm: tuple[float, float] | None = None) -> tuple[CompTable, list[str]]:
@@ -390,7 +396,7 @@ def _limit_um(axis: ServoAxis) -> float:
     return spec.max_correction_um if spec is not None else float("inf")
 
 
-def _plausible_push(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, Any], *,
+def _plausible_push(axes: Mapping[int, ServoAxis], tables: Mapping[int, LegTable], sources: Mapping[int, dict[str, Any] | None], *,
                     audit: AuditLog, drive_url: str, sinks: Iterable[Sink], catalog: Catalog | None,
                     accept_implausible: bool, table_name: str | None, override: Override):
     """(refusal job, [], sources) when a leg's values look like a unit slip and were not accepted,
@@ -422,26 +428,39 @@ def expected_tables(path: str | Path, legs: Iterable[int], spec: TableSpec) -> d
     return {leg: table_sha256(quantize(table.legs[leg].to_bank(), spec)) for leg in legs}
 
 
-def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *, audit: AuditLog, before: Any = None,
-               expected_sha256: dict[int, str] | None = None, expected_source: str = "the table",
-               drive_url: str = "", sinks: Iterable[Sink] = (), control: RunControl | None = None,
-               normalise: bool = True) -> JobOutcome:
+def verify_job(rig: Rig, plan: SweepPlan, out: str | Path, cfg: StationConfig, *, audit: AuditLog,
+               before: Session | None = None, expected_sha256: dict[int, str] | None = None,
+               expected_source: str = "the table", drive_url: str = "", sinks: Iterable[Sink] = (),
+               control: RunControl | None = None, normalise: bool = True,
+               identity: SessionIdentity | None = None) -> JobOutcome:
     """A verification sweep of `plan` with the tables active, recorded to `out`, compared with the
     calibration `before` (procedures.compensation.verify.verify_procedure); errors normalised to 20 degC
-    unless `normalise` is False."""
+    unless `normalise` is False. `identity`: the session's (None: station.services.session_identity.session_identity
+    of the rig's legs now)."""
     out = Path(out)
     if out.exists():
         raise InputError(f"{out}: exists; choose another file (a verification is a new session)")
     out.parent.mkdir(parents=True, exist_ok=True)
     # a verification is a session too: it records who and what it measured, and warns about the laser
-    identity = session_identity(cfg, plan.legs, rig.axes, __version__)
-    recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=cfg.to_dict(),
+    identity = identity or session_identity(cfg, plan.legs, rig.axes, __version__)
+    station_config = as_recorded("station_config", cfg.to_dict())
+    recorder = RecorderSink(out, operator=cfg.operator, rig=rig.kind, station_config=station_config,
                             software_version=__version__, identity=identity.to_json())
-    procedure = verify_procedure(rig.axes, rig.laser, rig.clock, plan, out, read_session=read_session, before=before,
+    # the figures come from the points as measured, with the config as recorded; the file's
+    # hash names the recording (the catalog sink indexes the file itself when it closes)
+    procedure = verify_procedure(rig.axes, rig.laser, rig.clock, plan, out, recording_sha256=file_sha256,
+                                 station_config=station_config, before=before,
                                  expected_sha256=expected_sha256, expected_source=expected_source, drive_url=drive_url,
                                  control=control, normalise=normalise,
                                  sweep_options={"session_id": uuid.uuid4().hex[:12], "warnings": identity.warnings})
     return run_table_job(procedure, audit, [recorder, *sinks], control, catalog=catalog_for(cfg), session_path=out)
+
+
+def as_recorded(name: str, value: dict[str, Any]) -> dict[str, Any]:
+    """`value` as a session records it in /meta (`name`: "station_config", "identity") and a
+    reader reads it back: the same JSON, so a figure of the points as measured equals the
+    figure of the file."""
+    return json.loads(to_json_text(name, value))
 
 
 class OperationFailed(DriverError):

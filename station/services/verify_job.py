@@ -14,11 +14,22 @@ import os
 import secrets
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import TYPE_CHECKING, Iterable, Iterator
 
 from procedures.vocabulary import InputError
 from station.services.config import StationConfig
-from station.services.job import JobOutcome
+from station.services.job import JobOutcome, require_legs
+
+if TYPE_CHECKING:  # annotations only: a request and its refusal load nothing of the procedures
+    import numpy as np
+
+    from procedures.acquisition.plans import SweepPlan
+    from procedures.compensation.audit import AuditLog
+    from procedures.compensation.verify import LegChecked, LegVerification
+    from procedures.engine.control import RunControl
+    from procedures.engine.runner import Sink
+    from procedures.io.recording.reader import Session
+    from station.services.wiring import Rig
 
 VERIFY = "verify"  # the audit log's action of a verification (its entries' `action`)
 
@@ -70,7 +81,7 @@ class Verification:
     one-line `as_left_summary`), the figures as JSON (`doc`)."""
 
     report: str
-    results: dict[int, Any]
+    results: dict[int, LegVerification]
     audit_lines: dict[int, str] = field(default_factory=dict)
     as_left: list[str] = field(default_factory=list)
     as_left_summary: str = ""
@@ -82,7 +93,7 @@ class Verification:
         return all(r.passed for r in self.results.values())
 
 
-def leg_checked_line(event) -> str | None:
+def leg_checked_line(event: object) -> str | None:
     """The line of a leg's active table as the verification found it (its LegChecked event), else None."""
     from procedures.compensation.verify import LegChecked
 
@@ -91,7 +102,7 @@ def leg_checked_line(event) -> str | None:
     return f"leg {event.leg}: bank {event.bank} active, {event.description}, sha256 {event.table_sha256[:12]}…"
 
 
-def verdict_parts(result) -> tuple[str, float | None, float, float | None]:
+def verdict_parts(result: LegVerification) -> tuple[str, float | None, float, float | None]:
     """(verdict "pass" / "above" / "none", ratio, the limit, range reduction %) of a leg's result."""
     from procedures.compensation.verify import ACCEPT_RATIO
 
@@ -108,24 +119,24 @@ class PreparedVerify:
     cfg: StationConfig
     out: Path
     legs: tuple[int, ...]
-    plan: Any  # procedures.acquisition.plans.SweepPlan
-    before: Any  # the calibration Session, or None
+    plan: SweepPlan
+    before: Session | None  # the calibration
     expected: dict[int, str]
     noise_seed: int | None
-    audit: Any  # procedures.compensation.audit.AuditLog
+    audit: AuditLog
     lines: list[str] = field(default_factory=list)
-    rig: Any = None
+    rig: Rig | None = None
     question: str | None = None
     needs_rig: bool = True
     kind: str = "verification"
-    recorded: Any = None
+    recorded: np.ndarray | None = None  # a resumed sweep's points (PreparedSweep's): none for a verification
 
     @property
     def total_points(self) -> int:
         return self.plan.total_points
 
     @contextlib.contextmanager
-    def connect(self) -> Iterator[Any]:
+    def connect(self) -> Iterator[Rig]:
         """Open the rig for the verified legs (the simulated one with the verification's noise seed)."""
         from station.services.wiring import open_rig
 
@@ -146,27 +157,26 @@ class PreparedVerify:
                 *(f"compensation target of leg {leg}: {target_text(self.cfg, leg)}" for leg in self.legs)]
 
     def check(self) -> None:
-        if self.rig is None:
-            raise InputError("not connected to the rig; nothing moved")
-        missing = [leg for leg in self.legs if leg not in self.rig.axes]
-        if missing:
-            raise InputError(f"no drive connected for leg(s) {missing} (connected: {sorted(self.rig.axes)}); "
-                             "nothing moved")
+        require_legs(None if self.rig is None else self.rig.axes, self.legs)
 
-    def run(self, sinks: Iterable[Any] = (), control: Any = None) -> JobOutcome:
+    def run(self, sinks: Iterable[Sink] = (), control: RunControl | None = None) -> JobOutcome:
         from procedures.compensation.audit import AuditRecord
         from procedures.compensation.verify import Verified
-        from procedures.io.recording.reader import read_session
+        from procedures.engine.events import SweepStarted
         from procedures.reporting.decision import decision_lines, decision_summary
-        from station.services.report_jobs import decisions_if_stated, session_decisions
-        from station.services.table_jobs import verify_job
+        from procedures.reporting.evaluation import evaluate_points
+        from station import __version__
+        from station.services.session_identity import session_identity
+        from station.services.table_jobs import as_recorded, verify_job
         from station.services.wiring import drive_url_of
 
         if self.request.force and self.out.exists():
             self.out.unlink()  # --force: the new verification session replaces it
+        identity = session_identity(self.cfg, self.plan.legs, self.rig.axes, __version__)
         job = verify_job(self.rig, self.plan, self.out, self.cfg, audit=self.audit, before=self.before,
                          expected_sha256=self.expected, expected_source=str(self.request.table),
-                         drive_url=drive_url_of(self.cfg), sinks=sinks, control=control, normalise=not self.request.raw)
+                         drive_url=drive_url_of(self.cfg), sinks=sinks, control=control, normalise=not self.request.raw,
+                         identity=identity)
         if not job.of(Verified):
             return job  # refused (nothing moved) or broken off: its finished event says why
         verified = job.of(Verified)[-1]
@@ -174,17 +184,21 @@ class PreparedVerify:
         doc = {"session": verified.session,
                "before": None if before is None else {"path": str(before.path), "sha256": before.sha256},
                "legs": {str(leg): r.to_json() for leg, r in verified.results.items()}}
-        # as-left: the verification's ISO 230-2 values with U against [tolerances.TYPE] as_left (docs/decisions.md)
-        session = read_session(self.out)
-        as_left = session_decisions(session, raw=self.request.raw, stage="as_left")["decisions"]
+        # as-left: the verification's ISO 230-2 values with U against [tolerances.TYPE] as_left
+        # (docs/decisions.md), of the points it measured with the config and identity it recorded
+        # (the same figures as the recording's, read back: tests/station/test_cli_verify_decisions.py)
+        started = job.of(SweepStarted)[-1]
+        as_left = evaluate_points(verified.points, plan=started.plan, devices=started.devices,
+                                  station_config=as_recorded("station_config", self.cfg.to_dict()),
+                                  identity=as_recorded("identity", identity.to_json()),
+                                  source={"path": verified.session["path"], "sha256": verified.session["sha256"]},
+                                  raw=self.request.raw, stage="as_left")["decisions"]
         doc["decisions"] = as_left
         audit_lines = {}
         for e in job.of(AuditRecord):
             audit_lines.setdefault(e.entry.leg, e.entry.message)
-        summary = ""
-        try:  # the one line of the Compensation page: only when the legs' types state a tolerance
-            if decisions_if_stated(session, stage="as_left") is not None:
-                summary = decision_summary(as_left["legs"])
+        try:  # the one line of the Compensation page ("" when no leg's type states a tolerance)
+            summary = decision_summary(as_left["legs"])
         except Exception:  # noqa: BLE001 (a decision line is an extra; the verification's figures stand)
             summary = ""
         job.data = Verification(verified.report, dict(verified.results), audit_lines,
@@ -197,7 +211,7 @@ class PreparedVerify:
         return job
 
 
-def _plan(request: VerifyRequest, legs: tuple[int, ...], before):
+def _plan(request: VerifyRequest, legs: tuple[int, ...], before: Session | None) -> SweepPlan:
     from procedures.acquisition.plans import SweepPlan, iso230_plan
 
     if before is None:

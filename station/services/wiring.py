@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Callable
 
 from drivers.clock import SystemClock
 from drivers.interfaces import Clock, Interferometer, ServoAxis, TableSpec
@@ -21,6 +21,10 @@ from procedures.vocabulary import InputError
 from station.services.config import StationConfig
 from station.services.drive_lock import holds_drive_lock
 
+if TYPE_CHECKING:  # annotations only: the simulated and replay rigs load when one is opened
+    from drivers.replay import ReplayRig
+    from drivers.sim.rig import SimRig
+
 
 @dataclass
 class Rig:
@@ -30,7 +34,7 @@ class Rig:
     kind: str  # "sim" / "live" / "replay"
     description: str
     profile: DriveProfile | None = None
-    sim: Any = None  # the SimRig when simulated (tests use it to inject faults)
+    sim: SimRig | ReplayRig | None = None  # the simulated (tests use it to inject faults) or replay rig
     _closers: list = field(default_factory=list)
 
     def close(self) -> None:
@@ -102,7 +106,7 @@ class DriveHandle:
 
     axes: dict[int, ServoAxis]
     url: str
-    close: Any
+    close: Callable[[], None]
 
     @property
     def axis(self) -> ServoAxis:

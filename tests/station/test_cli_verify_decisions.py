@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 
 from procedures.compensation.table import CompTable, LegTable, table_csv_text
+from procedures.io.recording.reader import read_session
+from station.services.report_jobs import session_decisions
 from station.cli import main
 
 
@@ -42,6 +44,9 @@ def test_verify_prints_and_writes_the_as_left_decisions(capsys):
     leg = d["legs"]["3"]
     assert leg["values"]["E"]["limit_um"] == 0.001 and leg["values"]["E"]["outcome"] == "does not conform"
     assert leg["values"]["R"]["limit_um"] == 1000 and leg["values"]["R"]["outcome"] == "conforms"
+    # decided on the points as measured, not read back: the same decisions as the recording's
+    recorded = session_decisions(read_session("v.h5"), stage="as_left")["decisions"]
+    assert d == json.loads(json.dumps(recorded)) and leg["values"]["E"]["value_um"] > 0
     # a certificate of the verified leg checks that the table active as left is the table given
     assert main(["certificate", "c.h5", "--as-left", "v.h5", "--table", "t.csv", "--config", "station.toml"]) == 0
     (cert,) = Path("runs/certificates").glob("*_r1.json")

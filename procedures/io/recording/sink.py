@@ -52,7 +52,7 @@ class RecorderSink:
                 })
         elif isinstance(event, ev.SweepFinished):
             # finished here, not only at close: a procedure that goes on after its sweep (a
-            # verification) reads the complete file, with its outcome and content hash
+            # verification) names the complete file, with its outcome, by its content hash
             self.close(event.outcome)
 
     def close(self, outcome: Outcome) -> None:
