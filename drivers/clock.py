@@ -35,6 +35,15 @@ class VirtualClock:
         self._lock = threading.Lock()
         self._offset_s = float(start_s)
         self._real0 = time.monotonic()
+        self._events: list[tuple] = []  # (next_due, on_due): see add_events
+
+    def add_events(self, next_due, on_due) -> None:
+        """A source of instants the clock must stop at (time scale 0): while advancing, the clock
+        stops at `next_due()` (the source's next instant, or None) whenever it lies within the
+        jump, and calls `on_due(t)` there, in the advancing thread, before going on. A simulated
+        instrument that streams (drivers/sim/linef1_server.py) samples the plant there, so a
+        move made within one request still yields samples along its path at their own times."""
+        self._events.append((next_due, on_due))
 
     def now(self) -> float:
         if self.time_scale == 0:
@@ -43,10 +52,24 @@ class VirtualClock:
             return self._offset_s + (time.monotonic() - self._real0) / self.time_scale
 
     def advance(self, dt_s: float) -> None:
-        """Jump virtual time forward by `dt_s` without waiting (any scale)."""
-        if dt_s > 0:
+        """Jump virtual time forward by `dt_s` without waiting (any scale); at scale 0 stopping
+        at every event instant within the jump (`add_events`)."""
+        if dt_s <= 0:
+            return
+        if self.time_scale != 0 or not self._events:
             with self._lock:
                 self._offset_s += dt_s
+            return
+        target = self._offset_s + dt_s
+        while True:
+            due = [(t, on_due) for next_due, on_due in self._events if (t := next_due()) is not None]
+            t, on_due = min(due, key=lambda d: d[0]) if due else (None, None)
+            with self._lock:
+                if t is None or not self._offset_s < t <= target:
+                    self._offset_s = max(self._offset_s, target)
+                    return
+                self._offset_s = t
+            on_due(t)  # outside the clock's lock: it may read the clock
 
     def sleep(self, dt_s: float) -> None:
         if dt_s <= 0:

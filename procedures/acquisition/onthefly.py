@@ -31,7 +31,10 @@ from drivers.interfaces import (
     DriverError,
     Interferometer,
     PositionCompareAxis,
+    Reading,
     ServoAxis,
+    StreamingInterferometer,
+    TracingAxis,
 )
 from procedures.engine import events as ev
 from procedures.acquisition.adaptive import AdaptiveRule
@@ -54,6 +57,70 @@ def _passes(points: list[PlanPoint]) -> list[list[PlanPoint]]:
             out[-1].append(p)
         else:
             out.append([p])
+    return out
+
+
+TRACE_INTERVAL_S = 0.02
+"""How often the drive's position actual is polled during a pass with a streaming laser (a
+Modbus TCP read takes about a millisecond; 50 polls a second leave the line to the rest)."""
+
+
+class StreamAlignment(DriverError):
+    """A pass with a streaming laser whose samples cannot be aligned with the drive's trace
+    (no samples near a target: a gap in the stream, or the trace does not cover the targets)."""
+
+
+def align_stream(seq_mm: np.ndarray, trace: list[tuple[float, float]], samples: list, leg: int,
+                 period_s: float) -> list[Reading]:
+    """The readings of a pass with a streaming laser (docs/onthefly.md, "A laser without trigger
+    input"): both time-stamped on the station's clock, the drive's traced position actual
+    (`trace`: (t s, position mm) per poll) and the laser's samples (`samples`: t_s, position_mm).
+
+    For each target, in pass order (`seq_mm`): the time the drive passed it, from a straight line
+    through the trace polls within a step of it (their time-stamp jitter averaged; the drive's own
+    speed there as its slope); each laser sample's error against the drive's position at its
+    time stamp (the trace interpolated); the reading at the target from a straight line through
+    the errors of the samples within 1.5 stream periods of travel of it (at least the two
+    nearest), evaluated at the target. A reading's `t_s` is the time the drive passed its target.
+    The samples are late on the drive's polls by what the two transports' latencies differ:
+    a constant delay, v x delay along the pass, which the dynamic fit takes as part of the
+    speed lag (procedures/fit/dynamic.py), as it takes the leg's own lag behind the encoder."""
+    t_tr = np.array([t for t, _ in trace], dtype=float)
+    x_tr = np.array([x for _, x in trace], dtype=float)
+    t_smp = np.array([x.t_s for x in samples], dtype=float)
+    l_smp = np.array([x.position_mm for x in samples], dtype=float)
+    if t_smp.size < 2 or t_tr.size < 3:
+        raise StreamAlignment(f"leg {leg}: {t_smp.size} laser samples and {t_tr.size} drive polls in the pass: "
+                              "too few to align")
+    x_smp = np.interp(t_smp, t_tr, x_tr)  # the drive's position at each sample's time stamp
+    e_smp = l_smp - x_smp
+    step = abs(float(seq_mm[1] - seq_mm[0])) if seq_mm.size > 1 else 1.0
+    out: list[Reading] = []
+    for x_i in seq_mm:
+        near = np.abs(x_tr - x_i) <= step
+        if near.sum() < 2:
+            near = np.argsort(np.abs(x_tr - x_i))[:2]
+        tt, xx = t_tr[near], x_tr[near]
+        if np.ptp(xx) <= 0:
+            raise StreamAlignment(f"leg {leg}: the drive's trace does not move near {x_i:.3f} mm")
+        slope, icpt = np.polyfit(xx, tt, 1)  # t = slope * x + icpt
+        t_i = float(slope * x_i + icpt)
+        v_i = 1.0 / float(slope)
+        reach = 1.5 * abs(v_i) * period_s
+        d = np.abs(x_smp - x_i)
+        use = d <= reach
+        if use.sum() < 2:
+            use = np.argsort(d)[:2]
+        if float(np.max(d[use])) > 2.5 * abs(v_i) * period_s:
+            raise StreamAlignment(f"leg {leg}: no laser sample within {2.5 * period_s:.3f} s of the drive passing "
+                                  f"{x_i:.3f} mm (a gap in the stream)")
+        xs, es = x_smp[use], e_smp[use]
+        if np.ptp(xs) > 0:
+            b, a = np.polyfit(xs - x_i, es, 1)
+            e_i = float(a)
+        else:
+            e_i = float(np.mean(es))
+        out.append(Reading(axis=leg, position_mm=float(x_i) + e_i, beam_ok=True, signal_pct=float("nan"), t_s=t_i))
     return out
 
 
@@ -150,11 +217,16 @@ def onthefly_passes(
     sweep's events and returns the count of points done. Leg changes, faults and retries as the
     stop-and-go sweep (procedures/acquisition/passes.py; retries run out: SweepFailed). `materials`: leg ->
     material the adaptive rule normalises with (procedures.acquisition.adaptive; a leg not in it: the default)."""
-    if not isinstance(laser, CapturingInterferometer):
-        raise DriverError("the interferometer has no capture mode (CAPARM/CAP?), so an on-the-fly plan cannot run; "
-                          "use a stop-and-go plan")
+    # a laser with a trigger input latches at the drive's compare pulses; a streaming one is
+    # aligned with the drive's traced positions on the station's clock
+    streaming = not isinstance(laser, CapturingInterferometer) and isinstance(laser, StreamingInterferometer)
+    if not streaming and not isinstance(laser, CapturingInterferometer):
+        raise DriverError("the interferometer has no capture mode (CAPARM/CAP?) and does not stream, so an on-the-fly "
+                          "plan cannot run; use a stop-and-go plan")
     for leg in plan.legs:
-        if not isinstance(axes[leg], PositionCompareAxis):
+        if streaming and not isinstance(axes[leg], TracingAxis):
+            raise DriverError(f"leg {leg}: the drive's position cannot be traced during a move; use a stop-and-go plan")
+        if not streaming and not isinstance(axes[leg], PositionCompareAxis):
             raise DriverError(f"leg {leg}: the drive has no position-compare output; use a stop-and-go plan")
     all_targets = np.asarray(plan.targets_mm, dtype=float)
     n = all_targets.size
@@ -221,17 +293,31 @@ def onthefly_passes(
                 if prev_temp is None or prev_temp[0] is None:
                     # the first pass of the leg: the temperature as it starts (time: its first sample)
                     prev_temp = (None, laser.environment().material_temp_of(leg))
-                axis.arm_position_compare(float(seq[0]), d * step, n)  # type: ignore[attr-defined]
-                laser.arm_capture(leg, n)  # type: ignore[attr-defined]
-                status = axis.move_to(end_mm, velocity_mm_s=speed)
-                axis.arm_position_compare(float(seq[0]), d * step, 0)  # type: ignore[attr-defined]  # off
-                captured, _ = laser.capture_count(leg)  # type: ignore[attr-defined]
-                if captured < n:
-                    raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
-                                       "(trigger wiring, or the move stopped short)")
-                readings = laser.capture_samples(leg, 0, n)  # type: ignore[attr-defined]
+                if streaming:
+                    status, trace = axis.move_traced(end_mm, speed, TRACE_INTERVAL_S)  # type: ignore[attr-defined]
+                    period_s = float(getattr(laser, "period_s", 0.04))
+                    t_tr = [t for t, x in trace if min(seq[0], seq[-1]) - step <= x <= max(seq[0], seq[-1]) + step]
+                    if len(t_tr) < 3:
+                        raise StreamAlignment(f"leg {leg} pass {run}: {len(t_tr)} drive polls over the targets "
+                                              "(the move stopped short, or the drive answers too slowly)")
+                    # the anchor's dwell first: the stream is in up to its end by then (on any clock)
+                    clock.sleep(max(plan.dwell_s, 4 * period_s))
+                    stream = laser.stream_samples(leg, t_tr[0] - 3 * period_s,  # type: ignore[attr-defined]
+                                                  t_tr[-1] + 3 * period_s)
+                    readings = align_stream(seq, trace, stream, leg, period_s)
+                else:
+                    axis.arm_position_compare(float(seq[0]), d * step, n)  # type: ignore[attr-defined]
+                    laser.arm_capture(leg, n)  # type: ignore[attr-defined]
+                    status = axis.move_to(end_mm, velocity_mm_s=speed)
+                    axis.arm_position_compare(float(seq[0]), d * step, 0)  # type: ignore[attr-defined]  # off
+                    captured, _ = laser.capture_count(leg)  # type: ignore[attr-defined]
+                    if captured < n:
+                        raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
+                                           "(trigger wiring, or the move stopped short)")
+                    readings = laser.capture_samples(leg, 0, n)  # type: ignore[attr-defined]
                 # the anchor: at rest where the pass ended, settled, averaged (same pass offset)
-                clock.sleep(plan.dwell_s)
+                if not streaming:  # (a streaming pass has had its dwell)
+                    clock.sleep(plan.dwell_s)
                 anchor_reading = laser.read(leg)
                 # after every pass: a pass heats the screw by its travel in seconds, so the
                 # material temperature of the pass before would be stale (the readings are
