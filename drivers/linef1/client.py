@@ -49,6 +49,10 @@ NO_IDENTITY_QUERY = "no identity query in the protocol: model and serial as conf
 _POLL_S = 0.02
 _KNOWN_CODES = frozenset((*lf.DATA_FRAMES, *lf.COMMANDS))
 MAX_AVERAGING_S = 10.0
+GRID_HORIZON_S = 30.0
+"""How far ahead in the stream a sample's time stamp looks for the earliest arrival (`_grid_stamps`):
+long enough that some frame in it arrived without delay; short enough that the instrument's and
+the station's clocks (crystals within 50 ppm of each other) drift apart by at most 1.5 ms in it."""
 MIN_SAMPLE_FRACTION = 0.5
 """A window with fewer of its expected samples (averaging time / stream period) is not a reading:
 `CommTimeout` (a gap in the stream), for the sweep to ask again. With more, frames lost in it only
@@ -310,7 +314,7 @@ class LineF1Interferometer:
         n_air = self._air_index()
         return [StreamSample(t_s=t, position_mm=x.raw_mm / n_air) for x, t in zip(span, stamps)]
 
-    def _grid_stamps(self, samples: list[_Sample], horizon_s: float = 2.0) -> list[float]:
+    def _grid_stamps(self, samples: list[_Sample], horizon_s: float = GRID_HORIZON_S) -> list[float]:
         """The samples' times on the stream's own grid: the instrument sends a frame every
         period (its crystal), the host's arrival stamps are late by the transport, by a varying
         part on top of a constant one. A frame's time is its number times the period plus the

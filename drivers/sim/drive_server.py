@@ -918,14 +918,15 @@ class SimDriveServer:
 
         self._tick = asyncio.get_running_loop().create_task(tick())
 
-    def sync_leg(self, leg: int) -> bool:
-        """Bring drive `leg`'s motion (and its plant) up to the clock's now; whether it is moving."""
+    def sync_leg(self, leg: int) -> int:
+        """Bring drive `leg`'s motion (and its plant) up to the clock's now: 0 at rest, 1 moving,
+        2 moving in a move the host traces (taking its time from the clock, DriveModel)."""
         with self.lock:
             m = self._models.get(leg)
             if m is None or m.motion is None:
-                return False
+                return 0
             m.refresh()
-            return m.motion is not None
+            return 0 if m.motion is None else (2 if m._pending else 1)
 
     def set_traceable_moves(self, on: bool) -> None:
         """Time scale 0: moves wait for the clock while the host traces them (DriveModel)."""

@@ -46,10 +46,11 @@ from drivers.sim.plant import LegPlant
 from drivers.sim.pty_server import PtyServer
 
 FAULT_KINDS = ("crc", "cut", "gap", "beam", "overflow", "no_ack")
+TRACED = 2
+"""`sync(leg)`'s answer for a move the host traces (the drive's, drivers/sim/drive_server.py)."""
 REST_TAIL_S = 1.0
 """Frames are written one by one at their instant (`_on_due`) while the beam's leg moves and this
 long after it stopped: the frames after a pass are the client's reference for its grid."""
-LANDING_S = 0.0003
 LOST_COUNT_MM = 0.3172  # where a lost count leaves the reading: off by a whole number of fringes, far from right
 
 
@@ -111,7 +112,8 @@ class SimLineF1(PtyServer):
         self.commands: Counter = Counter()  # command code (hex) -> times received
         self.sent = Counter()  # "distance", "meteo", "ack", "crc", "cut", "gap" -> frames
         self.failures: list[BaseException] = []
-        # rig hook: sync(leg) brings the leg's drive up to the clock's now, True while it moves
+        # rig hook: sync(leg) brings the leg's drive up to the clock's now: 0 at rest, 1 moving,
+        # TRACED moving in a move the host traces
         self.sync = sync
         self._events_added = False
         self._unread = False  # the client did not read what was written (not waited on then)
@@ -232,41 +234,51 @@ class SimLineF1(PtyServer):
 
     def _on_due(self, t_s: float) -> None:
         """At a frame's time, within a jump of the virtual clock: if the beam's leg is moving, the
-        drive is brought to this instant (`sync`) and the frames due are written now, and the
-        line is waited on until the client has read them, so the client time-stamps them on
-        arrival at this very instant (nothing else moves the clock meanwhile). At rest the
-        serving thread writes them in batches, as at any other time."""
+        drive is brought to this instant (`sync`) and the frames due are written now. In a move
+        the host traces, and for REST_TAIL_S after it, the clock is then held at this instant
+        until the client has time-stamped them (`_wait_stamped`). At rest the serving thread
+        writes the frames in batches, as at any other time; a move made within one drive
+        request is not waited on (the drive would not answer meanwhile)."""
         if self.leg is None or self._thread is None:
             return
         with self.lock:
-            if self.sync(self.leg):
+            moving = self.sync(self.leg)
+            if moving == TRACED:
                 self._moved_t = t_s
-            elif not t_s <= self._moved_t + REST_TAIL_S:
+            wait = moving == TRACED or (not moving and t_s <= self._moved_t + REST_TAIL_S)
+            if not (moving or wait):
                 return
-            self._send(self._due_frames())
-            self._wait_read()
+            frames = self._due_frames()
+            if not frames:
+                return
+            mark = self.clock.reads() if wait else 0
+            self._send(frames)
+        if wait:
+            self._wait_stamped(mark)
 
-    def _wait_read(self, timeout_s: float = 2.0) -> None:
-        """Until the client has read everything written (its input queue empty), at most
-        `timeout_s` real seconds; a client that does not read is not waited on again until it
-        has caught up."""
-        queued = lambda: struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]  # noqa: E731
+    def _wait_stamped(self, mark: int, timeout_s: float = 0.5) -> None:
+        """Until a thread other than this one and the serving one has asked the clock the time
+        since `mark` (the client's reader stamps what it reads on arrival, drivers.linef1.client),
+        at most `timeout_s` real seconds; a client that does not read is not waited on again
+        until it has read something (nothing left on the line)."""
+        read_since = getattr(self.clock, "read_since", None)
+        if read_since is None:
+            return
         if self._unread:
-            if queued():
+            if self._queued():
                 return
             self._unread = False
-        # the pty hands written bytes to the reading side a little later (the kernel's flip
-        # buffer): first until they are there (or, not seen within LANDING_S, already read),
-        # then until the client has read them
-        t_start = time.monotonic()
-        while not queued() and time.monotonic() - t_start < LANDING_S:
-            time.sleep(20e-6)
+        exclude = {threading.get_ident(), self._thread.ident if self._thread else 0}
         deadline = time.monotonic() + timeout_s
-        while queued():
+        while not read_since(mark, exclude):
             if time.monotonic() > deadline:
                 self._unread = True
                 return
-            time.sleep(50e-6)
+            time.sleep(20e-6)
+
+    def _queued(self) -> int:
+        """Bytes written that the client has not read yet (the pty's input queue)."""
+        return struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]
 
     def _commands(self, pending: bytearray) -> bytes:
         out = bytearray()

@@ -76,50 +76,54 @@ def align_stream(seq_mm: np.ndarray, trace: list[tuple[float, float]], samples: 
     input"): both time-stamped on the station's clock, the drive's traced position actual
     (`trace`: (t s, position mm) per poll) and the laser's samples (`samples`: t_s, position_mm).
 
-    For each target, in pass order (`seq_mm`): the time the drive passed it, from a straight line
-    through the trace polls within a step of it (their time-stamp jitter averaged; the drive's own
-    speed there as its slope); each laser sample's error against the drive's position at its
-    time stamp (the trace interpolated); the reading at the target from a straight line through
-    the errors of the samples within 1.5 stream periods of travel of it (at least the two
-    nearest), evaluated at the target. A reading's `t_s` is the time the drive passed its target.
-    The samples are late on the drive's polls by what the two transports' latencies differ:
-    a constant delay, v x delay along the pass, which the dynamic fit takes as part of the
-    speed lag (procedures/fit/dynamic.py), as it takes the leg's own lag behind the encoder."""
+    The drive's path is the cubic spline through its polls while it moved (its acceleration
+    at the ends of the pass included); for each target, in pass order (`seq_mm`), the time the
+    drive passed it on that path; each laser sample's error against the drive's position on the
+    path at its time stamp; the reading at the target from a straight line through the errors
+    of the samples within 1.5 stream periods of travel of it (at least the two nearest),
+    evaluated at the target. A reading's `t_s` is the time the drive passed its target. The
+    samples are late on the drive's polls by what the two transports' latencies differ: a
+    constant delay, v x delay along the pass, which the dynamic fit takes as part of the speed
+    lag (procedures/fit/dynamic.py), as it takes the leg's own lag behind the encoder."""
+    from scipy.interpolate import CubicSpline
+
     t_tr = np.array([t for t, _ in trace], dtype=float)
     x_tr = np.array([x for _, x in trace], dtype=float)
+    sign = 1.0 if seq_mm.size < 2 or seq_mm[-1] >= seq_mm[0] else -1.0
+    # the polls while it moved: each past the one before, later than it
+    keep = [0]
+    for k in range(1, t_tr.size):
+        if sign * (x_tr[k] - x_tr[keep[-1]]) > 0 and t_tr[k] > t_tr[keep[-1]]:
+            keep.append(k)
+    t_m, x_m = t_tr[keep], x_tr[keep]
     t_smp = np.array([x.t_s for x in samples], dtype=float)
     l_smp = np.array([x.position_mm for x in samples], dtype=float)
-    if t_smp.size < 2 or t_tr.size < 3:
-        raise StreamAlignment(f"leg {leg}: {t_smp.size} laser samples and {t_tr.size} drive polls in the pass: "
-                              "too few to align")
-    x_smp = np.interp(t_smp, t_tr, x_tr)  # the drive's position at each sample's time stamp
+    if t_smp.size < 2 or t_m.size < 4:
+        raise StreamAlignment(f"leg {leg}: {t_smp.size} laser samples and {t_m.size} drive polls while moving in "
+                              "the pass: too few to align")
+    lo, hi = (x_m[0], x_m[-1]) if sign > 0 else (x_m[-1], x_m[0])
+    if not (lo <= float(np.min(seq_mm)) and float(np.max(seq_mm)) <= hi):
+        raise StreamAlignment(f"leg {leg}: the drive's trace ({lo:.3f}..{hi:.3f} mm) does not cover the pass's "
+                              "targets (the move stopped short)")
+    x_of_t = CubicSpline(t_m, x_m)
+    t_of_x = CubicSpline(sign * x_m, t_m)
+    inside = (t_smp >= t_m[0]) & (t_smp <= t_m[-1])
+    t_smp, l_smp = t_smp[inside], l_smp[inside]
+    x_smp = x_of_t(t_smp)  # the drive's position at each sample's time stamp
     e_smp = l_smp - x_smp
-    step = abs(float(seq_mm[1] - seq_mm[0])) if seq_mm.size > 1 else 1.0
     out: list[Reading] = []
     for x_i in seq_mm:
-        near = np.abs(x_tr - x_i) <= step
-        if near.sum() < 2:
-            near = np.argsort(np.abs(x_tr - x_i))[:2]
-        tt, xx = t_tr[near], x_tr[near]
-        if np.ptp(xx) <= 0:
-            raise StreamAlignment(f"leg {leg}: the drive's trace does not move near {x_i:.3f} mm")
-        slope, icpt = np.polyfit(xx, tt, 1)  # t = slope * x + icpt
-        t_i = float(slope * x_i + icpt)
-        v_i = 1.0 / float(slope)
-        reach = 1.5 * abs(v_i) * period_s
+        t_i = float(t_of_x(sign * x_i))
+        v_i = float(x_of_t(t_i, 1))
         d = np.abs(x_smp - x_i)
-        use = d <= reach
+        use = d <= 1.5 * abs(v_i) * period_s
         if use.sum() < 2:
             use = np.argsort(d)[:2]
-        if float(np.max(d[use])) > 2.5 * abs(v_i) * period_s:
+        if d.size < 2 or float(np.max(d[use])) > 2.5 * abs(v_i) * period_s:
             raise StreamAlignment(f"leg {leg}: no laser sample within {2.5 * period_s:.3f} s of the drive passing "
                                   f"{x_i:.3f} mm (a gap in the stream)")
         xs, es = x_smp[use], e_smp[use]
-        if np.ptp(xs) > 0:
-            b, a = np.polyfit(xs - x_i, es, 1)
-            e_i = float(a)
-        else:
-            e_i = float(np.mean(es))
+        e_i = float(np.polyfit(xs - x_i, es, 1)[1]) if np.ptp(xs) > 0 else float(np.mean(es))
         out.append(Reading(axis=leg, position_mm=float(x_i) + e_i, beam_ok=True, signal_pct=float("nan"), t_s=t_i))
     return out
 
