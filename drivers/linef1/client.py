@@ -439,14 +439,9 @@ class LineF1Interferometer:
                 if fd is not None:
                     if not select.select((fd,), (), (), _POLL_S)[0]:
                         continue
-                    # time-stamped when the bytes are there, before reading them: on the simulated
-                    # rig the instrument waits for the read (drivers/sim/linef1_server.py), so the
-                    # clock stands at the frame's instant until then
-                    arrived = self._clock.now()
                     chunk = os.read(fd, 4096)
                 else:  # pragma: no cover - non-POSIX
                     chunk = self._serial.read(max(1, self._serial.in_waiting))
-                    arrived = self._clock.now()
             except BlockingIOError:
                 continue
             except (OSError, serial.SerialException, ValueError, TypeError) as exc:
@@ -458,6 +453,9 @@ class LineF1Interferometer:
                 return
             if not chunk:
                 continue
+            # time-stamped once read (on the simulated rig the instrument holds the clock at the
+            # frame's instant until this stamp, drivers/sim/linef1_server.py)
+            arrived = self._clock.now()
             self.bytes_in += len(chunk)
             buf += chunk
             frames: list[tuple[bytes, int]] = []  # (frame, frames lost just before it)
