@@ -150,9 +150,6 @@ def run(args) -> int:
         print(f"plan: {plan_size(plan_spec(args)).describe()}")
         if args.force and out.exists():
             out.unlink()  # --force: the new session replaces it (after the plan was accepted)
-    from station.services.laser_wiring import check_plan_for_laser
-
-    check_plan_for_laser(plan, cfg)  # before anything connects or is written
     for note in plan.notes:
         print(f"note: {note}")
     resume_hint = resume_command(out, cfg, args.config)

@@ -88,22 +88,3 @@ def replay_laser(laser, recorded_compensation: str | None):
     if isinstance(record, dict) and str(record.get("mode", "")).upper() == "STATION":
         return _RecordedStationCompensation(laser, record)
     return laser
-
-
-def check_plan_for_laser(plan, cfg) -> None:
-    """InputError for a plan the configured laser cannot measure: on the fly, a streaming laser
-    (the µLine-F1, no trigger input) is aligned with the drive's traced positions on the
-    station's clock (docs/onthefly.md), which needs a stream sample at least every step of the
-    pass: the plan's fastest speed times the stream's period must not exceed its step."""
-    from procedures.engine.errors import InputError
-
-    if not getattr(plan, "onthefly", False) or cfg.interferometer.protocol != "linef1":
-        return
-    from drivers.linef1.protocol import STREAM_RATE_HZ
-
-    travel_mm = max(plan.speeds_mm_s) / STREAM_RATE_HZ
-    if travel_mm > plan.step_mm:
-        raise InputError(f"the on-the-fly plan's step of {plan.step_mm:g} mm is shorter than the µLine-F1's travel "
-                         f"between two stream samples at {max(plan.speeds_mm_s):g} mm/s ({travel_mm:g} mm at "
-                         f"{STREAM_RATE_HZ:g} Hz; [interferometer] protocol = \"linef1\" in {cfg.source}): use a "
-                         "larger step or slower passes; nothing was written")
