@@ -21,6 +21,10 @@ echoing its code (protocol: drivers/linef1/protocol.py, docs/interferometer-prot
   the refractive index of the air sensor's latest values, by the equation it is given
   (procedures/metrology/air.py from the composition root), and `compensation()` says so in the
   record `station recorrect` reads (mode STATION: the index from the recorded air).
+- `stream_samples(axis, t0, t1)`: the samples of a span for an on-the-fly pass, their stamps put
+  on the stream's own frame grid (`_grid_stamps`: frame number x period plus the earliest
+  arrival's offset ahead), which the pass aligns with the drive's traced positions
+  (docs/interferometer-protocol.md, "Time stamps").
 - One beam: the instrument measures the leg it was last zeroed on (`zero(axis)`); reading
   another axis is refused.
 - The protocol as publicly described has no identity query: `identity()` gives the model and

@@ -326,7 +326,7 @@ class ModbusServoAxis:
         self._limits: DriveLimits | None = None
         self._profile_motion: tuple[float, float] | None = None  # profile velocity, accel
         self._last_position_mm: float | None = None
-        self._trace: tuple | None = None  # move_traced: (interval s, [(t s, position mm)], -)
+        self._trace: tuple | None = None  # move_traced: (interval s, [(t s, position mm)])
         self._closed = False
         p = self.profile
         self._proto = p.protocol
@@ -622,7 +622,7 @@ class ModbusServoAxis:
         or faulted), judged as `move_to` judges it."""
         if not interval_s > 0:
             raise ValueError(f"leg {self.leg}: trace interval {interval_s!r} is not > 0 s")
-        self._trace = (float(interval_s), [], None)
+        self._trace = (float(interval_s), [])
         try:
             st = self.move_to(target_mm, timeout_s, velocity_mm_s)
             return st, self._trace[1]

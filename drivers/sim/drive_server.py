@@ -197,7 +197,8 @@ class DriveModel:
         self._compare_t = 0.0  # compare pulses are given up to this time of the current move
         # time scale 0: a move waits for the clock (instead of taking its time within the request
         # that started it) while the host only reads position actual: the host traces a pass
-        # (ModbusAxis.move_traced); any other request waits for its end, as a status poll would
+        # (ModbusAxis.move_traced); any other read waits for its end, as a status poll would (a
+        # write does not: a stop stops it where the clock finds it)
         self.traceable_moves = False
         self._pending = False  # a move started at scale 0 whose time has not been taken yet
         self._init_registers()

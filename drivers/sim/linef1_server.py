@@ -13,10 +13,13 @@ simulated rig to the drives: the operator sets the laser up on the leg being pre
 
 Virtual time: frames are due at multiples of `period_s`; the serving thread wakes every
 `poll_s` real seconds and writes every frame due since the last, in time order (at time scale 0 the
-clock jumps, e.g. a whole move within one request; frames older than `max_catch_up_s` before
-now are skipped then). The plant is read once for the frames written together (each with a noise
-draw of its own), so a frame due during a move that happened within one jump sees the leg where it
-arrived: fine at rest, where readings are made.
+clock jumps; frames older than `max_catch_up_s` before now are skipped then). With `sync` (the rig's
+drives) the instrument shares the plant's virtual time with the drive: the clock stops at every
+frame's instant (drivers.clock.VirtualClock.add_events) and, while the beam's leg moves, the drive
+is brought there and the frame written then, so a move made within one jump still yields samples
+along its path; in a move the host traces (on-the-fly passes) the clock is held at each frame's
+instant until the client has time-stamped it (`_wait_stamped`). At rest the plant is read once for
+the frames written together (each with a noise draw of its own).
 
 Faults on demand (`inject`): CRC errors, cut frames, a gap in the stream, a broken beam (small
 signal, latched until cleared), a velocity overflow (latched; the count is lost until the origin
