@@ -79,9 +79,10 @@ def align_stream(seq_mm: np.ndarray, trace: list[tuple[float, float]], samples: 
     The drive's path is the cubic spline through its polls while it moved (its acceleration
     at the ends of the pass included); for each target, in pass order (`seq_mm`), the time the
     drive passed it on that path; each laser sample's error against the drive's position on the
-    path at its time stamp; the reading at the target from a straight line through the errors
-    of the samples within 1.5 stream periods of travel of it (at least the two nearest),
-    evaluated at the target. A reading's `t_s` is the time the drive passed its target. The
+    path at its time stamp; the reading at the target is the error interpolated there, a cubic
+    spline through the samples' errors over position (not smoothed: at 20 mm/s the samples lie
+    0.8 mm apart, and a straight line through the three or four about a target took a third off
+    the screw's 5 mm wobble). A reading's `t_s` is the time the drive passed its target. The
     samples are late on the drive's polls by what the two transports' latencies differ: a
     constant delay, v x delay along the pass, which the dynamic fit takes as part of the speed
     lag (procedures/fit/dynamic.py), as it takes the leg's own lag behind the encoder."""
@@ -111,19 +112,25 @@ def align_stream(seq_mm: np.ndarray, trace: list[tuple[float, float]], samples: 
     t_smp, l_smp = t_smp[inside], l_smp[inside]
     x_smp = x_of_t(t_smp)  # the drive's position at each sample's time stamp
     e_smp = l_smp - x_smp
+    order = np.argsort(sign * x_smp, kind="stable")
+    xs, es = sign * x_smp[order], e_smp[order]
+    ahead = np.r_[True, np.diff(xs) > 0]  # strictly along the pass (a spline needs it)
+    xs, es = xs[ahead], es[ahead]
+    if xs.size < 2:
+        raise StreamAlignment(f"leg {leg}: {xs.size} laser samples along the pass: too few to align")
+    e_at = CubicSpline(xs, es) if xs.size >= 4 else (lambda u: np.interp(u, xs, es))
     out: list[Reading] = []
     for x_i in seq_mm:
         t_i = float(t_of_x(sign * x_i))
         v_i = float(x_of_t(t_i, 1))
-        d = np.abs(x_smp - x_i)
-        use = d <= 1.5 * abs(v_i) * period_s
-        if use.sum() < 2:
-            use = np.argsort(d)[:2]
-        if d.size < 2 or float(np.max(d[use])) > 2.5 * abs(v_i) * period_s:
-            raise StreamAlignment(f"leg {leg}: no laser sample within {2.5 * period_s:.3f} s of the drive passing "
-                                  f"{x_i:.3f} mm (a gap in the stream)")
-        xs, es = x_smp[use], e_smp[use]
-        e_i = float(np.polyfit(xs - x_i, es, 1)[1]) if np.ptp(xs) > 0 else float(np.mean(es))
+        # a sample on either side within 1.5 stream periods of travel, else a gap in the stream
+        u = sign * x_i
+        below, above = xs[xs <= u], xs[xs >= u]
+        reach = 1.5 * abs(v_i) * period_s
+        if not (below.size and above.size and u - below[-1] <= reach and above[0] - u <= reach):
+            raise StreamAlignment(f"leg {leg}: no laser sample on both sides within {1.5 * period_s:.3f} s of the "
+                                  f"drive passing {x_i:.3f} mm (a gap in the stream)")
+        e_i = float(e_at(u))
         out.append(Reading(axis=leg, position_mm=float(x_i) + e_i, beam_ok=True, signal_pct=float("nan"), t_s=t_i))
     return out
 

@@ -5,8 +5,9 @@ verification.
 
 Alignment: on a quiet plant (no noise, no pass offsets, no heating) the station's own laser
 latches its reading at the drive's compare pulse, i.e. the plant's error at the crossing, exactly;
-the µLine-F1's reading at each target must equal it within 0.1 um (a timing error of one stream
-period would be 400 um at 10 mm/s, of 10 us 0.1 um). On the noisy plant: the speed lag found by
+the µLine-F1's reading at each target must equal it within 0.01 um (a timing error of one stream
+period would be 400 um at 10 mm/s, of 1 us 0.01 um; smoothing the samples instead of
+interpolating them would take a share of the screw's 0.2 um wobble). On the noisy plant: the speed lag found by
 the dynamic fit is the plant's within 3 % (the stream's time stamps share the drive's clock, so
 no latency adds to it in simulation). Behind STATION_LINEF1_OTF_VERIFY=1 (about a minute): the
 table made from the µLine-F1's on-the-fly calibration of a leg verifies at or below 1.1."""
@@ -46,7 +47,7 @@ os.environ.setdefault("STATION_CATALOG", "off")
 
 SEED = 2
 VERIFY_SEED = 0
-ALIGN_UM = 0.1
+ALIGN_UM = 0.01
 
 
 def run(laser_protocol: str, cfgs, plan, seed: int = SEED):
