@@ -12,6 +12,12 @@ reading: the pass's anchor (FLAG_ANCHOR), which shares the pass's offset and so 
 speed-dependent error from it (procedures/fit/dynamic.py). The
 environment (air, material temperature) is read after every pass and holds for its samples.
 
+A laser without trigger input that streams (the µLine-F1, drivers.interfaces.StreamingInterferometer)
+takes the compare and capture's place with the clock: the drive's move is traced (its position
+actual polled, `TracingAxis.move_traced`), the laser's samples of the pass read after the dwell,
+and `align_stream` makes each target's reading from the two on the station's clock
+(docs/onthefly.md, "A laser without trigger input").
+
 A fault during a pass (a sample taken without beam, fewer samples than pulses expected, a drive
 fault) is retried as the stop-and-go sweep retries a point (procedures/acquisition/passes.py), but for the
 whole pass (a moving axis cannot go back for one sample). `sweep()` calls `onthefly_passes` in
