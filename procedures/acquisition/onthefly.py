@@ -71,6 +71,10 @@ TRACE_INTERVAL_S = 0.02
 Modbus TCP read takes about a millisecond; 50 polls a second leave the line to the rest)."""
 
 
+MERGE_MM = 0.05
+"""Stream samples closer than this along a pass are averaged into one before interpolating."""
+
+
 class StreamAlignment(DriverError):
     """A pass with a streaming laser whose samples cannot be aligned with the drive's trace
     (no samples near a target: a gap in the stream, or the trace does not cover the targets)."""
@@ -118,10 +122,22 @@ def align_stream(seq_mm: np.ndarray, trace: list[tuple[float, float]], samples: 
     t_smp, l_smp = t_smp[inside], l_smp[inside]
     x_smp = x_of_t(t_smp)  # the drive's position at each sample's time stamp
     e_smp = l_smp - x_smp
-    order = np.argsort(sign * x_smp, kind="stable")
-    xs, es = sign * x_smp[order], e_smp[order]
-    ahead = np.r_[True, np.diff(xs) > 0]  # strictly along the pass (a spline needs it)
-    xs, es = xs[ahead], es[ahead]
+    # the samples over the targets (and a few mm more), along the pass; samples closer than
+    # MERGE_MM (the drive slowing at the ends) averaged into one: a spline through two noisy
+    # values a hair apart swings wide between them
+    span = (x_smp >= float(np.min(seq_mm)) - 2.0) & (x_smp <= float(np.max(seq_mm)) + 2.0)
+    order = np.argsort(sign * x_smp[span], kind="stable")
+    u_all, e_all = sign * x_smp[span][order], e_smp[span][order]
+    xs_l: list[float] = []
+    es_l: list[list[float]] = []
+    for u, e in zip(u_all, e_all):
+        if xs_l and u - xs_l[-1] < MERGE_MM:
+            es_l[-1].append(float(e))
+        else:
+            xs_l.append(float(u))
+            es_l.append([float(e)])
+    xs = np.array(xs_l)
+    es = np.array([float(np.mean(v)) for v in es_l])
     if xs.size < 2:
         raise StreamAlignment(f"leg {leg}: {xs.size} laser samples along the pass: too few to align")
     e_at = CubicSpline(xs, es) if xs.size >= 4 else (lambda u: np.interp(u, xs, es))
