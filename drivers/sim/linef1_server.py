@@ -259,11 +259,12 @@ class SimLineF1(PtyServer):
         if wait:
             self._wait_stamped(mark)
 
-    def _wait_stamped(self, mark: int, timeout_s: float = 0.5) -> None:
+    def _wait_stamped(self, mark: int, timeout_s: float = 5.0) -> None:
         """Until a thread other than this one and the serving one has asked the clock the time
         since `mark` (the client's reader stamps what it reads on arrival, drivers.linef1.client),
-        at most `timeout_s` real seconds; a client that does not read is not waited on again
-        until it has read something (nothing left on the line)."""
+        at most `timeout_s` real seconds (a loaded machine can starve the client's thread for a
+        while: given up too soon, a pass's frames are all stamped late); a client that does not
+        read is not waited on again until it has read everything (nothing left on the line)."""
         read_since = getattr(self.clock, "read_since", None)
         if read_since is None:
             return
