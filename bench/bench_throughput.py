@@ -42,7 +42,15 @@ the station compensating for the air; each reading the mean of its window's samp
 µLine-F1 has no capture input: on the fly its stream is aligned with the drive's traced positions
 on the rig's clock (docs/onthefly.md, "A laser without trigger input"); its bytes flow while the rig
 moves, so it has no read-out column. Every plan with both, the verification with the laser the
-calibration used. Measured 2026-11-29, seeds 0-3, six legs
+calibration used. On the fly, measured 2026-11-29, seeds 0-3, six legs (the µLine-F1's rows after
+its readings were interpolated, not smoothed; the adaptive rows before the last two fixes of the
+alignment, see git log): onthefly rig time 4.86 min/leg with the station's laser (+0.25 read-out)
+and 4.87 with the µLine-F1; legs at or below 1.1: 24/24 (worst 1.025) and 22/24 (1.358 seed 2
+leg 4, 1.490 seed 3 leg 6; the others 0.99-1.06); onthefly-adaptive 2.43-2.63 min/leg (+0.09)
+and 2.19-2.50, 24/24 (worst 1.073) and 23/24 (1.237 seed 2 leg 4; the others 0.99-1.05). The
+outliers are not explained yet (the same leg alone, or two legs, calibrates to 0.005 um): a pass
+stamped late as a whole under a loaded machine is suspected (the simulated laser then waited
+0.5 s for its client's stamp, now 5 s), not shown. Measured 2026-11-29, seeds 0-3, six legs
 (the µLine-F1's noise held per 0.1 s as the plant's): rig time per leg the same with both lasers
 (iso230 5.56 min, paper 93.5 min: a streamed reading takes its averaging time, as a `POS?` does);
 oracle ratio per leg 0.98-1.01 with the µLine-F1 (noise floor 0.056-0.058 um) against 0.98-1.02
