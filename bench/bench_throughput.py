@@ -50,7 +50,9 @@ leg 4, 1.490 seed 3 leg 6; the others 0.99-1.06); onthefly-adaptive 2.43-2.63 mi
 and 2.19-2.50, 24/24 (worst 1.073) and 23/24 (1.237 seed 2 leg 4; the others 0.99-1.05). The
 outliers are not explained yet (the same leg alone, or two legs, calibrates to 0.005 um): a pass
 stamped late as a whole under a loaded machine is suspected (the simulated laser then waited
-0.5 s for its client's stamp, now 5 s), not shown. Measured 2026-11-29, seeds 0-3, six legs
+0.5 s for its client's stamp, now 5 s). Run again with the 5 s wait, seeds 2-3: 11/12 (seed 2 all
+at or below 1.057, seed 3 leg 1 at 1.394 where leg 6 had been): the outlier moves between runs of
+the same seed, so it comes from timing (the stamps), not from the plant; not found yet. Measured 2026-11-29, seeds 0-3, six legs
 (the µLine-F1's noise held per 0.1 s as the plant's): rig time per leg the same with both lasers
 (iso230 5.56 min, paper 93.5 min: a streamed reading takes its averaging time, as a `POS?` does);
 oracle ratio per leg 0.98-1.01 with the µLine-F1 (noise floor 0.056-0.058 um) against 0.98-1.02
