@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 
 
 class SystemClock:
@@ -35,18 +36,56 @@ class VirtualClock:
         self._lock = threading.Lock()
         self._offset_s = float(start_s)
         self._real0 = time.monotonic()
+        self._events: list[tuple] = []  # (next_due, on_due): see add_events
+        self._reads = 0  # now() calls at time scale 0
+        self._readers: deque = deque(maxlen=64)  # (read number, thread ident) of the latest
+
+    def add_events(self, next_due, on_due) -> None:
+        """A source of instants the clock must stop at (time scale 0): while advancing, the clock
+        stops at `next_due()` (the source's next instant, or None) whenever it lies within the
+        jump, and calls `on_due(t)` there, in the advancing thread, before going on. A simulated
+        instrument that streams (drivers/sim/linef1_server.py) samples the plant there, so a
+        move made within one request still yields samples along its path at their own times."""
+        self._events.append((next_due, on_due))
 
     def now(self) -> float:
         if self.time_scale == 0:
+            # who asked (read_since): a simulated instrument waits for its client's time stamp
+            self._reads += 1
+            self._readers.append((self._reads, threading.get_ident()))
             return self._offset_s  # one attribute read, atomic: no lock (asked several times a point)
         with self._lock:
             return self._offset_s + (time.monotonic() - self._real0) / self.time_scale
 
+    def reads(self) -> int:
+        """The count of `now()` calls so far (time scale 0): a mark for `read_since`."""
+        return self._reads
+
+    def read_since(self, mark: int, exclude: set[int]) -> bool:
+        """Whether a thread not in `exclude` (thread idents) asked the time since `mark` (time
+        scale 0): the simulated µLine-F1 waits, the clock standing at a frame's instant, until
+        its client has time-stamped what it wrote (drivers/sim/linef1_server.py)."""
+        return any(n > mark and ident not in exclude for n, ident in list(self._readers))
+
     def advance(self, dt_s: float) -> None:
-        """Jump virtual time forward by `dt_s` without waiting (any scale)."""
-        if dt_s > 0:
+        """Jump virtual time forward by `dt_s` without waiting (any scale); at scale 0 stopping
+        at every event instant within the jump (`add_events`)."""
+        if dt_s <= 0:
+            return
+        if self.time_scale != 0 or not self._events:
             with self._lock:
                 self._offset_s += dt_s
+            return
+        target = self._offset_s + dt_s
+        while True:
+            due = [(t, on_due) for next_due, on_due in self._events if (t := next_due()) is not None]
+            t, on_due = min(due, key=lambda d: d[0]) if due else (None, None)
+            with self._lock:
+                if t is None or not self._offset_s < t <= target:
+                    self._offset_s = max(self._offset_s, target)
+                    return
+                self._offset_s = t
+            on_due(t)  # outside the clock's lock: it may read the clock
 
     def sleep(self, dt_s: float) -> None:
         if dt_s <= 0:

@@ -285,6 +285,33 @@ class CapturingInterferometer(Protocol):
     def capture_samples(self, axis: int, start: int, count: int) -> list[Reading]: ...
 
 
+@dataclass(frozen=True)
+class StreamSample:
+    """One sample of a streaming interferometer: `t_s` its time stamp on the station's clock,
+    `position_mm` its reading (air-compensated, relative to the zero, + = leg longer)."""
+
+    t_s: float
+    position_mm: float
+
+
+@runtime_checkable
+class StreamingInterferometer(Protocol):
+    """An interferometer that streams samples without a trigger input (the µLine-F1): an
+    on-the-fly pass aligns its samples with the drive's traced positions on the station's clock
+    (docs/onthefly.md, "A laser without trigger input")."""
+
+    def stream_samples(self, axis: int, t0_s: float, t1_s: float) -> list[StreamSample]: ...
+
+
+@runtime_checkable
+class TracingAxis(Protocol):
+    """A drive whose position actual can be polled during a move (`move_traced`): (time on the
+    station's clock, position mm) per poll."""
+
+    def move_traced(self, target_mm: float, velocity_mm_s: float, interval_s: float = 0.02,
+                    timeout_s: float | None = None) -> tuple[DriveStatus, list[tuple[float, float]]]: ...
+
+
 @runtime_checkable
 class Clock(Protocol):
     """Time source. The simulated rig runs on a virtual clock (see drivers.clock)."""

@@ -21,6 +21,10 @@ echoing its code (protocol: drivers/linef1/protocol.py, docs/interferometer-prot
   the refractive index of the air sensor's latest values, by the equation it is given
   (procedures/metrology/air.py from the composition root), and `compensation()` says so in the
   record `station recorrect` reads (mode STATION: the index from the recorded air).
+- `stream_samples(axis, t0, t1)`: the samples of a span for an on-the-fly pass, their stamps put
+  on the stream's own frame grid (`_grid_stamps`: frame number x period plus the earliest
+  arrival's offset ahead), which the pass aligns with the drive's traced positions
+  (docs/interferometer-protocol.md, "Time stamps").
 - One beam: the instrument measures the leg it was last zeroed on (`zero(axis)`); reading
   another axis is refused.
 - The protocol as publicly described has no identity query: `identity()` gives the model and
@@ -42,13 +46,17 @@ import serial
 
 from drivers.clock import SystemClock
 from drivers.errors import BeamBreak, CommTimeout, CountLost, DriverError
-from drivers.interfaces import Clock, Environment, Reading
+from drivers.interfaces import Clock, Environment, Reading, StreamSample
 from drivers.linef1 import protocol as lf
 
 NO_IDENTITY_QUERY = "no identity query in the protocol: model and serial as configured"
 _POLL_S = 0.02
 _KNOWN_CODES = frozenset((*lf.DATA_FRAMES, *lf.COMMANDS))
 MAX_AVERAGING_S = 10.0
+GRID_HORIZON_S = 30.0
+"""How far ahead in the stream a sample's time stamp looks for the earliest arrival (`_grid_stamps`):
+long enough that some frame in it arrived without delay; short enough that the instrument's and
+the station's clocks (crystals within 50 ppm of each other) drift apart by at most 1.5 ms in it."""
 MIN_SAMPLE_FRACTION = 0.5
 """A window with fewer of its expected samples (averaging time / stream period) is not a reading:
 `CommTimeout` (a gap in the stream), for the sweep to ask again. With more, frames lost in it only
@@ -76,6 +84,7 @@ class _Sample:
     stable: bool
     signal_good: bool
     level: int
+    frame_no: int = 0  # the distance frame's number in the stream, frames lost to CRC/cut counted
 
 
 def linear_air_index(temp_c: float, pressure_pa: float, humidity_pct: float) -> float:
@@ -124,6 +133,7 @@ class LineF1Interferometer:
         self._meteo: dict[int, tuple[float, lf.MeteoFrame]] = {}
         self._acks: dict[bytes, int] = {}  # code -> seq of its latest echo
         self._seq = 0
+        self._frame_no = 0  # distance frames since the stream began, lost ones included
         self._origin_seq: int | None = None  # seq of the last SET_ORIGIN echo: samples after it count
         self._losses: deque[tuple[float, int]] = deque(maxlen=4096)  # (t_s, frames) lost to CRC/cut frames
         self.crc_errors = 0  # frames dropped for their CRC or an unknown code
@@ -258,6 +268,78 @@ class LineF1Interferometer:
         return StreamReading(axis=axis, position_mm=mean, beam_ok=True, signal_pct=round(level * 100.0 / 255.0, 1),
                              t_s=window[-1].t_s, std_um=std, samples=len(values), frames_lost=lost)
 
+    def stream_samples(self, axis: int, t0_s: float, t1_s: float) -> list[StreamSample]:
+        """The distance samples of `axis` time-stamped within `t0_s`..`t1_s` on the station's clock
+        (air-compensated, relative to the origin; on-the-fly passes, docs/onthefly.md). Waits
+        (`timeout_s`, real time) for a sample stamped at or after `t1_s`. A sample with the
+        small-signal flag raises `BeamBreak`, a velocity overflow `CountLost`; fewer than half
+        the samples the span should hold, `CommTimeout` (a gap in the stream).
+
+        Time stamps: a sample is stamped on its arrival (frames read together one stream period
+        apart, the last at its arrival): the transport's latency makes them late by a constant
+        part, which an on-the-fly pass's alignment takes as part of the speed lag
+        (docs/interferometer-protocol.md, "Time stamps")."""
+        axis = self._check_axis(axis)
+        with self._cv:
+            aimed, lost, origin = self._aimed, self._count_lost, self._origin_seq
+        if aimed != axis or origin is None:
+            raise DriverError(f"the µLine-F1 on {self.port} measures one beam, zeroed on "
+                              f"{'no leg yet' if aimed is None else f'leg {aimed}'}; leg {axis} was not zeroed",
+                              hint="Zero the laser on the leg first (the sweep does at each leg's reference).")
+        if lost:
+            raise CountLost(f"µLine-F1 on {self.port}: leg {axis}'s count was lost (velocity overflow); the "
+                            "position is not valid until the origin is set again.")
+        deadline = time.monotonic() + self.timeout_s
+        with self._cv:
+            while not (self._samples and self._samples[-1].t_s >= t1_s):
+                left = deadline - time.monotonic()
+                if left <= 0 or self._closed:
+                    raise CommTimeout(f"µLine-F1 on {self.port}: no distance frame stamped after {t1_s:.3f} s "
+                                      f"within {self.timeout_s:g} s (a gap in the stream).")
+                self._cv.wait(min(left, _POLL_S))
+            after = [x for x in self._samples if x.seq > origin and x.t_s >= t0_s - self.period_s]
+        stamps = self._grid_stamps(after)
+        span = [x for x, t in zip(after, stamps) if t0_s <= t <= t1_s]
+        stamps = [t for t in stamps if t0_s <= t <= t1_s]
+        for x in span:
+            if x.overflow:
+                with self._cv:
+                    self._count_lost = True
+                raise CountLost(f"µLine-F1 on {self.port}: velocity overflow on leg {axis} at t = {x.t_s:.3f} s: "
+                                "the count is lost; the origin must be set again.")
+            if not x.signal_good or not x.stable:
+                why = "small signal (beam interrupted)" if not x.signal_good else "laser not stable"
+                raise BeamBreak(f"µLine-F1 on {self.port}, leg {axis}: {why} at t = {x.t_s:.3f} s "
+                                f"(signal level {x.level}).")
+        expected = max(1, math.floor((t1_s - t0_s) / self.period_s + 1e-9))
+        if len(span) < math.ceil(MIN_SAMPLE_FRACTION * expected):
+            raise CommTimeout(f"µLine-F1 on {self.port}: {len(span)} of about {expected} distance frames in "
+                              f"{t0_s:.3f}..{t1_s:.3f} s (a gap in the stream).")
+        n_air = self._air_index()
+        return [StreamSample(t_s=t, position_mm=x.raw_mm / n_air) for x, t in zip(span, stamps)]
+
+    def _grid_stamps(self, samples: list[_Sample], horizon_s: float = GRID_HORIZON_S) -> list[float]:
+        """The samples' times on the stream's own grid: the instrument sends a frame every
+        period (its crystal), the host's arrival stamps are late by the transport, by a varying
+        part on top of a constant one. A frame's time is its number times the period plus the
+        smallest offset (arrival - number x period) among it and the frames after it within
+        `horizon_s`: the earliest arrival bounds the latency; looking only forward, a gap in the
+        stream (frames never sent, so not numbered) moves the grid of the frames after it only."""
+        if not samples:
+            return []
+        period = self.period_s
+        offsets = [x.t_s - x.frame_no * period for x in samples]
+        out = [0.0] * len(samples)
+        window: deque[int] = deque()  # indices, their offsets increasing: the minimum of the horizon first
+        for i in range(len(samples) - 1, -1, -1):
+            while window and offsets[window[-1]] >= offsets[i]:
+                window.pop()
+            window.append(i)
+            while samples[window[0]].t_s > samples[i].t_s + horizon_s:
+                window.popleft()
+            out[i] = samples[i].frame_no * period + offsets[window[0]]
+        return out
+
     def environment(self) -> Environment:
         """The air sensor's latest values and each leg's material sensor (NaN: none)."""
         air = self._air()
@@ -375,6 +457,8 @@ class LineF1Interferometer:
                 return
             if not chunk:
                 continue
+            # time-stamped once read (on the simulated rig the instrument holds the clock at the
+            # frame's instant until this stamp, drivers/sim/linef1_server.py)
             arrived = self._clock.now()
             self.bytes_in += len(chunk)
             buf += chunk
@@ -425,12 +509,13 @@ class LineF1Interferometer:
                     last_t = t_s
                     if lost:
                         self._losses.append((t_s, lost))
+                    self._frame_no += 1 + lost
                     if code == lf.FRAME_VELOCITY:  # not asked for by the station; kept, not a position
                         self.velocity_m_s = lf.decode_velocity(data).velocity_m_s
                         continue
                     d = lf.decode_distance(data)
                     self._samples.append(_Sample(self._seq, t_s, d.distance_m * 1000.0, d.overflow, d.laser_stable,
-                                                 d.signal_good, d.level))
+                                                 d.signal_good, d.level, self._frame_no))
                     if d.overflow and self._origin_seq is not None:
                         self._count_lost = True  # the count is lost whenever it happens (moving or not)
                 elif code == lf.FRAME_METEO:

@@ -326,6 +326,7 @@ class ModbusServoAxis:
         self._limits: DriveLimits | None = None
         self._profile_motion: tuple[float, float] | None = None  # profile velocity, accel
         self._last_position_mm: float | None = None
+        self._trace: tuple | None = None  # move_traced: (interval s, [(t s, position mm)])
         self._closed = False
         p = self.profile
         self._proto = p.protocol
@@ -573,8 +574,9 @@ class ModbusServoAxis:
             span = lim.max_mm - lim.min_mm
             dist = abs(target_mm - self._last_position_mm) if self._last_position_mm is not None else span
             timeout_s = MOVE_TIMEOUT_FACTOR * self._trapezoid_s(dist) + MOVE_TIMEOUT_MARGIN_S
+        trace = self._trace
         try:
-            first = self._write_move(target_mm)
+            first = self._write_move(target_mm, with_status=trace is None)
         except RequestRefused as exc:
             raise DriveFault(f"leg {self.leg}: the drive refused the move to {target_mm:.4f} mm: {exc}", 0) from None
         # Judged on the clock the motion runs on, and only on the drive's time: from the write's
@@ -585,6 +587,13 @@ class ModbusServoAxis:
         t0 = self.clock.now()
         while True:
             asked = self.clock.now()
+            if trace is not None and not self._trace_poll(trace, target_mm):
+                if asked - t0 > timeout_s:
+                    self.stop()
+                    raise CommTimeout(f"leg {self.leg}: the drive did not reach {target_mm:.4f} mm within "
+                                      f"{timeout_s:.3g} s (at {trace[1][-1][1]:.4f} mm); it was quick-stopped.")
+                self.clock.sleep(trace[0])
+                continue
             st, first = (first, None) if first is not None else (self.status(), None)
             if st.fault:
                 raise DriveFault(f"leg {self.leg}: drive fault {self.profile.fault_text(st.fault_code)} "
@@ -602,7 +611,40 @@ class ModbusServoAxis:
                                   hint="Check the mechanics and the drive's motion profile.")
             self.clock.sleep(self.poll_interval_s)
 
-    def _write_move(self, target_mm: float) -> DriveStatus | None:
+    def move_traced(self, target_mm: float, velocity_mm_s: float, interval_s: float = 0.02,
+                    timeout_s: float | None = None) -> tuple[DriveStatus, list[tuple[float, float]]]:
+        """`move_to(target_mm, velocity_mm_s=...)` that polls position actual every `interval_s`
+        of the axis' clock while the drive moves: returns the status on arrival and the trace,
+        (time s, position mm) per poll, the time the middle of the request on this axis' clock
+        (the clock a streaming laser's samples are stamped on: on-the-fly with a laser without
+        trigger input, docs/onthefly.md). Position actual alone is read while moving (one
+        register, a short request); the status block once it stands still (arrived, stopped
+        or faulted), judged as `move_to` judges it."""
+        if not interval_s > 0:
+            raise ValueError(f"leg {self.leg}: trace interval {interval_s!r} is not > 0 s")
+        self._trace = (float(interval_s), [])
+        try:
+            st = self.move_to(target_mm, timeout_s, velocity_mm_s)
+            return st, self._trace[1]
+        finally:
+            self._trace = None
+
+    def _trace_poll(self, trace, target_mm: float) -> bool:
+        """One position poll of a traced move; True once the status should be read (the position
+        at the target, or the same as the poll before: the drive stands still)."""
+        t_a = self.clock.now()
+        pos = self._read_names(("position_actual",))["position_actual"]
+        t_b = self.clock.now()
+        points = trace[1]
+        # standing still: after it moved (a jerk-limited start moves less than a count at first),
+        # or not started half a second after the move was commanded (refused, faulted, stalled)
+        moved = bool(points) and any(p != points[0][1] for _, p in points)
+        still = (moved and pos == points[-1][1]) or (bool(points) and t_b - points[0][0] > 0.5 and not moved)
+        points.append((0.5 * (t_a + t_b), float(pos)))
+        count_mm = self.profile.registers["position_actual"].scale or 1e-6  # one count
+        return still or abs(pos - target_mm) <= 2 * count_mm
+
+    def _write_move(self, target_mm: float, with_status: bool = True) -> DriveStatus | None:
         """Command the move: one write of controlword + target where the profile's move_command
         block allows it; else the target first and then the controlword (the drive latches the
         target it holds when the set-point bit arrives). A drive latching on the rising edge
@@ -622,7 +664,7 @@ class ModbusServoAxis:
             words[self._cw_addr - b.start] = self._move_cw
             a = self._target_reg.address - b.start
             words[a : a + len(target)] = target
-            if self._move_and_status:
+            if self._move_and_status and with_status:
                 address, count, _ = self._status_run
                 st = self._decode_status_run(self.bus.write_read(self.unit, b.start, words, address, count))
             else:

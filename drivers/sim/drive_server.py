@@ -195,6 +195,12 @@ class DriveModel:
         self.compare = PositionCompare()
         self.trigger: TriggerLine | None = None
         self._compare_t = 0.0  # compare pulses are given up to this time of the current move
+        # time scale 0: a move waits for the clock (instead of taking its time within the request
+        # that started it) while the host only reads position actual: the host traces a pass
+        # (ModbusAxis.move_traced); any other read waits for its end, as a status poll would (a
+        # write does not: a stop stops it where the clock finds it)
+        self.traceable_moves = False
+        self._pending = False  # a move started at scale 0 whose time has not been taken yet
         self._init_registers()
 
     # -- registers ------------------------------------------------------------------------------
@@ -334,7 +340,10 @@ class DriveModel:
             if now >= m.t_end:
                 self._arrive()
             else:
-                self.nut_mm = m.position(now)
+                # within the move's ends: the closed form rounds a hair beyond its target near the
+                # end, and the plant takes any step back for a reversal (a new pass, lost motion)
+                lo, hi = min(m.p0, m.p1), max(m.p0, m.p1)
+                self.nut_mm = min(max(m.position(now), lo), hi)
                 self.plant.move(self.nut_mm, now)
                 self._plant_velocity(m.velocity(now))
 
@@ -381,12 +390,24 @@ class DriveModel:
         self.motion = SmoothedMove(self.nut_mm, nut_target, self.clock.now(), v, a, self._jerk_mm_s3())
         self._compare_t = self.motion.t0
         if getattr(self.clock, "time_scale", 1.0) == 0 and not self.stalled:
-            # no waiting: the move happens within this request, on virtual time
-            self.clock.sleep(self.motion.duration)
-            self.motion.t0 = self.clock.now() - self.motion.duration
-            self._compare_t = self.motion.t0
-            self._fire_compare(self.motion.t_end)
-            self._arrive()
+            if self.traceable_moves:
+                self._pending = True  # its time is taken by the clock, or by the next request
+                return
+            self._take_move_time()
+
+    def _take_move_time(self) -> None:
+        """Time scale 0: the move happens now, on virtual time (the clock jumps to its end; a
+        streaming laser samples it on the way, drivers.clock.VirtualClock.add_events)."""
+        self._pending = False
+        m = self.motion
+        if m is None or self.stalled:
+            return
+        self.clock.sleep(m.t_end - self.clock.now())
+        self._advance()
+
+    def _position_only(self, address: int, count: int) -> bool:
+        r = self.p.registers.get("position_actual")
+        return r is not None and address == r.address and count == r.words
 
     # -- motion dynamics and position compare (on-the-fly capture, docs/onthefly.md) ---------------
     def _jerk_mm_s3(self) -> float | None:
@@ -544,6 +565,8 @@ class DriveModel:
         self.reads += 1
         if address < 0 or address + count > len(self.regs) or not all(self.readable[address : address + count]):
             return ExcCodes.ILLEGAL_ADDRESS
+        if self._pending and not self._position_only(address, count):
+            self._take_move_time()
         self.refresh()
         return self.regs[address : address + count]
 
@@ -553,6 +576,7 @@ class DriveModel:
         count = len(values)
         if address < 0 or address + count > len(self.regs) or not all(self.writable[address : address + count]):
             return ExcCodes.ILLEGAL_ADDRESS
+        # a write does not wait for a pending move (a stop stops it where the clock finds it)
         self._advance()
         try:
             return self._apply(address, values)
@@ -887,6 +911,22 @@ class SimDriveServer:
                 self.sync()
 
         self._tick = asyncio.get_running_loop().create_task(tick())
+
+    def sync_leg(self, leg: int) -> int:
+        """Bring drive `leg`'s motion (and its plant) up to the clock's now: 0 at rest, 1 moving,
+        2 moving in a move the host traces (taking its time from the clock, DriveModel)."""
+        with self.lock:
+            m = self._models.get(leg)
+            if m is None or m.motion is None:
+                return 0
+            m.refresh()
+            return 0 if m.motion is None else (2 if m._pending else 1)
+
+    def set_traceable_moves(self, on: bool) -> None:
+        """Time scale 0: moves wait for the clock while the host traces them (DriveModel)."""
+        with self.lock:
+            for m in self._models.values():
+                m.traceable_moves = bool(on)
 
     def sync(self) -> None:
         """Bring every drive's motion (and its plant) up to the clock's now."""

@@ -17,7 +17,6 @@ import math
 import os
 import select
 import threading
-import tty
 from collections import Counter
 
 import numpy as np
@@ -25,12 +24,13 @@ import numpy as np
 from drivers.interferometer import protocol as p
 from drivers.interfaces import Clock
 from drivers.plant.leg import LegPlant
+from drivers.sim.pty_server import PtyServer
 
 GARBAGE_KINDS = ("checksum", "truncated", "noise", "unterminated")
 _DEFAULT_GARBAGE_CYCLE = ("checksum", "truncated", "noise")  # the ones a client detects at once
 
 
-class SimInterferometer:
+class SimInterferometer(PtyServer):
     """Simulated interferometer. `plants` maps axis (= leg) number to its plant; axes without
     a plant report BEAM (no beam aligned on them). `air` is (air_temp_c, air_pressure_hpa,
     humidity_pct) around which the air sensors wander slowly. `seed` fixes sensor noise and
@@ -39,6 +39,8 @@ class SimInterferometer:
     Use: ``port = sim.start()`` -> slave pty path for the client; ``sim.stop()`` when done
     (also as a context manager).
     """
+
+    name = "sim-interferometer"
 
     def __init__(
         self,
@@ -88,46 +90,7 @@ class SimInterferometer:
         self._capture: dict[int, list] = {axis: [0, []] for axis in range(1, self.axes + 1)}
         self.commands = Counter()  # command word -> count received (statistics for tests/bench)
         self.failures: list[BaseException] = []  # exceptions inside the server (should stay empty)
-        self._master = self._slave = self._wake_r = self._wake_w = -1
-        self._thread: threading.Thread | None = None
-        self.port: str | None = None
-
-    # -- lifecycle ------------------------------------------------------------------------------
-
-    def start(self) -> str:
-        """Open the pty, start serving; returns the slave path to give to the client."""
-        if self._thread is not None:
-            raise RuntimeError("simulated interferometer already started")
-        self._master, self._slave = os.openpty()
-        # raw before anyone writes: no echo, no CR/LF translation, no line editing
-        tty.setraw(self._slave)
-        # the sim keeps its slave fd open for its lifetime: otherwise reading the master fails
-        # with EIO whenever no client has the port open
-        self._wake_r, self._wake_w = os.pipe()
-        self.port = os.ttyname(self._slave)
-        self._thread = threading.Thread(target=self._serve, name=f"sim-interferometer {self.port}", daemon=True)
-        self._thread.start()
-        return self.port
-
-    def stop(self) -> None:
-        """Stop serving and close every descriptor. Safe to call twice."""
-        if self._thread is None:
-            return
-        os.write(self._wake_w, b"x")
-        self._thread.join(timeout=5.0)
-        if self._thread.is_alive():  # pragma: no cover - would be a bug in _serve
-            raise RuntimeError("simulated interferometer thread did not stop")
-        self._thread = None
-        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
-            os.close(fd)
-        self._master = self._slave = self._wake_r = self._wake_w = -1
-
-    def __enter__(self) -> "SimInterferometer":
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
+        self._init_pty()
 
     # -- faults on demand ---------------------------------------------------------------------
 

@@ -13,10 +13,13 @@ simulated rig to the drives: the operator sets the laser up on the leg being pre
 
 Virtual time: frames are due at multiples of `period_s`; the serving thread wakes every
 `poll_s` real seconds and writes every frame due since the last, in time order (at time scale 0 the
-clock jumps, e.g. a whole move within one request; frames older than `max_catch_up_s` before
-now are skipped then). The plant is read once for the frames written together (each with a noise
-draw of its own), so a frame due during a move that happened within one jump sees the leg where it
-arrived: fine at rest, where readings are made.
+clock jumps; frames older than `max_catch_up_s` before now are skipped then). With `sync` (the rig's
+drives) the instrument shares the plant's virtual time with the drive: the clock stops at every
+frame's instant (drivers.clock.VirtualClock.add_events) and, while the beam's leg moves, the drive
+is brought there and the frame written then, so a move made within one jump still yields samples
+along its path; in a move the host traces (on-the-fly passes) the clock is held at each frame's
+instant until the client has time-stamped it (`_wait_stamped`). At rest the plant is read once for
+the frames written together (each with a noise draw of its own).
 
 Faults on demand (`inject`): CRC errors, cut frames, a gap in the stream, a broken beam (small
 signal, latched until cleared), a velocity overflow (latched; the count is lost until the origin
@@ -29,8 +32,11 @@ from __future__ import annotations
 import math
 import os
 import select
+import fcntl
+import struct
+import termios
 import threading
-import tty
+import time
 from collections import Counter
 from dataclasses import dataclass
 from typing import Callable
@@ -40,8 +46,14 @@ import numpy as np
 from drivers.interfaces import Clock
 from drivers.linef1 import protocol as lf
 from drivers.plant.leg import LegPlant
+from drivers.sim.pty_server import PtyServer
 
 FAULT_KINDS = ("crc", "cut", "gap", "beam", "overflow", "no_ack")
+TRACED = 2
+"""`sync(leg)`'s answer for a move the host traces (the drive's, drivers/sim/drive_server.py)."""
+REST_TAIL_S = 1.0
+"""Frames are written one by one at their instant (`_on_due`) while the beam's leg moves and this
+long after it stopped: the frames after a pass are the client's reference for its grid."""
 LOST_COUNT_MM = 0.3172  # where a lost count leaves the reading: off by a whole number of fringes, far from right
 
 
@@ -61,17 +73,19 @@ class _Fault:
     start_s: float | None = None
 
 
-class SimLineF1:
+class SimLineF1(PtyServer):
     """Simulated µLine-F1. `plants`: leg -> plant; `aim()` -> the leg the beam is set up on when
     the origin is set (None: keep the last); `index(temp_c, pressure_pa, humidity_pct)` the air's
     refractive index (the station's equation from the composition root, else linearised);
     `air` (temp degC, pressure hPa, humidity %RH) the air the sensors wander around."""
 
+    name = "sim-linef1"
+
     def __init__(self, plants: dict[int, LegPlant], clock: Clock, lock: threading.RLock | None = None,
                  aim: Callable[[], int | None] | None = None, index: Callable[[float, float, float], float] | None = None,
                  air: tuple[float, float, float] = (20.0, 1013.25, 45.0), seed: int = 0, offset_um: float = 0.0,
                  period_s: float = 1.0 / lf.STREAM_RATE_HZ, max_catch_up_s: float = 2.0, poll_s: float = 0.002,
-                 sensor_noise: bool = True):
+                 sensor_noise: bool = True, sync: Callable[[int], bool] | None = None):
         self.plants = dict(plants)
         self.clock = clock
         self.lock = lock if lock is not None else threading.RLock()
@@ -101,40 +115,13 @@ class SimLineF1:
         self.commands: Counter = Counter()  # command code (hex) -> times received
         self.sent = Counter()  # "distance", "meteo", "ack", "crc", "cut", "gap" -> frames
         self.failures: list[BaseException] = []
-        self._master = self._slave = self._wake_r = self._wake_w = -1
-        self._thread: threading.Thread | None = None
-        self.port: str | None = None
-
-    # -- lifecycle ------------------------------------------------------------------------------
-    def start(self) -> str:
-        """Open the pty and start serving; returns the slave path for the client."""
-        if self._thread is not None:
-            raise RuntimeError("simulated µLine-F1 already started")
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        self._wake_r, self._wake_w = os.pipe()
-        self.port = os.ttyname(self._slave)
-        self._thread = threading.Thread(target=self._serve, name=f"sim-linef1 {self.port}", daemon=True)
-        self._thread.start()
-        return self.port
-
-    def stop(self) -> None:
-        """Stop serving and close every descriptor. Safe to call twice."""
-        if self._thread is None:
-            return
-        os.write(self._wake_w, b"x")
-        self._thread.join(timeout=5.0)
-        self._thread = None
-        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
-            os.close(fd)
-        self._master = self._slave = self._wake_r = self._wake_w = -1
-
-    def __enter__(self) -> "SimLineF1":
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
+        # rig hook: sync(leg) brings the leg's drive up to the clock's now: 0 at rest, 1 moving,
+        # TRACED moving in a move the host traces
+        self.sync = sync
+        self._events_added = False
+        self._unread = False  # the client did not read what was written (not waited on then)
+        self._moved_t = -math.inf  # the last frame's time at which the beam's leg was moving
+        self._init_pty()
 
     # -- faults ---------------------------------------------------------------------------------
     def inject(self, kind: str, *, frames: int = 1, duration_s: float = 0.0, at_rest_after_s: float | None = None) -> None:
@@ -199,17 +186,103 @@ class SimLineF1:
             ready, _, _ = select.select([self._master, self._wake_r], [], [], self.poll_s if streaming else None)
             if self._wake_r in ready:
                 return
-            out = bytearray()
             try:
-                out += self._due_frames()  # first what was due before these commands arrived
-                if self._master in ready:
-                    pending += os.read(self._master, 4096)
-                    out += self._commands(pending)
-            except Exception as exc:  # keep serving; tests check `failures` stays empty
-                self.failures.append(exc)
-            view = memoryview(bytes(out))
-            while view:
+                data = os.read(self._master, 4096) if self._master in ready else b""
+            except BlockingIOError:
+                data = b""
+            # computed and written under the rig lock: frames written along a move (`_on_due`,
+            # in the thread advancing the clock) and these leave in time order
+            with self.lock:
+                out = bytearray()
+                try:
+                    out += self._due_frames()  # first what was due before these commands arrived
+                    if data:
+                        pending += data
+                        out += self._commands(pending)
+                except Exception as exc:  # keep serving; tests check `failures` stays empty
+                    self.failures.append(exc)
+                self._send(bytes(out))
+
+    def _send(self, data: bytes) -> None:
+        """Write to the line without blocking: what the line cannot take (nobody reading the
+        port) is lost, as on a serial line whose receiver overflows."""
+        view = memoryview(data)
+        while view:
+            try:
                 view = view[os.write(self._master, view):]
+            except BlockingIOError:
+                self.sent["overrun_bytes"] += len(view)
+                return
+
+    # -- virtual time: frames along a move (time scale 0) --------------------------------------------
+    def start(self) -> str:
+        port = super().start()
+        os.set_blocking(self._master, False)
+        add_events = getattr(self.clock, "add_events", None)
+        if add_events is not None and self.sync is not None and not self._events_added:
+            add_events(self._next_due, self._on_due)
+            self._events_added = True
+        return port
+
+    def _next_due(self) -> float | None:
+        """The clock's next stop for this instrument (drivers.clock.VirtualClock.add_events): the
+        next distance frame, while the stream is on and the beam is set up on a leg."""
+        if self._thread is None or not self._distance_on or self.leg is None or self._next_t is None:
+            return None
+        now = self.clock.now()
+        if self._next_t > now:
+            return self._next_t
+        t = self._grid(now)
+        return t + self.period_s if t <= now else t
+
+    def _on_due(self, t_s: float) -> None:
+        """At a frame's time, within a jump of the virtual clock: if the beam's leg is moving, the
+        drive is brought to this instant (`sync`) and the frames due are written now. In a move
+        the host traces, and for REST_TAIL_S after it, the clock is then held at this instant
+        until the client has time-stamped them (`_wait_stamped`). At rest the serving thread
+        writes the frames in batches, as at any other time; a move made within one drive
+        request is not waited on (the drive would not answer meanwhile)."""
+        if self.leg is None or self._thread is None:
+            return
+        with self.lock:
+            moving = self.sync(self.leg)
+            if moving == TRACED:
+                self._moved_t = t_s
+            wait = moving == TRACED or (not moving and t_s <= self._moved_t + REST_TAIL_S)
+            if not (moving or wait):
+                return
+            frames = self._due_frames()
+            if not frames:
+                return
+            mark = self.clock.reads() if wait else 0
+            self._send(frames)
+        if wait:
+            self._wait_stamped(mark)
+
+    def _wait_stamped(self, mark: int, timeout_s: float = 5.0) -> None:
+        """Until a thread other than this one and the serving one has asked the clock the time
+        since `mark` (the client's reader stamps what it reads on arrival, drivers.linef1.client),
+        at most `timeout_s` real seconds (a loaded machine can starve the client's thread for a
+        while: given up too soon, a pass's frames are all stamped late); a client that does not
+        read is not waited on again until it has read everything (nothing left on the line)."""
+        read_since = getattr(self.clock, "read_since", None)
+        if read_since is None:
+            return
+        if self._unread:
+            if self._queued():
+                return
+            self._unread = False
+        exclude = {threading.get_ident(), self._thread.ident if self._thread else 0}
+        deadline = time.monotonic() + timeout_s
+        while not read_since(mark, exclude):
+            if time.monotonic() > deadline:
+                self._unread = True
+                return
+            time.sleep(20e-6)
+
+    def _queued(self) -> int:
+        """Bytes written that the client has not read yet (the pty's input queue)."""
+        return struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]
 
     def _commands(self, pending: bytearray) -> bytes:
         out = bytearray()
@@ -271,6 +344,7 @@ class SimLineF1:
         return math.ceil(t_s / self.period_s - 1e-9) * self.period_s
 
     def _due_frames(self) -> bytes:
+        """The frames due since the last written, up to now (call under the lock)."""
         now = self.clock.now()
         out = bytearray()
         if self._distance_on and self._next_t is not None:

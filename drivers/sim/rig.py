@@ -33,7 +33,8 @@ class SimRig:
     rtu: bool = False
     laser_offset_um: float = 0.0  # a bias on every laser reading (station.services.config [sim] laser_offset_um)
     # the simulated laser's protocol: "station" (docs/interferometer-protocol.md, the default) or
-    # "linef1" (the µLine-F1's stream, drivers/sim/linef1_server.py; no position-compare trigger)
+    # "linef1" (the µLine-F1's stream, drivers/sim/linef1_server.py; no trigger input: on-the-fly
+    # passes are aligned on the rig's clock, the drive traced by the host)
     laser_protocol: str = "station"
     air_index: object = None  # linef1: the air's index (temp_c, pressure_pa, humidity_pct) -> n
     clock: VirtualClock = field(init=False)
@@ -54,8 +55,14 @@ class SimRig:
             from drivers.sim.linef1_server import SimLineF1
 
             # one beam, set up by the operator on the leg being prepared (enabled) when zeroed
+            # on the plant's virtual time with the drives: the stream samples a move along its path
+            # (the clock stops at every frame, drivers.clock.VirtualClock.add_events), and at
+            # time scale 0 a move the host traces takes its time from the clock, so the host's
+            # position polls see it under way (on-the-fly passes, docs/onthefly.md)
             self.laser_server = SimLineF1(self.plants, self.clock, lock=self.lock, aim=self._enabled_leg,
-                                          index=self.air_index, seed=self.seed, offset_um=self.laser_offset_um)
+                                          index=self.air_index, seed=self.seed, offset_um=self.laser_offset_um,
+                                          sync=self.drive_server.sync_leg)
+            self.drive_server.set_traceable_moves(True)
         elif self.laser_protocol == "station":
             self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed,
                                                 offset_um=self.laser_offset_um)

@@ -12,6 +12,12 @@ reading: the pass's anchor (FLAG_ANCHOR), which shares the pass's offset and so 
 speed-dependent error from it (procedures/fit/dynamic.py). The
 environment (air, material temperature) is read after every pass and holds for its samples.
 
+A laser without trigger input that streams (the µLine-F1, drivers.interfaces.StreamingInterferometer)
+takes the compare and capture's place with the clock: the drive's move is traced (its position
+actual polled, `TracingAxis.move_traced`), the laser's samples of the pass read after the dwell,
+and `align_stream` makes each target's reading from the two on the station's clock
+(docs/onthefly.md, "A laser without trigger input").
+
 A fault during a pass (a sample taken without beam, fewer samples than pulses expected, a drive
 fault) is retried as the stop-and-go sweep retries a point (procedures/acquisition/passes.py), but for the
 whole pass (a moving axis cannot go back for one sample). `sweep()` calls `onthefly_passes` in
@@ -31,7 +37,10 @@ from drivers.interfaces import (
     DriverError,
     Interferometer,
     PositionCompareAxis,
+    Reading,
     ServoAxis,
+    StreamingInterferometer,
+    TracingAxis,
 )
 from procedures.engine import events as ev
 from procedures.acquisition.adaptive import AdaptiveRule
@@ -57,6 +66,97 @@ def _passes(points: list[PlanPoint]) -> list[list[PlanPoint]]:
             out[-1].append(p)
         else:
             out.append([p])
+    return out
+
+
+TRACE_INTERVAL_S = 0.02
+"""How often the drive's position actual is polled during a pass with a streaming laser (a
+Modbus TCP read takes about a millisecond; 50 polls a second leave the line to the rest)."""
+
+
+MERGE_MM = 0.05
+"""Stream samples closer than this along a pass are averaged into one before interpolating."""
+
+
+class StreamAlignment(DriverError):
+    """A pass with a streaming laser whose samples cannot be aligned with the drive's trace
+    (no samples near a target: a gap in the stream, or the trace does not cover the targets)."""
+
+
+def align_stream(seq_mm: np.ndarray, trace: list[tuple[float, float]], samples: list, leg: int,
+                 period_s: float) -> list[Reading]:
+    """The readings of a pass with a streaming laser (docs/onthefly.md, "A laser without trigger
+    input"): both time-stamped on the station's clock, the drive's traced position actual
+    (`trace`: (t s, position mm) per poll) and the laser's samples (`samples`: t_s, position_mm).
+
+    The drive's path is the cubic spline through its polls while it moved (its acceleration
+    at the ends of the pass included); for each target, in pass order (`seq_mm`), the time the
+    drive passed it on that path; each laser sample's error against the drive's position on the
+    path at its time stamp; the reading at the target is the error interpolated there, a cubic
+    spline through the samples' errors over position (not smoothed: at 20 mm/s the samples lie
+    0.8 mm apart, and a straight line through the three or four about a target took a third off
+    the screw's 5 mm wobble). A reading's `t_s` is the time the drive passed its target. The
+    samples are late on the drive's polls by what the two transports' latencies differ: a
+    constant delay, v x delay along the pass, which the dynamic fit takes as part of the speed
+    lag (procedures/fit/dynamic.py), as it takes the leg's own lag behind the encoder."""
+    from scipy.interpolate import CubicSpline
+
+    t_tr = np.array([t for t, _ in trace], dtype=float)
+    x_tr = np.array([x for _, x in trace], dtype=float)
+    sign = 1.0 if seq_mm.size < 2 or seq_mm[-1] >= seq_mm[0] else -1.0
+    # the polls while it moved: each past the one before, later than it
+    keep = [0]
+    for k in range(1, t_tr.size):
+        if sign * (x_tr[k] - x_tr[keep[-1]]) > 0 and t_tr[k] > t_tr[keep[-1]]:
+            keep.append(k)
+    t_m, x_m = t_tr[keep], x_tr[keep]
+    t_smp = np.array([x.t_s for x in samples], dtype=float)
+    l_smp = np.array([x.position_mm for x in samples], dtype=float)
+    if t_smp.size < 2 or t_m.size < 4:
+        raise StreamAlignment(f"leg {leg}: {t_smp.size} laser samples and {t_m.size} drive polls while moving in "
+                              "the pass: too few to align")
+    lo, hi = (x_m[0], x_m[-1]) if sign > 0 else (x_m[-1], x_m[0])
+    if not (lo <= float(np.min(seq_mm)) and float(np.max(seq_mm)) <= hi):
+        raise StreamAlignment(f"leg {leg}: the drive's trace ({lo:.3f}..{hi:.3f} mm) does not cover the pass's "
+                              "targets (the move stopped short)")
+    x_of_t = CubicSpline(t_m, x_m)
+    t_of_x = CubicSpline(sign * x_m, t_m)
+    inside = (t_smp >= t_m[0]) & (t_smp <= t_m[-1])
+    t_smp, l_smp = t_smp[inside], l_smp[inside]
+    x_smp = x_of_t(t_smp)  # the drive's position at each sample's time stamp
+    e_smp = l_smp - x_smp
+    # the samples over the targets (and a few mm more), along the pass; samples closer than
+    # MERGE_MM (the drive slowing at the ends) averaged into one: a spline through two noisy
+    # values a hair apart swings wide between them
+    span = (x_smp >= float(np.min(seq_mm)) - 2.0) & (x_smp <= float(np.max(seq_mm)) + 2.0)
+    order = np.argsort(sign * x_smp[span], kind="stable")
+    u_all, e_all = sign * x_smp[span][order], e_smp[span][order]
+    xs_l: list[float] = []
+    es_l: list[list[float]] = []
+    for u, e in zip(u_all, e_all):
+        if xs_l and u - xs_l[-1] < MERGE_MM:
+            es_l[-1].append(float(e))
+        else:
+            xs_l.append(float(u))
+            es_l.append([float(e)])
+    xs = np.array(xs_l)
+    es = np.array([float(np.mean(v)) for v in es_l])
+    if xs.size < 2:
+        raise StreamAlignment(f"leg {leg}: {xs.size} laser samples along the pass: too few to align")
+    e_at = CubicSpline(xs, es) if xs.size >= 4 else (lambda u: np.interp(u, xs, es))
+    out: list[Reading] = []
+    for x_i in seq_mm:
+        t_i = float(t_of_x(sign * x_i))
+        v_i = float(x_of_t(t_i, 1))
+        # a sample on either side within 1.5 stream periods of travel, else a gap in the stream
+        u = sign * x_i
+        below, above = xs[xs <= u], xs[xs >= u]
+        reach = 1.5 * abs(v_i) * period_s
+        if not (below.size and above.size and u - below[-1] <= reach and above[0] - u <= reach):
+            raise StreamAlignment(f"leg {leg}: no laser sample on both sides within {1.5 * period_s:.3f} s of the "
+                                  f"drive passing {x_i:.3f} mm (a gap in the stream)")
+        e_i = float(e_at(u))
+        out.append(Reading(axis=leg, position_mm=float(x_i) + e_i, beam_ok=True, signal_pct=float("nan"), t_s=t_i))
     return out
 
 
@@ -153,11 +253,16 @@ def onthefly_passes(
     sweep's events and returns the count of points done. Leg changes, faults and retries as the
     stop-and-go sweep (procedures/acquisition/passes.py; retries run out: SweepFailed). `materials`: leg ->
     material the adaptive rule normalises with (procedures.acquisition.adaptive; a leg not in it: the default)."""
-    if not isinstance(laser, CapturingInterferometer):
-        raise DriverError("the interferometer has no capture mode (CAPARM/CAP?), so an on-the-fly plan cannot run; "
-                          "use a stop-and-go plan")
+    # a laser with a trigger input latches at the drive's compare pulses; a streaming one is
+    # aligned with the drive's traced positions on the station's clock
+    streaming = not isinstance(laser, CapturingInterferometer) and isinstance(laser, StreamingInterferometer)
+    if not streaming and not isinstance(laser, CapturingInterferometer):
+        raise DriverError("the interferometer has no capture mode (CAPARM/CAP?) and does not stream, so an on-the-fly "
+                          "plan cannot run; use a stop-and-go plan")
     for leg in plan.legs:
-        if not isinstance(axes[leg], PositionCompareAxis):
+        if streaming and not isinstance(axes[leg], TracingAxis):
+            raise DriverError(f"leg {leg}: the drive's position cannot be traced during a move; use a stop-and-go plan")
+        if not streaming and not isinstance(axes[leg], PositionCompareAxis):
             raise DriverError(f"leg {leg}: the drive has no position-compare output; use a stop-and-go plan")
     all_targets = np.asarray(plan.targets_mm, dtype=float)
     n = all_targets.size
@@ -224,17 +329,31 @@ def onthefly_passes(
                 if prev_temp is None or prev_temp[0] is None:
                     # the first pass of the leg: the temperature as it starts (time: its first sample)
                     prev_temp = (None, laser.environment().material_temp_of(leg))
-                axis.arm_position_compare(float(seq[0]), d * step, n)  # type: ignore[attr-defined]
-                laser.arm_capture(leg, n)  # type: ignore[attr-defined]
-                status = axis.move_to(end_mm, velocity_mm_s=speed)
-                axis.arm_position_compare(float(seq[0]), d * step, 0)  # type: ignore[attr-defined]  # off
-                captured, _ = laser.capture_count(leg)  # type: ignore[attr-defined]
-                if captured < n:
-                    raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
-                                       "(trigger wiring, or the move stopped short)")
-                readings = laser.capture_samples(leg, 0, n)  # type: ignore[attr-defined]
+                if streaming:
+                    status, trace = axis.move_traced(end_mm, speed, TRACE_INTERVAL_S)  # type: ignore[attr-defined]
+                    period_s = float(getattr(laser, "period_s", 0.04))
+                    t_tr = [t for t, x in trace if min(seq[0], seq[-1]) - step <= x <= max(seq[0], seq[-1]) + step]
+                    if len(t_tr) < 3:
+                        raise StreamAlignment(f"leg {leg} pass {run}: {len(t_tr)} drive polls over the targets "
+                                              "(the move stopped short, or the drive answers too slowly)")
+                    # the anchor's dwell first: the stream is in up to its end by then (on any clock)
+                    clock.sleep(max(plan.dwell_s, 4 * period_s))
+                    stream = laser.stream_samples(leg, t_tr[0] - 3 * period_s,  # type: ignore[attr-defined]
+                                                  t_tr[-1] + 3 * period_s)
+                    readings = align_stream(seq, trace, stream, leg, period_s)
+                else:
+                    axis.arm_position_compare(float(seq[0]), d * step, n)  # type: ignore[attr-defined]
+                    laser.arm_capture(leg, n)  # type: ignore[attr-defined]
+                    status = axis.move_to(end_mm, velocity_mm_s=speed)
+                    axis.arm_position_compare(float(seq[0]), d * step, 0)  # type: ignore[attr-defined]  # off
+                    captured, _ = laser.capture_count(leg)  # type: ignore[attr-defined]
+                    if captured < n:
+                        raise CaptureShort(f"leg {leg} pass {run}: the laser latched {captured} of {n} samples "
+                                           "(trigger wiring, or the move stopped short)")
+                    readings = laser.capture_samples(leg, 0, n)  # type: ignore[attr-defined]
                 # the anchor: at rest where the pass ended, settled, averaged (same pass offset)
-                clock.sleep(plan.dwell_s)
+                if not streaming:  # (a streaming pass has had its dwell)
+                    clock.sleep(plan.dwell_s)
                 anchor_reading = laser.read(leg)
                 # after every pass: a pass heats the screw by its travel in seconds, so the
                 # material temperature of the pass before would be stale (the readings are

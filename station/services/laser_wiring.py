@@ -88,14 +88,3 @@ def replay_laser(laser, recorded_compensation: str | None):
     if isinstance(record, dict) and str(record.get("mode", "")).upper() == "STATION":
         return _RecordedStationCompensation(laser, record)
     return laser
-
-
-def check_plan_for_laser(plan, cfg) -> None:
-    """InputError for a plan the configured laser cannot measure: an on-the-fly plan needs a
-    capture input (position-triggered), which the µLine-F1's public description does not have."""
-    from procedures.vocabulary import InputError
-
-    if getattr(plan, "onthefly", False) and cfg.interferometer.protocol == "linef1":
-        raise InputError(f"an on-the-fly plan needs a laser with a capture input; the µLine-F1 ([interferometer] "
-                         f"protocol = \"linef1\" in {cfg.source}) has none described publicly: use a stop-and-go "
-                         "plan (--plan iso230); nothing was written")

@@ -202,7 +202,6 @@ class PreparedSweep:
         """Sweep (after `check()` and the question, which the JobRunner makes): the plan built
         first when `build_in_run` (an abort meanwhile ends it: nothing moved or written)."""
         from station.services.jobs import run_sweep
-        from station.services.laser_wiring import check_plan_for_laser
 
         if self.plan is None:
             from procedures.acquisition.plan_size import build_abortable
@@ -210,7 +209,6 @@ class PreparedSweep:
             self.plan = build_abortable(self.spec, control)
             if self.plan is None:
                 return JobOutcome("aborted", lines=["aborted before it began; nothing moved, nothing recorded"])
-            check_plan_for_laser(self.plan, self.cfg)
         if self.request.force and not self.request.resume and self.out.exists():
             self.out.unlink()  # --force: the new session replaces it (everything was accepted)
         result = run_sweep(self.rig, self.plan, self.out, self.cfg, sinks=sinks, control=control,
@@ -224,11 +222,10 @@ def prepare_sweep(request: SweepRequest, cfg: StationConfig, rig: Rig | None = N
     """Every refusal of `request` made without moving or writing anything: the simulated rig's
     options, the serials, the session file (a new one not there unless `force`, its folder there;
     a resumed one writable, with something left to measure), the plan sized against the config's
-    [limits] and built (unless `build_in_run`), and one the configured laser can measure.
+    [limits] and built (unless `build_in_run`).
     `rig`: the connected rig, when the front end holds one (the UI). InputError otherwise."""
     from procedures.io.outputs import check_appendable, check_output_file
     from station.services.session_identity import leg_fields
-    from station.services.laser_wiring import check_plan_for_laser
     from station.services.serials import serials_unverified_line
 
     lines: list[str] = []
@@ -283,12 +280,7 @@ def prepare_sweep(request: SweepRequest, cfg: StationConfig, rig: Rig | None = N
 
                 plan = plan_from_spec(spec, limits)
     if plan is not None:
-        check_plan_for_laser(plan, cfg)  # before anything connects or is written
         lines.extend(f"note: {note}" for note in plan.notes)
-    elif kind.startswith("onthefly"):
-        from types import SimpleNamespace
-
-        check_plan_for_laser(SimpleNamespace(onthefly=True), cfg)  # built in the run: refused here all the same
     job = PreparedSweep(request, cfg, out, tuple(legs), kind, total, plan=plan, spec=spec, lines=lines,
                         recorded=recorded, rig=rig)
     if rig is not None:

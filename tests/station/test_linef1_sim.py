@@ -223,17 +223,6 @@ def test_station_sim_refuses_a_streaming_laser_at_time_scale_0(capsys):
     assert len(out) == 1 and "a streaming laser needs a running clock" in out[0]
 
 
-def test_an_on_the_fly_plan_with_the_linef1_laser_is_refused_before_anything_is_written(tmp_path, capsys):
-    cfg = tmp_path / "c.toml"
-    cfg.write_text(f'[station]\nrecordings_dir = "{tmp_path}"\n[drive]\nurl = "sim"\n'
-                   '[interferometer]\nport = "sim"\nprotocol = "linef1"\n')
-    out = tmp_path / "otf.h5"
-    assert main(["sweep", "--config", str(cfg), "--plan", "onthefly", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "on-the-fly plan needs a laser with a capture input" in err[0]
-    assert not out.exists()
-
-
 @pytest.mark.timeout(3600)
 @pytest.mark.skipif(not __import__("os").environ.get("STATION_LINEF1_README"),
                     reason="the README's whole calibration with the µLine-F1 (about 10 min): set STATION_LINEF1_README=1")
