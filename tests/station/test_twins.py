@@ -10,11 +10,13 @@ from tests.tooling import defines, imported_names
 
 
 def test_the_command_and_the_self_check_use_the_shared_twins():
-    # by their imports (inside the functions: `station diagnose --help` loads no diagnosis), no copy of their own
-    assert imported_names("station.commands.diagnose")["load_twin"] == "station.services.twins.load_twin"
+    # by their imports (inside the functions: `station diagnose --help` loads no diagnosis), no copy of their own:
+    # the command and the UI's page fill a request of the diagnosis job, which loads the twin
+    assert imported_names("station.services.diagnosis_jobs")["load_twin"] == "station.services.twins.load_twin"
+    assert "load_twin" not in imported_names("station.commands.diagnose")
     assert imported_names("procedures.synthetic")["plant_twin"] == "procedures.diagnosis.twin.plant_twin"
     assert imported_names("station.services.twins")["plant_twin"] == "procedures.diagnosis.twin.plant_twin"
-    assert not defines("station.commands.diagnose", "load_twin") and not defines("procedures.synthetic", "plant_twin")
+    assert not defines("station.commands.diagnose", "load_twin") and not defines("station.services.diagnosis_jobs", "load_twin") and not defines("procedures.synthetic", "plant_twin")
     assert twins.load_twin.__module__ == "station.services.twins"
     assert twins.plant_twin.__module__ == "procedures.diagnosis.twin"
 

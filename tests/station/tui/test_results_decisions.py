@@ -35,12 +35,17 @@ def test_results_page_shows_the_decision(cfg, wait_until, tmp_path):
 
 
 def test_compensation_page_line_for_a_verification(tmp_path):
-    from station.tui.screens.compensation import _as_left_text
+    # the page shows "as-left (ISO 14253-1): " + the verification job's summary (Verification.as_left_summary,
+    # station/services/verify_job.py), the decision_summary of the session's as-left decisions; the job's
+    # decisions equal those of its recording read back (tests/station/test_cli_verify_decisions.py)
+    from procedures.io.recording.reader import read_session
+    from procedures.reporting.decision import decision_summary
+    from station.services.report_jobs import decisions_if_stated
 
     points = default_legs_points(legs=(1,), cycles=3, step_mm=15.0)
     tol = {"HX300": {"as_found_um": {"E": 1000.0}, "as_left_um": {"E": 0.001}, "source": "t"}}
-    ver = write_identified_session(tmp_path / "ver.h5", points, station_config={"tolerances": tol})
-    text = _as_left_text(str(ver))
-    assert text.startswith("\nas-left (ISO 14253-1): leg 1 DOES NOT CONFORM (E ") and "vs 0.001 µm" in text
-    assert _as_left_text(str(write_identified_session(tmp_path / "plain.h5", points))) == ""
-    assert _as_left_text(str(tmp_path / "missing.h5")) == ""  # the verification's own report stands
+    ver = read_session(write_identified_session(tmp_path / "ver.h5", points, station_config={"tolerances": tol}))
+    text = decision_summary(decisions_if_stated(ver, stage="as_left")["legs"])
+    assert text.startswith("leg 1 DOES NOT CONFORM (E ") and "vs 0.001 µm" in text
+    plain = read_session(write_identified_session(tmp_path / "plain.h5", points))
+    assert decisions_if_stated(plain, stage="as_left") is None  # no tolerance stated: no line on the page

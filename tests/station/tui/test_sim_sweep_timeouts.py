@@ -69,7 +69,7 @@ async def _sweep(pilot, wait_until, out: Path, during=None) -> str:
     Returns the outcome the app saw once the sweep job had ended."""
     app = pilot.app
     ended: list[str] = []
-    assert app.start_sweep(SweepRequest(out=out, plan=PLAN), on_done=lambda state: ended.append(state.status)), \
+    assert app.start_sweep(SweepRequest(out=out, plan=PLAN, make_parents=True), on_done=lambda state: ended.append(state.status)), \
         "the app refused the sweep"
     while not ended:
         if during is not None:
