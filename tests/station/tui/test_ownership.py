@@ -140,8 +140,10 @@ async def _only_the_ui_thread(cfg, size, connected, wait_until, recorded_session
         # two requests in a row: the newer one's rig is kept, the superseded one's is closed
         app.action_connect()
         app.action_connect()
-        await wait_never_closed(lambda: app.rig_state == "connected" and len(tracker.closed) == len(tracker.opened) - 1,
-                                "the second reconnection")
+        # (both requests' rigs opened: the first one's may open after the second's, so the count is
+        # part of the wait, not only of the assertion below)
+        await wait_never_closed(lambda: app.rig_state == "connected" and len(tracker.opened) == 4
+                                and len(tracker.closed) == len(tracker.opened) - 1, "the second reconnection")
         assert app.rig is tracker.opened[-1] and not tracker.is_closed(app.rig)
         assert len(tracker.opened) == 4  # one per connect request: at start, the reconnection, these two
 
