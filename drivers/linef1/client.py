@@ -226,8 +226,8 @@ class LineF1Interferometer:
         self._clock.sleep(max(self._averaging_s, self.period_s))
         t1 = self._clock.now()
         deadline = time.monotonic() + self.timeout_s
-        with self._cv:
-            while True:
+        while True:
+            with self._cv:
                 newest = self._samples[-1] if self._samples else None
                 if newest is not None and newest.seq > after and newest.t_s >= t1:
                     break
@@ -235,7 +235,14 @@ class LineF1Interferometer:
                 if left <= 0 or self._closed:
                     raise CommTimeout(f"µLine-F1 on {self.port}: no distance frame for {self.timeout_s:g} s after the "
                                       f"window {t0:.3f}..{t1:.3f} s (a gap in the stream).")
-                self._cv.wait(min(left, _POLL_S))
+                # the window's end is in: the frame after it is due a period after the newest; on
+                # the station's clock, which a simulated rig's clock only passes when slept on
+                ahead_s = (newest.t_s + self.period_s - self._clock.now()) if newest is not None else 0.0
+                if not 0.0 < ahead_s <= self.period_s:
+                    self._cv.wait(min(left, _POLL_S))
+                    continue
+            self._clock.sleep(max(ahead_s, 1e-6))
+        with self._cv:
             ordered = []  # the samples after the window's opening echo, in order (newest last)
             for s in reversed(self._samples):
                 if s.seq <= after:
