@@ -43,7 +43,8 @@ class VirtualClock:
     def add_events(self, next_due, on_due) -> None:
         """A source of instants the clock must stop at (time scale 0): while advancing, the clock
         stops at `next_due()` (the source's next instant, or None) whenever it lies within the
-        jump, and calls `on_due(t)` there, in the advancing thread, before going on. A simulated
+        jump, and calls `on_due(t)` there, in the advancing thread, before going on (every source due
+        at that instant, in the order added). A simulated
         instrument that streams (drivers/sim/linef1_server.py) samples the plant there, so a
         move made within one request still yields samples along its path at their own times."""
         self._events.append((next_due, on_due))
@@ -79,13 +80,17 @@ class VirtualClock:
         target = self._offset_s + dt_s
         while True:
             due = [(t, on_due) for next_due, on_due in self._events if (t := next_due()) is not None]
-            t, on_due = min(due, key=lambda d: d[0]) if due else (None, None)
+            t = min(d[0] for d in due) if due else None
             with self._lock:
                 if t is None or not self._offset_s < t <= target:
                     self._offset_s = max(self._offset_s, target)
                     return
                 self._offset_s = t
-            on_due(t)  # outside the clock's lock: it may read the clock
+            # every source due at this instant, in the order added: one that asks again once the
+            # clock stands here would find its instant no longer ahead, and be skipped
+            for t_due, on_due in due:
+                if t_due == t:
+                    on_due(t)  # outside the clock's lock: it may read the clock
 
     def sleep(self, dt_s: float) -> None:
         if dt_s <= 0:
