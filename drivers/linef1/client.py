@@ -11,8 +11,8 @@ echoing its code (protocol: drivers/linef1/protocol.py, docs/interferometer-prot
   period apart, the last at its arrival: the frames carry no time of their own).
 - A command is written and its echo awaited `timeout_s`; not echoed, it is sent again, at most
   `retries` times, then `CommTimeout` names it.
-- `read(axis)` waits the averaging time and makes the reading from the samples inside that
-  window: mean, standard deviation and count (`StreamReading`). A sample with the small-signal
+- `read(axis)` waits the averaging time and the frame after it (on the station's clock) and
+  makes the reading from the samples inside that window: mean, standard deviation and count (`StreamReading`). A sample with the small-signal
   flag (a broken beam) or an unstable laser raises `BeamBreak`; a velocity overflow raises
   `CountLost` (the count is lost: every later reading is refused until `zero` sets the origin
   again). Frames lost inside the window (CRC error, cut frame, a gap in the stream) are counted
