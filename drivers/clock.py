@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections import deque
 
 
 class SystemClock:
@@ -38,7 +37,7 @@ class VirtualClock:
         self._real0 = time.monotonic()
         self._events: list[tuple] = []  # (next_due, on_due): see add_events
         self._reads = 0  # now() calls at time scale 0
-        self._readers: deque = deque(maxlen=64)  # (read number, thread ident) of the latest
+        self._last_read: dict[int, int] = {}  # thread ident -> the number of its latest now() call
 
     def add_events(self, next_due, on_due) -> None:
         """A source of instants the clock must stop at (time scale 0): while advancing, the clock
@@ -53,7 +52,7 @@ class VirtualClock:
         if self.time_scale == 0:
             # who asked (read_since): a simulated instrument waits for its client's time stamp
             self._reads += 1
-            self._readers.append((self._reads, threading.get_ident()))
+            self._last_read[threading.get_ident()] = self._reads
             return self._offset_s  # one attribute read, atomic: no lock (asked several times a point)
         with self._lock:
             return self._offset_s + (time.monotonic() - self._real0) / self.time_scale
@@ -66,7 +65,13 @@ class VirtualClock:
         """Whether a thread not in `exclude` (thread idents) asked the time since `mark` (time
         scale 0): the simulated µLine-F1 waits, the clock standing at a frame's instant, until
         its client has time-stamped what it wrote (drivers/sim/linef1_server.py)."""
-        return any(n > mark and ident not in exclude for n, ident in list(self._readers))
+        return any(n > mark and ident not in exclude for ident, n in list(self._last_read.items()))
+
+    def read_by(self, mark: int, ident: int) -> bool:
+        """Whether thread `ident` asked the time since `mark` (time scale 0): the simulated
+        µLine-F1 waits for its client's reader to stamp what it wrote; another thread's reads
+        (the drive's server answering a late request) must not count."""
+        return self._last_read.get(ident, 0) > mark
 
     def advance(self, dt_s: float) -> None:
         """Jump virtual time forward by `dt_s` without waiting (any scale); at scale 0 stopping

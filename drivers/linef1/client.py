@@ -57,6 +57,9 @@ GRID_HORIZON_S = 30.0
 """How far ahead in the stream a sample's time stamp looks for the earliest arrival (`_grid_stamps`):
 long enough that some frame in it arrived without delay; short enough that the instrument's and
 the station's clocks (crystals within 50 ppm of each other) drift apart by at most 1.5 ms in it."""
+READER_THREAD = "linef1 reader {port}"
+"""The name of a client's reader thread (the thread that stamps the frames): a simulated instrument
+in the same process waits for that thread's stamp (drivers/sim/linef1_server.py)."""
 MIN_SAMPLE_FRACTION = 0.5
 """A window with fewer of its expected samples (averaging time / stream period) is not a reading:
 `CommTimeout` (a gap in the stream), for the sweep to ask again. With more, frames lost in it only
@@ -156,7 +159,7 @@ class LineF1Interferometer:
             raise DriverError(f"cannot open the µLine-F1 interferometer's serial port {port!r}: {exc}",
                               hint="Check the port name (ls /dev/ttyUSB* /dev/serial/by-id) and permissions "
                                    "(group dialout).") from exc
-        self._thread = threading.Thread(target=self._reader, name=f"linef1 reader {port}", daemon=True)
+        self._thread = threading.Thread(target=self._reader, name=READER_THREAD.format(port=port), daemon=True)
         self._thread.start()
         try:
             self._command(lf.CMD_DISTANCE_ON)

@@ -48,6 +48,7 @@ import numpy as np
 
 from drivers.interfaces import Clock
 from drivers.linef1 import protocol as lf
+from drivers.linef1.client import READER_THREAD
 from drivers.plant.leg import LegPlant
 from drivers.sim.pty_server import PtyServer
 
@@ -261,25 +262,45 @@ class SimLineF1(PtyServer):
         self._wait_stamped(mark)
 
     def _wait_stamped(self, mark: int, timeout_s: float = 5.0) -> None:
-        """Until a thread other than this one and the serving one has asked the clock the time
-        since `mark` (the client's reader stamps what it reads on arrival, drivers.linef1.client),
-        at most `timeout_s` real seconds (a loaded machine can starve the client's thread for a
+        """Until the client's reader thread (drivers.linef1.client.READER_THREAD, on this port)
+        has read everything written and asked the clock the time since `mark` (it stamps what it
+        reads on arrival), at most `timeout_s` real seconds (a loaded machine can starve it for a
         while: given up too soon, a pass's frames are all stamped late); a client that does not
-        read is not waited on again until it has read everything (nothing left on the line)."""
-        read_since = getattr(self.clock, "read_since", None)
-        if read_since is None:
+        read is not waited on again until it has read everything (nothing left on the line).
+        Another thread asking the time does not count (the drive's server answering a request a
+        Modbus retry sent again, late, on a loaded machine: the clock went on, the frame was
+        stamped late, a pass read tens of um off). A client of another kind (no such thread):
+        any thread but this one and the serving one."""
+        if getattr(self.clock, "read_since", None) is None:
             return
         if self._unread:
             if self._queued():
                 return
             self._unread = False
-        exclude = {threading.get_ident(), self._thread.ident if self._thread else 0}
+        reader = self._reader_ident()
+        if reader is not None:
+            def stamped() -> bool:
+                return self.clock.read_by(mark, reader) and not self._queued()
+        else:
+            exclude = {threading.get_ident(), self._thread.ident if self._thread else 0}
+
+            def stamped() -> bool:
+                return self.clock.read_since(mark, exclude)
         deadline = time.monotonic() + timeout_s
-        while not read_since(mark, exclude):
+        while not stamped():
             if time.monotonic() > deadline:
                 self._unread = True
                 return
             time.sleep(20e-6)
+
+    def _reader_ident(self) -> int | None:
+        """The thread id of the client's reader on this port, if it runs in this process."""
+        name = READER_THREAD.format(port=self.port)
+        cached = getattr(self, "_reader", None)
+        if cached is not None and cached.is_alive() and cached.name == name:
+            return cached.ident
+        self._reader = next((t for t in threading.enumerate() if t.name == name), None)
+        return self._reader.ident if self._reader is not None else None
 
     def _queued(self) -> int:
         """Bytes written that the client has not read yet (the pty's input queue)."""
