@@ -267,10 +267,10 @@ class SimLineF1(PtyServer):
         reads on arrival), at most `timeout_s` real seconds (a loaded machine can starve it for a
         while: given up too soon, a pass's frames are all stamped late); a client that does not
         read is not waited on again until it has read everything (nothing left on the line).
-        Another thread asking the time does not count (the drive's server answering a request a
-        Modbus retry sent again, late, on a loaded machine: the clock went on, the frame was
-        stamped late, a pass read tens of um off). A client of another kind (no such thread):
-        any thread but this one and the serving one."""
+        Another thread asking the time does not count (it did: the clock went on, frames were
+        stamped late, a pass read tens of um off; seen in the bench on a loaded machine, and with
+        a thread that asks the time every 0.2 ms, tests/drivers/test_linef1_stamps.py). A client
+        of another kind (no such thread): any thread but this one and the serving one."""
         if getattr(self.clock, "read_since", None) is None:
             return
         if self._unread:

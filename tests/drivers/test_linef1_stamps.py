@@ -180,3 +180,45 @@ def test_a_frame_due_while_another_source_holds_the_clock_at_its_instant_measure
     off_mm = np.array([s.position_mm for s in stream]) - np.interp(t_s, t_tr, x_tr)
     assert t_s.size > 200  # the pass's frames, 188 mm at 20 mm/s
     assert np.max(np.abs(off_mm - np.median(off_mm))) < 0.02, f"worst {np.max(np.abs(off_mm - np.median(off_mm))):.4f} mm"
+
+
+def test_another_thread_asking_the_time_does_not_let_the_clock_past_an_unstamped_frame():
+    """The simulated µLine-F1 holds the clock at a frame's instant until its client's reader has
+    stamped it; another thread asking the time meanwhile (here every 0.2 ms; on a loaded machine
+    e.g. the drive's server answering a late request) once counted as that stamp: the clock went
+    on, frames were stamped late, readings and anchors moved, a pass read tens of um off."""
+    import threading
+
+    cfgs = [c.with_leg_motion().without("noise", "run_offset", "thermal") for c in default_leg_configs(2, 1)]
+    with SimRig(time_scale=0.0, seed=2, legs=1, configs=cfgs, laser_protocol="linef1") as rig:
+        axis = connect_axes(rig.drive_url, [1], clock=rig.clock)[1]
+        laser = LineF1Interferometer(rig.laser_port, clock=rig.clock)
+        stop = threading.Event()
+
+        def ask():
+            while not stop.is_set():
+                rig.clock.now()
+                time.sleep(0.0002)
+
+        asker = threading.Thread(target=ask, daemon=True)
+        try:
+            axis.enable()
+            laser.zero(1)
+            axis.move_to(-94.0)
+            asker.start()
+            t_start = rig.clock.now()
+            _, trace = axis.move_traced(94.0, 20.0, 0.02)
+            rig.clock.sleep(0.5)
+            stream = laser.stream_samples(1, trace[0][0], trace[-1][0])
+            raw = [s.t_s for s in laser._samples if s.t_s >= t_start]  # the arrival stamps themselves
+        finally:
+            stop.set()
+            asker.join()
+            laser.close()
+            axis.close()
+    k = np.array(raw) / T
+    assert len(raw) > 200 and np.max(np.abs(k - np.round(k))) < 1e-6  # every frame stamped at its instant
+    t_tr = np.array([t for t, _ in trace])
+    x_tr = np.array([x for _, x in trace])
+    off_mm = np.array([s.position_mm for s in stream]) - np.interp([s.t_s for s in stream], t_tr, x_tr)
+    assert np.max(np.abs(off_mm - np.median(off_mm))) < 0.02
