@@ -42,17 +42,31 @@ the station compensating for the air; each reading the mean of its window's samp
 µLine-F1 has no capture input: on the fly its stream is aligned with the drive's traced positions
 on the rig's clock (docs/onthefly.md, "A laser without trigger input"); its bytes flow while the rig
 moves, so it has no read-out column. Every plan with both, the verification with the laser the
-calibration used. On the fly, measured 2026-11-29, seeds 0-3, six legs (the µLine-F1's rows after
-its readings were interpolated, not smoothed; the adaptive rows before the last two fixes of the
-alignment, see git log): onthefly rig time 4.86 min/leg with the station's laser (+0.25 read-out)
-and 4.87 with the µLine-F1; legs at or below 1.1: 24/24 (worst 1.025) and 22/24 (1.358 seed 2
-leg 4, 1.490 seed 3 leg 6; the others 0.99-1.06); onthefly-adaptive 2.43-2.63 min/leg (+0.09)
-and 2.19-2.50, 24/24 (worst 1.073) and 23/24 (1.237 seed 2 leg 4; the others 0.99-1.05). The
-outliers are not explained yet (the same leg alone, or two legs, calibrates to 0.005 um): a pass
-stamped late as a whole under a loaded machine is suspected (the simulated laser then waited
-0.5 s for its client's stamp, now 5 s). Run again with the 5 s wait, seeds 2-3: 11/12 (seed 2 all
-at or below 1.057, seed 3 leg 1 at 1.394 where leg 6 had been): the outlier moves between runs of
-the same seed, so it comes from timing (the stamps), not from the plant; not found yet. Measured 2026-11-29, seeds 0-3, six legs
+calibration used. On the fly, measured 2026-11-29 (after the fixes below), seeds 0-3, six legs:
+onthefly rig time 4.86 min/leg with the station's laser (+0.25 read-out) and 4.89 with the
+µLine-F1 (a reading ends at the frame after its window); legs at or below 1.1: 24/24 with
+either (worst 1.025 station, 1.042 µLine-F1; per leg, seed 0: station 1.018 0.985 0.986 0.985
+1.008 0.997, µLine-F1 0.994 1.042 1.001 0.996 1.006 1.001; seed 1: 1.004 1.024 1.001 0.984 0.984
+1.014 / 0.997 0.986 1.003 1.022 0.985 1.003; seed 2: 0.989 0.992 0.991 1.010 0.990 1.016 / 1.003
+1.006 0.998 0.992 0.994 0.997; seed 3: 0.984 0.988 0.985 0.983 0.983 1.025 / 0.995 0.990 0.988
+1.004 0.995 0.987), table error 0.005-0.010 and 0.005-0.013 um worst leg; onthefly-adaptive
+2.43-2.63 min/leg (+0.09) and 2.43-2.60, 24/24 with either (worst 1.073 station, 1.043
+µLine-F1; seed 0: 1.026 0.986 1.006 1.022 1.025 0.995 / 0.994 0.997 1.021 1.001 1.011 1.015;
+seed 1: 0.988 1.002 0.994 0.983 0.990 1.073 / 0.991 1.043 0.989 1.027 0.989 1.009; seed 2: 0.993
+1.044 0.988 0.991 0.988 0.992 / 0.999 1.015 1.022 1.000 0.987 0.994; seed 3: 0.985 0.986 0.983
+0.987 0.987 1.024 / 1.015 0.991 0.996 1.012 0.984 0.992). The simulated rig is deterministic for
+a seed with either laser: two runs give the same points, whatever the machine's load. Before
+(the same day: 22/24 and 23/24 with the µLine-F1, worst 1.490, the outlier leg changing between
+runs of a seed) the simulated µLine-F1's serving thread, waking every 2 ms of real time, could
+write a frame due mid-pass before the clock's stop at that instant did, with the leg where the
+drive was last brought (10 ms stale: 0.2 mm at 20 mm/s, a pass read hundreds of um off near it);
+the clock also went on when any thread asked the time rather than the client's reader (frames
+stamped late, a leg's table 0.24 um off on a loaded machine); and the simulated drive's nut
+stepped back 1e-12 mm when asked twice a rounding apart near a move's end, which the plant took
+for a reversal (a new pass offset, the lost motion wound up again between a pass and its anchor)
+(drivers/sim/linef1_server.py, drivers/sim/drive_server.py; tests/drivers/test_linef1_stamps.py).
+Measured 2026-11-29, seeds 0-3, six legs, before those fixes (not measured again: a µLine-F1
+reading now ends up to a period later, and the noise each draws has changed)
 (the µLine-F1's noise held per 0.1 s as the plant's): rig time per leg the same with both lasers
 (iso230 5.56 min, paper 93.5 min: a streamed reading takes its averaging time, as a `POS?` does);
 oracle ratio per leg 0.98-1.01 with the µLine-F1 (noise floor 0.056-0.058 um) against 0.98-1.02

@@ -11,8 +11,8 @@ echoing its code (protocol: drivers/linef1/protocol.py, docs/interferometer-prot
   period apart, the last at its arrival: the frames carry no time of their own).
 - A command is written and its echo awaited `timeout_s`; not echoed, it is sent again, at most
   `retries` times, then `CommTimeout` names it.
-- `read(axis)` waits the averaging time and makes the reading from the samples inside that
-  window: mean, standard deviation and count (`StreamReading`). A sample with the small-signal
+- `read(axis)` waits the averaging time and the frame after it (on the station's clock) and
+  makes the reading from the samples inside that window: mean, standard deviation and count (`StreamReading`). A sample with the small-signal
   flag (a broken beam) or an unstable laser raises `BeamBreak`; a velocity overflow raises
   `CountLost` (the count is lost: every later reading is refused until `zero` sets the origin
   again). Frames lost inside the window (CRC error, cut frame, a gap in the stream) are counted
@@ -57,6 +57,9 @@ GRID_HORIZON_S = 30.0
 """How far ahead in the stream a sample's time stamp looks for the earliest arrival (`_grid_stamps`):
 long enough that some frame in it arrived without delay; short enough that the instrument's and
 the station's clocks (crystals within 50 ppm of each other) drift apart by at most 1.5 ms in it."""
+READER_THREAD = "linef1 reader {port}"
+"""The name of a client's reader thread (the thread that stamps the frames): a simulated instrument
+in the same process waits for that thread's stamp (drivers/sim/linef1_server.py)."""
 MIN_SAMPLE_FRACTION = 0.5
 """A window with fewer of its expected samples (averaging time / stream period) is not a reading:
 `CommTimeout` (a gap in the stream), for the sweep to ask again. With more, frames lost in it only
@@ -156,7 +159,7 @@ class LineF1Interferometer:
             raise DriverError(f"cannot open the µLine-F1 interferometer's serial port {port!r}: {exc}",
                               hint="Check the port name (ls /dev/ttyUSB* /dev/serial/by-id) and permissions "
                                    "(group dialout).") from exc
-        self._thread = threading.Thread(target=self._reader, name=f"linef1 reader {port}", daemon=True)
+        self._thread = threading.Thread(target=self._reader, name=READER_THREAD.format(port=port), daemon=True)
         self._thread.start()
         try:
             self._command(lf.CMD_DISTANCE_ON)
@@ -226,8 +229,8 @@ class LineF1Interferometer:
         self._clock.sleep(max(self._averaging_s, self.period_s))
         t1 = self._clock.now()
         deadline = time.monotonic() + self.timeout_s
-        with self._cv:
-            while True:
+        while True:
+            with self._cv:
                 newest = self._samples[-1] if self._samples else None
                 if newest is not None and newest.seq > after and newest.t_s >= t1:
                     break
@@ -235,7 +238,14 @@ class LineF1Interferometer:
                 if left <= 0 or self._closed:
                     raise CommTimeout(f"µLine-F1 on {self.port}: no distance frame for {self.timeout_s:g} s after the "
                                       f"window {t0:.3f}..{t1:.3f} s (a gap in the stream).")
-                self._cv.wait(min(left, _POLL_S))
+                # the window's end is in: the frame after it is due a period after the newest; on
+                # the station's clock, which a simulated rig's clock only passes when slept on
+                ahead_s = (newest.t_s + self.period_s - self._clock.now()) if newest is not None else 0.0
+                if not 0.0 < ahead_s <= self.period_s:
+                    self._cv.wait(min(left, _POLL_S))
+                    continue
+            self._clock.sleep(max(ahead_s, 1e-6))
+        with self._cv:
             ordered = []  # the samples after the window's opening echo, in order (newest last)
             for s in reversed(self._samples):
                 if s.seq <= after:

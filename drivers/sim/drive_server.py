@@ -340,10 +340,14 @@ class DriveModel:
             if now >= m.t_end:
                 self._arrive()
             else:
-                # within the move's ends: the closed form rounds a hair beyond its target near the
-                # end, and the plant takes any step back for a reversal (a new pass, lost motion)
+                # within the move's ends and never back: the closed form rounds a hair beyond its
+                # target near the end, and a hair back between two instants of the deceleration
+                # (1e-11 mm, the difference of two large integrals), and the plant takes any step
+                # back for a reversal (a new pass offset, the lost motion wound up again: an
+                # on-the-fly pass and its anchor on two passes, 0.05 um apart)
                 lo, hi = min(m.p0, m.p1), max(m.p0, m.p1)
-                self.nut_mm = min(max(m.position(now), lo), hi)
+                pos = min(max(m.position(now), lo), hi)
+                self.nut_mm = pos if (pos - self.nut_mm) * m.sign >= 0 else self.nut_mm
                 self.plant.move(self.nut_mm, now)
                 self._plant_velocity(m.velocity(now))
 

@@ -12,14 +12,17 @@ One beam: it is on the leg that was enabled when the origin was last set (`aim()
 simulated rig to the drives: the operator sets the laser up on the leg being prepared).
 
 Virtual time: frames are due at multiples of `period_s`; the serving thread wakes every
-`poll_s` real seconds and writes every frame due since the last, in time order (at time scale 0 the
-clock jumps; frames older than `max_catch_up_s` before now are skipped then). With `sync` (the rig's
-drives) the instrument shares the plant's virtual time with the drive: the clock stops at every
-frame's instant (drivers.clock.VirtualClock.add_events) and, while the beam's leg moves, the drive
-is brought there and the frame written then, so a move made within one jump still yields samples
-along its path; in a move the host traces (on-the-fly passes) the clock is held at each frame's
-instant until the client has time-stamped it (`_wait_stamped`). At rest the plant is read once for
-the frames written together (each with a noise draw of its own).
+`poll_s` real seconds and writes every frame due since the last, in time order (frames older than
+`max_catch_up_s` before now are skipped then; the plant read once for the frames written together,
+each with a noise draw of its own). With `sync` (the rig's drives) on a clock with event stops at
+time scale 0 (drivers.clock.VirtualClock.add_events) the instrument is deterministic for a seed
+instead: the clock stops at every frame's instant (distance and meteo), the drive is brought there
+(`sync`), the frame written then, in the thread advancing the clock, and the clock held there until
+the client has time-stamped it (`_wait_stamped`): a move made within one jump yields samples along
+its path at their own times, and every sample's stamp is its instant. The serving thread then
+only answers commands: a frame it wrote could see the leg where the drive was last brought (on a
+pass 10 ms of travel stale, 0.2 mm at 20 mm/s: a pass read hundreds of um off), and the moments it
+wakes (real time) would decide which frames are skipped, stamped late or which noise they draw.
 
 Faults on demand (`inject`): CRC errors, cut frames, a gap in the stream, a broken beam (small
 signal, latched until cleared), a velocity overflow (latched; the count is lost until the origin
@@ -45,15 +48,13 @@ import numpy as np
 
 from drivers.interfaces import Clock
 from drivers.linef1 import protocol as lf
+from drivers.linef1.client import READER_THREAD
 from drivers.plant.leg import LegPlant
 from drivers.sim.pty_server import PtyServer
 
 FAULT_KINDS = ("crc", "cut", "gap", "beam", "overflow", "no_ack")
 TRACED = 2
 """`sync(leg)`'s answer for a move the host traces (the drive's, drivers/sim/drive_server.py)."""
-REST_TAIL_S = 1.0
-"""Frames are written one by one at their instant (`_on_due`) while the beam's leg moves and this
-long after it stopped: the frames after a pass are the client's reference for its grid."""
 LOST_COUNT_MM = 0.3172  # where a lost count leaves the reading: off by a whole number of fringes, far from right
 
 
@@ -96,8 +97,9 @@ class SimLineF1(PtyServer):
         self.period_s = float(period_s)
         self.max_catch_up_s = float(max_catch_up_s)
         self.poll_s = float(poll_s)
-        self._rng = np.random.default_rng(seed + 4242)
+        self._rng = np.random.default_rng(seed + 4242)  # the distance frames' signal level
         self._air_phase = self._rng.uniform(0, 2 * math.pi, size=3)
+        self._seed = int(seed)  # the air sensor's noise: drawn from the meteo frame's time (`_meteo`)
         self.leg: int | None = None  # the leg the beam is on
         self._datum_mm = 0.0  # plant position at the origin
         self._n0 = 1.0
@@ -120,7 +122,6 @@ class SimLineF1(PtyServer):
         self.sync = sync
         self._events_added = False
         self._unread = False  # the client did not read what was written (not waited on then)
-        self._moved_t = -math.inf  # the last frame's time at which the beam's leg was moving
         self._init_pty()
 
     # -- faults ---------------------------------------------------------------------------------
@@ -195,7 +196,8 @@ class SimLineF1(PtyServer):
             with self.lock:
                 out = bytearray()
                 try:
-                    out += self._due_frames()  # first what was due before these commands arrived
+                    if not self._timed():  # (else `_on_due` writes every frame at its instant)
+                        out += self._due_frames()  # first what was due before these commands arrived
                     if data:
                         pending += data
                         out += self._commands(pending)
@@ -224,61 +226,81 @@ class SimLineF1(PtyServer):
             self._events_added = True
         return port
 
+    def _timed(self) -> bool:
+        """Whether every frame is written at its instant by `_on_due` (a clock with event stops
+        at time scale 0, the rig's drives to sync): the serving thread then writes none."""
+        return self._events_added and getattr(self.clock, "time_scale", 1.0) == 0
+
     def _next_due(self) -> float | None:
         """The clock's next stop for this instrument (drivers.clock.VirtualClock.add_events): the
-        next distance frame, while the stream is on and the beam is set up on a leg."""
-        if self._thread is None or not self._distance_on or self.leg is None or self._next_t is None:
+        next distance frame or meteo set, while its stream is on."""
+        if self._thread is None:
             return None
-        now = self.clock.now()
-        if self._next_t > now:
-            return self._next_t
-        t = self._grid(now)
-        return t + self.period_s if t <= now else t
+        due = []
+        if self._distance_on and self._next_t is not None:
+            due.append(self._next_t)
+        if self._meteo_on and self._next_meteo_t is not None:
+            due.append(self._next_meteo_t)
+        return min(due) if due else None
 
     def _on_due(self, t_s: float) -> None:
-        """At a frame's time, within a jump of the virtual clock: if the beam's leg is moving, the
-        drive is brought to this instant (`sync`) and the frames due are written now. In a move
-        the host traces, and for REST_TAIL_S after it, the clock is then held at this instant
-        until the client has time-stamped them (`_wait_stamped`). At rest the serving thread
-        writes the frames in batches, as at any other time; a move made within one drive
-        request is not waited on (the drive would not answer meanwhile)."""
-        if self.leg is None or self._thread is None:
+        """At a frame's time, within a jump of the virtual clock: the beam's leg's drive is brought
+        to this instant (`sync`), the frames due are written now, and the clock is held here until
+        the client has time-stamped them (`_wait_stamped`): every frame is measured and stamped at
+        its own instant, whichever thread advances the clock (the host's, or the drive's in a move
+        made within one request), however the threads are scheduled."""
+        if self._thread is None:
             return
         with self.lock:
-            moving = self.sync(self.leg)
-            if moving == TRACED:
-                self._moved_t = t_s
-            wait = moving == TRACED or (not moving and t_s <= self._moved_t + REST_TAIL_S)
-            if not (moving or wait):
-                return
+            if self.leg is not None and self.sync is not None:
+                self.sync(self.leg)
             frames = self._due_frames()
             if not frames:
                 return
-            mark = self.clock.reads() if wait else 0
+            mark = self.clock.reads()
             self._send(frames)
-        if wait:
-            self._wait_stamped(mark)
+        self._wait_stamped(mark)
 
     def _wait_stamped(self, mark: int, timeout_s: float = 5.0) -> None:
-        """Until a thread other than this one and the serving one has asked the clock the time
-        since `mark` (the client's reader stamps what it reads on arrival, drivers.linef1.client),
-        at most `timeout_s` real seconds (a loaded machine can starve the client's thread for a
+        """Until the client's reader thread (drivers.linef1.client.READER_THREAD, on this port)
+        has read everything written and asked the clock the time since `mark` (it stamps what it
+        reads on arrival), at most `timeout_s` real seconds (a loaded machine can starve it for a
         while: given up too soon, a pass's frames are all stamped late); a client that does not
-        read is not waited on again until it has read everything (nothing left on the line)."""
-        read_since = getattr(self.clock, "read_since", None)
-        if read_since is None:
+        read is not waited on again until it has read everything (nothing left on the line).
+        Another thread asking the time does not count (it did: the clock went on, frames were
+        stamped late, a pass read tens of um off; seen in the bench on a loaded machine, and with
+        a thread that asks the time every 0.2 ms, tests/drivers/test_linef1_stamps.py). A client
+        of another kind (no such thread): any thread but this one and the serving one."""
+        if getattr(self.clock, "read_since", None) is None:
             return
         if self._unread:
             if self._queued():
                 return
             self._unread = False
-        exclude = {threading.get_ident(), self._thread.ident if self._thread else 0}
+        reader = self._reader_ident()
+        if reader is not None:
+            def stamped() -> bool:
+                return self.clock.read_by(mark, reader) and not self._queued()
+        else:
+            exclude = {threading.get_ident(), self._thread.ident if self._thread else 0}
+
+            def stamped() -> bool:
+                return self.clock.read_since(mark, exclude)
         deadline = time.monotonic() + timeout_s
-        while not read_since(mark, exclude):
+        while not stamped():
             if time.monotonic() > deadline:
                 self._unread = True
                 return
             time.sleep(20e-6)
+
+    def _reader_ident(self) -> int | None:
+        """The thread id of the client's reader on this port, if it runs in this process."""
+        name = READER_THREAD.format(port=self.port)
+        cached = getattr(self, "_reader", None)
+        if cached is not None and cached.is_alive() and cached.name == name:
+            return cached.ident
+        self._reader = next((t for t in threading.enumerate() if t.name == name), None)
+        return self._reader.ident if self._reader is not None else None
 
     def _queued(self) -> int:
         """Bytes written that the client has not read yet (the pty's input queue)."""
@@ -308,12 +330,16 @@ class SimLineF1(PtyServer):
             out += lf.ack_frame(code)
             self.sent["ack"] += 1
             self._apply(code)
+            if code == lf.CMD_METEO_ON:  # a first set at once (`_on_due` writes only at the clock's stops)
+                out += self._due_frames()
         return bytes(out)
 
     def _apply(self, code: bytes) -> None:
         now = self.clock.now()
         if code == lf.CMD_DISTANCE_ON:
-            self._distance_on, self._next_t = True, self._grid(now)
+            # the first frame after now: the clock stops there (`_next_due`)
+            t = self._grid(now)
+            self._distance_on, self._next_t = True, t + self.period_s if t <= now else t
         elif code in (lf.CMD_DISTANCE_OFF, lf.CMD_VELOCITY_ON, lf.CMD_VELOCITY_OFF):
             self._distance_on = False  # velocity frames are not simulated
         elif code == lf.CMD_METEO_ON:
@@ -418,7 +444,9 @@ class SimLineF1(PtyServer):
 
     def _meteo(self, t_s: float) -> bytes:
         temp_c, p_hpa, h = self.air_now(t_s)
-        noise = self._rng.normal(0.0, (0.002, 0.01, 0.05)) if self.sensor_noise else np.zeros(3)
+        # drawn from the frame's time: the same values however many sets were skipped before it
+        rng = np.random.default_rng((self._seed + 4243, int(round(t_s * 1000.0))))
+        noise = rng.normal(0.0, (0.002, 0.01, 0.05)) if self.sensor_noise else np.zeros(3)
         out = bytearray(lf.meteo_frame(lf.AIR_SENSOR_ID, temp_c + noise[0] + self._air_offset_c, h + noise[2],
                                        (p_hpa + noise[1]) * 100.0))
         with self.lock:
