@@ -204,11 +204,9 @@ class LineF1Interferometer:
             self._aimed = axis
             self._count_lost = False
 
-    def read(self, axis: int) -> StreamReading:
-        """The reading of `axis` over the averaging window starting now (module docstring).
-
-        `position_mm` relative to the origin, positive = leg longer, air-compensated by the
-        station; `t_s` the time stamp of the window's last sample."""
+    def _measuring(self, axis: int) -> tuple[int, int]:
+        """`axis` checked, and the stream's origin (the sequence number it was zeroed at): DriverError
+        when the one beam is not zeroed on this leg, CountLost when its count was lost since."""
         axis = self._check_axis(axis)
         with self._cv:
             aimed, lost, origin = self._aimed, self._count_lost, self._origin_seq
@@ -219,6 +217,14 @@ class LineF1Interferometer:
         if lost:
             raise CountLost(f"µLine-F1 on {self.port}: leg {axis}'s count was lost (velocity overflow); the "
                             "position is not valid until the origin is set again.")
+        return axis, origin
+
+    def read(self, axis: int) -> StreamReading:
+        """The reading of `axis` over the averaging window starting now (module docstring).
+
+        `position_mm` relative to the origin, positive = leg longer, air-compensated by the
+        station; `t_s` the time stamp of the window's last sample."""
+        axis, origin = self._measuring(axis)
         # The window opens with a command's echo: every frame before it in the stream was measured
         # before (the frames carry no time of their own), so none from before the dwell (e.g. the
         # leg still moving) can be mistaken for one of the window, however late it was read. The
@@ -289,16 +295,7 @@ class LineF1Interferometer:
         apart, the last at its arrival): the transport's latency makes them late by a constant
         part, which an on-the-fly pass's alignment takes as part of the speed lag
         (docs/interferometer-protocol.md, "Time stamps")."""
-        axis = self._check_axis(axis)
-        with self._cv:
-            aimed, lost, origin = self._aimed, self._count_lost, self._origin_seq
-        if aimed != axis or origin is None:
-            raise DriverError(f"the µLine-F1 on {self.port} measures one beam, zeroed on "
-                              f"{'no leg yet' if aimed is None else f'leg {aimed}'}; leg {axis} was not zeroed",
-                              hint="Zero the laser on the leg first (the sweep does at each leg's reference).")
-        if lost:
-            raise CountLost(f"µLine-F1 on {self.port}: leg {axis}'s count was lost (velocity overflow); the "
-                            "position is not valid until the origin is set again.")
+        axis, origin = self._measuring(axis)
         deadline = time.monotonic() + self.timeout_s
         with self._cv:
             while not (self._samples and self._samples[-1].t_s >= t1_s):
