@@ -204,6 +204,21 @@ class LineF1Interferometer:
             self._aimed = axis
             self._count_lost = False
 
+    def _judge(self, samples, axis: int) -> None:
+        """Every sample of a point's window or a pass's span must be good: a velocity overflow loses
+        the count (CountLost, until the origin is set again), a small signal or an unstable laser is
+        a beam break (BeamBreak); neither is ever averaged into a reading."""
+        for s in samples:
+            if s.overflow:
+                with self._cv:
+                    self._count_lost = True
+                raise CountLost(f"µLine-F1 on {self.port}: velocity overflow on leg {axis} at t = {s.t_s:.3f} s: "
+                                "the count is lost; the origin must be set again.")
+            if not s.signal_good or not s.stable:
+                why = "small signal (beam interrupted)" if not s.signal_good else "laser not stable"
+                raise BeamBreak(f"µLine-F1 on {self.port}, leg {axis}: {why} at t = {s.t_s:.3f} s "
+                                f"(signal level {s.level}).")
+
     def _measuring(self, axis: int) -> tuple[int, int]:
         """`axis` checked, and the stream's origin (the sequence number it was zeroed at): DriverError
         when the one beam is not zeroed on this leg, CountLost when its count was lost since."""
@@ -260,16 +275,7 @@ class LineF1Interferometer:
             ordered.reverse()
             losses = [n for t, n in self._losses if t0 - self.period_s <= t <= t1 + self.period_s]
         window = [s for s in ordered if t0 <= s.t_s <= t1] or [next(s for s in ordered if s.t_s >= t1)]
-        for s in window:
-            if s.overflow:
-                with self._cv:
-                    self._count_lost = True
-                raise CountLost(f"µLine-F1 on {self.port}: velocity overflow on leg {axis} at t = {s.t_s:.3f} s: "
-                                "the count is lost; the origin must be set again.")
-            if not s.signal_good or not s.stable:
-                why = "small signal (beam interrupted)" if not s.signal_good else "laser not stable"
-                raise BeamBreak(f"µLine-F1 on {self.port}, leg {axis}: {why} at t = {s.t_s:.3f} s "
-                                f"(signal level {s.level}).")
+        self._judge(window, axis)
         expected = max(1, math.floor(self._averaging_s / self.period_s + 1e-9))
         if len(window) < math.ceil(MIN_SAMPLE_FRACTION * expected):
             # too little of the window left to stand for it: asked again, not averaged
@@ -308,16 +314,7 @@ class LineF1Interferometer:
         stamps = self._grid_stamps(after)
         span = [x for x, t in zip(after, stamps) if t0_s <= t <= t1_s]
         stamps = [t for t in stamps if t0_s <= t <= t1_s]
-        for x in span:
-            if x.overflow:
-                with self._cv:
-                    self._count_lost = True
-                raise CountLost(f"µLine-F1 on {self.port}: velocity overflow on leg {axis} at t = {x.t_s:.3f} s: "
-                                "the count is lost; the origin must be set again.")
-            if not x.signal_good or not x.stable:
-                why = "small signal (beam interrupted)" if not x.signal_good else "laser not stable"
-                raise BeamBreak(f"µLine-F1 on {self.port}, leg {axis}: {why} at t = {x.t_s:.3f} s "
-                                f"(signal level {x.level}).")
+        self._judge(span, axis)
         expected = max(1, math.floor((t1_s - t0_s) / self.period_s + 1e-9))
         if len(span) < math.ceil(MIN_SAMPLE_FRACTION * expected):
             raise CommTimeout(f"µLine-F1 on {self.port}: {len(span)} of about {expected} distance frames in "
