@@ -420,7 +420,11 @@ async def one_string(pilot, rec: Recorder, field_id: str, text: str) -> None:
         await pilot.press("enter")
     else:
         button = {"f2": "#start", "f4": "#comp-make", "f5": "#replay-run", "f7": "#plat-run"}[PAGE_OF[field_id]]
-        app.screen.query_one(button).focus()  # Enter on the page's button (as a click, without the mouse's round trip)
+        button = app.screen.query_one(button)
+        # a Button ignores a press while it shows the last one (its "-active" effect, 0.2 s): a blank
+        # string typed right after the previous press would otherwise be pressed into nothing
+        await until(pilot, lambda: not button.has_class("-active"), what="the button's last press to end")
+        button.focus()  # Enter on the page's button (as a click, without the mouse's round trip)
         await pilot.press("enter")  # (Pilot.press waits until the app has handled it)
     if isinstance(app.screen, ConfirmScreen):  # a plan beyond the config's [limits] asks first: no
         await pilot.press("n")
