@@ -323,7 +323,10 @@ class ConfirmScreen(ModalScreen[bool]):
                 yield Button(f"{self.no_label} (n)", variant="primary", id="confirm-no")
 
     def on_mount(self) -> None:
-        self.query_one("#confirm-no", Button).focus()  # the safe answer is the default
+        # the safe answer is the default; the app may already be closing (its widgets going) as the
+        # question mounts, and then there is nothing to focus
+        for button in self.query("#confirm-no").results(Button):
+            button.focus()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         event.stop()

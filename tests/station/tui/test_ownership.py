@@ -55,7 +55,12 @@ class RecordingApp(StationApp):
 
     def __init__(self, *args, **kwargs) -> None:
         object.__setattr__(self, "_writes", [])  # (attribute, thread name, value)
+        object.__setattr__(self, "connected", [])  # (rig, attempt) of every RigConnected, in arrival order
         super().__init__(*args, **kwargs)
+
+    def on_rig_connected(self, message) -> None:
+        # (Textual calls StationApp's own handler after this one: it walks the class's MRO)
+        self.connected.append((message.rig, message.attempt))
 
     @property
     def writes(self) -> list:
@@ -144,7 +149,12 @@ async def _only_the_ui_thread(cfg, size, connected, wait_until, recorded_session
         # part of the wait, not only of the assertion below)
         await wait_never_closed(lambda: app.rig_state == "connected" and len(tracker.opened) == 4
                                 and len(tracker.closed) == len(tracker.opened) - 1, "the second reconnection")
-        assert app.rig is tracker.opened[-1] and not tracker.is_closed(app.rig)
+        # the rig kept is the one that answered the newer request, whichever of the two opened last
+        (rig_a, attempt_a), (rig_b, attempt_b) = app.connected[-2:]
+        newer, older = (rig_a, rig_b) if attempt_a > attempt_b else (rig_b, rig_a)
+        assert {attempt_a, attempt_b} == {app.session._attempt - 1, app.session._attempt}
+        assert app.rig is newer and not tracker.is_closed(newer)
+        await wait_never_closed(lambda: tracker.is_closed(older), "the superseded rig to be closed")
         assert len(tracker.opened) == 4  # one per connect request: at start, the reconnection, these two
 
         # a sweep, paused, resumed and aborted through the app's actions
