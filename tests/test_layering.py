@@ -426,3 +426,29 @@ def test_the_new_checks_see_what_they_check():
     assert found and all(f.startswith(FRONT_ENDS) for f in found)
     assert set().union(*found.values()) <= SHARED_VOCABULARY
     assert "procedures.engine" in imported_modules("from procedures.engine import events as ev", "station.tui.state")
+
+
+def station_imports_of_tests(folder: str = "tests/procedures") -> dict[str, set[str]]:
+    """The station modules each test file under `folder` imports (at the top, in a function, under
+    TYPE_CHECKING): file -> modules; files importing none left out."""
+    found = {f: {m for m in mods if m.split(".")[0] == "station"} for f, mods in imports_of(folder).items()}
+    return {f: mods for f, mods in found.items() if mods}
+
+
+def test_the_procedures_tests_do_not_import_station():
+    """tests/procedures tests the procedures/ layer, which does not depend on station/: its tests
+    use procedures (and drivers) only. A test of a station service, the config or the CLI lives
+    under tests/station."""
+    found = station_imports_of_tests()
+    bad = [f"{f}: imports {m}" for f, mods in sorted(found.items()) for m in sorted(mods)]
+    assert not bad, "tests under tests/procedures import station (move them to tests/station):\n" + "\n".join(bad)
+
+
+def test_the_procedures_tests_check_sees_imports():
+    # guard against a check that passes because it reads nothing: tests/station imports station,
+    # in every form the check must see
+    assert station_imports_of_tests("tests/station")
+    for text in ("import station.cli", "from station.services.table_jobs import push_table",
+                 "def test():\n    from station import interrupt\n",
+                 "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from station.services.config import StationConfig\n"):
+        assert any(m.split(".")[0] == "station" for m in imported_modules(text, "tests.procedures.x.test_y")), text

@@ -115,8 +115,11 @@ def warn_audit_problems(audit) -> None:
         print(f"warning: {line}", file=sys.stderr)
 
 
-def report(job: JobOutcome, audit) -> int:
-    """Print how a push or rollback ended; the exit code (0 ok, 1 cancelled, else an error)."""
+def report(job: JobOutcome, audit, cfg: StationConfig) -> int:
+    """Print how a push or rollback ended, in the words the terminal UI shows too
+    (station.services.push_jobs.outcome_lines); the exit code (0 ok, 1 cancelled), or the
+    refusal's or failure's message raised as the error to print (its last line)."""
+    from station.services.push_jobs import outcome_lines
     from station.services.table_jobs import OperationFailed
 
     for problem in job.audit_problems:
@@ -124,11 +127,11 @@ def report(job: JobOutcome, audit) -> int:
     end = job.finished
     if end is None:
         raise InputError("the operation ended without an outcome")
-    if end.outcome == "ok":
-        return 0
-    if end.outcome == "cancelled":
-        print("cancelled; nothing was written")
-        return 1
-    if end.outcome == "failed":
-        raise OperationFailed(end.message)
-    raise InputError(end.message)
+    lines = outcome_lines(job, cfg, audit)
+    if end.outcome in ("ok", "cancelled"):
+        for line in lines:
+            print(line)
+        return 0 if end.outcome == "ok" else 1
+    for line in lines[:-1]:  # the legs pushed before a refusal or failure of several legs
+        print(line)
+    raise (OperationFailed if end.outcome == "failed" else InputError)(lines[-1])

@@ -34,13 +34,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from station.commands._table_cli import PlanPrinter, prompt, report, station_config, warn_audit_problems
     from station.services.job import JobRunner
-    from station.services.push_jobs import PreparedRefusal, PushRequest, prepare_push, pushed_lines
+    from station.services.push_jobs import PreparedRefusal, PushRequest, prepare_push
 
     cfg = station_config(args)
     job = prepare_push(PushRequest(legs=args.leg, table=args.table, accept_implausible=args.accept_implausible,
                                    audit=args.audit), cfg)
     if isinstance(job, PreparedRefusal):  # refused before any drive: logged, then said
-        return report(JobRunner().run(job), job.audit)
+        return report(JobRunner().run(job), job.audit, cfg)
     for line in job.lines:
         print(line)
     sha = next(iter(job.sources.values()))["sha256"]
@@ -52,12 +52,9 @@ def run(args) -> int:
     for line in ended.warnings:  # found only against the drive's own limit
         if line not in job.warned:
             print(line)
-    for line in pushed_lines(ended, cfg):
-        print(line)
-    code = report(ended, job.audit)
+    code = report(ended, job.audit, cfg)  # the pushed legs and where the backup is, as the UI says it
     if code:
         return code
-    print(f"backup of the previous table(s) is in {job.audit.path}")
     if args.config:  # before --sim: the config holds the legs' compensation targets
         verify_where = undo_where = f"--config {args.config}"
     elif cfg.drive.url == "sim":

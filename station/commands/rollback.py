@@ -22,12 +22,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from station.commands._table_cli import PlanPrinter, prompt, report, station_config, warn_audit_problems
     from station.services.job import JobRunner
-    from station.services.push_jobs import PreparedRefusal, RollbackRequest, prepare_rollback, rolled_back_line
+    from station.services.push_jobs import PreparedRefusal, RollbackRequest, prepare_rollback
 
     cfg = station_config(args)
     job = prepare_rollback(RollbackRequest(leg=int(args.leg), audit=args.audit), cfg)
     if isinstance(job, PreparedRefusal):  # refused before the drive: logged, then said
-        return report(JobRunner().run(job), job.audit)
+        return report(JobRunner().run(job), job.audit, cfg)
     for line in job.lines:
         print(line)
     ask = prompt(args.yes)
@@ -35,8 +35,4 @@ def run(args) -> int:
     with job.connect():
         warn_audit_problems(job.audit)
         ended = JobRunner().run(job, [PlanPrinter()])
-    code = report(ended, job.audit)
-    if code:
-        return code
-    print(rolled_back_line(ended))
-    return 0
+    return report(ended, job.audit, cfg)  # the bank now active and its table, as the UI says it

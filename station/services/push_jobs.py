@@ -293,8 +293,8 @@ def audit_problem_lines(audit, most: int = 3) -> list[str]:
 
 
 def pushed_lines(job: JobOutcome, cfg: StationConfig) -> list[str]:
-    """A completed push's lines, one per leg: the bank now active, its checksum, its target, and
-    a warning when the drive does not apply its table."""
+    """A completed push's lines, one per leg pushed (PushResult.lines): the bank now active, its
+    checksum, its target, and a warning when the drive does not apply its table."""
     from procedures.compensation.push import OperationFinished
     from station.services.table_jobs import target_text
 
@@ -310,3 +310,30 @@ def rolled_back_line(job: JobOutcome) -> str:
     plan = job.of(TablePlanned)[-1].plan
     return (f"rolled back: leg {plan.leg} bank {result.bank} active (was bank {result.previous_bank}): "
             f"{describe_table(plan.table)}; sha256 {result.table_sha256}")
+
+
+CANCELLED_LINE = "cancelled; nothing was written"
+
+
+def outcome_lines(job: JobOutcome, cfg: StationConfig, audit: AuditLog | None = None) -> list[str]:
+    """How a push or rollback ended, in the one wording every front end shows (`station push` and
+    `station rollback` print these lines; the Compensation page's notice is them):
+    - a push that ended ok: each leg's `pushed_lines` (several legs: then the procedure's line
+      for them all), then where the backup is (`audit`'s path);
+    - a rollback that ended ok: `rolled_back_line`;
+    - cancelled: that nothing was written;
+    - refused or failed: the legs pushed before it (several legs), then the procedure's own
+      message, last (it says what was written and, after a failure, which table is active)."""
+    end = job.finished
+    if end is None:
+        return ["the operation ended without an outcome"]
+    pushed = pushed_lines(job, cfg) if end.action == PUSH else []
+    if end.outcome == "ok":
+        if end.action == ROLLBACK:
+            return [rolled_back_line(job)]
+        whole = [end.message] if end.leg is None else []  # several legs: "pushed legs [...]: ..."
+        return pushed + whole + [f"backup of the previous table(s) is in "
+                                 f"{audit.path if audit is not None else 'the audit log'}"]
+    if end.outcome == "cancelled":
+        return [CANCELLED_LINE]
+    return pushed + [end.message]

@@ -1,6 +1,8 @@
 """The command line and the terminal UI give the same refusals, audit lines and figures for push,
 rollback and verify on the same inputs: both run station.services.table_jobs over the simulated drive
-(a real Modbus server on loopback, its table memory in a file), each in a folder of its own.
+(a real Modbus server on loopback, its table memory in a file), each in a folder of its own. And
+they say the same words for how a push or rollback ended (station.services.push_jobs.outcome_lines):
+what `station push` / `station rollback` print is what the Compensation page's notice shows.
 
 The CLI is `station.cli.main` (answering its prompt through a terminal-like stdin); the UI is
 the Compensation page's controller in a running app, answered through its confirmation dialog.
@@ -83,22 +85,37 @@ def _comparable(entries) -> list[dict]:
     return out
 
 
-def _run_cli(folder: Path, csv: Path, operations, calibration: Path, monkeypatch) -> list:
+def _said(folder: Path, text: str) -> list[str]:
+    """The lines of `text` without the folder each front end works in (the audit log's path)."""
+    return [line for line in text.replace(f"{folder}/", "").splitlines() if line.strip()]
+
+
+def _run_cli(folder: Path, csv: Path, operations, calibration: Path, monkeypatch, capsys) -> tuple[list, list]:
+    """The audit entries, and for each push or rollback (exit code, what it printed: stdout, then
+    its error line without the `station CMD: error: ` prefix)."""
     monkeypatch.chdir(folder)
+    said = []
     for n, (op, answer) in enumerate(operations):
+        capsys.readouterr()
         if op == "push":
             monkeypatch.setattr("sys.stdin", Tty(answer + "\n"))
-            main(["push", csv.name, "--leg", str(LEG), "--sim"])
+            code = main(["push", csv.name, "--leg", str(LEG), "--sim"])
         elif op == "rollback":
             monkeypatch.setattr("sys.stdin", Tty(answer + "\n"))
-            main(["rollback", "--leg", str(LEG), "--sim"])
+            code = main(["rollback", "--leg", str(LEG), "--sim"])
         else:  # the UI's simulated rig repeats the plant's noise: the same seeds here
             main(["verify", "--leg", str(LEG), "--sim", "--before", str(calibration), "--out", f"verify-{n}.h5",
                   "--seed", "0", "--noise-seed", "0"])
-    return read_entries(folder / "runs" / "audit.jsonl")[0]
+            continue
+        out, err = capsys.readouterr()
+        out = out.replace("[y/N] ", "[y/N]\n")  # at a terminal, the answer typed ends the prompt's line
+        said.append((code, _said(folder, out) + [line.removeprefix(f"station {op}: error: ")
+                                                 for line in _said(folder, err)]))
+    return read_entries(folder / "runs" / "audit.jsonl")[0], said
 
 
-async def _run_tui(folder: Path, csv: Path, operations, calibration: Path) -> list:
+async def _run_tui(folder: Path, csv: Path, operations, calibration: Path) -> tuple[list, list]:
+    """The audit entries, and for each push or rollback the (text, severity) of the page's notice."""
     from station.tui.app import StationApp
     from station.tui.screens.common import ConfirmScreen
 
@@ -125,6 +142,14 @@ async def _run_tui(folder: Path, csv: Path, operations, calibration: Path) -> li
     async with app.run_test(size=(120, 40)) as pilot:
         await pilot.press("f4")
         comp = app.screen
+        notices = []
+        shown = comp.jobs.notice
+
+        def notice(message):  # what the page shows of how a push or rollback ended
+            notices.append(shown(message))
+            return notices[-1]
+
+        comp.jobs.notice = notice
         app.connect_rig()
         await wait(pilot, lambda: app.rig is not None, "the rig")
         for op, answer in operations:
@@ -144,19 +169,22 @@ async def _run_tui(folder: Path, csv: Path, operations, calibration: Path) -> li
                      "verify": ("refused", "completed", "aborted", "failed")}[op]
             await wait(pilot, lambda: count() > before and read_entries(audit)[0][-1].outcome in final
                        and not app.sweep.active, f"the end of the {op}")
+            if op != "verify":
+                await wait(pilot, lambda: len(notices) == sum(o != "verify" for o, _ in operations[:operations.index((op, answer)) + 1]),
+                           f"the notice of the {op}")
             await pilot.pause(0.1)
-    return read_entries(audit)[0]
+    return read_entries(audit)[0], [(text, severity) for text, severity in notices]
 
 
 @pytest.mark.parametrize("name, rows, operations", CASES, ids=[c[0] for c in CASES])
 def test_cli_and_tui_log_the_same_refusals_outcomes_and_figures(name, rows, operations, calibration, tmp_path,
-                                                                monkeypatch):
+                                                                monkeypatch, capsys):
     cli_dir, tui_dir = tmp_path / "cli", tmp_path / "tui"
     cli_dir.mkdir()
     tui_dir.mkdir()
-    cli = _run_cli(cli_dir, _table_csv(cli_dir, rows), operations, calibration, monkeypatch)
+    cli, cli_said = _run_cli(cli_dir, _table_csv(cli_dir, rows), operations, calibration, monkeypatch, capsys)
     monkeypatch.chdir(tui_dir)
-    tui = asyncio.run(_run_tui(tui_dir, _table_csv(tui_dir, rows), operations, calibration))
+    tui, tui_said = asyncio.run(_run_tui(tui_dir, _table_csv(tui_dir, rows), operations, calibration))
     assert cli, "the CLI logged nothing"
     a, b = _comparable(cli), _comparable(tui)
     assert len(a) == len(b), (a, b)
@@ -169,6 +197,19 @@ def test_cli_and_tui_log_the_same_refusals_outcomes_and_figures(name, rows, oper
         assert finals[-1] == "refused"
     if "verify" in name and "refused" not in name:
         assert finals[-1] in ("completed",) and cli[-1].details["ratio"] == tui[-1].details["ratio"]
+    # and both said the same words for how each push or rollback ended: the page's notice is
+    # lines the command printed, together, and an error there is an error here
+    tables = [op for op, _ in operations if op != "verify"]
+    assert len(cli_said) == len(tui_said) == len(tables), (cli_said, tui_said)
+    for op, final, (code, printed), (text, severity) in zip(tables, [e for e in cli if e.outcome != "started"
+                                                                      and e.action != "verify"], cli_said, tui_said):
+        notice = _said(tui_dir, text)
+        assert notice and any(printed[i:i + len(notice)] == notice for i in range(len(printed))), (op, notice, printed)
+        assert (code, severity) == {"ok": (0, "information"), "cancelled": (1, "information"),
+                                    "refused": (2, "error")}[final.outcome], (op, final.outcome, code, severity)
+        first = {"ok": "pushed: leg 1 bank " if op == "push" else "rolled back: leg 1 bank ",
+                 "cancelled": "cancelled; nothing was written", "refused": final.message}[final.outcome]
+        assert notice[0].startswith(first), (op, notice)
 
 
 

@@ -48,6 +48,9 @@ def test_cli_pushes_every_leg_after_one_confirmation(tmp_path, monkeypatch, caps
     assert main(["push", "t.csv", "--leg", "all", "--sim"]) == 0
     out = capsys.readouterr().out
     assert out.count("[y/N]") == 1 and "Push these tables to legs 1, 2, 3, 4, 5, 6?" in out
+    # the words the Compensation page's notice shows too (station.services.push_jobs.outcome_lines)
+    assert "pushed legs [1, 2, 3, 4, 5, 6]: each has its new table active\n" in out
+    assert out.count("pushed: leg ") == 6 and "backup of the previous table(s) is in runs/audit.jsonl\n" in out
     assert _active_banks(Path("runs/sim-drive-nv.json")) == {leg: 1 for leg in LEGS}
     entries = read_entries(Path("runs/audit.jsonl"))[0]
     assert [(e.leg, e.outcome) for e in entries] == [(leg, o) for leg in LEGS for o in ("started", "ok")]

@@ -12,8 +12,8 @@ from typing import Any, Protocol
 from textual.message import Message
 
 from station.services.config import StationConfig
-from station.services.push_jobs import PUSH, ROLLBACK, PushRequest, RollbackRequest, plan_lines, prepare_push, \
-    prepare_rollback
+from station.services.push_jobs import PUSH, ROLLBACK, PushRequest, RollbackRequest, outcome_lines, plan_lines, \
+    prepare_push, prepare_rollback
 from station.tui.error_text import describe
 from station.tui.messages import Notice
 from station.tui.screens.common import ConfirmScreen
@@ -57,17 +57,20 @@ class DriveTablesRead(Message):
 
 
 class TableJobDone(Message):
-    """A push or rollback ended, whichever way (`job`: station.services.table_jobs.JobOutcome, or None
-    with `error` when it could not run). `accept_again`: for a push refused for implausible values,
-    the same push with them accepted (started only after the user confirms it)."""
+    """A push or rollback ended, whichever way (`job`: station.services.table_jobs.JobOutcome, with
+    `lines` how it ended in the words of every front end, station.services.push_jobs.outcome_lines;
+    or None with `error` when it could not run). `accept_again`: for a push refused for implausible
+    values, the same push with them accepted (started only after the user confirms it)."""
 
-    def __init__(self, action: str, leg: int | None, job: Any = None, error: str = "", accept_again=None) -> None:
+    def __init__(self, action: str, leg: int | None, job: Any = None, error: str = "", accept_again=None,
+                 lines: list[str] | None = None) -> None:
         super().__init__()
         self.action = action
         self.leg = leg
         self.job = job
         self.error = error
         self.accept_again = accept_again
+        self.lines = list(lines or [])
 
 
 class VerificationDone(Message):
@@ -174,7 +177,8 @@ class CompensationController:
             except Exception as exc:  # busy, a leg without a drive, an audit log that cannot be written: said
                 self.screen.post_message(TableJobDone(action, leg, error=describe(exc, f"{action} of leg {leg}")))
                 return
-            self.screen.post_message(TableJobDone(action, leg, ended, accept_again=again if ended.implausible else None))
+            self.screen.post_message(TableJobDone(action, leg, ended, accept_again=again if ended.implausible else None,
+                                                  lines=outcome_lines(ended, cfg, job.audit)))
 
         self.screen.run_worker(work, thread=True, exclusive=True, group="push", exit_on_error=False)
 
@@ -224,25 +228,17 @@ class CompensationController:
         return self._ask(question, "Push all")
 
     def notice(self, message: TableJobDone) -> tuple[str, str]:
-        """(text, severity) for how a push or rollback ended."""
-        title = f"{message.action} of leg {message.leg}" if message.leg is not None else f"{message.action} of every leg"
+        """(text, severity) for how a push or rollback ended: the service's lines (the words `station
+        push` and `station rollback` print), then what this page adds: the audit log's problems
+        and the implausible values the user accepted."""
         if message.error:
             return message.error, "error"
         job = message.job
         problems = "".join(f" (audit log: {p})" for p in job.audit_problems)
         problems += "".join(f"\n{w}" for w in job.warnings)  # implausible values the user accepted
         end = job.finished
-        if end.outcome == "ok" and end.leg is None:  # several legs
-            return f"{end.message}; backups in the audit log.{problems}", "information"
-        if end.outcome == "ok":
-            r = end.result
-            done = "pushed and active" if message.action == PUSH else "rolled back"
-            warn = "" if r.table_enabled else " Warning: the drive does not apply its table (table_enable = 0)."
-            return (f"Leg {r.leg}: table {done} in bank {r.bank} (was bank {r.previous_bank}); backup in the audit log."
-                    f"{warn}{problems}", "information")
-        if end.outcome == "cancelled":
-            return f"{message.action.capitalize()} cancelled; nothing was written.{problems}", "information"
-        return f"{title} {end.outcome}: {end.message}{problems}", "error"
+        severity = "information" if end is not None and end.outcome in ("ok", "cancelled") else "error"
+        return "\n".join(message.lines) + problems, severity
 
     # -- verify ----------------------------------------------------------------------------------------
     def verify(self, leg: int, analysis) -> bool:

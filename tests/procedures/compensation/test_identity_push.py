@@ -16,9 +16,9 @@ from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer
 from drivers.plant.leg import LegPlant, PlantConfig
-from procedures.compensation.audit import AuditLog
-from procedures.compensation.push import PushRefused, check_leg_serial, push_legs_procedure, table_sha256
-from station.services.table_jobs import push_table  # the one way to run a push: the runner
+from procedures.compensation.audit import AuditLog, AuditSink
+from procedures.compensation.push import OperationFinished, check_leg_serial, finished, push_legs_procedure, \
+    push_procedure, table_sha256
 from procedures.engine.runner import ListSink, run
 from procedures.compensation.table import CompTable, LegTable, read_table_csv, write_table_csv
 
@@ -49,6 +49,15 @@ def _table(leg: int, offset_um: float) -> LegTable:
     return LegTable(leg, -90.0, 6.0, tuple(offset_um + 0.1 * i for i in range(n)), tuple(-offset_um - 0.1 * i for i in range(n)))
 
 
+def _push(axis, table, audit: AuditLog | None = None, **options) -> OperationFinished:
+    """push_procedure run to its end through the runner (with the audit sink on `audit`): how it ended."""
+    events = ListSink()
+    run(push_procedure(axis, table, **options), [events] + ([AuditSink(audit)] if audit is not None else []))
+    end = finished(events.events)
+    assert end is not None, "the push ended without an outcome"
+    return end
+
+
 def _drive_memory(server, axes, nv_path):
     """Everything a push could change: both banks as read over Modbus, the raw registers of both
     banks as the drive holds them, the active bank, the table memory file, the write counters."""
@@ -65,12 +74,11 @@ def test_wrong_serial_refused_before_anything_is_written(rig, tmp_path):
     server, axes, nv = rig
     audit = AuditLog(tmp_path / "audit.jsonl", station_id="bench-a", leg_serials={1: "HX-0077"})
     # the drive holds a table already (pushed for the right leg), so "nothing written" is not trivially "empty"
-    push_table(axes[1], _table(1, 1.0), audit=audit, source={"leg_serial": "HX-0077"}, leg_serial="HX-0077")
+    assert _push(axes[1], _table(1, 1.0), audit, source={"leg_serial": "HX-0077"}, leg_serial="HX-0077").outcome == "ok"
     before = _drive_memory(server, axes, nv)
-    with pytest.raises(PushRefused) as exc:
-        push_table(axes[1], _table(1, 5.0), audit=audit, source={"path": "t.csv", "leg_serial": "HX-0042"},
-                   leg_serial="HX-0077")
-    text = str(exc.value)
+    end = _push(axes[1], _table(1, 5.0), audit, source={"path": "t.csv", "leg_serial": "HX-0042"}, leg_serial="HX-0077")
+    assert end.outcome == "refused" and end.result is None
+    text = end.message
     assert "HX-0042" in text and "HX-0077" in text and "Nothing was written" in text
     assert _drive_memory(server, axes, nv) == before
     last = audit.entries()[-1]
@@ -81,11 +89,15 @@ def test_wrong_serial_refused_before_anything_is_written(rig, tmp_path):
 def test_matching_serial_or_unknown_serial_pushes(rig, tmp_path):
     server, axes, _ = rig
     table = _table(1, 2.0)
-    got = push_table(axes[1], table, source={"leg_serial": "HX-0042"}, leg_serial="HX-0042")
+    end = _push(axes[1], table, source={"leg_serial": "HX-0042"}, leg_serial="HX-0042")
+    assert end.outcome == "ok", end.message
+    got = end.result
     assert axes[1].active_bank() == got.bank and got.table_sha256 == table_sha256(axes[1].read_table(got.bank))
     # a table without a serial (made before 1.1) and a leg without a configured serial both go on
-    push_table(axes[1], _table(1, 3.0), source={}, leg_serial="HX-0042")
-    push_table(axes[1], _table(1, 4.0), source={"leg_serial": "HX-0042"}, leg_serial=None)
+    for source, serial, offset_um in (({}, "HX-0042", 3.0), ({"leg_serial": "HX-0042"}, None, 4.0)):
+        end = _push(axes[1], _table(1, offset_um), source=source, leg_serial=serial)
+        assert end.outcome == "ok", end.message
+        assert end.result.table_sha256 == table_sha256(axes[1].read_table(axes[1].active_bank()))
     check_leg_serial(1, None, None)
 
 

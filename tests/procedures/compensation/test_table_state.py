@@ -17,7 +17,8 @@ from drivers.sim.drive_server import SimDriveServer
 from drivers.plant.leg import LegPlant, PlantConfig
 from procedures.acquisition.sweep import table_state
 from procedures.compensation.applied_table import TableState, applied_table
-from station.services.table_jobs import push_table
+from procedures.compensation.push import finished, push_procedure
+from procedures.engine.runner import ListSink, run
 from procedures.io.recording.stage import active_tables
 
 PROFILE = DriveProfile.load()
@@ -42,7 +43,9 @@ def test_the_drive_state_as_a_structure_and_its_words(axis):
     assert not before.active and before.error == ""
     assert before.text in ("table compensation off", f"bank {before.bank} active, empty")
 
-    push_table(axis, TABLE, drive_url="sim")
+    events = ListSink()
+    run(push_procedure(axis, TABLE, drive_url="sim"), [events])  # the push procedure itself, through the runner
+    assert finished(events.events).outcome == "ok"
     state = table_state(axis)
     assert state.active and state.enabled and state.bank == axis.active_bank()
     assert (state.point_count, state.start_mm, state.spacing_mm) == (31, -90.0, 6.0)

@@ -281,24 +281,3 @@ def test_ctrl_c_closes_the_recording_as_aborted_and_releases_its_lock(tmp_path):
     s = read_session(out)
     assert s.outcome == Outcome.ABORTED and len(s.points) == 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.h5"], "no lock file left"
-
-
-def test_a_second_ctrl_c_while_the_recording_closes_is_not_raised(tmp_path):
-    """station.interrupt: the first Ctrl-C aborts, a second raises KeyboardInterrupt once, and
-    none is raised once the runner is closing (it would cut the file's finishing short)."""
-    import signal
-
-    from station.interrupt import abort_on_sigint
-
-    control = RunControl()
-    with abort_on_sigint(control):
-        signal.raise_signal(signal.SIGINT)
-        assert control.aborted and control.reason == "interrupted (Ctrl-C)"
-        control.begin_closing()
-        signal.raise_signal(signal.SIGINT)  # ignored: closing
-    control = RunControl()
-    with abort_on_sigint(control):
-        signal.raise_signal(signal.SIGINT)
-        with pytest.raises(KeyboardInterrupt):
-            signal.raise_signal(signal.SIGINT)
-        signal.raise_signal(signal.SIGINT)  # once forced, no more

@@ -1,26 +1,15 @@
-"""Import of other laser software's CSV through a mapping file: the example maps, units, sign
+"""Import of other laser software's CSV through a mapping file (procedures.io.import_map): units, sign
 conventions, direction from a column or the target order, run numbering, delimiters and decimal
 commas, header lines; bad maps and bad files refused naming the file, line and field/key, and
-nothing written."""
+nothing written. (The example maps and the refusals of `station import`: tests/station/test_cli_import_map.py.)"""
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from procedures.vocabulary import InputError
 from procedures.io.import_map import convert, load_map
-from procedures.io.recording.reader import read_session
-from station.cli import main
-
-MAPS = Path(__file__).resolve().parents[3] / "docs" / "import-maps"
-
-
-def points(path):
-    p = read_session(path).points
-    return p[np.argsort(p["index"])]
 
 
 def write_map(tmp_path, text, name="m.toml"):
@@ -51,36 +40,6 @@ def basic_map(tmp_path, delimiter=",", decimal=".", error_key="error", tu="mm", 
               extra=""):
     return write_map(tmp_path, BASIC.format(delimiter=delimiter, decimal=decimal, error_key=error_key, tu=tu, eu=eu,
                                             conv=conv, extra=extra))
-
-
-def test_the_renishaw_like_example(tmp_path, capsys):
-    out = tmp_path / "r.h5"
-    assert main(["import", str(MAPS / "renishaw-like.csv"), "--map", str(MAPS / "renishaw-like.toml"),
-                 "--out", str(out)]) == 0
-    p = points(out)
-    assert len(p) == 12 and set(p["leg"]) == {1}
-    # source runs 1 and 2 each hold both directions: four one-direction runs
-    np.testing.assert_array_equal(p["run"], [1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4])
-    np.testing.assert_array_equal(p["direction"], [1, 1, 1, -1, -1, -1] * 2)
-    np.testing.assert_allclose(p["target_mm"][:3], [-80, 0, 80])
-    np.testing.assert_allclose(p["error_um"][:4], [1.82, 0.05, -1.37, 0.61])
-    np.testing.assert_allclose(p["air_pressure_hpa"][0], 1012.8)
-    np.testing.assert_allclose(p["material_temp_c"][-1], 20.44)
-    assert "imported 12 points" in capsys.readouterr().out
-
-
-def test_the_api_xd_like_example_inch_decimal_comma_and_reversed_sign(tmp_path):
-    out = tmp_path / "a.h5"
-    assert main(["import", str(MAPS / "api-xd-like.csv"), "--map", str(MAPS / "api-xd-like.toml"),
-                 "--out", str(out)]) == 0
-    p = points(out)
-    assert set(p["leg"]) == {2}
-    np.testing.assert_allclose(p["target_mm"][:3], [-76.2, 0.0, 76.2])
-    # deviation -0,000072 in as nominal - measured: the leg was 0.000072 in = 1.8288 um long
-    np.testing.assert_allclose(p["error_um"][0], 1.8288, atol=1e-9)
-    # no direction column: out (+) and back (-) from the target order; each cycle gives two runs
-    np.testing.assert_array_equal(p["direction"], [1, 1, 1, -1, -1, -1] * 2)
-    np.testing.assert_array_equal(p["run"], [1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4])
 
 
 @pytest.mark.parametrize("tu, eu, t_text, e_text, target_mm, error_um", [
@@ -174,16 +133,3 @@ def test_bad_files_are_refused_naming_line_and_column(tmp_path, data, where):
     with pytest.raises(InputError, match=None) as exc:
         convert(path, load_map(basic_map(tmp_path)))
     assert where in str(exc.value)
-
-
-def test_interchange_problems_are_named_in_the_source_file_and_nothing_is_written(tmp_path, capsys):
-    data = tmp_path / "d.csv"
-    data.write_text("T,E\n0,1\n10,1\n\n20,5000\n")  # 5 mm error: no leg does that (after a blank line)
-    out = tmp_path / "x.h5"
-    assert main(["import", str(data), "--map", str(basic_map(tmp_path)), "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert f"{data}, line 5, field error_um (column 'E')" in err and "Traceback" not in err
-    assert not out.exists() and list(tmp_path.glob("*.h5")) == []
-    data.write_text("T,E\n0,1\n10,1\n300,2\n")  # beyond the soft limits
-    assert main(["import", str(data), "--map", str(basic_map(tmp_path)), "--out", str(out)]) == 2
-    assert f"{data}, line 4, field target_mm (column 'T')" in capsys.readouterr().err

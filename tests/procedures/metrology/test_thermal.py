@@ -7,7 +7,6 @@ import pytest
 from drivers.plant.leg import PlantConfig
 from procedures.metrology.thermal import (Material, nde_correction_um, normalise_points, normalise_session,
                                           recorded_materials)
-from station.services.config import load_config
 from procedures.synthetic import synth_session
 
 TARGETS = np.linspace(-90.0, 90.0, 31)
@@ -67,19 +66,8 @@ def test_missing_material_temperature():
     assert np.max(np.abs(n.points["error_um"] - full.points["error_um"])) < 0.01
 
 
-def test_materials_recorded_by_the_station_config(tmp_path):
-    p = tmp_path / "station.toml"
-    p.write_text('[drive]\nurl = "tcp://127.0.0.1:5020"\n[interferometer]\nport = "/dev/null"\n'
-                 '[metrology]\nreference_temp_c = 20.0\n[legs]\nfixed_point_mm = -140\n[legs.2]\nexpansion_um_m_k = 23.0\n')
-    rec = recorded_materials(load_config(p).to_dict())
-    assert rec is not None
-    ref, mats = rec
-    assert ref == 20.0 and mats[1] == Material(11.5, 1.0, -140.0) and mats[2] == Material(23.0, 1.0, -140.0)
-    # the simulated rig without [legs]: every leg's material is the simulated plant's own
-    sim = load_config(None)
-    mats_sim = recorded_materials(sim.to_dict())[1]
-    plant = sim.sim.leg_configs()
-    assert [mats_sim[k].fixed_point_mm for k in range(1, 7)] == [c.bearing_mm for c in plant]
+def test_a_session_that_recorded_no_materials_is_normalised_with_the_defaults():
+    """(The materials a station config records: tests/station/services/test_config_for_procedures.py.)"""
     # a session that recorded none: the defaults, and the output says so
     _, pts = _warm_leg(21.0, 21.0)
     n = normalise_session(pts, {})

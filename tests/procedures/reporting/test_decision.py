@@ -1,13 +1,12 @@
-"""ISO 14253-1 decisions (procedures.reporting.decision) at the boundaries, the tolerances of the config,
-and the decisions carried by the ISO 230-2 report of a synthetic session."""
+"""ISO 14253-1 decisions (procedures.reporting.decision) at the boundaries and the decisions carried by
+the ISO 230-2 report of a synthetic session (the tolerances of the station config:
+tests/station/services/test_config_for_procedures.py)."""
 
 from __future__ import annotations
 
 import pytest
 
 from procedures.reporting import decision as dec
-from procedures.vocabulary import InputError
-from station.services.config import load_config
 
 BUDGET = [{"source": "laser", "u_um": 0.3}, {"source": "repeatability", "u_um": 0.4},
           {"source": "repeatability", "u_um": 0.3}]
@@ -54,40 +53,6 @@ def test_overall_verdict():
     assert dec.overall([c, u]) == dec.UNDECIDED
     assert dec.overall([c, u, n]) == dec.NOT_CONFORM
     assert dec.overall([none]) == dec.NO_TOLERANCE
-
-
-def _cfg(tmp_path, text):
-    p = tmp_path / "station.toml"
-    p.write_text(text)
-    return p
-
-
-def test_tolerances_from_the_config(tmp_path):
-    p = _cfg(tmp_path, "[tolerances.HX300]\nE_um = 6.0\nB_um = 2\n[tolerances.HX300.as_left]\nE_um = 3.0\n"
-                       "[tolerances.HX300.as_found]\nR_um = 4.0\n")
-    cfg = load_config(p)
-    t = cfg.tolerances["HX300"]
-    assert t.limits("as_found") == {"E": 6.0, "B": 2.0, "R": 4.0}
-    assert t.limits("as_left") == {"E": 3.0, "B": 2.0}
-    assert t.source == f"{p} [tolerances.HX300]"
-    # recorded in sessions and read back
-    back = dec.tolerances_from_json(cfg.to_dict()["tolerances"])
-    assert back["HX300"].limits("as_left") == {"E": 3.0, "B": 2.0}
-
-
-@pytest.mark.parametrize("text, says", [
-    ("[tolerances.HX300]\nE = 6.0\n", "[tolerances.HX300] E: unknown key"),
-    ("[tolerances.HX300]\nE_um = -1\n", "[tolerances.HX300] E_um = -1: must be a finite number > 0"),
-    ("[tolerances.HX300]\nE_um = \"6\"\n", "[tolerances.HX300] E_um: expected a number"),
-    ("[tolerances.HX300.as_left]\nQ_um = 1\n", "[tolerances.HX300.as_left] Q_um: unknown key"),
-    ("[tolerances.HX300]\n", "[tolerances.HX300]: states no limit"),
-    ("tolerances = 3\n", "[tolerances] must hold one section per leg type"),
-])
-def test_bad_tolerances_named_by_file_section_key(tmp_path, text, says):
-    p = _cfg(tmp_path, text)
-    with pytest.raises(InputError) as exc:
-        load_config(p)
-    assert str(p) in str(exc.value) and says in str(exc.value)
 
 
 def _leg_report(value, U, leg_type):

@@ -159,7 +159,7 @@ async def _push(path, cfg, size, wait_until, notes, connected):
         await pilot.press("u")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the push confirmation")
         await pilot.press("y")
-        await wait_until(pilot, lambda: any("pushed and active" in n for n in notes(app)), 30, "the push")
+        await wait_until(pilot, lambda: any(n.startswith("pushed: leg 1 bank ") for n in notes(app)), 30, "the push")
         pushed = comp.table.legs[1]
         assert axis.active_bank() == 1 - bank0
         want_sha = table_sha256(quantize(pushed.to_bank(), app.rig.profile.table.entry_scale_um))
@@ -199,7 +199,7 @@ async def _push(path, cfg, size, wait_until, notes, connected):
         await pilot.press("b")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the rollback confirmation")
         await pilot.press("y")
-        await wait_until(pilot, lambda: any("rolled back" in n for n in notes(app)), 30, "the rollback")
+        await wait_until(pilot, lambda: any(n.startswith("rolled back: leg 1 bank ") for n in notes(app)), 30, "the rollback")
         assert table_sha256(axis.read_table(axis.active_bank())) == empty_sha
         entries, _ = read_entries(audit_path)
         assert (entries[-1].action, entries[-1].outcome) == ("rollback", "ok")

@@ -48,7 +48,7 @@ async def _station_target(path, cfg, size, wait_until, notes, connected):
         question = str(app.screen.query_one("#confirm-question").render())
         assert "compensation target station" in question and "target:   station" in question
         await pilot.press("y")
-        await wait_until(pilot, lambda: any("pushed and active" in n for n in notes(app)), 30, "the push")
+        await wait_until(pilot, lambda: any(n.startswith("pushed: leg 1 bank ") for n in notes(app)), 30, "the push")
         want = table_sha256(quantize(comp.table.legs[1].to_bank(), 0.001))
         leg1 = json.loads(store.read_text())["legs"]["1"]
         assert leg1["active_bank"] == 1 and leg1["banks"][1]["sha256"] == want
@@ -61,7 +61,7 @@ async def _station_target(path, cfg, size, wait_until, notes, connected):
         await pilot.press("b")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen) and app.screen.query("#confirm-question"), what="the rollback confirmation")
         await pilot.press("y")
-        await wait_until(pilot, lambda: any("rolled back" in n for n in notes(app)), 30, "the rollback")
+        await wait_until(pilot, lambda: any(n.startswith("rolled back: leg 1 bank ") for n in notes(app)), 30, "the rollback")
         leg1 = json.loads(store.read_text())["legs"]["1"]
         assert leg1["active_bank"] == 0 and leg1["banks"][0]["error_fwd_um"] == []
         entries, _ = read_entries(audit_path)

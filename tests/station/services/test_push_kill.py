@@ -1,4 +1,5 @@
-"""A drive process SIGKILLed at a random write of a push (procedures.compensation.push over Modbus TCP): after a
+"""A drive process SIGKILLed at a random write of a push (station.services.table_jobs.push_table running
+procedures.compensation.push, over Modbus TCP): after a
 restart from its non-volatile memory the previous table is active and intact, the error said so,
 and the audit log holds the backup and the failure."""
 
@@ -28,10 +29,6 @@ TABLE_WRITES = 7
 @pytest.fixture(autouse=True, scope="module")
 def _quiet_pymodbus():
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-
-
-
 
 
 def _axis(url: str) -> ModbusServoAxis:

@@ -1,5 +1,5 @@
-"""A station process SIGKILLed in the middle of a push to a station-compensated leg (procedures.compensation.push
-through the station's table store, the drive reached over Modbus TCP on 127.0.0.1): just before
+"""A station process SIGKILLed in the middle of a push to a station-compensated leg (station.services.table_jobs.push_table
+running procedures.compensation.push through the station's table store, the drive reached over Modbus TCP on 127.0.0.1): just before
 or just after each of the two file replacements (the table into the inactive bank, then the
 switch). The store is always readable and consistent, the previous table stays active until the
 switch has landed, and the audit log holds the backup. A failed store write (the file system

@@ -1,6 +1,8 @@
-"""procedures.compensation.push over the real Modbus client and the simulated drive: the safe path, the backup
-in the audit log, rollback, refusals that write nothing, and failures that leave the previous
-table active (a read-back that differs, a refused or unanswered switch, a link lost mid-push)."""
+"""station.services.table_jobs.push_table / rollback (procedures.compensation.push run through the runner,
+its outcome raised as PushRefused / PushFailed) over the real Modbus client and the simulated drive:
+the safe path, the backup in the audit log, rollback, refusals that write nothing, and failures
+that leave the previous table active (a read-back that differs, a refused or unanswered switch, a
+link lost mid-push)."""
 
 from __future__ import annotations
 
