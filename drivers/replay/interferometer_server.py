@@ -23,6 +23,7 @@ import threading
 from drivers.interferometer import protocol as p
 from drivers.replay.clock import DeviceClock, TimeoutClock
 from drivers.replay.plant import ReplayPlant, ReplayState
+from drivers.replay.script import UNKNOWN_SIGNAL_PCT, ReplayPoint
 from drivers.sim.interferometer_server import SimInterferometer
 
 ERR_NOT_RECORDED = 10
@@ -35,6 +36,12 @@ _MAX_ERR_TEXT = 180  # an ERR line must stay well under the protocol's 256-byte 
 def exact(value: float) -> str:
     """A float as the shortest text that parses back to the same double ('NAN' if NaN)."""
     return "NAN" if math.isnan(value) else repr(float(value))
+
+
+def signal_text(pt: ReplayPoint) -> str:
+    """A point's recorded signal level, exactly; an unknown one (a streamed pass's reading: the
+    protocol needs 0..100 there) as UNKNOWN_SIGNAL_PCT, which the replay's recorder puts back."""
+    return exact(UNKNOWN_SIGNAL_PCT if math.isnan(pt.signal_pct) else pt.signal_pct)
 
 
 class ReplayInterferometer(SimInterferometer):
@@ -65,7 +72,7 @@ class ReplayInterferometer(SimInterferometer):
         kind = answer.kind
         if kind == "value":
             pt = answer.point
-            return p.frame_reply("POS", axis, exact(pt.measured_mm), "OK", exact(pt.signal_pct), f"{t_s:.6f}")
+            return p.frame_reply("POS", axis, exact(pt.measured_mm), "OK", signal_text(pt), f"{t_s:.6f}")
         if kind == "beam":
             return p.frame_reply("POS", axis, exact(last), "BEAM", "0.0", f"{t_s:.6f}")
         if kind == "silent":
@@ -91,7 +98,7 @@ class ReplayInterferometer(SimInterferometer):
         if pt is None:
             return exact(self._last_position_mm[axis]), "BEAM", "0.0", f"{t_s:.6f}"
         self._last_position_mm[axis] = pt.measured_mm
-        return exact(pt.measured_mm), "OK", exact(pt.signal_pct), exact(pt.time_s)
+        return exact(pt.measured_mm), "OK", signal_text(pt), exact(pt.time_s)
 
     def _environment(self) -> bytes:
         with self.lock:

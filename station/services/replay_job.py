@@ -86,10 +86,42 @@ def prepare_replay(request: ReplayRequest, cfg: StationConfig | None = None) -> 
     check_output_file(out, force=request.force, suffixes=(".h5",), make_parents=request.make_parents)
     if not session.plan:
         raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
+    refusal = onthefly_refusal(session, source)
+    if refusal:
+        raise InputError(refusal)
     cfg = config_or_load(cfg)
     return PreparedReplay(source, session, out, request.speed, request.force, cfg,
                           lines=[f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) "
                                  f"{pace_text(request.speed)}"])
+
+
+def onthefly_refusal(session: Session, source: Path) -> str | None:
+    """Why an on-the-fly session cannot be replayed faithfully, in one line (None: it can).
+
+    A pass is replayed by latching the recorded reading of each target at the replay drive's
+    compare pulse (docs/replay.md), with either laser: the recording holds each pass's readings
+    (for a streaming laser, the µLine-F1, the result of aligning its samples with the drive's
+    trace), not the samples nor the trace. A pass that was retried (a fault inside it: a gap in
+    the stream, a beam break, a capture short of pulses, a drive fault) left nothing of its failed
+    attempt but the fault, so there is nothing to make that attempt fail the same way again: such a
+    session is refused here rather than replayed into a mismatch halfway, or into a different run."""
+    from procedures.acquisition.plans import SweepPlan
+
+    try:
+        plan = SweepPlan.from_dict(session.plan)
+    except (ValueError, TypeError, KeyError):
+        return None  # the replay rig says what is wrong with the plan (station.services.wiring)
+    if not plan.onthefly:
+        return None
+    for f in session.faults:
+        run = int(f["run"])
+        if plan.is_probe_run(run):
+            continue  # a reversal probe is a stop-and-go reading: its faults replay as a point's
+        return (f"{source}: leg {int(f['leg'])} on-the-fly pass {run} met a fault (attempt {int(f['attempt'])}: "
+                f"{_text(f['kind'])}) and was {'given up' if int(f['gave_up']) else 'retried'}; a replay cannot "
+                "reproduce a fault inside a moving pass (the recording holds each pass's readings, not its "
+                f"samples), so it is refused; analyse the recording itself (station fit {source} --out model.json)")
+    return None
 
 
 # -- a recording as the Replay page shows it --------------------------------------------------------

@@ -1,0 +1,128 @@
+"""Replay of on-the-fly sessions recorded with the µLine-F1 (issue 34, parts 2 and 3): a session
+recorded on the simulated rig (real Modbus TCP on 127.0.0.1, the laser's frames on a real pty,
+real HDF5) is replayed by `station replay` through the replay devices (the replay drive's Modbus
+server, the replay instrument's pty) and must give the recorded points back, every field bit for
+bit (tolerance 0: the replay instrument sends every number with `repr`, the drive's values come
+back through the registers they were recorded through). A pass's readings there carry no signal
+level (NaN, from the stream's alignment): the replay keeps them NaN. A session whose pass was
+retried cannot be replayed faithfully and is refused up front in one line, nothing written."""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+
+import numpy as np
+import pytest
+
+from procedures.acquisition.plans import onthefly_plan
+from procedures.engine import events as ev
+from procedures.engine.runner import CallbackSink
+from procedures.io.recording.reader import read_session
+from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
+from station.cli import main
+from station.services.config import StationConfig
+from station.services.jobs import run_sweep
+from station.services.replay_job import ReplayRequest, prepare_replay
+from station.services.wiring import open_rig
+
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+os.environ.setdefault("STATION_CATALOG", "off")
+
+# nine targets over +/-20 mm, one cycle per speed (10 and 20 mm/s): 40 points, about 21 s of rig time
+PLAN = onthefly_plan((1,), cycles=2, step_mm=5.0, min_mm=-20.0, max_mm=20.0, dwell_s=0.2, averaging_s=0.2)
+
+
+def _config(tmp_path, protocol: str) -> StationConfig:
+    cfg = StationConfig(operator="test")
+    cfg.interferometer.protocol = protocol
+    cfg.recordings_dir = str(tmp_path)
+    plain = cfg.sim.leg_configs
+    cfg.sim.leg_configs = lambda: [c.with_leg_motion() for c in plain()]  # a real drive's jerk limit
+    return cfg
+
+
+def _record(tmp_path, protocol: str, name: str, sinks=()):
+    cfg = _config(tmp_path, protocol)
+    out = tmp_path / name
+    with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
+        result = run_sweep(rig, PLAN, out, cfg, sinks=list(sinks), index=False)
+        assert not rig.sim.laser_server.failures
+    return result, read_session(out)
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """The µLine-F1's on-the-fly session of leg 1, and the station laser's of the same plan."""
+    tmp = tmp_path_factory.mktemp("otf-replay")
+    return {protocol: _record(tmp, protocol, f"otf-{protocol}.h5")[1] for protocol in ("linef1", "station")}
+
+
+def _replay(session, out, capsys):
+    rc = main(["replay", str(session.path), "--out", str(out)])
+    text = capsys.readouterr()
+    return rc, text.out, text.err
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("protocol", ["linef1", "station"])
+def test_an_onthefly_session_replays_to_the_recorded_points(recorded, protocol, tmp_path, capsys):
+    session = recorded[protocol]
+    pts = session.points
+    moving = (pts["flags"] & FLAG_ANCHOR) == 0
+    assert session.outcome == "completed" and len(pts) == 40 and moving.sum() == 36
+    assert np.all(np.isfinite(pts["speed_mm_s"][moving]))
+    if protocol == "linef1":  # the stream's alignment gives no signal level at a target
+        assert np.all(np.isnan(pts["signal_pct"][moving])) and np.all(np.isfinite(pts["signal_pct"][~moving]))
+    out = tmp_path / "replayed.h5"
+    rc, stdout, err = _replay(session, out, capsys)
+    assert rc == 0, err
+    assert "identical to the recording: 40 points (all fields)" in stdout
+    replayed = read_session(out)
+    assert replayed.attrs["rig"] == "replay"
+    a = np.sort(pts, order="index")
+    b = np.sort(replayed.points, order="index")
+    assert np.array_equal(a["index"], b["index"])
+    assert np.all(b["flags"] & FLAG_REPLAYED)
+    for name in a.dtype.names:  # point for point, every field, bit for bit (NaN stays NaN)
+        if name == "flags":
+            assert np.array_equal(a[name] | FLAG_REPLAYED, b[name])
+        elif a.dtype[name].kind == "f":
+            assert np.array_equal(a[name], b[name], equal_nan=True), name
+        else:
+            assert np.array_equal(a[name], b[name]), name
+    assert float(np.max(np.abs(a["error_um"] - b["error_um"]))) == 0.0
+    # the station applied the index on the µLine-F1's session: its replay says so too
+    assert replayed.devices["laser_air_compensation"] == session.devices["laser_air_compensation"]
+
+
+@pytest.mark.timeout(60)
+def test_an_onthefly_session_with_a_retried_pass_is_refused_up_front_in_one_line(tmp_path, capsys):
+    """A 1 s gap in the stream inside the second pass: the pass is retried (recorded as a fault at
+    its first point); its failed attempt left no readings to replay, so the replay is refused."""
+    state = {}
+
+    def gap_in_next_pass(e):
+        if isinstance(e, ev.PointMeasured) and int(e.record["index"]) == 9 and "rig" in state:
+            state["rig"].sim.laser_server.inject("gap", duration_s=1.0)
+
+    cfg = _config(tmp_path, "linef1")
+    out = tmp_path / "gap.h5"
+    with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
+        state["rig"] = rig
+        result = run_sweep(rig, PLAN, out, cfg, sinks=[CallbackSink(gap_in_next_pass)], index=False)
+    session = read_session(out)
+    assert result.outcome == "completed" and len(session.points) == 40
+    assert len(session.faults) >= 1 and {int(f["run"]) for f in session.faults} == {2}
+
+    replayed = tmp_path / "gap.replay.h5"
+    with pytest.raises(Exception) as refused:  # the service refuses before anything is opened or written
+        prepare_replay(ReplayRequest(out, replayed))
+    assert "on-the-fly pass 2" in str(refused.value) and not replayed.exists()
+    rc, stdout, err = _replay(session, replayed, capsys)
+    assert rc == 2 and not replayed.exists()
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert "leg 1 on-the-fly pass 2 met a fault" in lines[0] and "retried" in lines[0]
+    assert "station fit" in lines[0]  # what to do instead
