@@ -25,6 +25,7 @@ from drivers.replay.clock import DeviceClock, TimeoutClock
 from drivers.replay.plant import ReplayPlant, ReplayState
 from drivers.replay.script import UNKNOWN_SIGNAL_PCT, ReplayPoint
 from drivers.sim.interferometer_server import SimInterferometer
+from drivers.states import FaultKind
 
 ERR_NOT_RECORDED = 10
 """ERR code of a query the recording cannot answer (a mismatch, or the end of the recording)."""
@@ -88,17 +89,40 @@ class ReplayInterferometer(SimInterferometer):
         code = ERR_REPLAYED if kind == "error" else ERR_NOT_RECORDED
         return p.format_error(code, answer.text[:_MAX_ERR_TEXT])
 
-    def _capture_sample(self, axis: int, t_s: float) -> tuple[str, str, str, str]:
+    def trigger(self, leg: int, t_s: float) -> None:
+        """As the simulated instrument's, but a pulse of a failing attempt replayed as an error
+        latches nothing (`_capture_sample` None): the capture comes up short, as recorded."""
+        cap = self._capture.get(leg)
+        if cap is None or len(cap[1]) >= cap[0]:
+            return
+        sample = self._capture_sample(leg, t_s)
+        if sample is not None:
+            cap[1].append(sample)
+
+    def _capture_sample(self, axis: int, t_s: float) -> tuple[str, str, str, str] | None:
         """A trigger pulse of an on-the-fly pass (the replay drive's position compare): latch the
         next recorded point of the leg, if it is the one at this compare position, with its
-        recorded reading and time, exactly; a pulse the recording does not hold latches a BEAM
-        sample and the mismatch is kept (docs/replay.md)."""
+        recorded reading and time, exactly; a recorded beam break of the pass a BEAM sample, a
+        recorded error nothing (drivers.replay.plant.ReplayPlant.capture); a pulse the recording
+        does not hold latches a BEAM sample and the mismatch is kept (docs/replay.md)."""
         plant = self.plants.get(axis)
         pt = plant.capture() if plant is not None else None
-        if pt is None:
+        if pt is FaultKind.ERROR:
+            return None
+        if not isinstance(pt, ReplayPoint):
             return exact(self._last_position_mm[axis]), "BEAM", "0.0", f"{t_s:.6f}"
         self._last_position_mm[axis] = pt.measured_mm
         return exact(pt.measured_mm), "OK", signal_text(pt), exact(pt.time_s)
+
+    def _capture_command(self, word: str, args: list[str]) -> bytes:
+        if word != p.CMD_CAP_ARM:
+            axis = self._axis(args[:1])
+            if not isinstance(axis, bytes):
+                with self.lock:
+                    plant = self.plants.get(axis)
+                    if plant is not None:  # a replayed fault of a pass fails its attempt here, at its time
+                        plant.capture_asked(count=word == p.CMD_CAP_COUNT)
+        return super()._capture_command(word, args)
 
     def _environment(self) -> bytes:
         with self.lock:

@@ -101,10 +101,12 @@ def onthefly_refusal(session: Session, source: Path) -> str | None:
     A pass is replayed by latching the recorded reading of each target at the replay drive's
     compare pulse (docs/replay.md), with either laser: the recording holds each pass's readings
     (for a streaming laser, the µLine-F1, the result of aligning its samples with the drive's
-    trace), not the samples nor the trace. A pass that was retried (a fault inside it: a gap in
-    the stream, a beam break, a capture short of pulses, a drive fault) left nothing of its failed
-    attempt but the fault, so there is nothing to make that attempt fail the same way again: such a
-    session is refused here rather than replayed into a mismatch halfway, or into a different run."""
+    trace), not the samples nor the trace. A pass retried after a beam break or an error (a gap
+    in the µLine-F1's stream, a capture short of pulses) is replayed failing the same way at the
+    recorded time (drivers.replay.plant.ONTHEFLY_FAULTS); one retried after a drive fault, a
+    time-out or line noise inside the moving pass cannot be made to fail the same way, so such a
+    session is refused here rather than replayed into a mismatch halfway, or into another run."""
+    from drivers.replay.plant import ONTHEFLY_FAULTS
     from procedures.acquisition.plans import SweepPlan
 
     try:
@@ -114,13 +116,14 @@ def onthefly_refusal(session: Session, source: Path) -> str | None:
     if not plan.onthefly:
         return None
     for f in session.faults:
-        run = int(f["run"])
-        if plan.is_probe_run(run):
+        run, kind = int(f["run"]), _text(f["kind"])
+        if plan.is_probe_run(run) or kind in ONTHEFLY_FAULTS:
             continue  # a reversal probe is a stop-and-go reading: its faults replay as a point's
-        return (f"{source}: leg {int(f['leg'])} on-the-fly pass {run} met a fault (attempt {int(f['attempt'])}: "
-                f"{_text(f['kind'])}) and was {'given up' if int(f['gave_up']) else 'retried'}; a replay cannot "
-                "reproduce a fault inside a moving pass (the recording holds each pass's readings, not its "
-                f"samples), so it is refused; analyse the recording itself (station fit {source} --out model.json)")
+        what = kind.replace("_", " ") + ("" if "fault" in kind else " fault")
+        return (f"{source}: leg {int(f['leg'])} on-the-fly pass {run} met a {what} (attempt {int(f['attempt'])}) and "
+                f"was {'given up' if int(f['gave_up']) else 'retried'}; a replay cannot make a moving pass fail with a "
+                f"{what} again (only with a beam break or an error), so it is refused; analyse the recording itself "
+                f"(station fit {source} --out model.json)")
     return None
 
 

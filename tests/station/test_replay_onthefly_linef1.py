@@ -4,13 +4,14 @@ real HDF5) is replayed by `station replay` through the replay devices (the repla
 server, the replay instrument's pty) and must give the recorded points back, every field bit for
 bit (tolerance 0: the replay instrument sends every number with `repr`, the drive's values come
 back through the registers they were recorded through). A pass's readings there carry no signal
-level (NaN, from the stream's alignment): the replay keeps them NaN. A session whose pass was
-retried cannot be replayed faithfully and is refused up front in one line, nothing written."""
+level (NaN, from the stream's alignment): the replay keeps them NaN. A pass retried after a gap in
+the stream (an error) or a beam break replays failing the same way, at the recorded time; one
+retried after a drive fault cannot be replayed faithfully and is refused up front in one line,
+nothing written."""
 
 from __future__ import annotations
 
 import logging
-import math
 import os
 
 import numpy as np
@@ -21,6 +22,7 @@ from procedures.engine import events as ev
 from procedures.engine.runner import CallbackSink
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
+from procedures.vocabulary import InputError
 from station.cli import main
 from station.services.config import StationConfig
 from station.services.jobs import run_sweep
@@ -97,32 +99,70 @@ def test_an_onthefly_session_replays_to_the_recorded_points(recorded, protocol, 
     assert replayed.devices["laser_air_compensation"] == session.devices["laser_air_compensation"]
 
 
-@pytest.mark.timeout(60)
-def test_an_onthefly_session_with_a_retried_pass_is_refused_up_front_in_one_line(tmp_path, capsys):
-    """A 1 s gap in the stream inside the second pass: the pass is retried (recorded as a fault at
-    its first point); its failed attempt left no readings to replay, so the replay is refused."""
+def _record_with(tmp_path, protocol: str, name: str, fault):
+    """A session of PLAN with `fault(rig)` called once the first pass's anchor (index 9) is
+    recorded, so it hits the second pass; a beam broken on the station's laser is restored at
+    the fault it causes (the pass is retried)."""
     state = {}
 
-    def gap_in_next_pass(e):
-        if isinstance(e, ev.PointMeasured) and int(e.record["index"]) == 9 and "rig" in state:
-            state["rig"].sim.laser_server.inject("gap", duration_s=1.0)
+    def on_event(e):
+        if isinstance(e, ev.PointMeasured) and int(e.record["index"]) == 9:
+            fault(state["rig"])
+        elif isinstance(e, ev.Fault) and protocol == "station":
+            state["rig"].sim.laser_server.set_beam_break(1, False)
 
-    cfg = _config(tmp_path, "linef1")
-    out = tmp_path / "gap.h5"
+    cfg = _config(tmp_path, protocol)
+    out = tmp_path / name
     with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
         state["rig"] = rig
-        result = run_sweep(rig, PLAN, out, cfg, sinks=[CallbackSink(gap_in_next_pass)], index=False)
+        result = run_sweep(rig, PLAN, out, cfg, sinks=[CallbackSink(on_event)], index=False)
     session = read_session(out)
     assert result.outcome == "completed" and len(session.points) == 40
     assert len(session.faults) >= 1 and {int(f["run"]) for f in session.faults} == {2}
+    return session
 
-    replayed = tmp_path / "gap.replay.h5"
-    with pytest.raises(Exception) as refused:  # the service refuses before anything is opened or written
-        prepare_replay(ReplayRequest(out, replayed))
-    assert "on-the-fly pass 2" in str(refused.value) and not replayed.exists()
+
+RETRIED = {  # protocol -> (the fault put into the second pass, the kind recorded)
+    "linef1": (lambda rig: rig.sim.laser_server.inject("gap", duration_s=1.0), "error"),  # no samples: cannot align
+    "station": (lambda rig: rig.sim.laser_server.set_beam_break(1, True), "beam_break"),
+}
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("protocol", sorted(RETRIED))
+def test_a_pass_retried_after_a_gap_or_a_beam_break_replays_with_its_fault(protocol, tmp_path, capsys):
+    fault, kind = RETRIED[protocol]
+    session = _record_with(tmp_path, protocol, "retried.h5", fault)
+    assert [(_s(f["kind"]), int(f["attempt"]), int(f["gave_up"])) for f in session.faults] == [(kind, 1, 0)]
+    out = tmp_path / "retried.replay.h5"
+    rc, stdout, err = _replay(session, out, capsys)
+    assert rc == 0, err
+    assert "identical to the recording: 40 points (all fields), 1 faults" in stdout
+    replayed = read_session(out)
+    a, b = session.faults[0], replayed.faults[0]
+    for key in ("index", "leg", "run", "target_mm", "time_s", "kind", "attempt", "gave_up"):
+        assert a[key] == b[key], key  # the fault's time bit for bit: the replay fails the attempt at it
+    assert np.array_equal(np.sort(session.points, order="index")["measured_mm"],
+                          np.sort(replayed.points, order="index")["measured_mm"])
+
+
+def _s(value) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+@pytest.mark.timeout(60)
+def test_an_onthefly_session_with_a_drive_fault_in_a_pass_is_refused_up_front_in_one_line(tmp_path, capsys):
+    """A drive fault inside the second pass: the pass is retried; a replay cannot make the moving
+    pass fail with it again, so the replay is refused before anything is opened or written."""
+    session = _record_with(tmp_path, "linef1", "drive.h5",
+                           lambda rig: rig.sim.drive_server.inject_fault(1, "overcurrent"))
+    assert {_s(f["kind"]) for f in session.faults} == {"drive_fault"}
+    replayed = tmp_path / "drive.replay.h5"
+    with pytest.raises(InputError, match="on-the-fly pass 2 met a drive fault"):
+        prepare_replay(ReplayRequest(session.path, replayed))
     rc, stdout, err = _replay(session, replayed, capsys)
-    assert rc == 2 and not replayed.exists()
+    assert rc == 2 and not replayed.exists() and "sweep" not in stdout
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in err, err
-    assert "leg 1 on-the-fly pass 2 met a fault" in lines[0] and "retried" in lines[0]
+    assert "leg 1 on-the-fly pass 2 met a drive fault (attempt 1) and was retried" in lines[0]
     assert "station fit" in lines[0]  # what to do instead
