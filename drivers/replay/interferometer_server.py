@@ -122,6 +122,11 @@ class ReplayInterferometer(SimInterferometer):
                     plant = self.plants.get(axis)
                     if plant is not None:  # a replayed fault of a pass fails its attempt here, at its time
                         plant.capture_asked(count=word == p.CMD_CAP_COUNT)
+                    ended = self.state.ended if word == p.CMD_CAP_COUNT else ""
+                if ended:  # a cut-short recording ended in this pass: end the run here, as recorded
+                    if self.state.on_end is not None:
+                        self.state.on_end(ended)  # outside the rig lock (see `_position`)
+                    return p.format_error(ERR_NOT_RECORDED, ended[:_MAX_ERR_TEXT])
         return super()._capture_command(word, args)
 
     def _environment(self) -> bytes:

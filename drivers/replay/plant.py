@@ -178,12 +178,15 @@ class ReplayPlant:
         reproducible kinds (`ONTHEFLY_FAULTS`) are replayed one attempt each, from that point's
         pulse on until the client asks what fails it (`capture_asked`): the kind is returned for
         every pulse of that attempt, and the instrument latches a BEAM sample (beam_break) or
-        nothing (error: the capture comes up short). None, with the mismatch kept, when the next
-        recorded point is not at this position and direction, holds a fault of another kind, or
-        there is none."""
+        nothing (error: the capture comes up short). None where a cut-short recording ends
+        (`state.ended`; the instrument ends the run at the capture's count, as `reading` does),
+        and, with the mismatch kept, when the next recorded point is not at this position and
+        direction, holds a fault of another kind, or there is none."""
         if self._failing is not None:
             return self._failing.kind
         p = self.current
+        if (p is None or not (p.has_value or self._pending)) and self.end_of_recording():
+            return None  # a cut-short recording ends here: the instrument says so when asked the count
         x, d = self.x_mm, self.direction
         if p is None or p.direction != d or abs(x - p.target_mm) > max(self.state.target_tol_mm, 1e-5):
             self._arrival = (x, d)
@@ -224,6 +227,14 @@ class ReplayPlant:
 
     # -- when the recording does not hold what is asked -----------------------------------------
     def _not_recorded(self) -> LaserAnswer:
+        ended = self.end_of_recording()
+        if ended:
+            return LaserAnswer("end", None, ended)
+        return self._mismatch(self._describe_mismatch())
+
+    def end_of_recording(self) -> str:
+        """Why the recording has nothing more for this leg because it was cut short (every point
+        replayed, outcome not completed), kept in `state.ended`; "" if that is not the case."""
         st = self.state
         script = st.script
         if st.all_served and script.outcome != "completed" and not (self.current and self.current.has_value):
@@ -231,8 +242,8 @@ class ReplayPlant:
                 f"replay: the recording {script.source} ends here (its outcome was {script.outcome}; "
                 f"{script.value_points} points replayed)"
             )
-            return LaserAnswer("end", None, st.ended)
-        return self._mismatch(self._describe_mismatch())
+            return st.ended
+        return ""
 
     def _mismatch(self, message: str) -> LaserAnswer:
         if self.state.mismatch is None:

@@ -19,6 +19,7 @@ import pytest
 
 from procedures.acquisition.plans import onthefly_plan
 from procedures.engine import events as ev
+from procedures.engine.control import RunControl
 from procedures.engine.runner import CallbackSink
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
@@ -166,3 +167,31 @@ def test_an_onthefly_session_with_a_drive_fault_in_a_pass_is_refused_up_front_in
     assert len(lines) == 1 and "Traceback" not in err, err
     assert "leg 1 on-the-fly pass 2 met a drive fault (attempt 1) and was retried" in lines[0]
     assert "station fit" in lines[0]  # what to do instead
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("protocol", ["linef1", "station"])
+def test_an_onthefly_session_cut_short_replays_to_where_it_ends_and_is_aborted_there(protocol, tmp_path, capsys):
+    """Aborted by the operator once the second pass is recorded: the replay runs the third pass's
+    first attempt, finds the recording ends there, and aborts the run (it replayed into a
+    mismatch, with beam breaks the recording does not have, and failed)."""
+    control = RunControl()
+
+    def stop_after_pass_2(e):
+        if isinstance(e, ev.PointMeasured) and int(e.record["index"]) == 12:
+            control.abort("operator")
+
+    cfg = _config(tmp_path, protocol)
+    out = tmp_path / "cut.h5"
+    with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
+        result = run_sweep(rig, PLAN, out, cfg, sinks=[CallbackSink(stop_after_pass_2)], control=control, index=False)
+    session = read_session(out)
+    assert result.outcome == "aborted" and len(session.points) == 20 and len(session.faults) == 0
+    replayed_path = tmp_path / "cut.replay.h5"
+    rc, stdout, err = _replay(session, replayed_path, capsys)
+    assert rc == 0, err
+    assert "(aborted, 20 points; rig replay)" in stdout and "identical to the recording" in stdout
+    replayed = read_session(replayed_path)
+    assert replayed.outcome == "aborted" and len(replayed.faults) == 0
+    assert np.array_equal(np.sort(session.points, order="index")["measured_mm"],
+                          np.sort(replayed.points, order="index")["measured_mm"])
