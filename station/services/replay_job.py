@@ -90,9 +90,13 @@ def prepare_replay(request: ReplayRequest, cfg: StationConfig | None = None) -> 
     if refusal:
         raise InputError(refusal)
     cfg = config_or_load(cfg)
-    return PreparedReplay(source, session, out, request.speed, request.force, cfg,
-                          lines=[f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) "
-                                 f"{pace_text(request.speed)}"])
+    lines = [f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) {pace_text(request.speed)}"]
+    if (session.station_config.get("interferometer") or {}).get("protocol") == "linef1":
+        # say how, so nobody takes the replay for a test of the µLine-F1's frames (docs/replay.md)
+        lines.append("recorded with the µLine-F1: its recorded readings are served by the replay instrument over the "
+                     "station's protocol" + (", each pass's at the replay drive's compare pulses"
+                                             if (session.plan or {}).get("speeds_mm_s") else ""))
+    return PreparedReplay(source, session, out, request.speed, request.force, cfg, lines=lines)
 
 
 def onthefly_refusal(session: Session, source: Path) -> str | None:

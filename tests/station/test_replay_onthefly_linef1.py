@@ -82,6 +82,9 @@ def test_an_onthefly_session_replays_to_the_recorded_points(recorded, protocol, 
     rc, stdout, err = _replay(session, out, capsys)
     assert rc == 0, err
     assert "identical to the recording: 40 points (all fields)" in stdout
+    # the engineer is told how a µLine-F1 session is replayed (not through its frames)
+    assert ("recorded with the µLine-F1: its recorded readings are served by the replay instrument over the "
+            "station's protocol, each pass's at the replay drive's compare pulses" in stdout) == (protocol == "linef1")
     replayed = read_session(out)
     assert replayed.attrs["rig"] == "replay"
     a = np.sort(pts, order="index")
