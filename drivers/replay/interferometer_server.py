@@ -90,8 +90,8 @@ class ReplayInterferometer(SimInterferometer):
         return p.format_error(code, answer.text[:_MAX_ERR_TEXT])
 
     def trigger(self, leg: int, t_s: float) -> None:
-        """As the simulated instrument's, but a pulse of a failing attempt replayed as an error
-        latches nothing (`_capture_sample` None): the capture comes up short, as recorded."""
+        """As the simulated instrument's, but a pulse of a failing attempt replayed as an error, a
+        time-out or line noise latches nothing (`_capture_sample` None)."""
         cap = self._capture.get(leg)
         if cap is None or len(cap[1]) >= cap[0]:
             return
@@ -102,32 +102,41 @@ class ReplayInterferometer(SimInterferometer):
     def _capture_sample(self, axis: int, t_s: float) -> tuple[str, str, str, str] | None:
         """A trigger pulse of an on-the-fly pass (the replay drive's position compare): latch the
         next recorded point of the leg, if it is the one at this compare position, with its
-        recorded reading and time, exactly; a recorded beam break of the pass a BEAM sample, a
-        recorded error nothing (drivers.replay.plant.ReplayPlant.capture); a pulse the recording
+        recorded reading and time, exactly; a recorded beam break of the pass a BEAM sample, another
+        recorded fault of the laser nothing (drivers.replay.plant.ReplayPlant.capture); a pulse the recording
         does not hold latches a BEAM sample and the mismatch is kept (docs/replay.md)."""
         plant = self.plants.get(axis)
         pt = plant.capture() if plant is not None else None
-        if pt is FaultKind.ERROR:
+        if pt in (FaultKind.ERROR, FaultKind.TIMEOUT, FaultKind.FRAMING):
             return None
         if not isinstance(pt, ReplayPoint):
             return exact(self._last_position_mm[axis]), "BEAM", "0.0", f"{t_s:.6f}"
         self._last_position_mm[axis] = pt.measured_mm
         return exact(pt.measured_mm), "OK", signal_text(pt), exact(pt.time_s)
 
-    def _capture_command(self, word: str, args: list[str]) -> bytes:
-        if word != p.CMD_CAP_ARM:
-            axis = self._axis(args[:1])
-            if not isinstance(axis, bytes):
-                with self.lock:
-                    plant = self.plants.get(axis)
-                    if plant is not None:  # a replayed fault of a pass fails its attempt here, at its time
-                        plant.capture_asked(count=word == p.CMD_CAP_COUNT)
-                    ended = self.state.ended if word == p.CMD_CAP_COUNT else ""
-                if ended:  # a cut-short recording ended in this pass: end the run here, as recorded
-                    if self.state.on_end is not None:
-                        self.state.on_end(ended)  # outside the rig lock (see `_position`)
-                    return p.format_error(ERR_NOT_RECORDED, ended[:_MAX_ERR_TEXT])
-        return super()._capture_command(word, args)
+    def _capture_command(self, word: str, args: list[str]) -> bytes | None:
+        axis = self._axis(args[:1])
+        if isinstance(axis, bytes):
+            return super()._capture_command(word, args)
+        with self.lock:
+            plant = self.plants.get(axis)
+            mode = ended = None
+            if plant is not None and word == p.CMD_CAP_ARM:
+                plant.capture_armed()
+            elif plant is not None:  # a replayed fault of a pass fails its attempt here, at its time
+                mode = plant.capture_asked(count=word == p.CMD_CAP_COUNT)
+            if word == p.CMD_CAP_COUNT:
+                ended = self.state.ended
+        if ended:  # a cut-short recording ended in this pass: end the run here, as recorded
+            if self.state.on_end is not None:
+                self.state.on_end(ended)  # outside the rig lock (see `_position`)
+            return p.format_error(ERR_NOT_RECORDED, ended[:_MAX_ERR_TEXT])
+        if mode == "silent":
+            if self.timeout_clock is not None:
+                self.timeout_clock.silence()  # the client's wait for this reply ends now
+            return None
+        reply = super()._capture_command(word, args)
+        return self._corrupt(reply, "checksum") if mode == "garbage" else reply
 
     def _environment(self) -> bytes:
         with self.lock:

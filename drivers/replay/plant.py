@@ -24,11 +24,12 @@ from drivers.replay.replay_errors import ReplayMismatch
 from drivers.replay.script import ReplayFault, ReplayPoint, ReplayScript
 from drivers.states import FaultKind
 
-ONTHEFLY_FAULTS = (FaultKind.BEAM_BREAK, FaultKind.ERROR)
-"""Faults of an on-the-fly pass a replay reproduces (the pass's attempt fails the same way at the
-recorded time): a beam break (a sample latched without beam), any other error (the capture comes
-up short: the recorded text, e.g. a µLine-F1's gap in the stream, is not the replay's). A drive
-fault, a time-out or line noise inside a pass is not (station.services.replay_job refuses it)."""
+ONTHEFLY_FAULTS = (FaultKind.BEAM_BREAK, FaultKind.ERROR, FaultKind.TIMEOUT, FaultKind.FRAMING)
+"""Faults of an on-the-fly pass a replay reproduces, the laser's: the pass's attempt fails the same
+way at the recorded time, at the capture's read-back (a beam break: a sample latched without beam;
+an error: the capture comes up short; a time-out or line noise: the count asked is not answered,
+or garbled). The recorded text (e.g. a µLine-F1's gap in the stream) is not the replay's. A drive
+fault inside a pass is not reproduced (station.services.replay_job refuses such a session)."""
 
 
 @dataclass(frozen=True)
@@ -178,7 +179,7 @@ class ReplayPlant:
         reproducible kinds (`ONTHEFLY_FAULTS`) are replayed one attempt each, from that point's
         pulse on until the client asks what fails it (`capture_asked`): the kind is returned for
         every pulse of that attempt, and the instrument latches a BEAM sample (beam_break) or
-        nothing (error: the capture comes up short). None where a cut-short recording ends
+        nothing (the others). None where a cut-short recording ends
         (`state.ended`; the instrument ends the run at the capture's count, as `reading` does),
         and, with the mismatch kept, when the next recorded point is not at this position and
         direction, holds a fault of another kind, or there is none."""
@@ -215,14 +216,28 @@ class ReplayPlant:
         self._at = None
         return p
 
-    def capture_asked(self, count: bool) -> None:
+    def capture_asked(self, count: bool) -> str | None:
         """The client asks the capture's count (`count`) or its samples: where a recorded fault of
-        a pass is being replayed, this is where its attempt fails (error: the count is short;
-        beam_break: the first sample has no beam), so the clock is set to the fault's recorded
-        time (the client raises at once, and the sweep stamps the fault with it)."""
+        a pass is being replayed, this is where its attempt fails, so the clock is set to the
+        fault's recorded time (the client raises at once, and the sweep stamps the fault with
+        it). An error: the count is short (latched nothing); a beam break: the first sample has
+        no beam; a time-out or line noise: the count is answered with silence ("silent") or a
+        garbled reply ("garbage"), also to the client's own retries, until the capture is armed
+        again (`capture_armed`). Returns that mode, else None (answer as the instrument does)."""
         f = self._failing
-        if f is not None and (f.kind is FaultKind.ERROR) == count:
-            self.state.clock.set_recorded(f.time_s)
+        if f is None or (f.kind is FaultKind.BEAM_BREAK) == count:
+            return None
+        self.state.clock.set_recorded(f.time_s)
+        if f.kind is FaultKind.TIMEOUT:
+            return "silent"
+        if f.kind is FaultKind.FRAMING:
+            return "garbage"
+        self._failing = None
+        return None
+
+    def capture_armed(self) -> None:
+        """The capture is armed: a new attempt (a replayed time-out or line noise has ended)."""
+        if self._failing is not None and self._failing.kind in (FaultKind.TIMEOUT, FaultKind.FRAMING):
             self._failing = None
 
     # -- when the recording does not hold what is asked -----------------------------------------

@@ -105,11 +105,12 @@ def onthefly_refusal(session: Session, source: Path) -> str | None:
     A pass is replayed by latching the recorded reading of each target at the replay drive's
     compare pulse (docs/replay.md), with either laser: the recording holds each pass's readings
     (for a streaming laser, the µLine-F1, the result of aligning its samples with the drive's
-    trace), not the samples nor the trace. A pass retried after a beam break or an error (a gap
-    in the µLine-F1's stream, a capture short of pulses) is replayed failing the same way at the
-    recorded time (drivers.replay.plant.ONTHEFLY_FAULTS); one retried after a drive fault, a
-    time-out or line noise inside the moving pass cannot be made to fail the same way, so such a
-    session is refused here rather than replayed into a mismatch halfway, or into another run."""
+    trace), not the samples nor the trace. A pass retried after a fault of the laser (a beam break,
+    an error, a time-out, line noise: e.g. a gap in the µLine-F1's stream) is replayed failing the
+    same way at the recorded time (drivers.replay.plant.ONTHEFLY_FAULTS); one retried after a
+    drive fault inside the moving pass cannot be made to fail the same way (a replay drive faults
+    on arriving at a recorded point), so such a session is refused here rather than replayed into
+    a mismatch halfway, or into another run."""
     from drivers.replay.plant import ONTHEFLY_FAULTS
     from procedures.acquisition.plans import SweepPlan
 
@@ -126,7 +127,7 @@ def onthefly_refusal(session: Session, source: Path) -> str | None:
         what = kind.replace("_", " ") + ("" if "fault" in kind else " fault")
         return (f"{source}: leg {int(f['leg'])} on-the-fly pass {run} met a {what} (attempt {int(f['attempt'])}) and "
                 f"was {'given up' if int(f['gave_up']) else 'retried'}; a replay cannot make a moving pass fail with a "
-                f"{what} again (only with a beam break or an error), so it is refused; analyse the recording itself "
+                f"{what} again (only with the laser's faults), so it is refused; analyse the recording itself "
                 f"(station fit {source} --out model.json)")
     return None
 

@@ -4,10 +4,10 @@ real HDF5) is replayed by `station replay` through the replay devices (the repla
 server, the replay instrument's pty) and must give the recorded points back, every field bit for
 bit (tolerance 0: the replay instrument sends every number with `repr`, the drive's values come
 back through the registers they were recorded through). A pass's readings there carry no signal
-level (NaN, from the stream's alignment): the replay keeps them NaN. A pass retried after a gap in
-the stream (an error) or a beam break replays failing the same way, at the recorded time; one
-retried after a drive fault cannot be replayed faithfully and is refused up front in one line,
-nothing written."""
+level (NaN, from the stream's alignment): the replay keeps them NaN. A pass retried after a fault
+of the laser (a gap in the stream, a beam break, line noise) replays failing the same way, at the
+recorded time; one retried after a drive fault cannot be replayed faithfully and is refused up
+front in one line, nothing written."""
 
 from __future__ import annotations
 
@@ -126,16 +126,18 @@ def _record_with(tmp_path, protocol: str, name: str, fault):
     return session
 
 
-RETRIED = {  # protocol -> (the fault put into the second pass, the kind recorded)
-    "linef1": (lambda rig: rig.sim.laser_server.inject("gap", duration_s=1.0), "error"),  # no samples: cannot align
-    "station": (lambda rig: rig.sim.laser_server.set_beam_break(1, True), "beam_break"),
+RETRIED = {  # case -> (protocol, the fault put into the second pass, the kind recorded)
+    "linef1-gap-1s": ("linef1", lambda rig: rig.sim.laser_server.inject("gap", duration_s=1.0), "error"),  # cannot align
+    "linef1-gap-3s": ("linef1", lambda rig: rig.sim.laser_server.inject("gap", duration_s=3.0), "timeout"),  # too few frames
+    "station-beam": ("station", lambda rig: rig.sim.laser_server.set_beam_break(1, True), "beam_break"),
+    "station-noise": ("station", lambda rig: rig.sim.laser_server.inject_garbage(3), "framing"),  # a command's 3 tries
 }
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("protocol", sorted(RETRIED))
-def test_a_pass_retried_after_a_gap_or_a_beam_break_replays_with_its_fault(protocol, tmp_path, capsys):
-    fault, kind = RETRIED[protocol]
+@pytest.mark.parametrize("case", sorted(RETRIED))
+def test_a_pass_retried_after_a_fault_of_the_laser_replays_with_its_fault(case, tmp_path, capsys):
+    protocol, fault, kind = RETRIED[case]
     session = _record_with(tmp_path, protocol, "retried.h5", fault)
     assert [(_s(f["kind"]), int(f["attempt"]), int(f["gave_up"])) for f in session.faults] == [(kind, 1, 0)]
     out = tmp_path / "retried.replay.h5"
