@@ -204,6 +204,13 @@ class LineF1Interferometer:
             self._aimed = axis
             self._count_lost = False
 
+    def clear_signal_latch(self, axis: int) -> None:
+        """Clear the latched small-signal flag (drivers.interfaces.LatchingInterferometer): the
+        samples after the echo judge the beam by themselves. `axis` checked; the origin and a lost
+        count are untouched (only `zero` recovers those)."""
+        self._check_axis(axis)
+        self._command(lf.CMD_CLEAR_SMALL_SIGNAL)
+
     def _judge(self, samples, axis: int) -> None:
         """Every sample of a point's window or a pass's span must be good: a velocity overflow loses
         the count (CountLost, until the origin is set again), a small signal or an unstable laser is
