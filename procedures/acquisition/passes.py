@@ -31,6 +31,7 @@ from drivers.interfaces import (
 from procedures.engine import events as ev
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.plans import PlanPoint, SweepPlan
+from procedures.vocabulary import PlanError
 from procedures.io.recording.schema import FLAG_REREFERENCED, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, PointRecord
 from drivers.interfaces import FaultKind
 
@@ -135,6 +136,25 @@ def point_record(p: PlanPoint, reading: Reading, env: Environment, *, drive_posi
     )
 
 
+def reference_moves_mm(plan: SweepPlan) -> tuple[float, float]:
+    """Where preparing (and re-referencing) a leg moves it: the approach below the mid-stroke
+    reference, then the reference (0 mm), mm. The sweep checks both against each leg's soft
+    limits before anything moves (`check_reference_limits`)."""
+    return -max(plan.overrun_mm, 0.5), 0.0
+
+
+def check_reference_limits(plan: SweepPlan, min_mm: float, max_mm: float, leg: int) -> None:
+    """PlanError, before anything moves, when the leg's reference moves (`reference_moves_mm`)
+    leave its soft limits [min_mm, max_mm]: a lost count mid-session re-references the leg, so
+    they must be as safe as the plan's own travel."""
+    for where_mm in reference_moves_mm(plan):
+        if not min_mm - 1e-9 <= where_mm <= max_mm + 1e-9:
+            raise PlanError(f"leg {leg} is prepared (and re-referenced after a lost count) at its mid-stroke reference, "
+                            f"0 mm approached from {reference_moves_mm(plan)[0]:.3f} mm, but {where_mm:.3f} mm lies "
+                            f"outside its soft limits {min_mm:.3f} .. {max_mm:.3f} mm; set the drive's soft limits "
+                            "around its mid-stroke (or shrink the plan's overrun)")
+
+
 def prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan,
                 control: RunControl | None = None) -> None:
     """Enable the drive, go to the mid-stroke reference and zero the interferometer there.
@@ -144,15 +164,16 @@ def prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, 
     an abort asked for meanwhile (its stop quick-stops the drive) raises `Aborted` before the
     drive is enabled again or told to move (a re-reference runs in the middle of a session)."""
     check = control.check if control is not None else (lambda: None)
+    approach_mm, reference_mm = reference_moves_mm(plan)
     st = axis.status()
     if st.fault:
         axis.reset_fault()
     check()
     axis.enable()
     check()
-    axis.move_to(-max(plan.overrun_mm, 0.5))
+    axis.move_to(approach_mm)
     check()
-    axis.move_to(0.0)
+    axis.move_to(reference_mm)
     clock.sleep(plan.dwell_s)
     check()
     laser.zero(leg)

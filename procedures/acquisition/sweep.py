@@ -24,6 +24,7 @@ from procedures.acquisition.passes import (
     LaserRecovery,
     RetryPolicy,
     SweepFailed,
+    check_reference_limits,
     point_record,
     retry_after,
     start_leg,
@@ -84,6 +85,7 @@ def sweep(
     for leg in plan.legs:
         lim = axes[leg].limits()
         plan.validate_limits(lim.min_mm, lim.max_mm, leg)
+        check_reference_limits(plan, lim.min_mm, lim.max_mm, leg)  # where preparing and re-referencing go
     for leg in plan.legs:
         control.on_abort(axes[leg].stop)
 

@@ -6,12 +6,21 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.interfaces import BeamBreak, CommTimeout, DriveFault, Environment, Reading
+from drivers.interfaces import BeamBreak, CommTimeout, DriveFault, DriveLimits, Environment, Reading
 from procedures.engine import events as ev
 from procedures.engine.control import Aborted, RunControl
 from drivers.errors import CountLost
-from procedures.acquisition.passes import LaserRecovery, RetryPolicy, SweepFailed, point_record, retry_after
-from procedures.acquisition.plans import PlanPoint, onthefly_plan
+from procedures.acquisition.passes import (
+    LaserRecovery,
+    RetryPolicy,
+    SweepFailed,
+    check_reference_limits,
+    point_record,
+    retry_after,
+)
+from procedures.acquisition.plans import PlanPoint, SweepPlan, onthefly_plan
+from procedures.acquisition.sweep import sweep
+from procedures.vocabulary import PlanError
 from procedures.io.recording.schema import FLAG_REREFERENCED, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
 from procedures.io.recording.writer import point_row
 from drivers.interfaces import FaultKind
@@ -166,3 +175,24 @@ def test_an_abort_before_re_referencing_neither_enables_nor_moves():
     with pytest.raises(Aborted):
         recovery.before_attempt(PLAN, axis, LatchingLaser(axis.calls), 2, Clock(), control)
     assert "enable" not in axis.calls and not any(isinstance(c, tuple) for c in axis.calls)
+
+
+class _LimitedAxis(Axis):
+    """A leg whose soft limits hold the plan's travel but not its reference (0 mm)."""
+
+    def limits(self):
+        return DriveLimits(1.0, 95.0, 20.0, 200.0)
+
+
+def test_a_plan_whose_reference_moves_leave_the_soft_limits_is_refused_before_anything_moves():
+    plan = SweepPlan("limits", (10.0, 20.0, 30.0), cycles=1, legs=(2,), overrun_mm=4.0)
+    plan.validate_limits(1.0, 95.0, 2)  # its own travel (6 .. 34 mm) is inside the leg's limits
+    axis = _LimitedAxis()
+    with pytest.raises(PlanError, match=r"leg 2 is prepared \(and re-referenced after a lost count\) at its "
+                                        r"mid-stroke reference, 0 mm approached from -4.000 mm, but -4.000 mm lies "
+                                        r"outside its soft limits 1.000 .. 95.000 mm"):
+        list(sweep(plan, {2: axis}, LatchingLaser(axis.calls), Clock()))
+    assert axis.calls == []  # nothing asked of the drive, nothing moved
+    check_reference_limits(plan, -4.0, 95.0, 2)  # at the limit: allowed
+    with pytest.raises(PlanError, match="but 0.000 mm lies outside"):
+        check_reference_limits(plan, -4.0, -0.5, 2)
