@@ -206,3 +206,41 @@ def test_an_abort_while_re_referencing_stops_the_leg_there(tmp_path):
     approach_mm = -max(PLAN.overrun_mm, 0.5)
     assert after["position_mm"] == pytest.approx(approach_mm, abs=0.01), after  # not on to the reference (0)
     assert not after["enabled"]
+
+
+@pytest.mark.timeout(60)
+def test_a_lost_count_at_a_reversal_probe_re_references_the_leg_and_measures_it_again(tmp_path):
+    """The reversal probes are stop-and-go readings of an on-the-fly plan: a velocity overflow at
+    one is recovered by the same code (re-referenced, then the probe approached again over its
+    reversal); it equals the clean session's within the noise."""
+    plan = onthefly_plan((1,), cycles=2, step_mm=5.0, min_mm=-20.0, max_mm=20.0, dwell_s=0.2, averaging_s=0.2,
+                         reversal_probes=2)
+    first_probe = 40
+
+    def inject_at_probe(e, rig):
+        if isinstance(e, ev.PointMeasured) and int(e.record["index"]) == first_probe:
+            rig.sim.laser_server.inject("overflow")  # the next frame: on the way to the second probe
+
+    sessions = {}
+    for name in ("clean", "faulted"):
+        cfg = _config(tmp_path, "linef1")
+        out = tmp_path / f"{name}.h5"
+        with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
+            sinks = [CallbackSink(lambda e, rig=rig: inject_at_probe(e, rig))] if name == "faulted" else []
+            result = run_sweep(rig, plan, out, cfg, sinks=sinks, index=False)
+        assert result.outcome == "completed"
+        sessions[name] = read_session(out)
+    faulted, clean_s = sessions["faulted"], sessions["clean"]
+    assert [(f["kind"].decode(), int(f["index"]), int(f["attempt"])) for f in faulted.faults] == [
+        ("beam_break", first_probe + 1, 1)]
+    assert "velocity overflow" in faulted.faults[0]["message"].decode()
+    a, b = _by_index(faulted.points), _by_index(clean_s.points)
+    assert sorted(a) == sorted(b) == list(range(plan.total_points)) and plan.total_points == 44  # 2 probe pairs
+    retried = {i for i, p in a.items() if int(p["flags"]) & (FLAG_RETRIED_BEAM | FLAG_REREFERENCED)}
+    assert retried == {first_probe + 1}
+    assert int(a[first_probe + 1]["flags"]) & (FLAG_RETRIED_BEAM | FLAG_REREFERENCED) == (
+        FLAG_RETRIED_BEAM | FLAG_REREFERENCED)
+    diff_um = np.array([a[i]["error_um"] - b[i]["error_um"] for i in sorted(a)])
+    print(f"\nprobe overflow: |error - clean error| max {np.max(np.abs(diff_um)):.4f} um "
+          f"(the retried probe {abs(diff_um[first_probe + 1]):.4f} um)")
+    assert np.max(np.abs(diff_um)) < NOISE_UM
