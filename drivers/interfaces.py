@@ -304,6 +304,16 @@ class StreamingInterferometer(Protocol):
 
 
 @runtime_checkable
+class LatchingInterferometer(Protocol):
+    """An interferometer that latches a lost signal (the µLine-F1's small-signal flag): every
+    sample after a beam break carries it until `clear_signal_latch` (a stop-and-go reading clears
+    it as its window opens; an on-the-fly pass's retry has it cleared first,
+    procedures/acquisition/passes.py LaserRecovery)."""
+
+    def clear_signal_latch(self, axis: int) -> None: ...
+
+
+@runtime_checkable
 class TracingAxis(Protocol):
     """A drive whose position actual can be polled during a move (`move_traced`): (time on the
     station's clock, position mm) per poll."""

@@ -24,7 +24,9 @@ echoing its code (protocol: drivers/linef1/protocol.py, docs/interferometer-prot
 - `stream_samples(axis, t0, t1)`: the samples of a span for an on-the-fly pass, their stamps put
   on the stream's own frame grid (`_grid_stamps`: frame number x period plus the earliest
   arrival's offset ahead), which the pass aligns with the drive's traced positions
-  (docs/interferometer-protocol.md, "Time stamps").
+  (docs/interferometer-protocol.md, "Time stamps"). Its span cannot clear the latched
+  small-signal flag as a reading's window does: after a beam break the pass's retry clears it
+  first (`clear_signal_latch`).
 - One beam: the instrument measures the leg it was last zeroed on (`zero(axis)`); reading
   another axis is refused.
 - The protocol as publicly described has no identity query: `identity()` gives the model and
@@ -203,6 +205,13 @@ class LineF1Interferometer:
             self._origin_seq = seq
             self._aimed = axis
             self._count_lost = False
+
+    def clear_signal_latch(self, axis: int) -> None:
+        """Clear the latched small-signal flag (drivers.interfaces.LatchingInterferometer): the
+        samples after the echo judge the beam by themselves. `axis` checked; the origin and a lost
+        count are untouched (only `zero` recovers those)."""
+        self._check_axis(axis)
+        self._command(lf.CMD_CLEAR_SMALL_SIGNAL)
 
     def _judge(self, samples, axis: int) -> None:
         """Every sample of a point's window or a pass's span must be good: a velocity overflow loses

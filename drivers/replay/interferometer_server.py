@@ -23,7 +23,9 @@ import threading
 from drivers.interferometer import protocol as p
 from drivers.replay.clock import DeviceClock, TimeoutClock
 from drivers.replay.plant import ReplayPlant, ReplayState
+from drivers.replay.script import UNKNOWN_SIGNAL_PCT, ReplayPoint
 from drivers.sim.interferometer_server import SimInterferometer
+from drivers.states import FaultKind
 
 ERR_NOT_RECORDED = 10
 """ERR code of a query the recording cannot answer (a mismatch, or the end of the recording)."""
@@ -35,6 +37,12 @@ _MAX_ERR_TEXT = 180  # an ERR line must stay well under the protocol's 256-byte 
 def exact(value: float) -> str:
     """A float as the shortest text that parses back to the same double ('NAN' if NaN)."""
     return "NAN" if math.isnan(value) else repr(float(value))
+
+
+def signal_text(pt: ReplayPoint) -> str:
+    """A point's recorded signal level, exactly; an unknown one (a streamed pass's reading: the
+    protocol needs 0..100 there) as UNKNOWN_SIGNAL_PCT, which the replay's recorder puts back."""
+    return exact(UNKNOWN_SIGNAL_PCT if math.isnan(pt.signal_pct) else pt.signal_pct)
 
 
 class ReplayInterferometer(SimInterferometer):
@@ -65,7 +73,7 @@ class ReplayInterferometer(SimInterferometer):
         kind = answer.kind
         if kind == "value":
             pt = answer.point
-            return p.frame_reply("POS", axis, exact(pt.measured_mm), "OK", exact(pt.signal_pct), f"{t_s:.6f}")
+            return p.frame_reply("POS", axis, exact(pt.measured_mm), "OK", signal_text(pt), f"{t_s:.6f}")
         if kind == "beam":
             return p.frame_reply("POS", axis, exact(last), "BEAM", "0.0", f"{t_s:.6f}")
         if kind == "silent":
@@ -81,17 +89,54 @@ class ReplayInterferometer(SimInterferometer):
         code = ERR_REPLAYED if kind == "error" else ERR_NOT_RECORDED
         return p.format_error(code, answer.text[:_MAX_ERR_TEXT])
 
-    def _capture_sample(self, axis: int, t_s: float) -> tuple[str, str, str, str]:
+    def trigger(self, leg: int, t_s: float) -> None:
+        """As the simulated instrument's, but a pulse of a failing attempt replayed as an error, a
+        time-out or line noise latches nothing (`_capture_sample` None)."""
+        cap = self._capture.get(leg)
+        if cap is None or len(cap[1]) >= cap[0]:
+            return
+        sample = self._capture_sample(leg, t_s)
+        if sample is not None:
+            cap[1].append(sample)
+
+    def _capture_sample(self, axis: int, t_s: float) -> tuple[str, str, str, str] | None:
         """A trigger pulse of an on-the-fly pass (the replay drive's position compare): latch the
         next recorded point of the leg, if it is the one at this compare position, with its
-        recorded reading and time, exactly; a pulse the recording does not hold latches a BEAM
-        sample and the mismatch is kept (docs/replay.md)."""
+        recorded reading and time, exactly; a recorded beam break of the pass a BEAM sample, another
+        recorded fault of the laser nothing (drivers.replay.plant.ReplayPlant.capture); a pulse the recording
+        does not hold latches a BEAM sample and the mismatch is kept (docs/replay.md)."""
         plant = self.plants.get(axis)
         pt = plant.capture() if plant is not None else None
-        if pt is None:
+        if pt in (FaultKind.ERROR, FaultKind.TIMEOUT, FaultKind.FRAMING):
+            return None
+        if not isinstance(pt, ReplayPoint):
             return exact(self._last_position_mm[axis]), "BEAM", "0.0", f"{t_s:.6f}"
         self._last_position_mm[axis] = pt.measured_mm
-        return exact(pt.measured_mm), "OK", exact(pt.signal_pct), exact(pt.time_s)
+        return exact(pt.measured_mm), "OK", signal_text(pt), exact(pt.time_s)
+
+    def _capture_command(self, word: str, args: list[str]) -> bytes | None:
+        axis = self._axis(args[:1])
+        if isinstance(axis, bytes):
+            return super()._capture_command(word, args)
+        with self.lock:
+            plant = self.plants.get(axis)
+            mode = ended = None
+            if plant is not None and word == p.CMD_CAP_ARM:
+                plant.capture_armed()
+            elif plant is not None:  # a replayed fault of a pass fails its attempt here, at its time
+                mode = plant.capture_asked(count=word == p.CMD_CAP_COUNT)
+            if word == p.CMD_CAP_COUNT:
+                ended = self.state.ended
+        if ended:  # a cut-short recording ended in this pass: end the run here, as recorded
+            if self.state.on_end is not None:
+                self.state.on_end(ended)  # outside the rig lock (see `_position`)
+            return p.format_error(ERR_NOT_RECORDED, ended[:_MAX_ERR_TEXT])
+        if mode == "silent":
+            if self.timeout_clock is not None:
+                self.timeout_clock.silence()  # the client's wait for this reply ends now
+            return None
+        reply = super()._capture_command(word, args)
+        return self._corrupt(reply, "checksum") if mode == "garbage" else reply
 
     def _environment(self) -> bytes:
         with self.lock:

@@ -21,8 +21,15 @@ from typing import Callable
 
 from drivers.replay.clock import ReplayClock
 from drivers.replay.replay_errors import ReplayMismatch
-from drivers.replay.script import ReplayPoint, ReplayScript
+from drivers.replay.script import ReplayFault, ReplayPoint, ReplayScript
 from drivers.states import FaultKind
+
+ONTHEFLY_FAULTS = (FaultKind.BEAM_BREAK, FaultKind.ERROR, FaultKind.TIMEOUT, FaultKind.FRAMING)
+"""Faults of an on-the-fly pass a replay reproduces, the laser's: the pass's attempt fails the same
+way at the recorded time, at the capture's read-back (a beam break: a sample latched without beam;
+an error: the capture comes up short; a time-out or line noise: the count asked is not answered,
+or garbled). The recorded text (e.g. a µLine-F1's gap in the stream) is not the replay's. A drive
+fault inside a pass is not reproduced (station.services.replay_job refuses such a session)."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +91,7 @@ class ReplayPlant:
         self._laser_mode: str | None = None  # "silent" / "garbage" until the next move
         self._arrival: tuple[float, int] | None = None  # last (commanded mm, direction)
         self._last_served: ReplayPoint | None = None
+        self._failing: ReplayFault | None = None  # a recorded fault of an on-the-fly pass, being replayed
 
     # -- what LegPlant offers the simulated servers ---------------------------------------------
     def move(self, to_mm: float, t_end_s: float) -> None:
@@ -163,18 +171,39 @@ class ReplayPlant:
         self._at = "served"
         return LaserAnswer("value", p)
 
-    def capture(self) -> ReplayPoint | None:
+    def capture(self) -> ReplayPoint | FaultKind | None:
         """A compare pulse of an on-the-fly pass: the next recorded point, served as the sample
-        latched at it (the drive's nut is at the pulse's position now). None, with the mismatch
-        kept, when the next recorded point is not at this position and direction, holds faults
-        (not replayed on the fly), or there is none."""
+        latched at it (the drive's nut is at the pulse's position now).
+
+        A pass the recording retried holds its failed attempts' faults at its first point; the
+        reproducible kinds (`ONTHEFLY_FAULTS`) are replayed one attempt each, from that point's
+        pulse on until the client asks what fails it (`capture_asked`): the kind is returned for
+        every pulse of that attempt, and the instrument latches a BEAM sample (beam_break) or
+        nothing (the others). None where a cut-short recording ends
+        (`state.ended`; the instrument ends the run at the capture's count, as `reading` does),
+        and, with the mismatch kept, when the next recorded point is not at this position and
+        direction, holds a fault of another kind, or there is none."""
+        if self._failing is not None:
+            return self._failing.kind
         p = self.current
+        if (p is None or not (p.has_value or self._pending)) and self.end_of_recording():
+            return None  # a cut-short recording ends here: the instrument says so when asked the count
         x, d = self.x_mm, self.direction
-        if p is None or not p.has_value or p.direction != d or abs(x - p.target_mm) > max(self.state.target_tol_mm, 1e-5) \
-                or p.faults:
+        if p is None or p.direction != d or abs(x - p.target_mm) > max(self.state.target_tol_mm, 1e-5):
             self._arrival = (x, d)
-            why = " (its recorded faults are not replayed on the fly)" if p is not None and p.faults else ""
-            self._mismatch(self._describe_mismatch() + why)
+            self._mismatch(self._describe_mismatch())
+            return None
+        if self._pending:
+            fault = self._pending[0]
+            if fault.kind not in ONTHEFLY_FAULTS:
+                self._arrival = (x, d)
+                self._mismatch(self._describe_mismatch() + f" (its recorded {fault.kind} fault is not replayed on the fly)")
+                return None
+            self._failing = self._pending.popleft()
+            return fault.kind
+        if not p.has_value:
+            self._arrival = (x, d)
+            self._mismatch(self._describe_mismatch())
             return None
         self.state.clock.set_recorded(p.time_s)
         self.load_n = p.load_n
@@ -187,8 +216,40 @@ class ReplayPlant:
         self._at = None
         return p
 
+    def capture_asked(self, count: bool) -> str | None:
+        """The client asks the capture's count (`count`) or its samples: where a recorded fault of
+        a pass is being replayed, this is where its attempt fails, so the clock is set to the
+        fault's recorded time (the client raises at once, and the sweep stamps the fault with
+        it). An error: the count is short (latched nothing); a beam break: the first sample has
+        no beam; a time-out or line noise: the count is answered with silence ("silent") or a
+        garbled reply ("garbage"), also to the client's own retries, until the capture is armed
+        again (`capture_armed`). Returns that mode, else None (answer as the instrument does)."""
+        f = self._failing
+        if f is None or (f.kind is FaultKind.BEAM_BREAK) == count:
+            return None
+        self.state.clock.set_recorded(f.time_s)
+        if f.kind is FaultKind.TIMEOUT:
+            return "silent"
+        if f.kind is FaultKind.FRAMING:
+            return "garbage"
+        self._failing = None
+        return None
+
+    def capture_armed(self) -> None:
+        """The capture is armed: a new attempt (a replayed time-out or line noise has ended)."""
+        if self._failing is not None and self._failing.kind in (FaultKind.TIMEOUT, FaultKind.FRAMING):
+            self._failing = None
+
     # -- when the recording does not hold what is asked -----------------------------------------
     def _not_recorded(self) -> LaserAnswer:
+        ended = self.end_of_recording()
+        if ended:
+            return LaserAnswer("end", None, ended)
+        return self._mismatch(self._describe_mismatch())
+
+    def end_of_recording(self) -> str:
+        """Why the recording has nothing more for this leg because it was cut short (every point
+        replayed, outcome not completed), kept in `state.ended`; "" if that is not the case."""
         st = self.state
         script = st.script
         if st.all_served and script.outcome != "completed" and not (self.current and self.current.has_value):
@@ -196,8 +257,8 @@ class ReplayPlant:
                 f"replay: the recording {script.source} ends here (its outcome was {script.outcome}; "
                 f"{script.value_points} points replayed)"
             )
-            return LaserAnswer("end", None, st.ended)
-        return self._mismatch(self._describe_mismatch())
+            return st.ended
+        return ""
 
     def _mismatch(self, message: str) -> LaserAnswer:
         if self.state.mismatch is None:

@@ -4,7 +4,10 @@ Built from the arrays of a session file (field names of procedures/io/recording/
 module takes plain structured arrays so drivers never import procedures). Every value a device
 reports over its protocol must be known, so a point with an unknown (NaN) measured position,
 drive position, load, time or air value is refused here, when the replay is opened, with the
-point and field named; a material temperature may be unknown (the instrument reports NAN).
+point and field named; a material temperature may be unknown (the instrument reports NAN), and so
+may the signal level of a point read on the move (`speed_mm_s` recorded): a streaming laser's pass
+(the µLine-F1) has no signal level at a target, so the replay instrument sends `UNKNOWN_SIGNAL_PCT`
+for it and the replay's recorder writes the recorded NaN back (station.services.jobs).
 
 Faults are attached to the point they hit (by plan index), in attempt order. A session that was
 resumed after giving up at a point holds two episodes for that point: the one that ended the
@@ -32,6 +35,9 @@ DEFAULT_DRIVE_FAULT_CODE = 0x8611  # following error: used when a recorded messa
 # Fields the devices report over their protocols: unknown values cannot be sent.
 _REPORTED = ("measured_mm", "drive_position_mm", "time_s", "air_temp_c", "air_pressure_hpa",
              "humidity_pct", "load_n", "signal_pct")
+UNKNOWN_SIGNAL_PCT = 0.0
+"""What the replay instrument sends for a recorded unknown (NaN) signal level (a point of a streamed
+pass): the station's protocol must carry a number in 0..100 there."""
 _CODE = re.compile(r"0x([0-9A-Fa-f]{4})")
 
 
@@ -132,7 +138,10 @@ class ReplayScript:
             if index in by_index:
                 raise ReplayDataError(f"{source}: point index {index} is recorded twice; the file is inconsistent")
             where = f"{source}: point index {index} (leg {int(row['leg'])} run {int(row['run'])} target {float(row['target_mm']):.4f} mm)"
+            on_the_move = "speed_mm_s" in row.dtype.names and math.isfinite(float(row["speed_mm_s"]))
             for name in _REPORTED:
+                if name == "signal_pct" and on_the_move:
+                    continue  # a streamed pass's reading has no signal level (see the module's doc)
                 if not math.isfinite(float(row[name])):
                     raise ReplayDataError(
                         f"{where} has no recorded {name} (NaN); the replay devices report it over the "

@@ -20,7 +20,9 @@ and `align_stream` makes each target's reading from the two on the station's clo
 
 A fault during a pass (a sample taken without beam, fewer samples than pulses expected, a drive
 fault) is retried as the stop-and-go sweep retries a point (procedures/acquisition/passes.py), but for the
-whole pass (a moving axis cannot go back for one sample). `sweep()` calls `onthefly_passes` in
+whole pass (a moving axis cannot go back for one sample): its readings are dropped; after a lost
+count the leg is re-referenced first and after a beam break a latching laser's flag cleared, as
+for a point (passes.LaserRecovery; the pass's records say so: FLAG_REREFERENCED, FLAG_RETRIED_BEAM). `sweep()` calls `onthefly_passes` in
 place of its loop over points; safety (limits checked before any motion, stop and disable on
 every exit) stays with `sweep()`.
 """
@@ -46,7 +48,7 @@ from procedures.engine import events as ev
 from procedures.acquisition.adaptive import AdaptiveRule
 from procedures.acquisition.probe_rule import ProbeRule
 from procedures.engine.control import Aborted, RunControl
-from procedures.acquisition.passes import RetryPolicy, point_record, retry_after, start_leg
+from procedures.acquisition.passes import LaserRecovery, RetryPolicy, point_record, retry_after, start_leg
 from procedures.acquisition.plans import PlanPoint, SweepPlan
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_PROBE, POINT_DTYPE
 from procedures.io.recording.writer import point_row
@@ -183,10 +185,12 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
     it (`SweepPlan.probe_via_mm`). Returns the count of points done and the probe's record."""
     flags = FLAG_PROBE
     attempt = 0
+    recovery = LaserRecovery()  # a lost count (re-referenced: then approached again) or a beam break
     while True:
         yield from control.checkpoint()
         attempt += 1
         try:
+            flags |= recovery.before_attempt(plan, axis, laser, p.leg, clock, control)
             # at the plan's faster pass speed: the leg runs it on the fly anyway, and the probes'
             # moves (up the stroke in steps, a gap down) are most of their time after the dwell
             speed = max(plan.speeds_mm_s)
@@ -210,6 +214,7 @@ def _probe(plan: SweepPlan, p: PlanPoint, axis: ServoAxis, laser: Interferometer
             raise
         except DriverError as exc:
             flags |= yield from retry_after(exc, attempt, retry, control, clock, axis, p, t_start, "reversal probe: ")
+            recovery.note(exc)
     record = point_record(p, reading, env, drive_position_mm=status.position_mm, time_s=clock.now() - t_start,
                           material_temp_c=env.material_temp_of(p.leg), load_n=status.load_n, flags=flags,
                           speed_mm_s=float("nan"))
@@ -318,10 +323,14 @@ def onthefly_passes(
         flags = 0
         attempt = 0
         samples = None
+        # a lost count: the pass's readings are dropped, the leg re-referenced (the laser zeroed
+        # at its reference) before it runs again; a beam break: the laser's latch cleared first
+        recovery = LaserRecovery()
         while samples is None:
             yield from control.checkpoint()
             attempt += 1
             try:
+                flags |= recovery.before_attempt(plan, axis, laser, leg, clock, control)
                 if probing:  # the last leg's probes left their averaging: the anchor wants the plan's
                     laser.set_averaging(plan.averaging_s)
                     probing = False
@@ -365,6 +374,7 @@ def onthefly_passes(
             except DriverError as exc:
                 flags |= yield from retry_after(exc, attempt, retry, control, clock, axis, first, t_start,
                                                 "on-the-fly pass: ")
+                recovery.note(exc)
         readings, status, env, anchor_reading = samples
         t_abs = np.array([r.t_s for r in readings], dtype=float)
         v = speeds_of(seq, t_abs)

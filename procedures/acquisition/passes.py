@@ -1,7 +1,7 @@
 """What the stop-and-go sweep (procedures/acquisition/sweep.py) and the on-the-fly passes
 (procedures/acquisition/onthefly.py) share: the retry policy and how a fault is named, retried or given up,
-preparing a leg (enable, zero at mid-stroke), recovering an axis, stopping every axis, and the
-point record both yield.
+preparing a leg (enable, zero at mid-stroke), recovering an axis, recovering the laser after a
+lost count or a beam break (`LaserRecovery`), stopping every axis, and the point record both yield.
 
 Point record fields and units: procedures/io/recording/schema.py. `error_um` = interferometer
 reading minus target, micrometres (positive = leg longer than commanded).
@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import Generator, Iterator, Mapping
 
+from drivers.errors import CountLost
 from drivers.interfaces import (
     BeamBreak,
     Clock,
@@ -23,13 +24,15 @@ from drivers.interfaces import (
     Environment,
     FramingError,
     Interferometer,
+    LatchingInterferometer,
     Reading,
     ServoAxis,
 )
 from procedures.engine import events as ev
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.plans import PlanPoint, SweepPlan
-from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, PointRecord
+from procedures.vocabulary import PlanError
+from procedures.io.recording.schema import FLAG_REREFERENCED, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE, PointRecord
 from drivers.interfaces import FaultKind
 
 log = logging.getLogger(__name__)
@@ -86,7 +89,7 @@ def start_leg(plan: SweepPlan, axes: Mapping[int, ServoAxis], laser: Interferome
             laser.set_averaging(plan.averaging_s)
         else:
             axes[last_leg].disable()
-        prepare_leg(axes[first.leg], laser, first.leg, clock, plan)
+        prepare_leg(axes[first.leg], laser, first.leg, clock, plan, control)
     except DriverError as exc:
         if control.aborted:
             raise Aborted(control.reason) from exc
@@ -133,19 +136,94 @@ def point_record(p: PlanPoint, reading: Reading, env: Environment, *, drive_posi
     )
 
 
-def prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan) -> None:
+def reference_moves_mm(plan: SweepPlan) -> tuple[float, float]:
+    """Where preparing (and re-referencing) a leg moves it: the approach below the mid-stroke
+    reference, then the reference (0 mm), mm. The sweep checks both against each leg's soft
+    limits before anything moves (`check_reference_limits`)."""
+    return -max(plan.overrun_mm, 0.5), 0.0
+
+
+def check_reference_limits(plan: SweepPlan, min_mm: float, max_mm: float, leg: int) -> None:
+    """PlanError, before anything moves, when the leg's reference moves (`reference_moves_mm`)
+    leave its soft limits [min_mm, max_mm]: a lost count mid-session re-references the leg, so
+    they must be as safe as the plan's own travel."""
+    for where_mm in reference_moves_mm(plan):
+        if not min_mm - 1e-9 <= where_mm <= max_mm + 1e-9:
+            raise PlanError(f"leg {leg} is prepared (and re-referenced after a lost count) at its mid-stroke reference, "
+                            f"0 mm approached from {reference_moves_mm(plan)[0]:.3f} mm, but {where_mm:.3f} mm lies "
+                            f"outside its soft limits {min_mm:.3f} .. {max_mm:.3f} mm; set the drive's soft limits "
+                            "around its mid-stroke (or shrink the plan's overrun)")
+
+
+def prepare_leg(axis: ServoAxis, laser: Interferometer, leg: int, clock: Clock, plan: SweepPlan,
+                control: RunControl | None = None) -> None:
     """Enable the drive, go to the mid-stroke reference and zero the interferometer there.
 
     The reference is always approached upwards (from -overrun), so the zero carries the same
-    reversal state in every session, with or without a compensation table active."""
+    reversal state in every session, with or without a compensation table active. `control`:
+    an abort asked for meanwhile (its stop quick-stops the drive) raises `Aborted` before the
+    drive is enabled again or told to move (a re-reference runs in the middle of a session)."""
+    check = control.check if control is not None else (lambda: None)
+    approach_mm, reference_mm = reference_moves_mm(plan)
     st = axis.status()
     if st.fault:
         axis.reset_fault()
+    check()
     axis.enable()
-    axis.move_to(-max(plan.overrun_mm, 0.5))
-    axis.move_to(0.0)
+    check()
+    axis.move_to(approach_mm)
+    check()
+    axis.move_to(reference_mm)
     clock.sleep(plan.dwell_s)
+    check()
     laser.zero(leg)
+
+
+class LaserRecovery:
+    """What a fault of the laser leaves to do before the next attempt of a point, a reversal probe
+    or an on-the-fly pass (the one place the stop-and-go sweep and the on-the-fly passes recover it):
+
+    - a lost count (`CountLost`, a velocity overflow: no position is valid until the origin is
+      set again): the leg is re-referenced, `prepare_leg` (to the reference approached upwards,
+      the very moves the leg started with, so inside the soft limits it was prepared within; the
+      laser zeroed there, which clears its latched flags); the attempt's records carry
+      FLAG_REREFERENCED, and a stop-and-go point is approached again;
+    - a beam break: a laser that latches its small-signal flag (`LatchingInterferometer`, the
+      µLine-F1) has it cleared, so the next attempt judges the beam by its own samples (a
+      stop-and-go read clears it itself; a pass's stream cannot: every sample after the break
+      carries the latch). The wait for the beam is retry_after's.
+
+    `note(exc)` after a failed attempt; `before_attempt(...)` at the start of the next one, after
+    its checkpoint (a pause comes before any motion) and inside its `try`: a fault while
+    re-referencing is retried like the attempt's own, the recovery still due; an abort stops the
+    re-referencing move as any other (the sweep's on_abort stops the axes)."""
+
+    def __init__(self) -> None:
+        self.due: type[BeamBreak] | None = None  # CountLost (re-reference), BeamBreak (clear the latch), None
+
+    def note(self, exc: BaseException) -> None:
+        """After attempt's fault `exc`: what the next attempt must do first (a lost count outranks
+        a beam break: zeroing clears both)."""
+        if isinstance(exc, CountLost):
+            self.due = CountLost
+        elif isinstance(exc, BeamBreak) and self.due is None:
+            self.due = BeamBreak
+
+    def before_attempt(self, plan: SweepPlan, axis: ServoAxis, laser: Interferometer, leg: int,
+                       clock: Clock, control: RunControl) -> int:
+        """Do what is due (see the class); returns the flag the attempt's records carry
+        (FLAG_REREFERENCED after a lost count, else 0). An abort meanwhile: `Aborted`."""
+        due = self.due
+        if due is None:
+            return 0
+        if due is CountLost:
+            prepare_leg(axis, laser, leg, clock, plan, control)
+            self.due = None
+            return FLAG_REREFERENCED
+        if isinstance(laser, LatchingInterferometer):
+            laser.clear_signal_latch(leg)
+        self.due = None
+        return 0
 
 
 def recover_axis(axis: ServoAxis) -> None:

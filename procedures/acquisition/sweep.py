@@ -21,17 +21,17 @@ from procedures.compensation.applied_table import TableState, applied_tables_dev
 from procedures.engine.control import Aborted, RunControl
 from procedures.acquisition.onthefly import onthefly_passes
 from procedures.acquisition.passes import (
+    LaserRecovery,
     RetryPolicy,
     SweepFailed,
+    check_reference_limits,
     point_record,
-    prepare_leg,
     retry_after,
     start_leg,
     stop_all,
 )
 from procedures.acquisition.plans import PlanPoint, SweepPlan
 from procedures.io.recording.schema import FLAG_FRAMES_LOST, FLAG_REREFERENCED, FLAG_RETRIED_BEAM
-from drivers.errors import CountLost
 from procedures.vocabulary import Outcome
 
 if TYPE_CHECKING:  # the annotation only
@@ -85,6 +85,7 @@ def sweep(
     for leg in plan.legs:
         lim = axes[leg].limits()
         plan.validate_limits(lim.min_mm, lim.max_mm, leg)
+        check_reference_limits(plan, lim.min_mm, lim.max_mm, leg)  # where preparing and re-referencing go
     for leg in plan.legs:
         control.on_abort(axes[leg].stop)
 
@@ -136,16 +137,15 @@ def sweep(
             contiguous = prev is not None and prev.leg == p.leg and prev.run == p.run and prev.index == p.index - 1
             record = None
             attempt = 0
-            rereference = False
+            recovery = LaserRecovery()  # a lost count or a beam break: the laser recovered first
             while record is None:
                 yield from control.checkpoint()
                 attempt += 1
                 try:
                     axis = axes[p.leg]
-                    if rereference:  # the laser lost its count: zero it again at the leg's reference
-                        prepare_leg(axis, laser, p.leg, clock, plan)
-                        rereference, contiguous = False, False
+                    if recovery.before_attempt(plan, axis, laser, p.leg, clock, control) & FLAG_REREFERENCED:
                         flags |= FLAG_REREFERENCED
+                        contiguous = False  # re-referenced at mid-stroke: approach the point again
                     if not contiguous:
                         axis.move_to(p.approach_mm(plan.overrun_mm))
                     status = axis.move_to(p.target_mm)
@@ -168,7 +168,7 @@ def sweep(
                     # a beam break: the axis did not move, only re-read; else re-approach so the
                     # point keeps its direction
                     contiguous = flag == FLAG_RETRIED_BEAM
-                    rereference = isinstance(exc, CountLost)
+                    recovery.note(exc)
             done += 1
             prev = p
             yield ev.PointMeasured(record, done, total)

@@ -246,17 +246,23 @@ the station's line protocol, cannot say again: taken from the recorded point (do
 
 class ReplayRecorderSink(RecorderSink):
     """The recorder sink, with FLAG_REPLAYED set on every point it writes, and the recorded
-    point's STREAM_FLAGS (`stream_flags`: plan index -> those bits of the recording)."""
+    point's STREAM_FLAGS (`stream_flags`: plan index -> those bits of the recording); at the
+    points in `unknown_signal` (a streamed on-the-fly pass: no signal level at a target, which
+    the station's protocol cannot carry: drivers.replay.script.UNKNOWN_SIGNAL_PCT) the recorded NaN."""
 
-    def __init__(self, *args, stream_flags: dict[int, int] | None = None, **kwargs):
+    def __init__(self, *args, stream_flags: dict[int, int] | None = None, unknown_signal: frozenset[int] = frozenset(),
+                 **kwargs):
         super().__init__(*args, **kwargs)
         self.stream_flags = stream_flags or {}
+        self.unknown_signal = unknown_signal
 
     def handle(self, event: ev.Event) -> None:
         if isinstance(event, ev.PointMeasured):
             record = dict(event.record)
-            record["flags"] = (int(record.get("flags", 0)) | FLAG_REPLAYED
-                               | self.stream_flags.get(int(record["index"]), 0))
+            index = int(record["index"])
+            record["flags"] = (int(record.get("flags", 0)) | FLAG_REPLAYED | self.stream_flags.get(index, 0))
+            if index in self.unknown_signal:
+                record["signal_pct"] = float("nan")
             event = ev.PointMeasured(record, event.done, event.total)
         super().handle(event)
 
@@ -290,7 +296,9 @@ def replay_sweep(
                                   software_version=__version__,
                                   identity=session.identity.to_json() if session.identity.recorded else None,
                                   stream_flags={int(i): int(f) & STREAM_FLAGS for i, f in
-                                                zip(session.points["index"], session.points["flags"]) if int(f) & STREAM_FLAGS})
+                                                zip(session.points["index"], session.points["flags"]) if int(f) & STREAM_FLAGS},
+                                  unknown_signal=frozenset(int(i) for i in
+                                                           session.points["index"][np.isnan(session.points["signal_pct"])]))
     # t0_s=0: recorded times are seconds since the session start, so `now - 0` is bit-exact
     # the materials the recorded run's adaptive rule used (its station_config.leg_materials), so
     # it stops where the recording did; a session that recorded none: this config's

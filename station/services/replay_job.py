@@ -86,10 +86,50 @@ def prepare_replay(request: ReplayRequest, cfg: StationConfig | None = None) -> 
     check_output_file(out, force=request.force, suffixes=(".h5",), make_parents=request.make_parents)
     if not session.plan:
         raise InputError(f"{source}: the session stores no sweep plan, so there is nothing to replay")
+    refusal = onthefly_refusal(session, source)
+    if refusal:
+        raise InputError(refusal)
     cfg = config_or_load(cfg)
-    return PreparedReplay(source, session, out, request.speed, request.force, cfg,
-                          lines=[f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) "
-                                 f"{pace_text(request.speed)}"])
+    lines = [f"replaying {source} ({len(session.points)} points, outcome {session.outcome}) {pace_text(request.speed)}"]
+    if (session.station_config.get("interferometer") or {}).get("protocol") == "linef1":
+        # say how, so nobody takes the replay for a test of the µLine-F1's frames (docs/replay.md)
+        lines.append("recorded with the µLine-F1: its recorded readings are served by the replay instrument over the "
+                     "station's protocol" + (", each pass's at the replay drive's compare pulses"
+                                             if (session.plan or {}).get("speeds_mm_s") else ""))
+    return PreparedReplay(source, session, out, request.speed, request.force, cfg, lines=lines)
+
+
+def onthefly_refusal(session: Session, source: Path) -> str | None:
+    """Why an on-the-fly session cannot be replayed faithfully, in one line (None: it can).
+
+    A pass is replayed by latching the recorded reading of each target at the replay drive's
+    compare pulse (docs/replay.md), with either laser: the recording holds each pass's readings
+    (for a streaming laser, the µLine-F1, the result of aligning its samples with the drive's
+    trace), not the samples nor the trace. A pass retried after a fault of the laser (a beam break,
+    an error, a time-out, line noise: e.g. a gap in the µLine-F1's stream) is replayed failing the
+    same way at the recorded time (drivers.replay.plant.ONTHEFLY_FAULTS); one retried after a
+    drive fault inside the moving pass cannot be made to fail the same way (a replay drive faults
+    on arriving at a recorded point), so such a session is refused here rather than replayed into
+    a mismatch halfway, or into another run."""
+    from drivers.replay.plant import ONTHEFLY_FAULTS
+    from procedures.acquisition.plans import SweepPlan
+
+    try:
+        plan = SweepPlan.from_dict(session.plan)
+    except (ValueError, TypeError, KeyError):
+        return None  # the replay rig says what is wrong with the plan (station.services.wiring)
+    if not plan.onthefly:
+        return None
+    for f in session.faults:
+        run, kind = int(f["run"]), _text(f["kind"])
+        if plan.is_probe_run(run) or kind in ONTHEFLY_FAULTS:
+            continue  # a reversal probe is a stop-and-go reading: its faults replay as a point's
+        what = kind.replace("_", " ") + ("" if "fault" in kind else " fault")
+        return (f"{source}: leg {int(f['leg'])} on-the-fly pass {run} met a {what} (attempt {int(f['attempt'])}) and "
+                f"was {'given up' if int(f['gave_up']) else 'retried'}; a replay cannot make a moving pass fail with a "
+                f"{what} again (only with the laser's faults), so it is refused; analyse the recording itself "
+                f"(station fit {source} --out model.json)")
+    return None
 
 
 # -- a recording as the Replay page shows it --------------------------------------------------------

@@ -239,6 +239,18 @@ def test_unknown_values_and_fault_kinds_are_refused_naming_point_and_field():
         ReplayScript.from_arrays(pts, bad, source="rec.h5")
 
 
+def test_an_unknown_signal_level_is_allowed_only_for_a_reading_taken_on_the_move():
+    """A streamed on-the-fly pass (the µLine-F1) records no signal level at its targets; a point
+    read at rest must have one (the protocol carries it, the replay sends it)."""
+    pts = make_points(legs=(1,), cycles=1)
+    pts["signal_pct"][3] = np.nan
+    with pytest.raises(ReplayDataError, match=r"point index 3 .* has no recorded signal_pct"):
+        ReplayScript.from_arrays(pts, source="rec.h5")
+    pts["speed_mm_s"][3] = 10.0  # read on the move
+    script = ReplayScript.from_arrays(pts, source="rec.h5")
+    assert np.isnan(script.legs[1][3].signal_pct) and script.value_points == len(pts)
+
+
 def test_a_point_resumed_after_giving_up_keeps_the_episode_of_the_run_that_measured_it():
     pts = make_points(legs=(1,), cycles=1)
     tgt = float(pts[2]["target_mm"])

@@ -6,12 +6,22 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.interfaces import BeamBreak, CommTimeout, DriveFault, Environment, Reading
+from drivers.interfaces import BeamBreak, CommTimeout, DriveFault, DriveLimits, Environment, Reading
 from procedures.engine import events as ev
 from procedures.engine.control import Aborted, RunControl
-from procedures.acquisition.passes import RetryPolicy, SweepFailed, point_record, retry_after
-from procedures.acquisition.plans import PlanPoint
-from procedures.io.recording.schema import FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
+from drivers.errors import CountLost
+from procedures.acquisition.passes import (
+    LaserRecovery,
+    RetryPolicy,
+    SweepFailed,
+    check_reference_limits,
+    point_record,
+    retry_after,
+)
+from procedures.acquisition.plans import PlanPoint, SweepPlan, onthefly_plan
+from procedures.acquisition.sweep import sweep
+from procedures.vocabulary import PlanError
+from procedures.io.recording.schema import FLAG_REREFERENCED, FLAG_RETRIED_BEAM, FLAG_RETRIED_DRIVE
 from procedures.io.recording.writer import point_row
 from drivers.interfaces import FaultKind
 
@@ -45,6 +55,28 @@ class Axis:
 
     def enable(self):
         self.calls.append("enable")
+
+    def move_to(self, target_mm, velocity_mm_s=None):
+        self.calls.append(("move_to", target_mm))
+
+
+class Laser:
+    """A laser whose calls LaserRecovery makes are recorded; `latching`: it has the small-signal
+    latch to clear (drivers.interfaces.LatchingInterferometer), as the µLine-F1."""
+
+    def __init__(self, calls: list):
+        self.calls = calls
+
+    def zero(self, axis):
+        self.calls.append(("zero", axis))
+
+
+class LatchingLaser(Laser):
+    def clear_signal_latch(self, axis):
+        self.calls.append(("clear_signal_latch", axis))
+
+
+PLAN = onthefly_plan((2,), cycles=2, step_mm=5.0, min_mm=-20.0, max_mm=20.0, dwell_s=0.2, averaging_s=0.2)
 
 
 def run(gen):
@@ -102,3 +134,65 @@ def test_the_point_record_is_a_valid_session_row():
     assert (row["index"], row["leg"], row["run"], row["direction"]) == (7, 2, 3, -1)
     assert row["commanded_mm"] == 12.5 and row["material_temp_c"] == 21.25 and row["speed_mm_s"] == -4.0
     assert row["flags"] == FLAG_RETRIED_BEAM and row["signal_pct"] == 88.0 and row["air_pressure_hpa"] == 1012.0
+
+
+def test_a_lost_count_re_references_the_leg_before_the_next_attempt_once():
+    clock, axis = Clock(), Axis()
+    laser = LatchingLaser(axis.calls)
+    recovery = LaserRecovery()
+    assert recovery.before_attempt(PLAN, axis, laser, 2, clock, RunControl()) == 0 and axis.calls == []
+    recovery.note(CountLost("velocity overflow"))
+    recovery.note(BeamBreak("small signal"))  # a lost count outranks it: zeroing clears both latches
+    assert recovery.before_attempt(PLAN, axis, laser, 2, clock, RunControl()) == FLAG_REREFERENCED
+    # as the leg was prepared: up to the approach below the reference, up to it, settle, zero there
+    assert [c for c in axis.calls if c not in ("status", "reset_fault")] == [
+        "enable", ("move_to", -PLAN.overrun_mm), ("move_to", 0.0), ("zero", 2)]
+    assert clock.slept == [PLAN.dwell_s]
+    axis.calls.clear()
+    assert recovery.before_attempt(PLAN, axis, laser, 2, clock, RunControl()) == 0 and axis.calls == []
+
+
+def test_a_beam_break_clears_a_latching_lasers_flag_and_nothing_else():
+    clock, axis = Clock(), Axis()
+    recovery = LaserRecovery()
+    recovery.note(BeamBreak("small signal"))
+    assert recovery.before_attempt(PLAN, axis, LatchingLaser(axis.calls), 2, clock, RunControl()) == 0
+    assert axis.calls == [("clear_signal_latch", 2)] and clock.slept == []
+    recovery.note(BeamBreak("beam interrupted"))  # the station's own laser latches nothing
+    assert recovery.before_attempt(PLAN, axis, Laser(axis.calls), 2, clock, RunControl()) == 0
+    assert axis.calls == [("clear_signal_latch", 2)]
+    recovery.note(DriveFault("following error"))  # not the laser's: the axis's recovery is retry_after's
+    assert recovery.before_attempt(PLAN, axis, LatchingLaser(axis.calls), 2, clock, RunControl()) == 0
+    assert axis.calls == [("clear_signal_latch", 2)]
+
+
+def test_an_abort_before_re_referencing_neither_enables_nor_moves():
+    control = RunControl()
+    control.abort("operator")
+    axis = Axis()
+    recovery = LaserRecovery()
+    recovery.note(CountLost("velocity overflow"))
+    with pytest.raises(Aborted):
+        recovery.before_attempt(PLAN, axis, LatchingLaser(axis.calls), 2, Clock(), control)
+    assert "enable" not in axis.calls and not any(isinstance(c, tuple) for c in axis.calls)
+
+
+class _LimitedAxis(Axis):
+    """A leg whose soft limits hold the plan's travel but not its reference (0 mm)."""
+
+    def limits(self):
+        return DriveLimits(1.0, 95.0, 20.0, 200.0)
+
+
+def test_a_plan_whose_reference_moves_leave_the_soft_limits_is_refused_before_anything_moves():
+    plan = SweepPlan("limits", (10.0, 20.0, 30.0), cycles=1, legs=(2,), overrun_mm=4.0)
+    plan.validate_limits(1.0, 95.0, 2)  # its own travel (6 .. 34 mm) is inside the leg's limits
+    axis = _LimitedAxis()
+    with pytest.raises(PlanError, match=r"leg 2 is prepared \(and re-referenced after a lost count\) at its "
+                                        r"mid-stroke reference, 0 mm approached from -4.000 mm, but -4.000 mm lies "
+                                        r"outside its soft limits 1.000 .. 95.000 mm"):
+        list(sweep(plan, {2: axis}, LatchingLaser(axis.calls), Clock()))
+    assert axis.calls == []  # nothing asked of the drive, nothing moved
+    check_reference_limits(plan, -4.0, 95.0, 2)  # at the limit: allowed
+    with pytest.raises(PlanError, match="but 0.000 mm lies outside"):
+        check_reference_limits(plan, -4.0, -0.5, 2)
