@@ -81,7 +81,7 @@ def test_an_asymmetric_modbus_link_moves_the_drives_stamps_and_is_measured_with_
     assert transport_delay(streamed, latched).delay_ms == pytest.approx(3.5, abs=TOLERANCE_MS)
 
 
-def test_a_stroke_outside_the_soft_limits_is_refused_before_any_motion():
+def test_a_stroke_outside_the_soft_limits_or_one_speed_is_refused_before_any_motion():
     cfgs = [c.with_leg_motion() for c in default_leg_configs(SEED, 1)]
     with SimRig(time_scale=0.0, seed=SEED, legs=1, configs=cfgs, laser_protocol="linef1") as rig:
         axis = connect_axes(rig.drive_url, [1], clock=rig.clock)[1]
@@ -92,6 +92,8 @@ def test_a_stroke_outside_the_soft_limits_is_refused_before_any_motion():
             lim = axis.limits()
             with pytest.raises(InputError, match="soft limits"):
                 list(measure_latency(1, axis, laser, rig.clock, RunControl(), lim.min_mm - 1.0, 0.0))
+            with pytest.raises(InputError, match="two distinct speeds"):
+                list(measure_latency(1, axis, laser, rig.clock, RunControl(), -50.0, 50.0, speeds_mm_s=(10.0, 10.0)))
             assert axis.status().position_mm == before
         finally:
             laser.close()
@@ -101,3 +103,31 @@ def test_a_stroke_outside_the_soft_limits_is_refused_before_any_motion():
 def test_a_latency_on_the_station_protocols_laser_is_refused_with_a_reason():
     with pytest.raises(ValueError, match="compare pulse"):
         SimRig(laser_protocol="station", laser_latency_s=0.003)
+
+
+def test_with_the_reflector_on_the_nut_the_streamed_speed_lag_is_the_delay_alone():
+    """No leg between the encoder and the beam (the plant's lag taken out): no reference needed."""
+    nut = measure("linef1", SEED, LASER_LATENCY_S, 0.0, drive_delay_s=DRIVE_DELAY_S, cycles=1, on_nut=True)
+    for lag in nut.lags:
+        assert lag.lag_ms == pytest.approx(LASER_LATENCY_S * 1000.0, abs=TOLERANCE_MS)
+
+
+def test_the_floor_of_the_arrivals_follows_an_instrument_rate_off_the_nominal_one():
+    """Arrivals from an instrument 100 ppm slow, late by 3 ms and a uniform 0..2 ms: the floor's
+    slope is the rate, the jitter above it the draws (stream_jitter alone)."""
+    import numpy as np
+
+    from procedures.acquisition.latency import stream_jitter
+
+    rng = np.random.default_rng(7)
+    n = np.arange(1, 501)
+    true_period_s = 0.04 * (1 + 100e-6)
+    draws = rng.uniform(0.0, 0.002, n.size)
+    keep = np.ones(n.size, bool)
+    keep[[100, 101, 300]] = False  # lost frames keep their numbers
+    arrivals = list(zip(n[keep].tolist(), (5.0 + n * true_period_s + 0.003 + draws)[keep].tolist()))
+    s = stream_jitter(arrivals, 0.04)
+    assert s.lost == 3 and s.frames == 497
+    assert s.drift_ppm == pytest.approx(100.0, abs=10.0)
+    assert s.jitter.max_ms == pytest.approx(2.0, abs=0.1) and s.jitter.median_ms == pytest.approx(1.0, abs=0.15)
+
