@@ -130,6 +130,20 @@ class LatencyReport:
         """The speed lag over both directions (their mean), ms."""
         return float(np.mean([d.lag_ms for d in self.lags]))
 
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "latency report") -> "LatencyReport":
+        """The report `dataclasses.asdict` made (a saved one, e.g. the latched reference)."""
+        try:
+            stream = data.get("stream")
+            traced = data.get("poll_traced")
+            return cls(int(data["leg"]), str(data["laser"]), Spread(**data["poll_rest"]),
+                       Spread(**traced) if traced else None,
+                       StreamJitter(**{**stream, "jitter": Spread(**stream["jitter"])}) if stream else None,
+                       tuple(DirectionLag(**{**d, "speeds_mm_s": tuple(d["speeds_mm_s"])}) for d in data["lags"]))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise InputError(f"{where}: not a latency report ({type(exc).__name__}: {exc}); save one with "
+                             "bench/bench_latency.py --save") from None
+
 
 @dataclass(frozen=True)
 class TransportDelay:

@@ -131,3 +131,27 @@ def test_the_floor_of_the_arrivals_follows_an_instrument_rate_off_the_nominal_on
     assert s.drift_ppm == pytest.approx(100.0, abs=10.0)
     assert s.jitter.max_ms == pytest.approx(2.0, abs=0.1) and s.jitter.median_ms == pytest.approx(1.0, abs=0.15)
 
+
+
+def test_a_configured_rig_is_measured_and_its_delay_taken_against_a_saved_reference(tmp_path, capsys):
+    """bench/bench_latency.py --config: the path a real bench takes (here the configured simulated
+    rig, no delay given to its transports: d = 0), the latched report saved, the streamed one
+    measured against it; a file that is not a report is refused in one line."""
+    import re
+
+    from bench.bench_latency import main
+
+    base = '[drive]\nurl = "sim"\n[interferometer]\nport = "sim"\n{}[sim]\nseed = 3\n'
+    (tmp_path / "station.toml").write_text(base.format(""))
+    (tmp_path / "linef1.toml").write_text(base.format('protocol = "linef1"\n'))
+    ref = tmp_path / "ref.json"
+    common = ["--leg", "2", "--cycles", "1", "--stroke", "-40", "40"]
+    assert main(["--config", str(tmp_path / "station.toml"), *common, "--save", str(ref)]) == 0
+    assert main(["--config", str(tmp_path / "linef1.toml"), *common, "--reference", str(ref)]) == 0
+    out = capsys.readouterr().out
+    delay = float(re.search(r"behind the drive's polls: ([-+0-9.]+) ms", out).group(1))
+    assert abs(delay) < TOLERANCE_MS
+    (tmp_path / "bad.json").write_text('{"leg": 2}')
+    assert main(["--config", str(tmp_path / "linef1.toml"), *common, "--reference", str(tmp_path / "bad.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.json: not a latency report" in err[0]
