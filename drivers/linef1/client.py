@@ -271,7 +271,10 @@ class LineF1Interferometer:
                 # the window's end is in: the frame after it is due a period after the newest; on
                 # the station's clock, which a simulated rig's clock only passes when slept on
                 ahead_s = (newest.t_s + self.period_s - self._clock.now()) if newest is not None else 0.0
-                if not 0.0 < ahead_s <= self.period_s:
+                if -self.period_s < ahead_s <= 0.0 and newest is not None:
+                    # due, not in: late by the transport's jitter; waited for on the station's clock
+                    ahead_s = self.period_s / 8.0
+                elif not 0.0 < ahead_s <= self.period_s:
                     self._cv.wait(min(left, _POLL_S))
                     continue
             self._clock.sleep(max(ahead_s, 1e-6))
@@ -330,6 +333,13 @@ class LineF1Interferometer:
                               f"{t0_s:.3f}..{t1_s:.3f} s (a gap in the stream).")
         n_air = self._air_index()
         return [StreamSample(t_s=t, position_mm=x.raw_mm / n_air) for x, t in zip(span, stamps)]
+
+    def stream_arrivals(self, t0_s: float, t1_s: float) -> list[tuple[int, float]]:
+        """(frame number, arrival stamp s) of the distance frames that arrived within `t0_s`..`t1_s`
+        on the station's clock, unaligned (frames lost to CRC errors or cuts keep their numbers):
+        the stream's arrival jitter against its own frame grid (bench/bench_latency.py)."""
+        with self._cv:
+            return [(x.frame_no, x.t_s) for x in self._samples if t0_s <= x.t_s <= t1_s]
 
     def _grid_stamps(self, samples: list[_Sample], horizon_s: float = GRID_HORIZON_S) -> list[float]:
         """The samples' times on the stream's own grid: the instrument sends a frame every

@@ -327,6 +327,7 @@ class ModbusServoAxis:
         self._profile_motion: tuple[float, float] | None = None  # profile velocity, accel
         self._last_position_mm: float | None = None
         self._trace: tuple | None = None  # move_traced: (interval s, [(t s, position mm)])
+        self.trace_round_trips_s: list[float] = []  # the last traced move's polls: response - request, s
         self._closed = False
         p = self.profile
         self._proto = p.protocol
@@ -623,18 +624,26 @@ class ModbusServoAxis:
         if not interval_s > 0:
             raise ValueError(f"leg {self.leg}: trace interval {interval_s!r} is not > 0 s")
         self._trace = (float(interval_s), [])
+        self.trace_round_trips_s = []
         try:
             st = self.move_to(target_mm, timeout_s, velocity_mm_s)
             return st, self._trace[1]
         finally:
             self._trace = None
 
+    def poll_position(self) -> tuple[float, float, float]:
+        """One read of position actual alone, as a traced move polls it: (request sent, response
+        in, on the axis' clock, s; position mm). The round trip is the second less the first; a
+        traced move stamps the position at their middle (bench/bench_latency.py measures both)."""
+        t_a = self.clock.now()
+        pos = self._read_names(("position_actual",))["position_actual"]
+        return t_a, self.clock.now(), float(pos)
+
     def _trace_poll(self, trace, target_mm: float) -> bool:
         """One position poll of a traced move; True once the status should be read (the position
         at the target, or the same as the poll before: the drive stands still)."""
-        t_a = self.clock.now()
-        pos = self._read_names(("position_actual",))["position_actual"]
-        t_b = self.clock.now()
+        t_a, t_b, pos = self.poll_position()
+        self.trace_round_trips_s.append(t_b - t_a)
         points = trace[1]
         # standing still: after it moved (a jerk-limited start moves less than a count at first),
         # or not started half a second after the move was commanded (refused, faulted, stalled)

@@ -39,6 +39,7 @@ import json
 import logging
 import math
 import os
+import random
 import signal
 import sys
 import threading
@@ -766,6 +767,11 @@ class SimDriveServer:
         self.rtu_port: str | None = None
         self.frames = FrameStats()
         self._last_reply_t = -math.inf  # time.monotonic() when the previous request was answered
+        # the transport's delay (bench/bench_latency.py), on the rig's clock: a request reaches
+        # the drive `request_delay_s` after it was sent, its reply the host `response_delay_s`
+        # after the drive read its registers, each leg plus half a uniform 0..`delay_jitter_s`
+        self.request_delay_s = self.response_delay_s = self.delay_jitter_s = 0.0
+        self._delay_rng = random.Random(4245)
 
     # -- non-volatile memory ----------------------------------------------------------------------
     def _load_nv(self) -> None:
@@ -835,6 +841,19 @@ class SimDriveServer:
         """One request to drive `leg`, as both servers pass it: a read (`set_values` None) returns
         the registers or an exception; a write returns None or an exception. Function 23 comes
         as its write, then its read. Raises NoReply for a request the drive would not answer."""
+        delayed = self.request_delay_s > 0 or self.response_delay_s > 0 or self.delay_jitter_s > 0
+        if delayed:  # on the way in (outside the lock: a streaming laser samples the clock's stops)
+            half_jitter_s = 0.5 * self._delay_rng.uniform(0.0, self.delay_jitter_s)
+            if function_code != 23 or set_values is not None:
+                self.clock.sleep(self.request_delay_s + half_jitter_s)
+        try:
+            return self._request(leg, function_code, address, count, set_values)
+        finally:
+            if delayed and (function_code != 23 or set_values is None):
+                self.clock.sleep(self.response_delay_s + half_jitter_s)  # on the way back
+
+    def _request(self, leg: int, function_code: int, address: int, count: int,
+                 set_values: list[int] | None) -> list[int] | ExcCodes | None:
         try:
             with self.lock:
                 if function_code == 23:

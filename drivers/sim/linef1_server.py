@@ -86,7 +86,10 @@ class SimLineF1(PtyServer):
                  aim: Callable[[], int | None] | None = None, index: Callable[[float, float, float], float] | None = None,
                  air: tuple[float, float, float] = (20.0, 1013.25, 45.0), seed: int = 0, offset_um: float = 0.0,
                  period_s: float = 1.0 / lf.STREAM_RATE_HZ, max_catch_up_s: float = 2.0, poll_s: float = 0.002,
-                 sensor_noise: bool = True, sync: Callable[[int], bool] | None = None):
+                 sensor_noise: bool = True, sync: Callable[[int], bool] | None = None,
+                 latency_s: float = 0.0, jitter_s: float = 0.0):
+        if latency_s < 0 or jitter_s < 0:
+            raise ValueError(f"the simulated laser's latency and jitter must be >= 0 s, got {latency_s}, {jitter_s}")
         self.plants = dict(plants)
         self.clock = clock
         self.lock = lock if lock is not None else threading.RLock()
@@ -122,6 +125,12 @@ class SimLineF1(PtyServer):
         self.sync = sync
         self._events_added = False
         self._unread = False  # the client did not read what was written (not waited on then)
+        # the transport's delay (bench/bench_latency.py): a batch of frames measured at its instant
+        # leaves `latency_s` later, plus a uniform 0..`jitter_s` of its own, in order (a serial
+        # line never overtakes); time scale 0 only (`_on_due`), echoes are not delayed
+        self.latency_s, self.jitter_s = float(latency_s), float(jitter_s)
+        self._jitter_rng = np.random.default_rng(seed + 4244)
+        self._outbox: list[tuple[float, bytes]] = []  # (write time, frames) measured, not yet sent
         self._init_pty()
 
     # -- faults ---------------------------------------------------------------------------------
@@ -241,6 +250,8 @@ class SimLineF1(PtyServer):
             due.append(self._next_t)
         if self._meteo_on and self._next_meteo_t is not None:
             due.append(self._next_meteo_t)
+        if self._outbox:
+            due.append(self._outbox[0][0])
         return min(due) if due else None
 
     def _on_due(self, t_s: float) -> None:
@@ -255,6 +266,13 @@ class SimLineF1(PtyServer):
             if self.leg is not None and self.sync is not None:
                 self.sync(self.leg)
             frames = self._due_frames()
+            if frames and (self.latency_s > 0 or self.jitter_s > 0):
+                # measured now, written later (the transport): at least after the batch before
+                at = t_s + self.latency_s + (float(self._jitter_rng.uniform(0.0, self.jitter_s)) if self.jitter_s else 0.0)
+                self._outbox.append((max(at, self._outbox[-1][0] if self._outbox else at), frames))
+                frames = b""
+            while self._outbox and self._outbox[0][0] <= t_s:
+                frames += self._outbox.pop(0)[1]
             if not frames:
                 return
             mark = self.clock.reads()

@@ -37,6 +37,14 @@ class SimRig:
     # passes are aligned on the rig's clock, the drive traced by the host)
     laser_protocol: str = "station"
     air_index: object = None  # linef1: the air's index (temp_c, pressure_pa, humidity_pct) -> n
+    # known transport delays (bench/bench_latency.py), on the rig's clock: the µLine-F1's frames
+    # leave `laser_latency_s` (+ uniform 0..`laser_jitter_s`) after their instant (time scale 0);
+    # a Modbus request reaches the drive `drive_delay_s[0]` after it is sent, its reply the host
+    # `drive_delay_s[1]` after the drive read it, each plus half a uniform 0..`drive_jitter_s`
+    laser_latency_s: float = 0.0
+    laser_jitter_s: float = 0.0
+    drive_delay_s: tuple[float, float] = (0.0, 0.0)
+    drive_jitter_s: float = 0.0
     clock: VirtualClock = field(init=False)
     plants: dict[int, LegPlant] = field(init=False)
     drive_url: str = field(init=False, default="")
@@ -50,6 +58,14 @@ class SimRig:
         self.lock = threading.RLock()
         self.profile = self.profile or DriveProfile.load()
         self.drive_server = SimDriveServer(self.plants, self.clock, self.profile, nv_path=self.nv_path, lock=self.lock)
+        if min(*self.drive_delay_s, self.drive_jitter_s, self.laser_latency_s, self.laser_jitter_s) < 0:
+            raise ValueError("the simulated transports' delays and jitters must be >= 0 s")
+        self.drive_server.request_delay_s, self.drive_server.response_delay_s = map(float, self.drive_delay_s)
+        self.drive_server.delay_jitter_s = float(self.drive_jitter_s)
+        if (self.laser_latency_s or self.laser_jitter_s) and (self.laser_protocol != "linef1" or self.time_scale != 0):
+            raise ValueError("a simulated laser latency needs the µLine-F1 (laser_protocol 'linef1') at time scale 0: "
+                             "the station's own laser latches at the drive's compare pulse, and at time scale > 0 "
+                             "the frames are written by the serving thread as they fall due")
         self.trigger_line = TriggerLine()
         if self.laser_protocol == "linef1":
             from drivers.sim.linef1_server import SimLineF1
@@ -61,7 +77,8 @@ class SimRig:
             # position polls see it under way (on-the-fly passes, docs/onthefly.md)
             self.laser_server = SimLineF1(self.plants, self.clock, lock=self.lock, aim=self._enabled_leg,
                                           index=self.air_index, seed=self.seed, offset_um=self.laser_offset_um,
-                                          sync=self.drive_server.sync_leg)
+                                          sync=self.drive_server.sync_leg, latency_s=self.laser_latency_s,
+                                          jitter_s=self.laser_jitter_s)
             self.drive_server.set_traceable_moves(True)
         elif self.laser_protocol == "station":
             self.laser_server = SimInterferometer(self.plants, self.clock, lock=self.lock, seed=self.seed,
