@@ -5,13 +5,11 @@ memory file and its write counter are compared before and after."""
 
 from __future__ import annotations
 
-import json
 import logging
 
 import pytest
 
 from drivers.clock import VirtualClock
-from drivers.interfaces import TableBank
 from drivers.modbus.client import ModbusBus, ModbusServoAxis
 from drivers.modbus.profile import DriveProfile
 from drivers.sim.drive_server import SimDriveServer

@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from drivers.plant.leg import PlantConfig
-from procedures.metrology.thermal import (Material, nde_correction_um, normalise_points, normalise_session,
-                                          recorded_materials)
+from procedures.metrology.thermal import Material, nde_correction_um, normalise_points, normalise_session
 from procedures.synthetic import synth_session
 
 TARGETS = np.linspace(-90.0, 90.0, 31)
