@@ -184,3 +184,17 @@ def defines(module: str, name: str) -> bool:
         if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
             return True
     return False
+
+
+def onthefly_config(folder, protocol: str):
+    """A station config on the simulated rig for on-the-fly tests: the laser `protocol` ("station"
+    or "linef1"), recordings in `folder`, and the legs moving with a real drive's jerk limit (a
+    pass's speed profile, not an instant step)."""
+    from station.services.config import StationConfig
+
+    cfg = StationConfig(operator="test")
+    cfg.interferometer.protocol = protocol
+    cfg.recordings_dir = str(folder)
+    plain = cfg.sim.leg_configs
+    cfg.sim.leg_configs = lambda: [c.with_leg_motion() for c in plain()]
+    return cfg

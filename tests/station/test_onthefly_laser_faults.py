@@ -29,7 +29,7 @@ from procedures.engine.runner import CallbackSink
 from procedures.io.recording.reader import read_session
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED, FLAG_REREFERENCED, FLAG_RETRIED_BEAM
 from station.cli import main
-from station.services.config import StationConfig
+from tests.tooling import onthefly_config
 from station.services.jobs import run_sweep
 from station.services.wiring import open_rig
 
@@ -47,14 +47,6 @@ the screw's heating over the pass's later time add up to about 0.1 um; a lost co
 reading 317 um off (drivers/sim/linef1_server.py LOST_COUNT_MM), a stale or misaligned one
 microns to millimetres."""
 
-
-def _config(tmp_path, protocol: str) -> StationConfig:
-    cfg = StationConfig(operator="test")
-    cfg.interferometer.protocol = protocol
-    cfg.recordings_dir = str(tmp_path)
-    plain = cfg.sim.leg_configs
-    cfg.sim.leg_configs = lambda: [c.with_leg_motion() for c in plain()]  # a real drive's jerk limit
-    return cfg
 
 
 def _linef1_overflow(rig):
@@ -90,7 +82,7 @@ def _record(tmp, protocol: str, name: str, fault=None, control: RunControl | Non
             if on_fault is not None:
                 on_fault(state["rig"], e)
 
-    cfg = _config(tmp, protocol)
+    cfg = onthefly_config(tmp, protocol)
     out = tmp / name
     with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
         state["rig"] = rig
@@ -223,7 +215,7 @@ def test_a_lost_count_at_a_reversal_probe_re_references_the_leg_and_measures_it_
 
     sessions = {}
     for name in ("clean", "faulted"):
-        cfg = _config(tmp_path, "linef1")
+        cfg = onthefly_config(tmp_path, "linef1")
         out = tmp_path / f"{name}.h5"
         with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
             sinks = [CallbackSink(lambda e, rig=rig: inject_at_probe(e, rig))] if name == "faulted" else []

@@ -25,7 +25,7 @@ from procedures.io.recording.reader import read_session
 from procedures.io.recording.schema import FLAG_ANCHOR, FLAG_REPLAYED
 from procedures.vocabulary import InputError
 from station.cli import main
-from station.services.config import StationConfig
+from tests.tooling import onthefly_config
 from station.services.jobs import run_sweep
 from station.services.replay_job import ReplayRequest, prepare_replay
 from station.services.wiring import open_rig
@@ -37,17 +37,9 @@ os.environ.setdefault("STATION_CATALOG", "off")
 PLAN = onthefly_plan((1,), cycles=2, step_mm=5.0, min_mm=-20.0, max_mm=20.0, dwell_s=0.2, averaging_s=0.2)
 
 
-def _config(tmp_path, protocol: str) -> StationConfig:
-    cfg = StationConfig(operator="test")
-    cfg.interferometer.protocol = protocol
-    cfg.recordings_dir = str(tmp_path)
-    plain = cfg.sim.leg_configs
-    cfg.sim.leg_configs = lambda: [c.with_leg_motion() for c in plain()]  # a real drive's jerk limit
-    return cfg
-
 
 def _record(tmp_path, protocol: str, name: str, sinks=()):
-    cfg = _config(tmp_path, protocol)
+    cfg = onthefly_config(tmp_path, protocol)
     out = tmp_path / name
     with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
         result = run_sweep(rig, PLAN, out, cfg, sinks=list(sinks), index=False)
@@ -115,7 +107,7 @@ def _record_with(tmp_path, protocol: str, name: str, fault):
         elif isinstance(e, ev.Fault) and protocol == "station":
             state["rig"].sim.laser_server.set_beam_break(1, False)
 
-    cfg = _config(tmp_path, protocol)
+    cfg = onthefly_config(tmp_path, protocol)
     out = tmp_path / name
     with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
         state["rig"] = rig
@@ -186,7 +178,7 @@ def test_an_onthefly_session_cut_short_replays_to_where_it_ends_and_is_aborted_t
         if isinstance(e, ev.PointMeasured) and int(e.record["index"]) == 12:
             control.abort("operator")
 
-    cfg = _config(tmp_path, protocol)
+    cfg = onthefly_config(tmp_path, protocol)
     out = tmp_path / "cut.h5"
     with open_rig(cfg, legs=(1,), time_scale=0.0) as rig:
         result = run_sweep(rig, PLAN, out, cfg, sinks=[CallbackSink(stop_after_pass_2)], control=control, index=False)
