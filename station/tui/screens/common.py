@@ -323,7 +323,9 @@ class ConfirmScreen(ModalScreen[bool]):
                 yield Button(f"{self.no_label} (n)", variant="primary", id="confirm-no")
 
     def on_mount(self) -> None:
-        self.query_one("#confirm-no", Button).focus()  # the safe answer is the default
+        # the safe answer is the default; no button when the app is closing as the dialog mounts
+        for button in self.query("#confirm-no").results(Button):
+            button.focus()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         event.stop()
