@@ -48,6 +48,20 @@ class RigActionDone(Message):
         self.error = error
 
 
+class RigMoveDone(Message):
+    """A "move" rig action ended. `error` is "" when the leg arrived at `position_mm`; else why
+    it did not move, or where it stopped (`stopped`: quick-stopped on the way)."""
+
+    def __init__(self, leg: int, error: str = "", position_mm: float | None = None, speed_mm_s: float | None = None,
+                 stopped: bool = False) -> None:
+        super().__init__()
+        self.leg = leg
+        self.error = error
+        self.position_mm = position_mm
+        self.speed_mm_s = speed_mm_s
+        self.stopped = stopped
+
+
 class Notice(Message):
     """A notification to show (severity: information / warning / error)."""
 
