@@ -17,20 +17,23 @@ from procedures.io.recording.reader import read_session
 from procedures.vocabulary import Outcome
 
 REPO = Path(__file__).resolve().parents[2]
+TOTAL = 6 * 10 * 41 * 2  # legs x cycles x targets x directions
 
 
 def _start_sweep(out: Path) -> subprocess.Popen:
     # time scale 0: the simulated moves take no real time (no timeouts on a loaded machine);
-    # 630 points take a few seconds, with a progress line every 10 %
+    # a progress line every 10 % (the first once points are on disk). The sweep's other 90 % must
+    # outlast the test's reaction to that line: 630 points (a second or two) did not, on a loaded
+    # machine, so 4920 points (about 6 s after the first line here)
     return subprocess.Popen(
-        [sys.executable, "-m", "station.cli", "sweep", "--sim", "--legs", "1-3", "--cycles", "5", "--n-targets", "21",
+        [sys.executable, "-m", "station.cli", "sweep", "--sim", "--legs", "1-6", "--cycles", "10", "--n-targets", "41",
          "--time-scale", "0", "--out", str(out)],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env={**os.environ, "PYTHONPATH": str(REPO)})
 
 
 class _Stderr(threading.Thread):
-    """Collects the sweep's stderr; `progress` is set at its first progress line ("63/630 points
+    """Collects the sweep's stderr; `progress` is set at its first progress line ("492/4920 points
     (10%) ..."): points are on disk. (Polling the file instead could hold its HDF5 lock just when
     the writer opens it.)"""
 
@@ -41,7 +44,7 @@ class _Stderr(threading.Thread):
     def run(self):
         for line in self.proc.stderr:
             self.lines.append(line)
-            if "/630 points (" in line:
+            if f"/{TOTAL} points (" in line:
                 self.progress.set()
 
     @property
@@ -71,6 +74,6 @@ def test_ctrl_c_twice_during_a_sweep_leaves_a_finished_file_and_no_lock(tmp_path
     assert "Ctrl-C" in stdout + stderr
     s = read_session(out)  # readable: the file was closed
     assert s.outcome == Outcome.ABORTED, (s.outcome, stdout, stderr)
-    assert 63 <= len(s.points) < 630
+    assert TOTAL // 10 <= len(s.points) < TOTAL
     leftovers = sorted(p.name for p in tmp_path.iterdir() if p.name != out.name)
     assert leftovers == [], f"left beside the session: {leftovers}"  # e.g. .cc.h5.lock
