@@ -107,15 +107,17 @@ def test_station_target_push_verify_rollback_and_kill(capsys, tmp_path):
     # a SIGKILL in the middle of a sweep: the file, opened as it was left, says which table was applied
     killed = tmp_path / "killed.h5"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "station.cli", "sweep", "--config", cfg, "--legs", "1", "--cycles", "5",
-         "--n-targets", "21", "--time-scale", "0", "--out", str(killed), "--yes"],  # leg 1 compensated: confirmed
+        # 2020 points at time scale 0: the 90 % after the first progress line outlast the test's
+        # reaction to it on a loaded machine (210 points took a fraction of a second in all)
+        [sys.executable, "-m", "station.cli", "sweep", "--config", cfg, "--legs", "1", "--cycles", "10",
+         "--n-targets", "101", "--time-scale", "0", "--out", str(killed), "--yes"],  # leg 1 compensated: confirmed
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env={**os.environ, "PYTHONPATH": str(REPO)})
     progressed = threading.Event()
 
     def watch():
         for line in proc.stderr:
-            if "/210 points (" in line:
+            if "/2020 points (" in line:
                 progressed.set()
 
     threading.Thread(target=watch, daemon=True).start()
