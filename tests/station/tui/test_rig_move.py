@@ -85,7 +85,8 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes, rig_keys_act):
         moves = app.rig.sim.drive_server.set_points(1)
         await type_into(pilot, "move-target", "")
         await pilot.press("minus", "2", "5")
-        assert target.value == "-25" and app.focused is target
+        await wait_until(pilot, lambda: target.value == "-25", what="-25 typed into the target field")
+        assert app.focused is target
         await pilot.pause(0.2)
         assert app.rig.sim.drive_server.set_points(1) == moves and not app.rig_motion
         assert position(app, 1) == pytest.approx(30.0, abs=1e-6)
