@@ -172,9 +172,14 @@ async def _footers(cfg, wait_until):
         for mode, key in PAGE_KEYS:
             await pilot.press(key)
             await wait_until(pilot, lambda: app.screen.MODE == mode, what=f"the {mode} page")
-            await pilot.pause()
             screen = app.screen
             footer = screen.query_one(StationFooter)
+            # the page on show is not yet drawn: its footer's keys are laid out a refresh later
+            # (on a busy machine a pause is not enough; its rows were blank)
+            await wait_until(pilot, lambda: footer.region.height > 0 and footer.query("FooterKey")
+                             and all(k.region.width > 0 for k in footer.query("FooterKey"))
+                             and any(line.strip() for line in screen_lines(app)[footer.region.y:footer.region.bottom]),
+                             what=f"the {mode} page's footer drawn")
             lines = screen_lines(app)[footer.region.y:footer.region.bottom]
             # every binding the page shows has its key in the footer (one key per action: + for plus/=)
             shown = {b.binding.action for b in screen.active_bindings.values() if b.binding.show}
