@@ -144,7 +144,8 @@ async def _stray(cfg, connected, wait_until, notes, rig_keys_act):
         # c on its own, connected: asks first; no keeps the rig
         await pilot.press("c")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the reconnect question")
-        await pilot.pause(0.1)
+        # (the dialog is pushed before it is composed: wait for its question, not a fixed pause)
+        await wait_until(pilot, lambda: app.screen.query("#confirm-question"), what="the question's text")
         assert "Reconnect to the rig?" in text_of(app.screen.query_one("#confirm-question"))
         await pilot.press("n")
         await wait_until(pilot, lambda: app.screen is screen, what="the question closed")
