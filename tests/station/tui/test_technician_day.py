@@ -54,7 +54,11 @@ async def _choose_then_open(path, cfg, size, wait_until, notes):
         await wait_until(pilot, lambda: field.value == str(mine), what="the path field to take the choice")
         await pilot.click("#session-open")
         await wait_until(pilot, lambda: replay.session_path == mine, 30, "the session")
-        await pilot.pause(0.2)  # the rescan after the new session has posted its Changed(Select.NULL)
+        # the new session rescans the list (nothing chosen in it any more), whose Changed(Select.NULL)
+        # goes from the list to its picker: two message hops, each handled by the time a pause ends
+        await wait_until(pilot, lambda: listed.value is Select.NULL, what="the list rescanned after the new session")
+        await pilot.pause()
+        await pilot.pause()
         assert field.value == str(mine)
         assert listed.value is Select.NULL  # the list was rescanned: nothing chosen in it any more
         replay.session = None
