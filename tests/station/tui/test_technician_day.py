@@ -234,11 +234,14 @@ def test_results_drops_the_paper_error_when_switching_back(irregular_session, cf
     import procedures.fit
 
     real_fit = procedures.fit.fit
-    slow = {"paper": 0.0}
+    slow = {"paper": 0.0, "answered": []}
 
     def fit(points, method="default", **kwargs):  # the paper fit takes its time when asked to
         time.sleep(slow.get(method, 0.0))
-        return real_fit(points, method, **kwargs)
+        try:
+            return real_fit(points, method, **kwargs)
+        finally:
+            slow["answered"].append(method)
 
     monkeypatch.setattr(procedures.fit, "fit", fit)
     asyncio.run(_stale_error(irregular_session, cfg, size, wait_until, notes, slow))
@@ -268,12 +271,17 @@ async def _stale_error(path, cfg, size, wait_until, notes, slow):
         # m, and m again while the paper fit is under way: its answer is dropped, its error never shows
         app.clear_notifications()
         slow["paper"] = 1.5
+        answered = len(slow["answered"])  # the fits asked for so far have all answered
         await pilot.press("m")
         await wait_until(pilot, lambda: screen._fitting is not None and screen._fitting[1] == "paper", 5,
                          "the paper fit to start")
         await pilot.press("m")
         await wait_until(pilot, lambda: screen._fitting is None, 60, "the default fit")
-        await pilot.pause(2.5)  # the paper fit has answered by now
+        # the paper fit's answer (its error) has come back and been handled: a fixed pause let this
+        # pass unchecked when a loaded machine took longer than the pause for the 1.5 s fit
+        await wait_until(pilot, lambda: "paper" in slow["answered"][answered:], 60, "the paper fit's answer")
+        await pilot.pause()
+        await pilot.pause()
         assert "uniformly spaced" not in status_text(app, "#results-status")
         assert not any("uniformly spaced" in n for n in notes(app))
         assert app.analysis.method == "default" and screen.query_one("#method", Select).value == "default"
