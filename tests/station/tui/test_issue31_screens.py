@@ -175,17 +175,23 @@ async def _footers(cfg, wait_until):
             await wait_until(pilot, lambda: app.screen.MODE == mode, what=f"the {mode} page")
             screen = app.screen
             footer = screen.query_one(StationFooter)
-            # the page on show is not yet drawn: its footer's keys are laid out a refresh later
-            # (on a busy machine a pause is not enough; its rows were blank)
-            await wait_until(pilot, lambda: footer.region.height > 0 and footer.query("FooterKey")
-                             and all(k.region.width > 0 for k in footer.query("FooterKey"))
-                             and any(line.strip() for line in screen_lines(app)[footer.region.y:footer.region.bottom]),
-                             what=f"the {mode} page's footer drawn")
+
+            def shown() -> set[str]:
+                return {b.binding.action for b in screen.active_bindings.values() if b.binding.show}
+
+            def drawn_whole() -> bool:
+                keys = list(footer.query("FooterKey"))
+                return ({k.action for k in keys} >= shown() and footer.region.height > 0
+                        and all(k.region.width > 0 for k in keys)
+                        and any(line.strip() for line in screen_lines(app)[footer.region.y:footer.region.bottom]))
+
+            # every binding the page shows has its key in the footer (one key per action: + for plus/=),
+            # drawn: the footer recomposes for the page's bindings and is laid out a refresh or two
+            # after the page is on show (under load a pause was not enough: no keys yet, or blank rows)
+            await wait_until(pilot, drawn_whole, 10, f"the {mode} page's footer to show its keys {sorted(shown())}")
             lines = screen_lines(app)[footer.region.y:footer.region.bottom]
-            # every binding the page shows has its key in the footer (one key per action: + for plus/=)
-            shown = {b.binding.action for b in screen.active_bindings.values() if b.binding.show}
             keys = list(footer.query("FooterKey"))
-            assert {k.action for k in keys} >= shown, (mode, sorted(shown - {k.action for k in keys}))
+            assert {k.action for k in keys} >= shown(), (mode, sorted(shown() - {k.action for k in keys}))
             for k in keys:
                 drawn = f"{k.key_display or k.key} {k.description}"
                 row = next((line for line in lines if drawn in line), None)
