@@ -266,8 +266,11 @@ async def _quit_on_top(cfg, connected, wait_until):
             app.notify(f"a long notification {i} " * 4, severity="warning", timeout=30)
         await pilot.press("ctrl+q")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the quit question")
-        await pilot.pause(0.2)
         dialog = app.screen
+        # laid out: the dialog is pushed before it is composed and placed (a fixed pause was not that)
+        await wait_until(pilot, lambda: all(dialog.query(sel) and dialog.query_one(sel).region.area > 0
+                                            for sel in ("#confirm-yes", "#confirm-no", "#confirm-question")),
+                         what="the quit dialog laid out")
         for selector in ("#confirm-yes", "#confirm-no", "#confirm-question"):
             widget = dialog.query_one(selector)
             region = widget.region
