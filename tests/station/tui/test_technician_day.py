@@ -62,6 +62,10 @@ async def _choose_then_open(path, cfg, size, wait_until, notes):
         assert field.value == str(mine)
         assert listed.value is Select.NULL  # the list was rescanned: nothing chosen in it any more
         replay.session = None
+        # a Button ignores a press while it still shows the last one ("-active", 0.2 s): without the
+        # fixed pause before, a fast machine would click into nothing
+        opener = replay.query_one("#session-open")
+        await wait_until(pilot, lambda: not opener.has_class("-active"), what="Open's last press to end")
         await pilot.click("#session-open")  # Open again: the same file
         await wait_until(pilot, lambda: replay.session is not None, 30, "the session read again")
         assert replay.session_path == mine
