@@ -64,11 +64,18 @@ async def _comma(cfg, connected, wait_until, notes):
         for _ in range(6):  # Tab to the target field
             if app.focused is target:
                 break
+            was = app.focused
             await pilot.press("tab")
+            # each Tab handled before the next is counted (under load Pilot.press returns before)
+            await wait_until(pilot, lambda: app.focused is not was, what="Tab to move the focus")
         assert app.focused is target
         before = set_points(app)
         await pilot.press("1", "comma", "5")
-        assert target.value == "1,5", "the field keeps every character typed"
+        # (Pilot.press returns once the app looks idle, which under load can be before the keys are handled)
+        await wait_until(pilot, lambda: target.value == "1,5", what="the field to keep every character typed")
+        # the status follows the field's Changed message, handled after the value is set
+        await wait_until(pilot, lambda: "'1,5'" in text_of(screen.query_one("#move-status", Static)),
+                         what="the status to show 1,5")
         status = text_of(screen.query_one("#move-status", Static))
         assert "leg 1 target: '1,5': a comma is not a decimal separator here" in status
         assert "write 1.5 with a decimal point" in status
@@ -83,6 +90,8 @@ async def _comma(cfg, connected, wait_until, notes):
         # 1.5: shown with the leg's soft limits before it moves; Enter moves it there
         target.value = ""
         await pilot.press("1", "full_stop", "5")
+        await wait_until(pilot, lambda: target.value == "1.5" and "+1.500 mm" in text_of(screen.query_one("#move-status")),
+                         what="1.5 typed and shown")
         status = text_of(screen.query_one("#move-status", Static))
         assert "leg 1 → +1.500 mm at the default speed (soft limits -95.000 .. +95.000 mm): Enter or m moves it" in status
         assert set_points(app) == before and not target.has_class("-invalid")
@@ -93,6 +102,8 @@ async def _comma(cfg, connected, wait_until, notes):
         # beyond the soft limits: refused as typed, naming them
         target.value = ""
         await pilot.press("9", "6")
+        await wait_until(pilot, lambda: target.value == "96" and "'96'" in text_of(screen.query_one("#move-status")),
+                         what="96 typed and shown")
         status = text_of(screen.query_one("#move-status", Static))
         assert "leg 1 target: '96' is outside -95 .. 95 mm; give a position within leg 1's soft limits" in status
 
