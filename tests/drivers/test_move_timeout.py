@@ -101,18 +101,21 @@ def test_a_stalled_drive_times_out_on_the_rigs_clock_and_is_quick_stopped(sim_dr
 
 
 def test_a_stall_freed_during_a_move_lets_it_arrive(sim_drives):
-    sd = sim_drives(time_scale=SCALE)
+    # the rig's clock in real seconds, moved on by jumps (advance): on the UI's scale (0.02) a
+    # loaded machine's 10 ms sleep could outlast the whole 2 s (40 ms) move, which then arrived
+    # before the stall; here the stall comes 0.5 s into it unless the machine stalls 1.5 s
+    sd = sim_drives(time_scale=1.0)
     ax = sd.axis(4, clock=sd.clock)
     ax.enable()
     ax.move_to(0.0)
     p = sd.profile
     words = [p.commands["enable_operation"] | 0x10] + p.registers["target_position"].encode(20.0)
     ax.bus.write(4, p.address("controlword"), words)
-    time.sleep(0.01)  # half a second of rig time: under way
+    sd.clock.advance(0.5)  # half a second of rig time: under way
     sd.server.set_stalled(4)
     stalled_at = ax.status().position_mm
     assert 0.0 < stalled_at < 20.0
-    time.sleep(0.04)  # two seconds of rig time: long enough to have arrived, were it free
+    sd.clock.advance(2.0)  # two seconds of rig time: long enough to have arrived, were it free
     st = ax.status()
     assert not st.target_reached and st.position_mm == pytest.approx(stalled_at, abs=1e-9)
     assert st.following_error_um == 0.0

@@ -33,6 +33,25 @@ async def _connected(pilot, timeout_s: float = 20.0) -> None:
     assert app.rig is not None, f"rig did not connect: {app.rig_error}"
 
 
+async def _rig_keys_act(pilot, since: float, timeout_s: float = 20.0) -> None:
+    """Wait until a rig key (StationScreen.RIG_KEYS) pressed now acts: the page has seen what
+    happened at `since` (time.monotonic(); a text field losing the focus, keys typed outside a
+    field: its hold is stamped when the page handles it, which on a busy machine comes later)
+    and STRAY_HOLD_S has passed since. A fixed pause of STRAY_HOLD_S after the focus change is
+    not enough: the hold starts when the blur is handled, not when the focus was moved."""
+    screen = pilot.app.screen
+    await _wait_until(pilot, lambda: screen._stray_at >= since, timeout_s, "the page to see the field left")
+    await _wait_until(pilot, lambda: time.monotonic() - screen._stray_at > screen.STRAY_HOLD_S, timeout_s,
+                      "the page's hold on the rig keys to end")
+
+
+@pytest.fixture
+def rig_keys_act():
+    """`await rig_keys_act(pilot, since)`: wait until the page's rig keys act again after a text
+    field lost the focus (or keys were typed outside one) at `since` (time.monotonic())."""
+    return _rig_keys_act
+
+
 @pytest.fixture
 def wait_until():
     """`await wait_until(pilot, condition, timeout_s, what)`: bounded wait for a condition."""

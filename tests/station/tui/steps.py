@@ -38,3 +38,26 @@ async def type_keys(pilot, text: str) -> None:
         event.set_sender(app)
         app._driver.send_message(event)
     await pilot.pause()
+
+
+async def press_to_quit(pilot, key: str, timeout_s: float = 30.0) -> None:
+    """Press `key`, which ends the app (ctrl+q with nothing running, or the yes of the quit
+    dialog), and wait until the app has ended. The key goes through the app's driver as
+    Pilot.press sends it, but without Pilot.press's wait for the screen's widgets to handle a
+    callback each: under load Pilot's idle check returns before the key is handled, that wait
+    then begins on widgets that close with the app and never run it (WaitForScreenTimeout after
+    30 s). The wait here polls the app, not its widgets."""
+    import asyncio
+    import time
+
+    from textual import events
+
+    app = pilot.app
+    event = events.Key(key, key if len(key) == 1 else None)
+    event.set_sender(app)
+    app._driver.send_message(event)
+    deadline = time.monotonic() + timeout_s
+    while app.is_running:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s:g} s waiting for {key} to end the app")
+        await asyncio.sleep(0.01)

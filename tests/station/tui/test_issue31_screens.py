@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 
 import pytest
 from textual.widgets import DataTable, Input, Static
@@ -63,11 +64,18 @@ async def _comma(cfg, connected, wait_until, notes):
         for _ in range(6):  # Tab to the target field
             if app.focused is target:
                 break
+            was = app.focused
             await pilot.press("tab")
+            # each Tab handled before the next is counted (under load Pilot.press returns before)
+            await wait_until(pilot, lambda: app.focused is not was, what="Tab to move the focus")
         assert app.focused is target
         before = set_points(app)
         await pilot.press("1", "comma", "5")
-        assert target.value == "1,5", "the field keeps every character typed"
+        # (Pilot.press returns once the app looks idle, which under load can be before the keys are handled)
+        await wait_until(pilot, lambda: target.value == "1,5", what="the field to keep every character typed")
+        # the status follows the field's Changed message, handled after the value is set
+        await wait_until(pilot, lambda: "'1,5'" in text_of(screen.query_one("#move-status", Static)),
+                         what="the status to show 1,5")
         status = text_of(screen.query_one("#move-status", Static))
         assert "leg 1 target: '1,5': a comma is not a decimal separator here" in status
         assert "write 1.5 with a decimal point" in status
@@ -82,6 +90,8 @@ async def _comma(cfg, connected, wait_until, notes):
         # 1.5: shown with the leg's soft limits before it moves; Enter moves it there
         target.value = ""
         await pilot.press("1", "full_stop", "5")
+        await wait_until(pilot, lambda: target.value == "1.5" and "+1.500 mm" in text_of(screen.query_one("#move-status")),
+                         what="1.5 typed and shown")
         status = text_of(screen.query_one("#move-status", Static))
         assert "leg 1 → +1.500 mm at the default speed (soft limits -95.000 .. +95.000 mm): Enter or m moves it" in status
         assert set_points(app) == before and not target.has_class("-invalid")
@@ -92,17 +102,19 @@ async def _comma(cfg, connected, wait_until, notes):
         # beyond the soft limits: refused as typed, naming them
         target.value = ""
         await pilot.press("9", "6")
+        await wait_until(pilot, lambda: target.value == "96" and "'96'" in text_of(screen.query_one("#move-status")),
+                         what="96 typed and shown")
         status = text_of(screen.query_one("#move-status", Static))
         assert "leg 1 target: '96' is outside -95 .. 95 mm; give a position within leg 1's soft limits" in status
 
 
 # -- keys act only where they are shown, on their own --------------------------------------------------------
 
-def test_typing_outside_a_field_never_acts_on_the_rig(cfg, connected, wait_until, notes):
-    asyncio.run(_stray(cfg, connected, wait_until, notes))
+def test_typing_outside_a_field_never_acts_on_the_rig(cfg, connected, wait_until, notes, rig_keys_act):
+    asyncio.run(_stray(cfg, connected, wait_until, notes, rig_keys_act))
 
 
-async def _stray(cfg, connected, wait_until, notes):
+async def _stray(cfg, connected, wait_until, notes, rig_keys_act):
     app = StationApp(cfg, time_scale=0.0, poll_interval_s=0.2)
     async with app.run_test(size=SMALL) as pilot:
         await connected(pilot)
@@ -111,25 +123,31 @@ async def _stray(cfg, connected, wait_until, notes):
         screen.query_one("#drives", DataTable).focus()
         await pilot.pause(screen.STRAY_HOLD_S + 0.1)
         # "abc": a and b are no keys of the Rig page, so c comes in a run of typing: ignored
+        typed = time.monotonic()
         await type_keys(pilot, "abc")  # a typist's burst
-        await pilot.pause(screen.ALONE_S + 0.2)
+        # (the notice comes as c is handled, which on a busy machine is not at once)
+        await wait_until(pilot, lambda: any("c (Connect) ignored: it came right after typing outside a field (ab)" in n
+                                            for n in notes(app)), what="the notice that c was ignored")
+        await pilot.pause(screen.ALONE_S + 0.2)  # c would have acted by now, had it been taken alone
         assert app.rig is rig and app.rig_state == "connected", "c reconnected (the simulated rig restarted)"
         assert not isinstance(app.screen, ConfirmScreen)
-        assert any("c (Connect) ignored: it came right after typing outside a field (ab)" in n for n in notes(app))
         # "hello": h (home) and e (enable) are keys of the page, but each is followed by another key
-        await pilot.pause(screen.STRAY_HOLD_S + 0.1)
+        await rig_keys_act(pilot, typed)
         before = set_points(app)
+        typed = time.monotonic()
         await type_keys(pilot, "hello")  # a typist's burst
-        await pilot.pause(screen.ALONE_S + 0.3)
+        await wait_until(pilot, lambda: any("h (Home (0 mm)) ignored: another key followed it at once" in n
+                                            for n in notes(app)), what="the notice that h was ignored")
+        await pilot.pause(screen.ALONE_S + 0.3)  # h or e would have acted by now
         assert set_points(app) == before and not app.rig.axes[1].status().enabled
-        assert any("h (Home (0 mm)) ignored: another key followed it at once" in n for n in notes(app))
         # "-25" typed where the focus is not a field: not a jog
-        await pilot.pause(screen.STRAY_HOLD_S + 0.1)
+        await rig_keys_act(pilot, typed)
+        typed = time.monotonic()
         await type_keys(pilot, "-25")
         await pilot.pause(screen.ALONE_S + 0.3)
         assert set_points(app) == before and not app.rig_motion
         # e on its own enables; + + + jogs three times (the same key again acts each time)
-        await pilot.pause(screen.STRAY_HOLD_S + 0.1)
+        await rig_keys_act(pilot, typed)
         await pilot.press("e")
         await wait_until(pilot, lambda: app.rig.axes[1].status().enabled, what="leg 1 enabled (e on its own)")
         await pilot.press("plus")
@@ -137,7 +155,8 @@ async def _stray(cfg, connected, wait_until, notes):
         # c on its own, connected: asks first; no keeps the rig
         await pilot.press("c")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the reconnect question")
-        await pilot.pause(0.1)
+        # (the dialog is pushed before it is composed: wait for its question, not a fixed pause)
+        await wait_until(pilot, lambda: app.screen.query("#confirm-question"), what="the question's text")
         assert "Reconnect to the rig?" in text_of(app.screen.query_one("#confirm-question"))
         await pilot.press("n")
         await wait_until(pilot, lambda: app.screen is screen, what="the question closed")
@@ -165,14 +184,25 @@ async def _footers(cfg, wait_until):
         for mode, key in PAGE_KEYS:
             await pilot.press(key)
             await wait_until(pilot, lambda: app.screen.MODE == mode, what=f"the {mode} page")
-            await pilot.pause()
             screen = app.screen
             footer = screen.query_one(StationFooter)
+
+            def shown() -> set[str]:
+                return {b.binding.action for b in screen.active_bindings.values() if b.binding.show}
+
+            def drawn_whole() -> bool:
+                keys = list(footer.query("FooterKey"))
+                return ({k.action for k in keys} >= shown() and footer.region.height > 0
+                        and all(k.region.width > 0 for k in keys)
+                        and any(line.strip() for line in screen_lines(app)[footer.region.y:footer.region.bottom]))
+
+            # every binding the page shows has its key in the footer (one key per action: + for plus/=),
+            # drawn: the footer recomposes for the page's bindings and is laid out a refresh or two
+            # after the page is on show (under load a pause was not enough: no keys yet, or blank rows)
+            await wait_until(pilot, drawn_whole, 10, f"the {mode} page's footer to show its keys {sorted(shown())}")
             lines = screen_lines(app)[footer.region.y:footer.region.bottom]
-            # every binding the page shows has its key in the footer (one key per action: + for plus/=)
-            shown = {b.binding.action for b in screen.active_bindings.values() if b.binding.show}
             keys = list(footer.query("FooterKey"))
-            assert {k.action for k in keys} >= shown, (mode, sorted(shown - {k.action for k in keys}))
+            assert {k.action for k in keys} >= shown(), (mode, sorted(shown() - {k.action for k in keys}))
             for k in keys:
                 drawn = f"{k.key_display or k.key} {k.description}"
                 row = next((line for line in lines if drawn in line), None)
@@ -247,8 +277,11 @@ async def _quit_on_top(cfg, connected, wait_until):
             app.notify(f"a long notification {i} " * 4, severity="warning", timeout=30)
         await pilot.press("ctrl+q")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the quit question")
-        await pilot.pause(0.2)
         dialog = app.screen
+        # laid out: the dialog is pushed before it is composed and placed (a fixed pause was not that)
+        await wait_until(pilot, lambda: all(dialog.query(sel) and dialog.query_one(sel).region.area > 0
+                                            for sel in ("#confirm-yes", "#confirm-no", "#confirm-question")),
+                         what="the quit dialog laid out")
         for selector in ("#confirm-yes", "#confirm-no", "#confirm-question"):
             widget = dialog.query_one(selector)
             region = widget.region

@@ -37,11 +37,11 @@ async def select_leg(pilot, leg: int) -> None:
     await pilot.pause()
 
 
-def test_move_to_a_position_at_a_speed_and_jog_by_steps(cfg, size, connected, wait_until, notes):
-    asyncio.run(_move_and_jog(cfg, size, connected, wait_until, notes))
+def test_move_to_a_position_at_a_speed_and_jog_by_steps(cfg, size, connected, wait_until, notes, rig_keys_act):
+    asyncio.run(_move_and_jog(cfg, size, connected, wait_until, notes, rig_keys_act))
 
 
-async def _move_and_jog(cfg, size, connected, wait_until, notes):
+async def _move_and_jog(cfg, size, connected, wait_until, notes, rig_keys_act):
     app = StationApp(cfg, time_scale=0.0, poll_interval_s=0.1)
     async with app.run_test(size=size) as pilot:
         await connected(pilot)
@@ -56,11 +56,13 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
                          what="the request for a target")
         assert app.focused is app.screen.query_one("#move-target", Input)
         await pilot.press("3", "0")
-        assert app.screen.query_one("#move-target", Input).value == "30"
+        await wait_until(pilot, lambda: app.screen.query_one("#move-target", Input).value == "30",
+                         what="the digits typed into the target field")
+        left = time.monotonic()
         app.screen.query_one("#drives", DataTable).focus()
         # a rig key right after a field lost the focus is ignored (it may be typing meant for the
         # field: StationScreen.RIG_KEYS); a moment later it acts
-        await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)
+        await rig_keys_act(pilot, left)
         # a disabled leg is refused, with what to do
         await type_into(pilot, "move-target", "30")
         await pilot.press("m")
@@ -83,12 +85,14 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         moves = app.rig.sim.drive_server.set_points(1)
         await type_into(pilot, "move-target", "")
         await pilot.press("minus", "2", "5")
-        assert target.value == "-25" and app.focused is target
+        await wait_until(pilot, lambda: target.value == "-25", what="-25 typed into the target field")
+        assert app.focused is target
         await pilot.pause(0.2)
         assert app.rig.sim.drive_server.set_points(1) == moves and not app.rig_motion
         assert position(app, 1) == pytest.approx(30.0, abs=1e-6)
+        left = time.monotonic()
         await pilot.press("escape")  # out of the field: the motion keys act again
-        assert isinstance(app.focused, DataTable)
+        await wait_until(pilot, lambda: isinstance(app.focused, DataTable), what="Esc to leave the field")
         # the drive's own profile velocity is back for the sweeps that follow
         reg = app.rig.profile.registers["profile_velocity"]
         ax = app.rig.axes[1]
@@ -97,12 +101,12 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         # jogs: +1 mm (the default step), then the step is 10 mm (j), -10 mm; blank speed = default
         await type_into(pilot, "move-speed", "")
         # a rig key within STRAY_HOLD_S of leaving a text field is taken for typing (docs/tui.md "Keys")
-        await pilot.pause(app.screen.STRAY_HOLD_S + 0.2)
+        await rig_keys_act(pilot, left)
         await pilot.press("plus")
         await wait_until(pilot, lambda: any("leg 1 at +31.0000 mm (moved at 5 mm/s)" in n for n in notes(app)),
                          what="the jog +1 mm")
         await pilot.press("j")
-        assert app.screen.query_one("#jog-step", Select).value == 10.0
+        await wait_until(pilot, lambda: app.screen.query_one("#jog-step", Select).value == 10.0, what="the 10 mm step")
         await pilot.press("minus")
         await wait_until(pilot, lambda: any("leg 1 at +21.0000 mm" in n for n in notes(app)), what="the jog -10 mm")
         assert position(app, 1) == pytest.approx(21.0, abs=1e-6)
@@ -146,11 +150,11 @@ async def _move_and_jog(cfg, size, connected, wait_until, notes):
         assert position(app, 2) == pytest.approx(-12.5, abs=1e-6)
 
 
-def test_stop_all_ends_a_move_at_once(cfg, size, connected, wait_until, notes):
-    asyncio.run(_stop(cfg, size, connected, wait_until, notes))
+def test_stop_all_ends_a_move_at_once(cfg, size, connected, wait_until, notes, rig_keys_act):
+    asyncio.run(_stop(cfg, size, connected, wait_until, notes, rig_keys_act))
 
 
-async def _stop(cfg, size, connected, wait_until, notes):
+async def _stop(cfg, size, connected, wait_until, notes, rig_keys_act):
     # 1 simulated s = 50 ms: 80 mm at 0.2 mm/s take 20 s (a key press waits up to 2 s for the app
     # to be idle, and a move polls its drive busily)
     app = StationApp(cfg, time_scale=0.05, poll_interval_s=0.2)
@@ -169,9 +173,11 @@ async def _stop(cfg, size, connected, wait_until, notes):
         await wait_until(pilot, lambda: any("Leg 1 is still moving" in n for n in notes(app)), what="the second refused")
         # x stops it, also from inside a move field
         app.screen.query_one("#move-target", Input).focus()
+        # t0 before the position is read: the leg moves on between the two, and the bound below
+        # must count that time (under load a read can take longer than the 0.01 mm slack allows)
+        t0 = time.monotonic()
         before = position(app, 1)
         assert app.rig_motion and 0.0 < before < 80.0
-        t0 = time.monotonic()
         await pilot.press("x")
         await wait_until(pilot, lambda: not app.rig_motion, 10, "the move to end")
         elapsed = time.monotonic() - t0
@@ -186,8 +192,9 @@ async def _stop(cfg, size, connected, wait_until, notes):
                    for n in notes(app))
         await wait_until(pilot, lambda: "quick-stopped" in motion_text(app), what="the stop shown")
         # enabled again: the quick stop's toast goes (it no longer says what to do)
+        left = time.monotonic()
         await pilot.press("escape")  # leave the field; its letters act a moment later (RIG_KEYS)
-        await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)
+        await rig_keys_act(pilot, left)
         await pilot.press("e")
         await wait_until(pilot, lambda: app.rig.axes[1].status().enabled, what="leg 1 enabled again")
         await wait_until(pilot, lambda: not any("quick-stopped" in n for n in notes(app)), what="the toast cleared")

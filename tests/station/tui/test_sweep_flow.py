@@ -16,6 +16,7 @@ from procedures.io.recording.reader import read_session
 from station.tui.app import StationApp
 from station.tui.screens.common import ConfirmScreen
 from station.tui.widgets import XYPlot
+from tests.station.tui.steps import press_to_quit
 
 
 pytestmark = pytest.mark.timeout(120)
@@ -78,7 +79,7 @@ async def _test_sweep_completes_with_plot_progress_and_recording(cfg, size, conn
         # the sweep leaves the drive disabled and still
         st = app.rig.axes[3].status()
         assert not st.enabled and not st.moving
-        await pilot.press("ctrl+q")  # no sweep running: quits without asking
+        await press_to_quit(pilot, "ctrl+q")  # no sweep running: quits without asking
     assert app.return_code == 0
 
 
@@ -156,8 +157,7 @@ async def _test_quit_during_a_sweep_asks_then_aborts_and_keeps_the_recording(cfg
         await pilot.press("ctrl+q")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the quit question")
         sim = app.rig.sim
-        await pilot.press("y")
-        await wait_until(pilot, lambda: not app.is_running, what="the app to exit")
+        await press_to_quit(pilot, "y")
     assert app.sweep.status == "aborted"
     s = read_session(app.sweep.out)
     assert s.attrs["outcome"] == "aborted"
@@ -165,6 +165,7 @@ async def _test_quit_during_a_sweep_asks_then_aborts_and_keeps_the_recording(cfg
     assert sim.drive_server.state(4) != "operation_enabled"
 
 
+@pytest.mark.timeout(300)  # the module's 120 s is shorter than the 240 s this test gives the sweep to complete
 def test_quit_confirmed_after_the_sweep_ended_meanwhile_quits(cfg, size, connected, wait_until):
     asyncio.run(_test_quit_confirmed_after_the_sweep_ended_meanwhile_quits(cfg, size, connected, wait_until))
 
@@ -179,7 +180,6 @@ async def _test_quit_confirmed_after_the_sweep_ended_meanwhile_quits(cfg, size, 
         await pilot.press("ctrl+q")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the quit question")
         await wait_until(pilot, lambda: app.sweep.status == "completed", timeout_s=240, what="the sweep to complete")
-        await pilot.press("y")
-        await wait_until(pilot, lambda: not app.is_running, what="the app to exit")
+        await press_to_quit(pilot, "y")
     assert app.sweep.status == "completed"
     assert len(read_session(app.sweep.out).points) == app.sweep.total

@@ -51,7 +51,10 @@ async def open_resume(pilot, wait_until) -> ResumeScreen:
     app = pilot.app
     await pilot.press("r")
     await wait_until(pilot, lambda: isinstance(app.screen, ResumeScreen), what="the resume dialog")
-    await pilot.pause(0.1)  # r acts a moment after it is pressed (StationScreen.RIG_KEYS): let the dialog settle
+    # settled: its path field focused (what Enter submits) and its buttons laid out (where a click
+    # lands); a fixed 0.1 s was not that under load
+    await wait_until(pilot, lambda: app.screen.query("#resume-path") and app.focused is app.screen.query_one("#resume-path")
+                     and app.screen.query_one("#resume-yes").region.area > 0, what="the resume dialog settled")
     return app.screen
 
 

@@ -54,10 +54,18 @@ async def _choose_then_open(path, cfg, size, wait_until, notes):
         await wait_until(pilot, lambda: field.value == str(mine), what="the path field to take the choice")
         await pilot.click("#session-open")
         await wait_until(pilot, lambda: replay.session_path == mine, 30, "the session")
-        await pilot.pause(0.2)  # the rescan after the new session has posted its Changed(Select.NULL)
+        # the new session rescans the list (nothing chosen in it any more), whose Changed(Select.NULL)
+        # goes from the list to its picker: two message hops, each handled by the time a pause ends
+        await wait_until(pilot, lambda: listed.value is Select.NULL, what="the list rescanned after the new session")
+        await pilot.pause()
+        await pilot.pause()
         assert field.value == str(mine)
         assert listed.value is Select.NULL  # the list was rescanned: nothing chosen in it any more
         replay.session = None
+        # a Button ignores a press while it still shows the last one ("-active", 0.2 s): without the
+        # fixed pause before, a fast machine would click into nothing
+        opener = replay.query_one("#session-open")
+        await wait_until(pilot, lambda: not opener.has_class("-active"), what="Open's last press to end")
         await pilot.click("#session-open")  # Open again: the same file
         await wait_until(pilot, lambda: replay.session is not None, 30, "the session read again")
         assert replay.session_path == mine
@@ -230,11 +238,14 @@ def test_results_drops_the_paper_error_when_switching_back(irregular_session, cf
     import procedures.fit
 
     real_fit = procedures.fit.fit
-    slow = {"paper": 0.0}
+    slow = {"paper": 0.0, "answered": []}
 
     def fit(points, method="default", **kwargs):  # the paper fit takes its time when asked to
         time.sleep(slow.get(method, 0.0))
-        return real_fit(points, method, **kwargs)
+        try:
+            return real_fit(points, method, **kwargs)
+        finally:
+            slow["answered"].append(method)
 
     monkeypatch.setattr(procedures.fit, "fit", fit)
     asyncio.run(_stale_error(irregular_session, cfg, size, wait_until, notes, slow))
@@ -264,12 +275,17 @@ async def _stale_error(path, cfg, size, wait_until, notes, slow):
         # m, and m again while the paper fit is under way: its answer is dropped, its error never shows
         app.clear_notifications()
         slow["paper"] = 1.5
+        answered = len(slow["answered"])  # the fits asked for so far have all answered
         await pilot.press("m")
         await wait_until(pilot, lambda: screen._fitting is not None and screen._fitting[1] == "paper", 5,
                          "the paper fit to start")
         await pilot.press("m")
         await wait_until(pilot, lambda: screen._fitting is None, 60, "the default fit")
-        await pilot.pause(2.5)  # the paper fit has answered by now
+        # the paper fit's answer (its error) has come back and been handled: a fixed pause let this
+        # pass unchecked when a loaded machine took longer than the pause for the 1.5 s fit
+        await wait_until(pilot, lambda: "paper" in slow["answered"][answered:], 60, "the paper fit's answer")
+        await pilot.pause()
+        await pilot.pause()
         assert "uniformly spaced" not in status_text(app, "#results-status")
         assert not any("uniformly spaced" in n for n in notes(app))
         assert app.analysis.method == "default" and screen.query_one("#method", Select).value == "default"

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import string
+import time
 
 import pytest
 from textual.widgets import Input
@@ -59,11 +60,11 @@ def fields_of(screen) -> list[Input]:
     return [f for f in screen.query(Input).results(Input) if not f.disabled and f.display]
 
 
-def test_typing_into_every_field_of_every_page_never_moves_a_leg(cfg, size, connected, wait_until):
-    asyncio.run(_type_everywhere(cfg, size, connected, wait_until))
+def test_typing_into_every_field_of_every_page_never_moves_a_leg(cfg, size, connected, wait_until, rig_keys_act):
+    asyncio.run(_type_everywhere(cfg, size, connected, wait_until, rig_keys_act))
 
 
-async def _type_everywhere(cfg, size, connected, wait_until):
+async def _type_everywhere(cfg, size, connected, wait_until, rig_keys_act):
     app = StationApp(cfg, time_scale=0.0, poll_interval_s=0.2)
     typed_into: list[str] = []
     async with app.run_test(size=size) as pilot:
@@ -92,8 +93,9 @@ async def _type_everywhere(cfg, size, connected, wait_until):
                 if mode == "rig":  # x (Stop all) acts from the move fields: enable again for the next field
                     await enable_all(pilot, wait_until)
             if mode == "sweep":  # the Resume dialog's path field
+                left = time.monotonic()
                 await pilot.press("escape")
-                await pilot.pause(app.screen.STRAY_HOLD_S + 0.1)  # r on its own (RIG_KEYS), not right after a field
+                await rig_keys_act(pilot, left)  # r on its own (RIG_KEYS), not right after a field
                 await pilot.press("r")
                 await wait_until(pilot, lambda: app.screen.query("#resume-path"), what="the Resume dialog")
                 for field in fields_of(app.screen):
