@@ -370,7 +370,9 @@ class ResumeScreen(ModalScreen["Path | None"]):
 
     def on_select_changed(self, event: Select.Changed) -> None:
         event.stop()
-        if event.value is not Select.BLANK:
+        # nothing chosen leaves the path as it is: Textual 8's "no selection" is Select.NULL
+        # (Select.BLANK is False and never equals it, so the path became the text "Select.NULL")
+        if event.value is not Select.NULL:
             self.query_one("#resume-path", Input).value = str(event.value)
 
     def on_input_submitted(self, event: Input.Submitted) -> None:

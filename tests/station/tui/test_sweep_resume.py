@@ -9,7 +9,7 @@ import asyncio
 
 import numpy as np
 import pytest
-from textual.widgets import Input, Static
+from textual.widgets import Input, Select, Static
 
 from procedures.engine import events as ev
 from procedures.engine.control import RunControl
@@ -79,7 +79,19 @@ async def _resume_the_aborted_one(cfg, size, connected, wait_until):
 
         # r offers the aborted session; Enter resumes it
         dialog = await open_resume(pilot, wait_until)
-        assert dialog.query_one("#resume-path", Input).value == str(out)
+        path = dialog.query_one("#resume-path", Input)
+        assert path.value == str(out)
+        # a session chosen in the list goes into the path; the choice cleared (nothing chosen)
+        # leaves the path as it is (it once became the text "Select.NULL")
+        listed = dialog.query_one("#resume-list", Select)
+        listed.value = str(out)  # (refused by the Select if the list did not offer it)
+        path.value = ""
+        await wait_until(pilot, lambda: path.value == str(out), what="the chosen session in the path")
+        listed.clear()
+        await wait_until(pilot, lambda: listed.value is Select.NULL, what="the choice cleared")
+        await pilot.pause()
+        assert path.value == str(out)
+        path.focus()
         await pilot.press("enter")
         await wait_until(pilot, lambda: app.sweep.active and app.sweep.done > first + 5, what="the resumed sweep")
         assert app.sweep.out == out and app.sweep.resumed_points == first
