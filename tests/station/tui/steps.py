@@ -61,3 +61,34 @@ async def press_to_quit(pilot, key: str, timeout_s: float = 30.0) -> None:
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s:g} s waiting for {key} to end the app")
         await asyncio.sleep(0.01)
+
+
+async def choose_plan(pilot, plan: str, timeout_s: float = 30.0) -> None:
+    """Choose `plan` on the Sweep page and wait until the page has answered: choosing a plan fills
+    a cycles field left blank or at a plan's standard number with the plan's own (ISO 230-2: 5,
+    the paper: 6), and an answer that comes after the next field is typed would overwrite a 5 or a
+    6 typed there. The cycles field is blanked first so the answer is seen; a number typed before
+    (not a standard one) is put back, as the page keeps it."""
+    import asyncio
+    import time
+
+    from textual.widgets import Select
+
+    from procedures.acquisition.plan_spec import DEFAULT_CYCLES
+
+    screen = pilot.app.screen
+    select = screen.query_one("#plan", Select)
+    if select.value == plan:
+        return  # no change, no answer to wait for
+    cycles = screen.query_one("#cycles", Input)
+    before = cycles.value
+    cycles.value = ""
+    select.value = plan
+    deadline = time.monotonic() + timeout_s
+    while cycles.value != str(DEFAULT_CYCLES[plan]):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the Sweep page did not answer the choice of plan {plan!r} in {timeout_s:g} s")
+        await asyncio.sleep(0.01)
+    if before.strip() not in ("", *(str(n) for n in DEFAULT_CYCLES.values())):
+        cycles.value = before
+    await pilot.pause()

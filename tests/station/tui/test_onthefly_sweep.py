@@ -7,13 +7,14 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from textual.widgets import Input, Select, Static
+from textual.widgets import Input, Static
 
 from procedures.acquisition.plan_spec import plan_from_spec
 from procedures.acquisition.plan_spec import DEFAULT_CYCLES
 from station.cli import build_parser
 from station.commands.sweep import plan_spec as cli_plan_spec
 from station.tui.app import StationApp
+from tests.station.tui.steps import choose_plan
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -29,8 +30,7 @@ async def _run(cfg, size, connected, wait_until):
         await pilot.press("f2")
         await wait_until(pilot, lambda: app.screen.MODE == "sweep", what="the Sweep screen")
         screen = app.screen
-        screen.query_one("#plan", Select).value = "onthefly-adaptive"
-        await pilot.pause()
+        await choose_plan(pilot, "onthefly-adaptive")  # (waits for the page's answer to the choice)
         most = str(DEFAULT_CYCLES["onthefly-adaptive"])
         assert screen.query_one("#cycles", Input).value == most  # the plan's most cycles
         assert screen.query_one("#n-targets", Input).disabled  # positions come from the step

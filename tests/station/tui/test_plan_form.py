@@ -6,13 +6,14 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from textual.widgets import Input, Select, Static
+from textual.widgets import Input, Static
 
 from procedures.acquisition.plan_spec import PlanSpec, plan_from_spec
 from station.cli import build_parser, main
 from station.commands.sweep import plan_spec as cli_plan_spec
 from procedures.vocabulary import InputError
 from station.tui.app import StationApp
+from tests.station.tui.steps import choose_plan
 from station.tui.fields import FIELD_KINDS
 
 pytestmark = pytest.mark.timeout(120)
@@ -22,8 +23,7 @@ async def fill_form(pilot, **fields) -> None:
     """Set form fields by id; the plan first, since choosing a plan sets its number of cycles."""
     screen = pilot.app.screen
     if "plan" in fields:
-        screen.query_one("#plan", Select).value = fields.pop("plan")
-        await pilot.pause()
+        await choose_plan(pilot, fields.pop("plan"))
     for wid, value in fields.items():
         screen.query_one(f"#{wid.replace('_', '-')}", Input).value = str(value)
 

@@ -54,10 +54,26 @@ def assert_on_show(app, selector: str, screen=None):
 
 
 async def show_page(pilot, mode: str, wait_until) -> None:
+    """Show the page `mode` and let it settle: its controls laid out and its footer recomposed
+    for its keys (a page on show is laid out a refresh or two later; under load one pause was not
+    that). If it never settles, the callers' checks say what is wrong with it."""
     app = pilot.app
-    await pilot.press(CONTROLS[mode][0])
+    key, selectors = CONTROLS[mode]
+    await pilot.press(key)
     await wait_until(pilot, lambda: app.screen.MODE == mode, what=f"the {mode} page")
     app.clear_notifications()
+
+    def settled() -> bool:
+        screen = app.screen
+        shown = {b.binding.action for b in screen.active_bindings.values() if b.binding.show}
+        keys = list(screen.query("StationFooter FooterKey"))
+        return ({k.action for k in keys} >= shown and all(k.region.width > 0 for k in keys)
+                and all(w.region.area > 0 for sel in selectors for w in screen.query(sel)))
+
+    try:
+        await wait_until(pilot, settled, 10, f"the {mode} page laid out")
+    except AssertionError:
+        pass  # the checks that follow name the control that has no room, or the key missing
     await pilot.pause()
 
 

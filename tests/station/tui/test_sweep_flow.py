@@ -10,13 +10,13 @@ import asyncio
 
 import numpy as np
 import pytest
-from textual.widgets import Input, ProgressBar, Select
+from textual.widgets import Input, ProgressBar
 
 from procedures.io.recording.reader import read_session
 from station.tui.app import StationApp
 from station.tui.screens.common import ConfirmScreen
 from station.tui.widgets import XYPlot
-from tests.station.tui.steps import press_to_quit
+from tests.station.tui.steps import choose_plan, press_to_quit
 
 
 pytestmark = pytest.mark.timeout(120)
@@ -27,8 +27,7 @@ async def fill_form(pilot, **fields) -> None:
     the plan first, since choosing a plan sets its standard number of cycles."""
     app = pilot.app
     if "plan" in fields:
-        app.screen.query_one("#plan", Select).value = fields.pop("plan")
-        await pilot.pause()
+        await choose_plan(pilot, fields.pop("plan"))
     for wid, value in fields.items():
         wid = wid.replace("_", "-")
         app.screen.query_one(f"#{wid}", Input).value = str(value)
